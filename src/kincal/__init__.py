@@ -1,0 +1,1 @@
+"""kincal: kinematic calibration of serial robots from URDF."""

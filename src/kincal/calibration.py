@@ -1,0 +1,435 @@
+"""Calibration: build the problem, analyse what the data identify, solve, report.
+
+``CalibrationProblem(robot, data, options)`` builds; ``.analyze()`` returns the
+identifiability of the parameters on these data; ``.solve()`` runs the identification
+(plain least squares, or L2 toward nominal with lambda given or chosen by k-fold CV) and
+returns a :class:`CalibrationResult`. ``calibrate(...)`` does all three.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+
+from . import mdh as mdh_layer
+from .cross_validation import CrossValidation, cross_validate, lambda_grid
+from .errors import DataError, IdentifiabilityError, KincalWarning, OptionError
+from .frames_init import initial_frames
+from .measurement_model import MeasurementModel
+from .measurements import Measurements
+from .parameters import BASE, DEG, MM, TOOL, ParameterSpace
+from .robot import Robot
+from .rotations import base_angles
+from .selection import RANK_TOL, Identifiability, analyze
+from .solver import SolverOptions, SolveSummary, solve
+from .statistics import ErrorStats
+
+METHODS = ("l2", "ls", "frames")
+
+
+@dataclass(frozen=True)
+class CalibrationOptions:
+    """Every choice of a calibration, with the paper's defaults.
+
+    method: "l2" (penalty toward nominal), "ls" (plain least squares) or "frames" (fit
+        only the measurement frame and tool point; kinematics stay nominal).
+    lam: "cv" to choose lambda by cross-validation, or a number >= 0 (method "l2").
+    folds, seed: k and the seed of the fold split.
+    lambda_min, lambda_max, n_lambdas: the CV grid (log-spaced; paper: 1e-6, 1e3, 50).
+    length_scale [m], angle_scale [rad]: the unit s of the penalty
+        lambda * sum(((x - x0) / s)^2); 1 mm and 1 deg by default, the paper's units.
+    fix: parameter names held at their nominal values.
+    free: parameter names kept in the fit even if the analysis finds them redundant
+        (sensible only with method "l2", whose penalty keeps them bounded).
+    tool_guess: (3,) tool point in the tip frame [m], a starting guess; None: derived.
+    base_guess: (6,) measurement frame (x, y, z [m], rx, ry, rz [rad]) start; None: derived.
+    rank_tol: tolerance of the rank-revealing selection (see kincal.selection).
+    warm_start: CV path solved from large to small lambda, each from the previous one.
+    cv_step_tol: [mm or deg] step tolerance of the fold fits; a validation error needs
+        far less precision than the final fit (which uses solver.step_tol).
+    solver: stopping rules (paper: 1e-5 mm^2 over 5 iterations, 100 iterations).
+    progress: callback(done, total) during the CV sweep, or None.
+    """
+
+    method: str = "l2"
+    lam: float | str = "cv"
+    folds: int = 5
+    seed: int = 0
+    lambda_min: float = 1e-6
+    lambda_max: float = 1e3
+    n_lambdas: int = 50
+    length_scale: float = MM
+    angle_scale: float = DEG
+    fix: tuple[str, ...] = ()
+    free: tuple[str, ...] = ()
+    tool_guess: tuple[float, float, float] | None = None
+    base_guess: tuple[float, ...] | None = None
+    rank_tol: float = RANK_TOL
+    warm_start: bool = True
+    cv_step_tol: float = 1e-6
+    solver: SolverOptions = SolverOptions()
+    progress: Callable | None = field(default=None, compare=False, repr=False)
+
+    def validated(self) -> "CalibrationOptions":
+        if self.method not in METHODS:
+            raise OptionError(f"unknown method {self.method!r}; expected one of {', '.join(METHODS)}")
+        if isinstance(self.lam, str):
+            if self.lam != "cv":
+                raise OptionError(f"lambda must be 'cv' or a number >= 0, got {self.lam!r}")
+        elif not (math.isfinite(float(self.lam)) and float(self.lam) >= 0):
+            raise OptionError(f"lambda must be 'cv' or a finite number >= 0, got {self.lam!r}")
+        if not (self.length_scale > 0 and self.angle_scale > 0):
+            raise OptionError("length_scale and angle_scale must be > 0")
+        if self.tool_guess is not None and np.shape(self.tool_guess) != (3,):
+            raise OptionError("tool_guess needs 3 numbers (x, y, z in the tip frame) [m]")
+        if self.base_guess is not None and np.shape(self.base_guess) != (6,):
+            raise OptionError("base_guess needs 6 numbers (x, y, z [m], rx, ry, rz [rad])")
+        lambda_grid(self.lambda_min, self.lambda_max, self.n_lambdas)
+        return self
+
+
+@dataclass(frozen=True)
+class ParameterEstimate:
+    """One row of the parameter table (SI units; ``deviation = estimate - nominal``).
+
+    status: "identified", "dropped" (redundant on these data), "fixed" (by the user).
+    std_error: NaN unless identified.
+    """
+
+    name: str
+    is_length: bool
+    nominal: float
+    estimate: float
+    std_error: float
+    status: str
+
+    @property
+    def deviation(self) -> float:
+        return self.estimate - self.nominal
+
+    def reported(self) -> tuple[float, float, float, str]:
+        """(nominal, deviation, std_error) in mm or deg, and the unit."""
+        k, unit = (1e3, "mm") if self.is_length else (180.0 / math.pi, "deg")
+        return self.nominal * k, self.deviation * k, self.std_error * k, unit
+
+
+class CalibrationProblem:
+    """The identification of one robot chain from one set of measurements."""
+
+    def __init__(self, robot: Robot, data: Measurements, options: CalibrationOptions | None = None):
+        self.robot = robot
+        self.options = (options or CalibrationOptions()).validated()
+        self.data = data.for_chain(robot.joint_names)
+        self.mdh = mdh_layer.extract(robot.geometry)
+        self.space = ParameterSpace(self.mdh.joint_names)
+        self.model = MeasurementModel(self.mdh, self.data.joint_values)
+        o = self.options
+        self.scale = np.where(self.space.is_length, o.length_scale, o.angle_scale)
+        if self.data.sigma is None:
+            self.weights = np.ones(len(self.data))
+        else:
+            inv = 1.0 / self.data.sigma
+            self.weights = inv / np.sqrt(np.mean(inv ** 2))
+        for name in o.fix + o.free:
+            self.space.index(name)  # unknown names raise ParameterError listing the valid ones
+        self._x_start = None
+        self._ident = None
+
+    # --------------------------------------------------------------- residuals
+    def residual_function(self, rows=None) -> Callable:
+        """residual(u, with_jacobian) on the samples ``rows`` (default all), in mm."""
+        model = self.model if rows is None else self.model.subset(rows)
+        P = self.data.positions if rows is None else self.data.positions[rows]
+        w = (self.weights if rows is None else self.weights[rows])[:, None]
+        s = self.scale
+
+        def residual(u, with_jacobian):
+            x = u * s
+            if not with_jacobian:
+                return ((P - model.predict(x)) * w).ravel() / MM, None
+            pred, J = model.jacobian(x)
+            r = ((P - pred) * w).ravel() / MM
+            Jr = -(J * w[:, :, None]).reshape(-1, s.size) * (s / MM)
+            return r, Jr
+
+        return residual
+
+    # ------------------------------------------------------------------ start
+    @property
+    def x_nominal(self) -> np.ndarray:
+        return self.space.join(self.mdh.table, np.zeros(6), np.zeros(3))
+
+    def start(self) -> np.ndarray:
+        """Nominal kinematics with the measurement frame and tool point fitted to the data."""
+        if self._x_start is not None:
+            return self._x_start
+        o = self.options
+        R_tip, p_tip = self.model.tip_poses(self.mdh.table)
+        Rb, tb, tool, _, _ = initial_frames(R_tip, p_tip, self.data.positions, o.tool_guess)
+        base = np.concatenate([tb, base_angles(Rb)])
+        if o.base_guess is not None:
+            base = np.asarray(o.base_guess, dtype=float)
+            if o.tool_guess is not None:
+                tool = np.asarray(o.tool_guess, dtype=float)
+        x = self.space.join(self.mdh.table, base, tool)
+        free = ~self.space.is_kinematic
+        sol = solve(self.residual_function(), x / self.scale, free, options=o.solver)
+        self._x_start = sol.u * self.scale
+        return self._x_start
+
+    # ---------------------------------------------------------------- analyse
+    def analyze(self) -> Identifiability:
+        """Which parameters these data identify, at the starting point."""
+        if self._ident is not None:
+            return self._ident
+        o = self.options
+        free = np.ones(self.space.size, dtype=bool)
+        if o.method == "frames":
+            free[: self.space.n_kinematic] = False
+        free[self.space.indices(o.fix)] = False
+        _, J = self.residual_function()(self.start() / self.scale, True)
+        # reporting units: mm per mm or per degree, whatever the penalty scale
+        J = J * (self.space.reporting_scale() / self.scale)
+        ident = analyze(J, self.space.names, self.space.n_kinematic, free, o.rank_tol)
+        self._ident = ident
+        return ident
+
+    def free_mask(self) -> np.ndarray:
+        ident = self.analyze()
+        mask = np.zeros(self.space.size, dtype=bool)
+        mask[self.space.indices(ident.kept)] = True
+        if self.options.free:
+            mask[self.space.indices(self.options.free)] = True
+        return mask
+
+    # ------------------------------------------------------------------- fits
+    def fit(self, lam: float, rows=None, start: np.ndarray | None = None,
+            free: np.ndarray | None = None, residual: Callable | None = None,
+            options: SolverOptions | None = None) -> SolveSummary:
+        """One solve with penalty weight ``lam`` on the samples ``rows`` (default all).
+
+        residual: a prebuilt :meth:`residual_function` for ``rows`` (saves rebuilding it).
+        """
+        x0 = self.start() if start is None else start
+        free = self.free_mask() if free is None else free
+        u_prior = self.start() / self.scale  # kinematics at nominal; frames not penalised
+        residual = self.residual_function(rows) if residual is None else residual
+        return solve(residual, x0 / self.scale, free, lam=lam,
+                     penalised=self.space.is_kinematic, prior=u_prior,
+                     options=options or self.options.solver)
+
+    def position_errors(self, x: np.ndarray, rows=None) -> np.ndarray:
+        """(N, 3) measured minus predicted positions [m]."""
+        model = self.model if rows is None else self.model.subset(rows)
+        P = self.data.positions if rows is None else self.data.positions[rows]
+        return P - model.predict(x)
+
+    def cross_validate(self) -> CrossValidation:
+        o = self.options
+        grid = lambda_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
+        free = self.free_mask()
+
+        fold_options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol))
+        cache = {}  # per fold: the training residual and the validation model
+
+        def fit(train, lam, start):
+            key = train.tobytes()
+            if key not in cache:
+                cache.clear()
+                cache[key] = self.residual_function(train)
+            return self.fit(lam, train, None if start is None else start.u * self.scale, free,
+                            residual=cache[key], options=fold_options)
+
+        val_models = {}
+
+        def error(sol, val):
+            key = val.tobytes()
+            if key not in val_models:
+                val_models.clear()
+                val_models[key] = (self.model.subset(val), self.data.positions[val])
+            model, P = val_models[key]
+            e = P - model.predict(sol.u * self.scale)
+            return float(np.mean(np.linalg.norm(e, axis=1)) / MM)
+
+        return cross_validate(fit, error, len(self.data), grid, o.folds, o.seed,
+                              o.warm_start, o.progress)
+
+    # ------------------------------------------------------------------ solve
+    def solve(self) -> "CalibrationResult":
+        o = self.options
+        ident = self.analyze()
+        n_free = int(self.free_mask().sum())
+        m = 3 * len(self.data)
+        if o.method == "ls" and m < n_free:
+            raise IdentifiabilityError(
+                f"{len(self.data)} poses give {m} equations for {n_free} identifiable "
+                f"parameters; plain least squares needs at least {math.ceil(n_free / 3)} poses")
+        if len(self.data) < 3:
+            raise DataError(f"{len(self.data)} poses are too few; the measurement frame alone "
+                            "needs at least 3")
+        cv = None
+        if o.method == "l2":
+            if o.lam == "cv":
+                cv = self.cross_validate()
+                lam = cv.best_lambda
+            else:
+                lam = float(o.lam)
+        else:
+            lam = 0.0
+        sol = self.fit(lam)
+        if not sol.converged:
+            warnings.warn(f"the solver did not converge in {sol.iterations} iterations; the "
+                          "result is the best iterate and is flagged not converged", KincalWarning)
+        return CalibrationResult._build(self, sol, lam, cv, ident)
+
+
+def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam: float,
+                scale: np.ndarray) -> np.ndarray:
+    """Sandwich standard errors [SI] of the free parameters (NaN for the others)."""
+    J = sol.jacobian[:, free]
+    H = J.T @ J + lam * np.diag(penalised[free].astype(float))
+    out = np.full(scale.size, np.nan)
+    try:
+        Hi = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return out
+    dof = float(np.trace(J @ Hi @ J.T))
+    m = J.shape[0]
+    if m - dof <= 0.5:
+        return out
+    s2 = float(sol.residual @ sol.residual) / (m - dof)
+    cov = s2 * Hi @ (J.T @ J) @ Hi
+    out[free] = np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale[free]
+    return out
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Everything a calibration produced. Values in SI; reports in mm and degrees.
+
+    robot: the nominal robot; corrected: the robot with identified joint placements.
+    parameters: one ParameterEstimate per parameter (kinematic, base, tool).
+    x_nominal / x_start / x: parameter vectors (nominal; nominal kinematics with fitted
+    frames; identified). lam: the penalty weight used (0 for LS). cv: the CV curve or
+    None. before / after: position errors on the calibration data [mm] with the start
+    and the identified parameters. residuals: (N, 3) after calibration [m].
+    solve: the final solve's summary (cost history, convergence).
+    """
+
+    robot: Robot
+    corrected: Robot
+    options: CalibrationOptions
+    space: ParameterSpace
+    parameters: tuple[ParameterEstimate, ...]
+    x_nominal: np.ndarray
+    x_start: np.ndarray
+    x: np.ndarray
+    lam: float
+    cv: CrossValidation | None
+    before: ErrorStats
+    after: ErrorStats
+    residuals: np.ndarray
+    solve: SolveSummary
+    identifiability: Identifiability
+    mdh: mdh_layer.MdhModel
+
+    @classmethod
+    def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
+        sp = problem.space
+        x = sol.u * problem.scale
+        free = problem.free_mask()
+        se = _std_errors(sol, free, sp.is_kinematic, lam, problem.scale)
+        fixed = set(ident.fixed)
+        x_nom = problem.x_nominal.copy()
+        x_start = problem.start()
+        # base and tool have no nominal: their "nominal" is the fitted starting value
+        x_nom[sp.n_kinematic:] = x_start[sp.n_kinematic:]
+        rows = []
+        for i, name in enumerate(sp.names):
+            status = "identified" if free[i] else ("fixed" if name in fixed else "dropped")
+            rows.append(ParameterEstimate(name, bool(sp.is_length[i]), float(x_nom[i]),
+                                          float(x[i]), float(se[i]), status))
+        table, _, _ = sp.split(x)
+        corrected = problem.robot.with_joint_frames(problem.mdh.joint_frames(table))
+        before = ErrorStats.from_errors(problem.position_errors(x_start))
+        res = problem.position_errors(x)
+        return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
+                   x, float(lam), cv, before, ErrorStats.from_errors(res), res, sol, ident,
+                   problem.mdh)
+
+    # ------------------------------------------------------------ accessors
+    @property
+    def converged(self) -> bool:
+        return self.solve.converged
+
+    def parameter(self, name: str) -> ParameterEstimate:
+        return self.parameters[self.space.index(name)]
+
+    @property
+    def base(self) -> np.ndarray:
+        """(6,) measurement frame: x, y, z [m], rx, ry, rz [rad]."""
+        return self.space.split(self.x)[1].copy()
+
+    @property
+    def tool(self) -> np.ndarray:
+        """(3,) tool point in the tip frame [m]."""
+        return self.space.split(self.x)[2].copy()
+
+    def frames_dict(self) -> dict:
+        """The FRAMES.json content: measurement frame and tool point in SI units."""
+        b, t = self.base, self.tool
+        return {"base": dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, b))),
+                "tool": dict(zip(("x", "y", "z"), map(float, t))),
+                "convention": "P_measured = R_base (p_tip + R_tip t_tool) + t_base, "
+                              "R_base = rotx(rx) roty(ry) rotz(rz); metres and radians",
+                "base_frame": self.robot.base, "tip_frame": self.robot.tip}
+
+    def predict(self, joint_values: np.ndarray) -> np.ndarray:
+        """(N, 3) predicted tool-point positions in the measurement frame [m]."""
+        return MeasurementModel(self.mdh, np.atleast_2d(joint_values)).predict(self.x)
+
+    def corrected_urdf_text(self) -> str:
+        from .urdf_export import edit_joint_origins
+
+        return edit_joint_origins(self.robot.urdf_text, self.corrected.urdf_origins(),
+                                  source=str(self.robot.source)).text
+
+    def export_urdf(self, path, overwrite: bool = False):
+        """Write the corrected URDF (only chain joint origins differ from the input)."""
+        from .urdf_export import write_text_atomic
+
+        protect = (self.robot.source,) if self.robot.source is not None else ()
+        return write_text_atomic(path, self.corrected_urdf_text(), overwrite=overwrite,
+                                 protect=protect)
+
+    def summary(self) -> str:
+        lines = [f"kincal calibration of {self.robot.name} ({self.robot.base} -> {self.robot.tip}), "
+                 f"method {self.options.method}, lambda = {self.lam:.4g}"
+                 + (" (chosen by cross-validation)" if self.cv is not None else ""),
+                 f"  {self.identifiability.summary().splitlines()[0]}",
+                 f"  before: {self.before.line()}",
+                 f"  after:  {self.after.line()}",
+                 f"  solver: {self.solve.iterations} iterations, {self.solve.reason}"
+                 + ("" if self.converged else "  [NOT CONVERGED]"),
+                 "  parameter                 nominal      deviation    std.err  unit"]
+        for p in self.parameters:
+            if p.status == "dropped" and p.name.split(".")[0] not in ("base", "tool"):
+                continue
+            nom, dev, se, unit = p.reported()
+            flag = "" if p.status == "identified" else f"  ({p.status})"
+            lines.append(f"  {p.name:<24} {nom:>10.4f} {dev:>+13.5f} {se:>10.5f}  {unit}{flag}")
+        return "\n".join(lines)
+
+
+def calibrate(robot: Robot, data: Measurements, options: CalibrationOptions | None = None,
+              **overrides) -> CalibrationResult:
+    """Build, analyse and solve in one call; keyword arguments override ``options`` fields."""
+    if options is None:
+        options = CalibrationOptions(**overrides)
+    elif overrides:
+        options = replace(options, **overrides)
+    return CalibrationProblem(robot, data, options).solve()

@@ -1,0 +1,63 @@
+"""Closed-form first guess of the measurement frame and the tool point.
+
+Plain numpy. With the nominal kinematics the tip poses (R_k, p_k) in the base frame are
+known; the measured points P_k satisfy P_k = R_b (p_k + R_k t) + t_b. Two starts are
+tried and the better kept, so no user guess is needed:
+
+- pivot start: if the measured point moved little (R-test, a sphere seated in a cup),
+  p_k + R_k t is nearly constant, which is linear in (t, c): a pivot calibration;
+- given start: the user's tool guess (default: the tip frame origin).
+
+From each start, rigid registration (Kabsch) of the predicted points gives (R_b, t_b);
+with R_b fixed, (t, t_b) follow from a linear least-squares solve; a few rounds of the
+two settle the guess. The caller then refines base and tool by Gauss-Newton.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .rotations import kabsch
+
+
+def pivot_tool(R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
+    """Tool point t [m] in the tip frame that keeps p_k + R_k t most nearly fixed."""
+    N = len(R_tip)
+    A = np.concatenate([R_tip, np.broadcast_to(-np.eye(3), (N, 3, 3))], axis=2).reshape(3 * N, 6)
+    sol, *_ = np.linalg.lstsq(A, -p_tip.reshape(-1), rcond=None)
+    return sol[:3]
+
+
+def alternate(R_tip, p_tip, P, tool, rounds: int = 20):
+    """Alternate Kabsch for (R_b, t_b) and a linear solve for (t, t_b) from ``tool``.
+
+    Returns (R_b (3, 3), t_b (3,), tool (3,), rms [m]).
+    """
+    t = np.asarray(tool, dtype=float).copy()
+    N = len(P)
+    for _ in range(rounds):
+        x = p_tip + R_tip @ t
+        Rb, tb = kabsch(x, P)
+        A = np.concatenate([Rb @ R_tip, np.broadcast_to(np.eye(3), (N, 3, 3))], axis=2)
+        b = P - p_tip @ Rb.T
+        sol, *_ = np.linalg.lstsq(A.reshape(3 * N, 6), b.reshape(-1), rcond=None)
+        if np.allclose(sol[:3], t, rtol=0, atol=1e-12):
+            t = sol[:3]
+            break
+        t = sol[:3]
+    x = p_tip + R_tip @ t
+    Rb, tb = kabsch(x, P)
+    rms = float(np.sqrt(np.mean(np.sum((P - (x @ Rb.T + tb)) ** 2, axis=1))))
+    return Rb, tb, t, rms
+
+
+def initial_frames(R_tip, p_tip, P, tool_guess=None):
+    """Best of the pivot and given starts: (R_b, t_b, tool, rms [m], start name)."""
+    starts = {"given": np.zeros(3) if tool_guess is None else np.asarray(tool_guess, float),
+              "pivot": pivot_tool(R_tip, p_tip)}
+    best = None
+    for name, t0 in starts.items():
+        Rb, tb, t, rms = alternate(R_tip, p_tip, P, t0)
+        if best is None or rms < best[3]:
+            best = (Rb, tb, t, rms, name)
+    return best

@@ -1,0 +1,138 @@
+"""Predicted measurements and the analytic identification Jacobian, vectorised over poses.
+
+Plain numpy. For N poses with chain joint values q (N, n), and the parameter vector x of
+:mod:`kincal.parameters`, the predicted tool point in the measurement frame is
+
+    P_k = R_base (p_tip(q_k; table) + R_tip(q_k; table) t_tool) + t_base       [m]
+
+computed with the exact MD-H model of :mod:`kincal.mdh` (the same numbers Pinocchio gives
+for the corrected URDF). Derivatives are closed form: a change of alpha_{i-1} turns
+everything after frame i-1 about its x axis, a_{i-1} slides it along that axis, theta_i
+turns it about axis i, d_i slides it along axis i. No finite differences.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .mdh import MdhModel
+from .parameters import ParameterSpace
+from .rotations import base_rotation, rotx, roty, rotz
+
+
+def _rodrigues(w: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotations by angles q (N,) about the unit axis w (3,)."""
+    c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    return c * np.eye(3) + s * K + (1.0 - c) * np.outer(w, w)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (N, 3) arrays (np.cross is slow on small batches)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis of equally shaped arrays."""
+    out = np.empty(a.shape)
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+def _mdh4(a, alpha, d, theta) -> np.ndarray:
+    ca, sa, ct, st = math.cos(alpha), math.sin(alpha), math.cos(theta), math.sin(theta)
+    return np.array([[ct, -st, 0.0, a], [ca * st, ca * ct, -sa, -sa * d],
+                     [sa * st, sa * ct, ca, ca * d], [0.0, 0.0, 0.0, 1.0]])
+
+
+class MeasurementModel:
+    """Forward model and Jacobian of one MD-H chain over a fixed set of poses.
+
+    mdh: the chain. joint_values: (N, n) [rad or m]. The joint motions are computed once
+    here, so evaluating many parameter vectors on the same poses is cheap.
+    """
+
+    def __init__(self, mdh: MdhModel, joint_values: np.ndarray):
+        self.mdh = mdh
+        self.space = ParameterSpace(mdh.joint_names)
+        q = np.asarray(joint_values, dtype=float)
+        if q.ndim != 2 or q.shape[1] != mdh.n:
+            raise ValueError(f"joint_values must be (N, {mdh.n}), got {q.shape}")
+        self.q = q
+        self.N = len(q)
+        # joint motions as (N, 4, 4) transforms, computed once for these poses
+        self._motion = []
+        for i, (kind, w) in enumerate(zip(mdh.kinds, mdh.screw_axes)):
+            M = np.zeros((self.N, 4, 4))
+            M[:, 3, 3] = 1.0
+            if kind == "prismatic":
+                M[:, :3, :3] = np.eye(3)
+                M[:, :3, 3] = q[:, i, None] * w
+            else:
+                M[:, :3, :3] = _rodrigues(w, q[:, i])
+            self._motion.append(M)
+
+    def subset(self, rows) -> "MeasurementModel":
+        return MeasurementModel(self.mdh, self.q[rows])
+
+    def tip_poses(self, table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(R (N, 3, 3), p (N, 3)) of the tip frame in the base frame."""
+        R, p, _ = self._chain(table, keep=False)
+        return R, p
+
+    def _chain(self, table, keep: bool):
+        G = np.broadcast_to(self.mdh.T_base_0, (self.N, 4, 4)) if keep else self.mdh.T_base_0
+        stages = []
+        for i in range(self.mdh.n):
+            H = G @ _mdh4(*table[i])  # frame i before its joint moves
+            if keep:
+                stages.append((G, H))
+            G = H @ self._motion[i]
+        T = G @ self.mdh.T_n_tip
+        return T[:, :3, :3], T[:, :3, 3], stages
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        """(N, 3) predicted tool-point positions in the measurement frame [m]."""
+        table, base, tool = self.space.split(x)
+        R_tip, p_tip, _ = self._chain(table, keep=False)
+        P = p_tip + R_tip @ tool
+        return P @ base_rotation(*base[3:]).T + base[:3]
+
+    def jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(prediction (N, 3), Jacobian (N, 3, p)) of the predicted positions w.r.t. x."""
+        table, base, tool = self.space.split(x)
+        R_tip, p_tip, stages = self._chain(table, keep=True)
+        P = p_tip + R_tip @ tool  # tool point in the base frame
+        n, N = self.mdh.n, self.N
+        J = np.empty((N, 3, self.space.size))
+        G = np.stack([g for g, _ in stages])  # (n, N, 4, 4)
+        H = np.stack([h for _, h in stages])
+        xg, zh = G[:, :, :3, 0], H[:, :, :3, 2]                            # (n, N, 3)
+        rg, rh = P - G[:, :, :3, 3], P - H[:, :, :3, 3]
+        cols = np.empty((n, 4, N, 3))
+        cols[:, 0] = xg                                                    # a_{i-1}
+        cols[:, 1] = _cross3(xg, rg)                                       # alpha_{i-1}
+        cols[:, 2] = zh                                                    # d_i
+        cols[:, 3] = _cross3(zh, rh)                                       # theta_i
+        J[:, :, :4 * n] = cols.reshape(4 * n, N, 3).transpose(1, 2, 0)
+        k = 4 * n
+        rx, ry, rz = base[3:]
+        Rx, Ry, Rz = rotx(rx), roty(ry), rotz(rz)
+        Rb = Rx @ Ry @ Rz
+        J[:, :, :k] = np.einsum("ij,njp->nip", Rb, J[:, :, :k])
+        Pm = P @ Rb.T + base[:3]
+        J[:, :, k:k + 3] = np.eye(3)
+        ex, ey, ez = np.eye(3)
+        J[:, :, k + 3] = _cross(np.broadcast_to(ex, (N, 3)), Pm - base[:3])
+        J[:, :, k + 4] = _cross(np.broadcast_to(ey, (N, 3)), P @ (Ry @ Rz).T) @ Rx.T
+        J[:, :, k + 5] = _cross(np.broadcast_to(ez, (N, 3)), P @ Rz.T) @ (Rx @ Ry).T
+        J[:, :, k + 6:k + 9] = np.einsum("ij,njk->nik", Rb, R_tip)
+        return Pm, J

@@ -1,0 +1,183 @@
+"""Measured samples: joint values and the measured 3-D position of the tool point.
+
+A CSV file has a header naming the chain joints as in the URDF plus the position columns
+(``x,y,z`` by default), and optionally ``sigma`` (per-sample standard deviation of the
+position). Units: metres and radians by default; ``length_unit="mm"`` reads positions,
+sigma and prismatic joints in millimetres, ``angle_unit="deg"`` reads revolute joints in
+degrees. Inside, everything is SI. Other columns are kept out of the fit and reported.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DataError, InputFileError, listing, suggest
+
+LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
+ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """N samples of one chain.
+
+    joint_names: the chain joints, in chain order.
+    joint_values: (N, n) [rad or m].
+    positions: (N, 3) measured tool point in the measurement frame [m].
+    sigma: (N,) standard deviation of each measured position [m], or None.
+    rows: (N,) line numbers in the source file (1 = header), for messages.
+    source: where the samples came from.
+    ignored_columns: columns of the file that are not used.
+    """
+
+    joint_names: tuple[str, ...]
+    joint_values: np.ndarray
+    positions: np.ndarray
+    sigma: np.ndarray | None = None
+    rows: np.ndarray | None = None
+    source: str = "<memory>"
+    ignored_columns: tuple[str, ...] = field(default=())
+
+    def __post_init__(self):
+        q = _readonly(self.joint_values)
+        P = _readonly(self.positions)
+        if q.ndim != 2 or q.shape[1] != len(self.joint_names):
+            raise DataError(f"{self.source}: joint values must be (N, {len(self.joint_names)}), "
+                            f"got {q.shape}")
+        if P.shape != (len(q), 3):
+            raise DataError(f"{self.source}: positions must be ({len(q)}, 3), got {P.shape}")
+        for name, arr in (("joint value", q), ("position", P)):
+            bad = np.argwhere(~np.isfinite(arr))
+            if bad.size:
+                k = bad[0][0]
+                raise DataError(f"{self.source}: sample {k + 1} has a non-finite {name}")
+        object.__setattr__(self, "joint_values", q)
+        object.__setattr__(self, "positions", P)
+        if self.sigma is not None:
+            s = _readonly(self.sigma)
+            if s.shape != (len(q),) or not np.all(np.isfinite(s)) or np.any(s <= 0):
+                raise DataError(f"{self.source}: sigma must be N positive finite values")
+            object.__setattr__(self, "sigma", s)
+        rows = np.arange(2, len(q) + 2) if self.rows is None else np.asarray(self.rows)
+        object.__setattr__(self, "rows", rows)
+
+    def __len__(self) -> int:
+        return len(self.joint_values)
+
+    def subset(self, index) -> "Measurements":
+        index = np.asarray(index)
+        return Measurements(self.joint_names, self.joint_values[index], self.positions[index],
+                            None if self.sigma is None else self.sigma[index], self.rows[index],
+                            self.source, self.ignored_columns)
+
+    def for_chain(self, joint_names) -> "Measurements":
+        """The same samples with columns in the order of ``joint_names`` (checked)."""
+        joint_names = tuple(joint_names)
+        if joint_names == self.joint_names:
+            return self
+        missing = [j for j in joint_names if j not in self.joint_names]
+        if missing:
+            raise DataError(f"{self.source}: no values for chain joints {', '.join(missing)}; "
+                            f"the data has {listing(self.joint_names)}")
+        idx = [self.joint_names.index(j) for j in joint_names]
+        return Measurements(joint_names, self.joint_values[:, idx], self.positions, self.sigma,
+                            self.rows, self.source, self.ignored_columns)
+
+    @classmethod
+    def from_csv(cls, path, joint_names, prismatic=(), length_unit: str = "m",
+                 angle_unit: str = "rad", position_columns=("x", "y", "z"),
+                 sigma_column: str | None = "sigma") -> "Measurements":
+        """Read a CSV file for the chain ``joint_names`` (see the module notes).
+
+        prismatic: names of prismatic chain joints (read with the length unit).
+        """
+        if length_unit not in LENGTH_UNITS:
+            raise DataError(f"unknown length unit {length_unit!r}; expected one of m, mm")
+        if angle_unit not in ANGLE_UNITS:
+            raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+        path = Path(path)
+        if not path.exists():
+            raise InputFileError(f"data file not found: {path}")
+        if path.is_dir():
+            raise InputFileError(f"expected a CSV file, got a directory: {path}")
+        try:
+            with open(path, newline="", encoding="utf-8-sig") as fh:
+                table = list(csv.reader(fh))
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise InputFileError(f"cannot read {path}: {exc}") from exc
+        table = [row for row in table if any(cell.strip() for cell in row)]
+        if not table:
+            raise DataError(f"{path}: the file is empty; expected a header with "
+                            f"{', '.join(list(joint_names) + list(position_columns))}")
+        header = [h.strip() for h in table[0]]
+        dupes = sorted({h for h in header if header.count(h) > 1})
+        if dupes:
+            raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
+        wanted = list(joint_names) + list(position_columns)
+        missing = [c for c in wanted if c not in header]
+        if missing:
+            extra = [h for h in header if h not in wanted]
+            hints = "".join(suggest(m, extra) for m in missing)
+            raise DataError(f"{path}: missing column(s) {', '.join(missing)}.{hints} Expected "
+                            f"the chain joints and positions: {', '.join(wanted)}; "
+                            f"the header has {listing(header)}")
+        use_sigma = sigma_column is not None and sigma_column in header
+        used = set(wanted) | ({sigma_column} if use_sigma else set())
+        ignored = tuple(h for h in header if h not in used)
+        cols = [header.index(c) for c in wanted]
+        if use_sigma:
+            cols.append(header.index(sigma_column))
+        values = np.empty((len(table) - 1, len(cols)))
+        for r, row in enumerate(table[1:]):
+            line = r + 2
+            if len(row) != len(header):
+                raise DataError(f"{path}, line {line}: {len(row)} cells, the header has "
+                                f"{len(header)}")
+            for k, c in enumerate(cols):
+                cell = row[c].strip()
+                try:
+                    v = float(cell)
+                except ValueError:
+                    v = None
+                if v is None or not math.isfinite(v):
+                    what = "an empty cell" if cell == "" else f"{cell!r}"
+                    raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; "
+                                    "expected a finite number")
+                values[r, k] = v
+        if len(values) == 0:
+            raise DataError(f"{path}: a header but no samples")
+        L, A = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
+        n = len(joint_names)
+        unit = np.array([L if j in set(prismatic) else A for j in joint_names])
+        q = values[:, :n] * unit
+        P = values[:, n:n + 3] * L
+        sigma = values[:, n + 3] * L if use_sigma else None
+        if sigma is not None and np.any(sigma <= 0):
+            k = int(np.argmax(sigma <= 0))
+            raise DataError(f"{path}, line {k + 2}, column {sigma_column!r}: sigma must be > 0")
+        return cls(tuple(joint_names), q, P, sigma, np.arange(2, len(values) + 2), str(path),
+                   ignored)
+
+    def to_csv(self, path, prismatic=()) -> None:
+        """Write in the CSV layout :meth:`from_csv` reads (SI units)."""
+        from .urdf_export import write_text_atomic
+
+        cols = list(self.joint_names) + ["x", "y", "z"] + (["sigma"] if self.sigma is not None else [])
+        lines = [",".join(cols)]
+        for k in range(len(self)):
+            vals = list(self.joint_values[k]) + list(self.positions[k])
+            if self.sigma is not None:
+                vals.append(self.sigma[k])
+            lines.append(",".join(repr(float(v)) for v in vals))
+        write_text_atomic(Path(path), "\n".join(lines) + "\n", overwrite=True)

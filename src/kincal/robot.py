@@ -1,0 +1,299 @@
+"""The one Pinocchio boundary: a robot loaded from URDF and the chain from base to tip.
+
+:class:`Robot` owns the ``pin.Model`` and answers kinematic questions by frame name.
+Everything else in kincal (MD-H layer, identification, statistics) is plain numpy and
+talks to Pinocchio only through this class.
+
+Frames: the *base frame* B is a link or joint frame of the URDF (default: the root
+link); the *tip frame* E is any frame below it. Chain joints are the movable joints on
+the path from B down to E, root first. Joint values are in the joint's own unit:
+radians for revolute and continuous joints, metres for prismatic ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from . import descriptions
+from .errors import ChainError, FrameError, UrdfError, listing, suggest
+from .rotations import inverse
+from .urdf_source import read_urdf_text
+
+_REVOLUTE = {"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned"}
+_CONTINUOUS = {"JointModelRUBX", "JointModelRUBY", "JointModelRUBZ",
+               "JointModelRevoluteUnboundedUnaligned"}
+_PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"}
+
+
+@dataclass(frozen=True)
+class ChainGeometry:
+    """The chain at zero joint values, expressed in the base frame B.
+
+    joint_names: the n movable chain joints, root first.
+    kinds: "revolute" (revolute or continuous) or "prismatic", per joint.
+    joint_frames: (n, 4, 4) T_B_Ji, pose of joint frame i (= its child link frame) [m].
+    axes: (n, 3) unit joint axis of joint i in its own frame.
+    T_base_tip: (4, 4) pose of the tip frame at zero joint values [m].
+    lower, upper: (n,) joint limits [rad or m]; +-inf when the URDF gives none.
+    """
+
+    joint_names: tuple[str, ...]
+    kinds: tuple[str, ...]
+    joint_frames: np.ndarray
+    axes: np.ndarray
+    T_base_tip: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.joint_names)
+
+
+def _se3(T: np.ndarray) -> pin.SE3:
+    return pin.SE3(np.array(T[:3, :3]), np.array(T[:3, 3]))
+
+
+def _mat(M: pin.SE3) -> np.ndarray:
+    return np.array(M.homogeneous)
+
+
+class Robot:
+    """A URDF robot in Pinocchio with a chosen chain from ``base`` to ``tip``.
+
+    Build with :meth:`load`. A Robot is never modified: :meth:`with_joint_frames`
+    returns a corrected copy that shares the original URDF text.
+    """
+
+    def __init__(self, model: pin.Model, urdf_text: str, name: str, base: str, tip: str,
+                 source: Path | None = None):
+        self.model = model
+        self.urdf_text = urdf_text
+        self.name = name
+        self.source = source
+        self._data = model.createData()
+        self.base = base
+        self.tip = tip
+        self._base_id = self._frame_id(base, "base")
+        self._tip_id = self._frame_id(tip, "tip")
+        self._chain = self._find_chain()
+        self.geometry = self._compute_geometry()
+
+    # ------------------------------------------------------------------ loading
+    @classmethod
+    def load(cls, robot: str | Path, tip: str | None = None, base: str | None = None) -> "Robot":
+        """Load a URDF path, ``"ec66"``, or an example-robot-data name (``"ur10"``, ...).
+
+        ``tip`` defaults to the description's usual tip frame when known; ``base`` to the
+        URDF root link.
+        """
+        desc = descriptions.resolve(robot)
+        text = read_urdf_text(desc.urdf)
+        try:
+            model = pin.buildModelFromXML(text)
+        except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError
+            raise UrdfError(f"{desc.urdf}: Pinocchio could not build a model: {exc}") from exc
+        root = next((f.name for f in model.frames if f.type == pin.FrameType.BODY), None)
+        if root is None:
+            raise UrdfError(f"{desc.urdf}: the URDF has no link")
+        tip = tip or desc.default_tip
+        if tip is None:
+            leaves = cls._leaf_links(model)
+            raise FrameError(f"{desc.urdf}: no tip frame given; choose one with --tip, e.g. one "
+                             f"of the leaf links: {listing(leaves)}", valid=tuple(leaves))
+        return cls(model, text, desc.name, base or root, tip, source=desc.urdf)
+
+    @staticmethod
+    def _leaf_links(model: pin.Model) -> list[str]:
+        parents = {f.parentFrame for f in model.frames}
+        return [f.name for i, f in enumerate(model.frames)
+                if f.type == pin.FrameType.BODY and i not in parents]
+
+    def frame_names(self) -> list[str]:
+        """Names usable as base or tip: links and joints of the URDF."""
+        return [f.name for f in self.model.frames
+                if f.type in (pin.FrameType.BODY, pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)]
+
+    def _frame_id(self, name: str, role: str) -> int:
+        if not isinstance(name, str) or not self.model.existFrame(name):
+            valid = self.frame_names()
+            raise FrameError(f"unknown {role} frame {name!r} in robot {self.name!r}."
+                             + suggest(str(name), valid) + f" Valid frames: {listing(valid)}",
+                             valid=tuple(valid))
+        return self.model.getFrameId(name)
+
+    def _frames_below(self, joint: int) -> list[str]:
+        below = []
+        for f in self.model.frames:
+            j = f.parentJoint
+            while j not in (0, joint):
+                j = self.model.parents[j]
+            if j == joint and f.type in (pin.FrameType.BODY, pin.FrameType.JOINT):
+                below.append(f.name)
+        return below
+
+    def _find_chain(self) -> list[int]:
+        m = self.model
+        jb = m.frames[self._base_id].parentJoint
+        je = m.frames[self._tip_id].parentJoint
+        chain, j = [], je
+        while j != jb:
+            if j == 0:
+                valid = self._frames_below(jb)
+                raise FrameError(f"tip frame {self.tip!r} is not below base frame {self.base!r}; "
+                                 f"frames below the base: {listing(valid)}", valid=tuple(valid))
+            chain.append(j)
+            j = m.parents[j]
+        chain.reverse()
+        if not chain:
+            raise ChainError(f"no movable joint between base {self.base!r} and tip {self.tip!r}")
+        for j in chain:
+            kind = m.joints[j].shortname()
+            if kind not in _REVOLUTE | _CONTINUOUS | _PRISMATIC:
+                raise ChainError(f"joint {m.names[j]!r} on the chain {self.base!r} -> {self.tip!r} "
+                                 f"is a {kind}; kincal models revolute, continuous and prismatic "
+                                 "joints only (choose a base below floating or planar joints)")
+        return chain
+
+    # ----------------------------------------------------------------- geometry
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(self.model.names[j] for j in self._chain)
+
+    def _compute_geometry(self) -> ChainGeometry:
+        m = self.model
+        T_jb_B = _mat(m.frames[self._base_id].placement)
+        T = inverse(T_jb_B)  # base joint frame expressed in B
+        frames, axes, kinds = [], [], []
+        for j in self._chain:
+            T = T @ _mat(m.jointPlacements[j])
+            frames.append(T.copy())
+            axis, kind = self._axis(j)
+            axes.append(axis)
+            kinds.append(kind)
+        T_tip = T @ _mat(m.frames[self._tip_id].placement)
+        lower, upper = [], []
+        for j in self._chain:
+            iq = m.joints[j].idx_q
+            if m.joints[j].nq == 2:  # continuous: no limit
+                lower.append(-np.inf), upper.append(np.inf)
+            else:
+                lo, hi = float(m.lowerPositionLimit[iq]), float(m.upperPositionLimit[iq])
+                # Pinocchio stores "no limit" as +-max double
+                lower.append(lo if lo > -1e300 else -np.inf)
+                upper.append(hi if hi < 1e300 else np.inf)
+        return ChainGeometry(self.joint_names, tuple(kinds), np.array(frames), np.array(axes),
+                             T_tip, np.array(lower), np.array(upper))
+
+    def _axis(self, j: int) -> tuple[np.ndarray, str]:
+        """Unit axis of joint j in its own frame, read from its motion subspace."""
+        m, d = self.model, self._data
+        q = pin.neutral(m)
+        J = pin.computeJointJacobian(m, d, q, j)  # 6 x nv, in the joint's local frame
+        col = J[:, m.joints[j].idx_v]
+        kind = "prismatic" if m.joints[j].shortname() in _PRISMATIC else "revolute"
+        axis = col[:3] if kind == "prismatic" else col[3:]
+        return axis / np.linalg.norm(axis), kind
+
+    # --------------------------------------------------------------- kinematics
+    def configuration(self, joint_values) -> np.ndarray:
+        """Pinocchio q for chain joint values (n,) [rad or m]; other joints at neutral."""
+        q = pin.neutral(self.model)
+        for j, v in zip(self._chain, np.asarray(joint_values, dtype=float)):
+            jm = self.model.joints[j]
+            if jm.nq == 2:
+                q[jm.idx_q:jm.idx_q + 2] = (np.cos(v), np.sin(v))
+            else:
+                q[jm.idx_q] = v
+        return q
+
+    def tip_poses(self, joint_values) -> np.ndarray:
+        """(N, 4, 4) poses of the tip frame in the base frame for (N, n) joint values.
+
+        Reference implementation through Pinocchio (a loop over samples); the
+        identification uses the vectorised MD-H model, which tests check against this.
+        """
+        Q = np.atleast_2d(np.asarray(joint_values, dtype=float))
+        out = np.empty((len(Q), 4, 4))
+        for k, qk in enumerate(Q):
+            pin.framesForwardKinematics(self.model, self._data, self.configuration(qk))
+            oMb = self._data.oMf[self._base_id]
+            oMe = self._data.oMf[self._tip_id]
+            out[k] = _mat(oMb.actInv(oMe))
+        return out
+
+    # -------------------------------------------------------------- correction
+    def with_joint_frames(self, joint_frames: np.ndarray) -> "Robot":
+        """A copy whose chain joint frames at zero joint values are ``joint_frames``.
+
+        joint_frames: (n, 4, 4) T_B_Ji in the base frame. Only the placements of the
+        chain joints change; every link stays rigidly attached to its joint frame.
+        """
+        m = pin.Model(self.model)
+        T_prev = inverse(_mat(m.frames[self._base_id].placement))
+        for j, T in zip(self._chain, np.asarray(joint_frames)):
+            m.jointPlacements[j] = _se3(inverse(T_prev) @ T)
+            T_prev = T
+        return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source)
+
+    def urdf_origins(self) -> dict[str, np.ndarray]:
+        """URDF ``<origin>`` (pose of the joint in its parent link) of every chain joint."""
+        m = self.model
+        out = {}
+        for j in self._chain:
+            fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
+            parent_link = m.frames[m.frames[fid].parentFrame]
+            out[m.names[j]] = inverse(_mat(parent_link.placement)) @ _mat(m.jointPlacements[j])
+        return out
+
+    def __repr__(self) -> str:
+        return (f"Robot({self.name!r}, base={self.base!r}, tip={self.tip!r}, "
+                f"joints={list(self.joint_names)})")
+
+    # ---------------------------------------------------------- inverse kinematics
+    def inverse_kinematics(self, position, tool=(0.0, 0.0, 0.0), rotation=None, start=None,
+                           max_iterations: int = 200, tolerance: float = 1e-10):
+        """Chain joint values putting the tool point at ``position`` in the base frame.
+
+        position: (3,) [m]; tool: (3,) tool point in the tip frame [m]; rotation: optional
+        (3, 3) orientation of the tip frame in the base frame; start: (n,) first guess.
+        Damped least squares, clipped to the joint limits. Returns (q (n,), converged).
+        """
+        m, d = self.model, self._data
+        chain_v = [m.joints[j].idx_v for j in self._chain]
+        g = self.geometry
+        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        q = np.clip(np.zeros(g.n) if start is None else np.asarray(start, float), lo, hi)
+        target = np.asarray(position, float)
+        tool = np.asarray(tool, float)
+        oMb = None
+        for _ in range(max_iterations):
+            qp = self.configuration(q)
+            pin.framesForwardKinematics(m, d, qp)
+            oMb = d.oMf[self._base_id]
+            bMe = oMb.actInv(d.oMf[self._tip_id])
+            R, p = bMe.rotation, bMe.translation
+            pt = p + R @ tool
+            err = [target - pt]
+            Jw = pin.computeFrameJacobian(m, d, qp, self._tip_id, pin.LOCAL_WORLD_ALIGNED)
+            Jw = Jw[:, chain_v]
+            Rb = oMb.rotation.T
+            Jv, Jo = Rb @ Jw[:3], Rb @ Jw[3:]  # in base-frame axes
+            rt = R @ tool
+            Jp = Jv - np.cross(rt, Jo.T).T  # point velocity v + w x (R t)
+            rows = [Jp]
+            if rotation is not None:
+                err.append(pin.log3(np.asarray(rotation) @ R.T))
+                rows.append(Jo)
+            e = np.concatenate(err)
+            if np.linalg.norm(e) < tolerance:
+                return q, True
+            A = np.vstack(rows)
+            dq = A.T @ np.linalg.solve(A @ A.T + 1e-8 * np.eye(len(e)), e)
+            q = np.clip(q + dq, lo, hi)
+        return q, False

@@ -1,0 +1,131 @@
+"""Rotations and rigid transforms as plain numpy (no Pinocchio).
+
+Conventions:
+- URDF ``rpy`` = (roll, pitch, yaw) means R = Rz(yaw) @ Ry(pitch) @ Rx(roll) [rad].
+- The measurement frame of the paper uses R = Rx(rx) @ Ry(ry) @ Rz(rz) [rad].
+- Homogeneous transforms are 4x4 arrays; batches are (..., 4, 4).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def rotx(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def roty(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rotz(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def transform(R: np.ndarray | None = None, p=None) -> np.ndarray:
+    """4x4 homogeneous transform from rotation R (3x3) and translation p (3,) [m]."""
+    T = np.eye(4)
+    if R is not None:
+        T[:3, :3] = R
+    if p is not None:
+        T[:3, 3] = p
+    return T
+
+
+def inverse(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform (4x4 or batch)."""
+    R = T[..., :3, :3]
+    p = T[..., :3, 3]
+    Ti = np.zeros_like(T)
+    Rt = np.swapaxes(R, -1, -2)
+    Ti[..., :3, :3] = Rt
+    Ti[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, p)
+    Ti[..., 3, 3] = 1.0
+    return Ti
+
+
+def rpy_to_matrix(rpy) -> np.ndarray:
+    """URDF rpy [rad] to a rotation matrix: Rz(y) Ry(p) Rx(r)."""
+    r, p, y = (float(v) for v in rpy)
+    return rotz(y) @ roty(p) @ rotx(r)
+
+
+def _wrap_near(angle: float, reference: float) -> float:
+    """``angle`` plus the multiple of 2*pi that brings it closest to ``reference``."""
+    return angle + 2.0 * math.pi * round((reference - angle) / (2.0 * math.pi))
+
+
+def matrix_to_rpy(R: np.ndarray, near=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """URDF rpy [rad] of rotation R, chosen closest to the triple ``near``.
+
+    A rotation has two rpy triples (r, p, y) and (r + pi, pi - p, y + pi), each
+    modulo 2*pi per angle. Of these, the one closest to ``near`` (Euclidean, after
+    wrapping each angle next to its reference) is returned, so a corrected origin
+    keeps the look of its original numbers. At exact gimbal lock (|R[2,0]| = 1)
+    only r - y (or r + y) is defined; roll is then kept at its reference value.
+    The result reproduces R to machine precision in every case.
+    """
+    R = np.asarray(R, dtype=float)
+    near = np.asarray(near, dtype=float)
+    # pitch from atan2, well conditioned also near +-90 deg (asin is not)
+    cp = math.hypot(R[2, 1], R[2, 2])
+    p = math.atan2(-R[2, 0], cp)
+    # roll from the last row; at exact gimbal lock it is free: keep the reference
+    r = math.atan2(R[2, 1], R[2, 2]) if cp > 1e-300 else float(near[0])
+    # yaw from what is left once roll and pitch are removed, so that the triple
+    # reproduces R to machine precision even where roll alone is ill-conditioned
+    M = R @ rotx(r).T @ roty(p).T
+    y = math.atan2(M[1, 0], M[0, 0])
+    candidates = [(r, p, y), (r + math.pi, math.pi - p, y + math.pi)]
+    best, best_d = None, math.inf
+    for c in candidates:
+        w = np.array([_wrap_near(c[i], near[i]) for i in range(3)])
+        d = float(np.sum((w - near) ** 2))
+        if d < best_d:
+            best, best_d = w, d
+    return best
+
+
+def xyz_rpy_to_transform(xyz, rpy) -> np.ndarray:
+    return transform(rpy_to_matrix(rpy), np.asarray(xyz, dtype=float))
+
+
+def base_rotation(rx: float, ry: float, rz: float) -> np.ndarray:
+    """Measurement-frame rotation of the paper: Rx(rx) Ry(ry) Rz(rz) [rad]."""
+    return rotx(rx) @ roty(ry) @ rotz(rz)
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    x, y, z = v
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def rotation_angle(R: np.ndarray) -> float:
+    """Geodesic angle [rad] of rotation R."""
+    c = (np.trace(R) - 1.0) / 2.0
+    s = np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2.0
+    return math.atan2(s, c)
+
+
+def base_angles(R: np.ndarray) -> np.ndarray:
+    """(rx, ry, rz) [rad] with R = Rx(rx) Ry(ry) Rz(rz), ry in [-pi/2, pi/2]."""
+    ry = math.atan2(R[0, 2], math.hypot(R[1, 2], R[2, 2]))
+    rx = math.atan2(-R[1, 2], R[2, 2])
+    rz = math.atan2(-R[0, 1], R[0, 0])
+    return np.array([rx, ry, rz])
+
+
+def kabsch(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid (R, t) minimising sum ||y_k - (R x_k + t)||^2 for (N, 3) point sets."""
+    xm, ym = x.mean(axis=0), y.mean(axis=0)
+    H = (x - xm).T @ (y - ym)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    R = Vt.T @ D @ U.T
+    return R, ym - R @ xm

@@ -1,0 +1,174 @@
+"""What the data can identify: rank, redundant parameters and weak ones.
+
+Plain numpy. Works on the identification Jacobian of the actual data, with columns in
+reporting units (mm of position per mm or per degree of parameter), so the analysis
+does not depend on SI scaling.
+
+Selection is an ordered rank-revealing QR: columns are taken in a fixed order of
+preference and a column is kept when the part of it that the kept columns cannot
+reproduce is larger than ``rank_tol`` of its own norm. The order is: measurement frame,
+then tool point, then the kinematic parameters from the last joint back to the first
+(a, alpha, d, theta within a joint). So a kinematic parameter that duplicates the frame
+or tool is dropped (not the frame), and of a set of parallel-axis offsets the one
+nearest the tool is kept. This is deterministic (no random draws, no data-dependent
+pivoting among equals) and, being greedy in a fixed order, stable as poses are added.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+RANK_TOL = 1e-7  # relative size of the new part of a column below which it is redundant
+WEAK_INDEPENDENCE = 0.02  # kept, but 98 % of its effect reproducible by the others
+WEAK_SENSITIVITY = 0.005  # kept, but moves the point less than this [mm RMS per mm or deg]
+
+
+@dataclass(frozen=True)
+class Duplicate:
+    """A dropped parameter and the kept ones that reproduce its effect.
+
+    combination: (name, coefficient) pairs, largest first: one reporting unit of the
+    dropped parameter acts like ``coefficient`` units of each named one. Empty when
+    the parameter has no effect at all on the measured point.
+    """
+
+    name: str
+    combination: tuple[tuple[str, float], ...]
+
+    def describe(self) -> str:
+        if not self.combination:
+            return f"{self.name}: no effect on the measured point"
+        terms = " ".join(f"{c:+.3g} {n}" for n, c in self.combination)
+        return f"{self.name} ~ {terms}"
+
+
+@dataclass(frozen=True)
+class Weak:
+    """A kept parameter the data barely constrain.
+
+    independence: fraction (0..1) of its effect the other kept parameters cannot mimic.
+    sensitivity: RMS point motion [mm] per unit (mm or deg) of it, after removing what
+    the others can mimic.
+    """
+
+    name: str
+    independence: float
+    sensitivity: float
+    hint: str = ""
+
+    def describe(self) -> str:
+        text = (f"{self.name}: only {100 * self.independence:.2g} % of its effect is its own, "
+                f"{self.sensitivity:.3g} mm per unit")
+        return text + (f" ({self.hint})" if self.hint else "")
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """The outcome of :func:`analyze`.
+
+    names: every parameter name; free: those offered to the analysis (not fixed by the
+    user); kept / dropped: the partition of ``free``; fixed: fixed by the user.
+    rank: numerical rank of the free columns; singular_values: of the free columns,
+    each normalised to unit length (descending); condition_number: of the kept columns
+    (normalised). duplicates: why each dropped parameter was dropped. weak: kept but
+    poorly determined parameters.
+    """
+
+    names: tuple[str, ...]
+    free: tuple[str, ...]
+    kept: tuple[str, ...]
+    dropped: tuple[str, ...]
+    fixed: tuple[str, ...]
+    rank: int
+    singular_values: np.ndarray
+    condition_number: float
+    duplicates: tuple[Duplicate, ...]
+    weak: tuple[Weak, ...]
+    rank_tol: float
+
+    def summary(self) -> str:
+        lines = [f"identifiable: {len(self.kept)} of {len(self.free)} free parameters "
+                 f"(rank {self.rank}, condition number {self.condition_number:.3g})"]
+        if self.fixed:
+            lines.append(f"fixed by the user: {', '.join(self.fixed)}")
+        for d in self.duplicates:
+            lines.append(f"dropped {d.describe()}")
+        for w in self.weak:
+            lines.append(f"weak {w.describe()}")
+        return "\n".join(lines)
+
+
+def preference_order(names, n_kinematic: int) -> list[int]:
+    """Column indices in the order of preference described in the module notes."""
+    n_joints = n_kinematic // 4
+    order = list(range(n_kinematic, len(names)))  # base then tool
+    for j in reversed(range(n_joints)):
+        order += [4 * j + f for f in range(4)]
+    return order
+
+
+def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float = RANK_TOL,
+            weak_independence: float = WEAK_INDEPENDENCE,
+            weak_sensitivity: float = WEAK_SENSITIVITY) -> Identifiability:
+    """Identifiability of the parameters from a Jacobian in reporting units.
+
+    J: (m, p) rows = residual components [mm], columns = parameters [mm or deg].
+    free: (p,) bool, the parameters the user did not fix (default: all).
+    """
+    names = tuple(names)
+    p = len(names)
+    free = np.ones(p, dtype=bool) if free is None else np.asarray(free, dtype=bool)
+    norms = np.linalg.norm(J, axis=0)
+    scale = float(norms.max()) if norms.size else 1.0
+    Q = np.zeros((J.shape[0], 0))
+    kept, dropped = [], []
+    for c in preference_order(names, n_kinematic):
+        if not free[c]:
+            continue
+        col = J[:, c]
+        if norms[c] <= rank_tol * scale:
+            dropped.append(c)
+            continue
+        r = col - Q @ (Q.T @ col)
+        r = r - Q @ (Q.T @ r)  # second pass keeps the basis orthogonal to working precision
+        if np.linalg.norm(r) > rank_tol * norms[c]:
+            kept.append(c)
+            Q = np.column_stack([Q, r / np.linalg.norm(r)])
+        else:
+            dropped.append(c)
+    kept.sort()
+    dropped.sort()
+    free_idx = np.flatnonzero(free)
+    Jn = J[:, free_idx] / np.where(norms[free_idx] > 0, norms[free_idx], 1.0)
+    sv = np.linalg.svd(Jn, compute_uv=False) if free_idx.size else np.zeros(0)
+    rank = int(np.sum(sv > rank_tol * sv[0])) if sv.size else 0
+    Jk = J[:, kept]
+    Jkn = Jk / norms[kept]
+    svk = np.linalg.svd(Jkn, compute_uv=False)
+    cond = float(svk[0] / svk[-1]) if svk.size and svk[-1] > 0 else float("inf")
+    duplicates = []
+    for c in dropped:
+        if norms[c] <= rank_tol * scale:
+            duplicates.append(Duplicate(names[c], ()))
+            continue
+        coef, *_ = np.linalg.lstsq(Jk, J[:, c], rcond=None)
+        big = np.argsort(-np.abs(coef))
+        top = [(names[kept[i]], float(coef[i])) for i in big[:4]
+               if abs(coef[i]) >= 0.05 * abs(coef[big[0]])]
+        duplicates.append(Duplicate(names[c], tuple(top)))
+    weak = []
+    if kept:
+        G = Jkn.T @ Jkn
+        Ginv = np.linalg.pinv(G)
+        independence = 1.0 / np.sqrt(np.maximum(np.diag(Ginv), 1e-300))
+        rows = J.shape[0] // 3 if J.shape[0] % 3 == 0 else J.shape[0]
+        sensitivity = independence * norms[kept] / np.sqrt(max(rows, 1))
+        for i, c in enumerate(kept):
+            if independence[i] < weak_independence or sensitivity[i] < weak_sensitivity:
+                weak.append(Weak(names[c], float(independence[i]), float(sensitivity[i])))
+    return Identifiability(names, tuple(names[i] for i in free_idx), tuple(names[i] for i in kept),
+                           tuple(names[i] for i in dropped),
+                           tuple(names[i] for i in range(p) if not free[i]), rank, sv, cond,
+                           tuple(duplicates), tuple(weak), rank_tol)

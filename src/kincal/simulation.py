@@ -1,0 +1,129 @@
+"""Synthetic measurements: a robot with planted errors, a pose design and sensor noise.
+
+Used by the demo, the paper reproduction, the benchmarks and the tests. The "true" robot
+is the nominal MD-H model with a perturbed table, plus optionally a non-geometric error
+that no MD-H model can absorb: a gravity-like compliance that bends joints 2 and 3 by
+``compliance * cos`` of their angle sums (radians), as a loaded shoulder and elbow do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import OptionError
+from .mdh import MdhModel
+from .measurement_model import MeasurementModel
+from .measurements import Measurements
+from .parameters import ParameterSpace
+from .robot import Robot
+from .rotations import base_rotation, rotx
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The simulated robot and sensor setup (SI units).
+
+    table: (n, 4) true MD-H table. base: (6,) true measurement frame. tool: (3,) true
+    tool point in the tip frame. compliance: [rad] amplitude of the non-geometric error.
+    """
+
+    table: np.ndarray
+    base: np.ndarray
+    tool: np.ndarray
+    compliance: float = 0.0
+
+    def x(self, space: ParameterSpace) -> np.ndarray:
+        return space.join(self.table, self.base, self.tool)
+
+
+def planted_table(mdh: MdhModel, rng: np.random.Generator, length_sd: float = 0.3e-3,
+                  angle_sd: float = np.radians(0.03), names=None) -> np.ndarray:
+    """The nominal table plus Gaussian errors [m, rad] on ``names`` (default: all)."""
+    space = ParameterSpace(mdh.joint_names)
+    x = space.join(mdh.table, np.zeros(6), np.zeros(3))
+    idx = np.arange(space.n_kinematic) if names is None else space.indices(names)
+    sd = np.where(space.is_length[idx], length_sd, angle_sd)
+    x[idx] += rng.normal(size=idx.size) * sd
+    return space.split(x)[0].copy()
+
+
+def latin_hypercube(n: int, rng: np.random.Generator, dim: int = 3) -> np.ndarray:
+    """(n, dim) Latin-hypercube sample of the unit cube."""
+    u = (rng.random((n, dim)) + np.arange(n)[:, None]) / n
+    for k in range(dim):
+        u[:, k] = u[rng.permutation(n), k]
+    return u
+
+
+def random_rotation_near(R0: np.ndarray, max_angle: float, rng) -> np.ndarray:
+    """R0 turned by a uniformly random axis and an angle uniform in [0, max_angle]."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    angle = rng.uniform(0, max_angle)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return (np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K) @ R0
+
+
+def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.Generator,
+               orientation=None, max_tilt: float = np.radians(30), lhs: bool = True,
+               attempts: int = 40) -> np.ndarray:
+    """(n, dof) joint values putting the tool point at points of a cube [m].
+
+    center: (3,) cube centre in the base frame; size: edge length. Points are a Latin
+    hypercube (or uniform) sample. orientation: (3, 3) mean tip orientation (default:
+    tool z pointing down), varied by up to ``max_tilt`` per pose; None orientation with
+    max_tilt=None leaves the orientation free (position-only IK).
+    """
+    if n < 1:
+        raise OptionError(f"need at least one pose, got {n}")
+    center = np.asarray(center, float)
+    pts = center + (latin_hypercube(n, rng) if lhs else rng.random((n, 3)) - 0.0) * size - size / 2
+    R0 = rotx(np.pi) if orientation is None else np.asarray(orientation, float)
+    g = robot.geometry
+    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+    out = np.empty((n, g.n))
+    # one solution at the centre, in the mean orientation, seeds every pose: the cube is
+    # small next to the arm, so Gauss-Newton from there rarely needs a random restart
+    home = None
+    for _ in range(attempts):
+        home, ok = robot.inverse_kinematics(center, tool, None if max_tilt is None else R0,
+                                            start=rng.uniform(lo, hi))
+        if ok:
+            break
+    for k, p in enumerate(pts):
+        for attempt in range(attempts):
+            R = None if max_tilt is None else random_rotation_near(R0, max_tilt, rng)
+            seed = home if attempt == 0 else rng.uniform(lo, hi)
+            q, ok = robot.inverse_kinematics(p, tool, R, start=seed, max_iterations=60)
+            if ok:
+                out[k] = q
+                break
+        else:
+            raise OptionError(f"no joint solution reaches the point {np.round(p, 4)} m of the "
+                              f"{size * 1e3:g} mm cube at {np.round(center, 4)} m; move the cube")
+    return out
+
+
+def true_positions(mdh: MdhModel, truth: Truth, q: np.ndarray) -> np.ndarray:
+    """(N, 3) exact tool-point positions in the measurement frame [m]."""
+    q_eff = np.array(q, dtype=float)
+    if truth.compliance and q_eff.shape[1] >= 3:
+        q_eff[:, 1] += truth.compliance * np.cos(q_eff[:, 1])
+        q_eff[:, 2] += truth.compliance * np.cos(q_eff[:, 1] + q_eff[:, 2])
+    model = MeasurementModel(mdh, q_eff)
+    return model.predict(truth.x(model.space))
+
+
+def measure(mdh: MdhModel, truth: Truth, q: np.ndarray, noise_sd: float,
+            rng: np.random.Generator, source: str = "<simulated>") -> Measurements:
+    """Measurements of ``truth`` at joint values ``q`` with Gaussian noise [m] per axis."""
+    P = true_positions(mdh, truth, q) + rng.normal(size=(len(q), 3)) * noise_sd
+    return Measurements(mdh.joint_names, q, P, source=source)
+
+
+def base_pose(base) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) of a measurement frame vector (x, y, z, rx, ry, rz)."""
+    return base_rotation(*base[3:]), np.asarray(base[:3], float)

@@ -1,0 +1,156 @@
+"""Gauss-Newton with Levenberg-Marquardt damping and an L2 pull toward nominal values.
+
+Plain numpy. The problem is posed in *reporting units*: residuals in mm, parameters in
+mm or degrees (u = x / scale), so that a penalty weight lambda means the same as in the
+paper (whose tables use mm and degrees). The objective is
+
+    F(u) = || w * r(u) ||^2 + lambda * || u_k - u0_k ||^2     [mm^2]
+
+over the free parameters, where u_k are the penalised (kinematic) ones. A step is taken
+only if it lowers F; otherwise the damping grows and the step is tried again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.linalg
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Stopping rules and damping.
+
+    max_iterations: accepted or rejected steps at most (paper: 100).
+    cost_tol: [mm^2] the objective changed by less than this ...
+    cost_window: ... over this many consecutive iterations (paper: 1e-5 over 5).
+    step_tol: [mm or deg] largest component of an accepted step below which we stop.
+    initial_damping: damping tried after a rejected Gauss-Newton step, as a multiple
+        of diag(J^T J) (Marquardt scaling).
+    """
+
+    max_iterations: int = 100
+    cost_tol: float = 1e-5
+    cost_window: int = 5
+    step_tol: float = 1e-10
+    initial_damping: float = 1e-4
+
+
+@dataclass(frozen=True)
+class SolveSummary:
+    """Outcome of one solve, with its history.
+
+    u: parameters at the end (reporting units, all parameters, fixed ones untouched).
+    cost: objective per iteration [mm^2], starting with the initial value.
+    damping: damping used at each iteration (0 = plain Gauss-Newton step).
+    converged: whether a stopping rule other than the iteration limit fired.
+    reason: which rule stopped the solve.
+    """
+
+    u: np.ndarray
+    cost: np.ndarray
+    data_cost: float
+    penalty: float
+    damping: np.ndarray
+    iterations: int
+    converged: bool
+    reason: str
+    jacobian: np.ndarray = field(repr=False)  # (m, p) at the solution, reporting units
+    residual: np.ndarray = field(repr=False)  # (m,) at the solution [mm]
+
+
+ResidualFn = Callable[[np.ndarray, bool], tuple]
+
+
+def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float = 0.0,
+          penalised: np.ndarray | None = None, prior: np.ndarray | None = None,
+          options: SolverOptions = SolverOptions()) -> SolveSummary:
+    """Minimise F from ``u0`` over the parameters where ``free`` is True.
+
+    residual(u, with_jacobian) -> (r (m,), J (m, p) or None): weighted residuals [mm]
+        and their Jacobian with respect to u (measured minus predicted has J = -dP/du;
+        either sign convention works as long as J = dr/du).
+    penalised: (p,) bool, parameters pulled toward ``prior`` with weight lam.
+    """
+    p = u0.size
+    free_idx = np.flatnonzero(free)
+    pen = np.zeros(p, dtype=bool) if penalised is None else np.asarray(penalised, dtype=bool)
+    prior = u0.copy() if prior is None else np.asarray(prior, dtype=float)
+    pen_f = pen[free_idx]
+    sq = np.sqrt(lam) if lam > 0 else 0.0
+
+    def objective(u, r):
+        d = (u - prior)[pen]
+        return float(r @ r), float(lam * (d @ d))
+
+    u = u0.astype(float).copy()
+    r, J = residual(u, True)
+    data, penalty = objective(u, r)
+    costs, damps = [data + penalty], []
+    # Levenberg-Marquardt with Nielsen's damping update: mu scales diag(J^T J); a step
+    # is kept only if it lowers F, and the gain ratio rho (actual / predicted decrease)
+    # steers mu, so well-conditioned problems take plain Gauss-Newton steps.
+    mu, nu = 0.0, 2.0
+    small = 0
+    reason, converged = "iteration limit", False
+    it = 0
+    while it < options.max_iterations:
+        it += 1
+        Jf = J[:, free_idx]
+        rows, rhs = [Jf], [-r]
+        if sq > 0 and pen_f.any():
+            P = np.zeros((pen_f.sum(), free_idx.size))
+            P[np.arange(pen_f.sum()), np.flatnonzero(pen_f)] = sq
+            rows.append(P)
+            rhs.append(-sq * (u - prior)[free_idx][pen_f])
+        A0, b0 = np.vstack(rows), np.concatenate(rhs)
+        colnorm2 = np.maximum(np.einsum("ij,ij->j", A0, A0), 1e-30)
+        accepted = False
+        while True:
+            if mu > 0:
+                A = np.vstack([A0, np.diag(np.sqrt(mu * colnorm2))])
+                b = np.concatenate([b0, np.zeros(free_idx.size)])
+            else:
+                A, b = A0, b0
+            step, *_ = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy",
+                                          check_finite=False)
+            u_new = u.copy()
+            u_new[free_idx] += step
+            # with the Jacobian at once: most steps are accepted, and then it is needed
+            r_new, J_new = residual(u_new, True)
+            d_new, p_new = objective(u_new, r_new)
+            lin = A0 @ step - b0
+            predicted = costs[-1] - float(lin @ lin)
+            actual = costs[-1] - (d_new + p_new)
+            if actual >= 0 and np.isfinite(d_new):
+                accepted = True
+                rho = actual / predicted if predicted > 0 else 1.0
+                if mu > 0:
+                    mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                    if mu < options.initial_damping * 1e-3:
+                        mu = 0.0
+                nu = 2.0
+                break
+            mu = options.initial_damping if mu == 0 else mu * nu
+            nu *= 2.0
+            if mu > 1e10:
+                break
+        damps.append(mu)
+        if not accepted:
+            reason, converged = "no step lowers the objective (local minimum)", True
+            break
+        u, r, J = u_new, r_new, J_new
+        data, penalty = d_new, p_new
+        costs.append(data + penalty)
+        if np.max(np.abs(step)) < options.step_tol:
+            reason, converged = "step below step_tol", True
+            break
+        small = small + 1 if actual < options.cost_tol else 0
+        if small >= options.cost_window:
+            reason, converged = (f"objective change below {options.cost_tol:g} mm^2 over "
+                                 f"{options.cost_window} iterations"), True
+            break
+    return SolveSummary(u, np.array(costs), data, penalty, np.array(damps), it, converged,
+                        reason, J, r)

@@ -1,0 +1,71 @@
+"""Random serial chains as URDF text, with the degenerate cases put in on purpose."""
+
+from __future__ import annotations
+
+import numpy as np
+
+CASES = ("general", "parallel", "intersecting", "coincident", "prismatic", "gimbal", "fixed")
+
+
+def _fmt(v) -> str:
+    return " ".join(repr(float(x)) for x in v)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def random_chain(rng: np.random.Generator, n: int | None = None, cases=CASES) -> tuple[str, list[str]]:
+    """URDF text of a random chain base_link -> tip, and the case used at each joint.
+
+    Each joint i > 1 takes a case relative to joint i-1: general position, parallel
+    axis, intersecting axes, coincident axes, a prismatic joint, an origin with pitch
+    near +-90 deg, or a fixed joint inserted before it. Joint 1 is in general position
+    relative to the base.
+    """
+    n = int(rng.integers(3, 8)) if n is None else n
+    lines = ['<?xml version="1.0"?>', "<!-- random chain made by kincal's tests -->",
+             '<robot name="random_chain">', '  <link name="base_link"/>']
+    parent = "base_link"
+    prev_axis = _unit(rng.normal(size=3))
+    used = []
+    for i in range(1, n + 1):
+        case = "general" if i == 1 else str(rng.choice(cases))
+        used.append(case)
+        axis = _unit(rng.normal(size=3)) if rng.random() < 0.6 else np.eye(3)[rng.integers(3)]
+        xyz = rng.uniform(-0.3, 0.3, 3)
+        rpy = rng.uniform(-np.pi, np.pi, 3)
+        kind = "revolute" if rng.random() < 0.8 else "continuous"
+        if case == "fixed":
+            lines += [f'  <joint name="fixed_{i}" type="fixed">', f'    <parent link="{parent}"/>',
+                      f'    <child link="fixed_link_{i}"/>',
+                      f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>', "  </joint>",
+                      f'  <link name="fixed_link_{i}"/>']
+            parent = f"fixed_link_{i}"
+            xyz = rng.uniform(-0.3, 0.3, 3)
+            rpy = rng.uniform(-np.pi, np.pi, 3)
+        elif case == "parallel":
+            rpy, axis = np.zeros(3), prev_axis
+        elif case == "intersecting":
+            xyz = prev_axis * rng.uniform(-0.3, 0.3)
+        elif case == "coincident":
+            xyz, rpy, axis = prev_axis * rng.uniform(-0.3, 0.3), np.zeros(3), prev_axis
+        elif case == "prismatic":
+            kind = "prismatic"
+        elif case == "gimbal":
+            rpy[1] = np.pi / 2 * rng.choice([-1.0, 1.0]) + rng.normal() * 1e-7
+        limit = ('    <limit lower="-0.3" upper="0.3" effort="1" velocity="1"/>' if kind == "prismatic"
+                 else '    <limit lower="-3.0" upper="3.0" effort="1" velocity="1"/>')
+        lines += [f'  <joint name="j{i}" type="{kind}">', f'    <parent link="{parent}"/>',
+                  f'    <child link="l{i}"/>', f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>',
+                  f'    <axis xyz="{_fmt(axis)}"/>']
+        if kind != "continuous":
+            lines.append(limit)
+        lines += ["  </joint>", f'  <link name="l{i}"/>']
+        parent = f"l{i}"
+        prev_axis = axis
+    tip_xyz = rng.uniform(-0.2, 0.2, 3)
+    lines += ['  <joint name="tip_joint" type="fixed">', f'    <parent link="{parent}"/>',
+              '    <child link="tip"/>', f'    <origin xyz="{_fmt(tip_xyz)}" rpy="0.1 0.2 0.3"/>',
+              "  </joint>", '  <link name="tip"/>', "</robot>", ""]
+    return "\n".join(lines), used

@@ -1,0 +1,75 @@
+"""Which parameters the data identify."""
+
+import numpy as np
+import pytest
+from conftest import random_joint_values
+
+from kincal import mdh
+from kincal.calibration import CalibrationOptions, CalibrationProblem
+from kincal.measurements import Measurements
+from kincal.robot import Robot
+from kincal.simulation import Truth, measure
+
+PAPER_DROPPED = {"joint_1.a", "joint_1.alpha", "joint_1.d", "joint_1.theta", "joint_2.d",
+                 "joint_3.d", "joint_6.d", "joint_6.theta"}
+
+
+def _problem(tool, n=60, seed=0, **options):
+    rng = np.random.default_rng(seed)
+    robot = Robot.load("ec66")
+    model = mdh.extract(robot.geometry)
+    q = random_joint_values(robot.geometry, rng, n)
+    truth = Truth(model.table, np.array([0.6, 0.2, -0.1, 0.01, 0.02, 0.5]), np.array(tool))
+    data = measure(model, truth, q, 0.0, rng)
+    return CalibrationProblem(robot, data, CalibrationOptions(**options))
+
+
+def test_ec66_keeps_25_of_33_like_the_paper():
+    ident = _problem([0.03, 0.02, 0.12]).analyze()
+    assert len(ident.free) == 33
+    assert len(ident.kept) == 25 and ident.rank == 25
+    assert set(ident.dropped) == PAPER_DROPPED
+    why = {d.name: d for d in ident.duplicates}
+    assert why["joint_2.d"].combination[0][0] == "joint_4.d"
+    assert why["joint_1.d"].combination[0][0] == "base.z"
+    assert why["joint_6.d"].combination[0][0] == "tool.z"
+
+
+def test_selection_is_deterministic_and_stable_as_poses_are_added():
+    a = _problem([0.03, 0.02, 0.12], n=40, seed=1).analyze()
+    b = _problem([0.03, 0.02, 0.12], n=40, seed=1).analyze()
+    c = _problem([0.03, 0.02, 0.12], n=400, seed=1).analyze()
+    assert a.kept == b.kept and a.kept == c.kept
+    assert np.array_equal(a.singular_values, b.singular_values)
+
+
+def test_tool_point_near_last_axis_warns_about_joint_6():
+    ident = _problem([0.0005, 0.0, 0.12]).analyze()
+    weak = {w.name for w in ident.weak}
+    assert "joint_6.alpha" in weak  # alpha_5 of the paper
+    why = {d.name: d for d in ident.duplicates}
+    assert "joint_6.theta" in why  # theta_6 cannot be told from the tool point
+    good = _problem([0.05, 0.03, 0.12]).analyze()
+    assert not any(w.name.startswith("joint_") for w in good.weak)
+
+
+def test_tool_point_on_last_axis_makes_theta6_invisible():
+    ident = _problem([0.0, 0.0, 0.12]).analyze()
+    why = {d.name: d for d in ident.duplicates}
+    assert why["joint_6.theta"].combination == ()
+
+
+def test_user_can_fix_and_free_parameters():
+    p = _problem([0.03, 0.02, 0.12], fix=("joint_4.d", "base.rz"))
+    ident = p.analyze()
+    assert "joint_4.d" in ident.fixed and "joint_4.d" not in ident.kept
+    assert "joint_3.d" in ident.kept  # the parallel-axis offset moves to the next one
+    p2 = _problem([0.03, 0.02, 0.12], free=("joint_2.d",), method="l2", lam=1.0)
+    assert p2.free_mask()[p2.space.index("joint_2.d")]
+
+
+def test_unknown_parameter_name_lists_valid_ones():
+    from kincal.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="joint_4.d"):
+        _problem([0.03, 0.02, 0.12], fix=("joint_4.dd",))

@@ -1,0 +1,1 @@
+"""Robot descriptions bundled with kincal (the EC66 of the paper)."""
