@@ -297,12 +297,13 @@ def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam:
         Hi = np.linalg.inv(H)
     except np.linalg.LinAlgError:
         return out
-    dof = float(np.trace(J @ Hi @ J.T))
+    JtJ = J.T @ J
+    dof = float(np.trace(Hi @ JtJ))  # effective number of parameters, trace of the hat matrix
     m = J.shape[0]
     if m - dof <= 0.5:
         return out
     s2 = float(sol.residual @ sol.residual) / (m - dof)
-    cov = s2 * Hi @ (J.T @ J) @ Hi
+    cov = s2 * Hi @ JtJ @ Hi
     out[free] = np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale[free]
     return out
 
@@ -395,12 +396,12 @@ class CalibrationResult:
     def corrected_urdf_text(self) -> str:
         from .urdf_export import edit_joint_origins
 
-        return edit_joint_origins(self.robot.urdf_text, self.corrected.urdf_origins(),
+        return edit_joint_origins(self.robot.urdf_text, self.robot.changed_origins(self.corrected),
                                   source=str(self.robot.source)).text
 
     def export_urdf(self, path, overwrite: bool = False):
         """Write the corrected URDF (only chain joint origins differ from the input)."""
-        from .urdf_export import write_text_atomic
+        from .safe_write import write_text_atomic
 
         protect = (self.robot.source,) if self.robot.source is not None else ()
         return write_text_atomic(path, self.corrected_urdf_text(), overwrite=overwrite,

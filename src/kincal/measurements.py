@@ -171,7 +171,7 @@ class Measurements:
 
     def to_csv(self, path, prismatic=()) -> None:
         """Write in the CSV layout :meth:`from_csv` reads (SI units)."""
-        from .urdf_export import write_text_atomic
+        from .safe_write import write_text_atomic
 
         cols = list(self.joint_names) + ["x", "y", "z"] + (["sigma"] if self.sigma is not None else [])
         lines = [",".join(cols)]

@@ -297,3 +297,12 @@ class Robot:
             dq = A.T @ np.linalg.solve(A @ A.T + 1e-8 * np.eye(len(e)), e)
             q = np.clip(q + dq, lo, hi)
         return q, False
+
+    def changed_origins(self, corrected: "Robot", tol: float = 1e-14) -> dict[str, np.ndarray]:
+        """URDF origins of ``corrected`` that differ from this robot's by more than ``tol``.
+
+        Both sides come out of the same arithmetic, so a joint whose placement did not
+        change compares equal to roundoff and its text in the URDF is left untouched.
+        """
+        mine, theirs = self.urdf_origins(), corrected.urdf_origins()
+        return {name: T for name, T in theirs.items() if np.abs(T - mine[name]).max() > tol}

@@ -120,6 +120,11 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     names = tuple(names)
     p = len(names)
     free = np.ones(p, dtype=bool) if free is None else np.asarray(free, dtype=bool)
+    rows = J.shape[0] // 3 if J.shape[0] % 3 == 0 else J.shape[0]  # poses, for RMS figures
+    # J = Q R: R has the same column norms, projections and singular values, so all
+    # that follows works on p x p numbers whatever the number of poses
+    if J.shape[0] > J.shape[1]:
+        J = np.linalg.qr(J, mode="r")  # Householder: the rank decision needs full accuracy
     norms = np.linalg.norm(J, axis=0)
     scale = float(norms.max()) if norms.size else 1.0
     Q = np.zeros((J.shape[0], 0))
@@ -163,7 +168,6 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
         G = Jkn.T @ Jkn
         Ginv = np.linalg.pinv(G)
         independence = 1.0 / np.sqrt(np.maximum(np.diag(Ginv), 1e-300))
-        rows = J.shape[0] // 3 if J.shape[0] % 3 == 0 else J.shape[0]
         sensitivity = independence * norms[kept] / np.sqrt(max(rows, 1))
         for i, c in enumerate(kept):
             if independence[i] < weak_independence or sensitivity[i] < weak_sensitivity:

@@ -64,6 +64,27 @@ class SolveSummary:
 ResidualFn = Callable[[np.ndarray, bool], tuple]
 
 
+def triangular_factor(A: np.ndarray) -> np.ndarray:
+    """R of A = Q R (upper triangular, n x n) for a tall A (m x n).
+
+    CholeskyQR2 (two Cholesky passes, the second on A R1^-1) costs two Gram products,
+    much less than Householder QR on tall matrices, and is as accurate as QR while
+    cond(A) stays below ~1e7; beyond that, or if A is rank deficient, Householder QR.
+    """
+    m, n = A.shape
+    if m <= 4 * n:
+        return np.linalg.qr(A, mode="r")
+    try:
+        R1 = scipy.linalg.cholesky(A.T @ A, lower=False, check_finite=False)
+        if np.min(np.abs(np.diag(R1))) <= 1e-7 * np.max(np.abs(np.diag(R1))):
+            raise np.linalg.LinAlgError("ill-conditioned")
+        A1 = scipy.linalg.solve_triangular(R1, A.T, trans="T", check_finite=False).T
+        R2 = scipy.linalg.cholesky(A1.T @ A1, lower=False, check_finite=False)
+        return R2 @ R1
+    except (np.linalg.LinAlgError, ValueError):
+        return np.linalg.qr(A, mode="r")
+
+
 def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float = 0.0,
           penalised: np.ndarray | None = None, prior: np.ndarray | None = None,
           options: SolverOptions = SolverOptions()) -> SolveSummary:
@@ -98,8 +119,13 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float = 0.0
     it = 0
     while it < options.max_iterations:
         it += 1
-        Jf = J[:, free_idx]
-        rows, rhs = [Jf], [-r]
+        # One QR of [J | -r] reduces the data rows to a k x k triangle R and z = Q^T (-r):
+        # ||J d + r||^2 = ||R d - z||^2 + rho^2, so every damping attempt below solves a
+        # small system whatever the number of poses.
+        Rz = triangular_factor(np.column_stack([J[:, free_idx], -r]))
+        k = free_idx.size
+        rows, rhs = [Rz[:k, :k]], [Rz[:k, k]]
+        rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
         if sq > 0 and pen_f.any():
             P = np.zeros((pen_f.sum(), free_idx.size))
             P[np.arange(pen_f.sum()), np.flatnonzero(pen_f)] = sq
@@ -122,7 +148,7 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float = 0.0
             r_new, J_new = residual(u_new, True)
             d_new, p_new = objective(u_new, r_new)
             lin = A0 @ step - b0
-            predicted = costs[-1] - float(lin @ lin)
+            predicted = costs[-1] - float(lin @ lin) - rho2
             actual = costs[-1] - (d_new + p_new)
             if actual >= 0 and np.isfinite(d_new):
                 accepted = True

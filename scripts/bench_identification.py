@@ -1,0 +1,84 @@
+"""Speed and memory of kincal's identification on this machine; prints its figures.
+
+EC66, tracker-like poses in a 400 mm cube (and an R-test-like 20 mm cube for the CV),
+0.05 mm noise:
+- one least-squares fit on 60 poses (median of repeats),
+- the whole Algorithm 1 on 60 poses (50 lambdas x 5 folds + final fit), L2 + CV,
+- one least-squares fit on 1,000 / 10,000 poses, with the peak memory (tracemalloc) of
+  the fit, to show it grows linearly with the number of poses.
+
+Usage: python scripts/bench_identification.py [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import tracemalloc
+import warnings
+
+import numpy as np
+
+from kincal import mdh
+from kincal.calibration import CalibrationOptions, CalibrationProblem
+from kincal.robot import Robot
+from kincal.simulation import Truth, cube_poses, measure, planted_table
+
+
+def _data(robot, model, n, size, rng, tilt=30):
+    tool = np.array([0.02, 0.01, 0.12])
+    if n <= 200:
+        q = cube_poses(robot, n, [0.4, 0.0, 0.25], size, tool, rng, max_tilt=np.radians(tilt))
+    else:  # many poses: random joints (IK for 10,000 poses would dominate the benchmark)
+        g = robot.geometry
+        q = rng.uniform(np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi), size=(n, g.n))
+    truth = Truth(planted_table(model, rng), np.array([0.8, 0.3, -0.2, 0.02, -0.03, 1.2]),
+                  tool + [0.001, -0.001, 0.002])
+    return measure(model, truth, q, 5e-5, rng)
+
+
+def _time(fn, repeats):
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return float(np.median(times)), out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    rng = np.random.default_rng(0)
+    robot = Robot.load("ec66")
+    model = mdh.extract(robot.geometry)
+    print("kincal identification benchmark: EC66, 2-core machine, times are medians of "
+          f"{args.repeats} runs, whole calls from data to result")
+    tracker = _data(robot, model, 60, 0.4, rng)
+    rtest = _data(robot, model, 60, 0.02, rng, tilt=15)
+    t, res = _time(lambda: CalibrationProblem(robot, tracker, CalibrationOptions(method="ls")).solve(),
+                   args.repeats)
+    print(f"LS fit, 60 poses (400 mm cube):            {t * 1e3:8.1f} ms  "
+          f"({res.solve.iterations} iterations, target < 20 ms)")
+    for name, data in (("400 mm cube", tracker), ("20 mm cube", rtest)):
+        t, res = _time(lambda: CalibrationProblem(robot, data, CalibrationOptions(method="l2")).solve(),
+                       max(1, args.repeats // 2))
+        print(f"Algorithm 1 (250 fold fits + final), 60 poses, {name}: {t:6.3f} s  "
+              f"(lambda = {res.lam:.3g}, target < 1 s)")
+    for n in (1000, 10000):
+        data = _data(robot, model, n, 0.4, rng)
+        t, res = _time(lambda: CalibrationProblem(robot, data, CalibrationOptions(method="ls")).solve(),
+                       max(1, args.repeats // 2))
+        tracemalloc.start()
+        CalibrationProblem(robot, data, CalibrationOptions(method="ls")).solve()
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        print(f"LS fit, {n:>6} poses:                        {t:8.3f} s   peak memory "
+              f"{peak / 2**20:7.1f} MiB ({peak / n / 1024:.1f} KiB per pose)"
+              + ("  (target < 2 s)" if n == 10000 else ""))
+
+
+if __name__ == "__main__":
+    main()

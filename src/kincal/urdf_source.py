@@ -1,0 +1,125 @@
+"""Read a URDF file as text and refuse what kincal cannot use safely.
+
+The text is returned unchanged (line endings, comments and all) so that
+:mod:`kincal.urdf_export` can later write corrected joint origins into it and
+nothing else. The checks run on stdlib expat, which reports entity declarations
+before expanding them, so an entity bomb is rejected without being expanded.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from xml.parsers import expat
+
+from .errors import InputFileError, UrdfError
+
+MAX_URDF_BYTES = 50 * 1024 * 1024
+"""Largest URDF accepted [bytes]; real robots are well under 1 MB."""
+
+XACRO_HINT = "run `xacro file.urdf.xacro > file.urdf` first and pass the generated URDF"
+
+# Namespace URIs that xacro files bind (both spellings occur in the wild).
+_XACRO_URIS = ("ros.org/wiki/xacro",)
+# ${expr} and $(arg ...) / $(find ...) are xacro substitutions; plain URDF has none.
+_SUBSTITUTION = re.compile(r"\$[{(]")
+_DECLARED_ENCODING = re.compile(
+    rb"""^(?:\xef\xbb\xbf)?\s*<\?xml[^>]*?encoding\s*=\s*["']([A-Za-z0-9._-]+)["']"""
+)
+_UTF8_NAMES = ("utf-8", "utf8", "us-ascii", "ascii")
+
+
+def read_urdf_text(path) -> str:
+    """The text of the URDF file at ``path``, checked by :func:`check_urdf_text`.
+
+    Raises :class:`InputFileError` for a missing, unreadable or directory path and
+    :class:`UrdfError` for a file over :data:`MAX_URDF_BYTES`, text that is not
+    UTF-8, or anything :func:`check_urdf_text` rejects. Line endings are kept.
+    """
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            # read one byte past the limit: also bounds special files whose stat size lies
+            data = f.read(MAX_URDF_BYTES + 1)
+    except FileNotFoundError:
+        raise InputFileError(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise InputFileError(f"{p}: is a directory, expected a URDF file") from None
+    except OSError as exc:
+        raise InputFileError(f"{p}: cannot read ({exc.strerror or exc})") from exc
+    if len(data) > MAX_URDF_BYTES:
+        raise UrdfError(f"{p}: larger than {MAX_URDF_BYTES // 2**20} MB; not a URDF kincal will read")
+    declared = _DECLARED_ENCODING.match(data)
+    if declared and declared.group(1).decode("ascii").lower() not in _UTF8_NAMES:
+        # kincal writes the text back as UTF-8; accepting another encoding would
+        # leave an XML declaration that lies about the corrected file
+        raise UrdfError(
+            f"{p}: declares encoding {declared.group(1).decode('ascii')!r}; kincal reads "
+            "UTF-8 URDFs only (convert with `iconv -t UTF-8` and fix the XML declaration)"
+        )
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise UrdfError(f"{p}: not UTF-8 text (invalid byte at offset {exc.start})") from None
+    check_urdf_text(text, source=str(p))
+    return text
+
+
+def check_urdf_text(text: str, source: str = "<string>") -> None:
+    """Raise :class:`UrdfError` unless ``text`` is plain, safe URDF XML.
+
+    Rejected: malformed XML (message gives ``source:line:column``, undefined
+    entities included); a DOCTYPE with an internal subset (entity declarations) or
+    an external DTD; xacro elements (``<xacro:macro>``, ``<xacro:include>``, ...) or
+    ``${...}`` / ``$(...)`` substitutions in attribute values; a root element other
+    than ``<robot>``. An ``xmlns:xacro`` declaration alone is accepted: generated
+    URDFs often keep it.
+    """
+    # The encoding argument overrides the document's declaration: we hand expat
+    # the str encoded as UTF-8, whatever the declaration says.
+    parser = expat.ParserCreate(encoding="UTF-8")
+    xacro_prefixes = {"xacro"}
+    seen_root = False
+
+    def fail(problem: str):
+        where = f"{source}:{parser.CurrentLineNumber}:{parser.CurrentColumnNumber + 1}"
+        raise UrdfError(f"{where}: {problem}")
+
+    def on_doctype(name, system_id, public_id, has_internal_subset):
+        # Called before the internal subset is read: a bomb stops here, unexpanded.
+        if has_internal_subset:
+            fail("DOCTYPE with an internal subset (entity declarations) is not accepted in a URDF")
+        # expat does not load external DTDs, so the entities one declares would be
+        # dropped silently from attribute values instead of failing
+        if system_id or public_id:
+            fail("DOCTYPE referring to an external DTD is not accepted in a URDF")
+
+    def on_entity_decl(name, *rest):
+        fail(f"entity declaration {name!r} is not accepted in a URDF")
+
+    def on_start(name, attrs):
+        nonlocal seen_root
+        for key, value in attrs.items():
+            if key.startswith("xmlns:") and any(uri in value for uri in _XACRO_URIS):
+                xacro_prefixes.add(key[len("xmlns:"):])
+        prefix, colon, _ = name.partition(":")
+        if colon and prefix in xacro_prefixes:
+            fail(f"xacro element <{name}> left in the URDF; {XACRO_HINT}")
+        for key, value in attrs.items():
+            if _SUBSTITUTION.search(value):
+                fail(f"xacro substitution in <{name} {key}={value!r}>; {XACRO_HINT}")
+        if not seen_root:
+            seen_root = True
+            if name != "robot":
+                fail(f"root element is <{name}>, expected <robot>")
+
+    parser.StartDoctypeDeclHandler = on_doctype
+    parser.EntityDeclHandler = on_entity_decl
+    parser.UnparsedEntityDeclHandler = on_entity_decl
+    parser.StartElementHandler = on_start
+    try:
+        parser.Parse(text.encode("utf-8", errors="surrogatepass"), True)
+    except expat.ExpatError as exc:
+        raise UrdfError(
+            f"{source}:{exc.lineno}:{exc.offset + 1}: malformed XML: {expat.ErrorString(exc.code)}"
+        ) from None
