@@ -73,3 +73,18 @@ def test_unknown_parameter_name_lists_valid_ones():
 
     with pytest.raises(ParameterError, match="joint_4.d"):
         _problem([0.03, 0.02, 0.12], fix=("joint_4.dd",))
+
+
+def test_tool_point_near_last_axis_gives_a_note_and_a_warning():
+    import warnings
+
+    from kincal.errors import KincalWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ident = _problem([0.0005, 0.0, 0.12]).analyze()
+    assert any("0.50 mm from the axis of joint_6" in n for n in ident.notes)
+    assert any(issubclass(w.category, KincalWarning) for w in caught)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an offset tool point raises no warning
+        assert _problem([0.05, 0.03, 0.12]).analyze().notes == ()

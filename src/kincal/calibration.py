@@ -195,8 +195,30 @@ class CalibrationProblem:
         # reporting units: mm per mm or per degree, whatever the penalty scale
         J = J * (self.space.reporting_scale() / self.scale)
         ident = analyze(J, self.space.names, self.space.n_kinematic, free, o.rank_tol)
+        note = self._tool_axis_note()
+        if note:
+            ident = replace(ident, notes=ident.notes + (note,))
+            warnings.warn(note, KincalWarning)
         self._ident = ident
         return ident
+
+    TOOL_AXIS_WARNING = 5e-3  # [m] tool point this close to the last joint axis: warn
+
+    def _tool_axis_note(self) -> str:
+        """A warning when the tool point sits near the axis of the last (revolute) joint."""
+        if self.mdh.kinds[-1] != "revolute":
+            return ""
+        tool = self.space.split(self.start())[2]
+        p = self.mdh.T_n_tip[:3, :3] @ tool + self.mdh.T_n_tip[:3, 3]  # in MD-H frame n
+        w = self.mdh.screw_axes[-1]
+        dist = float(np.linalg.norm(np.cross(p, w)))
+        if dist >= self.TOOL_AXIS_WARNING:
+            return ""
+        last = self.mdh.joint_names[-1]
+        return (f"the tool point is {dist * 1e3:.2f} mm from the axis of {last}: turning about "
+                f"that axis barely moves it, so {last}.theta and the tilt of that axis "
+                f"({last}.alpha) are weak or redundant; an offset tool point (>= 20 mm off the "
+                "axis) makes them identifiable")
 
     def free_mask(self) -> np.ndarray:
         ident = self.analyze()
@@ -337,6 +359,7 @@ class CalibrationResult:
     solve: SolveSummary
     identifiability: Identifiability
     mdh: mdh_layer.MdhModel
+    rows: np.ndarray  # (N,) line numbers of the samples in their source file
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
@@ -360,7 +383,7 @@ class CalibrationResult:
         res = problem.position_errors(x)
         return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
                    x, float(lam), cv, before, ErrorStats.from_errors(res), res, sol, ident,
-                   problem.mdh)
+                   problem.mdh, np.asarray(problem.data.rows))
 
     # ------------------------------------------------------------ accessors
     @property

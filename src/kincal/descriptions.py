@@ -45,6 +45,11 @@ _ERD = {
 
 _BUNDLED = {"ec66": ("ec66.urdf", "flange")}
 
+# centre [m] of a measurement cube in each arm's base frame that the arm reaches with
+# the tool pointing down (used by 'kincal simulate' when no --center-m is given)
+_CENTERS = {"ec66": (0.4, 0.0, 0.25), "ur3": (0.25, 0.05, 0.2), "ur5": (0.4, 0.1, 0.3),
+            "ur10": (0.6, 0.2, 0.4), "panda": (0.5, 0.0, 0.4)}
+
 
 def erd_robots_dir() -> Path | None:
     """The robots/ folder of the installed example-robot-data, or None."""
@@ -88,3 +93,13 @@ def resolve(robot: str | Path) -> Description:
         f"unknown robot {text!r}: give a URDF path or one of {listing(known_names())}."
         + suggest(text, known_names())
     )
+
+
+def default_center(name: str) -> tuple[float, float, float]:
+    """A reachable measurement-cube centre [m] for a known robot name."""
+    from .errors import OptionError
+
+    if name not in _CENTERS:
+        raise OptionError(f"no default cube centre for robot {name!r}; give --center-m X Y Z "
+                          f"(metres, base frame). Known: {listing(sorted(_CENTERS))}")
+    return _CENTERS[name]

@@ -169,10 +169,8 @@ class Measurements:
         return cls(tuple(joint_names), q, P, sigma, np.arange(2, len(values) + 2), str(path),
                    ignored)
 
-    def to_csv(self, path, prismatic=()) -> None:
-        """Write in the CSV layout :meth:`from_csv` reads (SI units)."""
-        from .safe_write import write_text_atomic
-
+    def to_csv_text(self) -> str:
+        """The samples in the CSV layout :meth:`from_csv` reads, SI units, full precision."""
         cols = list(self.joint_names) + ["x", "y", "z"] + (["sigma"] if self.sigma is not None else [])
         lines = [",".join(cols)]
         for k in range(len(self)):
@@ -180,4 +178,4 @@ class Measurements:
             if self.sigma is not None:
                 vals.append(self.sigma[k])
             lines.append(",".join(repr(float(v)) for v in vals))
-        write_text_atomic(Path(path), "\n".join(lines) + "\n", overwrite=True)
+        return "\n".join(lines) + "\n"

@@ -81,3 +81,48 @@ def _default_mode(target: Path) -> int:
     umask = os.umask(0)  # reading the umask means setting it; restored at once
     os.umask(umask)
     return 0o666 & ~umask
+
+
+def _check_target(path, overwrite: bool, protect) -> Path:
+    """The checks of :func:`write_bytes_atomic`, without writing anything."""
+    target = Path(path).expanduser().resolve()
+    for protected in protect:
+        protected = Path(protected).expanduser()
+        same = target == protected.resolve() or (
+            target.exists() and protected.exists() and os.path.samefile(target, protected))
+        if same and not overwrite:
+            raise ExportError(f"{path}: refusing to overwrite the input file {protected}; "
+                              "choose another output path or pass --overwrite")
+    if target.is_dir():
+        raise ExportError(f"{path}: is a directory")
+    if target.exists() and not overwrite:
+        raise ExportError(f"{path}: already exists; choose another output path or pass --overwrite")
+    if not target.parent.is_dir():
+        raise ExportError(f"{path}: directory {target.parent} does not exist")
+    return target
+
+
+def write_all(files, *, overwrite: bool = False, protect=()) -> list[Path]:
+    """Write several files as one transaction: all of them, or none.
+
+    files: (path, bytes or str) pairs. Every target is checked before the first byte is
+    written; if a later write fails, the files this call created are removed again and
+    the ones it replaced... cannot be brought back, so replacing needs ``overwrite``.
+    """
+    files = [(p, d.encode("utf-8") if isinstance(d, str) else d) for p, d in files]
+    targets = [_check_target(p, overwrite, protect) for p, _ in files]
+    if len(set(targets)) != len(targets):
+        raise ExportError("two outputs name the same file: "
+                          + ", ".join(str(p) for p, _ in files))
+    created, written = [], []
+    try:
+        for (path, data), target in zip(files, targets):
+            existed = target.exists()
+            written.append(write_bytes_atomic(path, data, overwrite=overwrite, protect=protect))
+            if not existed:
+                created.append(target)
+    except BaseException:
+        for target in created:
+            target.unlink(missing_ok=True)
+        raise
+    return written

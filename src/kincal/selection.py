@@ -87,16 +87,31 @@ class Identifiability:
     duplicates: tuple[Duplicate, ...]
     weak: tuple[Weak, ...]
     rank_tol: float
+    notes: tuple[str, ...] = ()
 
     def summary(self) -> str:
         lines = [f"identifiable: {len(self.kept)} of {len(self.free)} free parameters "
                  f"(rank {self.rank}, condition number {self.condition_number:.3g})"]
         if self.fixed:
             lines.append(f"fixed by the user: {', '.join(self.fixed)}")
+        lines += [f"note: {n}" for n in self.notes]
+        if self.rank != len(self.kept):
+            lines.append(f"note: the singular values give rank {self.rank}, the ordered "
+                         f"selection kept {len(self.kept)}; parameters near the tolerance "
+                         f"{self.rank_tol:g} are borderline")
         for d in self.duplicates:
             lines.append(f"dropped {d.describe()}")
-        for w in self.weak:
-            lines.append(f"weak {w.describe()}")
+        if len(self.weak) <= 6:
+            for w in self.weak:
+                lines.append(f"weak {w.describe()}")
+        else:
+            kin = [w for w in self.weak if not w.name.startswith(("base.", "tool."))]
+            worst = sorted(self.weak, key=lambda w: w.independence)[:3]
+            lines.append(f"weak: {len(self.weak)} parameters ({len(kin)} kinematic) are barely "
+                         "told apart by these poses: " + ", ".join(w.name for w in self.weak))
+            lines.append("  the poses cover too little of the workspace to separate them; with "
+                         "method l2 they stay near nominal. Weakest: "
+                         + "; ".join(w.describe() for w in worst))
         return "\n".join(lines)
 
 

@@ -1,0 +1,112 @@
+"""The calibration report: every number of a result as plain JSON-ready data.
+
+Deterministic: the same result gives the same text (no time stamps, no wall times),
+so the same inputs and seed give byte-identical report files. SI values carry their
+unit in the key (``_m``, ``_rad``); human figures are in mm and degrees, labelled.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from .calibration import CalibrationResult
+from .selection import Identifiability
+from .statistics import ErrorStats
+
+FORMAT = "kincal-report-1"
+
+
+def _clean(value):
+    """JSON-safe: numpy to Python, NaN and inf to None."""
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _clean(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def stats_dict(stats: ErrorStats) -> dict:
+    return {f"{k}_mm" if k != "n" else k: v for k, v in stats.as_dict().items()}
+
+
+def identifiability_dict(ident: Identifiability) -> dict:
+    return {
+        "rank": ident.rank,
+        "condition_number": ident.condition_number,
+        "rank_tolerance": ident.rank_tol,
+        "singular_values": ident.singular_values,
+        "free": list(ident.free),
+        "kept": list(ident.kept),
+        "dropped": [{"name": d.name, "reproduced_by": [{"name": n, "coefficient": c}
+                                                       for n, c in d.combination],
+                     "why": d.describe()} for d in ident.duplicates],
+        "fixed": list(ident.fixed),
+        "weak": [{"name": w.name, "independence": w.independence,
+                  "sensitivity_mm_per_unit": w.sensitivity, "why": w.describe()}
+                 for w in ident.weak],
+    }
+
+
+def result_dict(result: CalibrationResult, data_source: str | None = None) -> dict:
+    """The whole result (REPORT.json)."""
+    from . import __version__
+
+    o = result.options
+    params = []
+    for p in result.parameters:
+        nom, dev, se, unit = p.reported()
+        si = "m" if p.is_length else "rad"
+        params.append({"name": p.name, "status": p.status, "unit": unit,
+                       f"nominal_{si}": p.nominal, f"estimate_{si}": p.estimate,
+                       f"deviation_{si}": p.deviation, f"std_error_{si}": p.std_error,
+                       f"nominal_{unit}": nom, f"deviation_{unit}": dev,
+                       f"std_error_{unit}": se})
+    errors_mm = np.linalg.norm(result.residuals, axis=1) * 1e3
+    out = {
+        "format": FORMAT,
+        "kincal_version": __version__,
+        "robot": {"name": result.robot.name, "urdf": str(result.robot.source),
+                  "base": result.robot.base, "tip": result.robot.tip,
+                  "joints": list(result.robot.joint_names),
+                  "mdh_notes": [n for n in result.mdh.notes]},
+        "data": {"source": data_source, "poses": int(len(result.residuals))},
+        "options": {"method": o.method, "lambda": o.lam, "folds": o.folds, "seed": o.seed,
+                    "lambda_grid": [o.lambda_min, o.lambda_max, o.n_lambdas],
+                    "penalty_length_scale_m": o.length_scale,
+                    "penalty_angle_scale_rad": o.angle_scale,
+                    "fix": list(o.fix), "free": list(o.free),
+                    "tool_guess_m": o.tool_guess, "rank_tolerance": o.rank_tol,
+                    "solver": {"max_iterations": o.solver.max_iterations,
+                               "cost_tol_mm2": o.solver.cost_tol,
+                               "cost_window": o.solver.cost_window,
+                               "step_tol": o.solver.step_tol}},
+        "lambda": result.lam,
+        "cross_validation": None if result.cv is None else result.cv.as_dict(),
+        "identifiability": identifiability_dict(result.identifiability),
+        "parameters": params,
+        "frames": result.frames_dict(),
+        "errors": {"before": stats_dict(result.before), "after": stats_dict(result.after)},
+        "convergence": {"converged": result.converged, "reason": result.solve.reason,
+                        "iterations": result.solve.iterations,
+                        "objective_mm2": result.solve.cost,
+                        "damping": result.solve.damping},
+        "residuals": {"row": result.rows, "error_mm": errors_mm,
+                      "dx_dy_dz_mm": result.residuals * 1e3},
+    }
+    return _clean(out)
+
+
+def dumps(data: dict) -> str:
+    return json.dumps(_clean(data), indent=2, allow_nan=False) + "\n"

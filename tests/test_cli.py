@@ -1,0 +1,150 @@
+"""The command line: every subcommand through main([...]), good and bad input."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import EC66
+
+from kincal.cli import main
+from kincal.robot import Robot
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sim")
+    assert main(["simulate", "ec66", "--out", str(d / "cal.csv"), "--design", "tracker",
+                 "--poses", "40", "--seed", "3", "--tool-m", "0.03", "0.02", "0.12",
+                 "--truth-out", str(d / "truth.json")]) == 0
+    assert main(["simulate", "ec66", "--out", str(d / "val.csv"), "--design", "tracker",
+                 "--poses", "60", "--seed", "4", "--noise-mm", "0.01"]) == 0
+    return d
+
+
+def _one_line_error(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    errors = [line for line in err if line.startswith("kincal: error:")]
+    assert len(errors) == 1, err
+    assert not any("Traceback" in line for line in err)
+    return errors[0]
+
+
+def test_simulate_writes_csv_and_truth(sim):
+    header = (sim / "cal.csv").read_text().splitlines()[0].split(",")
+    assert header == [f"joint_{i}" for i in range(1, 7)] + ["x", "y", "z"]
+    truth = json.loads((sim / "truth.json").read_text())
+    assert len(truth["deviations_si"]) == 24 and truth["seed"] == 3
+
+
+def test_calibrate_writes_urdf_frames_and_report(sim, tmp_path, capsys):
+    out = tmp_path / "cal.urdf"
+    code = main(["calibrate", "ec66", str(sim / "cal.csv"), "--tip", "flange", "--out", str(out),
+                 "--frames-out", str(tmp_path / "frames.json"), "--report",
+                 str(tmp_path / "report.json"), "--lambda", "cv"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "lambda" in text and "after:" in text and "joint_4.a" in text
+    frames = json.loads((tmp_path / "frames.json").read_text())
+    assert abs(frames["tool"]["z"] - 0.12) < 1e-3 and set(frames["base"]) == {"x", "y", "z", "rx", "ry", "rz"}
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert len(report["parameters"]) == 33 and len(report["cross_validation"]["lambdas"]) == 50
+    assert report["errors"]["after"]["mean_mm"] < report["errors"]["before"]["mean_mm"]
+    # the corrected URDF differs from the input only on origin lines, and loads
+    old, new = EC66.read_text().splitlines(), out.read_text().splitlines()
+    assert len(old) == len(new)
+    assert all("<origin" in a for a, b in zip(old, new) if a != b)
+    corrected = Robot.load(out, tip="flange")
+    assert corrected.joint_names == Robot.load("ec66").joint_names
+
+
+def test_calibrated_model_evaluates_better_on_held_out_data(sim, tmp_path, capsys):
+    out = tmp_path / "cal.urdf"
+    assert main(["calibrate", "ec66", str(sim / "cal.csv"), "--out", str(out), "--method", "ls",
+                 "--frames-out", str(tmp_path / "f.json"), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(out), str(sim / "val.csv"), "--tip", "flange", "--fit-frames",
+                 "--report", str(tmp_path / "after.json")]) == 0
+    assert main(["evaluate", "ec66", str(sim / "val.csv"), "--fit-frames",
+                 "--report", str(tmp_path / "before.json")]) == 0
+    after = json.loads((tmp_path / "after.json").read_text())["errors"]["mean_mm"]
+    before = json.loads((tmp_path / "before.json").read_text())["errors"]["mean_mm"]
+    assert after < 0.5 * before
+    # frames from calibration, on the calibration data itself
+    assert main(["evaluate", str(out), str(sim / "cal.csv"), "--tip", "flange",
+                 "--frames", str(tmp_path / "f.json")]) == 0
+    assert "mean" in capsys.readouterr().out
+
+
+def test_analyze_reports_the_paper_selection(sim, capsys):
+    assert main(["analyze", "ec66", str(sim / "cal.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "25 of 33" in out and "dropped joint_2.d ~ +1 joint_4.d" in out
+
+
+def test_same_inputs_give_byte_identical_outputs(sim, tmp_path):
+    for k in (1, 2):
+        assert main(["calibrate", "ec66", str(sim / "cal.csv"), "--out", str(tmp_path / f"{k}.urdf"),
+                     "--report", str(tmp_path / f"{k}.json"), "--quiet"]) == 0
+    assert (tmp_path / "1.urdf").read_bytes() == (tmp_path / "2.urdf").read_bytes()
+    assert (tmp_path / "1.json").read_bytes() == (tmp_path / "2.json").read_bytes()
+
+
+@pytest.mark.parametrize("case", ["missing_data", "wrong_columns", "unknown_tip", "unknown_robot",
+                                  "bad_lambda", "too_many_folds", "unknown_fix"])
+def test_bad_input_fails_cleanly_with_no_output(case, sim, tmp_path, capsys):
+    data = sim / "cal.csv"
+    if case == "wrong_columns":
+        data = tmp_path / "bad.csv"
+        data.write_text((sim / "cal.csv").read_text().replace("joint_3", "joint_three", 1))
+    args = {"missing_data": ["ec66", str(tmp_path / "nope.csv")],
+            "wrong_columns": ["ec66", str(data)],
+            "unknown_tip": ["ec66", str(data), "--tip", "flang"],
+            "unknown_robot": ["ec77", str(data)],
+            "bad_lambda": ["ec66", str(data), "--lambda", "much"],
+            "too_many_folds": ["ec66", str(data), "--folds", "1000"],
+            "unknown_fix": ["ec66", str(data), "--fix", "joint_9.a"]}[case]
+    out = tmp_path / "out.urdf"
+    assert main(["calibrate", *args, "--out", str(out), "--report", str(tmp_path / "r.json")]) == 1
+    line = _one_line_error(capsys)
+    expected = {"missing_data": "not found", "wrong_columns": "joint_3", "unknown_tip": "flange",
+                "unknown_robot": "ec66", "bad_lambda": "lambda", "too_many_folds": "folds",
+                "unknown_fix": "joint_9.a"}[case]
+    assert expected in line
+    assert not out.exists() and not (tmp_path / "r.json").exists()
+
+
+def test_existing_output_and_input_urdf_are_protected(sim, tmp_path, capsys):
+    src = tmp_path / "robot.urdf"
+    src.write_text(EC66.read_text())
+    before = src.read_bytes()
+    assert main(["calibrate", str(src), str(sim / "cal.csv"), "--tip", "flange",
+                 "--out", str(src)]) == 1
+    assert "input file" in _one_line_error(capsys)
+    assert src.read_bytes() == before
+    existing = tmp_path / "existing.urdf"
+    existing.write_text("keep me")
+    assert main(["calibrate", str(src), str(sim / "cal.csv"), "--tip", "flange",
+                 "--out", str(tmp_path / "new.urdf"), "--report", str(existing)]) == 1
+    assert "already exists" in _one_line_error(capsys)
+    assert existing.read_text() == "keep me" and not (tmp_path / "new.urdf").exists()
+    assert main(["calibrate", str(src), str(sim / "cal.csv"), "--tip", "flange", "--quiet",
+                 "--out", str(src), "--overwrite"]) == 0
+    assert src.read_bytes() != before  # asked for: the input is replaced
+
+
+def test_evaluate_needs_a_frames_choice(sim, capsys):
+    assert main(["evaluate", "ec66", str(sim / "val.csv")]) == 1
+    assert "--fit-frames" in _one_line_error(capsys)
+
+
+def test_evaluate_rejects_a_bad_frames_file(sim, tmp_path, capsys):
+    bad = tmp_path / "frames.json"
+    bad.write_text('{"base": {"x": 1}}')
+    assert main(["evaluate", "ec66", str(sim / "val.csv"), "--frames", str(bad)]) == 1
+    assert "frames" in _one_line_error(capsys)
+
+
+def test_usage_errors_exit_2():
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", "ec66"])
+    assert exc.value.code == 2
