@@ -18,7 +18,10 @@ import numpy as np
 from . import mdh as mdh_layer
 from .cross_validation import CrossValidation, cross_validate, lambda_grid
 from .errors import DataError, IdentifiabilityError, KincalWarning, OptionError
+from .data_checks import (angle_unit_warnings, distinct_poses, length_unit_warnings,
+                          limit_warnings)
 from .frames_init import initial_frames
+from .robust import LOSSES, ROBUST_SCALE, Downweighted, weights as robust_weights
 from .measurement_model import MeasurementModel
 from .measurements import Measurements
 from .parameters import BASE, DEG, MM, TOOL, ParameterSpace
@@ -48,6 +51,10 @@ class CalibrationOptions:
     tool_guess: (3,) tool point in the tip frame [m], a starting guess; None: derived.
     base_guess: (6,) measurement frame (x, y, z [m], rx, ry, rz [rad]) start; None: derived.
     rank_tol: tolerance of the rank-revealing selection (see kincal.selection).
+    robust: None (default: plain squares), "huber" or "cauchy": a robust loss on the
+        per-pose error, by iteratively reweighted least squares after the chosen method
+        (lambda stays as chosen); the down-weighted samples are reported.
+    robust_scale_mm: the loss's scale c [mm]; None: 2.5 x the median pose error.
     warm_start: CV path solved from large to small lambda, each from the previous one.
     cv_step_tol: [mm or deg] step tolerance of the fold fits; a validation error needs
         far less precision than the final fit (which uses solver.step_tol).
@@ -69,6 +76,8 @@ class CalibrationOptions:
     tool_guess: tuple[float, float, float] | None = None
     base_guess: tuple[float, ...] | None = None
     rank_tol: float = RANK_TOL
+    robust: str | None = None
+    robust_scale_mm: float | None = None
     warm_start: bool = True
     cv_step_tol: float = 1e-6
     solver: SolverOptions = SolverOptions()
@@ -89,6 +98,11 @@ class CalibrationOptions:
         if self.base_guess is not None and np.shape(self.base_guess) != (6,):
             raise OptionError("base_guess needs 6 numbers (x, y, z [m], rx, ry, rz [rad])")
         lambda_grid(self.lambda_min, self.lambda_max, self.n_lambdas)
+        if self.robust is not None and self.robust not in LOSSES:
+            raise OptionError(f"unknown robust loss {self.robust!r}; expected one of "
+                              f"{', '.join(LOSSES)} (or none)")
+        if self.robust_scale_mm is not None and not self.robust_scale_mm > 0:
+            raise OptionError(f"robust_scale_mm must be > 0, got {self.robust_scale_mm}")
         return self
 
 
@@ -136,6 +150,15 @@ class CalibrationProblem:
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
         for name in o.fix + o.free:
             self.space.index(name)  # unknown names raise ParameterError listing the valid ones
+        if len(self.data) < 3:
+            raise DataError(f"{self.data.source}: {len(self.data)} poses; the measurement frame "
+                            "and tool point alone need at least 3 (a calibration needs many more)")
+        g = robot.geometry
+        for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper,
+                                       self.data.joint_values, self.data.rows)
+                        + angle_unit_warnings(g.joint_names, g.kinds, self.data.joint_values,
+                                              self.data.angle_unit)):
+            warnings.warn(f"{self.data.source}: {message}", KincalWarning)
         self._x_start = None
         self._ident = None
 
@@ -169,6 +192,10 @@ class CalibrationProblem:
             return self._x_start
         o = self.options
         R_tip, p_tip = self.model.tip_poses(self.mdh.table)
+        guess = np.zeros(3) if o.tool_guess is None else np.asarray(o.tool_guess, float)
+        for message in length_unit_warnings(self.data.positions, p_tip + R_tip @ guess,
+                                            self.data.length_unit):
+            warnings.warn(f"{self.data.source}: {message}", KincalWarning)
         Rb, tb, tool, _, _ = initial_frames(R_tip, p_tip, self.data.positions, o.tool_guess)
         base = np.concatenate([tb, base_angles(Rb)])
         if o.base_guess is not None:
@@ -195,12 +222,54 @@ class CalibrationProblem:
         # reporting units: mm per mm or per degree, whatever the penalty scale
         J = J * (self.space.reporting_scale() / self.scale)
         ident = analyze(J, self.space.names, self.space.n_kinematic, free, o.rank_tol)
+        frames_lost = [n for n in ident.dropped if n.startswith(("base.", "tool."))]
+        if frames_lost:
+            why = "; ".join(d.describe() for d in ident.duplicates if d.name in frames_lost)
+            distinct = distinct_poses(self.data.joint_values)
+            raise IdentifiabilityError(
+                f"{self.data.source}: the poses cannot even locate the measurement frame and "
+                f"tool point: {', '.join(frames_lost)} cannot be identified ({why}). There are "
+                f"{distinct} distinct poses of {len(self.data)}; add poses that differ in every "
+                "joint, or fix what the data cannot give (e.g. --fix tool.x tool.y tool.z with "
+                "--tool-offset). Identifiable now: " + ", ".join(ident.kept))
+        general = self.structural()
+        lost = [n for n in general.kept if n not in ident.kept]
+        if lost:
+            need = math.ceil(len(general.kept) / 3)
+            ident = replace(ident, notes=ident.notes + (
+                f"{len(lost)} parameters this chain can identify are not identifiable from "
+                f"these {len(self.data)} poses ({distinct_poses(self.data.joint_values)} "
+                f"distinct): {', '.join(lost)}; the {len(general.kept)} identifiable "
+                f"parameters need at least {need} poses, and many more spread over the "
+                "workspace for a good result",))
         note = self._tool_axis_note()
         if note:
             ident = replace(ident, notes=ident.notes + (note,))
             warnings.warn(note, KincalWarning)
         self._ident = ident
         return ident
+
+    def structural(self) -> Identifiability:
+        """What this chain can identify from generic poses (seeded random joint values).
+
+        Compared with :meth:`analyze`, it tells which parameters are lost to the data (too
+        few or too similar poses) rather than to the geometry of the chain.
+        """
+        if getattr(self, "_structural", None) is not None:
+            return self._structural
+        g = self.robot.geometry
+        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        q = np.random.default_rng(0).uniform(lo, hi, size=(2 * self.space.size, g.n))
+        pred, J = MeasurementModel(self.mdh, q).jacobian(self.start())
+        J = J.reshape(-1, self.space.size) * self.space.reporting_scale() / MM
+        free = np.ones(self.space.size, dtype=bool)
+        if self.options.method == "frames":
+            free[: self.space.n_kinematic] = False
+        free[self.space.indices(self.options.fix)] = False
+        self._structural = analyze(J, self.space.names, self.space.n_kinematic, free,
+                                   self.options.rank_tol)
+        return self._structural
 
     TOOL_AXIS_WARNING = 5e-3  # [m] tool point this close to the last joint axis: warn
 
@@ -284,15 +353,15 @@ class CalibrationProblem:
     def solve(self) -> "CalibrationResult":
         o = self.options
         ident = self.analyze()
-        n_free = int(self.free_mask().sum())
+        general = self.structural()
         m = 3 * len(self.data)
-        if o.method == "ls" and m < n_free:
+        if o.method != "l2" and m <= len(general.kept) and len(ident.kept) < len(general.kept):
             raise IdentifiabilityError(
-                f"{len(self.data)} poses give {m} equations for {n_free} identifiable "
-                f"parameters; plain least squares needs at least {math.ceil(n_free / 3)} poses")
-        if len(self.data) < 3:
-            raise DataError(f"{len(self.data)} poses are too few; the measurement frame alone "
-                            "needs at least 3")
+                f"{len(self.data)} poses give {m} equations for the {len(general.kept)} "
+                f"parameters this chain can identify; method {o.method} needs at least "
+                f"{math.ceil((len(general.kept) + 1) / 3)} poses (and many more spread over the "
+                "workspace); with these poses it would only interpolate. Method l2 can work "
+                "with fewer, pulling what the data cannot fix toward nominal")
         cv = None
         if o.method == "l2":
             if o.lam == "cv":
@@ -303,10 +372,38 @@ class CalibrationProblem:
         else:
             lam = 0.0
         sol = self.fit(lam)
+        downweighted = ()
+        if o.robust is not None:
+            sol, downweighted = self._irls(sol, lam)
         if not sol.converged:
             warnings.warn(f"the solver did not converge in {sol.iterations} iterations; the "
                           "result is the best iterate and is flagged not converged", KincalWarning)
-        return CalibrationResult._build(self, sol, lam, cv, ident)
+        result = CalibrationResult._build(self, sol, lam, cv, ident)
+        return replace(result, downweighted=downweighted)
+
+    def _irls(self, sol: SolveSummary, lam: float, rounds: int = 20):
+        """Reweight poses by the robust loss until the weights settle (see kincal.robust)."""
+        o = self.options
+        base_weights = self.weights
+        try:
+            w = np.ones(len(self.data))
+            for _ in range(rounds):
+                e = np.linalg.norm(self.position_errors(sol.u * self.scale), axis=1) / MM
+                c = o.robust_scale_mm or ROBUST_SCALE * float(np.median(e))
+                w_new = robust_weights(e, o.robust, max(c, 1e-9))
+                self.weights = base_weights * np.sqrt(w_new)  # residuals carry sqrt(weight)
+                sol = self.fit(lam, start=sol.u * self.scale)
+                done = np.max(np.abs(w_new - w)) < 1e-4
+                w = w_new
+                if done:
+                    break
+        finally:
+            self.weights = base_weights
+        e = np.linalg.norm(self.position_errors(sol.u * self.scale), axis=1) / MM
+        low = np.flatnonzero(w < 0.5)
+        out = tuple(Downweighted(int(self.data.rows[k]), float(e[k]), float(w[k]))
+                    for k in low[np.argsort(w[low])])
+        return sol, out
 
 
 def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam: float,
@@ -360,6 +457,7 @@ class CalibrationResult:
     identifiability: Identifiability
     mdh: mdh_layer.MdhModel
     rows: np.ndarray  # (N,) line numbers of the samples in their source file
+    downweighted: tuple[Downweighted, ...] = ()  # samples a robust loss trusted less
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
@@ -439,6 +537,12 @@ class CalibrationResult:
                  f"  after:  {self.after.line()}",
                  f"  solver: {self.solve.iterations} iterations, {self.solve.reason}"
                  + ("" if self.converged else "  [NOT CONVERGED]"),
+                 *([f"  robust loss {self.options.robust}: {len(self.downweighted)} samples "
+                    "down-weighted below 0.5: " + ", ".join(
+                        f"line {d.row} ({d.error_mm:.3g} mm, weight {d.weight:.2f})"
+                        for d in self.downweighted[:10])
+                    + (" ..." if len(self.downweighted) > 10 else "")]
+                   if self.options.robust else []),
                  "  parameter                 nominal      deviation    std.err  unit"]
         for p in self.parameters:
             if p.status == "dropped" and p.name.split(".")[0] not in ("base", "tool"):

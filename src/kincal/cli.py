@@ -107,7 +107,8 @@ def _options(args, method):
             raise OptionError(f"--lambda must be 'cv' or a number, got {lam!r}") from None
     return CalibrationOptions(method=method, lam=lam, folds=args.folds, seed=args.seed,
                               fix=tuple(args.fix), free=tuple(args.free),
-                              tool_guess=_tool_offset(args), progress=_progress_bar())
+                              tool_guess=_tool_offset(args), robust=args.robust,
+                              robust_scale_mm=args.robust_scale_mm, progress=_progress_bar())
 
 
 def _render_plots(result, out_dir: Path):
@@ -281,6 +282,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME", help="parameters held nominal")
     p.add_argument("--free", nargs="+", default=[], metavar="NAME",
                    help="parameters kept even if found redundant (method l2)")
+    p.add_argument("--robust", choices=("huber", "cauchy"),
+                   help="robust loss on the per-pose error; down-weighted samples are listed")
+    p.add_argument("--robust-scale-mm", type=float, help="scale of the robust loss [mm] "
+                   "(default 2.5 x the median pose error)")
     p.add_argument("--out", required=True, help="corrected URDF to write")
     p.add_argument("--frames-out", help="FRAMES.json: measurement frame and tool point (SI)")
     p.add_argument("--report", help="REPORT.json: the whole result")

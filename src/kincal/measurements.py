@@ -48,6 +48,8 @@ class Measurements:
     rows: np.ndarray | None = None
     source: str = "<memory>"
     ignored_columns: tuple[str, ...] = field(default=())
+    length_unit: str = "m"  # the unit the source file used (values here are SI)
+    angle_unit: str = "rad"
 
     def __post_init__(self):
         q = _readonly(self.joint_values)
@@ -79,7 +81,7 @@ class Measurements:
         index = np.asarray(index)
         return Measurements(self.joint_names, self.joint_values[index], self.positions[index],
                             None if self.sigma is None else self.sigma[index], self.rows[index],
-                            self.source, self.ignored_columns)
+                            self.source, self.ignored_columns, self.length_unit, self.angle_unit)
 
     def for_chain(self, joint_names) -> "Measurements":
         """The same samples with columns in the order of ``joint_names`` (checked)."""
@@ -92,7 +94,8 @@ class Measurements:
                             f"the data has {listing(self.joint_names)}")
         idx = [self.joint_names.index(j) for j in joint_names]
         return Measurements(joint_names, self.joint_values[:, idx], self.positions, self.sigma,
-                            self.rows, self.source, self.ignored_columns)
+                            self.rows, self.source, self.ignored_columns, self.length_unit,
+                            self.angle_unit)
 
     @classmethod
     def from_csv(cls, path, joint_names, prismatic=(), length_unit: str = "m",
@@ -167,7 +170,7 @@ class Measurements:
             k = int(np.argmax(sigma <= 0))
             raise DataError(f"{path}, line {k + 2}, column {sigma_column!r}: sigma must be > 0")
         return cls(tuple(joint_names), q, P, sigma, np.arange(2, len(values) + 2), str(path),
-                   ignored)
+                   ignored, length_unit, angle_unit)
 
     def to_csv_text(self) -> str:
         """The samples in the CSV layout :meth:`from_csv` reads, SI units, full precision."""

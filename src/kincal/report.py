@@ -102,6 +102,9 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                         "iterations": result.solve.iterations,
                         "objective_mm2": result.solve.cost,
                         "damping": result.solve.damping},
+        "robust": {"loss": o.robust, "scale_mm": o.robust_scale_mm,
+                   "downweighted": [{"row": d.row, "error_mm": d.error_mm, "weight": d.weight}
+                                    for d in result.downweighted]},
         "residuals": {"row": result.rows, "error_mm": errors_mm,
                       "dx_dy_dz_mm": result.residuals * 1e3},
     }

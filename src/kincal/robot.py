@@ -193,7 +193,8 @@ class Robot:
         """Unit axis of joint j in its own frame, read from its motion subspace."""
         m, d = self.model, self._data
         q = pin.neutral(m)
-        J = pin.computeJointJacobian(m, d, q, j)  # 6 x nv, in the joint's local frame
+        # 6 x nv in the joint frame; a model with nv = 1 comes back as a flat (6,) array
+        J = np.asarray(pin.computeJointJacobian(m, d, q, j)).reshape(6, -1)
         col = J[:, m.joints[j].idx_v]
         kind = "prismatic" if m.joints[j].shortname() in _PRISMATIC else "revolute"
         axis = col[:3] if kind == "prismatic" else col[3:]
@@ -280,7 +281,8 @@ class Robot:
             R, p = bMe.rotation, bMe.translation
             pt = p + R @ tool
             err = [target - pt]
-            Jw = pin.computeFrameJacobian(m, d, qp, self._tip_id, pin.LOCAL_WORLD_ALIGNED)
+            Jw = np.asarray(pin.computeFrameJacobian(m, d, qp, self._tip_id,
+                                                     pin.LOCAL_WORLD_ALIGNED)).reshape(6, -1)
             Jw = Jw[:, chain_v]
             Rb = oMb.rotation.T
             Jv, Jo = Rb @ Jw[:3], Rb @ Jw[3:]  # in base-frame axes

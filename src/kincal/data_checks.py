@@ -1,0 +1,71 @@
+"""Sanity checks of measurement data against the robot, before any fitting.
+
+Plain numpy. Each check returns human messages (for KincalWarning) naming the joint,
+the line of the file and the expected range; none of them alters a sample.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+UNIT_RATIO = 30.0  # measured spread this many times the robot's: probably mm read as m
+
+
+def limit_warnings(joint_names, kinds, lower, upper, q, rows) -> list[str]:
+    """Joint values outside the URDF limits (1e-6 of slack for rounding)."""
+    out = []
+    for j, name in enumerate(joint_names):
+        lo, hi = lower[j], upper[j]
+        bad = np.flatnonzero((q[:, j] < lo - 1e-6) | (q[:, j] > hi + 1e-6))
+        if bad.size:
+            excess = np.maximum(lo - q[bad, j], q[bad, j] - hi)
+            k = bad[np.argmax(excess)]
+            unit = "m" if kinds[j] == "prismatic" else "rad"
+            out.append(f"{name}: {bad.size} of {len(q)} values outside its URDF limits "
+                       f"[{lo:.4g}, {hi:.4g}] {unit} (worst {q[k, j]:.4g} at line {rows[k]})")
+    return out
+
+
+def angle_unit_warnings(joint_names, kinds, q, angle_unit: str) -> list[str]:
+    """Revolute values that look like degrees read as radians, or the reverse."""
+    rev = [j for j, k in enumerate(kinds) if k == "revolute"]
+    if not rev:
+        return []
+    biggest = float(np.max(np.abs(q[:, rev])))
+    if angle_unit == "rad" and biggest > 2 * np.pi + 0.5:
+        return [f"revolute joint values reach {biggest:.4g} rad ({biggest / np.pi:.1f} pi): were "
+                "they degrees? Read them with --angle-unit deg (Python: angle_unit='deg')"]
+    spans = np.ptp(q[:, rev], axis=0)
+    if angle_unit == "deg" and len(q) > 3 and float(spans.max()) < np.radians(3.0):
+        return [f"revolute joint values span at most {np.degrees(spans.max()):.3g} deg: were they "
+                "radians read as degrees? Drop --angle-unit deg"]
+    return []
+
+
+def spread(points: np.ndarray) -> float:
+    """RMS distance [m] of points from their centroid."""
+    return float(np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1))))
+
+
+def length_unit_warnings(measured: np.ndarray, predicted: np.ndarray, length_unit: str) -> list[str]:
+    """Measured positions far larger or smaller than what the robot's motion can produce."""
+    s_meas, s_pred = spread(measured), spread(predicted)
+    if s_pred < 1e-3 or len(measured) < 3:  # the poses barely differ: nothing to compare
+        return []
+    ratio = s_meas / s_pred
+    if ratio > UNIT_RATIO:
+        return [f"measured positions spread {s_meas:.4g} m while the robot's tip moves by "
+                f"{s_pred:.3g} m: were they millimetres? Read them with --length-unit mm"]
+    if ratio < 1.0 / (10 * UNIT_RATIO) and length_unit == "mm":
+        return [f"measured positions spread only {s_meas * 1e3:.3g} mm while the robot's tip "
+                f"moves by {s_pred * 1e3:.3g} mm: were they metres read as millimetres?"]
+    if ratio < 1.0 / (10 * UNIT_RATIO):
+        return [f"measured positions spread only {s_meas * 1e3:.3g} mm while the robot's tip "
+                f"moves by {s_pred * 1e3:.3g} mm: check the units and that the positions match "
+                "the joint values"]
+    return []
+
+
+def distinct_poses(q: np.ndarray) -> int:
+    """Number of distinct joint configurations (to 1e-9)."""
+    return int(np.unique(np.round(q, 9), axis=0).shape[0])
