@@ -118,8 +118,9 @@ def test_floating_joint_on_chain_is_rejected(tmp_path):
                                     '<joint name="joint_3" type="floating">')
     path = tmp_path / "floating.urdf"
     path.write_text(text)
-    with pytest.raises(ChainError, match="joint_3"):
+    with pytest.raises(ChainError, match="joint_3") as exc:
         Robot.load(path, tip="flange")
+    assert "link_3" in str(exc.value)  # the valid base below it
     robot = Robot.load(path, base="link_3", tip="flange")  # below the floating joint it is fine
     assert robot.joint_names == ("joint_4", "joint_5", "joint_6")
 
@@ -137,3 +138,17 @@ def test_no_tip_lists_leaf_links(tmp_path):
     path.write_text(EC66.read_text())
     with pytest.raises(FrameError, match="flange"):
         Robot.load(path)
+
+
+def test_off_chain_joint_values(rng):
+    robot = Robot.load("tiago", tip="arm_tool_link", joint_values={"head_1_joint": 0.3})
+    assert robot.off_chain == {"head_1_joint": 0.3}
+    q = robot.configuration(np.zeros(robot.geometry.n))
+    assert q[robot.model.joints[robot.model.getJointId("head_1_joint")].idx_q] == 0.3
+    plain = Robot.load("tiago", tip="arm_tool_link")
+    qs = random_joint_values(robot.geometry, rng, 5)
+    assert np.abs(robot.tip_poses(qs) - plain.tip_poses(qs)).max() < 1e-15
+    with pytest.raises(FrameError, match="head_1_joint"):
+        Robot.load("tiago", tip="arm_tool_link", joint_values={"head_1_jiont": 0.3})
+    with pytest.raises(FrameError, match="on the chain"):
+        Robot.load("tiago", tip="arm_tool_link", joint_values={"arm_1_joint": 0.3})

@@ -70,7 +70,7 @@ class Robot:
     """
 
     def __init__(self, model: pin.Model, urdf_text: str, name: str, base: str, tip: str,
-                 source: Path | None = None):
+                 source: Path | None = None, joint_values: dict | None = None):
         self.model = model
         self.urdf_text = urdf_text
         self.name = name
@@ -82,14 +82,16 @@ class Robot:
         self._tip_id = self._frame_id(tip, "tip")
         self._chain = self._find_chain()
         self.geometry = self._compute_geometry()
+        self.off_chain = self._check_off_chain(joint_values or {})
 
     # ------------------------------------------------------------------ loading
     @classmethod
-    def load(cls, robot: str | Path, tip: str | None = None, base: str | None = None) -> "Robot":
+    def load(cls, robot: str | Path, tip: str | None = None, base: str | None = None,
+             joint_values: dict | None = None) -> "Robot":
         """Load a URDF path, ``"ec66"``, or an example-robot-data name (``"ur10"``, ...).
 
         ``tip`` defaults to the description's usual tip frame when known; ``base`` to the
-        URDF root link.
+        URDF root link. ``joint_values``: {name: value} for joints off the chain.
         """
         desc = descriptions.resolve(robot)
         text = read_urdf_text(desc.urdf)
@@ -105,7 +107,8 @@ class Robot:
             leaves = cls._leaf_links(model)
             raise FrameError(f"{desc.urdf}: no tip frame given; choose one with --tip, e.g. one "
                              f"of the leaf links: {listing(leaves)}", valid=tuple(leaves))
-        return cls(model, text, desc.name, base or root, tip, source=desc.urdf)
+        return cls(model, text, desc.name, base or root, tip, source=desc.urdf,
+                   joint_values=joint_values)
 
     @staticmethod
     def _leaf_links(model: pin.Model) -> list[str]:
@@ -151,13 +154,29 @@ class Robot:
         chain.reverse()
         if not chain:
             raise ChainError(f"no movable joint between base {self.base!r} and tip {self.tip!r}")
-        for j in chain:
+        for j in reversed(chain):
             kind = m.joints[j].shortname()
             if kind not in _REVOLUTE | _CONTINUOUS | _PRISMATIC:
+                valid = [f.name for f in m.frames if f.parentJoint == j
+                         and f.type in (pin.FrameType.BODY, pin.FrameType.JOINT)]
                 raise ChainError(f"joint {m.names[j]!r} on the chain {self.base!r} -> {self.tip!r} "
                                  f"is a {kind}; kincal models revolute, continuous and prismatic "
-                                 "joints only (choose a base below floating or planar joints)")
+                                 f"joints only: choose a base below it, e.g. {listing(valid)}")
         return chain
+
+    def _check_off_chain(self, values: dict) -> dict:
+        """Values [rad or m] for joints off the chain; the others stay at neutral."""
+        movable = [n for j, n in enumerate(self.model.names) if j > 0]
+        off = {}
+        for name, value in values.items():
+            if name not in movable:
+                raise FrameError(f"unknown joint {name!r} in joint values." + suggest(name, movable)
+                                 + f" Joints: {listing(movable)}", valid=tuple(movable))
+            if name in self.joint_names:
+                raise FrameError(f"joint {name!r} is on the chain {self.base!r} -> {self.tip!r}; "
+                                 "its values come with each sample, not as a fixed value")
+            off[name] = float(value)
+        return off
 
     # ----------------------------------------------------------------- geometry
     @property
@@ -202,9 +221,16 @@ class Robot:
 
     # --------------------------------------------------------------- kinematics
     def configuration(self, joint_values) -> np.ndarray:
-        """Pinocchio q for chain joint values (n,) [rad or m]; other joints at neutral."""
+        """Pinocchio q for chain joint values (n,) [rad or m].
+
+        Joints off the chain take the values given at load time (``joint_values``), or
+        their neutral value. They cannot move the tip relative to the base, but they
+        place the chain in the world (e.g. for a viewer).
+        """
         q = pin.neutral(self.model)
-        for j, v in zip(self._chain, np.asarray(joint_values, dtype=float)):
+        ids = [self.model.getJointId(n) for n in self.off_chain]
+        for j, v in zip(self._chain + ids, list(np.asarray(joint_values, dtype=float))
+                        + list(self.off_chain.values())):
             jm = self.model.joints[j]
             if jm.nq == 2:
                 q[jm.idx_q:jm.idx_q + 2] = (np.cos(v), np.sin(v))
@@ -239,7 +265,7 @@ class Robot:
         for j, T in zip(self._chain, np.asarray(joint_frames)):
             m.jointPlacements[j] = _se3(inverse(T_prev) @ T)
             T_prev = T
-        return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source)
+        return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source, self.off_chain)
 
     def urdf_origins(self) -> dict[str, np.ndarray]:
         """URDF ``<origin>`` (pose of the joint in its parent link) of every chain joint."""
