@@ -92,3 +92,23 @@ def test_export_changes_only_chain_origins(name, tip, rng):
     for a, b in changed:
         assert "<origin" in a and "<origin" in b
         assert strip.sub("", a) == strip.sub("", b)
+
+
+def test_joint_offset_next_to_gimbal_lock_keeps_rpy_readable(tmp_path, rng):
+    from kincal.readable_export import corrected_text
+
+    robot = _load("tiago_file", "wrist_ft_tool_link")  # arm_6 origin: rpy 0 -pi/2 -pi/2
+    model = mdh.extract(robot.geometry)
+    err = np.zeros_like(model.table)
+    err[:, 3] = 1e-3  # a joint offset on every joint
+    corrected = robot.with_joint_frames(model.joint_frames(model.table + err))
+    plain, _ = corrected_text(robot, corrected, readable=False)
+    assert np.max(np.abs(plain.for_joint("arm_6_joint").rpy_change)) > 1.0  # rpy alone swings
+    result, moved = corrected_text(robot, corrected)
+    assert [m.joint for m in moved] == ["arm_6_joint"] and moved[0].children == ("arm_7_joint",)
+    assert result.for_joint("arm_6_joint").new_rpy == "0.0 -1.57079632679 -1.57079632679"
+    assert np.max(np.abs(result.for_joint("arm_7_joint").rpy_change)) < 0.01
+    path = tmp_path / "c.urdf"
+    path.write_text(result.text)
+    q = random_joint_values(robot.geometry, rng, 500)
+    assert np.abs(Robot.load(path, tip=robot.tip).tip_poses(q) - corrected.tip_poses(q)).max() < 1e-12

@@ -514,11 +514,15 @@ class CalibrationResult:
         """(N, 3) predicted tool-point positions in the measurement frame [m]."""
         return MeasurementModel(self.mdh, np.atleast_2d(joint_values)).predict(self.x)
 
-    def corrected_urdf_text(self) -> str:
-        from .urdf_export import edit_joint_origins
+    def corrected_urdf_text(self, readable: bool = True) -> str:
+        """The corrected URDF; see :mod:`kincal.readable_export` for ``readable``."""
+        return self.export_edits(readable)[0].text
 
-        return edit_joint_origins(self.robot.urdf_text, self.robot.changed_origins(self.corrected),
-                                  source=str(self.robot.source)).text
+    def export_edits(self, readable: bool = True):
+        """(EditResult, joint offsets moved to child origins) of the corrected URDF."""
+        from .readable_export import corrected_text
+
+        return corrected_text(self.robot, self.corrected, readable, source=str(self.robot.source))
 
     def export_urdf(self, path, overwrite: bool = False):
         """Write the corrected URDF (only chain joint origins differ from the input)."""

@@ -138,7 +138,8 @@ def cmd_calibrate(args) -> int:
     robot = _robot(args)
     data = _measurements(args, robot)
     result = CalibrationProblem(robot, data, _options(args, args.method)).solve()
-    files = [(args.out, result.corrected_urdf_text())]
+    edits, moved = result.export_edits()
+    files = [(args.out, edits.text)]
     if args.frames_out:
         files.append((args.frames_out, report.dumps(result.frames_dict())))
     if args.report:
@@ -152,6 +153,8 @@ def cmd_calibrate(args) -> int:
         for line in result.identifiability.summary().splitlines()[1:]:
             if line.startswith(("weak", "  the poses")):
                 print(f"  {line}")
+        for m in moved:
+            print(f"  export: {m.describe()}")
         for path in written:
             print(f"  wrote {path}")
     return 0

@@ -334,3 +334,21 @@ class Robot:
         """
         mine, theirs = self.urdf_origins(), corrected.urdf_origins()
         return {name: T for name, T in theirs.items() if np.abs(T - mine[name]).max() > tol}
+
+    def child_joint_origins(self, joint: str) -> dict[str, np.ndarray]:
+        """URDF origins of the joints (movable or fixed) whose parent link is ``joint``'s child."""
+        m = self.model
+        jid = m.getFrameId(joint, pin.FrameType.JOINT)
+        link = next(i for i, f in enumerate(m.frames)
+                    if f.type == pin.FrameType.BODY and f.parentFrame == jid)
+        L = _mat(m.frames[link].placement)
+        out = {}
+        for f in m.frames:
+            if f.parentFrame != link or f.type not in (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT):
+                continue
+            if f.type == pin.FrameType.JOINT:
+                T = _mat(m.jointPlacements[f.parentJoint])  # relative to the parent joint
+            else:
+                T = _mat(f.placement)
+            out[f.name] = inverse(L) @ T
+        return out

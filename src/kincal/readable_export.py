@@ -1,0 +1,82 @@
+"""Corrected URDF text whose rpy stay readable, also next to gimbal lock.
+
+A URDF origin is exact in rpy, but where the original pitch is +-90 deg a correction
+about the one axis rpy cannot follow there forces roll and yaw to swing together. When
+the offending part of a correction is a turn of a joint about its own axis (a joint
+offset), it can be moved instead into the origins of that joint's child joints: the
+kinematics stay exact (every frame beyond the joint is where it was), only the link's
+own frame turns by that offset about the joint axis, so its mesh is drawn off by the
+offset angle. kincal does this only where it removes a swing, and reports each case.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .robot import Robot
+from .rotations import rotation_angle
+from .urdf_export import EditResult, edit_joint_origins
+
+SWING = 0.05  # [rad] an rpy component moving this much more than the rotation itself
+
+
+@dataclass(frozen=True)
+class Regauged:
+    """A joint offset moved into the child origins: joint name, angle [rad], children."""
+
+    joint: str
+    angle: float
+    children: tuple[str, ...]
+
+    def describe(self) -> str:
+        return (f"{self.joint}: its offset of {np.degrees(self.angle):+.4f} deg was written into "
+                f"the origins of {', '.join(self.children)} to keep the rpy of {self.joint} "
+                "readable (pitch near +-90 deg); its link frame turns by that angle")
+
+
+def _swing(edit, R_old: np.ndarray, R_new: np.ndarray) -> float:
+    """How much more the rpy numbers moved than the rotation did [rad]."""
+    return float(np.max(np.abs(edit.rpy_change)) - rotation_angle(R_old.T @ R_new))
+
+
+def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    T = np.eye(4)
+    T[:3, :3] = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+    return T
+
+
+def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,
+                   source: str = "<string>") -> tuple[EditResult, tuple[Regauged, ...]]:
+    """The corrected URDF text (and the joints whose offset was moved, if any)."""
+    origins = nominal.changed_origins(corrected)
+    result = edit_joint_origins(nominal.urdf_text, origins, source=source)
+    if not readable:
+        return result, ()
+    old = nominal.urdf_origins()
+    moved = []
+    for name, T_new in list(origins.items()):
+        edit = result.for_joint(name)
+        if _swing(edit, old[name][:3, :3], T_new[:3, :3]) < SWING:
+            continue
+        k = nominal.joint_names.index(name)
+        axis = nominal.geometry.axes[k]
+        # the part of the correction that turns the joint about its own axis
+        dR = old[name][:3, :3].T @ T_new[:3, :3]
+        w = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]]) / 2
+        angle = float(np.arcsin(np.clip(w @ axis, -1, 1)))
+        trial = dict(origins)
+        trial[name] = T_new @ _rot(axis, -angle)
+        children = corrected.child_joint_origins(name)
+        for child, T_child in children.items():
+            trial[child] = _rot(axis, angle) @ trial.get(child, T_child)
+        candidate = edit_joint_origins(nominal.urdf_text, trial, source=source)
+        after = _swing(candidate.for_joint(name), old[name][:3, :3], trial[name][:3, :3])
+        child_ok = all(_swing(candidate.for_joint(c), (old.get(c, children[c]))[:3, :3],
+                              trial[c][:3, :3]) < SWING for c in children)
+        if after < SWING and child_ok:  # only where it removes the swing altogether
+            origins, result = trial, candidate
+            moved.append(Regauged(name, angle, tuple(children)))
+    return result, tuple(moved)
