@@ -148,3 +148,25 @@ def test_usage_errors_exit_2():
     with pytest.raises(SystemExit) as exc:
         main(["calibrate", "ec66"])
     assert exc.value.code == 2
+
+
+def test_frames_can_be_added_to_the_urdf_on_request(sim, tmp_path):
+    out = tmp_path / "with_frames.urdf"
+    assert main(["calibrate", "ec66", str(sim / "cal.csv"), "--out", str(out), "--method", "ls",
+                 "--add-frames", "--frames-out", str(tmp_path / "f.json"), "--quiet"]) == 0
+    frames = json.loads((tmp_path / "f.json").read_text())
+    robot = Robot.load(out, tip="kincal_tool_point")
+    M = Robot.load(out, base="kincal_measurement_frame", tip="kincal_tool_point")
+    q = np.zeros((1, 6)) + 0.3
+    # the tool point seen from the measurement frame is the model's prediction
+    T = M.tip_poses(q)[0]
+    from kincal.rotations import base_rotation
+
+    tool_in_base = robot.tip_poses(q)[0][:3, 3]
+    b = frames["base"]
+    expected = base_rotation(b["rx"], b["ry"], b["rz"]) @ tool_in_base + [b["x"], b["y"], b["z"]]
+    assert np.abs(T[:3, 3] - expected).max() < 1e-12
+    plain = tmp_path / "plain.urdf"
+    assert main(["calibrate", "ec66", str(sim / "cal.csv"), "--out", str(plain), "--method", "ls",
+                 "--quiet"]) == 0
+    assert "kincal_tool_point" not in plain.read_text()

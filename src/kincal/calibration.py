@@ -524,6 +524,22 @@ class CalibrationResult:
 
         return corrected_text(self.robot, self.corrected, readable, source=str(self.robot.source))
 
+    def urdf_with_frames(self, text: str) -> str:
+        """``text`` plus two fixed frames: ``kincal_measurement_frame`` (child of the base
+        link, the pose of the measurement frame M in the base frame) and
+        ``kincal_tool_point`` (child of the tip link, at the tool point)."""
+        from .rotations import base_rotation, inverse, transform
+        from .urdf_export import add_fixed_frame
+
+        base_link, T_bl = self.robot.link_of(self.robot.base)
+        tip_link, T_tl = self.robot.link_of(self.robot.tip)
+        b = self.base
+        T_MB = transform(base_rotation(*b[3:]), b[:3])  # base frame expressed in M
+        text = add_fixed_frame(text, base_link, "kincal_measurement_frame",
+                               "kincal_measurement_frame_joint", T_bl @ inverse(T_MB))
+        return add_fixed_frame(text, tip_link, "kincal_tool_point", "kincal_tool_point_joint",
+                               T_tl @ transform(None, self.tool))
+
     def export_urdf(self, path, overwrite: bool = False):
         """Write the corrected URDF (only chain joint origins differ from the input)."""
         from .safe_write import write_text_atomic

@@ -139,7 +139,8 @@ def cmd_calibrate(args) -> int:
     data = _measurements(args, robot)
     result = CalibrationProblem(robot, data, _options(args, args.method)).solve()
     edits, moved = result.export_edits()
-    files = [(args.out, edits.text)]
+    text = result.urdf_with_frames(edits.text) if args.add_frames else edits.text
+    files = [(args.out, text)]
     if args.frames_out:
         files.append((args.frames_out, report.dumps(result.frames_dict())))
     if args.report:
@@ -291,6 +292,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default 2.5 x the median pose error)")
     p.add_argument("--out", required=True, help="corrected URDF to write")
     p.add_argument("--frames-out", help="FRAMES.json: measurement frame and tool point (SI)")
+    p.add_argument("--add-frames", action="store_true",
+                   help="also add the measurement frame and tool point to the URDF as fixed "
+                        "frames (kincal_measurement_frame, kincal_tool_point)")
     p.add_argument("--report", help="REPORT.json: the whole result")
     p.add_argument("--plots", help="directory for PNG plots")
     p.add_argument("--overwrite", action="store_true", help="replace existing output files")

@@ -352,3 +352,15 @@ class Robot:
                 T = _mat(f.placement)
             out[f.name] = inverse(L) @ T
         return out
+
+    def link_of(self, frame: str) -> tuple[str, np.ndarray]:
+        """(URDF link, pose of ``frame`` in that link) for a link or joint frame name."""
+        m = self.model
+        fid = self._frame_id(frame, "frame")
+        f = m.frames[fid]
+        if f.type == pin.FrameType.BODY:
+            return f.name, np.eye(4)
+        # a joint frame coincides with its child link's frame
+        child = next(i for i, g in enumerate(m.frames)
+                     if g.type == pin.FrameType.BODY and g.parentFrame == fid)
+        return m.frames[child].name, np.eye(4)
