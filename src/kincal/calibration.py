@@ -564,13 +564,21 @@ class CalibrationResult:
                     + (" ..." if len(self.downweighted) > 10 else "")]
                    if self.options.robust else []),
                  "  parameter                 nominal      deviation    std.err  unit"]
+
+        def z(v):  # no "-0.0000" for values that are zero to the digits shown
+            return 0.0 if abs(v) < 5e-6 else v
+
+        frames = []
         for p in self.parameters:
-            if p.status == "dropped" and p.name.split(".")[0] not in ("base", "tool"):
-                continue
             nom, dev, se, unit = p.reported()
             flag = "" if p.status == "identified" else f"  ({p.status})"
-            lines.append(f"  {p.name:<24} {nom:>10.4f} {dev:>+13.5f} {se:>10.5f}  {unit}{flag}")
-        return "\n".join(lines)
+            if p.name.startswith(("base.", "tool.")):
+                frames.append(f"  {p.name:<24} {z(nom + dev):>14.4f} {z(se):>10.5f}  {unit}{flag}")
+            elif p.status != "dropped":
+                lines.append(f"  {p.name:<24} {z(nom):>10.4f} {z(dev):>+13.5f} {z(se):>10.5f}  "
+                             f"{unit}{flag}")
+        lines.append("  measurement frame and tool point   estimate    std.err  unit")
+        return "\n".join(lines + frames)
 
 
 def calibrate(robot: Robot, data: Measurements, options: CalibrationOptions | None = None,
