@@ -47,3 +47,16 @@ def test_degenerate_cases_are_noted(tmp_path):
             if word in notes:
                 seen.add(word)
     assert seen == {"parallel", "intersect", "coincide", "prismatic", "first axis"}
+
+
+def test_axes_parallel_only_within_tolerance_stay_exact(tmp_path):
+    # found by hypothesis: j4 and j5 parallel to ~7e-8 rad, so MD-H frame 5 sits ~1e-8 m
+    # off the joint axis; the joint must still turn about its true axis line
+    rng = np.random.default_rng(151641461)
+    text, _ = random_chain(rng, n=5, cases=("gimbal", "intersecting"))
+    robot = _load(tmp_path, text, "near_parallel")
+    model = mdh.extract(robot.geometry)
+    assert "parallel" in model.notes[3]
+    q = random_joint_values(robot.geometry, rng, 200)
+    R, p = MeasurementModel(model, q).tip_poses(model.table)
+    assert np.abs(robot.tip_poses(q)[:, :3, 3] - p).max() < 1e-12

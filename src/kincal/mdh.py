@@ -77,6 +77,9 @@ class MdhModel:
     T_base_0: (4, 4) fixed pose of MD-H frame 0 in the base frame B.
     offsets: (n, 4, 4) C_i, pose of the URDF joint frame i in MD-H frame i.
     screw_axes: (n, 3) joint i's axis in MD-H frame i (= C_i axis_i; e_z up to PARALLEL_TOL).
+    screw_points: (n, 3) a point of joint i's axis line in MD-H frame i (the URDF joint
+        origin; on the z axis up to PARALLEL_TOL). The joint turns about this line, so the
+        model is exact even where MD-H frame i is not exactly on the joint axis.
     T_n_tip: (4, 4) pose of the tip frame in MD-H frame n.
     notes: one line per joint naming the degenerate case met, if any.
     """
@@ -89,6 +92,7 @@ class MdhModel:
     screw_axes: np.ndarray
     T_n_tip: np.ndarray
     notes: tuple[str, ...]
+    screw_points: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -202,4 +206,5 @@ def extract(geometry) -> MdhModel:
     screw = np.einsum("nij,nj->ni", offsets[:, :3, :3], np.asarray(geometry.axes, dtype=float))
     T_n_tip = inverse(F[-1]) @ geometry.T_base_tip
     return MdhModel(model.joint_names, model.kinds, table, T_base_0, offsets,
-                    screw / np.linalg.norm(screw, axis=1, keepdims=True), T_n_tip, model.notes)
+                    screw / np.linalg.norm(screw, axis=1, keepdims=True), T_n_tip, model.notes,
+                    offsets[:, :3, 3].copy())

@@ -76,8 +76,12 @@ class MeasurementModel:
             if kind == "prismatic":
                 M[:, :3, :3] = np.eye(3)
                 M[:, :3, 3] = q[:, i, None] * w
-            else:
-                M[:, :3, :3] = _rodrigues(w, q[:, i])
+            else:  # a turn about the axis line through the screw point c: x -> R (x - c) + c
+                R = _rodrigues(w, q[:, i])
+                M[:, :3, :3] = R
+                if mdh.screw_points is not None:
+                    c = mdh.screw_points[i]
+                    M[:, :3, 3] = c - R @ c
             self._motion.append(M)
 
     def subset(self, rows) -> "MeasurementModel":
