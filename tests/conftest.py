@@ -28,3 +28,14 @@ def random_joint_values(geometry, rng, n):
     lo = np.where(np.isfinite(geometry.lower), geometry.lower, -np.pi)
     hi = np.where(np.isfinite(geometry.upper), geometry.upper, np.pi)
     return rng.uniform(lo, hi, size=(n, geometry.n))
+
+
+def ur10_path() -> Path:
+    """The UR10 URDF of the installed example-robot-data (located by kincal itself)."""
+    from kincal.descriptions import resolve
+    from kincal.errors import InputFileError
+
+    try:
+        return resolve("ur10").urdf
+    except InputFileError:
+        pytest.skip("example-robot-data is not installed")

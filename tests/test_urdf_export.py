@@ -7,7 +7,6 @@ urdfdom, and yourdfpy, through lxml + trimesh) to check the placements to 1e-12.
 from __future__ import annotations
 
 import difflib
-import importlib.metadata
 import io
 import os
 import zlib
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import ur10_path
 import yourdfpy
 from lxml import etree
 from scipy.spatial.transform import Rotation
@@ -31,17 +31,6 @@ REPO = Path(__file__).resolve().parents[1]
 EC66 = REPO / "urdf" / "ec66.urdf"
 TIAGO = Path(__file__).resolve().parents[2] / "shared/data/tiago_mocap/tiago_48_schunk.urdf"
 TOL = 1e-12
-
-
-def ur10_path() -> Path:
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed")
-    for f in dist.files or ():
-        if str(f).endswith("ur_description/urdf/ur10_robot.urdf"):
-            return Path(dist.locate_file(f))
-    pytest.skip("ur10_robot.urdf not found in example-robot-data")
 
 
 def robot_path(name: str) -> Path:

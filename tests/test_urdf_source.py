@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import importlib.metadata
 import time
 from pathlib import Path
 
 import pytest
+from conftest import ur10_path
 
 from kincal.errors import InputFileError, KincalError, UrdfError
 from kincal.urdf_source import MAX_URDF_BYTES, check_urdf_text, read_urdf_text
@@ -16,17 +16,6 @@ EC66 = REPO / "urdf" / "ec66.urdf"
 TIAGO = Path(__file__).resolve().parents[2] / "shared/data/tiago_mocap/tiago_48_schunk.urdf"
 
 MINIMAL = '<?xml version="1.0"?>\n<robot name="r">\n  <link name="a"/>\n</robot>\n'
-
-
-def ur10_path() -> Path:
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed")
-    for f in dist.files or ():
-        if str(f).endswith("ur_description/urdf/ur10_robot.urdf"):
-            return Path(dist.locate_file(f))
-    pytest.skip("ur10_robot.urdf not found in example-robot-data")
 
 
 def write(tmp_path: Path, text: str, name: str = "robot.urdf") -> Path:
