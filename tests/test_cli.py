@@ -170,3 +170,17 @@ def test_frames_can_be_added_to_the_urdf_on_request(sim, tmp_path):
     assert main(["calibrate", "ec66", str(sim / "cal.csv"), "--out", str(plain), "--method", "ls",
                  "--quiet"]) == 0
     assert "kincal_tool_point" not in plain.read_text()
+
+
+def test_demo_writes_tables_and_plots_whose_numbers_hold(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    results = json.loads((out / "results.json").read_text())["summary"]
+    assert results["l2_rtest_validation_mean_mm"] < results["ls_rtest_validation_mean_mm"]
+    assert results["ls_tracker_validation_mean_mm"] < results["l2_rtest_validation_mean_mm"]
+    assert f"{results['l2_rtest_validation_mean_mm']:8.3f}" in printed
+    for name in ("cv_curve.png", "point_sets.png", "validation_errors.png",
+                 "parameter_deviations.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "Table 2" in (out / "tables.md").read_text()

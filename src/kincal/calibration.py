@@ -458,6 +458,7 @@ class CalibrationResult:
     mdh: mdh_layer.MdhModel
     rows: np.ndarray  # (N,) line numbers of the samples in their source file
     downweighted: tuple[Downweighted, ...] = ()  # samples a robust loss trusted less
+    residuals_before: np.ndarray | None = None  # (N, 3) with the start parameters [m]
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
@@ -477,11 +478,12 @@ class CalibrationResult:
                                           float(x[i]), float(se[i]), status))
         table, _, _ = sp.split(x)
         corrected = problem.robot.with_joint_frames(problem.mdh.joint_frames(table))
-        before = ErrorStats.from_errors(problem.position_errors(x_start))
+        res_before = problem.position_errors(x_start)
         res = problem.position_errors(x)
         return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
-                   x, float(lam), cv, before, ErrorStats.from_errors(res), res, sol, ident,
-                   problem.mdh, np.asarray(problem.data.rows))
+                   x, float(lam), cv, ErrorStats.from_errors(res_before),
+                   ErrorStats.from_errors(res), res, sol, ident, problem.mdh,
+                   np.asarray(problem.data.rows), residuals_before=res_before)
 
     # ------------------------------------------------------------ accessors
     @property

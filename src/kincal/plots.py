@@ -1,0 +1,251 @@
+"""Calibration figures as PNG files (matplotlib, Agg canvas, no display needed).
+
+Each function takes plain arrays (or a :class:`~kincal.calibration.CalibrationResult`),
+draws one figure on its own ``Figure`` (no pyplot, so no global state and no backend
+switching) and writes it through :func:`kincal.safe_write.write_bytes_atomic`; it returns
+the path written. Units are in every axis label: positions and errors in mm, angles in
+deg. ``source`` goes into the PNG's "Software" text field.
+
+- :func:`plot_cv_curve`: mean CV error against lambda, chosen lambda marked (paper Fig. 3);
+- :func:`plot_point_sets`: calibration and validation points in 3-D (Fig. 4);
+- :func:`plot_error_distributions`: per-method error distributions (Fig. 5);
+- :func:`plot_parameter_deviations`: identified minus nominal per method (Table 4);
+- :func:`plot_calibration`: the figures of one calibration, for ``kincal calibrate --plots``.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .safe_write import write_bytes_atomic
+
+_COLORS = ("#7f7f7f", "#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd")
+
+
+def _figure(width: float, height: float):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), dpi=110, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, path, overwrite: bool, source: str) -> Path:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", metadata={"Software": source})
+    return write_bytes_atomic(path, buf.getvalue(), overwrite=overwrite)
+
+
+def plot_cv_curve(lambdas, mean_error_mm, best_lambda: float, path, *, fold_errors_mm=None,
+                  title: str = "Cross-validation error against lambda",
+                  overwrite: bool = False, source: str = "kincal") -> Path:
+    """Mean validation error [mm] of each lambda candidate, log x, best lambda marked.
+
+    lambdas: (M,); mean_error_mm: (M,); fold_errors_mm: optional (M, k), drawn faintly.
+    """
+    lam = np.asarray(lambdas, float)
+    err = np.asarray(mean_error_mm, float)
+    fig = _figure(6.4, 4.0)
+    ax = fig.add_subplot()
+    if fold_errors_mm is not None:
+        folds = np.asarray(fold_errors_mm, float)
+        for k in range(folds.shape[1]):
+            ax.plot(lam, folds[:, k], color="0.75", lw=0.8,
+                    label="single folds" if k == 0 else None)
+    ax.plot(lam, err, "o-", color=_COLORS[2], ms=3.5, lw=1.5, label="mean over folds")
+    best = int(np.argmin(np.abs(np.log(lam) - np.log(best_lambda))))
+    ax.axvline(best_lambda, color=_COLORS[1], ls="--", lw=1)
+    ax.plot([best_lambda], [err[best]], "o", color=_COLORS[1], ms=7,
+            label=f"chosen: lambda = {best_lambda:.3g}, {err[best]:.3f} mm")
+    ax.set_xscale("log")
+    ax.set_xlabel("lambda (penalty weight, mm and deg units)")
+    ax.set_ylabel("mean CV position error (mm)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path, overwrite, source)
+
+
+def plot_point_sets(calibration_mm, validation_mm, path, *, highlight_index=None,
+                    labels=("R-test calibration points", "laser-tracker validation points"),
+                    overwrite: bool = False, source: str = "kincal") -> Path:
+    """Two point sets [mm] in one 3-D view (paper Fig. 4), equal axis scales.
+
+    calibration_mm: (N, 3); validation_mm: (M, 3), both in the same frame.
+    highlight_index: validation points also used for a calibration (drawn filled).
+    """
+    C = np.asarray(calibration_mm, float)
+    V = np.asarray(validation_mm, float)
+    fig = _figure(6.4, 5.6)
+    ax = fig.add_subplot(projection="3d")
+    ax.scatter(*V.T, s=10, facecolors="none", edgecolors=_COLORS[2], lw=0.7,
+               label=f"{labels[1]} ({len(V)})")
+    if highlight_index is not None and len(highlight_index):
+        H = V[np.asarray(highlight_index, int)]
+        ax.scatter(*H.T, s=10, color=_COLORS[2], label=f"  of which used for LS ({len(H)})")
+    ax.scatter(*C.T, s=14, color=_COLORS[1], depthshade=False, label=f"{labels[0]} ({len(C)})")
+    both = np.vstack([C, V])
+    mid = (both.max(0) + both.min(0)) / 2
+    half = (both.max(0) - both.min(0)).max() / 2 * 1.05
+    ax.set_xlim(mid[0] - half, mid[0] + half)
+    ax.set_ylim(mid[1] - half, mid[1] + half)
+    ax.set_zlim(mid[2] - half, mid[2] + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_zlabel("z (mm)")
+    ax.set_title("Calibration and validation points (robot base frame)", fontsize=10)
+    ax.legend(fontsize=8, loc="upper left")
+    return _save(fig, path, overwrite, source)
+
+
+def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
+                             title: str = "Position error distribution",
+                             overwrite: bool = False, source: str = "kincal") -> Path:
+    """Box plots (with the points) of per-pose position errors [mm], one per method.
+
+    series: (label, (N,) errors [mm]) pairs, drawn left to right. A log axis is used
+    when the largest median is over 20 times the smallest, so all boxes stay readable.
+    """
+    labels = [s[0] for s in series]
+    data = [np.asarray(s[1], float) for s in series]
+    fig = _figure(6.4, 4.2)
+    ax = fig.add_subplot()
+    pos = np.arange(1, len(data) + 1)
+    ax.boxplot(data, positions=pos, widths=0.55, showfliers=False, medianprops={"color": "k"})
+    ax.set_xticks(pos, labels)  # not boxplot(tick_labels=): that needs matplotlib 3.9
+    rng = np.random.default_rng(0)  # fixed jitter: the same data give the same picture
+    for i, d in enumerate(data):
+        ax.scatter(pos[i] + rng.uniform(-0.18, 0.18, d.size), d, s=6, alpha=0.45,
+                   color=_COLORS[i % len(_COLORS)])
+        ax.annotate(f"mean {d.mean():.3f}", (pos[i], d.max()), textcoords="offset points",
+                    xytext=(0, 4), ha="center", fontsize=8)
+    meds = [np.median(d) for d in data if d.size]
+    if meds and min(meds) > 0 and max(meds) / min(meds) > 20:
+        ax.set_yscale("log")
+    ax.set_ylabel("position error (mm)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.tick_params(axis="x", labelsize=8)
+    return _save(fig, path, overwrite, source)
+
+
+def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
+                              title: str = "Kinematic parameter deviations from nominal",
+                              overwrite: bool = False, source: str = "kincal") -> Path:
+    """Grouped bars of identified minus nominal parameters: lengths [mm] and angles [deg].
+
+    names: (P,) parameter names; is_length: (P,) bool.
+    columns: (label, (P,) deviations in mm or deg, (P,) bool shown) triples, or pairs
+        (label, deviations) when every value is shown. Parameters no column shows are
+        left out. Bars beyond 4x the largest deviation of the last column (the
+        reference, e.g. the truth) are clipped and their value written at the edge.
+    """
+    names = list(names)
+    is_length = np.asarray(is_length, bool)
+    cols = []
+    for c in columns:
+        vals = np.asarray(c[1], float)
+        shown = np.asarray(c[2], bool) if len(c) > 2 else np.ones(len(names), bool)
+        cols.append((c[0], np.where(shown, vals, np.nan)))
+    keep = np.any([np.isfinite(v) & (np.abs(v) > 0) for _, v in cols], axis=0)
+    fig = _figure(8.4, 6.0)
+    axes = fig.subplots(2, 1)
+    for ax, length, unit in ((axes[0], True, "mm"), (axes[1], False, "deg")):
+        idx = np.flatnonzero(keep & (is_length == length))
+        if idx.size == 0:
+            ax.set_visible(False)
+            continue
+        ref = np.nanmax(np.abs(cols[-1][1][idx])) if np.any(np.isfinite(cols[-1][1][idx])) else 0
+        limit = 4 * ref if ref > 0 else None
+        w = 0.8 / len(cols)
+        x = np.arange(idx.size)
+        for j, (label, vals) in enumerate(cols):
+            v = vals[idx]
+            shown = np.where(np.isfinite(v), v, 0.0)
+            if limit is not None:
+                shown = np.clip(shown, -limit, limit)
+            xs = x - 0.4 + w * (j + 0.5)
+            ax.bar(xs, shown, w, label=label, color=_COLORS[(j + 1) % len(_COLORS)])
+            if limit is not None:
+                for xi, vi in zip(xs, v):
+                    if np.isfinite(vi) and abs(vi) > limit:
+                        ax.annotate(f"{vi:.1f}", (xi, np.sign(vi) * limit), ha="center",
+                                    va="bottom" if vi > 0 else "top", fontsize=7, rotation=90)
+        if limit is not None:
+            ax.set_ylim(-limit * 1.35, limit * 1.35)
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xticks(x, [names[i] for i in idx], rotation=30, ha="right", fontsize=8)
+        ax.set_ylabel(f"deviation ({unit})")
+        ax.grid(True, axis="y", alpha=0.3)
+    fig.suptitle(title, fontsize=10)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(4, len(cols)), fontsize=8)
+    return _save(fig, path, overwrite, source)
+
+
+def plot_calibration(result, out_dir, data=None, overwrite: bool = False,
+                     source: str = "kincal") -> list[Path]:
+    """The figures of one calibration in ``out_dir`` (which must exist); returns the paths.
+
+    cv_curve.png (if lambda was chosen by cross-validation), residuals.png (per-pose
+    position errors on the calibration data after calibration, and before it when
+    ``data`` -- the Measurements that were calibrated -- is given; without them only the
+    before statistics are known) and parameters.png (identified kinematic deviations
+    with one standard error).
+    """
+    out_dir = Path(out_dir)
+    paths = []
+    if result.cv is not None:
+        cv = result.cv
+        paths.append(plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda,
+                                   out_dir / "cv_curve.png", fold_errors_mm=cv.fold_errors,
+                                   overwrite=overwrite, source=source))
+    after = np.linalg.norm(np.asarray(result.residuals), axis=1) * 1e3
+    series = []
+    if getattr(result, "residuals_before", None) is not None:
+        series.append(("before (frames fitted)",
+                       np.linalg.norm(result.residuals_before, axis=1) * 1e3))
+    elif data is not None:
+        from .measurement_model import MeasurementModel
+
+        d = data.for_chain(result.robot.joint_names)
+        pred = MeasurementModel(result.mdh, d.joint_values).predict(result.x_start)
+        series.append(("before (frames fitted)", np.linalg.norm(d.positions - pred, axis=1) * 1e3))
+    series.append((f"after ({result.options.method})", after))
+    title = (f"Calibration residuals, {len(after)} poses; before: mean {result.before.mean:.3f},"
+             f" max {result.before.max:.3f} mm")
+    paths.append(plot_error_distributions(series, out_dir / "residuals.png", title=title,
+                                          overwrite=overwrite, source=source))
+    kin = [p for p in result.parameters[:result.space.n_kinematic] if p.status == "identified"]
+    if kin:
+        how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")
+        paths.append(_plot_estimates(kin, out_dir / "parameters.png", overwrite, source,
+                                     f"Identified deviations from nominal ({how})"))
+    return paths
+
+
+def _plot_estimates(params, path, overwrite, source, title) -> Path:
+    """Bars of deviations with +-1 standard error, lengths [mm] above angles [deg]."""
+    fig = _figure(8.0, 5.6)
+    axes = fig.subplots(2, 1)
+    for ax, length, unit in ((axes[0], True, "mm"), (axes[1], False, "deg")):
+        ps = [p for p in params if p.is_length == length]
+        if not ps:
+            ax.set_visible(False)
+            continue
+        rep = np.array([p.reported()[1:3] for p in ps], float)
+        x = np.arange(len(ps))
+        err = np.where(np.isfinite(rep[:, 1]), rep[:, 1], 0.0)
+        ax.bar(x, rep[:, 0], 0.6, yerr=err, capsize=3, color=_COLORS[2 if length else 3])
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xticks(x, [p.name for p in ps], rotation=30, ha="right", fontsize=8)
+        ax.set_ylabel(f"deviation ({unit})")
+        ax.grid(True, axis="y", alpha=0.3)
+    axes[0].set_title(title + "; error bars: one standard error", fontsize=10)
+    return _save(fig, path, overwrite, source)
