@@ -77,3 +77,17 @@ def test_iteration_limit_is_reported_not_hidden():
     assert any(issubclass(w.category, KincalWarning) and "did not converge" in str(w.message)
                for w in caught)
     assert "NOT CONVERGED" in res.summary()
+
+
+@pytest.mark.parametrize("m,deficient", [(100, False), (5000, False), (5000, True)])
+def test_triangular_factor_matches_householder(m, deficient):
+    from kincal.solver import triangular_factor
+
+    rng = np.random.default_rng(m)
+    A = rng.normal(size=(m, 20)) * np.logspace(0, 3, 20)  # columns of very different size
+    if deficient:
+        A[:, 7] = A[:, 3] - 2 * A[:, 5]
+    R = triangular_factor(A)
+    assert np.allclose(R.T @ R, A.T @ A, rtol=1e-10, atol=1e-8 * np.abs(A.T @ A).max())
+    R_qr = np.linalg.qr(A, mode="r")
+    assert np.allclose(np.abs(np.diag(R)), np.abs(np.diag(R_qr)), rtol=1e-6, atol=1e-6 * np.abs(R_qr).max())

@@ -67,21 +67,21 @@ ResidualFn = Callable[[np.ndarray, bool], tuple]
 def triangular_factor(A: np.ndarray) -> np.ndarray:
     """R of A = Q R (upper triangular, n x n) for a tall A (m x n).
 
-    CholeskyQR2 (two Cholesky passes, the second on A R1^-1) costs two Gram products,
-    much less than Householder QR on tall matrices, and is as accurate as QR while
-    cond(A) stays below ~1e7; beyond that, or if A is rank deficient, Householder QR.
+    Householder QR, except for very tall A (many poses), where CholeskyQR2 (two Cholesky
+    passes, the second on A R1^-1) costs two Gram products instead; it is as accurate as
+    QR while cond(A) stays below ~1e7, and falls back to QR beyond that.
     """
     m, n = A.shape
-    if m <= 4 * n:
+    if m <= 50 * n:
         return np.linalg.qr(A, mode="r")
     try:
-        R1 = scipy.linalg.cholesky(A.T @ A, lower=False, check_finite=False)
-        if np.min(np.abs(np.diag(R1))) <= 1e-7 * np.max(np.abs(np.diag(R1))):
+        R1 = np.linalg.cholesky(A.T @ A).T
+        d = np.abs(np.diag(R1))
+        if d.min() <= 1e-7 * d.max():
             raise np.linalg.LinAlgError("ill-conditioned")
-        A1 = scipy.linalg.solve_triangular(R1, A.T, trans="T", check_finite=False).T
-        R2 = scipy.linalg.cholesky(A1.T @ A1, lower=False, check_finite=False)
-        return R2 @ R1
-    except (np.linalg.LinAlgError, ValueError):
+        A1 = A @ np.linalg.inv(R1)  # small n x n inverse: much faster than a wide trsm
+        return np.linalg.cholesky(A1.T @ A1).T @ R1
+    except np.linalg.LinAlgError:
         return np.linalg.qr(A, mode="r")
 
 
