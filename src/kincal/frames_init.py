@@ -28,7 +28,7 @@ def pivot_tool(R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
     return sol[:3]
 
 
-def alternate(R_tip, p_tip, P, tool, rounds: int = 20):
+def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
     """Alternate Kabsch for (R_b, t_b) and a linear solve for (t, t_b) from ``tool``.
 
     Returns (R_b (3, 3), t_b (3,), tool (3,), rms [m]).
@@ -41,7 +41,7 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 20):
         A = np.concatenate([Rb @ R_tip, np.broadcast_to(np.eye(3), (N, 3, 3))], axis=2)
         b = P - p_tip @ Rb.T
         sol, *_ = np.linalg.lstsq(A.reshape(3 * N, 6), b.reshape(-1), rcond=None)
-        if np.allclose(sol[:3], t, rtol=0, atol=1e-12):
+        if np.allclose(sol[:3], t, rtol=0, atol=1e-9):  # Gauss-Newton refines it after
             t = sol[:3]
             break
         t = sol[:3]
