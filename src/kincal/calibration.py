@@ -163,8 +163,11 @@ class CalibrationProblem:
         self._ident = None
 
     # --------------------------------------------------------------- residuals
-    def residual_function(self, rows=None) -> Callable:
-        """residual(u, with_jacobian) on the samples ``rows`` (default all), in mm."""
+    def residual_function(self, rows=None, kinematic: bool = True) -> Callable:
+        """residual(u, with_jacobian) on the samples ``rows`` (default all), in mm.
+
+        kinematic=False: MD-H columns of the Jacobian left at zero (frame-only fits).
+        """
         model = self.model if rows is None else self.model.subset(rows)
         P = self.data.positions if rows is None else self.data.positions[rows]
         w = (self.weights if rows is None else self.weights[rows])[:, None]
@@ -174,7 +177,7 @@ class CalibrationProblem:
             x = u * s
             if not with_jacobian:
                 return ((P - model.predict(x)) * w).ravel() / MM, None
-            pred, J = model.jacobian(x)
+            pred, J = model.jacobian(x, kinematic)
             r = ((P - pred) * w).ravel() / MM
             Jr = -(J * w[:, :, None]).reshape(-1, s.size) * (s / MM)
             return r, Jr
@@ -204,7 +207,8 @@ class CalibrationProblem:
                 tool = np.asarray(o.tool_guess, dtype=float)
         x = self.space.join(self.mdh.table, base, tool)
         free = ~self.space.is_kinematic
-        sol = solve(self.residual_function(), x / self.scale, free, options=o.solver)
+        sol = solve(self.residual_function(kinematic=False), x / self.scale, free,
+                    options=o.solver)
         self._x_start = sol.u * self.scale
         return self._x_start
 

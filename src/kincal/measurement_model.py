@@ -110,13 +110,19 @@ class MeasurementModel:
         P = p_tip + R_tip @ tool
         return P @ base_rotation(*base[3:]).T + base[:3]
 
-    def jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(prediction (N, 3), Jacobian (N, 3, p)) of the predicted positions w.r.t. x."""
+    def jacobian(self, x: np.ndarray, kinematic: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(prediction (N, 3), Jacobian (N, 3, p)) of the predicted positions w.r.t. x.
+
+        kinematic=False leaves the MD-H columns at zero (cheaper, for frame-only fits).
+        """
         table, base, tool = self.space.split(x)
-        R_tip, p_tip, stages = self._chain(table, keep=True)
+        R_tip, p_tip, stages = self._chain(table, keep=kinematic)
         P = p_tip + R_tip @ tool  # tool point in the base frame
         n, N = self.mdh.n, self.N
         J = np.empty((N, 3, self.space.size))
+        if not kinematic:
+            J[:, :, :4 * n] = 0.0
+            return self._frame_columns(J, P, R_tip, base, tool)
         G = np.stack([g for g, _ in stages])  # (n, N, 4, 4)
         H = np.stack([h for _, h in stages])
         xg, zh = G[:, :, :3, 0], H[:, :, :3, 2]                            # (n, N, 3)
@@ -127,16 +133,21 @@ class MeasurementModel:
         cols[:, 2] = zh                                                    # d_i
         cols[:, 3] = _cross3(zh, rh)                                       # theta_i
         J[:, :, :4 * n] = cols.reshape(4 * n, N, 3).transpose(1, 2, 0)
-        k = 4 * n
+        return self._frame_columns(J, P, R_tip, base, tool, rotate_kinematic=True)
+
+    def _frame_columns(self, J, P, R_tip, base, tool, rotate_kinematic=False):
+        """Fill the base and tool columns (and turn the MD-H ones into the measurement frame)."""
+        N, k = self.N, self.space.n_kinematic
         rx, ry, rz = base[3:]
         Rx, Ry, Rz = rotx(rx), roty(ry), rotz(rz)
         Rb = Rx @ Ry @ Rz
-        J[:, :, :k] = np.einsum("ij,njp->nip", Rb, J[:, :, :k])
+        if rotate_kinematic:
+            J[:, :, :k] = np.matmul(Rb, J[:, :, :k])
         Pm = P @ Rb.T + base[:3]
         J[:, :, k:k + 3] = np.eye(3)
         ex, ey, ez = np.eye(3)
         J[:, :, k + 3] = _cross(np.broadcast_to(ex, (N, 3)), Pm - base[:3])
         J[:, :, k + 4] = _cross(np.broadcast_to(ey, (N, 3)), P @ (Ry @ Rz).T) @ Rx.T
         J[:, :, k + 5] = _cross(np.broadcast_to(ez, (N, 3)), P @ Rz.T) @ (Rx @ Ry).T
-        J[:, :, k + 6:k + 9] = np.einsum("ij,njk->nik", Rb, R_tip)
+        J[:, :, k + 6:k + 9] = np.matmul(Rb, R_tip)
         return Pm, J
