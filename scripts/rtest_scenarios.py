@@ -18,36 +18,7 @@ import warnings
 
 import numpy as np
 
-from kincal import mdh
-from kincal.calibration import CalibrationOptions, CalibrationProblem, calibrate
-from kincal.robot import Robot
-from kincal.simulation import Truth, cube_poses, measure, planted_table
-
-BASE = np.array([0.9, -0.4, 0.2, 0.05, -0.1, 2.0])
-
-
-def scenario(seed: int) -> dict:
-    """The same scenario as tests/test_calibration.py::_rtest_scenario."""
-    rng = np.random.default_rng(seed)
-    robot = Robot.load("ec66")
-    model = mdh.extract(robot.geometry)
-    tool = np.array([0.0, 0.0, 0.12])
-    q = cube_poses(robot, 60, [0.4, 0.0, 0.25], 0.02, tool, rng, max_tilt=np.radians(15))
-    q_val = cube_poses(robot, 150, [0.4, 0.0, 0.25], 0.4, tool, rng, max_tilt=np.radians(30))
-    truth = Truth(planted_table(model, rng), BASE, tool + rng.normal(size=3) * 1e-3)
-    data = measure(model, truth, q, 5e-5, rng)
-    val = measure(model, truth, q_val, 1e-5, rng)
-    row = {"seed": seed}
-    before = CalibrationProblem(robot, val, CalibrationOptions(method="frames")).solve()
-    row["before"] = before.after.mean
-    for method in ("ls", "l2"):
-        res = calibrate(robot, data, method=method)
-        v = CalibrationProblem(res.corrected, val, CalibrationOptions(method="frames")).solve()
-        row[method] = v.after.mean
-        row[f"{method}_cal"] = res.after.mean
-        if method == "l2":
-            row["lambda"] = res.lam
-    return row
+from kincal.paper_experiment import rtest_scenario
 
 
 def main(argv=None):
@@ -56,7 +27,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")  # LS on 20 mm data may stop at the iteration limit
     t = time.perf_counter()
-    rows = [scenario(s) for s in range(args.seeds)]
+    rows = [rtest_scenario(s) for s in range(args.seeds)]
     print("| seed | before [mm] | LS + R-test [mm] | L2 + R-test [mm] | lambda (CV) | L2 better |")
     print("|---|---|---|---|---|---|")
     for r in rows:

@@ -8,6 +8,7 @@ from kincal import mdh
 from kincal.calibration import CalibrationOptions, CalibrationProblem, calibrate
 from kincal.errors import OptionError
 from kincal.measurements import Measurements
+from kincal.paper_experiment import rtest_scenario
 from kincal.robot import Robot
 from kincal.simulation import Truth, cube_poses, measure, planted_table, true_positions
 
@@ -98,32 +99,12 @@ def test_l2_fits_training_data_nearly_as_well_as_ls():
     assert l2.after.mean <= 1.5 * ls.after.mean
 
 
-def _rtest_scenario(seed):
-    """60 poses in a 20 mm cube, varied orientation, 0.05 mm noise; validation in 400 mm."""
-    rng = np.random.default_rng(seed)
-    robot = Robot.load("ec66")
-    model = mdh.extract(robot.geometry)
-    tool = np.array([0.0, 0.0, 0.12])
-    q = cube_poses(robot, 60, [0.4, 0.0, 0.25], 0.02, tool, rng, max_tilt=np.radians(15))
-    q_val = cube_poses(robot, 150, [0.4, 0.0, 0.25], 0.4, tool, rng, max_tilt=np.radians(30))
-    truth = Truth(planted_table(model, rng), BASE, tool + rng.normal(size=3) * 1e-3)
-    data = measure(model, truth, q, 5e-5, rng)
-    val = measure(model, truth, q_val, 1e-5, rng)
-    errors = {}
-    for method in ("ls", "l2"):
-        res = calibrate(robot, data, method=method)
-        # validation as in the paper: frames fitted on the validation set, kinematics fixed
-        v = CalibrationProblem(res.corrected, val, CalibrationOptions(method="frames")).solve()
-        errors[method] = v.after.mean
-    return errors
-
-
 def test_l2_beats_ls_on_rtest_like_data_in_most_scenarios():
     import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LS on 20 mm data may stop at the iteration limit
-        results = [_rtest_scenario(seed) for seed in range(10)]
+        results = [rtest_scenario(seed) for seed in range(10)]
     wins = sum(r["l2"] < r["ls"] for r in results)
     assert wins >= 7, results
 
