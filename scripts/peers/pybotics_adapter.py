@@ -44,57 +44,14 @@ Output (``.npz``):
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
 import sys
 import time
-import traceback
 
 import numpy as np
+from adapter_io import rms_mm, worker_main
 
 PEER = "pybotics"
 PARALLEL_SIN = 1e-6  # |sin(alpha)| below which consecutive axes count as parallel
-
-
-# ----------------------------------------------------------------------------- job I/O
-def _plain(value):
-    """npz 0-d string arrays -> str, string arrays -> list of str."""
-    if isinstance(value, np.ndarray) and value.dtype.kind in "US":
-        return str(value) if value.ndim == 0 else [str(v) for v in value]
-    return value
-
-
-def load_job(path: str, meta_path: str | None = None) -> dict:
-    with np.load(path, allow_pickle=False) as z:
-        job = {k: _plain(z[k]) for k in z.files}
-    if meta_path is None:
-        side = os.path.splitext(path)[0] + ".json"
-        meta_path = side if os.path.exists(side) else None
-    if meta_path:
-        with open(meta_path, encoding="utf-8") as f:
-            job.update(json.load(f))
-    opts = job.get("options", {})
-    if isinstance(opts, str):
-        opts = json.loads(opts) if opts.strip() else {}
-    job["options"] = opts
-    return job
-
-
-def save_output(path: str, out: dict) -> None:
-    arrays = {}
-    for k, v in out.items():
-        if isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
-            arrays[k] = np.array(v, dtype=str)
-        elif isinstance(v, str):
-            arrays[k] = np.array(v)
-        else:
-            arrays[k] = np.asarray(v)
-    np.savez(path, **arrays)
-
-
-def rms_mm(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.sum((np.asarray(a) - np.asarray(b)) ** 2, axis=1))) * 1e3)
 
 
 def kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -275,24 +232,7 @@ def pybotics_version(mod) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("job")
-    ap.add_argument("out")
-    ap.add_argument("--meta", default=None, help="JSON side file with the non-array fields")
-    args = ap.parse_args(argv)
-    try:
-        job = load_job(args.job, args.meta)
-        out = run(job)
-        save_output(args.out, out)
-        print(json.dumps({k: out[k] for k in ("peer", "variant", "n_params", "fit_time_s",
-                                              "rms_train_mm") if k in out}
-                         | ({"rms_test_mm": out["rms_test_mm"]} if "rms_test_mm" in out else {})))
-        return 0
-    except Exception as exc:
-        save_output(args.out, dict(peer=PEER, error=f"{type(exc).__name__}: {exc}",
-                                   traceback=traceback.format_exc(), success=False))
-        print(traceback.format_exc(), file=sys.stderr)
-        return 1
+    return worker_main(PEER, run, __doc__.splitlines()[0], argv)
 
 
 if __name__ == "__main__":

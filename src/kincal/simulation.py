@@ -18,7 +18,7 @@ from .measurement_model import MeasurementModel
 from .measurements import Measurements
 from .parameters import ParameterSpace
 from .robot import Robot
-from .rotations import base_rotation, rotx
+from .rotations import rotx
 
 
 @dataclass(frozen=True)
@@ -131,7 +131,3 @@ def measure(mdh: MdhModel, truth: Truth, q: np.ndarray, noise_sd: float,
     P = true_positions(mdh, truth, q) + rng.normal(size=(len(q), 3)) * noise_sd
     return Measurements(mdh.joint_names, q, P, source=source)
 
-
-def base_pose(base) -> tuple[np.ndarray, np.ndarray]:
-    """(R, t) of a measurement frame vector (x, y, z, rx, ry, rz)."""
-    return base_rotation(*base[3:]), np.asarray(base[:3], float)

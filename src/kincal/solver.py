@@ -61,9 +61,6 @@ class SolveSummary:
     residual: np.ndarray = field(repr=False)  # (m,) at the solution [mm]
 
 
-ResidualFn = Callable[[np.ndarray, bool], tuple]
-
-
 def triangular_factor(A: np.ndarray) -> np.ndarray:
     """R of A = Q R (upper triangular, n x n) for a tall A (m x n).
 
