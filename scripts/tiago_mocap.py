@@ -19,14 +19,17 @@ is the one kincal uses for lambda: the mean Euclidean validation error of marker
 over repeated 5-fold splits. The held-out day is used for reporting only. For information,
 the held-out RMS with frames re-fitted on the held-out day is also given.
 
-Models. The plain rows run through the kincal API (CalibrationProblem). The extensions are
-prototyped here on top of kincal's MeasurementModel, solver, selection and CV (the library
-has no hook for them yet; see PROPOSALS at the end of this file's output):
+Models. Every row is fitted by this script's ExtendedProblem, built on kincal's
+MeasurementModel, solver, selection and CV; the rows kincal itself offers (frames, offsets,
+MD-H LS and L2 + CV, with or without backlash terms) are also fitted through the kincal API
+(CalibrationProblem) and their held-out predictions cross-checked. The extensions kincal
+does not offer are prototyped here (see PROPOSALS at the end of this file's output):
 
 - joint-space error terms: the joint angle the kinematics see is q + sum c * g(q), with
   backlash g = approach direction (+1 / -1: sign of the last motion of that joint before
-  the posture, from the time order of the rows) and compliance g = gravity torque [N m]
-  of the joint (Pinocchio, the URDF inertias);
+  the posture, from the time order of the rows; kincal.backlash, a library option) and
+  compliance g = gravity torque [N m] of the joint (Pinocchio, the URDF inertias;
+  prototype);
 - the hand pose from all four markers: the markers are one rigid body (spacing constant to
   0.01 mm), so the tool becomes a marker-body pose (marker 1 point + 3 rotation angles) and
   markers 2-4 add residuals with weight MARKER_WEIGHT relative to marker 1;
@@ -77,7 +80,6 @@ MARKERS = tuple((f"x{i}", f"y{i}", f"z{i}") for i in range(1, 5))
 MARKER_WEIGHT = 1.0  # markers 2-4 relative to marker 1: equal weight on all four points
 FOLDS, CV_SEEDS = 5, (0, 1, 2)
 LAMBDAS = lambda_grid(1e-6, 1e3, 50)  # kincal's default grid
-MOVE_TOL = 1e-3  # [rad or m] a joint motion smaller than this does not set a direction
 COMPLIANCE_UNIT = DEG / 10.0  # [rad / (N m)] reporting and penalty unit: 1 deg per 10 N m
 MIN_TORQUE = 2.0  # [N m] joints with less gravity torque are not screened for compliance
 HUBER_FACTOR = 2.0  # Huber threshold = this x the median per-posture distance
@@ -100,8 +102,8 @@ class Session:
     markers: four Measurements (marker 1..4 as the measured point), same postures.
     q: (N, n) chain joint values [rad, m]. P: (4, N, 3) marker positions [m].
     gravity: (N, n) gravity torque of each chain joint [N m] (force [N] for the torso).
-    approach: (N, n) sign of the last motion (> MOVE_TOL) of each joint before the
-        posture, 0 before the first motion; rows must be in time order (checked).
+    approach: (N, n) sign of the last motion (> kincal.backlash.MOVE_TOL) of each joint
+        before the posture, 0 before the first motion; rows must be in time order (checked).
     """
 
     name: str
@@ -141,15 +143,6 @@ def gravity_torques(robot: Robot, q: np.ndarray) -> np.ndarray:
                      for qk in q])
 
 
-def approach_directions(q: np.ndarray, tol: float = MOVE_TOL) -> np.ndarray:
-    """(N, n) sign of the last joint motion larger than ``tol`` before each posture."""
-    out = np.zeros_like(q)
-    for k in range(1, len(q)):
-        step = q[k] - q[k - 1]
-        out[k] = np.where(np.abs(step) > tol, np.sign(step), out[k - 1])
-    return out
-
-
 def load_session(robot: Robot, path: Path) -> Session:
     prismatic = [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
     markers = tuple(Measurements.from_csv(path, robot.joint_names, prismatic=prismatic,
@@ -160,7 +153,7 @@ def load_session(robot: Robot, path: Path) -> Session:
         sys.exit(f"{path}: rows are not in time order; approach directions need the sequence")
     q = markers[0].joint_values
     return Session(path.name, markers, q, np.stack([m.positions for m in markers]),
-                   gravity_torques(robot, q), approach_directions(q))
+                   gravity_torques(robot, q), markers[0].approach)
 
 
 def marker_body(P: np.ndarray) -> tuple[np.ndarray, float]:
@@ -556,11 +549,13 @@ def models(quick: bool) -> list[Model]:
             "arm_2_joint", "arm_3_joint", "arm_4_joint")),
         Model("offsets + hand pose (4 markers)", markers=True),
         Model("offsets, Huber loss", loss="huber"),
-        Model("offsets + backlash arm_6", terms=backlash("arm_6_joint")),
-        Model("offsets + backlash arm_5-7", terms=backlash(*WRIST)),
+        Model("offsets + backlash arm_6", terms=backlash("arm_6_joint"), api=True),
+        Model("offsets + backlash arm_5-7", terms=backlash(*WRIST), api=True),
         Model("offsets + backlash arm_5-7 + hand pose", terms=backlash(*WRIST), markers=True),
-        Model("full MD-H, L2 + CV + backlash arm_6", "full", "l2", terms=backlash("arm_6_joint")),
-        Model("full MD-H, L2 + CV + backlash arm_5-7", "full", "l2", terms=backlash(*WRIST)),
+        Model("full MD-H, L2 + CV + backlash arm_6", "full", "l2", terms=backlash("arm_6_joint"),
+              api=True),
+        Model("full MD-H, L2 + CV + backlash arm_5-7", "full", "l2", terms=backlash(*WRIST),
+              api=True),
     ]
     if not quick:
         rows.append(Model("stepwise from offsets (MD-H, backlash, compliance)", "offsets",
@@ -587,26 +582,29 @@ class Row:
         return int(self.fit.free.sum())
 
 
-def plain_options(study: Study, model: Model) -> tuple[str, tuple[str, ...]]:
-    """(kincal method, parameters to fix) of a plain row."""
+def plain_options(study: Study, model: Model) -> tuple[str, tuple[str, ...], tuple[str, ...]]:
+    """(kincal method, parameters to fix, backlash joints) of a row kincal offers."""
+    if model.markers or model.loss != "l2" or any(t.kind != "backlash" for t in model.terms):
+        raise ValueError(f"{model.label}: not a model the kincal API offers")
+    joints = tuple(t.joint for t in model.terms)
     if model.kinematics == "frames":
-        return "frames", ()
+        return "frames", (), joints
     fix = ()
     if model.kinematics == "offsets":
         # everything kinematic except theta (revolute) / d (prismatic) of each joint
         fix = tuple(f"{j}.{f}" for j, k in zip(study.robot.joint_names, study.robot.geometry.kinds)
                     for f in ("a", "alpha", "d", "theta")
                     if f != ("d" if k == "prismatic" else "theta"))
-    return model.method, fix
+    return model.method, fix, joints
 
 
 def api_fit(study: Study, model: Model):
-    """The same plain model through the kincal API; returns the CalibrationResult."""
-    method, fix = plain_options(study, model)
+    """The same model through the kincal API; returns the CalibrationResult."""
+    method, fix, joints = plain_options(study, model)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalWarning)  # reported once, at load
-        return CalibrationProblem(study.robot, study.train.markers[0],
-                                  CalibrationOptions(method=method, fix=fix)).solve()
+        return CalibrationProblem(study.robot, study.train.markers[0], CalibrationOptions(
+            method=method, fix=fix, backlash=joints)).solve()
 
 
 def run_row(study: Study, model: Model, nested: bool) -> Row:
@@ -623,7 +621,7 @@ def run_row(study: Study, model: Model, nested: bool) -> Row:
     check = None
     if model.api:
         res = api_fit(study, model)
-        pred = res.predict(study.held_out.q)
+        pred = res.predict(study.held_out.q, study.held_out.approach)
         check = float(np.abs(pred - fit.problem.predict(fit.v, study.held_out)).max() / MM)
     ms = lambda e: ErrorStats.from_errors(np.asarray(e) * MM)  # noqa: E731
     return Row(model, fit, ms(fit.errors(study.train)), ms(fit.errors(study.held_out)),
@@ -737,22 +735,26 @@ def parameters_of(row: Row, threshold: float = 0.0) -> str:
 
 
 def cli_demo(study: Study, shared: Path, model: Model) -> str:
-    """A plain model through the CLI: calibrate, then evaluate with the training frames."""
+    """A model kincal offers through the CLI: calibrate, then evaluate with the training
+    frames (and, without backlash terms, with frames re-fitted on the held-out day)."""
     from kincal.cli import main
 
-    method, fix = plain_options(study, model)
+    method, fix, joints = plain_options(study, model)
     out = []
     with tempfile.TemporaryDirectory(prefix="kincal-tiago-") as tmp:
         tmp = Path(tmp)
         common = ["--tip", TIP, "--position-columns", "x1", "y1", "z1"]
+        if joints:
+            common += ["--order-column", "t_start_robot"]
         cal = ["calibrate", str(study.paths["urdf"]), str(study.paths["train"]), *common,
                "--method", method, *(["--fix", *fix] if fix else []),
+               *(["--backlash", *joints] if joints else []),
                "--out", str(tmp / "tiago_calibrated.urdf"),
                "--frames-out", str(tmp / "frames.json"), "--quiet"]
         ev = ["evaluate", str(tmp / "tiago_calibrated.urdf"), str(study.paths["held_out"]),
               *common, "--frames", str(tmp / "frames.json")]
-        ev_refit = ev[:-2] + ["--fit-frames"]
-        for argv in (cal, ev, ev_refit):
+        runs = [cal, ev] if joints else [cal, ev, ev[:-2] + ["--fit-frames"]]
+        for argv in runs:
             buf_out, buf_err = io.StringIO(), io.StringIO()
             with contextlib.redirect_stdout(buf_out), contextlib.redirect_stderr(buf_err):
                 code = main(argv)
@@ -765,13 +767,13 @@ def cli_demo(study: Study, shared: Path, model: Model) -> str:
 
 
 PROPOSALS = """\
-Library changes the best result needs (prototyped in this script, none made):
-1. Joint-space error terms in MeasurementModel: q_eff = q + G(postures) c, with named
-   coefficients "<joint>.backlash" / "<joint>.compliance"; Jacobian column = the joint's
-   theta (or d) column times g. ~40 lines in measurement_model.py + parameters.py.
-2. Measurements: approach directions from the row order (an order column such as
-   t_start_robot) and gravity torques from Robot (Robot.gravity_torques(q), Pinocchio
-   stays behind the Robot boundary).
+Model extensions
+
+Backlash terms are a kincal option (CalibrationOptions.backlash, `--backlash JOINT
+--order-column COL`). Prototyped here only, without a held-out gain on these data so far:
+1. Compliance terms "<joint>.compliance" (g = gravity torque; Robot.gravity_torques(q) so
+   that Pinocchio stays behind the Robot boundary).
+2. The hand pose from all four markers (a marker-body tool with 3 rotation parameters).
 3. CalibrationOptions.selection = "stepwise": forward selection of parameters by the
    same k-fold CV that chooses lambda, with the path kept in the result.
 """
@@ -854,7 +856,8 @@ def main(argv=None) -> int:
         "full MD-H, L2 + CV + backlash arm_6") or r.model.stepwise or r is selected]))
     if not args.quick:
         plain = min((r for r in rows if r.model.api), key=lambda r: r.cv.mean())
-        print(f"\n## The best plain model by training CV ({plain.model.label}) through the CLI\n")
+        print(f"\n## The best model kincal offers, by training CV ({plain.model.label}), through "
+              "the CLI\n")
         print(cli_demo(study, shared, plain.model))
         print(f"(API, same model: held-out RMS {plain.held.rms:.3f}, mean {plain.held.mean:.3f}, "
               f"max {plain.held.max:.3f} mm; frames re-fitted: RMS {plain.held_refit.rms:.3f} mm)")

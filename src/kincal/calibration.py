@@ -24,6 +24,7 @@ from .frames_init import initial_frames
 from .robust import LOSSES, ROBUST_SCALE, Downweighted, weights as robust_weights
 from .measurement_model import MeasurementModel
 from .measurements import Measurements
+from .backlash import CONVENTION as BACKLASH_CONVENTION
 from .parameters import BASE, DEG, MM, TOOL, ParameterSpace
 from .robot import Robot
 from .rotations import base_angles
@@ -48,6 +49,9 @@ class CalibrationOptions:
     fix: parameter names held at their nominal values.
     free: parameter names kept in the fit even if the analysis finds them redundant
         (sensible only with method "l2", whose penalty keeps them bounded).
+    backlash: chain joints given a backlash term ``<joint>.backlash`` (half the play,
+        nominally 0; see kincal.backlash), identified from the approach directions of
+        the samples. Methods "l2" and "ls".
     tool_guess: (3,) tool point in the tip frame [m], a starting guess; None: derived.
     base_guess: (6,) measurement frame (x, y, z [m], rx, ry, rz [rad]) start; None: derived.
     rank_tol: tolerance of the rank-revealing selection (see kincal.selection).
@@ -73,6 +77,7 @@ class CalibrationOptions:
     angle_scale: float = DEG
     fix: tuple[str, ...] = ()
     free: tuple[str, ...] = ()
+    backlash: tuple[str, ...] = ()
     tool_guess: tuple[float, float, float] | None = None
     base_guess: tuple[float, ...] | None = None
     rank_tol: float = RANK_TOL
@@ -103,6 +108,9 @@ class CalibrationOptions:
                               f"{', '.join(LOSSES)} (or none)")
         if self.robust_scale_mm is not None and not self.robust_scale_mm > 0:
             raise OptionError(f"robust_scale_mm must be > 0, got {self.robust_scale_mm}")
+        if self.backlash and self.method == "frames":
+            raise OptionError("backlash terms need method l2 or ls; method frames fits only "
+                              "the measurement frame and tool point")
         return self
 
 
@@ -111,6 +119,7 @@ class ParameterEstimate:
     """One row of the parameter table (SI units; ``deviation = estimate - nominal``).
 
     status: "identified", "dropped" (redundant on these data), "fixed" (by the user).
+    is_length: True for lengths [m], False for angles [rad].
     std_error: NaN unless identified.
     """
 
@@ -139,8 +148,10 @@ class CalibrationProblem:
         self.options = (options or CalibrationOptions()).validated()
         self.data = data.for_chain(robot.joint_names)
         self.mdh = mdh_layer.extract(robot.geometry)
-        self.space = ParameterSpace(self.mdh.joint_names)
-        self.model = MeasurementModel(self.mdh, self.data.joint_values)
+        self.space = ParameterSpace.of_chain(self.mdh.joint_names, self.mdh.kinds,
+                                             self.options.backlash)
+        self.model = MeasurementModel(self.mdh, self.data.joint_values, self.data.approach,
+                                      self.space.backlash)
         o = self.options
         self.scale = np.where(self.space.is_length, o.length_scale, o.angle_scale)
         if self.data.sigma is None:
@@ -157,7 +168,8 @@ class CalibrationProblem:
         for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper,
                                        self.data.joint_values, self.data.rows)
                         + angle_unit_warnings(g.joint_names, g.kinds, self.data.joint_values,
-                                              self.data.angle_unit)):
+                                              self.data.angle_unit)
+                        + self._approach_warnings()):
             warnings.warn(f"{self.data.source}: {message}", KincalWarning)
         self._x_start = None
         self._ident = None
@@ -185,6 +197,19 @@ class CalibrationProblem:
         return residual
 
     # ------------------------------------------------------------------ start
+    def _approach_warnings(self) -> list[str]:
+        """Backlash joints whose samples do not come from both directions."""
+        out = []
+        for j, i in zip(self.space.backlash, self.space.backlash_joint_index):
+            g = self.data.approach[:, i]
+            up, down = int(np.sum(g > 0)), int(np.sum(g < 0))
+            if min(up, down) < 3:
+                out.append(f"{j}.backlash: {up} samples approached {j} from below and {down} "
+                           f"from above (acquisition order: {self.data.order_source}); "
+                           "backlash is identifiable only from both directions, a few of "
+                           "each at least")
+        return out
+
     @property
     def x_nominal(self) -> np.ndarray:
         return self.space.join(self.mdh.table, np.zeros(6), np.zeros(3))
@@ -206,7 +231,7 @@ class CalibrationProblem:
             if o.tool_guess is not None:
                 tool = np.asarray(o.tool_guess, dtype=float)
         x = self.space.join(self.mdh.table, base, tool)
-        free = ~self.space.is_kinematic
+        free = self.space.is_frame
         sol = solve(self.residual_function(kinematic=False), x / self.scale, free,
                     options=o.solver)
         self._x_start = sol.u * self.scale
@@ -218,9 +243,7 @@ class CalibrationProblem:
         if self._ident is not None:
             return self._ident
         o = self.options
-        free = np.ones(self.space.size, dtype=bool)
-        if o.method == "frames":
-            free[: self.space.n_kinematic] = False
+        free = np.ones(self.space.size, dtype=bool) if o.method != "frames" else self.space.is_frame
         free[self.space.indices(o.fix)] = False
         _, J = self.residual_function()(self.start() / self.scale, True)
         # reporting units: mm per mm or per degree, whatever the penalty scale
@@ -264,12 +287,13 @@ class CalibrationProblem:
         g = self.robot.geometry
         lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
         hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
-        q = np.random.default_rng(0).uniform(lo, hi, size=(2 * self.space.size, g.n))
-        pred, J = MeasurementModel(self.mdh, q).jacobian(self.start())
+        rng = np.random.default_rng(0)
+        q = rng.uniform(lo, hi, size=(2 * self.space.size, g.n))
+        approach = rng.choice([-1.0, 1.0], size=q.shape)
+        pred, J = MeasurementModel(self.mdh, q, approach, self.space.backlash).jacobian(self.start())
         J = J.reshape(-1, self.space.size) * self.space.reporting_scale() / MM
-        free = np.ones(self.space.size, dtype=bool)
-        if self.options.method == "frames":
-            free[: self.space.n_kinematic] = False
+        free = (np.ones(self.space.size, dtype=bool) if self.options.method != "frames"
+                else self.space.is_frame)
         free[self.space.indices(self.options.fix)] = False
         self._structural = analyze(J, self.space.names, self.space.n_kinematic, free,
                                    self.options.rank_tol)
@@ -314,7 +338,7 @@ class CalibrationProblem:
         u_prior = self.start() / self.scale  # kinematics at nominal; frames not penalised
         residual = self.residual_function(rows) if residual is None else residual
         return solve(residual, x0 / self.scale, free, lam=lam,
-                     penalised=self.space.is_kinematic, prior=u_prior,
+                     penalised=self.space.is_penalised, prior=u_prior,
                      options=options or self.options.solver)
 
     def position_errors(self, x: np.ndarray, rows=None) -> np.ndarray:
@@ -463,18 +487,19 @@ class CalibrationResult:
     rows: np.ndarray  # (N,) line numbers of the samples in their source file
     downweighted: tuple[Downweighted, ...] = ()  # samples a robust loss trusted less
     residuals_before: np.ndarray | None = None  # (N, 3) with the start parameters [m]
+    order_source: str = ""  # how the samples' acquisition order was known (backlash terms)
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
         sp = problem.space
         x = sol.u * problem.scale
         free = problem.free_mask()
-        se = _std_errors(sol, free, sp.is_kinematic, lam, problem.scale)
+        se = _std_errors(sol, free, sp.is_penalised, lam, problem.scale)
         fixed = set(ident.fixed)
         x_nom = problem.x_nominal.copy()
         x_start = problem.start()
         # base and tool have no nominal: their "nominal" is the fitted starting value
-        x_nom[sp.n_kinematic:] = x_start[sp.n_kinematic:]
+        x_nom[sp.is_frame] = x_start[sp.is_frame]
         rows = []
         for i, name in enumerate(sp.names):
             status = "identified" if free[i] else ("fixed" if name in fixed else "dropped")
@@ -487,7 +512,8 @@ class CalibrationResult:
         return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
                    x, float(lam), cv, ErrorStats.from_errors(res_before),
                    ErrorStats.from_errors(res), res, sol, ident, problem.mdh,
-                   np.asarray(problem.data.rows), residuals_before=res_before)
+                   np.asarray(problem.data.rows), residuals_before=res_before,
+                   order_source=problem.data.order_source)
 
     # ------------------------------------------------------------ accessors
     @property
@@ -507,18 +533,36 @@ class CalibrationResult:
         """(3,) tool point in the tip frame [m]."""
         return self.space.split(self.x)[2].copy()
 
-    def frames_dict(self) -> dict:
-        """The FRAMES.json content: measurement frame and tool point in SI units."""
-        b, t = self.base, self.tool
-        return {"base": dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, b))),
-                "tool": dict(zip(("x", "y", "z"), map(float, t))),
-                "convention": "P_measured = R_base (p_tip + R_tip t_tool) + t_base, "
-                              "R_base = rotx(rx) roty(ry) rotz(rz); metres and radians",
-                "base_frame": self.robot.base, "tip_frame": self.robot.tip}
+    @property
+    def backlash(self) -> dict[str, float]:
+        """Half the play of each joint with a backlash term [rad, or m if prismatic]."""
+        return dict(zip(self.space.backlash, map(float, self.space.backlash_values(self.x))))
 
-    def predict(self, joint_values: np.ndarray) -> np.ndarray:
-        """(N, 3) predicted tool-point positions in the measurement frame [m]."""
-        return MeasurementModel(self.mdh, np.atleast_2d(joint_values)).predict(self.x)
+    def frames_dict(self) -> dict:
+        """The FRAMES.json content: measurement frame and tool point (and backlash) in SI.
+
+        Backlash is not a property of a URDF, so it travels with the frames: ``kincal
+        evaluate --frames`` applies it."""
+        b, t = self.base, self.tool
+        out = {"base": dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, b))),
+               "tool": dict(zip(("x", "y", "z"), map(float, t))),
+               "convention": "P_measured = R_base (p_tip + R_tip t_tool) + t_base, "
+                             "R_base = rotx(rx) roty(ry) rotz(rz); metres and radians",
+               "base_frame": self.robot.base, "tip_frame": self.robot.tip}
+        if self.space.n_backlash:
+            out["backlash"] = self.backlash
+            out["backlash_convention"] = BACKLASH_CONVENTION
+        return out
+
+    def predict(self, joint_values: np.ndarray, approach: np.ndarray | None = None) -> np.ndarray:
+        """(N, 3) predicted tool-point positions in the measurement frame [m].
+
+        approach: (N, n) approach directions for the backlash terms (e.g. the
+        ``approach`` of a Measurements); None: every joint in the middle of its play.
+        """
+        q = np.atleast_2d(joint_values)
+        g = np.zeros(q.shape) if approach is None else np.atleast_2d(approach)
+        return MeasurementModel(self.mdh, q, g, self.space.backlash).predict(self.x)
 
     def corrected_urdf_text(self, readable: bool = True) -> str:
         """The corrected URDF; see :mod:`kincal.readable_export` for ``readable``."""
@@ -569,6 +613,9 @@ class CalibrationResult:
                         for d in self.downweighted[:10])
                     + (" ..." if len(self.downweighted) > 10 else "")]
                    if self.options.robust else []),
+                 *([f"  backlash terms ({', '.join(self.space.backlash)}): approach directions "
+                    f"from {self.order_source}; the URDF models the middle of the play"]
+                   if self.space.n_backlash else []),
                  "  parameter                 nominal      deviation    std.err  unit"]
 
         def z(v):  # no "-0.0000" for values that are zero to the digits shown

@@ -52,7 +52,8 @@ def _measurements(args, robot):
     prismatic = [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
     return Measurements.from_csv(args.data, robot.joint_names, prismatic=prismatic,
                                  length_unit=args.length_unit, angle_unit=args.angle_unit,
-                                 position_columns=tuple(args.position_columns))
+                                 position_columns=tuple(args.position_columns),
+                                 order_column=args.order_column)
 
 
 def _tool_offset(args):
@@ -61,8 +62,8 @@ def _tool_offset(args):
     return tuple(v * (1e-3 if args.length_unit == "mm" else 1.0) for v in args.tool_offset)
 
 
-def _read_frames(path) -> tuple[np.ndarray, np.ndarray]:
-    """(base (6,), tool (3,)) in SI from a FRAMES.json file."""
+def _read_frames(path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+    """(base (6,), tool (3,), backlash {joint: value}) in SI from a FRAMES.json file."""
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"frames file not found: {path}")
@@ -70,13 +71,15 @@ def _read_frames(path) -> tuple[np.ndarray, np.ndarray]:
         data = json.loads(path.read_text(encoding="utf-8"))
         base = [float(data["base"][k]) for k in ("x", "y", "z", "rx", "ry", "rz")]
         tool = [float(data["tool"][k]) for k in ("x", "y", "z")]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+        backlash = {str(j): float(v) for j, v in data.get("backlash", {}).items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise DataError(f"{path}: not a kincal frames file ({exc.__class__.__name__}: {exc}); "
                         'expected {"base": {"x","y","z","rx","ry","rz"}, "tool": {"x","y","z"}} '
-                        "in metres and radians") from None
-    if not all(math.isfinite(v) for v in base + tool):
+                        'and optionally "backlash": {joint: value}, in metres and '
+                        "radians") from None
+    if not all(math.isfinite(v) for v in base + tool + list(backlash.values())):
         raise DataError(f"{path}: frames contain a non-finite number")
-    return np.array(base), np.array(tool)
+    return np.array(base), np.array(tool), backlash
 
 
 def _add_common(p, data=True):
@@ -92,6 +95,9 @@ def _add_common(p, data=True):
                        help="unit of revolute joints in DATA (default rad)")
         p.add_argument("--position-columns", nargs=3, default=("x", "y", "z"),
                        metavar=("X", "Y", "Z"), help="names of the position columns")
+        p.add_argument("--order-column", metavar="COL",
+                       help="column giving the acquisition order (e.g. a time stamp), for the "
+                            "approach directions of backlash terms; default: the row order")
     p.add_argument("--tool-offset", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="initial guess of the tool point in the tip frame, in the length unit")
 
@@ -107,6 +113,7 @@ def _options(args, method):
             raise OptionError(f"--lambda must be 'cv' or a number, got {lam!r}") from None
     return CalibrationOptions(method=method, lam=lam, folds=args.folds, seed=args.seed,
                               fix=tuple(args.fix), free=tuple(args.free),
+                              backlash=tuple(args.backlash),
                               tool_guess=_tool_offset(args), robust=args.robust,
                               robust_scale_mm=args.robust_scale_mm, progress=_progress_bar())
 
@@ -174,11 +181,19 @@ def cmd_evaluate(args) -> int:
     problem = CalibrationProblem(robot, data, CalibrationOptions(method="frames",
                                                                  tool_guess=_tool_offset(args)))
     if args.frames:
-        base, tool = _read_frames(args.frames)
-        x = problem.space.join(problem.mdh.table, base, tool)
-        model = MeasurementModel(problem.mdh, data.for_chain(robot.joint_names).joint_values)
+        base, tool, backlash = _read_frames(args.frames)
+        data = data.for_chain(robot.joint_names)
+        try:
+            model = MeasurementModel(problem.mdh, data.joint_values, data.approach, backlash)
+        except KincalError as exc:
+            raise DataError(f"{args.frames}: {exc}") from None
+        x = model.space.join(problem.mdh.table, base, tool,
+                             [backlash[j] for j in model.space.backlash])
         stats = ErrorStats.from_errors(data.positions - model.predict(x))
         how = f"frames from {args.frames}"
+        if backlash:
+            how += (f" with backlash of {', '.join(model.space.backlash)} (approach directions "
+                    f"from {data.order_source})")
     else:
         stats = problem.solve().after
         how = "measurement frame and tool point fitted on these data"
@@ -295,6 +310,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME", help="parameters held nominal")
     p.add_argument("--free", nargs="+", default=[], metavar="NAME",
                    help="parameters kept even if found redundant (method l2)")
+    p.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
+                   help="give these joints a backlash term (needs the acquisition order: "
+                        "rows in order, or --order-column)")
     p.add_argument("--robust", choices=("huber", "cauchy"),
                    help="robust loss on the per-pose error; down-weighted samples are listed")
     p.add_argument("--robust-scale-mm", type=float, help="scale of the robust loss [mm] "

@@ -9,6 +9,10 @@ computed with the exact MD-H model of :mod:`kincal.mdh` (the same numbers Pinocc
 for the corrected URDF). Derivatives are closed form: a change of alpha_{i-1} turns
 everything after frame i-1 about its x axis, a_{i-1} slides it along that axis, theta_i
 turns it about axis i, d_i slides it along axis i. No finite differences.
+
+Backlash terms (:mod:`kincal.backlash`) move joint i to q_i + b_i g_i, with g the
+approach directions of the poses: their column is the joint's own motion (the turn about,
+or slide along, its true axis line) times g.
 """
 
 from __future__ import annotations
@@ -56,72 +60,92 @@ def _mdh4(a, alpha, d, theta) -> np.ndarray:
 class MeasurementModel:
     """Forward model and Jacobian of one MD-H chain over a fixed set of poses.
 
-    mdh: the chain. joint_values: (N, n) [rad or m]. The joint motions are computed once
-    here, so evaluating many parameter vectors on the same poses is cheap.
+    mdh: the chain. joint_values: (N, n) [rad or m]. backlash: chain joints with a
+    backlash term; approach: (N, n) approach directions of the poses (needed with
+    backlash terms). The joint motions are computed once here, so evaluating many
+    parameter vectors on the same poses is cheap.
     """
 
-    def __init__(self, mdh: MdhModel, joint_values: np.ndarray):
+    def __init__(self, mdh: MdhModel, joint_values: np.ndarray, approach: np.ndarray | None = None,
+                 backlash=()):
         self.mdh = mdh
-        self.space = ParameterSpace(mdh.joint_names)
+        self.space = ParameterSpace.of_chain(mdh.joint_names, mdh.kinds, backlash)
         q = np.asarray(joint_values, dtype=float)
         if q.ndim != 2 or q.shape[1] != mdh.n:
             raise ValueError(f"joint_values must be (N, {mdh.n}), got {q.shape}")
+        if self.space.n_backlash and (approach is None or np.shape(approach) != q.shape):
+            raise ValueError(f"backlash terms need approach directions of shape {q.shape}")
         self.q = q
+        self.approach = None if approach is None else np.asarray(approach, dtype=float)
         self.N = len(q)
+        self._backlash_of = dict(zip(self.space.backlash_joint_index, range(self.space.n_backlash)))
         # joint motions as (N, 4, 4) transforms, computed once for these poses
-        self._motion = []
-        for i, (kind, w) in enumerate(zip(mdh.kinds, mdh.screw_axes)):
-            M = np.zeros((self.N, 4, 4))
-            M[:, 3, 3] = 1.0
-            if kind == "prismatic":
-                M[:, :3, :3] = np.eye(3)
-                M[:, :3, 3] = q[:, i, None] * w
-            else:  # a turn about the axis line through the screw point c: x -> R (x - c) + c
-                R = _rodrigues(w, q[:, i])
-                M[:, :3, :3] = R
-                if mdh.screw_points is not None:
-                    c = mdh.screw_points[i]
-                    M[:, :3, 3] = c - R @ c
-            self._motion.append(M)
+        self._motion = [self._joint_motion(i, q[:, i]) for i in range(mdh.n)]
+
+    def _joint_motion(self, i: int, qi: np.ndarray) -> np.ndarray:
+        """(N, 4, 4) motion of joint i by qi (N,), in MD-H frame i before it moves."""
+        kind, w = self.mdh.kinds[i], self.mdh.screw_axes[i]
+        M = np.zeros((len(qi), 4, 4))
+        M[:, 3, 3] = 1.0
+        if kind == "prismatic":
+            M[:, :3, :3] = np.eye(3)
+            M[:, :3, 3] = qi[:, None] * w
+        else:  # a turn about the axis line through the screw point c: x -> R (x - c) + c
+            R = _rodrigues(w, qi)
+            M[:, :3, :3] = R
+            if self.mdh.screw_points is not None:
+                c = self.mdh.screw_points[i]
+                M[:, :3, 3] = c - R @ c
+        return M
 
     def subset(self, rows) -> "MeasurementModel":
-        return MeasurementModel(self.mdh, self.q[rows])
+        return MeasurementModel(self.mdh, self.q[rows],
+                                None if self.approach is None else self.approach[rows],
+                                self.space.backlash)
 
-    def tip_poses(self, table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def tip_poses(self, table: np.ndarray, backlash: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
         """(R (N, 3, 3), p (N, 3)) of the tip frame in the base frame."""
-        R, p, _ = self._chain(table, keep=False)
+        R, p, _ = self._chain(table, backlash, keep=False)
         return R, p
 
-    def _chain(self, table, keep: bool):
+    def _chain(self, table, backlash, keep: bool):
         G = np.broadcast_to(self.mdh.T_base_0, (self.N, 4, 4)) if keep else self.mdh.T_base_0
         stages = []
         for i in range(self.mdh.n):
             H = G @ _mdh4(*table[i])  # frame i before its joint moves
             if keep:
                 stages.append((G, H))
-            G = H @ self._motion[i]
+            k = self._backlash_of.get(i)
+            if k is None or backlash is None or backlash[k] == 0.0:
+                G = H @ self._motion[i]
+            else:
+                G = H @ self._joint_motion(i, self.q[:, i] + backlash[k] * self.approach[:, i])
         T = G @ self.mdh.T_n_tip
         return T[:, :3, :3], T[:, :3, 3], stages
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """(N, 3) predicted tool-point positions in the measurement frame [m]."""
         table, base, tool = self.space.split(x)
-        R_tip, p_tip, _ = self._chain(table, keep=False)
+        R_tip, p_tip, _ = self._chain(table, self.space.backlash_values(x), keep=False)
         P = p_tip + R_tip @ tool
         return P @ base_rotation(*base[3:]).T + base[:3]
 
     def jacobian(self, x: np.ndarray, kinematic: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(prediction (N, 3), Jacobian (N, 3, p)) of the predicted positions w.r.t. x.
 
-        kinematic=False leaves the MD-H columns at zero (cheaper, for frame-only fits).
+        kinematic=False leaves the MD-H and backlash columns at zero (cheaper, for frame-only
+        fits).
         """
         table, base, tool = self.space.split(x)
-        R_tip, p_tip, stages = self._chain(table, keep=kinematic)
+        backlash = self.space.backlash_values(x)
+        R_tip, p_tip, stages = self._chain(table, backlash, keep=kinematic)
         P = p_tip + R_tip @ tool  # tool point in the base frame
         n, N = self.mdh.n, self.N
         J = np.empty((N, 3, self.space.size))
         if not kinematic:
             J[:, :, :4 * n] = 0.0
+            J[:, :, 4 * n + 9:] = 0.0
             return self._frame_columns(J, P, R_tip, base, tool)
         G = np.stack([g for g, _ in stages])  # (n, N, 4, 4)
         H = np.stack([h for _, h in stages])
@@ -133,6 +157,17 @@ class MeasurementModel:
         cols[:, 2] = zh                                                    # d_i
         cols[:, 3] = _cross3(zh, rh)                                       # theta_i
         J[:, :, :4 * n] = cols.reshape(4 * n, N, 3).transpose(1, 2, 0)
+        for k, i in enumerate(self.space.backlash_joint_index):
+            # the joint's own motion: about (along) its axis line w through c, in frame H_i
+            Hr, Ht = H[i, :, :3, :3], H[i, :, :3, 3]
+            w = Hr @ self.mdh.screw_axes[i]
+            if self.mdh.kinds[i] == "prismatic":
+                col = w
+            else:
+                c = (Ht if self.mdh.screw_points is None
+                     else Ht + Hr @ self.mdh.screw_points[i])
+                col = _cross(w, P - c)
+            J[:, :, 4 * n + 9 + k] = col * self.approach[:, i, None]
         return self._frame_columns(J, P, R_tip, base, tool, rotate_kinematic=True)
 
     def _frame_columns(self, J, P, R_tip, base, tool, rotate_kinematic=False):
@@ -143,6 +178,7 @@ class MeasurementModel:
         Rb = Rx @ Ry @ Rz
         if rotate_kinematic:
             J[:, :, :k] = np.matmul(Rb, J[:, :, :k])
+            J[:, :, k + 9:] = np.matmul(Rb, J[:, :, k + 9:])
         Pm = P @ Rb.T + base[:3]
         J[:, :, k:k + 3] = np.eye(3)
         ex, ey, ez = np.eye(3)

@@ -5,6 +5,10 @@ A CSV file has a header naming the chain joints as in the URDF plus the position
 position). Units: metres and radians by default; ``length_unit="mm"`` reads positions,
 sigma and prismatic joints in millimetres, ``angle_unit="deg"`` reads revolute joints in
 degrees. Inside, everything is SI. Other columns are kept out of the fit and reported.
+
+Every sample also carries the approach direction of each joint (see
+:mod:`kincal.backlash`), computed from the acquisition order: the order of the rows, or
+an ``order_column`` such as a time stamp. Only backlash terms use it.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .backlash import approach_directions
 from .errors import DataError, InputFileError, listing, suggest
 
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
@@ -39,6 +44,9 @@ class Measurements:
     rows: (N,) line numbers in the source file (1 = header), for messages.
     source: where the samples came from.
     ignored_columns: columns of the file that are not used.
+    approach: (N, n) approach direction of each joint (+1, -1, 0), see kincal.backlash;
+        None: computed from the order of the samples.
+    order_source: how the acquisition order was known, for reports.
     """
 
     joint_names: tuple[str, ...]
@@ -50,6 +58,8 @@ class Measurements:
     ignored_columns: tuple[str, ...] = field(default=())
     length_unit: str = "m"  # the unit the source file used (values here are SI)
     angle_unit: str = "rad"
+    approach: np.ndarray | None = None
+    order_source: str = "the order of the samples"
 
     def __post_init__(self):
         q = _readonly(self.joint_values)
@@ -73,6 +83,11 @@ class Measurements:
             object.__setattr__(self, "sigma", s)
         rows = np.arange(2, len(q) + 2) if self.rows is None else np.asarray(self.rows)
         object.__setattr__(self, "rows", rows)
+        g = approach_directions(q) if self.approach is None else np.asarray(self.approach, float)
+        if g.shape != q.shape or not np.all(np.isin(g, (-1.0, 0.0, 1.0))):
+            raise DataError(f"{self.source}: approach directions must be ({len(q)}, "
+                            f"{q.shape[1]}) values in {{-1, 0, 1}}, got shape {g.shape}")
+        object.__setattr__(self, "approach", _readonly(g))
 
     def __len__(self) -> int:
         return len(self.joint_values)
@@ -81,7 +96,8 @@ class Measurements:
         index = np.asarray(index)
         return Measurements(self.joint_names, self.joint_values[index], self.positions[index],
                             None if self.sigma is None else self.sigma[index], self.rows[index],
-                            self.source, self.ignored_columns, self.length_unit, self.angle_unit)
+                            self.source, self.ignored_columns, self.length_unit, self.angle_unit,
+                            self.approach[index], self.order_source)
 
     def for_chain(self, joint_names) -> "Measurements":
         """The same samples with columns in the order of ``joint_names`` (checked)."""
@@ -95,15 +111,18 @@ class Measurements:
         idx = [self.joint_names.index(j) for j in joint_names]
         return Measurements(joint_names, self.joint_values[:, idx], self.positions, self.sigma,
                             self.rows, self.source, self.ignored_columns, self.length_unit,
-                            self.angle_unit)
+                            self.angle_unit, self.approach[:, idx], self.order_source)
 
     @classmethod
     def from_csv(cls, path, joint_names, prismatic=(), length_unit: str = "m",
                  angle_unit: str = "rad", position_columns=("x", "y", "z"),
-                 sigma_column: str | None = "sigma") -> "Measurements":
+                 sigma_column: str | None = "sigma",
+                 order_column: str | None = None) -> "Measurements":
         """Read a CSV file for the chain ``joint_names`` (see the module notes).
 
         prismatic: names of prismatic chain joints (read with the length unit).
+        order_column: a column giving the acquisition order (e.g. a time stamp) for the
+            approach directions; None: the rows are in acquisition order.
         """
         if length_unit not in LENGTH_UNITS:
             raise DataError(f"unknown length unit {length_unit!r}; expected one of m, mm")
@@ -128,6 +147,10 @@ class Measurements:
         if dupes:
             raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
         wanted = list(joint_names) + list(position_columns)
+        if order_column is not None and order_column not in header:
+            raise DataError(f"{path}: no order column {order_column!r}."
+                            + suggest(order_column, header)
+                            + f" The header has {listing(header)}")
         missing = [c for c in wanted if c not in header]
         if missing:
             extra = [h for h in header if h not in wanted]
@@ -136,11 +159,14 @@ class Measurements:
                             f"the chain joints and positions: {', '.join(wanted)}; "
                             f"the header has {listing(header)}")
         use_sigma = sigma_column is not None and sigma_column in header
-        used = set(wanted) | ({sigma_column} if use_sigma else set())
+        used = set(wanted) | ({sigma_column} if use_sigma else set()) | (
+            {order_column} if order_column is not None else set())
         ignored = tuple(h for h in header if h not in used)
         cols = [header.index(c) for c in wanted]
         if use_sigma:
             cols.append(header.index(sigma_column))
+        if order_column is not None:
+            cols.append(header.index(order_column))
         values = np.empty((len(table) - 1, len(cols)))
         for r, row in enumerate(table[1:]):
             line = r + 2
@@ -169,8 +195,14 @@ class Measurements:
         if sigma is not None and np.any(sigma <= 0):
             k = int(np.argmax(sigma <= 0))
             raise DataError(f"{path}, line {k + 2}, column {sigma_column!r}: sigma must be > 0")
-        return cls(tuple(joint_names), q, P, sigma, np.arange(2, len(values) + 2), str(path),
-                   ignored, length_unit, angle_unit)
+        rows = np.arange(2, len(values) + 2)
+        if order_column is None:
+            approach, order_source = approach_directions(q), "the order of the rows"
+        else:
+            approach = approach_directions(q, values[:, -1], source=str(path), rows=rows)
+            order_source = f"column {order_column!r}"
+        return cls(tuple(joint_names), q, P, sigma, rows, str(path), ignored, length_unit,
+                   angle_unit, approach, order_source)
 
     def to_csv_text(self) -> str:
         """The samples in the CSV layout :meth:`from_csv` reads, SI units, full precision."""

@@ -4,7 +4,11 @@ The parameter vector x holds absolute values (not errors), in SI units:
 
     [ <joint_1>.a, .alpha, .d, .theta, ..., <joint_n>.theta,      4 n kinematic (MD-H)
       base.x, base.y, base.z, base.rx, base.ry, base.rz,          measurement frame
-      tool.x, tool.y, tool.z ]                                     tool point in the tip frame
+      tool.x, tool.y, tool.z,                                      tool point in the tip frame
+      <joint>.backlash, ... ]                                      optional backlash terms
+
+The backlash terms (:mod:`kincal.backlash`) exist only for the joints asked for; each is
+half the play of its joint [rad, or m for a prismatic joint], nominally 0.
 
 The measurement frame M sees the tool point at
 ``P = R_base (p_tip + R_tip t_tool) + t_base`` with ``R_base = Rx(rx) Ry(ry) Rz(rz)``.
@@ -27,11 +31,44 @@ MM = 1e-3  # [m]
 DEG = math.pi / 180.0  # [rad]
 
 
+def _check_backlash_joints(joint_names: tuple[str, ...], backlash: tuple[str, ...]) -> None:
+    unknown = [j for j in backlash if j not in joint_names]
+    if unknown:
+        raise ParameterError(f"no chain joint {unknown[0]!r} for a backlash term."
+                             + suggest(unknown[0], joint_names)
+                             + f" Chain joints: {listing(joint_names, 60)}", valid=joint_names)
+    if len(set(backlash)) != len(backlash):
+        raise ParameterError(f"backlash joints given twice: {', '.join(backlash)}")
+
+
 @dataclass(frozen=True)
 class ParameterSpace:
-    """The parameters of one chain: stable names, units and vector layout."""
+    """The parameters of one chain: stable names, units and vector layout.
+
+    backlash: chain joints with a backlash term, in chain order; backlash_is_length: for
+    each, True if the joint is prismatic (the term is a length).
+    """
 
     joint_names: tuple[str, ...]
+    backlash: tuple[str, ...] = ()
+    backlash_is_length: tuple[bool, ...] = ()
+
+    def __post_init__(self):
+        _check_backlash_joints(self.joint_names, self.backlash)
+        order = [self.joint_names.index(j) for j in self.backlash]
+        if order != sorted(order):
+            raise ParameterError("backlash joints must be in chain order")
+        if len(self.backlash_is_length) != len(self.backlash):
+            raise ParameterError("backlash_is_length needs one flag per backlash joint")
+
+    @classmethod
+    def of_chain(cls, joint_names, kinds, backlash=()) -> "ParameterSpace":
+        """The space of a chain with joint ``kinds``; ``backlash`` joints in any order."""
+        joint_names = tuple(joint_names)
+        _check_backlash_joints(joint_names, tuple(backlash))
+        chosen = tuple(j for j in joint_names if j in set(backlash))
+        lengths = tuple(kinds[joint_names.index(j)] == "prismatic" for j in chosen)
+        return cls(joint_names, chosen, lengths)
 
     @property
     def n_joints(self) -> int:
@@ -42,25 +79,54 @@ class ParameterSpace:
         return 4 * self.n_joints
 
     @property
+    def n_backlash(self) -> int:
+        return len(self.backlash)
+
+    @property
     def names(self) -> tuple[str, ...]:
         kin = tuple(f"{j}.{f}" for j in self.joint_names for f in FIELDS)
-        return kin + BASE + TOOL
+        return kin + BASE + TOOL + tuple(f"{j}.backlash" for j in self.backlash)
 
     @property
     def size(self) -> int:
-        return self.n_kinematic + 9
+        return self.n_kinematic + 9 + self.n_backlash
 
     @property
     def is_length(self) -> np.ndarray:
         """(p,) True for lengths [m], False for angles [rad]."""
         kin = [f in LENGTH_FIELDS for _ in self.joint_names for f in FIELDS]
-        return np.array(kin + [True, True, True, False, False, False] + [True] * 3)
+        return np.array(kin + [True, True, True, False, False, False] + [True] * 3
+                        + list(self.backlash_is_length), dtype=bool)
 
     @property
     def is_kinematic(self) -> np.ndarray:
+        """(p,) True for the MD-H parameters (what the corrected URDF carries)."""
         mask = np.zeros(self.size, dtype=bool)
         mask[: self.n_kinematic] = True
         return mask
+
+    @property
+    def is_frame(self) -> np.ndarray:
+        """(p,) True for the measurement frame and the tool point."""
+        mask = np.zeros(self.size, dtype=bool)
+        mask[self.n_kinematic: self.n_kinematic + 9] = True
+        return mask
+
+    @property
+    def is_backlash(self) -> np.ndarray:
+        mask = np.zeros(self.size, dtype=bool)
+        mask[self.n_kinematic + 9:] = True
+        return mask
+
+    @property
+    def is_penalised(self) -> np.ndarray:
+        """(p,) the parameters with a nominal value that L2 pulls toward: all but frames."""
+        return ~self.is_frame
+
+    @property
+    def backlash_joint_index(self) -> tuple[int, ...]:
+        """Chain index of each backlash joint."""
+        return tuple(self.joint_names.index(j) for j in self.backlash)
 
     def reporting_scale(self) -> np.ndarray:
         """(p,) size of one reporting unit per parameter: 1 mm or 1 deg, in SI."""
@@ -82,6 +148,14 @@ class ParameterSpace:
         k = self.n_kinematic
         return x[:k].reshape(self.n_joints, 4), x[k:k + 6], x[k + 6:k + 9]
 
-    def join(self, table, base, tool) -> np.ndarray:
+    def backlash_values(self, x: np.ndarray) -> np.ndarray:
+        """(n_backlash,) view of the backlash terms of a parameter vector."""
+        return x[self.n_kinematic + 9:]
+
+    def join(self, table, base, tool, backlash=None) -> np.ndarray:
+        """The parameter vector; ``backlash`` None means zero backlash."""
+        b = np.zeros(self.n_backlash) if backlash is None else np.asarray(backlash, float)
+        if b.shape != (self.n_backlash,):
+            raise ParameterError(f"{self.n_backlash} backlash values expected, got {b.shape}")
         return np.concatenate([np.asarray(table, float).ravel(), np.asarray(base, float),
-                               np.asarray(tool, float)])
+                               np.asarray(tool, float), b])

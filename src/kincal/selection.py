@@ -8,9 +8,11 @@ Selection is an ordered rank-revealing QR: columns are taken in a fixed order of
 preference and a column is kept when the part of it that the kept columns cannot
 reproduce is larger than ``rank_tol`` of its own norm. The order is: measurement frame,
 then tool point, then the kinematic parameters from the last joint back to the first
-(a, alpha, d, theta within a joint). So a kinematic parameter that duplicates the frame
-or tool is dropped (not the frame), and of a set of parallel-axis offsets the one
-nearest the tool is kept. This is deterministic (no random draws, no data-dependent
+(a, alpha, d, theta within a joint), then any other columns after those (backlash terms).
+So a kinematic parameter that duplicates the frame or tool is dropped (not the frame),
+of a set of parallel-axis offsets the one nearest the tool is kept, and a backlash term
+the data cannot tell from its joint's offset (samples approached from one side) is
+dropped, not the offset. This is deterministic (no random draws, no data-dependent
 pivoting among equals) and, being greedy in a fixed order, stable as poses are added.
 """
 
@@ -118,10 +120,11 @@ class Identifiability:
 def preference_order(names, n_kinematic: int) -> list[int]:
     """Column indices in the order of preference described in the module notes."""
     n_joints = n_kinematic // 4
-    order = list(range(n_kinematic, len(names)))  # base then tool
+    frames_end = min(n_kinematic + 9, len(names))
+    order = list(range(n_kinematic, frames_end))  # base then tool
     for j in reversed(range(n_joints)):
         order += [4 * j + f for f in range(4)]
-    return order
+    return order + list(range(frames_end, len(names)))
 
 
 def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float = RANK_TOL,

@@ -3,15 +3,17 @@
 Used by the demo, the paper reproduction, the benchmarks and the tests. The "true" robot
 is the nominal MD-H model with a perturbed table, plus optionally a non-geometric error
 that no MD-H model can absorb: a gravity-like compliance that bends joints 2 and 3 by
-``compliance * cos`` of their angle sums (radians), as a loaded shoulder and elbow do.
+``compliance * cos`` of their angle sums (radians), as a loaded shoulder and elbow do;
+and joint backlash (:mod:`kincal.backlash`), which kincal can model.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from .backlash import approach_directions
 from .errors import OptionError
 from .mdh import MdhModel
 from .measurement_model import MeasurementModel
@@ -27,12 +29,15 @@ class Truth:
 
     table: (n, 4) true MD-H table. base: (6,) true measurement frame. tool: (3,) true
     tool point in the tip frame. compliance: [rad] amplitude of the non-geometric error.
+    backlash: {joint: half the play [rad or m]} (see kincal.backlash); the poses are
+    taken in the order given.
     """
 
     table: np.ndarray
     base: np.ndarray
     tool: np.ndarray
     compliance: float = 0.0
+    backlash: dict = field(default_factory=dict)
 
     def x(self, space: ParameterSpace) -> np.ndarray:
         return space.join(self.table, self.base, self.tool)
@@ -121,6 +126,11 @@ def true_positions(mdh: MdhModel, truth: Truth, q: np.ndarray) -> np.ndarray:
     if truth.compliance and q_eff.shape[1] >= 3:
         q_eff[:, 1] += truth.compliance * np.cos(q_eff[:, 1])
         q_eff[:, 2] += truth.compliance * np.cos(q_eff[:, 1] + q_eff[:, 2])
+    if truth.backlash:
+        g = approach_directions(q)
+        for joint, b in truth.backlash.items():
+            i = mdh.joint_names.index(joint)
+            q_eff[:, i] += b * g[:, i]
     model = MeasurementModel(mdh, q_eff)
     return model.predict(truth.x(model.space))
 
