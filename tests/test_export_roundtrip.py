@@ -112,3 +112,23 @@ def test_joint_offset_next_to_gimbal_lock_keeps_rpy_readable(tmp_path, rng):
     path.write_text(result.text)
     q = random_joint_values(robot.geometry, rng, 500)
     assert np.abs(Robot.load(path, tip=robot.tip).tip_poses(q) - corrected.tip_poses(q)).max() < 1e-12
+
+
+def test_a_tilt_next_to_gimbal_lock_is_exact_and_reported(tmp_path, rng):
+    from kincal.readable_export import RpySwing, corrected_text
+
+    robot = _load("tiago_file", "wrist_ft_tool_link")  # arm_4 origin: rpy -pi/2 -pi/2 0
+    model = mdh.extract(robot.geometry)
+    err = np.zeros_like(model.table)
+    err[robot.joint_names.index("arm_4_joint"), 1] = np.radians(0.2)  # alpha_3: a tilt
+    corrected = robot.with_joint_frames(model.joint_frames(model.table + err))
+    result, notes = corrected_text(robot, corrected)
+    swings = [n for n in notes if isinstance(n, RpySwing)]
+    assert [s.joint for s in swings] == ["arm_4_joint"]
+    assert swings[0].rotation == pytest.approx(np.radians(0.2), rel=1e-6)
+    assert swings[0].largest_change > np.radians(5)
+    assert "no edit of joint origins alone avoids it" in swings[0].describe()
+    path = tmp_path / "c.urdf"
+    path.write_text(result.text)
+    q = random_joint_values(robot.geometry, rng, 200)
+    assert np.abs(Robot.load(path, tip=robot.tip).tip_poses(q) - corrected.tip_poses(q)).max() < 1e-12

@@ -7,6 +7,12 @@ offset), it can be moved instead into the origins of that joint's child joints: 
 kinematics stay exact (every frame beyond the joint is where it was), only the link's
 own frame turns by that offset about the joint axis, so its mesh is drawn off by the
 offset angle. kincal does this only where it removes a swing, and reports each case.
+
+A tilt of a joint axis at such an origin (an alpha correction there) cannot be moved
+anywhere: the exact URDFs that change only joint origins differ from one another by turns
+of link frames about their own joint axes, and none of those reaches the lost axis. The
+exact triple is kept (the closest one to the original) and the swing is reported
+(:class:`RpySwing`), so nobody mistakes it for a large correction.
 """
 
 from __future__ import annotations
@@ -36,6 +42,24 @@ class Regauged:
                 "readable (pitch near +-90 deg); its link frame turns by that angle")
 
 
+@dataclass(frozen=True)
+class RpySwing:
+    """A corrected origin whose exact rpy moved much more than its rotation did."""
+
+    joint: str
+    old_rpy: str
+    new_rpy: str
+    rotation: float  # [rad] angle of the correction's rotation
+    largest_change: float  # [rad] largest change of an rpy component
+
+    def describe(self) -> str:
+        return (f"{self.joint}: rpy \"{self.old_rpy}\" -> \"{self.new_rpy}\": a correction "
+                f"of only {np.degrees(self.rotation):.3f} deg turns this frame about the one "
+                f"axis rpy cannot follow at pitch +-90 deg, so roll and yaw move together (by up "
+                f"to {np.degrees(self.largest_change):.1f} deg); the triple is exact and the "
+                "closest to the original, and no edit of joint origins alone avoids it")
+
+
 def _swing(edit, R_old: np.ndarray, R_new: np.ndarray) -> float:
     """How much more the rpy numbers moved than the rotation did [rad]."""
     return float(np.max(np.abs(edit.rpy_change)) - rotation_angle(R_old.T @ R_new))
@@ -49,8 +73,9 @@ def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,
-                   source: str = "<string>") -> tuple[EditResult, tuple[Regauged, ...]]:
-    """The corrected URDF text (and the joints whose offset was moved, if any)."""
+                   source: str = "<string>") -> tuple[EditResult, tuple[Regauged | RpySwing, ...]]:
+    """The corrected URDF text, and what a reader should know about its rpy: the joints
+    whose offset was moved into the child origins, and the swings that remain."""
     origins = nominal.changed_origins(corrected)
     result = edit_joint_origins(nominal.urdf_text, origins, source=source)
     if not readable:
@@ -79,4 +104,11 @@ def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,
         if after < SWING and child_ok:  # only where it removes the swing altogether
             origins, result = trial, candidate
             moved.append(Regauged(name, angle, tuple(children)))
+    for name, T_new in origins.items():
+        T_old = old[name]
+        edit = result.for_joint(name)
+        if edit.changed and _swing(edit, T_old[:3, :3], T_new[:3, :3]) >= SWING:
+            moved.append(RpySwing(name, edit.old_rpy or "0 0 0", edit.new_rpy,
+                                  rotation_angle(T_old[:3, :3].T @ T_new[:3, :3]),
+                                  float(np.max(np.abs(edit.rpy_change)))))
     return result, tuple(moved)
