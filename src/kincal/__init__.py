@@ -13,8 +13,11 @@ from .calibration import (CalibrationOptions, CalibrationProblem, CalibrationRes
                           calibrate)
 from .errors import KincalError, KincalWarning  # noqa: E402
 from .measurements import Measurements  # noqa: E402
+from .candidates import random_candidates, read_candidates  # noqa: E402
+from .pose_selection import PoseSelection, select_poses  # noqa: E402
 from .robot import Robot  # noqa: E402
 from .solver import SolverOptions  # noqa: E402
 
 __all__ = ["Robot", "Measurements", "calibrate", "CalibrationOptions", "CalibrationProblem",
-           "CalibrationResult", "SolverOptions", "KincalError", "KincalWarning", "__version__"]
+           "CalibrationResult", "SolverOptions", "select_poses", "PoseSelection",
+           "random_candidates", "read_candidates", "KincalError", "KincalWarning", "__version__"]

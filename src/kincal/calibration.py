@@ -303,13 +303,8 @@ class CalibrationProblem:
 
     def _tool_axis_note(self) -> str:
         """A warning when the tool point sits near the axis of the last (revolute) joint."""
-        if self.mdh.kinds[-1] != "revolute":
-            return ""
-        tool = self.space.split(self.start())[2]
-        p = self.mdh.T_n_tip[:3, :3] @ tool + self.mdh.T_n_tip[:3, 3]  # in MD-H frame n
-        w = self.mdh.screw_axes[-1]
-        dist = float(np.linalg.norm(np.cross(p, w)))
-        if dist >= self.TOOL_AXIS_WARNING:
+        dist = self.mdh.last_axis_distance(self.space.split(self.start())[2])
+        if dist is None or dist >= self.TOOL_AXIS_WARNING:
             return ""
         last = self.mdh.joint_names[-1]
         return (f"the tool point is {dist * 1e3:.2f} mm from the axis of {last}: turning about "

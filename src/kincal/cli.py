@@ -277,6 +277,37 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def cmd_plan(args) -> int:
+    from .candidates import candidates_csv_text, random_candidates, read_candidates
+    from .pose_selection import select_poses
+    from .safe_write import write_all
+
+    if (args.candidates is None) == (args.random is None):
+        raise OptionError("give exactly one of CANDIDATES.csv or --random M")
+    if not (math.isfinite(args.noise_mm) and args.noise_mm > 0):
+        raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
+    robot = _robot(args)
+    if args.candidates is not None:
+        q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit)
+        source = f"{len(q)} candidates from {args.candidates}"
+    else:
+        q, lines = random_candidates(robot, args.random, args.seed), None
+        source = f"{len(q)} random candidates within the joint limits (seed {args.seed})"
+    tool = _tool_offset(args)
+    selection = select_poses(robot, q, args.poses, tool=(0.0, 0.0, 0.0) if tool is None else tool,
+                             fix=tuple(args.fix))
+    protect = [robot.source] + ([args.candidates] if args.candidates is not None else [])
+    chosen_lines = None if lines is None else lines[list(selection.indices)]
+    written = write_all([(args.out, candidates_csv_text(selection.joint_names,
+                                                         selection.joint_values, chosen_lines))],
+                        overwrite=args.overwrite, protect=protect)
+    print(f"{source}:")
+    print(selection.summary(args.noise_mm))
+    for path in written:
+        print(f"  wrote {path} ({len(selection.indices)} poses, joint values in rad and m)")
+    return 0
+
+
 def cmd_demo(args) -> int:
     from .paper_experiment import demo
 
@@ -368,6 +399,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth-out", help="JSON with the planted parameters")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("plan", help="choose which poses to measure (D-optimal)",
+                       description="Choose N of the candidate poses that best determine the "
+                       "parameters (D-optimal: largest det of J^T J at the nominal robot). The "
+                       "candidates must be safe, reachable and measurable: kincal does not "
+                       "check collisions or line of sight.")
+    _add_common(p, data=False)
+    p.add_argument("candidates", nargs="?", metavar="CANDIDATES.csv",
+                   help="CSV with the chain joint columns (no positions needed); or use --random")
+    p.add_argument("--random", type=int, metavar="M",
+                   help="instead of a CSV: M random candidates uniform within the joint limits")
+    p.add_argument("--seed", type=int, default=0, help="seed of --random")
+    p.add_argument("--poses", type=int, required=True, metavar="N", help="poses to choose")
+    p.add_argument("--out", required=True,
+                   help="CSV of the chosen poses: chain joint columns in SI units (rad, m) "
+                        "whatever the input units, in the order chosen, and with a CSV of "
+                        "candidates their line numbers there (candidate_line)")
+    p.add_argument("--length-unit", choices=("m", "mm"), default="m",
+                   help="unit of prismatic joints in CANDIDATES and of --tool-offset (default m)")
+    p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad",
+                   help="unit of revolute joints in CANDIDATES (default rad)")
+    p.add_argument("--fix", nargs="+", default=[], metavar="NAME",
+                   help="parameters held nominal (left out of the criterion)")
+    p.add_argument("--noise-mm", type=float, default=0.05,
+                   help="noise per axis [mm] for the predicted standard errors (default 0.05)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("demo", help="the paper's experiment, simulated at a small size")
     p.add_argument("--out", default=DEMO_DIR, help=f"output directory (default {DEMO_DIR})")

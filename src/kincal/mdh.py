@@ -115,6 +115,16 @@ class MdhModel:
         """
         return self.frames(table) @ self.offsets
 
+    def last_axis_distance(self, tool) -> float | None:
+        """Distance [m] of the tool point (tip frame) from the last joint's axis line, or
+        None if the last joint is prismatic. Near 0, turning that joint barely moves the
+        point: its theta (and the tilt of its axis) are weak or unidentifiable."""
+        if self.kinds[-1] != "revolute":
+            return None
+        p = self.T_n_tip[:3, :3] @ np.asarray(tool, float) + self.T_n_tip[:3, 3]  # frame n
+        c = np.zeros(3) if self.screw_points is None else self.screw_points[-1]
+        return float(np.linalg.norm(np.cross(p - c, self.screw_axes[-1])))
+
 
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)

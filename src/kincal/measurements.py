@@ -13,15 +13,14 @@ an ``order_column`` such as a time stamp. Only backlash terms use it.
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from .backlash import approach_directions
-from .errors import DataError, InputFileError, listing, suggest
+from .csv_table import read_columns
+from .errors import DataError, listing, suggest
 
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
@@ -128,81 +127,31 @@ class Measurements:
             raise DataError(f"unknown length unit {length_unit!r}; expected one of m, mm")
         if angle_unit not in ANGLE_UNITS:
             raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
-        path = Path(path)
-        if not path.exists():
-            raise InputFileError(f"data file not found: {path}")
-        if path.is_dir():
-            raise InputFileError(f"expected a CSV file, got a directory: {path}")
-        try:
-            with open(path, newline="", encoding="utf-8-sig") as fh:
-                table = list(csv.reader(fh))
-        except (OSError, UnicodeDecodeError, csv.Error) as exc:
-            raise InputFileError(f"cannot read {path}: {exc}") from exc
-        table = [row for row in table if any(cell.strip() for cell in row)]
-        if not table:
-            raise DataError(f"{path}: the file is empty; expected a header with "
-                            f"{', '.join(list(joint_names) + list(position_columns))}")
-        header = [h.strip() for h in table[0]]
-        dupes = sorted({h for h in header if header.count(h) > 1})
-        if dupes:
-            raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
         wanted = list(joint_names) + list(position_columns)
-        if order_column is not None and order_column not in header:
+        extra = [c for c in (sigma_column, order_column) if c is not None]
+        table = read_columns(path, wanted, extra, kind="data",
+                             expected="the chain joints and positions")
+        path = table.path
+        if order_column is not None and order_column not in table.values:
             raise DataError(f"{path}: no order column {order_column!r}."
-                            + suggest(order_column, header)
-                            + f" The header has {listing(header)}")
-        missing = [c for c in wanted if c not in header]
-        if missing:
-            extra = [h for h in header if h not in wanted]
-            hints = "".join(suggest(m, extra) for m in missing)
-            raise DataError(f"{path}: missing column(s) {', '.join(missing)}.{hints} Expected "
-                            f"the chain joints and positions: {', '.join(wanted)}; "
-                            f"the header has {listing(header)}")
-        use_sigma = sigma_column is not None and sigma_column in header
-        used = set(wanted) | ({sigma_column} if use_sigma else set()) | (
-            {order_column} if order_column is not None else set())
-        ignored = tuple(h for h in header if h not in used)
-        cols = [header.index(c) for c in wanted]
-        if use_sigma:
-            cols.append(header.index(sigma_column))
-        if order_column is not None:
-            cols.append(header.index(order_column))
-        values = np.empty((len(table) - 1, len(cols)))
-        for r, row in enumerate(table[1:]):
-            line = r + 2
-            if len(row) != len(header):
-                raise DataError(f"{path}, line {line}: {len(row)} cells, the header has "
-                                f"{len(header)}")
-            for k, c in enumerate(cols):
-                cell = row[c].strip()
-                try:
-                    v = float(cell)
-                except ValueError:
-                    v = None
-                if v is None or not math.isfinite(v):
-                    what = "an empty cell" if cell == "" else f"{cell!r}"
-                    raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; "
-                                    "expected a finite number")
-                values[r, k] = v
-        if len(values) == 0:
-            raise DataError(f"{path}: a header but no samples")
+                            + suggest(order_column, table.header)
+                            + f" The header has {listing(table.header)}")
+        rows = table.lines
         L, A = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
-        n = len(joint_names)
-        unit = np.array([L if j in set(prismatic) else A for j in joint_names])
-        q = values[:, :n] * unit
-        P = values[:, n:n + 3] * L
-        sigma = values[:, n + 3] * L if use_sigma else None
+        v = table.values
+        q = np.column_stack([v[j] * (L if j in set(prismatic) else A) for j in joint_names])
+        P = np.column_stack([v[c] for c in position_columns]) * L
+        sigma = v[sigma_column] * L if sigma_column in v else None
         if sigma is not None and np.any(sigma <= 0):
             k = int(np.argmax(sigma <= 0))
-            raise DataError(f"{path}, line {k + 2}, column {sigma_column!r}: sigma must be > 0")
-        rows = np.arange(2, len(values) + 2)
+            raise DataError(f"{path}, line {rows[k]}, column {sigma_column!r}: sigma must be > 0")
         if order_column is None:
             approach, order_source = approach_directions(q), "the order of the rows"
         else:
-            approach = approach_directions(q, values[:, -1], source=str(path), rows=rows)
+            approach = approach_directions(q, v[order_column], source=str(path), rows=rows)
             order_source = f"column {order_column!r}"
-        return cls(tuple(joint_names), q, P, sigma, rows, str(path), ignored, length_unit,
-                   angle_unit, approach, order_source)
+        return cls(tuple(joint_names), q, P, sigma, rows, str(path), table.ignored(),
+                   length_unit, angle_unit, approach, order_source)
 
     def to_csv_text(self) -> str:
         """The samples in the CSV layout :meth:`from_csv` reads, SI units, full precision."""

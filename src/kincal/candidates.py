@@ -1,0 +1,77 @@
+"""Candidate poses: joint configurations that could be measured, before they are.
+
+From a CSV file whose header names the chain joints (no position columns needed), or
+drawn at random within the joint limits. :mod:`kincal.pose_selection` picks among them.
+Random poses are not checked for collisions; a user's candidates should be poses the
+robot can safely reach and the instrument can see.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .csv_table import read_columns
+from .data_checks import angle_unit_warnings, limit_warnings
+from .errors import KincalWarning, OptionError
+from .measurements import ANGLE_UNITS, LENGTH_UNITS
+
+if TYPE_CHECKING:
+    from .robot import Robot
+
+
+def random_candidates(robot: "Robot", m: int, rng) -> np.ndarray:
+    """(m, n_joints) joint values uniform within the joint limits [rad or m].
+
+    Joints without limits (continuous) are drawn in [-pi, pi]. rng: a numpy Generator or
+    a seed.
+    """
+    if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
+        raise OptionError(f"the number of random candidates must be an integer >= 1, got {m!r}")
+    g = robot.geometry
+    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+    return np.random.default_rng(rng).uniform(lo, hi, size=(int(m), g.n))
+
+
+def read_candidates(path, robot: "Robot", length_unit: str = "m",
+                    angle_unit: str = "rad") -> tuple[np.ndarray, np.ndarray]:
+    """((M, n_joints) candidate joint values [SI], (M,) their line numbers) from a CSV file.
+
+    The header names the chain joints as in the URDF (other columns are ignored).
+    Revolute joints are read in ``angle_unit``, prismatic ones in ``length_unit``. Values
+    outside the URDF limits are warned about, not dropped.
+    """
+    if length_unit not in LENGTH_UNITS:
+        raise OptionError(f"unknown length unit {length_unit!r}; expected one of m, mm")
+    if angle_unit not in ANGLE_UNITS:
+        raise OptionError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+    g = robot.geometry
+    table = read_columns(path, robot.joint_names, kind="candidates", expected="the chain joints",
+                         rows_name="candidate poses")
+    unit = [LENGTH_UNITS[length_unit] if k == "prismatic" else ANGLE_UNITS[angle_unit]
+            for k in g.kinds]
+    q = np.column_stack([table.values[j] * u for j, u in zip(robot.joint_names, unit)])
+    for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, table.lines)
+                    + angle_unit_warnings(g.joint_names, g.kinds, q, angle_unit)):
+        warnings.warn(f"{table.path}: {message}", KincalWarning)
+    return q, table.lines
+
+
+def candidates_csv_text(joint_names, joint_values, source_lines=None) -> str:
+    """Joint values as CSV: a header of joint names, SI units, full precision.
+
+    source_lines: optional (n,) line numbers of the poses in the candidates file, written
+    as a last column ``candidate_line`` (ignored when the file is read as data).
+    """
+    q = np.asarray(joint_values, float)
+    header = list(joint_names) + (["candidate_line"] if source_lines is not None else [])
+    lines = [",".join(header)]
+    for k, row in enumerate(q):
+        cells = [repr(float(v)) for v in row]
+        if source_lines is not None:
+            cells.append(str(int(source_lines[k])))
+        lines.append(",".join(cells))
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,410 @@
+"""Which poses to measure: D-optimal selection of n poses from a set of candidates.
+
+Plain numpy (the robot enters only through its geometry). Given M candidate joint
+configurations, :func:`select_poses` chooses n of them that maximise
+
+    log det(J_S^T J_S)
+
+over the parameters the candidates can identify, where J_S stacks the 3 x p
+identification Jacobians of the chosen poses (:mod:`kincal.measurement_model`, at the
+nominal robot with the tool point guess). Under the linearised model with independent
+noise of equal size on every axis, (J_S^T J_S)^-1 sigma^2 is the covariance of the
+least-squares estimate, so maximising the determinant minimises the volume of its
+confidence ellipsoid (D-optimality).
+
+Units and columns. J is taken in reporting units (mm of position per mm or per degree of
+parameter, as :mod:`kincal.selection`). Kincal's own identifiability analysis
+(:func:`kincal.selection.analyze`, ordered rank-revealing QR) runs on the stacked
+Jacobian of ALL candidates; the criterion uses only the columns it keeps, since a
+redundant column would make every determinant zero. Those columns are then divided by
+their RMS norm per pose over the candidate set, so that the average pose adds 1 to every
+diagonal entry of the information matrix. Rescaling columns multiplies the determinant of
+every set by the same constant, so it does not change which set is best; it makes the
+reported log det free of units, and it gives the ridge below the same meaning for every
+parameter. Predicted standard errors are given back in mm and deg.
+
+Search. Greedy forward selection starts from the ridge ``RIDGE * I`` (so that the first
+picks, with fewer than p/3 poses, have a finite objective: with a tiny ridge the greedy
+step picks the pose whose Jacobian spans the largest volume of what is not yet
+determined). Each step scores every remaining candidate at once by the determinant lemma
+det(M + J_k^T J_k) = det(M) det(I_3 + J_k M^-1 J_k^T) and updates M^-1 by Woodbury.
+As soon as the chosen poses determine every column, the ridge is removed (M^-1 and
+log det recomputed once, exactly) and the rest works on J_S^T J_S itself. Then a
+Fedorov exchange: the best swap of a chosen pose for an unchosen one over all pairs,
+scored at once by the rank-6 version of the lemma, is made while it raises log det by
+more than ``EXCHANGE_TOL``, at most ``max_swaps`` times. The result is a local optimum
+for single swaps (not, in general, the global optimum, which is a combinatorial search).
+Ties go to the lower candidate index; the whole procedure is deterministic.
+
+Limits. D-optimality speaks about parameter variance under the model linearised at the
+nominal robot and the tool guess, with equal independent noise per axis. It does not see
+collisions, cable wrap, reachability of the measuring instrument (line of sight of a
+laser tracker, the range of an R-test) or non-geometric errors: the candidates given must
+already be safe and measurable poses; kincal only picks among them. The figures for the
+measurement frame (base.*) are for a frame at the base's orientation; turning it changes
+those three standard errors, not the selection.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import mdh as mdh_layer
+from .errors import DataError, KincalWarning, OptionError
+from .measurement_model import MeasurementModel
+from .parameters import MM, ParameterSpace
+from .selection import RANK_TOL, analyze
+
+if TYPE_CHECKING:
+    from .robot import Robot
+
+METHODS = ("D",)
+RIDGE = 1e-6  # start of the greedy search, in units of the average pose's information
+EXCHANGE_TOL = 1e-9  # a swap must raise log det by more than this to be made
+SINGULAR = 1e-12  # reciprocal condition below which an information matrix counts as singular
+RANDOM_SUBSETS = 20  # K random subsets for the baseline
+CHUNK = 2048  # unchosen candidates scored at once in the exchange (bounds memory)
+
+
+# ------------------------------------------------------------------ result
+def _readonly(a, dtype=float) -> np.ndarray:
+    a = np.array(a, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class PoseSelection:
+    """The outcome of :func:`select_poses`.
+
+    indices: the chosen candidates (row indices), in the order chosen (``keep`` first; a
+        pose brought in by the exchange takes the place of the one it replaced).
+    joint_values: (n, n_joints) the chosen poses [rad or m], chain order.
+    parameters: the parameters the candidates identify (the columns of the criterion);
+        units: "mm" or "deg" for each. not_identifiable: free parameters the candidate set
+        cannot identify (redundant with others, or no effect); fixed: held by the user.
+    lost: parameters the candidates identify but the chosen poses do not (normally empty).
+    column_scale: (p,) RMS point motion per pose over the candidates [mm per mm or deg],
+        the normalisation of each column.
+    log_det: ln det of the normalised information matrix J_S^T J_S of the chosen set
+        (-inf if singular). greedy_log_det: the same after the greedy stage.
+    condition: condition number of the chosen set's information matrix scaled to unit
+        diagonal (the square of the Jacobian condition number `kincal analyze` prints).
+    variances: (p,) diag((J_S^T J_S)^-1) in reporting units, [mm^2 or deg^2 per mm^2 of
+        noise]; :meth:`std_errors` turns them into standard errors.
+    swaps, exchange_converged: exchanges made; False if ``max_swaps`` stopped them.
+    random_log_det, random_condition, random_variances: the same figures for random
+        subsets of the same size (median over ``random_subsets`` seeded draws; ``keep``
+        is in every draw).
+    """
+
+    chain: str
+    joint_names: tuple[str, ...]
+    n_candidates: int
+    indices: tuple[int, ...]
+    joint_values: np.ndarray
+    parameters: tuple[str, ...]
+    units: tuple[str, ...]
+    not_identifiable: tuple[str, ...]
+    fixed: tuple[str, ...]
+    lost: tuple[str, ...]
+    column_scale: np.ndarray
+    log_det: float
+    greedy_log_det: float
+    condition: float
+    variances: np.ndarray
+    swaps: int
+    exchange_converged: bool
+    random_log_det: float
+    random_condition: float
+    random_variances: np.ndarray
+    random_subsets: int
+    ridge: float = RIDGE
+
+    def std_errors(self, sigma_mm: float) -> np.ndarray:
+        """(p,) predicted standard errors [mm or deg, see ``units``] of ``parameters`` for a
+        noise of ``sigma_mm`` [mm] per axis: sqrt(diag((J_S^T J_S)^-1)) * sigma."""
+        return np.sqrt(self.variances) * float(sigma_mm)
+
+    def random_std_errors(self, sigma_mm: float) -> np.ndarray:
+        """(p,) the same for random subsets (median variance over the draws)."""
+        return np.sqrt(self.random_variances) * float(sigma_mm)
+
+    def summary(self, sigma_mm: float = 0.05, largest: int = 4) -> str:
+        """Human report: criterion and condition vs random, largest predicted std errors."""
+        n, p = len(self.indices), len(self.parameters)
+        lines = [f"D-optimal selection of {n} of {self.n_candidates} candidate poses, "
+                 f"{self.chain}",
+                 f"  optimised over the {p} parameters the candidates identify"]
+        if self.not_identifiable:
+            lines.append(f"  not identifiable from the candidates: {', '.join(self.not_identifiable)}")
+        if self.fixed:
+            lines.append(f"  fixed by the user: {', '.join(self.fixed)}")
+        if self.lost:
+            lines.append(f"  WARNING: the chosen poses do not identify {', '.join(self.lost)}")
+        gain = self.log_det - self.random_log_det
+        lines.append(f"  log det (normalised information): {self.log_det:.2f} chosen, "
+                     f"{self.random_log_det:.2f} random median of {self.random_subsets}")
+        if math.isfinite(gain):
+            lines.append(f"    = {math.exp(gain / p):.3g}x the information per parameter, "
+                         f"std errors x{math.exp(-gain / (2 * p)):.3g} (geometric means)")
+        lines.append(f"  condition number (information, unit diagonal): {self.condition:.3g} "
+                     f"chosen, {self.random_condition:.3g} random median")
+        how = "converged" if self.exchange_converged else "stopped at max_swaps"
+        lines.append(f"  greedy log det {self.greedy_log_det:.2f}, then {self.swaps} exchanges "
+                     f"({how})")
+        se, se_r = self.std_errors(sigma_mm), self.random_std_errors(sigma_mm)
+        lines.append(f"  largest predicted std errors at {sigma_mm:g} mm noise per axis:")
+        lines.append(f"    {'parameter':<22} {'chosen':>10} {'random':>10}  unit")
+        for unit in ("mm", "deg"):
+            idx = [i for i in range(p) if self.units[i] == unit]
+            for i in sorted(idx, key=lambda i: -se[i])[:largest]:
+                lines.append(f"    {self.parameters[i]:<22} {se[i]:>10.4g} {se_r[i]:>10.4g}  {unit}")
+        lines.append("  (linearised at the nominal robot and tool guess; the candidates must be "
+                     "safe and measurable, kincal does not check)")
+        return "\n".join(lines)
+
+
+# ------------------------------------------------------------ linear algebra
+def _det3(A: np.ndarray) -> np.ndarray:
+    """Determinants of (..., 3, 3) arrays, closed form."""
+    return (A[..., 0, 0] * (A[..., 1, 1] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 1])
+            - A[..., 0, 1] * (A[..., 1, 0] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 0])
+            + A[..., 0, 2] * (A[..., 1, 0] * A[..., 2, 1] - A[..., 1, 1] * A[..., 2, 0]))
+
+
+def _log(x: np.ndarray) -> np.ndarray:
+    """ln x, -inf where x <= 0 (a determinant that rounding made non-positive)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(x > 0, np.log(np.where(x > 0, x, 1.0)), -np.inf)
+
+
+def _quad(J: np.ndarray, Minv: np.ndarray) -> np.ndarray:
+    """(k, 3, 3) J_k M^-1 J_k^T for (k, 3, p) Jacobians."""
+    return (J @ Minv) @ J.transpose(0, 2, 1)
+
+
+def _exact_inverse(G: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """(G^-1, ln det G) of a symmetric information matrix, or None if it is singular."""
+    w = np.linalg.eigvalsh(G)
+    if w[0] <= SINGULAR * w[-1]:
+        return None
+    L = np.linalg.cholesky(G)
+    Linv = np.linalg.inv(L)
+    return Linv.T @ Linv, float(2.0 * np.sum(np.log(np.diag(L))))
+
+
+def _greedy(Jn: np.ndarray, n: int, keep: list[int]):
+    """Forward selection from RIDGE * I; returns (chosen, M^-1, log det, ridge still on)."""
+    M, _, p = Jn.shape
+    chosen = list(keep)
+    G = RIDGE * np.eye(p) + np.einsum("kip,kiq->pq", Jn[chosen], Jn[chosen])
+    Minv, log_det = np.linalg.inv(G), float(np.linalg.slogdet(G)[1])
+    ridge = True
+    available = np.ones(M, dtype=bool)
+    available[chosen] = False
+    while True:
+        if ridge and 3 * len(chosen) >= p:
+            S = Jn[chosen].reshape(-1, p)
+            exact = _exact_inverse(S.T @ S)
+            if exact is not None:
+                (Minv, log_det), ridge = exact, False
+        if len(chosen) == n:
+            return chosen, Minv, log_det, ridge
+        gain = _log(_det3(np.eye(3) + _quad(Jn, Minv)))  # all candidates: one batched product
+        gain[~available] = -np.inf
+        k = int(np.argmax(gain))
+        Jk = Jn[k]
+        W = Jk @ Minv                                                   # (3, p)
+        Minv = Minv - W.T @ np.linalg.solve(np.eye(3) + W @ Jk.T, W)    # Woodbury
+        Minv = 0.5 * (Minv + Minv.T)
+        log_det += float(gain[k])
+        chosen.append(k)
+        available[k] = False
+
+
+def _best_swap(Jn, chosen, removable, Minv):
+    """(log-det gain, position in chosen, candidate) of the best single swap."""
+    M, _, p = Jn.shape
+    JS = Jn[chosen]
+    WS = JS @ Minv
+    A_ii = WS @ JS.transpose(0, 2, 1)                                  # (n, 3, 3)
+    free_rows = np.setdiff1d(np.arange(M), chosen)
+    best = (-np.inf, -1, -1)
+    for start in range(0, free_rows.size, CHUNK):
+        rows = free_rows[start:start + CHUNK]
+        JU = Jn[rows]
+        I_A = np.eye(3) + _quad(JU, Minv)                               # (c, 3, 3)
+        A_ij = (WS.reshape(-1, p) @ JU.reshape(-1, p).T).reshape(
+            len(chosen), 3, len(rows), 3).transpose(0, 2, 1, 3)         # (n, c, 3, 3)
+        # det(M - J_i'J_i + J_j'J_j) / det M = det(I + A_jj) det(I - A_ii + A_ij (I + A_jj)^-1 A_ji)
+        D = np.eye(3) - A_ii[:, None] + A_ij @ np.linalg.inv(I_A)[None] @ A_ij.transpose(0, 1, 3, 2)
+        gain = _log(_det3(I_A))[None, :] + _log(_det3(D))
+        gain[~removable] = -np.inf
+        i, j = np.unravel_index(int(np.argmax(gain)), gain.shape)
+        if gain[i, j] > best[0]:
+            best = (float(gain[i, j]), int(i), int(rows[j]))
+    return best
+
+
+def _exchange(Jn, chosen, n_keep, Minv, log_det, max_swaps):
+    """Fedorov exchange; returns (chosen, M^-1, log det, swaps, converged)."""
+    removable = np.arange(len(chosen)) >= n_keep
+    swaps = 0
+    while True:
+        if len(chosen) == Jn.shape[0] or not removable.any():
+            return chosen, Minv, log_det, swaps, True
+        gain, i, j = _best_swap(Jn, chosen, removable, Minv)
+        if not gain > EXCHANGE_TOL:
+            return chosen, Minv, log_det, swaps, True
+        if swaps == max_swaps:
+            return chosen, Minv, log_det, swaps, False
+        U = np.concatenate([Jn[j], Jn[chosen[i]]])                     # (6, p)
+        W = U @ Minv
+        K = W @ U.T + np.diag([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])       # C^-1 + U M^-1 U'
+        Minv = Minv - W.T @ np.linalg.solve(K, W)                      # Woodbury, rank 6
+        Minv = 0.5 * (Minv + Minv.T)
+        log_det += gain
+        chosen = chosen[:i] + [j] + chosen[i + 1:]
+        swaps += 1
+
+
+def _set_figures(Jn: np.ndarray, scale: np.ndarray, subsets: np.ndarray):
+    """(log det, condition, variances [reporting units^2]) of each subset (K, n) of rows."""
+    K = len(subsets)
+    X = Jn[subsets].reshape(K, -1, Jn.shape[2])
+    G = X.transpose(0, 2, 1) @ X
+    sign, log_det = np.linalg.slogdet(G)
+    log_det = np.where(sign > 0, log_det, -np.inf)
+    d = np.sqrt(np.einsum("kii->ki", G))
+    w = np.linalg.eigvalsh(G / (d[:, :, None] * d[:, None, :]))
+    ok = w[:, 0] > SINGULAR * w[:, -1]
+    cond = np.where(ok, w[:, -1] / np.where(ok, w[:, 0], 1.0), np.inf)
+    var = np.full((K, scale.size), np.inf)
+    if ok.any():
+        var[ok] = np.einsum("kii->ki", np.linalg.inv(G[ok])) / scale ** 2
+    return log_det, cond, var
+
+
+# -------------------------------------------------------------- selection
+TOOL_AXIS_WARNING = 5e-3  # [m] as kincal.calibration: a tool point this close to the last axis
+
+
+def _warn_tool_on_axis(model, tool: np.ndarray) -> None:
+    """Warn when the tool guess sits on the last revolute axis (its turn is then invisible)."""
+    dist = model.last_axis_distance(tool)
+    if dist is not None and dist < TOOL_AXIS_WARNING:
+        last = model.joint_names[-1]
+        warnings.warn(f"the tool point guess is {dist * 1e3:.2f} mm from the axis of {last}: "
+                      f"the selection then ignores {last}.theta (and weakly sees {last}.alpha); "
+                      "give the real offset of the measured point (tool, --tool-offset)",
+                      KincalWarning)
+
+
+def _check_indices(keep, m: int) -> list[int]:
+    out = []
+    for k in keep:
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < m:
+            raise OptionError(f"keep: {k!r} is not a candidate index (0 to {m - 1})")
+        out.append(int(k))
+    if len(set(out)) != len(out):
+        raise OptionError(f"keep: an index is given twice: {out}")
+    return out
+
+
+def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(), keep=(),
+                 method: str = "D", max_swaps: int = 1000, seed: int = 0,
+                 random_subsets: int = RANDOM_SUBSETS) -> PoseSelection:
+    """Choose ``n`` of the ``candidates`` to measure (see the module notes).
+
+    candidates: (M, n_joints) joint values in the chain order of ``robot`` [rad or m];
+        they must be safe, reachable and measurable, kincal does not check that.
+    tool: (3,) guess of the measured point in the tip frame [m]; it decides whether the
+        last joint's theta (and alpha) can be seen at all, so give a realistic one.
+    fix: parameter names held at nominal (left out of the criterion).
+    keep: candidate indices that must be in the selection (e.g. poses already measured).
+    method: "D" (maximise log det of the information matrix).
+    max_swaps: bound on the exchange stage. seed, random_subsets: the random baseline.
+    """
+    if method not in METHODS:
+        raise OptionError(f"unknown selection method {method!r}; expected one of {', '.join(METHODS)}")
+    g = robot.geometry
+    q = np.asarray(candidates, dtype=float)
+    if q.ndim != 2 or q.shape[1] != g.n:
+        raise DataError(f"candidates must be an (M, {g.n}) array of joint values for "
+                        f"{', '.join(g.joint_names)}; got shape {q.shape}")
+    bad = np.argwhere(~np.isfinite(q))
+    if bad.size:
+        r, c = bad[0]
+        raise DataError(f"candidate row {r} (0-based) has a non-finite value {q[r, c]} for "
+                        f"{g.joint_names[c]}; {len(np.unique(bad[:, 0]))} rows are affected")
+    M = len(q)
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise OptionError(f"the number of poses must be an integer >= 1, got {n!r}")
+    if n > M:
+        raise OptionError(f"cannot choose {n} poses from {M} candidates; give more candidates "
+                          "or ask for fewer poses")
+    keep = _check_indices(keep, M)
+    if len(keep) > n:
+        raise OptionError(f"keep names {len(keep)} poses, more than the {n} to choose")
+    t = np.asarray(tool, dtype=float)
+    if t.shape != (3,) or not np.all(np.isfinite(t)):
+        raise OptionError(f"tool needs 3 finite numbers (x, y, z in the tip frame) [m], got {tool!r}")
+    if not (isinstance(max_swaps, (int, np.integer)) and max_swaps >= 0):
+        raise OptionError(f"max_swaps must be an integer >= 0, got {max_swaps!r}")
+    if not (isinstance(random_subsets, (int, np.integer)) and random_subsets >= 1):
+        raise OptionError(f"random_subsets must be an integer >= 1, got {random_subsets!r}")
+
+    model = mdh_layer.extract(g)
+    _warn_tool_on_axis(model, t)
+    space = ParameterSpace(model.joint_names)
+    free = np.ones(space.size, dtype=bool)
+    free[space.indices(fix)] = False  # unknown names raise ParameterError with the list
+    x = space.join(model.table, np.zeros(6), t)
+    # J^T J does not depend on where the measurement frame is: base at the identity
+    J = MeasurementModel(model, q).jacobian(x)[1] * (space.reporting_scale() / MM)
+    ident = analyze(J.reshape(-1, space.size), space.names, space.n_kinematic, free, RANK_TOL)
+    cols = space.indices(ident.kept)
+    p = cols.size
+    if p == 0:
+        raise DataError(f"the {M} candidates identify no parameter at all ({len(ident.free)} "
+                        "free): give candidates that move every joint")
+    need = math.ceil(p / 3)
+    if n < need:
+        raise OptionError(f"{n} poses give {3 * n} equations, but the candidates identify {p} "
+                          f"parameters ({len(ident.free)} free, {len(ident.dropped)} redundant): "
+                          f"at least {need} poses are needed (3 equations per pose), and many "
+                          "more for a good calibration")
+    Jk = J[:, :, cols]
+    scale = np.sqrt(np.einsum("kic,kic->c", Jk, Jk) / M)  # RMS per pose [mm per mm or deg]
+    Jn = np.ascontiguousarray(Jk / scale)
+
+    chosen, Minv, log_det, ridge = _greedy(Jn, n, keep)
+    greedy_log_det = log_det if not ridge else -np.inf
+    chosen, Minv, log_det, swaps, converged = _exchange(Jn, chosen, len(keep), Minv, log_det,
+                                                        int(max_swaps))
+    ld, cond, var = _set_figures(Jn, scale, np.array([chosen]))
+    if ridge:  # the criterion carried the ridge throughout: report the set's own figures
+        log_det = float(ld[0])
+
+    rng = np.random.default_rng(seed)
+    rest = np.setdiff1d(np.arange(M), keep)
+    draws = np.array([keep + rng.choice(rest, n - len(keep), replace=False).tolist()
+                      for _ in range(random_subsets)])
+    r_ld, r_cond, r_var = _set_figures(Jn, scale, draws)
+
+    mine = analyze(J[chosen].reshape(-1, space.size), space.names, space.n_kinematic, free,
+                   RANK_TOL)
+    lost = tuple(name for name in ident.kept if name not in mine.kept)
+    units = tuple("mm" if space.is_length[c] else "deg" for c in cols)
+    return PoseSelection(f"{robot.name} ({robot.base} -> {robot.tip})", tuple(g.joint_names), M, tuple(chosen), _readonly(q[chosen]),
+                         tuple(ident.kept), units, tuple(ident.dropped), tuple(ident.fixed), lost,
+                         _readonly(scale), float(log_det), float(greedy_log_det),
+                         float(cond[0]), _readonly(var[0]), swaps, converged,
+                         float(np.median(r_ld)), float(np.median(r_cond)),
+                         _readonly(np.median(r_var, axis=0)), int(random_subsets))
