@@ -68,14 +68,9 @@ from kincal.rotations import base_rotation, rotx, roty, rotz  # noqa: E402
 from kincal.selection import RANK_TOL, analyze  # noqa: E402
 from kincal.solver import SolverOptions, solve  # noqa: E402
 from kincal.statistics import ErrorStats  # noqa: E402
+from tiago_files import (DEFAULT_SHARED, HELD_OUT, ORDER_COLUMN, SUBDIR, TIP, TRAIN,  # noqa: E402
+                         URDF, locate)
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_SHARED = REPO.parent / "shared"
-SUBDIR = Path("data") / "tiago_mocap"
-URDF = "tiago_48_schunk.urdf"
-TRAIN = "qualisys_2021-11-30_static_postures.csv"
-HELD_OUT = "qualisys_2021-11-26_static_postures.csv"
-TIP = "wrist_ft_tool_link"
 MARKERS = tuple((f"x{i}", f"y{i}", f"z{i}") for i in range(1, 5))
 MARKER_WEIGHT = 1.0  # markers 2-4 relative to marker 1: equal weight on all four points
 FOLDS, CV_SEEDS = 5, (0, 1, 2)
@@ -148,7 +143,7 @@ def load_session(robot: Robot, path: Path) -> Session:
     markers = tuple(Measurements.from_csv(path, robot.joint_names, prismatic=prismatic,
                                           position_columns=c) for c in MARKERS)
     with open(path, newline="") as fh:
-        t = np.array([float(r["t_start_robot"]) for r in csv.DictReader(fh)])
+        t = np.array([float(r[ORDER_COLUMN]) for r in csv.DictReader(fh)])
     if np.any(np.diff(t) <= 0):
         sys.exit(f"{path}: rows are not in time order; approach directions need the sequence")
     q = markers[0].joint_values
@@ -745,7 +740,7 @@ def cli_demo(study: Study, shared: Path, model: Model) -> str:
         tmp = Path(tmp)
         common = ["--tip", TIP, "--position-columns", "x1", "y1", "z1"]
         if joints:
-            common += ["--order-column", "t_start_robot"]
+            common += ["--order-column", ORDER_COLUMN]
         cal = ["calibrate", str(study.paths["urdf"]), str(study.paths["train"]), *common,
                "--method", method, *(["--fix", *fix] if fix else []),
                *(["--backlash", *joints] if joints else []),
@@ -780,9 +775,9 @@ Backlash terms are a kincal option (CalibrationOptions.backlash, `--backlash JOI
 
 
 def find_shared(argv_shared: str | None) -> Path | None:
-    shared = Path(argv_shared) if argv_shared else DEFAULT_SHARED
-    needed = [shared / SUBDIR / f for f in (URDF, TRAIN, HELD_OUT)]
-    return shared if all(p.is_file() for p in needed) else None
+    """The shared folder holding the TIAGo files, or None if they are not all there."""
+    d, missing = locate(argv_shared)
+    return None if missing else d.parents[1]
 
 
 def main(argv=None) -> int:
