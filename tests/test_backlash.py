@@ -171,3 +171,14 @@ def test_evaluate_rejects_backlash_of_a_joint_not_in_the_chain(tmp_path, capsys)
     code = main(["evaluate", "ur10", str(csv), "--tip", "tool0", "--frames", str(frames)])
     err = capsys.readouterr().err
     assert code == 1 and "frames.json: no chain joint 'arm_6_joint' for a backlash term" in err
+
+
+def test_cli_analyze_lists_backlash_terms_and_the_tool_point(tmp_path, capsys):
+    rng, robot, model, q, truth = _ur10_with_backlash(n=40)
+    csv = tmp_path / "d.csv"
+    csv.write_text(measure(model, truth, q, 0.0, rng).to_csv_text())
+    assert main(["analyze", "ur10", str(csv), "--tip", "tool0", "--backlash", "wrist_2_joint"]) == 0
+    out = capsys.readouterr().out
+    assert "of 34 free parameters" in out  # 24 MD-H + 9 frames + 1 backlash
+    tool_mm = json.loads(out.split("tip frame): ")[1].split(" mm")[0])
+    assert np.allclose(tool_mm, truth.tool * 1e3, atol=5.0)  # not the backlash value

@@ -216,11 +216,11 @@ def cmd_analyze(args) -> int:
     robot = _robot(args)
     data = _measurements(args, robot)
     problem = CalibrationProblem(robot, data, CalibrationOptions(
-        fix=tuple(args.fix), tool_guess=_tool_offset(args)))
+        fix=tuple(args.fix), backlash=tuple(args.backlash), tool_guess=_tool_offset(args)))
     ident = problem.analyze()
     print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(data)} poses from {args.data}")
     print(ident.summary())
-    tool = problem.start()[-3:]
+    tool = problem.space.split(problem.start())[2]
     print(f"  tool point (first estimate, tip frame): {np.round(tool * 1e3, 3).tolist()} mm")
     if args.report:
         from .safe_write import write_all
@@ -371,6 +371,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("analyze", help="what the data can identify, without solving")
     _add_common(p)
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME")
+    p.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
+                   help="also analyse backlash terms of these joints (see calibrate)")
     p.add_argument("--report", help="write the identifiability report as JSON")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_analyze)
