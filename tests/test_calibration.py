@@ -137,3 +137,26 @@ def test_sigma_weights_down_a_noisy_sample():
     x_true = truth.x(plain.space)
     k = plain.space.index("joint_4.a")
     assert abs(weighted.x[k] - x_true[k]) < 0.1 * abs(plain.x[k] - x_true[k])
+
+
+def test_blas_runs_on_one_thread_while_solving_and_is_restored():
+    from threadpoolctl import threadpool_info
+
+    def blas_threads():
+        return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+    tool = np.array([0.02, 0.01, 0.1])
+    rng, robot, model, q = _setup("ec66", "flange", tool, 4, n=30)
+    data = measure(model, Truth(planted_table(model, rng), BASE, tool), q, 1e-5, rng)
+    before = blas_threads()
+    seen = []
+    res = calibrate(robot, data, method="l2", progress=lambda done, total: seen.append(blas_threads()))
+    assert seen and all(s == {1} for s in seen)
+    assert blas_threads() == before
+    seen.clear()
+    free = calibrate(robot, data, method="l2", blas_threads=None,
+                     progress=lambda done, total: seen.append(blas_threads()))
+    assert seen[0] == before
+    assert np.allclose(res.x, free.x, rtol=0, atol=1e-12)
+    with pytest.raises(OptionError, match="blas_threads"):
+        calibrate(robot, data, blas_threads=0)

@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import blas_threads
 from . import mdh as mdh_layer
 from .cross_validation import CrossValidation, cross_validate, lambda_grid
 from .errors import DataError, IdentifiabilityError, KincalWarning, OptionError
@@ -63,6 +64,8 @@ class CalibrationOptions:
     cv_step_tol: [mm or deg] step tolerance of the fold fits; a validation error needs
         far less precision than the final fit (which uses solver.step_tol).
     solver: stopping rules (paper: 1e-5 mm^2 over 5 iterations, 100 iterations).
+    blas_threads: BLAS threads while solving (1: faster on a busy machine, see
+        kincal.blas_threads); None leaves BLAS as it is.
     progress: callback(done, total) during the CV sweep, or None.
     """
 
@@ -86,6 +89,7 @@ class CalibrationOptions:
     warm_start: bool = True
     cv_step_tol: float = 1e-6
     solver: SolverOptions = SolverOptions()
+    blas_threads: int | None = 1
     progress: Callable | None = field(default=None, compare=False, repr=False)
 
     def validated(self) -> "CalibrationOptions":
@@ -108,6 +112,10 @@ class CalibrationOptions:
                               f"{', '.join(LOSSES)} (or none)")
         if self.robust_scale_mm is not None and not self.robust_scale_mm > 0:
             raise OptionError(f"robust_scale_mm must be > 0, got {self.robust_scale_mm}")
+        if self.blas_threads is not None and not (isinstance(self.blas_threads, int)
+                                                  and self.blas_threads >= 1):
+            raise OptionError(f"blas_threads must be an integer >= 1 or None, got "
+                              f"{self.blas_threads!r}")
         if self.backlash and self.method == "frames":
             raise OptionError("backlash terms need method l2 or ls; method frames fits only "
                               "the measurement frame and tool point")
@@ -374,6 +382,10 @@ class CalibrationProblem:
 
     # ------------------------------------------------------------------ solve
     def solve(self) -> "CalibrationResult":
+        with blas_threads.limited(self.options.blas_threads):
+            return self._solve()
+
+    def _solve(self) -> "CalibrationResult":
         o = self.options
         ident = self.analyze()
         general = self.structural()
