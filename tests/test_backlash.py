@@ -182,3 +182,18 @@ def test_cli_analyze_lists_backlash_terms_and_the_tool_point(tmp_path, capsys):
     assert "of 34 free parameters" in out  # 24 MD-H + 9 frames + 1 backlash
     tool_mm = json.loads(out.split("tip frame): ")[1].split(" mm")[0])
     assert np.allclose(tool_mm, truth.tool * 1e3, atol=5.0)  # not the backlash value
+
+
+def test_an_unused_time_column_is_pointed_out(tmp_path):
+    rng, robot, model, q, truth = _ur10_with_backlash(n=40)
+    lines = measure(model, truth, q, 0.0, rng).to_csv_text().splitlines()
+    csv = tmp_path / "d.csv"
+    csv.write_text("\n".join([lines[0] + ",timestamp"]
+                             + [f"{row},{k}" for k, row in enumerate(lines[1:])]) + "\n")
+    data = Measurements.from_csv(csv, robot.joint_names)
+    with pytest.warns(KincalWarning, match="'timestamp' that looks like a time stamp"):
+        calibrate(robot, data, method="ls", backlash=("wrist_2_joint",))
+    ordered = Measurements.from_csv(csv, robot.joint_names, order_column="timestamp")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", KincalWarning)
+        calibrate(robot, ordered, method="ls", backlash=("wrist_2_joint",))

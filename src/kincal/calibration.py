@@ -9,6 +9,7 @@ returns a :class:`CalibrationResult`. ``calibrate(...)`` does all three.
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from dataclasses import dataclass, field, replace
 from typing import Callable
@@ -206,8 +207,16 @@ class CalibrationProblem:
 
     # ------------------------------------------------------------------ start
     def _approach_warnings(self) -> list[str]:
-        """Backlash joints whose samples do not come from both directions."""
+        """Backlash joints whose samples do not come from both directions, and a time-like
+        column left unused while the directions come from the row order."""
         out = []
+        timelike = [c for c in self.data.ignored_columns
+                    if re.search(r"time|stamp|(^|_)t($|_)", c, re.IGNORECASE)]
+        if self.space.n_backlash and self.data.order_source.startswith("the order") and timelike:
+            out.append(f"backlash: the approach directions come from {self.data.order_source}; "
+                       f"the file has a column {timelike[0]!r} that looks like a time stamp: if "
+                       f"the rows are not in acquisition order, give it as the order column "
+                       f"(--order-column {timelike[0]})")
         for j, i in zip(self.space.backlash, self.space.backlash_joint_index):
             g = self.data.approach[:, i]
             up, down = int(np.sum(g > 0)), int(np.sum(g < 0))
