@@ -301,3 +301,28 @@ def test_d_optimal_poses_calibrate_better_than_random_ones(ec66):
     assert np.mean(d_opt) < np.mean(rand)
     assert all(a < b for a, b in zip(se_d, se_r))
     assert math.isfinite(np.mean(d_opt)) and np.mean(d_opt) < 1e-4  # [m], 0.1 mm
+
+
+def test_cli_plan_complements_poses_already_measured(tmp_path, capsys):
+    ec66 = Robot.load("ec66", tip="flange")
+    rng = np.random.default_rng(11)
+    measured = random_candidates(ec66, 12, rng)
+    header = ",".join(ec66.joint_names)
+    done = tmp_path / "measured.csv"  # as a measurement file: extra x, y, z columns
+    done.write_text(header + ",x,y,z\n" + "\n".join(
+        ",".join(repr(float(v)) for v in row) + ",0,0,0" for row in measured) + "\n")
+    cands = random_candidates(ec66, 300, rng)
+    src = tmp_path / "candidates.csv"
+    src.write_text(header + "\n" + "\n".join(",".join(repr(float(v)) for v in row)
+                                             for row in cands) + "\n")
+    out = tmp_path / "new.csv"
+    assert main(["plan", "ec66", str(src), "--measured", str(done), "--poses", "10",
+                 "--tool-offset", "0.03", "0.02", "0.12", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "plus the 12 poses already measured" in text and "10 new" in text
+    table = np.array([[float(v) for v in line.split(",")] for line in out.read_text().splitlines()[1:]])
+    expected = select_poses(ec66, np.vstack([measured, cands]), 22, tool=TOOL, keep=range(12))
+    assert list(expected.indices[:12]) == list(range(12))
+    new = [i - 12 for i in expected.indices[12:]]
+    np.testing.assert_allclose(table[:, :6], cands[new], rtol=0, atol=1e-12)
+    assert table[:, 6].tolist() == [i + 2 for i in new]

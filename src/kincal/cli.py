@@ -293,18 +293,26 @@ def cmd_plan(args) -> int:
     else:
         q, lines = random_candidates(robot, args.random, args.seed), None
         source = f"{len(q)} random candidates within the joint limits (seed {args.seed})"
+    measured = np.zeros((0, q.shape[1]))
+    if args.measured is not None:  # poses already measured: kept, and only new ones written
+        measured, _ = read_candidates(args.measured, robot, args.length_unit, args.angle_unit)
+        source += f", plus the {len(measured)} poses already measured in {args.measured}"
+    k = len(measured)
     tool = _tool_offset(args)
-    selection = select_poses(robot, q, args.poses, tool=(0.0, 0.0, 0.0) if tool is None else tool,
-                             fix=tuple(args.fix))
-    protect = [robot.source] + ([args.candidates] if args.candidates is not None else [])
-    chosen_lines = None if lines is None else lines[list(selection.indices)]
-    written = write_all([(args.out, candidates_csv_text(selection.joint_names,
-                                                         selection.joint_values, chosen_lines))],
-                        overwrite=args.overwrite, protect=protect)
+    selection = select_poses(robot, np.vstack([measured, q]), k + args.poses,
+                             tool=(0.0, 0.0, 0.0) if tool is None else tool,
+                             fix=tuple(args.fix), keep=tuple(range(k)))
+    new = [i - k for i in selection.indices if i >= k]
+    protect = [robot.source] + [f for f in (args.candidates, args.measured) if f is not None]
+    written = write_all([(args.out, candidates_csv_text(
+        selection.joint_names, q[new], None if lines is None else lines[new]))],
+        overwrite=args.overwrite, protect=protect)
     print(f"{source}:")
     print(selection.summary(args.noise_mm))
+    if k:
+        print(f"  (the selection includes the {k} poses already measured; {len(new)} new)")
     for path in written:
-        print(f"  wrote {path} ({len(selection.indices)} poses, joint values in rad and m)")
+        print(f"  wrote {path} ({len(new)} new poses, joint values in rad and m)")
     return 0
 
 
@@ -414,6 +422,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="instead of a CSV: M random candidates uniform within the joint limits")
     p.add_argument("--seed", type=int, default=0, help="seed of --random")
     p.add_argument("--poses", type=int, required=True, metavar="N", help="poses to choose")
+    p.add_argument("--measured", metavar="DATA.csv",
+                   help="poses already measured (joint columns; other columns ignored): the "
+                        "N new poses are chosen to complement them")
     p.add_argument("--out", required=True,
                    help="CSV of the chosen poses: chain joint columns in SI units (rad, m) "
                         "whatever the input units, in the order chosen, and with a CSV of "
