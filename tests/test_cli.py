@@ -184,3 +184,13 @@ def test_demo_writes_tables_and_plots_whose_numbers_hold(tmp_path, capsys):
                  "parameter_deviations.png"):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "Table 2" in (out / "tables.md").read_text()
+
+
+@pytest.mark.parametrize("robot", ["ec66", "panda", "ur3", "ur5", "ur10"])
+def test_simulate_works_out_of_the_box_for_every_robot_with_a_default_cube(robot, tmp_path):
+    """The default cube of each known arm is reachable (the UR3's is smaller)."""
+    for seed in (0, 1):
+        out = tmp_path / f"{robot}-{seed}.csv"
+        assert main(["simulate", robot, "--poses", "30", "--seed", str(seed), "--out", str(out)]) == 0
+    assert main(["calibrate", robot, str(out), "--method", "ls", "--out", str(tmp_path / "c.urdf"),
+                 "--quiet"]) == 0

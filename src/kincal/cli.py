@@ -238,7 +238,6 @@ def cmd_simulate(args) -> int:
     model = mdh.extract(robot.geometry)
     rng = np.random.default_rng(args.seed)
     design = {"tracker": (0.4, 30.0), "rtest": (0.02, 15.0)}[args.design]
-    size = args.size_mm * 1e-3 if args.size_mm is not None else design[0]
     tilt = args.tilt_deg if args.tilt_deg is not None else design[1]
     tool = np.array(args.tool_m)
     center = args.center_m
@@ -246,6 +245,12 @@ def cmd_simulate(args) -> int:
         from .descriptions import default_center
 
         center = default_center(robot.name)
+    if args.size_mm is not None:
+        size = args.size_mm * 1e-3
+    else:
+        from .descriptions import max_cube
+
+        size = max_cube(robot.name, design[0])
     q = simulation.cube_poses(robot, args.poses, center, size, tool, rng,
                               max_tilt=math.radians(tilt))
     # the robot's errors have their own seed, so data sets with different pose seeds
@@ -393,7 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poses", type=int, default=60)
     p.add_argument("--center-m", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="cube centre in the base frame [m]")
-    p.add_argument("--size-mm", type=float, help="cube edge [mm]")
+    p.add_argument("--size-mm", type=float, help="cube edge [mm] (default: 400 for tracker, "
+                   "200 for the small UR3; 20 for rtest)")
     p.add_argument("--tilt-deg", type=float, help="largest tilt of the tool from pointing down")
     p.add_argument("--tool-m", nargs=3, type=float, default=(0.0, 0.0, 0.12),
                    metavar=("X", "Y", "Z"), help="true tool point in the tip frame [m]")

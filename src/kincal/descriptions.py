@@ -46,9 +46,12 @@ _ERD = {
 _BUNDLED = {"ec66": ("ec66.urdf", "flange")}
 
 # centre [m] of a measurement cube in each arm's base frame that the arm reaches with
-# the tool pointing down (used by 'kincal simulate' when no --center-m is given)
+# the tool pointing down (used by 'kincal simulate' when no --center-m is given), and the
+# largest tracker-like cube edge [m] where the usual 400 mm is too much for a small arm
+# (each checked with seeds 0-9 of 'kincal simulate ROBOT')
 _CENTERS = {"ec66": (0.4, 0.0, 0.25), "ur3": (0.25, 0.05, 0.2), "ur5": (0.4, 0.1, 0.3),
-            "ur10": (0.6, 0.2, 0.4), "panda": (0.5, 0.0, 0.4)}
+            "ur10": (0.6, 0.2, 0.4), "panda": (0.45, 0.0, 0.3)}
+_MAX_CUBE = {"ur3": 0.2}
 
 
 def erd_robots_dir() -> Path | None:
@@ -103,3 +106,8 @@ def default_center(name: str) -> tuple[float, float, float]:
         raise OptionError(f"no default cube centre for robot {name!r}; give --center-m X Y Z "
                           f"(metres, base frame). Known: {listing(sorted(_CENTERS))}")
     return _CENTERS[name]
+
+
+def max_cube(name: str, size: float) -> float:
+    """``size`` [m], or less for a small arm that cannot reach a cube that large."""
+    return min(size, _MAX_CUBE.get(name, size))

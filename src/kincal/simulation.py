@@ -108,6 +108,8 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
         near = solved_q[int(np.argmin(np.linalg.norm(np.array(solved_pts) - p, axis=1)))]
         for attempt in range(attempts):
             start = near if attempt == 0 else home if attempt == 1 else rng.uniform(lo, hi)
+            if attempt >= 2 and attempt % 2 == 0 and max_tilt is not None:
+                R = random_rotation_near(R0, max_tilt, rng)  # that orientation may be out of reach
             q, ok = robot.inverse_kinematics(p, tool, R, start=start, max_iterations=60)
             if ok:
                 out[k] = q
