@@ -99,7 +99,7 @@ def test_plot_calibration_of_one_result(tmp_path):
                   np.array([0.03, 0.0, 0.1]))
     data = measure(model, truth, q, 5e-5, rng)
     res = CalibrationProblem(robot, data, CalibrationOptions(n_lambdas=6, folds=3)).solve()
-    paths = plots.plot_calibration(res, tmp_path, data=data)
+    paths = plots.plot_calibration(res, tmp_path)
     assert [p.name for p in paths] == ["cv_curve.png", "residuals.png", "parameters.png"]
     for p in paths:
         assert min(png_size(p)) >= 400 and p.stat().st_size > 10_000

@@ -22,14 +22,14 @@ from .cross_validation import CrossValidation, cross_validate, lambda_grid
 from .errors import DataError, IdentifiabilityError, KincalWarning, OptionError
 from .data_checks import (angle_unit_warnings, distinct_poses, length_unit_warnings,
                           limit_warnings)
-from .frames_init import initial_frames
+from .frames_init import initial_frames, point_in_tip
 from .robust import LOSSES, ROBUST_SCALE, Downweighted, weights as robust_weights
 from .measurement_model import MeasurementModel
 from .measurements import Measurements
 from .backlash import CONVENTION as BACKLASH_CONVENTION
 from .parameters import BASE, DEG, MM, TOOL, ParameterSpace
 from .robot import Robot
-from .rotations import base_angles
+from .rotations import base_angles, base_rotation
 from .selection import RANK_TOL, Identifiability, analyze
 from .solver import SolverOptions, SolveSummary, solve
 from .statistics import ErrorStats
@@ -158,9 +158,10 @@ class CalibrationProblem:
         self.data = data.for_chain(robot.joint_names)
         self.mdh = mdh_layer.extract(robot.geometry)
         self.space = ParameterSpace.of_chain(self.mdh.joint_names, self.mdh.kinds,
-                                             self.options.backlash)
+                                             self.options.backlash, self.data.n_points)
         self.model = MeasurementModel(self.mdh, self.data.joint_values, self.data.approach,
-                                      self.space.backlash)
+                                      self.space.backlash, self.data.points,
+                                      self.space.n_points)
         o = self.options
         self.scale = np.where(self.space.is_length, o.length_scale, o.angle_scale)
         if self.data.sigma is None:
@@ -229,25 +230,31 @@ class CalibrationProblem:
 
     @property
     def x_nominal(self) -> np.ndarray:
-        return self.space.join(self.mdh.table, np.zeros(6), np.zeros(3))
+        return self.space.join(self.mdh.table, np.zeros(6), np.zeros((self.space.n_points, 3)))
 
     def start(self) -> np.ndarray:
-        """Nominal kinematics with the measurement frame and tool point fitted to the data."""
+        """Nominal kinematics with the measurement frame and tool point(s) fitted to the data.
+
+        tool_guess is for point 1; further points follow from a linear solve."""
         if self._x_start is not None:
             return self._x_start
         o = self.options
         R_tip, p_tip = self.model.tip_poses(self.mdh.table)
+        P, first = self.data.positions, self.data.points == 0
         guess = np.zeros(3) if o.tool_guess is None else np.asarray(o.tool_guess, float)
-        for message in length_unit_warnings(self.data.positions, p_tip + R_tip @ guess,
+        for message in length_unit_warnings(P[first], p_tip[first] + R_tip[first] @ guess,
                                             self.data.length_unit):
             warnings.warn(f"{self.data.source}: {message}", KincalWarning)
-        Rb, tb, tool, _, _ = initial_frames(R_tip, p_tip, self.data.positions, o.tool_guess)
+        Rb, tb, tool, _, _ = initial_frames(R_tip[first], p_tip[first], P[first], o.tool_guess)
         base = np.concatenate([tb, base_angles(Rb)])
         if o.base_guess is not None:
             base = np.asarray(o.base_guess, dtype=float)
+            Rb, tb = base_rotation(*base[3:]), base[:3]
             if o.tool_guess is not None:
                 tool = np.asarray(o.tool_guess, dtype=float)
-        x = self.space.join(self.mdh.table, base, tool)
+        tools = [tool] + [point_in_tip(R_tip[m], p_tip[m], P[m], Rb, tb)
+                          for m in (self.data.points == k for k in range(1, self.space.n_points))]
+        x = self.space.join(self.mdh.table, base, np.array(tools))
         free = self.space.is_frame
         sol = solve(self.residual_function(kinematic=False), x / self.scale, free,
                     options=o.solver)
@@ -266,7 +273,8 @@ class CalibrationProblem:
         # reporting units: mm per mm or per degree, whatever the penalty scale
         J = J * (self.space.reporting_scale() / self.scale)
         ident = analyze(J, self.space.names, self.space.n_kinematic, free, o.rank_tol)
-        frames_lost = [n for n in ident.dropped if n.startswith(("base.", "tool."))]
+        frame_names = set(np.array(self.space.names)[self.space.is_frame])
+        frames_lost = [n for n in ident.dropped if n in frame_names]
         if frames_lost:
             why = "; ".join(d.describe() for d in ident.duplicates if d.name in frames_lost)
             distinct = distinct_poses(self.data.joint_values)
@@ -279,10 +287,11 @@ class CalibrationProblem:
         general = self.structural()
         lost = [n for n in general.kept if n not in ident.kept]
         if lost:
-            need = math.ceil(len(general.kept) / 3)
+            need = math.ceil(len(general.kept) / (3 * self.space.n_points))
             ident = replace(ident, notes=ident.notes + (
                 f"{len(lost)} parameters this chain can identify are not identifiable from "
-                f"these {len(self.data)} poses ({distinct_poses(self.data.joint_values)} "
+                f"these {len(np.unique(self.data.poses))} poses "
+                f"({distinct_poses(self.data.joint_values)} "
                 f"distinct): {', '.join(lost)}; the {len(general.kept)} identifiable "
                 f"parameters need at least {need} poses, and many more spread over the "
                 "workspace for a good result",))
@@ -305,9 +314,12 @@ class CalibrationProblem:
         lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
         hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
         rng = np.random.default_rng(0)
-        q = rng.uniform(lo, hi, size=(2 * self.space.size, g.n))
-        approach = rng.choice([-1.0, 1.0], size=q.shape)
-        pred, J = MeasurementModel(self.mdh, q, approach, self.space.backlash).jacobian(self.start())
+        K = self.space.n_points
+        q = np.repeat(rng.uniform(lo, hi, size=(2 * self.space.size, g.n)), K, axis=0)
+        approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * self.space.size, g.n)), K, axis=0)
+        points = np.tile(np.arange(K), 2 * self.space.size)
+        pred, J = MeasurementModel(self.mdh, q, approach, self.space.backlash, points,
+                                   K).jacobian(self.start())
         J = J.reshape(-1, self.space.size) * self.space.reporting_scale() / MM
         free = (np.ones(self.space.size, dtype=bool) if self.options.method != "frames"
                 else self.space.is_frame)
@@ -319,12 +331,14 @@ class CalibrationProblem:
     TOOL_AXIS_WARNING = 5e-3  # [m] tool point this close to the last joint axis: warn
 
     def _tool_axis_note(self) -> str:
-        """A warning when the tool point sits near the axis of the last (revolute) joint."""
-        dist = self.mdh.last_axis_distance(self.space.split(self.start())[2])
-        if dist is None or dist >= self.TOOL_AXIS_WARNING:
+        """A warning when every tool point sits near the axis of the last (revolute) joint."""
+        dists = [self.mdh.last_axis_distance(t) for t in self.space.tools(self.start())]
+        if dists[0] is None or max(dists) >= self.TOOL_AXIS_WARNING:
             return ""
+        dist = max(dists)
         last = self.mdh.joint_names[-1]
-        return (f"the tool point is {dist * 1e3:.2f} mm from the axis of {last}: turning about "
+        which = "tool point is" if len(dists) == 1 else f"{len(dists)} measured points are all"
+        return (f"the {which} {dist * 1e3:.2f} mm from the axis of {last}: turning about "
                 f"that axis barely moves it, so {last}.theta and the tilt of that axis "
                 f"({last}.alpha) are weak or redundant; an offset tool point (>= 20 mm off the "
                 "axis) makes them identifiable")
@@ -387,7 +401,7 @@ class CalibrationProblem:
             return float(np.mean(np.linalg.norm(e, axis=1)) / MM)
 
         return cross_validate(fit, error, len(self.data), grid, o.folds, o.seed,
-                              o.warm_start, o.progress)
+                              o.warm_start, o.progress, groups=self.data.poses)
 
     # ------------------------------------------------------------------ solve
     def solve(self) -> "CalibrationResult":
@@ -504,6 +518,7 @@ class CalibrationResult:
     downweighted: tuple[Downweighted, ...] = ()  # samples a robust loss trusted less
     residuals_before: np.ndarray | None = None  # (N, 3) with the start parameters [m]
     order_source: str = ""  # how the samples' acquisition order was known (backlash terms)
+    points: np.ndarray | None = None  # (N,) the measured point of each sample (0 = point 1)
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
@@ -529,7 +544,7 @@ class CalibrationResult:
                    x, float(lam), cv, ErrorStats.from_errors(res_before),
                    ErrorStats.from_errors(res), res, sol, ident, problem.mdh,
                    np.asarray(problem.data.rows), residuals_before=res_before,
-                   order_source=problem.data.order_source)
+                   order_source=problem.data.order_source, points=problem.data.points)
 
     # ------------------------------------------------------------ accessors
     @property
@@ -546,8 +561,13 @@ class CalibrationResult:
 
     @property
     def tool(self) -> np.ndarray:
-        """(3,) tool point in the tip frame [m]."""
+        """(3,) tool point (point 1) in the tip frame [m]."""
         return self.space.split(self.x)[2].copy()
+
+    @property
+    def tools(self) -> np.ndarray:
+        """(K, 3) every measured point in the tip frame [m]."""
+        return self.space.tools(self.x).copy()
 
     @property
     def backlash(self) -> dict[str, float]:
@@ -565,20 +585,32 @@ class CalibrationResult:
                "convention": "P_measured = R_base (p_tip + R_tip t_tool) + t_base, "
                              "R_base = rotx(rx) roty(ry) rotz(rz); metres and radians",
                "base_frame": self.robot.base, "tip_frame": self.robot.tip}
+        if self.space.n_points > 1:
+            out["tool_points"] = [dict(zip(("x", "y", "z"), map(float, t))) for t in self.tools]
         if self.space.n_backlash:
             out["backlash"] = self.backlash
             out["backlash_convention"] = BACKLASH_CONVENTION
         return out
 
-    def predict(self, joint_values: np.ndarray, approach: np.ndarray | None = None) -> np.ndarray:
-        """(N, 3) predicted tool-point positions in the measurement frame [m].
+    def predict(self, joint_values: np.ndarray, approach: np.ndarray | None = None,
+                points=0) -> np.ndarray:
+        """(N, 3) predicted positions in the measurement frame [m] of measured points.
 
         approach: (N, n) approach directions for the backlash terms (e.g. the
         ``approach`` of a Measurements); None: every joint in the middle of its play.
+        points: which measured point (0 = point 1), one for all or (N,) per row.
         """
         q = np.atleast_2d(joint_values)
         g = np.zeros(q.shape) if approach is None else np.atleast_2d(approach)
-        return MeasurementModel(self.mdh, q, g, self.space.backlash).predict(self.x)
+        idx = np.broadcast_to(np.asarray(points, dtype=int), (len(q),))
+        return MeasurementModel(self.mdh, q, g, self.space.backlash, idx,
+                                self.space.n_points).predict(self.x)
+
+    def predict_data(self, data: Measurements) -> np.ndarray:
+        """(N, 3) predictions for the samples of ``data``: its poses, approach directions
+        and measured points [m]."""
+        data = data.for_chain(self.robot.joint_names)
+        return self.predict(data.joint_values, data.approach, data.points)
 
     def corrected_urdf_text(self, readable: bool = True) -> str:
         """The corrected URDF; see :mod:`kincal.readable_export` for ``readable``."""
@@ -591,9 +623,10 @@ class CalibrationResult:
         return corrected_text(self.robot, self.corrected, readable, source=str(self.robot.source))
 
     def urdf_with_frames(self, text: str) -> str:
-        """``text`` plus two fixed frames: ``kincal_measurement_frame`` (child of the base
-        link, the pose of the measurement frame M in the base frame) and
-        ``kincal_tool_point`` (child of the tip link, at the tool point)."""
+        """``text`` plus fixed frames: ``kincal_measurement_frame`` (child of the base link,
+        the pose of the measurement frame M in the base frame) and ``kincal_tool_point``
+        (child of the tip link, at the tool point; ``kincal_tool_point_<k>`` for point k >= 2
+        when several are measured)."""
         from .rotations import base_rotation, inverse, transform
         from .urdf_export import add_fixed_frame
 
@@ -603,8 +636,10 @@ class CalibrationResult:
         T_MB = transform(base_rotation(*b[3:]), b[:3])  # base frame expressed in M
         text = add_fixed_frame(text, base_link, "kincal_measurement_frame",
                                "kincal_measurement_frame_joint", T_bl @ inverse(T_MB))
-        return add_fixed_frame(text, tip_link, "kincal_tool_point", "kincal_tool_point_joint",
-                               T_tl @ transform(None, self.tool))
+        for k, t in enumerate(self.tools, start=1):
+            name = "kincal_tool_point" + ("" if k == 1 else f"_{k}")
+            text = add_fixed_frame(text, tip_link, name, name + "_joint", T_tl @ transform(None, t))
+        return text
 
     def export_urdf(self, path, overwrite: bool = False):
         """Write the corrected URDF (only chain joint origins differ from the input)."""
@@ -619,6 +654,8 @@ class CalibrationResult:
                  f"method {self.options.method}, lambda = {self.lam:.4g}"
                  + (" (chosen by cross-validation)" if self.cv is not None else ""),
                  f"  {self.identifiability.summary().splitlines()[0]}",
+                 *([f"  {self.space.n_points} measured points per pose: statistics are over "
+                    "every point"] if self.space.n_points > 1 else []),
                  f"  before: {self.before.line()}",
                  f"  after:  {self.after.line()}",
                  f"  solver: {self.solve.iterations} iterations, {self.solve.reason}"
@@ -638,10 +675,10 @@ class CalibrationResult:
             return 0.0 if abs(v) < 5e-6 else v
 
         frames = []
-        for p in self.parameters:
+        for p, is_frame in zip(self.parameters, self.space.is_frame):
             nom, dev, se, unit = p.reported()
             flag = "" if p.status == "identified" else f"  ({p.status})"
-            if p.name.startswith(("base.", "tool.")):
+            if is_frame:
                 frames.append(f"  {p.name:<24} {z(nom + dev):>14.4f} {z(se):>10.5f}  {unit}{flag}")
             elif p.status != "dropped":
                 lines.append(f"  {p.name:<24} {z(nom):>10.4f} {z(dev):>+13.5f} {z(se):>10.5f}  "

@@ -63,23 +63,25 @@ def _tool_offset(args):
 
 
 def _read_frames(path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
-    """(base (6,), tool (3,), backlash {joint: value}) in SI from a FRAMES.json file."""
+    """(base (6,), tool points (K, 3), backlash {joint: value}) in SI from FRAMES.json."""
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"frames file not found: {path}")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
         base = [float(data["base"][k]) for k in ("x", "y", "z", "rx", "ry", "rz")]
-        tool = [float(data["tool"][k]) for k in ("x", "y", "z")]
+        tools = [[float(t[k]) for k in ("x", "y", "z")]
+                 for t in data.get("tool_points", [data["tool"]])]
         backlash = {str(j): float(v) for j, v in data.get("backlash", {}).items()}
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise DataError(f"{path}: not a kincal frames file ({exc.__class__.__name__}: {exc}); "
                         'expected {"base": {"x","y","z","rx","ry","rz"}, "tool": {"x","y","z"}} '
-                        'and optionally "backlash": {joint: value}, in metres and '
-                        "radians") from None
-    if not all(math.isfinite(v) for v in base + tool + list(backlash.values())):
-        raise DataError(f"{path}: frames contain a non-finite number")
-    return np.array(base), np.array(tool), backlash
+                        'and optionally "tool_points": [{"x","y","z"}, ...] and "backlash": '
+                        "{joint: value}, in metres and radians") from None
+    values = base + [v for t in tools for v in t] + list(backlash.values())
+    if not tools or not all(math.isfinite(v) for v in values):
+        raise DataError(f"{path}: frames contain a non-finite number or no tool point")
+    return np.array(base), np.array(tools), backlash
 
 
 def _add_common(p, data=True):
@@ -93,8 +95,9 @@ def _add_common(p, data=True):
                        help="unit of positions and prismatic joints in DATA (default m)")
         p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad",
                        help="unit of revolute joints in DATA (default rad)")
-        p.add_argument("--position-columns", nargs=3, default=("x", "y", "z"),
-                       metavar=("X", "Y", "Z"), help="names of the position columns")
+        p.add_argument("--position-columns", nargs="+", default=("x", "y", "z"),
+                       metavar="COL", help="names of the position columns: X Y Z, or "
+                       "X1 Y1 Z1 X2 Y2 Z2 ... for several points measured at each pose")
         p.add_argument("--order-column", metavar="COL",
                        help="column giving the acquisition order (e.g. a time stamp), for the "
                             "approach directions of backlash terms; default: the row order")
@@ -181,13 +184,17 @@ def cmd_evaluate(args) -> int:
     problem = CalibrationProblem(robot, data, CalibrationOptions(method="frames",
                                                                  tool_guess=_tool_offset(args)))
     if args.frames:
-        base, tool, backlash = _read_frames(args.frames)
+        base, tools, backlash = _read_frames(args.frames)
         data = data.for_chain(robot.joint_names)
+        if data.n_points > len(tools):
+            raise DataError(f"{args.data} has {data.n_points} measured points per pose, "
+                            f"{args.frames} has {len(tools)} tool point(s)")
         try:
-            model = MeasurementModel(problem.mdh, data.joint_values, data.approach, backlash)
+            model = MeasurementModel(problem.mdh, data.joint_values, data.approach, backlash,
+                                     data.points, len(tools))
         except KincalError as exc:
             raise DataError(f"{args.frames}: {exc}") from None
-        x = model.space.join(problem.mdh.table, base, tool,
+        x = model.space.join(problem.mdh.table, base, tools,
                              [backlash[j] for j in model.space.backlash])
         stats = ErrorStats.from_errors(data.positions - model.predict(x))
         how = f"frames from {args.frames}"
@@ -220,8 +227,9 @@ def cmd_analyze(args) -> int:
     ident = problem.analyze()
     print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(data)} poses from {args.data}")
     print(ident.summary())
-    tool = problem.space.split(problem.start())[2]
-    print(f"  tool point (first estimate, tip frame): {np.round(tool * 1e3, 3).tolist()} mm")
+    for k, tool in enumerate(problem.space.tools(problem.start()), start=1):
+        which = "tool point" if problem.space.n_points == 1 else f"measured point {k}"
+        print(f"  {which} (first estimate, tip frame): {np.round(tool * 1e3, 3).tolist()} mm")
     if args.report:
         from .safe_write import write_all
 

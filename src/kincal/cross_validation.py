@@ -1,6 +1,7 @@
 """k-fold cross-validation of the L2 weight lambda (Algorithm 1 of the paper).
 
-Plain numpy. The samples are split into k folds by a seeded permutation; for each
+Plain numpy. The poses are split into k folds by a seeded permutation (the samples of one
+pose, several measured points, always stay together); for each
 candidate lambda and fold, the parameters are fitted on the other folds and the mean
 Euclidean position error on the held-out fold is recorded. The lambda with the lowest
 mean over folds wins.
@@ -49,18 +50,24 @@ def lambda_grid(lo: float = 1e-6, hi: float = 1e3, count: int = 50) -> np.ndarra
     return np.logspace(np.log10(lo), np.log10(hi), int(count))
 
 
-def make_folds(n_samples: int, k: int, seed: int) -> tuple[np.ndarray, ...]:
-    """k folds of a seeded permutation of range(n_samples) (sorted within each fold)."""
-    if not 2 <= k <= n_samples:
+def make_folds(n_samples: int, k: int, seed: int, groups=None) -> tuple[np.ndarray, ...]:
+    """k folds of a seeded permutation of range(n_samples) (sorted within each fold).
+
+    groups: (n_samples,) pose of each sample; the poses are permuted and split, so a pose's
+    samples share a fold. None: every sample its own pose.
+    """
+    groups = np.arange(n_samples) if groups is None else np.asarray(groups)
+    poses, inverse = np.unique(groups, return_inverse=True)
+    if not 2 <= k <= len(poses):
         raise OptionError(f"cross-validation needs 2 <= folds <= number of poses "
-                          f"({n_samples}), got folds={k}")
-    perm = np.random.default_rng(seed).permutation(n_samples)
-    return tuple(np.sort(f) for f in np.array_split(perm, k))
+                          f"({len(poses)}), got folds={k}")
+    perm = np.random.default_rng(seed).permutation(len(poses))
+    return tuple(np.flatnonzero(np.isin(inverse, f)) for f in np.array_split(perm, k))
 
 
 def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.ndarray,
                    k: int = 5, seed: int = 0, warm_start: bool = True,
-                   progress: Callable | None = None) -> CrossValidation:
+                   progress: Callable | None = None, groups=None) -> CrossValidation:
     """Run the CV sweep.
 
     fit(train_index, lam, start) -> solution: fit on the training samples, from ``start``
@@ -69,9 +76,10 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
     warm_start: solve each fold's lambdas from the largest down, each starting from the
         previous solution (same minimiser, far fewer iterations); False starts every fit
         from the nominal parameters, as the paper writes it.
+    groups: (n_samples,) pose of each sample (see make_folds).
     """
     lambdas = np.asarray(lambdas, dtype=float)
-    folds = make_folds(n_samples, k, seed)
+    folds = make_folds(n_samples, k, seed, groups)
     errors = np.empty((lambdas.size, k))
     order = np.argsort(-lambdas)
     total, done = lambdas.size * k, 0

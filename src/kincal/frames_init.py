@@ -10,7 +10,8 @@ tried and the better kept, so no user guess is needed:
 
 From each start, rigid registration (Kabsch) of the predicted points gives (R_b, t_b);
 with R_b fixed, (t, t_b) follow from a linear least-squares solve; a few rounds of the
-two settle the guess. The caller then refines base and tool by Gauss-Newton.
+two settle the guess. Further measured points on the tool then follow, each by a linear
+solve with that frame (:func:`point_in_tip`). The caller refines all by Gauss-Newton.
 """
 
 from __future__ import annotations
@@ -61,3 +62,11 @@ def initial_frames(R_tip, p_tip, P, tool_guess=None):
         if best is None or rms < best[3]:
             best = (Rb, tb, t, rms, name)
     return best
+
+
+def point_in_tip(R_tip, p_tip, P, Rb, tb) -> np.ndarray:
+    """(3,) the tool point t that best gives P_k = R_b (p_k + R_k t) + t_b, frame known."""
+    A = np.asarray(R_tip).reshape(-1, 3)
+    b = ((np.asarray(P) - tb) @ Rb - p_tip).reshape(-1)
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    return sol

@@ -13,6 +13,9 @@ turns it about axis i, d_i slides it along axis i. No finite differences.
 Backlash terms (:mod:`kincal.backlash`) move joint i to q_i + b_i g_i, with g the
 approach directions of the poses: their column is the joint's own motion (the turn about,
 or slide along, its true axis line) times g.
+
+With several measured points per pose (K tool points), each sample names its point; the
+sample sees its own t_tool, and only that point's tool columns are non-zero.
 """
 
 from __future__ import annotations
@@ -60,19 +63,29 @@ def _mdh4(a, alpha, d, theta) -> np.ndarray:
 class MeasurementModel:
     """Forward model and Jacobian of one MD-H chain over a fixed set of poses.
 
-    mdh: the chain. joint_values: (N, n) [rad or m]. backlash: chain joints with a
-    backlash term; approach: (N, n) approach directions of the poses (needed with
-    backlash terms). The joint motions are computed once here, so evaluating many
-    parameter vectors on the same poses is cheap.
+    mdh: the chain. joint_values: (N, n) [rad or m], one row per sample. backlash: chain
+    joints with a backlash term; approach: (N, n) approach directions of the samples
+    (needed with backlash terms). points: (N,) index of the measured point of each sample
+    (default all 0) among n_points (default: as many as the indices name). The joint
+    motions are computed once here, so evaluating many parameter vectors on the same
+    poses is cheap.
     """
 
     def __init__(self, mdh: MdhModel, joint_values: np.ndarray, approach: np.ndarray | None = None,
-                 backlash=()):
+                 backlash=(), points: np.ndarray | None = None, n_points: int | None = None):
         self.mdh = mdh
-        self.space = ParameterSpace.of_chain(mdh.joint_names, mdh.kinds, backlash)
         q = np.asarray(joint_values, dtype=float)
         if q.ndim != 2 or q.shape[1] != mdh.n:
             raise ValueError(f"joint_values must be (N, {mdh.n}), got {q.shape}")
+        self.points = (np.zeros(len(q), dtype=int) if points is None
+                       else np.asarray(points, dtype=int))
+        if self.points.shape != (len(q),) or (len(q) and self.points.min() < 0):
+            raise ValueError(f"points must be ({len(q)},) indices >= 0")
+        if n_points is None:
+            n_points = int(self.points.max()) + 1 if len(q) else 1
+        self.space = ParameterSpace.of_chain(mdh.joint_names, mdh.kinds, backlash, n_points)
+        if len(q) and self.points.max() >= n_points:
+            raise ValueError(f"a point index is >= n_points = {n_points}")
         if self.space.n_backlash and (approach is None or np.shape(approach) != q.shape):
             raise ValueError(f"backlash terms need approach directions of shape {q.shape}")
         self.q = q
@@ -101,7 +114,11 @@ class MeasurementModel:
     def subset(self, rows) -> "MeasurementModel":
         return MeasurementModel(self.mdh, self.q[rows],
                                 None if self.approach is None else self.approach[rows],
-                                self.space.backlash)
+                                self.space.backlash, self.points[rows], self.space.n_points)
+
+    def _tool_points(self, x: np.ndarray) -> np.ndarray:
+        """(N, 3) each sample's measured point in the tip frame."""
+        return self.space.tools(x)[self.points]
 
     def tip_poses(self, table: np.ndarray, backlash: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -126,9 +143,9 @@ class MeasurementModel:
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """(N, 3) predicted tool-point positions in the measurement frame [m]."""
-        table, base, tool = self.space.split(x)
+        table, base, _ = self.space.split(x)
         R_tip, p_tip, _ = self._chain(table, self.space.backlash_values(x), keep=False)
-        P = p_tip + R_tip @ tool
+        P = p_tip + np.einsum("nij,nj->ni", R_tip, self._tool_points(x))
         return P @ base_rotation(*base[3:]).T + base[:3]
 
     def jacobian(self, x: np.ndarray, kinematic: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -137,16 +154,16 @@ class MeasurementModel:
         kinematic=False leaves the MD-H and backlash columns at zero (cheaper, for frame-only
         fits).
         """
-        table, base, tool = self.space.split(x)
+        table, base, _ = self.space.split(x)
         backlash = self.space.backlash_values(x)
         R_tip, p_tip, stages = self._chain(table, backlash, keep=kinematic)
-        P = p_tip + R_tip @ tool  # tool point in the base frame
+        P = p_tip + np.einsum("nij,nj->ni", R_tip, self._tool_points(x))  # in the base frame
         n, N = self.mdh.n, self.N
         J = np.empty((N, 3, self.space.size))
         if not kinematic:
             J[:, :, :4 * n] = 0.0
-            J[:, :, 4 * n + 9:] = 0.0
-            return self._frame_columns(J, P, R_tip, base, tool)
+            J[:, :, 4 * n + self.space.n_frames:] = 0.0
+            return self._frame_columns(J, P, R_tip, base)
         G = np.stack([g for g, _ in stages])  # (n, N, 4, 4)
         H = np.stack([h for _, h in stages])
         xg, zh = G[:, :, :3, 0], H[:, :, :3, 2]                            # (n, N, 3)
@@ -167,23 +184,26 @@ class MeasurementModel:
                 c = (Ht if self.mdh.screw_points is None
                      else Ht + Hr @ self.mdh.screw_points[i])
                 col = _cross(w, P - c)
-            J[:, :, 4 * n + 9 + k] = col * self.approach[:, i, None]
-        return self._frame_columns(J, P, R_tip, base, tool, rotate_kinematic=True)
+            J[:, :, 4 * n + self.space.n_frames + k] = col * self.approach[:, i, None]
+        return self._frame_columns(J, P, R_tip, base, rotate_kinematic=True)
 
-    def _frame_columns(self, J, P, R_tip, base, tool, rotate_kinematic=False):
+    def _frame_columns(self, J, P, R_tip, base, rotate_kinematic=False):
         """Fill the base and tool columns (and turn the MD-H ones into the measurement frame)."""
-        N, k = self.N, self.space.n_kinematic
+        N, k, f = self.N, self.space.n_kinematic, self.space.n_frames
         rx, ry, rz = base[3:]
         Rx, Ry, Rz = rotx(rx), roty(ry), rotz(rz)
         Rb = Rx @ Ry @ Rz
         if rotate_kinematic:
             J[:, :, :k] = np.matmul(Rb, J[:, :, :k])
-            J[:, :, k + 9:] = np.matmul(Rb, J[:, :, k + 9:])
+            J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
         Pm = P @ Rb.T + base[:3]
         J[:, :, k:k + 3] = np.eye(3)
         ex, ey, ez = np.eye(3)
         J[:, :, k + 3] = _cross(np.broadcast_to(ex, (N, 3)), Pm - base[:3])
         J[:, :, k + 4] = _cross(np.broadcast_to(ey, (N, 3)), P @ (Ry @ Rz).T) @ Rx.T
         J[:, :, k + 5] = _cross(np.broadcast_to(ez, (N, 3)), P @ Rz.T) @ (Rx @ Ry).T
-        J[:, :, k + 6:k + 9] = np.matmul(Rb, R_tip)
+        RbR = np.matmul(Rb, R_tip)
+        for point in range(self.space.n_points):  # a sample moves with its own point only
+            c = k + 6 + 3 * point
+            J[:, :, c:c + 3] = RbR * (self.points == point)[:, None, None]
         return Pm, J

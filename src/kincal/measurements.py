@@ -14,7 +14,7 @@ an ``order_column`` such as a time stamp. Only backlash terms use it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -46,6 +46,11 @@ class Measurements:
     approach: (N, n) approach direction of each joint (+1, -1, 0), see kincal.backlash;
         None: computed from the order of the samples.
     order_source: how the acquisition order was known, for reports.
+    points: (N,) which measured point a sample is (0 .. K-1), when several points on the
+        tool are measured at each pose; None: all 0 (one point).
+    poses: (N,) which pose a sample was taken at (samples of one pose share it, e.g. the
+        K points of one file row); None: every sample its own pose. Cross-validation
+        never splits a pose.
     """
 
     joint_names: tuple[str, ...]
@@ -59,6 +64,8 @@ class Measurements:
     angle_unit: str = "rad"
     approach: np.ndarray | None = None
     order_source: str = "the order of the samples"
+    points: np.ndarray | None = None
+    poses: np.ndarray | None = None
 
     def __post_init__(self):
         q = _readonly(self.joint_values)
@@ -87,16 +94,32 @@ class Measurements:
             raise DataError(f"{self.source}: approach directions must be ({len(q)}, "
                             f"{q.shape[1]}) values in {{-1, 0, 1}}, got shape {g.shape}")
         object.__setattr__(self, "approach", _readonly(g))
+        for name, default in (("points", np.zeros(len(q), dtype=int)),
+                              ("poses", np.arange(len(q)))):
+            value = getattr(self, name)
+            a = default if value is None else np.asarray(value)
+            if a.shape != (len(q),) or (a.size and (a.dtype.kind not in "iu" or a.min() < 0)):
+                raise DataError(f"{self.source}: {name} must be {len(q)} integers >= 0, got "
+                                f"{a.dtype} of shape {a.shape}")
+            a = a.astype(int)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
 
     def __len__(self) -> int:
         return len(self.joint_values)
 
+    @property
+    def n_points(self) -> int:
+        """Measured points per pose (K)."""
+        return int(self.points.max()) + 1 if len(self) else 1
+
     def subset(self, index) -> "Measurements":
         index = np.asarray(index)
-        return Measurements(self.joint_names, self.joint_values[index], self.positions[index],
-                            None if self.sigma is None else self.sigma[index], self.rows[index],
-                            self.source, self.ignored_columns, self.length_unit, self.angle_unit,
-                            self.approach[index], self.order_source)
+        return replace(self, joint_values=self.joint_values[index],
+                       positions=self.positions[index],
+                       sigma=None if self.sigma is None else self.sigma[index],
+                       rows=self.rows[index], approach=self.approach[index],
+                       points=self.points[index], poses=self.poses[index])
 
     def for_chain(self, joint_names) -> "Measurements":
         """The same samples with columns in the order of ``joint_names`` (checked)."""
@@ -108,9 +131,8 @@ class Measurements:
             raise DataError(f"{self.source}: no values for chain joints {', '.join(missing)}; "
                             f"the data has {listing(self.joint_names)}")
         idx = [self.joint_names.index(j) for j in joint_names]
-        return Measurements(joint_names, self.joint_values[:, idx], self.positions, self.sigma,
-                            self.rows, self.source, self.ignored_columns, self.length_unit,
-                            self.angle_unit, self.approach[:, idx], self.order_source)
+        return replace(self, joint_names=joint_names, joint_values=self.joint_values[:, idx],
+                       approach=self.approach[:, idx])
 
     @classmethod
     def from_csv(cls, path, joint_names, prismatic=(), length_unit: str = "m",
@@ -120,9 +142,18 @@ class Measurements:
         """Read a CSV file for the chain ``joint_names`` (see the module notes).
 
         prismatic: names of prismatic chain joints (read with the length unit).
+        position_columns: 3 names (x, y, z of the measured point), or 3 K names for K
+            points measured at each pose (x1, y1, z1, x2, ...): each row then gives K
+            samples of one pose, point k with its own position in the tip frame.
         order_column: a column giving the acquisition order (e.g. a time stamp) for the
             approach directions; None: the rows are in acquisition order.
         """
+        position_columns = tuple(position_columns)
+        if not position_columns or len(position_columns) % 3:
+            raise DataError(f"position columns come in threes (x, y, z of each measured "
+                            f"point); got {len(position_columns)}: {', '.join(position_columns)}")
+        if len(set(position_columns)) != len(position_columns):
+            raise DataError(f"a position column is named twice: {', '.join(position_columns)}")
         if length_unit not in LENGTH_UNITS:
             raise DataError(f"unknown length unit {length_unit!r}; expected one of m, mm")
         if angle_unit not in ANGLE_UNITS:
@@ -140,7 +171,9 @@ class Measurements:
         L, A = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
         v = table.values
         q = np.column_stack([v[j] * (L if j in set(prismatic) else A) for j in joint_names])
-        P = np.column_stack([v[c] for c in position_columns]) * L
+        K = len(position_columns) // 3
+        P = np.stack([np.column_stack([v[c] for c in position_columns[3 * k:3 * k + 3]])
+                      for k in range(K)], axis=1) * L  # (rows, K, 3)
         sigma = v[sigma_column] * L if sigma_column in v else None
         if sigma is not None and np.any(sigma <= 0):
             k = int(np.argmax(sigma <= 0))
@@ -150,16 +183,34 @@ class Measurements:
         else:
             approach = approach_directions(q, v[order_column], source=str(path), rows=rows)
             order_source = f"column {order_column!r}"
-        return cls(tuple(joint_names), q, P, sigma, rows, str(path), table.ignored(),
-                   length_unit, angle_unit, approach, order_source)
+        n = len(q)  # one sample per row and point, row-major
+        return cls(tuple(joint_names), np.repeat(q, K, axis=0), P.reshape(n * K, 3),
+                   None if sigma is None else np.repeat(sigma, K), np.repeat(rows, K),
+                   str(path), table.ignored(), length_unit, angle_unit,
+                   np.repeat(approach, K, axis=0), order_source,
+                   np.tile(np.arange(K), n), np.repeat(np.arange(n), K))
 
     def to_csv_text(self) -> str:
-        """The samples in the CSV layout :meth:`from_csv` reads, SI units, full precision."""
-        cols = list(self.joint_names) + ["x", "y", "z"] + (["sigma"] if self.sigma is not None else [])
+        """The samples in the CSV layout :meth:`from_csv` reads, SI units, full precision:
+        one row per pose; with K points per pose the columns x1, y1, z1, ..., xK, yK, zK
+        (every pose must then have each point once)."""
+        K = self.n_points
+        order = np.arange(len(self)) if K == 1 else np.lexsort((self.points, self.poses))
+        poses, first = np.unique(self.poses[order], return_index=True)
+        if K == 1:
+            poses, first = order, order
+        counts = np.diff(np.append(first, len(self)))
+        if np.any(counts != K) or not np.array_equal(self.points[order],
+                                                     np.tile(np.arange(K), len(poses))):
+            raise DataError(f"{self.source}: writing as CSV needs each of the {len(poses)} "
+                            f"poses to have each of the {K} points once")
+        xyz = ["x", "y", "z"] if K == 1 else [f"{c}{k}" for k in range(1, K + 1) for c in "xyz"]
+        cols = list(self.joint_names) + xyz + (["sigma"] if self.sigma is not None else [])
         lines = [",".join(cols)]
-        for k in range(len(self)):
-            vals = list(self.joint_values[k]) + list(self.positions[k])
+        for start in first:
+            idx = order[start:start + K]
+            vals = list(self.joint_values[idx[0]]) + list(self.positions[idx].ravel())
             if self.sigma is not None:
-                vals.append(self.sigma[k])
+                vals.append(self.sigma[idx[0]])
             lines.append(",".join(repr(float(v)) for v in vals))
         return "\n".join(lines) + "\n"

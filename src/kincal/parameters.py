@@ -5,9 +5,12 @@ The parameter vector x holds absolute values (not errors), in SI units:
     [ <joint_1>.a, .alpha, .d, .theta, ..., <joint_n>.theta,      4 n kinematic (MD-H)
       base.x, base.y, base.z, base.rx, base.ry, base.rz,          measurement frame
       tool.x, tool.y, tool.z,                                      tool point in the tip frame
+      tool2.x, ..., tool<K>.z,                                     further measured points
       <joint>.backlash, ... ]                                      optional backlash terms
 
-The backlash terms (:mod:`kincal.backlash`) exist only for the joints asked for; each is
+With K measured points per pose (several targets on the tool: their positions together
+carry its orientation) point 1 is ``tool.*`` and point k >= 2 is ``tool<k>.*``. The
+backlash terms (:mod:`kincal.backlash`) exist only for the joints asked for; each is
 half the play of its joint [rad, or m for a prismatic joint], nominally 0.
 
 The measurement frame M sees the tool point at
@@ -46,12 +49,14 @@ class ParameterSpace:
     """The parameters of one chain: stable names, units and vector layout.
 
     backlash: chain joints with a backlash term, in chain order; backlash_is_length: for
-    each, True if the joint is prismatic (the term is a length).
+    each, True if the joint is prismatic (the term is a length). n_points: measured
+    points per pose (K), each with its own position in the tip frame.
     """
 
     joint_names: tuple[str, ...]
     backlash: tuple[str, ...] = ()
     backlash_is_length: tuple[bool, ...] = ()
+    n_points: int = 1
 
     def __post_init__(self):
         _check_backlash_joints(self.joint_names, self.backlash)
@@ -60,15 +65,17 @@ class ParameterSpace:
             raise ParameterError("backlash joints must be in chain order")
         if len(self.backlash_is_length) != len(self.backlash):
             raise ParameterError("backlash_is_length needs one flag per backlash joint")
+        if not (isinstance(self.n_points, (int, np.integer)) and self.n_points >= 1):
+            raise ParameterError(f"n_points must be an integer >= 1, got {self.n_points!r}")
 
     @classmethod
-    def of_chain(cls, joint_names, kinds, backlash=()) -> "ParameterSpace":
+    def of_chain(cls, joint_names, kinds, backlash=(), n_points: int = 1) -> "ParameterSpace":
         """The space of a chain with joint ``kinds``; ``backlash`` joints in any order."""
         joint_names = tuple(joint_names)
         _check_backlash_joints(joint_names, tuple(backlash))
         chosen = tuple(j for j in joint_names if j in set(backlash))
         lengths = tuple(kinds[joint_names.index(j)] == "prismatic" for j in chosen)
-        return cls(joint_names, chosen, lengths)
+        return cls(joint_names, chosen, lengths, int(n_points))
 
     @property
     def n_joints(self) -> int:
@@ -83,19 +90,26 @@ class ParameterSpace:
         return len(self.backlash)
 
     @property
+    def n_frames(self) -> int:
+        """Measurement frame (6) and tool points (3 each)."""
+        return 6 + 3 * self.n_points
+
+    @property
     def names(self) -> tuple[str, ...]:
         kin = tuple(f"{j}.{f}" for j in self.joint_names for f in FIELDS)
-        return kin + BASE + TOOL + tuple(f"{j}.backlash" for j in self.backlash)
+        tools = TOOL + tuple(f"tool{k}.{c}" for k in range(2, self.n_points + 1)
+                             for c in "xyz")
+        return kin + BASE + tools + tuple(f"{j}.backlash" for j in self.backlash)
 
     @property
     def size(self) -> int:
-        return self.n_kinematic + 9 + self.n_backlash
+        return self.n_kinematic + self.n_frames + self.n_backlash
 
     @property
     def is_length(self) -> np.ndarray:
         """(p,) True for lengths [m], False for angles [rad]."""
         kin = [f in LENGTH_FIELDS for _ in self.joint_names for f in FIELDS]
-        return np.array(kin + [True, True, True, False, False, False] + [True] * 3
+        return np.array(kin + [True, True, True, False, False, False] + [True] * 3 * self.n_points
                         + list(self.backlash_is_length), dtype=bool)
 
     @property
@@ -109,13 +123,13 @@ class ParameterSpace:
     def is_frame(self) -> np.ndarray:
         """(p,) True for the measurement frame and the tool point."""
         mask = np.zeros(self.size, dtype=bool)
-        mask[self.n_kinematic: self.n_kinematic + 9] = True
+        mask[self.n_kinematic: self.n_kinematic + self.n_frames] = True
         return mask
 
     @property
     def is_backlash(self) -> np.ndarray:
         mask = np.zeros(self.size, dtype=bool)
-        mask[self.n_kinematic + 9:] = True
+        mask[self.n_kinematic + self.n_frames:] = True
         return mask
 
     @property
@@ -144,18 +158,28 @@ class ParameterSpace:
         return np.array([self.index(n) for n in names], dtype=int)
 
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(table (n, 4), base (6,), tool (3,)) views of a parameter vector."""
+        """(table (n, 4), base (6,), tool (3,) of point 1) views of a parameter vector."""
         k = self.n_kinematic
         return x[:k].reshape(self.n_joints, 4), x[k:k + 6], x[k + 6:k + 9]
 
+    def tools(self, x: np.ndarray) -> np.ndarray:
+        """(n_points, 3) view of the measured points in the tip frame."""
+        k = self.n_kinematic + 6
+        return x[k:k + 3 * self.n_points].reshape(self.n_points, 3)
+
     def backlash_values(self, x: np.ndarray) -> np.ndarray:
         """(n_backlash,) view of the backlash terms of a parameter vector."""
-        return x[self.n_kinematic + 9:]
+        return x[self.n_kinematic + self.n_frames:]
 
-    def join(self, table, base, tool, backlash=None) -> np.ndarray:
-        """The parameter vector; ``backlash`` None means zero backlash."""
+    def join(self, table, base, tools, backlash=None) -> np.ndarray:
+        """The parameter vector. tools: (3,) with one point, or (n_points, 3); backlash
+        None means zero backlash."""
         b = np.zeros(self.n_backlash) if backlash is None else np.asarray(backlash, float)
         if b.shape != (self.n_backlash,):
             raise ParameterError(f"{self.n_backlash} backlash values expected, got {b.shape}")
+        t = np.asarray(tools, float)
+        if t.size != 3 * self.n_points:
+            raise ParameterError(f"{self.n_points} tool point(s) of 3 numbers expected, got "
+                                 f"shape {t.shape}")
         return np.concatenate([np.asarray(table, float).ravel(), np.asarray(base, float),
-                               np.asarray(tool, float), b])
+                               t.ravel(), b])

@@ -189,15 +189,13 @@ def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
     return _save(fig, path, overwrite, source)
 
 
-def plot_calibration(result, out_dir, data=None, overwrite: bool = False,
+def plot_calibration(result, out_dir, overwrite: bool = False,
                      source: str = "kincal") -> list[Path]:
     """The figures of one calibration in ``out_dir`` (which must exist); returns the paths.
 
-    cv_curve.png (if lambda was chosen by cross-validation), residuals.png (per-pose
-    position errors on the calibration data after calibration, and before it when
-    ``data`` -- the Measurements that were calibrated -- is given; without them only the
-    before statistics are known) and parameters.png (identified kinematic deviations
-    with one standard error).
+    cv_curve.png (if lambda was chosen by cross-validation), residuals.png (position
+    errors on the calibration data before and after calibration) and parameters.png
+    (identified kinematic deviations with one standard error).
     """
     out_dir = Path(out_dir)
     paths = []
@@ -208,15 +206,8 @@ def plot_calibration(result, out_dir, data=None, overwrite: bool = False,
                                    overwrite=overwrite, source=source))
     after = np.linalg.norm(np.asarray(result.residuals), axis=1) * 1e3
     series = []
-    if getattr(result, "residuals_before", None) is not None:
-        series.append(("before (frames fitted)",
-                       np.linalg.norm(result.residuals_before, axis=1) * 1e3))
-    elif data is not None:
-        from .measurement_model import MeasurementModel
-
-        d = data.for_chain(result.robot.joint_names)
-        pred = MeasurementModel(result.mdh, d.joint_values).predict(result.x_start)
-        series.append(("before (frames fitted)", np.linalg.norm(d.positions - pred, axis=1) * 1e3))
+    series.append(("before (frames fitted)",
+                   np.linalg.norm(result.residuals_before, axis=1) * 1e3))
     series.append((f"after ({result.options.method})", after))
     title = (f"Calibration residuals, {len(after)} poses; before: mean {result.before.mean:.3f},"
              f" max {result.before.max:.3f} mm")

@@ -81,12 +81,14 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                   "base": result.robot.base, "tip": result.robot.tip,
                   "joints": list(result.robot.joint_names),
                   "mdh_notes": [n for n in result.mdh.notes]},
-        "data": {"source": data_source, "poses": int(len(result.residuals))},
+        "data": {"source": data_source, "samples": int(len(result.residuals)),
+                 "points_per_pose": int(result.space.n_points),
+                 "acquisition_order": result.order_source},
         "options": {"method": o.method, "lambda": o.lam, "folds": o.folds, "seed": o.seed,
                     "lambda_grid": [o.lambda_min, o.lambda_max, o.n_lambdas],
                     "penalty_length_scale_m": o.length_scale,
                     "penalty_angle_scale_rad": o.angle_scale,
-                    "fix": list(o.fix), "free": list(o.free),
+                    "fix": list(o.fix), "free": list(o.free), "backlash": list(o.backlash),
                     "tool_guess_m": o.tool_guess, "rank_tolerance": o.rank_tol,
                     "solver": {"max_iterations": o.solver.max_iterations,
                                "cost_tol_mm2": o.solver.cost_tol,
@@ -105,7 +107,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "robust": {"loss": o.robust, "scale_mm": o.robust_scale_mm,
                    "downweighted": [{"row": d.row, "error_mm": d.error_mm, "weight": d.weight}
                                     for d in result.downweighted]},
-        "residuals": {"row": result.rows, "error_mm": errors_mm,
+        "residuals": {"row": result.rows, "point": result.points, "error_mm": errors_mm,
                       "dx_dy_dz_mm": result.residuals * 1e3},
     }
     return _clean(out)

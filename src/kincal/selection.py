@@ -18,10 +18,12 @@ pivoting among equals) and, being greedy in a fixed order, stable as poses are a
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
+_FRAME = re.compile(r"(base|tool\d*)\.")  # measurement frame and tool point names
 RANK_TOL = 1e-7  # relative size of the new part of a column below which it is redundant
 WEAK_INDEPENDENCE = 0.02  # kept, but 98 % of its effect reproducible by the others
 WEAK_SENSITIVITY = 0.005  # kept, but moves the point less than this [mm RMS per mm or deg]
@@ -107,7 +109,7 @@ class Identifiability:
             for w in self.weak:
                 lines.append(f"weak {w.describe()}")
         else:
-            kin = [w for w in self.weak if not w.name.startswith(("base.", "tool."))]
+            kin = [w for w in self.weak if not _FRAME.match(w.name)]
             worst = sorted(self.weak, key=lambda w: w.independence)[:3]
             lines.append(f"weak: {len(self.weak)} parameters ({len(kin)} kinematic) are barely "
                          "told apart by these poses: " + ", ".join(w.name for w in self.weak))
@@ -120,8 +122,10 @@ class Identifiability:
 def preference_order(names, n_kinematic: int) -> list[int]:
     """Column indices in the order of preference described in the module notes."""
     n_joints = n_kinematic // 4
-    frames_end = min(n_kinematic + 9, len(names))
-    order = list(range(n_kinematic, frames_end))  # base then tool
+    frames_end = n_kinematic
+    while frames_end < len(names) and _FRAME.match(names[frames_end]):
+        frames_end += 1
+    order = list(range(n_kinematic, frames_end))  # base then tool point(s)
     for j in reversed(range(n_joints)):
         order += [4 * j + f for f in range(4)]
     return order + list(range(frames_end, len(names)))

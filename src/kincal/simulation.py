@@ -28,7 +28,8 @@ class Truth:
     """The simulated robot and sensor setup (SI units).
 
     table: (n, 4) true MD-H table. base: (6,) true measurement frame. tool: (3,) true
-    tool point in the tip frame. compliance: [rad] amplitude of the non-geometric error.
+    tool point in the tip frame, or (K, 3) for K points measured at each pose.
+    compliance: [rad] amplitude of the non-geometric error.
     backlash: {joint: half the play [rad or m]} (see kincal.backlash); the poses are
     taken in the order given.
     """
@@ -38,6 +39,10 @@ class Truth:
     tool: np.ndarray
     compliance: float = 0.0
     backlash: dict = field(default_factory=dict)
+
+    @property
+    def n_points(self) -> int:
+        return np.asarray(self.tool).size // 3
 
     def x(self, space: ParameterSpace) -> np.ndarray:
         return space.join(self.table, self.base, self.tool)
@@ -122,8 +127,11 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     return out
 
 
-def true_positions(mdh: MdhModel, truth: Truth, q: np.ndarray) -> np.ndarray:
-    """(N, 3) exact tool-point positions in the measurement frame [m]."""
+def true_positions(mdh: MdhModel, truth: Truth, q: np.ndarray, points=0) -> np.ndarray:
+    """(N, 3) exact positions of measured points in the measurement frame [m].
+
+    points: which of the truth's points (0 = the first), one for all or (N,) per row.
+    """
     q_eff = np.array(q, dtype=float)
     if truth.compliance and q_eff.shape[1] >= 3:
         q_eff[:, 1] += truth.compliance * np.cos(q_eff[:, 1])
@@ -133,13 +141,23 @@ def true_positions(mdh: MdhModel, truth: Truth, q: np.ndarray) -> np.ndarray:
         for joint, b in truth.backlash.items():
             i = mdh.joint_names.index(joint)
             q_eff[:, i] += b * g[:, i]
-    model = MeasurementModel(mdh, q_eff)
+    idx = np.broadcast_to(np.asarray(points, dtype=int), (len(q_eff),))
+    model = MeasurementModel(mdh, q_eff, points=idx, n_points=truth.n_points)
     return model.predict(truth.x(model.space))
 
 
 def measure(mdh: MdhModel, truth: Truth, q: np.ndarray, noise_sd: float,
             rng: np.random.Generator, source: str = "<simulated>") -> Measurements:
-    """Measurements of ``truth`` at joint values ``q`` with Gaussian noise [m] per axis."""
-    P = true_positions(mdh, truth, q) + rng.normal(size=(len(q), 3)) * noise_sd
-    return Measurements(mdh.joint_names, q, P, source=source)
+    """Measurements of ``truth`` at joint values ``q`` with Gaussian noise [m] per axis:
+    one sample per pose and measured point (pose-major)."""
+    K, n = truth.n_points, len(q)
+    if K == 1:
+        P = true_positions(mdh, truth, q) + rng.normal(size=(n, 3)) * noise_sd
+        return Measurements(mdh.joint_names, q, P, source=source)
+    points = np.tile(np.arange(K), n)
+    true = true_positions(mdh, truth, np.repeat(q, K, axis=0), points)
+    g = np.repeat(approach_directions(q), K, axis=0)
+    return Measurements(mdh.joint_names, np.repeat(q, K, axis=0),
+                        true + rng.normal(size=(n * K, 3)) * noise_sd, source=source,
+                        approach=g, points=points, poses=np.repeat(np.arange(n), K))
 
