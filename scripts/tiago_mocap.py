@@ -768,7 +768,9 @@ Backlash terms are a kincal option (CalibrationOptions.backlash, `--backlash JOI
 --order-column COL`). Prototyped here only, without a held-out gain on these data so far:
 1. Compliance terms "<joint>.compliance" (g = gravity torque; Robot.gravity_torques(q) so
    that Pinocchio stays behind the Robot boundary).
-2. The hand pose from all four markers (a marker-body tool with 3 rotation parameters).
+2. The hand pose as one rigid marker body (its layout fitted once, 3 rotation
+   parameters); kincal itself takes the four markers as separate measured points
+   (`--position-columns x1 y1 z1 ... z4`), each with its own position on the hand.
 3. CalibrationOptions.selection = "stepwise": forward selection of parameters by the
    same k-fold CV that chooses lambda, with the path kept in the result.
 """
