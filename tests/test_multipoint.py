@@ -126,6 +126,7 @@ def test_cli_with_four_markers_on_the_tiago_files(tmp_path, capsys):
                  "--backlash", "arm_6_joint", "--out", str(out), "--frames-out", str(frames),
                  "--report", str(tmp_path / "report.json"), "--quiet"]) == 0
     assert len(json.loads(frames.read_text())["tool_points"]) == 4
+    assert "1 of 37 values outside its URDF limits" in capsys.readouterr().err  # poses, not samples
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["data"]["samples"] == 148 and report["data"]["points_per_pose"] == 4
     assert report["residuals"]["point"][:5] == [0, 1, 2, 3, 0]

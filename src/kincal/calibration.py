@@ -175,9 +175,11 @@ class CalibrationProblem:
             raise DataError(f"{self.data.source}: {len(self.data)} poses; the measurement frame "
                             "and tool point alone need at least 3 (a calibration needs many more)")
         g = robot.geometry
-        for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper,
-                                       self.data.joint_values, self.data.rows)
-                        + angle_unit_warnings(g.joint_names, g.kinds, self.data.joint_values,
+        pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
+        q_poses = self.data.joint_values[pose]
+        for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q_poses,
+                                       self.data.rows[pose])
+                        + angle_unit_warnings(g.joint_names, g.kinds, q_poses,
                                               self.data.angle_unit)
                         + self._approach_warnings()):
             warnings.warn(f"{self.data.source}: {message}", KincalWarning)
