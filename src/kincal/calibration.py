@@ -171,8 +171,9 @@ class CalibrationProblem:
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
         for name in o.fix + o.free:
             self.space.index(name)  # unknown names raise ParameterError listing the valid ones
-        if len(self.data) < 3:
-            raise DataError(f"{self.data.source}: {len(self.data)} poses; the measurement frame "
+        self.n_poses = len(np.unique(self.data.poses))
+        if self.n_poses < 3:
+            raise DataError(f"{self.data.source}: {self.n_poses} poses; the measurement frame "
                             "and tool point alone need at least 3 (a calibration needs many more)")
         g = robot.geometry
         pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
@@ -283,7 +284,7 @@ class CalibrationProblem:
             raise IdentifiabilityError(
                 f"{self.data.source}: the poses cannot even locate the measurement frame and "
                 f"tool point: {', '.join(frames_lost)} cannot be identified ({why}). There are "
-                f"{distinct} distinct poses of {len(self.data)}; add poses that differ in every "
+                f"{distinct} distinct poses of {self.n_poses}; add poses that differ in every "
                 "joint, or fix what the data cannot give (e.g. --fix tool.x tool.y tool.z with "
                 "--tool-offset). Identifiable now: " + ", ".join(ident.kept))
         general = self.structural()
@@ -292,7 +293,7 @@ class CalibrationProblem:
             need = math.ceil(len(general.kept) / (3 * self.space.n_points))
             ident = replace(ident, notes=ident.notes + (
                 f"{len(lost)} parameters this chain can identify are not identifiable from "
-                f"these {len(np.unique(self.data.poses))} poses "
+                f"these {self.n_poses} poses "
                 f"({distinct_poses(self.data.joint_values)} "
                 f"distinct): {', '.join(lost)}; the {len(general.kept)} identifiable "
                 f"parameters need at least {need} poses, and many more spread over the "
@@ -415,11 +416,12 @@ class CalibrationProblem:
         ident = self.analyze()
         general = self.structural()
         m = 3 * len(self.data)
+        per_pose = 3 * self.space.n_points
         if o.method != "l2" and m <= len(general.kept) and len(ident.kept) < len(general.kept):
             raise IdentifiabilityError(
-                f"{len(self.data)} poses give {m} equations for the {len(general.kept)} "
+                f"{self.n_poses} poses give {m} equations for the {len(general.kept)} "
                 f"parameters this chain can identify; method {o.method} needs at least "
-                f"{math.ceil((len(general.kept) + 1) / 3)} poses (and many more spread over the "
+                f"{math.ceil((len(general.kept) + 1) / per_pose)} poses (and many more spread over the "
                 "workspace); with these poses it would only interpolate. Method l2 can work "
                 "with fewer, pulling what the data cannot fix toward nominal")
         cv = None
