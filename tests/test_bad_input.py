@@ -18,16 +18,22 @@ from kincal.simulation import Truth, measure, planted_table
 HEADER = "joint_1,joint_2,joint_3,joint_4,joint_5,joint_6,x,y,z"
 
 
-@pytest.fixture(scope="module")
-def good_csv(tmp_path_factory):
-    rng = np.random.default_rng(0)
+def _simulated_ec66(seed, n, noise):
+    """(robot, measurements, rng) of a simulated EC66 with planted errors, n random poses."""
+    rng = np.random.default_rng(seed)
     robot = Robot.load("ec66")
     model = mdh.extract(robot.geometry)
-    q = random_joint_values(robot.geometry, rng, 30)
+    q = random_joint_values(robot.geometry, rng, n)
     truth = Truth(planted_table(model, rng), np.array([0.5, 0.1, 0.2, 0.0, 0.0, 0.3]),
                   np.array([0.03, 0.02, 0.12]))
+    return robot, measure(model, truth, q, noise, rng), rng
+
+
+@pytest.fixture(scope="module")
+def good_csv(tmp_path_factory):
+    _, data, _ = _simulated_ec66(0, 30, 1e-5)
     path = tmp_path_factory.mktemp("data") / "good.csv"
-    path.write_text(measure(model, truth, q, 1e-5, rng).to_csv_text())
+    path.write_text(data.to_csv_text())
     return path
 
 
@@ -214,13 +220,8 @@ def test_joint_values_outside_limits_warn(good_csv, tmp_path):
 
 # ------------------------------------------------------------------ outliers
 def test_robust_loss_lists_and_resists_outliers():
-    rng = np.random.default_rng(2)
-    robot = Robot.load("ec66")
-    model = mdh.extract(robot.geometry)
-    q = random_joint_values(robot.geometry, rng, 60)
-    truth = Truth(planted_table(model, rng), np.array([0.5, 0.1, 0.2, 0.0, 0.0, 0.3]),
-                  np.array([0.03, 0.02, 0.12]))
-    data = measure(model, truth, q, 2e-5, rng)
+    robot, data, rng = _simulated_ec66(2, 60, 2e-5)
+    q = data.joint_values
     P = np.array(data.positions)
     bad = [3, 17, 40]
     P[bad] += rng.normal(size=(3, 3)) * 3e-3  # lost tracker lock: mm-size errors

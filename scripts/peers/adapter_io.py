@@ -2,6 +2,17 @@
 
 Imported as a sibling module: an adapter run as a script has its own folder first on
 sys.path. Plain numpy and the standard library only, so it works in every venv.
+
+Job (``.npz``; any non-array field may instead come from a JSON side file given with
+``--meta`` or found next to the job as ``JOB.json``; the JSON wins):
+
+    q_train     (N, n) joint values of the chain joints, root first [rad | m]
+    p_train     (N, 3) measured tool-point positions in the measurement frame M [m]
+    q_test      (K, n) joint values to predict [rad | m]
+    p_test      (K, 3) optional; only used to report rms_test_mm
+    ...         the fields each adapter documents
+
+Output (``.npz``): the adapter's fields; on failure ``error`` and ``traceback``.
 """
 
 from __future__ import annotations

@@ -10,13 +10,8 @@ robot-specific ``cost_function``, unified YAML config, measurements in a CSV, un
 base and tip frames, ``initialize()`` then ``solve()``), with the config and the CSV
 written to a temporary directory from the job.
 
-Job (``.npz``; any non-array field may instead come from a JSON side file given with
-``--meta`` or found next to the job as ``JOB.json``; the JSON wins):
+Job: the common fields of ``adapter_io`` (q_train, p_train, q_test, p_test), plus
 
-    q_train     (N, n) joint values of the chain joints, root first [rad | m]
-    p_train     (N, 3) measured tool-point positions in the measurement frame M [m]
-    q_test      (K, n) joint values to predict [rad | m]
-    p_test      (K, 3) optional; only used to report rms_test_mm
     urdf        path of the URDF (meshes are not loaded)
     joint_names (n,)   the chain joints, root first (FIGAROH's active_joints)
     base_frame  name of the base frame B (a URDF link or joint frame)

@@ -9,13 +9,8 @@ pybotics has no URDF reader: it only knows Modified DH (Craig) chains, so the jo
 describes the chain as an MD-H table plus two fixed transforms (see README.md for how
 to make them with ``kincal.mdh.extract``).
 
-Job (``.npz``; any non-array field may instead come from a JSON side file given with
-``--meta`` or found next to the job as ``JOB.json``; the JSON wins):
+Job: the common fields of ``adapter_io`` (q_train, p_train, q_test, p_test), plus
 
-    q_train     (N, n) joint values of the chain joints, root first [rad | m]
-    p_train     (N, 3) measured tool-point positions in the measurement frame M [m]
-    q_test      (K, n) joint values to predict [rad | m]
-    p_test      (K, 3) optional; only used to report rms_test_mm
     mdh         (n, 4) nominal MD-H rows [alpha_{i-1} rad, a_{i-1} m, theta_offset_i rad, d_i m]
                 (pybotics' own column order)
     T_base      (4, 4) pose of MD-H frame 0 in the robot base frame B (default identity)

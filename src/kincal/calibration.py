@@ -18,6 +18,7 @@ import numpy as np
 
 from . import blas_threads
 from . import mdh as mdh_layer
+from .mdh import TOOL_AXIS_WARNING
 from .cross_validation import CrossValidation, cross_validate, lambda_grid
 from .errors import DataError, IdentifiabilityError, KincalWarning, OptionError
 from .data_checks import (angle_unit_warnings, distinct_poses, length_unit_warnings,
@@ -171,12 +172,12 @@ class CalibrationProblem:
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
         for name in o.fix + o.free:
             self.space.index(name)  # unknown names raise ParameterError listing the valid ones
-        self.n_poses = len(np.unique(self.data.poses))
+        pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
+        self.n_poses = len(pose)
         if self.n_poses < 3:
             raise DataError(f"{self.data.source}: {self.n_poses} poses; the measurement frame "
                             "and tool point alone need at least 3 (a calibration needs many more)")
         g = robot.geometry
-        pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
         q_poses = self.data.joint_values[pose]
         for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q_poses,
                                        self.data.rows[pose])
@@ -216,7 +217,7 @@ class CalibrationProblem:
         out = []
         timelike = [c for c in self.data.ignored_columns
                     if re.search(r"time|stamp|(^|_)t($|_)", c, re.IGNORECASE)]
-        if self.space.n_backlash and self.data.order_source.startswith("the order") and timelike:
+        if self.space.n_backlash and not self.data.has_order_column and timelike:
             out.append(f"backlash: the approach directions come from {self.data.order_source}; "
                        f"the file has a column {timelike[0]!r} that looks like a time stamp: if "
                        f"the rows are not in acquisition order, give it as the order column "
@@ -270,8 +271,7 @@ class CalibrationProblem:
         if self._ident is not None:
             return self._ident
         o = self.options
-        free = np.ones(self.space.size, dtype=bool) if o.method != "frames" else self.space.is_frame
-        free[self.space.indices(o.fix)] = False
+        free = self._unfixed()
         _, J = self.residual_function()(self.start() / self.scale, True)
         # reporting units: mm per mm or per degree, whatever the penalty scale
         J = J * (self.space.reporting_scale() / self.scale)
@@ -324,19 +324,22 @@ class CalibrationProblem:
         pred, J = MeasurementModel(self.mdh, q, approach, self.space.backlash, points,
                                    K).jacobian(self.start())
         J = J.reshape(-1, self.space.size) * self.space.reporting_scale() / MM
-        free = (np.ones(self.space.size, dtype=bool) if self.options.method != "frames"
-                else self.space.is_frame)
-        free[self.space.indices(self.options.fix)] = False
+        free = self._unfixed()
         self._structural = analyze(J, self.space.names, self.space.n_kinematic, free,
                                    self.options.rank_tol)
         return self._structural
 
-    TOOL_AXIS_WARNING = 5e-3  # [m] tool point this close to the last joint axis: warn
+    def _unfixed(self) -> np.ndarray:
+        """(p,) the parameters the method fits and the user did not fix."""
+        free = (np.ones(self.space.size, dtype=bool) if self.options.method != "frames"
+                else self.space.is_frame)
+        free[self.space.indices(self.options.fix)] = False
+        return free
 
     def _tool_axis_note(self) -> str:
         """A warning when every tool point sits near the axis of the last (revolute) joint."""
         dists = [self.mdh.last_axis_distance(t) for t in self.space.tools(self.start())]
-        if dists[0] is None or max(dists) >= self.TOOL_AXIS_WARNING:
+        if dists[0] is None or max(dists) >= TOOL_AXIS_WARNING:
             return ""
         dist = max(dists)
         last = self.mdh.joint_names[-1]

@@ -44,6 +44,7 @@ import numpy as np
 from .rotations import inverse, transform
 
 PARALLEL_TOL = 1e-6  # |sin| of the angle between axes below which they count as parallel
+TOOL_AXIS_WARNING = 5e-3  # [m] a tool point nearer the last joint axis: warn (last_axis_distance)
 _ZERO = 1e-12  # [m] or [-], what counts as zero length in the geometric construction
 
 FIELDS = ("a", "alpha", "d", "theta")  # column order of an MD-H table in kincal

@@ -116,9 +116,12 @@ class MeasurementModel:
                                 None if self.approach is None else self.approach[rows],
                                 self.space.backlash, self.points[rows], self.space.n_points)
 
-    def _tool_points(self, x: np.ndarray) -> np.ndarray:
-        """(N, 3) each sample's measured point in the tip frame."""
-        return self.space.tools(x)[self.points]
+    def _measured_points(self, x: np.ndarray, R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
+        """(N, 3) each sample's measured point in the base frame."""
+        tools = self.space.tools(x)
+        if len(tools) == 1:
+            return p_tip + R_tip @ tools[0]
+        return p_tip + np.einsum("nij,nj->ni", R_tip, tools[self.points])
 
     def tip_poses(self, table: np.ndarray, backlash: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -145,7 +148,7 @@ class MeasurementModel:
         """(N, 3) predicted tool-point positions in the measurement frame [m]."""
         table, base, _ = self.space.split(x)
         R_tip, p_tip, _ = self._chain(table, self.space.backlash_values(x), keep=False)
-        P = p_tip + np.einsum("nij,nj->ni", R_tip, self._tool_points(x))
+        P = self._measured_points(x, R_tip, p_tip)
         return P @ base_rotation(*base[3:]).T + base[:3]
 
     def jacobian(self, x: np.ndarray, kinematic: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -157,7 +160,7 @@ class MeasurementModel:
         table, base, _ = self.space.split(x)
         backlash = self.space.backlash_values(x)
         R_tip, p_tip, stages = self._chain(table, backlash, keep=kinematic)
-        P = p_tip + np.einsum("nij,nj->ni", R_tip, self._tool_points(x))  # in the base frame
+        P = self._measured_points(x, R_tip, p_tip)
         n, N = self.mdh.n, self.N
         J = np.empty((N, 3, self.space.size))
         if not kinematic:
@@ -202,8 +205,9 @@ class MeasurementModel:
         J[:, :, k + 3] = _cross(np.broadcast_to(ex, (N, 3)), Pm - base[:3])
         J[:, :, k + 4] = _cross(np.broadcast_to(ey, (N, 3)), P @ (Ry @ Rz).T) @ Rx.T
         J[:, :, k + 5] = _cross(np.broadcast_to(ez, (N, 3)), P @ Rz.T) @ (Rx @ Ry).T
-        RbR = np.matmul(Rb, R_tip)
-        for point in range(self.space.n_points):  # a sample moves with its own point only
-            c = k + 6 + 3 * point
-            J[:, :, c:c + 3] = RbR * (self.points == point)[:, None, None]
+        # a sample moves with its own point only: its block gets R_b R_tip, the others 0
+        J[:, :, k + 6:k + 6 + 3 * self.space.n_points] = 0.0
+        rows, first = np.arange(N), k + 6 + 3 * self.points
+        for c in range(3):
+            J[rows, :, first + c] = np.matmul(Rb, R_tip[:, :, c, None])[:, :, 0]
         return Pm, J

@@ -109,6 +109,11 @@ class Measurements:
         return len(self.joint_values)
 
     @property
+    def has_order_column(self) -> bool:
+        """Whether the acquisition order came from an order column (not the sample order)."""
+        return self.order_source.startswith("column ")
+
+    @property
     def n_points(self) -> int:
         """Measured points per pose (K)."""
         return int(self.points.max()) + 1 if len(self) else 1
@@ -195,20 +200,20 @@ class Measurements:
         one row per pose; with K points per pose the columns x1, y1, z1, ..., xK, yK, zK
         (every pose must then have each point once)."""
         K = self.n_points
-        order = np.arange(len(self)) if K == 1 else np.lexsort((self.points, self.poses))
-        poses, first = np.unique(self.poses[order], return_index=True)
-        if K == 1:
-            poses, first = order, order
-        counts = np.diff(np.append(first, len(self)))
-        if np.any(counts != K) or not np.array_equal(self.points[order],
-                                                     np.tile(np.arange(K), len(poses))):
-            raise DataError(f"{self.source}: writing as CSV needs each of the {len(poses)} "
-                            f"poses to have each of the {K} points once")
+        if K == 1:  # one sample per pose, in the order of the samples
+            groups = np.arange(len(self))[:, None]
+        else:
+            order = np.lexsort((self.points, self.poses))
+            groups = order.reshape(-1, K) if len(self) % K == 0 else None
+            if groups is None or np.any(self.points[groups] != np.arange(K)) or np.any(
+                    self.poses[groups] != self.poses[groups[:, :1]]):
+                raise DataError(f"{self.source}: writing as CSV needs each of the "
+                                f"{len(np.unique(self.poses))} poses to have each of the {K} "
+                                "points once")
         xyz = ["x", "y", "z"] if K == 1 else [f"{c}{k}" for k in range(1, K + 1) for c in "xyz"]
         cols = list(self.joint_names) + xyz + (["sigma"] if self.sigma is not None else [])
         lines = [",".join(cols)]
-        for start in first:
-            idx = order[start:start + K]
+        for idx in groups:
             vals = list(self.joint_values[idx[0]]) + list(self.positions[idx].ravel())
             if self.sigma is not None:
                 vals.append(self.sigma[idx[0]])

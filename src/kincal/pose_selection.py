@@ -55,6 +55,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import mdh as mdh_layer
+from .mdh import TOOL_AXIS_WARNING
 from .errors import DataError, KincalWarning, OptionError
 from .measurement_model import MeasurementModel
 from .parameters import MM, ParameterSpace
@@ -292,7 +293,6 @@ def _set_figures(Jn: np.ndarray, scale: np.ndarray, subsets: np.ndarray):
 
 
 # -------------------------------------------------------------- selection
-TOOL_AXIS_WARNING = 5e-3  # [m] as kincal.calibration: a tool point this close to the last axis
 
 
 def _warn_tool_on_axis(model, tool: np.ndarray) -> None:
