@@ -192,5 +192,10 @@ def test_simulate_works_out_of_the_box_for_every_robot_with_a_default_cube(robot
     for seed in (0, 1):
         out = tmp_path / f"{robot}-{seed}.csv"
         assert main(["simulate", robot, "--poses", "30", "--seed", str(seed), "--out", str(out)]) == 0
+        assert len(out.read_text().splitlines()) == 31
+    report = tmp_path / "r.json"
     assert main(["calibrate", robot, str(out), "--method", "ls", "--out", str(tmp_path / "c.urdf"),
-                 "--quiet"]) == 0
+                 "--report", str(report), "--quiet"]) == 0
+    result = json.loads(report.read_text())
+    assert result["convergence"]["converged"]
+    assert result["errors"]["after"]["rms_mm"] < result["errors"]["before"]["rms_mm"]

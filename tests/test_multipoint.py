@@ -138,3 +138,30 @@ def test_cli_with_four_markers_on_the_tiago_files(tmp_path, capsys):
     assert main(["evaluate", str(out), str(held), *common, "--position-columns", *markers[:6],
                  "--frames", str(frames)]) == 0
     assert "(n = 124)" in capsys.readouterr().out
+
+
+def test_bad_multipoint_input_fails_cleanly_with_no_output(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    robot = Robot.load("ur10", tip="tool0")
+    model = mdh.extract(robot.geometry)
+    data = measure(model, Truth(model.table, BASE, TOOLS[:2]), random_joint_values(robot.geometry, rng, 20),
+                   0.0, rng)
+    csv = tmp_path / "two.csv"
+    csv.write_text(data.to_csv_text())
+    out = tmp_path / "cal.urdf"
+    cols = ["--position-columns", "x1", "y1", "z1", "x2", "y2", "z2"]
+    assert main(["calibrate", "ur10", str(csv), "--tip", "tool0", "--position-columns", "x1",
+                 "y1", "z1", "x2", "--out", str(out)]) == 1
+    assert "position columns come in threes" in capsys.readouterr().err and not out.exists()
+    frames = tmp_path / "frames.json"
+    frames.write_text(json.dumps({"base": dict(zip(("x", "y", "z", "rx", "ry", "rz"), BASE)),
+                                  "tool": dict(zip("xyz", TOOLS[0]))}))
+    assert main(["evaluate", "ur10", str(csv), "--tip", "tool0", *cols, "--frames", str(frames)]) == 1
+    assert "has 2 measured points per pose" in capsys.readouterr().err
+    frames.write_text(json.dumps({"base": dict(zip(("x", "y", "z", "rx", "ry", "rz"), BASE)),
+                                  "tool": dict(zip("xyz", TOOLS[0])), "tool_points": []}))
+    assert main(["evaluate", "ur10", str(csv), "--tip", "tool0", *cols, "--frames", str(frames)]) == 1
+    assert "no tool point" in capsys.readouterr().err
+    report = tmp_path / "r.json"
+    assert main(["evaluate", "ur10", str(csv), "--tip", "tool0", *cols, "--fit-frames",
+                 "--report", str(report)]) == 0 and report.exists()

@@ -201,7 +201,7 @@ def test_candidate_csv_reader(ec66, tmp_path):
     with pytest.raises(DataError, match=r"missing column\(s\) joint_6.*Did you mean 'joint6'"):
         read_candidates(_write(tmp_path / "f.csv", header.replace("joint_6", "joint6") + "0,0,0,0,0,0\n"),
                         ec66)
-    with pytest.raises(DataError, match="no candidate poses"):
+    with pytest.raises(DataError, match="a header but no poses"):
         read_candidates(_write(tmp_path / "g.csv", header), ec66)
     with pytest.raises(DataError, match="empty"):
         read_candidates(_write(tmp_path / "h.csv", ""), ec66)
@@ -326,3 +326,10 @@ def test_cli_plan_complements_poses_already_measured(tmp_path, capsys):
     new = [i - 12 for i in expected.indices[12:]]
     np.testing.assert_allclose(table[:, :6], cands[new], rtol=0, atol=1e-12)
     assert table[:, 6].tolist() == [i + 2 for i in new]
+
+
+def test_cli_plan_with_a_missing_measured_file_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "new.csv"
+    assert main(["plan", "ec66", "--random", "100", "--poses", "10", "--measured",
+                 str(tmp_path / "nope.csv"), "--out", str(out)]) == 1
+    assert "measured poses file not found" in _one_line_error(capsys) and not out.exists()

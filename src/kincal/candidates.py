@@ -36,21 +36,22 @@ def random_candidates(robot: "Robot", m: int, rng) -> np.ndarray:
     return np.random.default_rng(rng).uniform(lo, hi, size=(int(m), g.n))
 
 
-def read_candidates(path, robot: "Robot", length_unit: str = "m",
-                    angle_unit: str = "rad") -> tuple[np.ndarray, np.ndarray]:
+def read_candidates(path, robot: "Robot", length_unit: str = "m", angle_unit: str = "rad",
+                    kind: str = "candidates") -> tuple[np.ndarray, np.ndarray]:
     """((M, n_joints) candidate joint values [SI], (M,) their line numbers) from a CSV file.
 
     The header names the chain joints as in the URDF (other columns are ignored).
     Revolute joints are read in ``angle_unit``, prismatic ones in ``length_unit``. Values
-    outside the URDF limits are warned about, not dropped.
+    outside the URDF limits are warned about, not dropped. kind: what the file is, for
+    messages.
     """
     if length_unit not in LENGTH_UNITS:
         raise OptionError(f"unknown length unit {length_unit!r}; expected one of m, mm")
     if angle_unit not in ANGLE_UNITS:
         raise OptionError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
     g = robot.geometry
-    table = read_columns(path, robot.joint_names, kind="candidates", expected="the chain joints",
-                         rows_name="candidate poses")
+    table = read_columns(path, robot.joint_names, kind=kind, expected="the chain joints",
+                         rows_name="poses")
     unit = [LENGTH_UNITS[length_unit] if k == "prismatic" else ANGLE_UNITS[angle_unit]
             for k in g.kinds]
     q = np.column_stack([table.values[j] * u for j, u in zip(robot.joint_names, unit)])

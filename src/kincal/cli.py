@@ -308,7 +308,8 @@ def cmd_plan(args) -> int:
         source = f"{len(q)} random candidates within the joint limits (seed {args.seed})"
     measured = np.zeros((0, q.shape[1]))
     if args.measured is not None:  # poses already measured: kept, and only new ones written
-        measured, _ = read_candidates(args.measured, robot, args.length_unit, args.angle_unit)
+        measured, _ = read_candidates(args.measured, robot, args.length_unit, args.angle_unit,
+                                      kind="measured poses")
         source += f", plus the {len(measured)} poses already measured in {args.measured}"
     k = len(measured)
     tool = _tool_offset(args)
