@@ -25,10 +25,10 @@ import warnings
 
 import numpy as np
 
-from kincal import mdh
-from kincal.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.models import mdh
+from kincal.planning.simulation import Truth, cube_poses, measure, planted_table
 from kincal.robot import Robot
-from kincal.simulation import Truth, cube_poses, measure, planted_table
 
 
 def _data(robot, model, n, size, rng, tilt=30):

@@ -71,13 +71,21 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import tiago_files  # scripts/tiago_files.py, next to this script
 
-from kincal import CalibrationOptions, KincalWarning, Measurements, calibrate, mdh
+from kincal import CalibrationOptions, KincalWarning, Measurements, calibrate
+from kincal.models import mdh
+from kincal.planning.simulation import (
+    Truth,
+    cube_poses,
+    latin_hypercube,
+    measure,
+    planted_table,
+    random_rotation_near,
+    true_positions,
+)
 from kincal.robot import Robot
 from kincal.rotations import rotx
-from kincal.simulation import (Truth, cube_poses, latin_hypercube, measure, planted_table,
-                               random_rotation_near, true_positions)
-import tiago_files  # scripts/tiago_files.py, next to this script
 
 ROOT = Path(__file__).resolve().parents[1]
 PEERS = ROOT / ".peers"

@@ -20,8 +20,9 @@ import warnings
 
 import numpy as np
 
-from kincal import Robot, calibrate, mdh, random_candidates, select_poses
-from kincal.simulation import Truth, measure, planted_table, true_positions
+from kincal import Robot, calibrate, random_candidates, select_poses
+from kincal.models import mdh
+from kincal.planning.simulation import Truth, measure, planted_table, true_positions
 
 TOOL = (0.03, 0.02, 0.12)
 BASE = np.array([0.8, 0.3, -0.2, 0.01, -0.03, 1.0])

@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from kincal.paper_experiment import ExperimentConfig, run, tables, write_report
+from kincal.experiments.paper_experiment import ExperimentConfig, run, tables, write_report
 
 
 def main(argv=None) -> int:

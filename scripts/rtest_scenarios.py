@@ -18,7 +18,7 @@ import warnings
 
 import numpy as np
 
-from kincal.paper_experiment import rtest_scenario
+from kincal.experiments.paper_experiment import rtest_scenario
 
 
 def main(argv=None):

@@ -59,17 +59,16 @@ from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from tiago_files import DEFAULT_SHARED, HELD_OUT, ORDER_COLUMN, SUBDIR, TIP, TRAIN, URDF, locate  # noqa: E402
 
 from kincal import CalibrationOptions, CalibrationProblem, KincalWarning, Measurements, Robot  # noqa: E402
-from kincal.cross_validation import cross_validate, lambda_grid, make_folds  # noqa: E402
-from kincal.measurement_model import MeasurementModel  # noqa: E402
-from kincal.parameters import DEG, MM  # noqa: E402
+from kincal.identification.cross_validation import cross_validate, lambda_grid, make_folds  # noqa: E402
+from kincal.identification.parameters import DEG, MM  # noqa: E402
+from kincal.identification.selection import RANK_TOL, analyze  # noqa: E402
+from kincal.identification.solver import SolverOptions, solve  # noqa: E402
+from kincal.identification.statistics import ErrorStats  # noqa: E402
+from kincal.measurements.point import MeasurementModel  # noqa: E402
 from kincal.rotations import base_rotation, rotx, roty, rotz  # noqa: E402
-from kincal.selection import RANK_TOL, analyze  # noqa: E402
-from kincal.solver import SolverOptions, solve  # noqa: E402
-from kincal.statistics import ErrorStats  # noqa: E402
-from tiago_files import (DEFAULT_SHARED, HELD_OUT, ORDER_COLUMN, SUBDIR, TIP, TRAIN,  # noqa: E402
-                         URDF, locate)
 
 MARKERS = tuple((f"x{i}", f"y{i}", f"z{i}") for i in range(1, 5))
 MARKER_WEIGHT = 1.0  # markers 2-4 relative to marker 1: equal weight on all four points
@@ -732,7 +731,7 @@ def parameters_of(row: Row, threshold: float = 0.0) -> str:
 def cli_demo(study: Study, shared: Path, model: Model) -> str:
     """A model kincal offers through the CLI: calibrate, then evaluate with the training
     frames (and, without backlash terms, with frames re-fitted on the held-out day)."""
-    from kincal.cli import main
+    from kincal.cli.main import main
 
     method, fix, joints = plain_options(study, model)
     out = []

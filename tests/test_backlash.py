@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 from conftest import random_joint_values, tiago_urdf
 
-from kincal import mdh
-from kincal.backlash import MOVE_TOL, approach_directions
-from kincal.calibration import calibrate
-from kincal.cli import main
+from kincal.cli.main import main
 from kincal.errors import DataError, KincalWarning, OptionError, ParameterError
-from kincal.measurement_model import MeasurementModel
-from kincal.measurements import Measurements
+from kincal.identification.calibration import calibrate
+from kincal.measurements.data import Measurements
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh
+from kincal.models.backlash import MOVE_TOL, approach_directions
+from kincal.planning.simulation import Truth, cube_poses, measure, true_positions
 from kincal.robot import Robot
 from kincal.rotations import base_rotation
-from kincal.simulation import Truth, cube_poses, measure, true_positions
 
 BASE = np.array([0.9, -0.4, 0.2, 0.05, -0.1, 2.0])
 

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from conftest import EC66, random_joint_values
 
-from kincal import mdh
-from kincal.calibration import calibrate
-from kincal.cli import main
-from kincal.errors import DataError, IdentifiabilityError, KincalWarning
-from kincal.measurements import Measurements
+from kincal.cli.main import main
+from kincal.errors import IdentifiabilityError, KincalWarning
+from kincal.identification.calibration import calibrate
+from kincal.measurements.data import Measurements
+from kincal.models import mdh
+from kincal.planning.simulation import Truth, measure, planted_table
 from kincal.robot import Robot
-from kincal.simulation import Truth, measure, planted_table
 
 HEADER = "joint_1,joint_2,joint_3,joint_4,joint_5,joint_6,x,y,z"
 

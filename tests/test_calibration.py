@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from conftest import random_joint_values
 
-from kincal import mdh
-from kincal.calibration import CalibrationOptions, CalibrationProblem, calibrate
 from kincal.errors import OptionError
-from kincal.measurements import Measurements
-from kincal.paper_experiment import rtest_scenario
+from kincal.experiments.paper_experiment import rtest_scenario
+from kincal.identification.calibration import CalibrationProblem, calibrate
+from kincal.measurements.data import Measurements
+from kincal.models import mdh
+from kincal.planning.simulation import Truth, cube_poses, measure, planted_table, true_positions
 from kincal.robot import Robot
-from kincal.simulation import Truth, cube_poses, measure, planted_table, true_positions
 
 BASE = np.array([0.9, -0.4, 0.2, 0.05, -0.1, 2.0])
 

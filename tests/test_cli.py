@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import EC66
 
-from kincal.cli import main
+from kincal.cli.main import main
 from kincal.robot import Robot
 
 

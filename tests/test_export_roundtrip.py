@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import yourdfpy
 from chains import random_chain
-from conftest import EC66, random_joint_values, tiago_urdf
+from conftest import random_joint_values, tiago_urdf
 
-from kincal import mdh
+from kincal.export.urdf_export import edit_joint_origins
+from kincal.models import mdh
 from kincal.robot import Robot
-from kincal.urdf_export import edit_joint_origins
 
 ROBOTS = [("ec66", "flange"), ("ur5", "tool0"), ("ur10", "tool0"), ("panda", "panda_link8"),
           ("tiago", "arm_tool_link"), ("tiago_file", "wrist_ft_tool_link")]
@@ -95,7 +95,7 @@ def test_export_changes_only_chain_origins(name, tip, rng):
 
 
 def test_joint_offset_next_to_gimbal_lock_keeps_rpy_readable(tmp_path, rng):
-    from kincal.readable_export import corrected_text
+    from kincal.export.readable_export import corrected_text
 
     robot = _load("tiago_file", "wrist_ft_tool_link")  # arm_6 origin: rpy 0 -pi/2 -pi/2
     model = mdh.extract(robot.geometry)
@@ -115,7 +115,7 @@ def test_joint_offset_next_to_gimbal_lock_keeps_rpy_readable(tmp_path, rng):
 
 
 def test_a_tilt_next_to_gimbal_lock_is_exact_and_reported(tmp_path, rng):
-    from kincal.readable_export import RpySwing, corrected_text
+    from kincal.export.readable_export import RpySwing, corrected_text
 
     robot = _load("tiago_file", "wrist_ft_tool_link")  # arm_4 origin: rpy -pi/2 -pi/2 0
     model = mdh.extract(robot.geometry)

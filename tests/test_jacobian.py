@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from conftest import random_joint_values, tiago_urdf
 
-from kincal import mdh
-from kincal.measurement_model import MeasurementModel
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh
 from kincal.robot import Robot
 
 CASES = [("ec66", "flange"), ("ur5", "tool0"), ("panda", "panda_link8"), ("tiago", "arm_tool_link"),

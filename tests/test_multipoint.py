@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 from conftest import random_joint_values, tiago_urdf
 
-from kincal import mdh
-from kincal.calibration import calibrate
-from kincal.cli import main
-from kincal.cross_validation import make_folds
+from kincal.cli.main import main
 from kincal.errors import DataError, KincalWarning
-from kincal.measurement_model import MeasurementModel
-from kincal.measurements import Measurements
+from kincal.identification.calibration import calibrate
+from kincal.identification.cross_validation import make_folds
+from kincal.measurements.data import Measurements
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh
+from kincal.planning.simulation import Truth, measure, planted_table, true_positions
 from kincal.robot import Robot
-from kincal.simulation import Truth, measure, planted_table, true_positions
 
 BASE = np.array([0.9, -0.4, 0.2, 0.05, -0.1, 2.0])
 TOOLS = np.array([[0.04, 0.03, 0.11], [-0.05, 0.02, 0.09], [0.01, -0.06, 0.13]])

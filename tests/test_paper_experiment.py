@@ -11,10 +11,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kincal import plots
 from kincal.errors import ExportError
-from kincal.paper_experiment import (PLOT_FILES, REPORT_FILES, ExperimentConfig, demo, run,
-                                     tables, write_plots, write_report)
+from kincal.experiments.paper_experiment import (
+    PLOT_FILES,
+    REPORT_FILES,
+    ExperimentConfig,
+    demo,
+    run,
+    tables,
+    write_plots,
+    write_report,
+)
+from kincal.export import plots
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -85,10 +93,10 @@ def test_plots_are_png_files_with_content_and_never_replace_a_users_file(result,
 
 
 def test_plot_calibration_of_one_result(tmp_path):
-    from kincal.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.models import mdh
+    from kincal.planning.simulation import Truth, measure, planted_table
     from kincal.robot import Robot
-    from kincal import mdh
-    from kincal.simulation import Truth, measure, planted_table
 
     rng = np.random.default_rng(3)
     robot = Robot.load("ec66")

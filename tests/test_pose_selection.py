@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 from conftest import ur10_path
 
-from kincal import mdh
-from kincal.calibration import CalibrationOptions, CalibrationProblem, calibrate
-from kincal.cli import main
+from kincal.cli.main import main
 from kincal.errors import DataError, InputFileError, OptionError, ParameterError
-from kincal.measurement_model import MeasurementModel
-from kincal.parameters import MM, ParameterSpace
-from kincal.candidates import random_candidates, read_candidates
-from kincal.pose_selection import EXCHANGE_TOL, select_poses
+from kincal.identification.calibration import CalibrationOptions, CalibrationProblem, calibrate
+from kincal.identification.parameters import MM, ParameterSpace
+from kincal.identification.selection import analyze
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh
+from kincal.planning.candidates import random_candidates, read_candidates
+from kincal.planning.pose_selection import EXCHANGE_TOL, select_poses
+from kincal.planning.simulation import Truth, measure, planted_table, true_positions
 from kincal.robot import Robot
-from kincal.selection import analyze
-from kincal.simulation import Truth, measure, planted_table, true_positions
 
 TOOL = (0.03, 0.02, 0.12)  # [m] a tool point well off the last axis
 

@@ -8,12 +8,12 @@ from conftest import random_joint_values
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from kincal import mdh
-from kincal.measurement_model import MeasurementModel
-from kincal.measurements import Measurements
+from kincal.export.urdf_export import edit_joint_origins
+from kincal.measurements.data import Measurements
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh
 from kincal.robot import Robot
 from kincal.rotations import matrix_to_rpy, rpy_to_matrix
-from kincal.urdf_export import edit_joint_origins
 
 SETTINGS = settings(max_examples=25, deadline=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -5,8 +5,8 @@ import pytest
 from chains import random_chain
 from conftest import random_joint_values
 
-from kincal import mdh
-from kincal.measurement_model import MeasurementModel
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh
 from kincal.robot import Robot
 
 

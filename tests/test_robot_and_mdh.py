@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import EC66, random_joint_values, tiago_urdf
 
-from kincal import mdh
 from kincal.errors import ChainError, FrameError, InputFileError, KincalError
-from kincal.measurement_model import MeasurementModel
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh
 from kincal.robot import Robot
 
 D = math.pi / 180

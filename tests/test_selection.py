@@ -4,11 +4,10 @@ import numpy as np
 import pytest
 from conftest import random_joint_values
 
-from kincal import mdh
-from kincal.calibration import CalibrationOptions, CalibrationProblem
-from kincal.measurements import Measurements
+from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.models import mdh
+from kincal.planning.simulation import Truth, measure
 from kincal.robot import Robot
-from kincal.simulation import Truth, measure
 
 PAPER_DROPPED = {"joint_1.a", "joint_1.alpha", "joint_1.d", "joint_1.theta", "joint_2.d",
                  "joint_3.d", "joint_6.d", "joint_6.theta"}

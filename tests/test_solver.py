@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from conftest import random_joint_values
 
-from kincal import mdh
-from kincal.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.solver import SolverOptions, solve
+from kincal.models import mdh
+from kincal.planning.simulation import Truth, measure, planted_table
 from kincal.robot import Robot
-from kincal.simulation import Truth, measure, planted_table
-from kincal.solver import SolverOptions, solve
 
 
 def _problem(seed, noise=2e-5, n=40, **options):
@@ -81,7 +81,7 @@ def test_iteration_limit_is_reported_not_hidden():
 
 @pytest.mark.parametrize("m,deficient", [(100, False), (5000, False), (5000, True)])
 def test_triangular_factor_matches_householder(m, deficient):
-    from kincal.solver import triangular_factor
+    from kincal.identification.solver import triangular_factor
 
     rng = np.random.default_rng(m)
     A = rng.normal(size=(m, 20)) * np.logspace(0, 3, 20)  # columns of very different size

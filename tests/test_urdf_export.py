@@ -16,15 +16,20 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import ur10_path
 import yourdfpy
+from conftest import ur10_path
 from lxml import etree
 from scipy.spatial.transform import Rotation
 
 from kincal.errors import ExportError, FrameError, UrdfError
-from kincal.rotations import rotation_angle, rotx, rotz, rpy_to_matrix, transform, xyz_rpy_to_transform
-from kincal.safe_write import write_text_atomic
-from kincal.urdf_export import add_fixed_frame, edit_joint_origins
+from kincal.export.safe_write import write_text_atomic
+from kincal.export.urdf_export import add_fixed_frame, edit_joint_origins
+from kincal.rotations import (
+    rotx,
+    rotz,
+    transform,
+    xyz_rpy_to_transform,
+)
 from kincal.urdf_source import check_urdf_text
 
 REPO = Path(__file__).resolve().parents[1]

@@ -109,9 +109,9 @@ def write_csv(path: str, joints, q: np.ndarray, p: np.ndarray) -> None:
 # ----------------------------------------------------------------------------- run
 def run(job: dict) -> dict:
     import pinocchio as pin
-    from pinocchio.robot_wrapper import RobotWrapper
     from figaroh.calibration.base_calibration import BaseCalibration
     from figaroh.calibration.calibration_tools import calc_updated_fkm
+    from pinocchio.robot_wrapper import RobotWrapper
 
     class PeerCalibration(BaseCalibration):
         """Cost as in FIGAROH's UR10 example: SE3 log-map residuals, unit weights."""

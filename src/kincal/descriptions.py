@@ -11,7 +11,7 @@ import importlib.resources
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import InputFileError, listing, suggest
+from kincal.errors import InputFileError, listing, suggest
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,7 @@ def resolve(robot: str | Path) -> Description:
 
 def default_center(name: str) -> tuple[float, float, float]:
     """A reachable measurement-cube centre [m] for a known robot name."""
-    from .errors import OptionError
+    from kincal.errors import OptionError
 
     if name not in _CENTERS:
         raise OptionError(f"no default cube centre for robot {name!r}; give --center-m X Y Z "

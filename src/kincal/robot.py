@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from . import descriptions
-from .errors import ChainError, FrameError, UrdfError, listing, suggest
-from .rotations import inverse
-from .urdf_source import read_urdf_text
+from kincal import descriptions
+from kincal.errors import ChainError, FrameError, UrdfError, listing, suggest
+from kincal.rotations import inverse
+from kincal.urdf_source import read_urdf_text
 
 _REVOLUTE = {"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned"}
 _CONTINUOUS = {"JointModelRUBX", "JointModelRUBY", "JointModelRUBZ",

@@ -12,7 +12,7 @@ import re
 from pathlib import Path
 from xml.parsers import expat
 
-from .errors import InputFileError, UrdfError
+from kincal.errors import InputFileError, UrdfError
 
 MAX_URDF_BYTES = 50 * 1024 * 1024
 """Largest URDF accepted [bytes]; real robots are well under 1 MB."""

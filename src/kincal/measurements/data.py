@@ -18,9 +18,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .backlash import approach_directions
-from .csv_table import read_columns
-from .errors import DataError, listing, suggest
+from kincal.errors import DataError, listing, suggest
+from kincal.measurements.csv_table import read_columns
+from kincal.models.backlash import approach_directions
 
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}

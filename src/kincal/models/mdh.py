@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rotations import inverse, transform
+from kincal.rotations import inverse, transform
 
 PARALLEL_TOL = 1e-6  # |sin| of the angle between axes below which they count as parallel
 TOOL_AXIS_WARNING = 5e-3  # [m] a tool point nearer the last joint axis: warn (last_axis_distance)

@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ParameterError, listing, suggest
-from .mdh import FIELDS, LENGTH_FIELDS
+from kincal.errors import ParameterError, listing, suggest
+from kincal.models.mdh import FIELDS, LENGTH_FIELDS
 
 BASE = ("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz")
 TOOL = ("tool.x", "tool.y", "tool.z")

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from .errors import DataError, InputFileError, KincalError, KincalWarning, OptionError
+from kincal import __version__
+from kincal.errors import DataError, InputFileError, KincalError, KincalWarning, OptionError
 
 DEMO_DIR = "kincal-demo"
 
@@ -41,13 +41,13 @@ def _progress_bar(stream=sys.stderr):
 
 
 def _robot(args):
-    from .robot import Robot
+    from kincal.robot import Robot
 
     return Robot.load(args.robot, tip=args.tip, base=args.base)
 
 
 def _measurements(args, robot):
-    from .measurements import Measurements
+    from kincal.measurements.data import Measurements
 
     prismatic = [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
     return Measurements.from_csv(args.data, robot.joint_names, prismatic=prismatic,
@@ -106,7 +106,7 @@ def _add_common(p, data=True):
 
 
 def _options(args, method):
-    from .calibration import CalibrationOptions
+    from kincal.identification.calibration import CalibrationOptions
 
     lam = args.lam
     if lam != "cv":
@@ -129,7 +129,7 @@ def _render_plots(result, out_dir: Path):
     """
     import tempfile
 
-    from .plots import plot_calibration
+    from kincal.export.plots import plot_calibration
 
     with tempfile.TemporaryDirectory(prefix="kincal-plots-") as tmp:
         paths = plot_calibration(result, Path(tmp))
@@ -141,9 +141,9 @@ def _render_plots(result, out_dir: Path):
 
 # -------------------------------------------------------------- subcommands
 def cmd_calibrate(args) -> int:
-    from . import report
-    from .calibration import CalibrationProblem
-    from .safe_write import write_all
+    from kincal.export import report
+    from kincal.export.safe_write import write_all
+    from kincal.identification.calibration import CalibrationProblem
 
     robot = _robot(args)
     data = _measurements(args, robot)
@@ -172,10 +172,10 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    from . import report
-    from .calibration import CalibrationOptions, CalibrationProblem
-    from .measurement_model import MeasurementModel
-    from .statistics import ErrorStats
+    from kincal.export import report
+    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.identification.statistics import ErrorStats
+    from kincal.measurements.point import MeasurementModel
 
     if bool(args.frames) == bool(args.fit_frames):
         raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
@@ -207,7 +207,7 @@ def cmd_evaluate(args) -> int:
     print(f"{robot.name} ({robot.base} -> {robot.tip}) on {args.data}, {how}:")
     print(f"  {stats.line()}")
     if args.report:
-        from .safe_write import write_all
+        from kincal.export.safe_write import write_all
 
         write_all([(args.report, report.dumps({"format": "kincal-evaluation-1",
                                                "robot": str(robot.source), "data": str(args.data),
@@ -217,8 +217,8 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_analyze(args) -> int:
-    from . import report
-    from .calibration import CalibrationOptions, CalibrationProblem
+    from kincal.export import report
+    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
 
     robot = _robot(args)
     data = _measurements(args, robot)
@@ -231,7 +231,7 @@ def cmd_analyze(args) -> int:
         which = "tool point" if problem.space.n_points == 1 else f"measured point {k}"
         print(f"  {which} (first estimate, tip frame): {np.round(tool * 1e3, 3).tolist()} mm")
     if args.report:
-        from .safe_write import write_all
+        from kincal.export.safe_write import write_all
 
         write_all([(args.report, report.dumps(report.identifiability_dict(ident)))],
                   overwrite=args.overwrite, protect=[robot.source, args.data])
@@ -239,8 +239,9 @@ def cmd_analyze(args) -> int:
 
 
 def cmd_simulate(args) -> int:
-    from . import mdh, simulation
-    from .safe_write import write_all
+    from kincal.export.safe_write import write_all
+    from kincal.models import mdh
+    from kincal.planning import simulation
 
     robot = _robot(args)
     model = mdh.extract(robot.geometry)
@@ -250,13 +251,13 @@ def cmd_simulate(args) -> int:
     tool = np.array(args.tool_m)
     center = args.center_m
     if center is None:
-        from .descriptions import default_center
+        from kincal.descriptions import default_center
 
         center = default_center(robot.name)
     if args.size_mm is not None:
         size = args.size_mm * 1e-3
     else:
-        from .descriptions import max_cube
+        from kincal.descriptions import max_cube
 
         size = max_cube(robot.name, design[0])
     q = simulation.cube_poses(robot, args.poses, center, size, tool, rng,
@@ -272,8 +273,8 @@ def cmd_simulate(args) -> int:
     data = simulation.measure(model, truth, q, args.noise_mm * 1e-3, rng, source="simulated")
     files = [(args.out, data.to_csv_text())]
     if args.truth_out:
-        from .parameters import ParameterSpace
-        from . import report
+        from kincal.export import report
+        from kincal.identification.parameters import ParameterSpace
 
         sp = ParameterSpace(model.joint_names)
         x, x0 = truth.x(sp), sp.join(model.table, np.zeros(6), np.zeros(3))
@@ -291,9 +292,9 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    from .candidates import candidates_csv_text, random_candidates, read_candidates
-    from .pose_selection import select_poses
-    from .safe_write import write_all
+    from kincal.export.safe_write import write_all
+    from kincal.planning.candidates import candidates_csv_text, random_candidates, read_candidates
+    from kincal.planning.pose_selection import select_poses
 
     if (args.candidates is None) == (args.random is None):
         raise OptionError("give exactly one of CANDIDATES.csv or --random M")
@@ -331,7 +332,7 @@ def cmd_plan(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from .paper_experiment import demo
+    from kincal.experiments.paper_experiment import demo
 
     print("kincal demo: the paper's experiment on a simulated EC66 (one seed, small size)")
     s = demo(Path(args.out), progress=lambda message: print(f"  {message}", flush=True))

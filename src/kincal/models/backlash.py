@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import DataError
+from kincal.errors import DataError
 
 MOVE_TOL = 1e-3  # [rad or m] a joint motion smaller than this does not set a direction
 CONVENTION = ("q_effective = q + backlash * g, g = +1 / -1 the sign of the joint's last "

@@ -19,9 +19,9 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from .errors import ExportError, FrameError, UrdfError, listing, suggest
-from .rotations import matrix_to_rpy, rpy_to_matrix
-from .urdf_source import check_urdf_text
+from kincal.errors import ExportError, FrameError, UrdfError, listing, suggest
+from kincal.rotations import matrix_to_rpy, rpy_to_matrix
+from kincal.urdf_source import check_urdf_text
 
 RPY_KEEP_TOLERANCE = 1e-15
 """Max abs rotation-matrix element difference under which the original rpy text is kept."""

@@ -24,9 +24,9 @@ import math
 
 import numpy as np
 
-from .mdh import MdhModel
-from .parameters import ParameterSpace
-from .rotations import base_rotation, rotx, roty, rotz
+from kincal.identification.parameters import ParameterSpace
+from kincal.models.mdh import MdhModel
+from kincal.rotations import base_rotation, rotx, roty, rotz
 
 
 def _rodrigues(w: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import OptionError
+from kincal.errors import OptionError
 
 
 @dataclass(frozen=True)

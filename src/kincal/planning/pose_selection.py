@@ -54,15 +54,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import mdh as mdh_layer
-from .mdh import TOOL_AXIS_WARNING
-from .errors import DataError, KincalWarning, OptionError
-from .measurement_model import MeasurementModel
-from .parameters import MM, ParameterSpace
-from .selection import RANK_TOL, analyze
+from kincal.errors import DataError, KincalWarning, OptionError
+from kincal.identification.parameters import MM, ParameterSpace
+from kincal.identification.selection import RANK_TOL, analyze
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh as mdh_layer
+from kincal.models.mdh import TOOL_AXIS_WARNING
 
 if TYPE_CHECKING:
-    from .robot import Robot
+    from kincal.robot import Robot
 
 METHODS = ("D",)
 RIDGE = 1e-6  # start of the greedy search, in units of the average pose's information

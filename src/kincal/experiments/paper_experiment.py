@@ -100,17 +100,27 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from . import mdh as mdh_layer
-from .calibration import CalibrationOptions, CalibrationProblem, CalibrationResult
-from .cross_validation import CrossValidation
-from .errors import ExportError, KincalWarning, OptionError
-from .parameters import DEG, MM, ParameterSpace
-from .robot import Robot
-from .rotations import base_rotation, rotx
-from .safe_write import write_text_atomic
-from .simulation import Truth, latin_hypercube, measure, planted_table, random_rotation_near, \
-    true_positions
-from .statistics import ErrorStats
+from kincal.errors import ExportError, KincalWarning, OptionError
+from kincal.export.safe_write import write_text_atomic
+from kincal.identification.calibration import (
+    CalibrationOptions,
+    CalibrationProblem,
+    CalibrationResult,
+)
+from kincal.identification.cross_validation import CrossValidation
+from kincal.identification.parameters import DEG, MM, ParameterSpace
+from kincal.identification.statistics import ErrorStats
+from kincal.models import mdh as mdh_layer
+from kincal.planning.simulation import (
+    Truth,
+    latin_hypercube,
+    measure,
+    planted_table,
+    random_rotation_near,
+    true_positions,
+)
+from kincal.robot import Robot
+from kincal.rotations import base_rotation, rotx
 
 # Table 4, "LS + Laser Tracker" column, per joint (a [mm], alpha [deg], d [mm], theta [deg]),
 # signs restored (NOTES.md). Alpha_3 and d_3 both print 0.253 in the paper; kept as printed.
@@ -142,7 +152,7 @@ _HOME_GUESS_DEG = (0.0, -110.0, 130.0, -110.0, 90.0, -110.0)
 # R-test frame: turned about the vertical, origin at the cube centre (set in run)
 _RTEST_RPY = (0.004, -0.006, 0.6)  # [rad]
 _TRACKER_FRAME = (1.9, -0.7, -0.95, 0.012, -0.008, 2.4)  # x, y, z [m], rx, ry, rz [rad]
-_MARK = "kincal.paper_experiment"
+_MARK = "kincal.experiments.paper_experiment"
 
 
 @dataclass(frozen=True)
@@ -538,7 +548,7 @@ def write_plots(result: ExperimentResult, out_dir, overwrite: bool = False,
 
     source: written into each PNG's "Software" field.
     """
-    from . import plots
+    from kincal.export import plots
 
     out_dir = Path(out_dir)
     cv = result.cv
@@ -650,7 +660,7 @@ def rtest_scenario(seed: int) -> dict:
     poses in a 400 mm cube (10 um). Returns mean validation errors [mm] ("before", "ls",
     "l2"), the calibration-set means ("ls_cal", "l2_cal") and the CV lambda.
     """
-    from .simulation import cube_poses
+    from kincal.planning.simulation import cube_poses
 
     rng = np.random.default_rng(seed)
     robot = Robot.load("ec66")

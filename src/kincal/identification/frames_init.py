@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .rotations import kabsch
+from kincal.rotations import kabsch
 
 
 def pivot_tool(R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:

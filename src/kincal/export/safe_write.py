@@ -13,7 +13,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from .errors import ExportError
+from kincal.errors import ExportError
 
 
 def write_text_atomic(path, text: str, *, overwrite: bool = False, protect=()) -> Path:

@@ -13,13 +13,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .csv_table import read_columns
-from .data_checks import angle_unit_warnings, limit_warnings
-from .errors import KincalWarning, OptionError
-from .measurements import ANGLE_UNITS, LENGTH_UNITS
+from kincal.errors import KincalWarning, OptionError
+from kincal.measurements.checks import angle_unit_warnings, limit_warnings
+from kincal.measurements.csv_table import read_columns
+from kincal.measurements.data import ANGLE_UNITS, LENGTH_UNITS
 
 if TYPE_CHECKING:
-    from .robot import Robot
+    from kincal.robot import Robot
 
 
 def random_candidates(robot: "Robot", m: int, rng) -> np.ndarray:

@@ -21,7 +21,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .safe_write import write_bytes_atomic
+from kincal.export.safe_write import write_bytes_atomic
 
 _COLORS = ("#7f7f7f", "#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd")
 

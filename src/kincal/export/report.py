@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
-from .calibration import CalibrationResult
-from .selection import Identifiability
-from .statistics import ErrorStats
+from kincal.identification.calibration import CalibrationResult
+from kincal.identification.selection import Identifiability
+from kincal.identification.statistics import ErrorStats
 
 FORMAT = "kincal-report-1"
 
@@ -61,7 +61,7 @@ def identifiability_dict(ident: Identifiability) -> dict:
 
 def result_dict(result: CalibrationResult, data_source: str | None = None) -> dict:
     """The whole result (REPORT.json)."""
-    from . import __version__
+    from kincal import __version__
 
     o = result.options
     params = []

@@ -13,14 +13,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .backlash import approach_directions
-from .errors import OptionError
-from .mdh import MdhModel
-from .measurement_model import MeasurementModel
-from .measurements import Measurements
-from .parameters import ParameterSpace
-from .robot import Robot
-from .rotations import rotx
+from kincal.errors import OptionError
+from kincal.identification.parameters import ParameterSpace
+from kincal.measurements.data import Measurements
+from kincal.measurements.point import MeasurementModel
+from kincal.models.backlash import approach_directions
+from kincal.models.mdh import MdhModel
+from kincal.robot import Robot
+from kincal.rotations import rotx
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DataError, InputFileError, listing, suggest
+from kincal.errors import DataError, InputFileError, listing, suggest
 
 
 @dataclass(frozen=True)

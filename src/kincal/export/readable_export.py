@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .robot import Robot
-from .rotations import rotation_angle
-from .urdf_export import EditResult, edit_joint_origins
+from kincal.export.urdf_export import EditResult, edit_joint_origins
+from kincal.robot import Robot
+from kincal.rotations import rotation_angle
 
 SWING = 0.05  # [rad] an rpy component moving this much more than the rotation itself
 

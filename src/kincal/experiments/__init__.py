@@ -1,0 +1,1 @@
+"""Experiments that reproduce the seed paper (not part of the calibration core)."""

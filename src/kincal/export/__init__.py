@@ -1,0 +1,1 @@
+"""Everything kincal writes: corrected URDF, frames, reports, plots, all atomically."""

@@ -1,0 +1,1 @@
+"""Identification: parameters, rank-revealing selection, solver, penalty, CV, results."""

@@ -1,0 +1,377 @@
+"""Calibration: build the problem, analyse what the data identify, solve, report.
+
+``CalibrationProblem(robot, data, options)`` builds; ``.analyze()`` returns the
+identifiability of the parameters on these data; ``.solve()`` runs the identification
+(plain least squares, or L2 toward nominal with lambda given or chosen by k-fold CV) and
+returns a :class:`CalibrationResult`. ``calibrate(...)`` does all three. Options: :mod:`.options`; results: :mod:`.result`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import warnings
+from dataclasses import replace
+from typing import Callable
+
+import numpy as np
+
+from kincal.errors import DataError, IdentifiabilityError, KincalWarning
+from kincal.identification import blas_threads
+from kincal.identification.cross_validation import (
+    CrossValidation,
+    cross_validate,
+    lambda_grid,
+)
+from kincal.identification.frames_init import initial_frames, point_in_tip
+from kincal.identification.options import CalibrationOptions
+from kincal.identification.parameters import MM, ParameterSpace
+from kincal.identification.result import CalibrationResult
+from kincal.identification.robust import ROBUST_SCALE, Downweighted
+from kincal.identification.robust import weights as robust_weights
+from kincal.identification.selection import Identifiability, analyze
+from kincal.identification.solver import SolverOptions, SolveSummary, solve
+from kincal.measurements.checks import (
+    angle_unit_warnings,
+    distinct_poses,
+    length_unit_warnings,
+    limit_warnings,
+)
+from kincal.measurements.data import Measurements
+from kincal.measurements.point import MeasurementModel
+from kincal.models import mdh as mdh_layer
+from kincal.models.mdh import TOOL_AXIS_WARNING
+from kincal.robot import Robot
+from kincal.rotations import base_angles, base_rotation
+
+
+class CalibrationProblem:
+    """The identification of one robot chain from one set of measurements."""
+
+    def __init__(self, robot: Robot, data: Measurements, options: CalibrationOptions | None = None):
+        self.robot = robot
+        self.options = (options or CalibrationOptions()).validated()
+        self.data = data.for_chain(robot.joint_names)
+        self.mdh = mdh_layer.extract(robot.geometry)
+        self.space = ParameterSpace.of_chain(self.mdh.joint_names, self.mdh.kinds,
+                                             self.options.backlash, self.data.n_points)
+        self.model = MeasurementModel(self.mdh, self.data.joint_values, self.data.approach,
+                                      self.space.backlash, self.data.points,
+                                      self.space.n_points)
+        o = self.options
+        self.scale = np.where(self.space.is_length, o.length_scale, o.angle_scale)
+        if self.data.sigma is None:
+            self.weights = np.ones(len(self.data))
+        else:
+            inv = 1.0 / self.data.sigma
+            self.weights = inv / np.sqrt(np.mean(inv ** 2))
+        for name in o.fix + o.free:
+            self.space.index(name)  # unknown names raise ParameterError listing the valid ones
+        pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
+        self.n_poses = len(pose)
+        if self.n_poses < 3:
+            raise DataError(f"{self.data.source}: {self.n_poses} poses; the measurement frame "
+                            "and tool point alone need at least 3 (a calibration needs many more)")
+        g = robot.geometry
+        q_poses = self.data.joint_values[pose]
+        for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q_poses,
+                                       self.data.rows[pose])
+                        + angle_unit_warnings(g.joint_names, g.kinds, q_poses,
+                                              self.data.angle_unit)
+                        + self._approach_warnings()):
+            warnings.warn(f"{self.data.source}: {message}", KincalWarning)
+        self._x_start = None
+        self._ident = None
+
+    # --------------------------------------------------------------- residuals
+    def residual_function(self, rows=None, kinematic: bool = True) -> Callable:
+        """residual(u, with_jacobian) on the samples ``rows`` (default all), in mm.
+
+        kinematic=False: MD-H columns of the Jacobian left at zero (frame-only fits).
+        """
+        model = self.model if rows is None else self.model.subset(rows)
+        P = self.data.positions if rows is None else self.data.positions[rows]
+        w = (self.weights if rows is None else self.weights[rows])[:, None]
+        s = self.scale
+
+        def residual(u, with_jacobian):
+            x = u * s
+            if not with_jacobian:
+                return ((P - model.predict(x)) * w).ravel() / MM, None
+            pred, J = model.jacobian(x, kinematic)
+            r = ((P - pred) * w).ravel() / MM
+            Jr = -(J * w[:, :, None]).reshape(-1, s.size) * (s / MM)
+            return r, Jr
+
+        return residual
+
+    # ------------------------------------------------------------------ start
+    def _approach_warnings(self) -> list[str]:
+        """Backlash joints whose samples do not come from both directions, and a time-like
+        column left unused while the directions come from the row order."""
+        out = []
+        timelike = [c for c in self.data.ignored_columns
+                    if re.search(r"time|stamp|(^|_)t($|_)", c, re.IGNORECASE)]
+        if self.space.n_backlash and not self.data.has_order_column and timelike:
+            out.append(f"backlash: the approach directions come from {self.data.order_source}; "
+                       f"the file has a column {timelike[0]!r} that looks like a time stamp: if "
+                       f"the rows are not in acquisition order, give it as the order column "
+                       f"(--order-column {timelike[0]})")
+        for j, i in zip(self.space.backlash, self.space.backlash_joint_index):
+            g = self.data.approach[:, i]
+            up, down = int(np.sum(g > 0)), int(np.sum(g < 0))
+            if min(up, down) < 3:
+                out.append(f"{j}.backlash: {up} samples approached {j} from below and {down} "
+                           f"from above (acquisition order: {self.data.order_source}); "
+                           "backlash is identifiable only from both directions, a few of "
+                           "each at least")
+        return out
+
+    @property
+    def x_nominal(self) -> np.ndarray:
+        return self.space.join(self.mdh.table, np.zeros(6), np.zeros((self.space.n_points, 3)))
+
+    def start(self) -> np.ndarray:
+        """Nominal kinematics with the measurement frame and tool point(s) fitted to the data.
+
+        tool_guess is for point 1; further points follow from a linear solve."""
+        if self._x_start is not None:
+            return self._x_start
+        o = self.options
+        R_tip, p_tip = self.model.tip_poses(self.mdh.table)
+        P, first = self.data.positions, self.data.points == 0
+        guess = np.zeros(3) if o.tool_guess is None else np.asarray(o.tool_guess, float)
+        for message in length_unit_warnings(P[first], p_tip[first] + R_tip[first] @ guess,
+                                            self.data.length_unit):
+            warnings.warn(f"{self.data.source}: {message}", KincalWarning)
+        Rb, tb, tool, _, _ = initial_frames(R_tip[first], p_tip[first], P[first], o.tool_guess)
+        base = np.concatenate([tb, base_angles(Rb)])
+        if o.base_guess is not None:
+            base = np.asarray(o.base_guess, dtype=float)
+            Rb, tb = base_rotation(*base[3:]), base[:3]
+            if o.tool_guess is not None:
+                tool = np.asarray(o.tool_guess, dtype=float)
+        tools = [tool] + [point_in_tip(R_tip[m], p_tip[m], P[m], Rb, tb)
+                          for m in (self.data.points == k for k in range(1, self.space.n_points))]
+        x = self.space.join(self.mdh.table, base, np.array(tools))
+        free = self.space.is_frame
+        sol = solve(self.residual_function(kinematic=False), x / self.scale, free,
+                    options=o.solver)
+        self._x_start = sol.u * self.scale
+        return self._x_start
+
+    # ---------------------------------------------------------------- analyse
+    def analyze(self) -> Identifiability:
+        """Which parameters these data identify, at the starting point."""
+        if self._ident is not None:
+            return self._ident
+        o = self.options
+        free = self._unfixed()
+        _, J = self.residual_function()(self.start() / self.scale, True)
+        # reporting units: mm per mm or per degree, whatever the penalty scale
+        J = J * (self.space.reporting_scale() / self.scale)
+        ident = analyze(J, self.space.names, self.space.n_kinematic, free, o.rank_tol)
+        frame_names = set(np.array(self.space.names)[self.space.is_frame])
+        frames_lost = [n for n in ident.dropped if n in frame_names]
+        if frames_lost:
+            why = "; ".join(d.describe() for d in ident.duplicates if d.name in frames_lost)
+            distinct = distinct_poses(self.data.joint_values)
+            raise IdentifiabilityError(
+                f"{self.data.source}: the poses cannot even locate the measurement frame and "
+                f"tool point: {', '.join(frames_lost)} cannot be identified ({why}). There are "
+                f"{distinct} distinct poses of {self.n_poses}; add poses that differ in every "
+                "joint, or fix what the data cannot give (e.g. --fix tool.x tool.y tool.z with "
+                "--tool-offset). Identifiable now: " + ", ".join(ident.kept))
+        general = self.structural()
+        lost = [n for n in general.kept if n not in ident.kept]
+        if lost:
+            need = math.ceil(len(general.kept) / (3 * self.space.n_points))
+            ident = replace(ident, notes=ident.notes + (
+                f"{len(lost)} parameters this chain can identify are not identifiable from "
+                f"these {self.n_poses} poses "
+                f"({distinct_poses(self.data.joint_values)} "
+                f"distinct): {', '.join(lost)}; the {len(general.kept)} identifiable "
+                f"parameters need at least {need} poses, and many more spread over the "
+                "workspace for a good result",))
+        note = self._tool_axis_note()
+        if note:
+            ident = replace(ident, notes=ident.notes + (note,))
+            warnings.warn(note, KincalWarning)
+        self._ident = ident
+        return ident
+
+    def structural(self) -> Identifiability:
+        """What this chain can identify from generic poses (seeded random joint values).
+
+        Compared with :meth:`analyze`, it tells which parameters are lost to the data (too
+        few or too similar poses) rather than to the geometry of the chain.
+        """
+        if getattr(self, "_structural", None) is not None:
+            return self._structural
+        g = self.robot.geometry
+        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        rng = np.random.default_rng(0)
+        K = self.space.n_points
+        q = np.repeat(rng.uniform(lo, hi, size=(2 * self.space.size, g.n)), K, axis=0)
+        approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * self.space.size, g.n)), K, axis=0)
+        points = np.tile(np.arange(K), 2 * self.space.size)
+        pred, J = MeasurementModel(self.mdh, q, approach, self.space.backlash, points,
+                                   K).jacobian(self.start())
+        J = J.reshape(-1, self.space.size) * self.space.reporting_scale() / MM
+        free = self._unfixed()
+        self._structural = analyze(J, self.space.names, self.space.n_kinematic, free,
+                                   self.options.rank_tol)
+        return self._structural
+
+    def _unfixed(self) -> np.ndarray:
+        """(p,) the parameters the method fits and the user did not fix."""
+        free = (np.ones(self.space.size, dtype=bool) if self.options.method != "frames"
+                else self.space.is_frame)
+        free[self.space.indices(self.options.fix)] = False
+        return free
+
+    def _tool_axis_note(self) -> str:
+        """A warning when every tool point sits near the axis of the last (revolute) joint."""
+        dists = [self.mdh.last_axis_distance(t) for t in self.space.tools(self.start())]
+        if dists[0] is None or max(dists) >= TOOL_AXIS_WARNING:
+            return ""
+        dist = max(dists)
+        last = self.mdh.joint_names[-1]
+        which = "tool point is" if len(dists) == 1 else f"{len(dists)} measured points are all"
+        return (f"the {which} {dist * 1e3:.2f} mm from the axis of {last}: turning about "
+                f"that axis barely moves it, so {last}.theta and the tilt of that axis "
+                f"({last}.alpha) are weak or redundant; an offset tool point (>= 20 mm off the "
+                "axis) makes them identifiable")
+
+    def free_mask(self) -> np.ndarray:
+        ident = self.analyze()
+        mask = np.zeros(self.space.size, dtype=bool)
+        mask[self.space.indices(ident.kept)] = True
+        if self.options.free:
+            mask[self.space.indices(self.options.free)] = True
+        return mask
+
+    # ------------------------------------------------------------------- fits
+    def fit(self, lam: float, rows=None, start: np.ndarray | None = None,
+            free: np.ndarray | None = None, residual: Callable | None = None,
+            options: SolverOptions | None = None) -> SolveSummary:
+        """One solve with penalty weight ``lam`` on the samples ``rows`` (default all).
+
+        residual: a prebuilt :meth:`residual_function` for ``rows`` (saves rebuilding it).
+        """
+        x0 = self.start() if start is None else start
+        free = self.free_mask() if free is None else free
+        u_prior = self.start() / self.scale  # kinematics at nominal; frames not penalised
+        residual = self.residual_function(rows) if residual is None else residual
+        return solve(residual, x0 / self.scale, free, lam=lam,
+                     penalised=self.space.is_penalised, prior=u_prior,
+                     options=options or self.options.solver)
+
+    def position_errors(self, x: np.ndarray, rows=None) -> np.ndarray:
+        """(N, 3) measured minus predicted positions [m]."""
+        model = self.model if rows is None else self.model.subset(rows)
+        P = self.data.positions if rows is None else self.data.positions[rows]
+        return P - model.predict(x)
+
+    def cross_validate(self) -> CrossValidation:
+        o = self.options
+        grid = lambda_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
+        free = self.free_mask()
+
+        fold_options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol))
+        cache = {}  # per fold: the training residual and the validation model
+
+        def fit(train, lam, start):
+            key = train.tobytes()
+            if key not in cache:
+                cache.clear()
+                cache[key] = self.residual_function(train)
+            return self.fit(lam, train, None if start is None else start.u * self.scale, free,
+                            residual=cache[key], options=fold_options)
+
+        val_models = {}
+
+        def error(sol, val):
+            key = val.tobytes()
+            if key not in val_models:
+                val_models.clear()
+                val_models[key] = (self.model.subset(val), self.data.positions[val])
+            model, P = val_models[key]
+            e = P - model.predict(sol.u * self.scale)
+            return float(np.mean(np.linalg.norm(e, axis=1)) / MM)
+
+        return cross_validate(fit, error, len(self.data), grid, o.folds, o.seed,
+                              o.warm_start, o.progress, groups=self.data.poses)
+
+    # ------------------------------------------------------------------ solve
+    def solve(self) -> "CalibrationResult":
+        with blas_threads.limited(self.options.blas_threads):
+            return self._solve()
+
+    def _solve(self) -> "CalibrationResult":
+        o = self.options
+        ident = self.analyze()
+        general = self.structural()
+        m = 3 * len(self.data)
+        per_pose = 3 * self.space.n_points
+        if o.method != "l2" and m <= len(general.kept) and len(ident.kept) < len(general.kept):
+            raise IdentifiabilityError(
+                f"{self.n_poses} poses give {m} equations for the {len(general.kept)} "
+                f"parameters this chain can identify; method {o.method} needs at least "
+                f"{math.ceil((len(general.kept) + 1) / per_pose)} poses (and many more spread over the "
+                "workspace); with these poses it would only interpolate. Method l2 can work "
+                "with fewer, pulling what the data cannot fix toward nominal")
+        cv = None
+        if o.method == "l2":
+            if o.lam == "cv":
+                cv = self.cross_validate()
+                lam = cv.best_lambda
+            else:
+                lam = float(o.lam)
+        else:
+            lam = 0.0
+        sol = self.fit(lam)
+        downweighted = ()
+        if o.robust is not None:
+            sol, downweighted = self._irls(sol, lam)
+        if not sol.converged:
+            warnings.warn(f"the solver did not converge in {sol.iterations} iterations; the "
+                          "result is the best iterate and is flagged not converged", KincalWarning)
+        result = CalibrationResult._build(self, sol, lam, cv, ident)
+        return replace(result, downweighted=downweighted)
+
+    def _irls(self, sol: SolveSummary, lam: float, rounds: int = 20):
+        """Reweight poses by the robust loss until the weights settle (see kincal.robust)."""
+        o = self.options
+        base_weights = self.weights
+        try:
+            w = np.ones(len(self.data))
+            for _ in range(rounds):
+                e = np.linalg.norm(self.position_errors(sol.u * self.scale), axis=1) / MM
+                c = o.robust_scale_mm or ROBUST_SCALE * float(np.median(e))
+                w_new = robust_weights(e, o.robust, max(c, 1e-9))
+                self.weights = base_weights * np.sqrt(w_new)  # residuals carry sqrt(weight)
+                sol = self.fit(lam, start=sol.u * self.scale)
+                done = np.max(np.abs(w_new - w)) < 1e-4
+                w = w_new
+                if done:
+                    break
+        finally:
+            self.weights = base_weights
+        e = np.linalg.norm(self.position_errors(sol.u * self.scale), axis=1) / MM
+        low = np.flatnonzero(w < 0.5)
+        out = tuple(Downweighted(int(self.data.rows[k]), float(e[k]), float(w[k]))
+                    for k in low[np.argsort(w[low])])
+        return sol, out
+
+
+
+def calibrate(robot: Robot, data: Measurements, options: CalibrationOptions | None = None,
+              **overrides) -> CalibrationResult:
+    """Build, analyse and solve in one call; keyword arguments override ``options`` fields."""
+    if options is None:
+        options = CalibrationOptions(**overrides)
+    elif overrides:
+        options = replace(options, **overrides)
+    return CalibrationProblem(robot, data, options).solve()

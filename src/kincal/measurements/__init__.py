@@ -1,0 +1,1 @@
+"""Measurement kinds: the data a calibration reads and what each kind predicts."""

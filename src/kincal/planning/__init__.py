@@ -1,0 +1,1 @@
+"""Planning measurement campaigns: candidate poses, D-optimal selection, simulation."""
