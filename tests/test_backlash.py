@@ -177,7 +177,8 @@ def test_cli_analyze_lists_backlash_terms_and_the_tool_point(tmp_path, capsys):
     rng, robot, model, q, truth = _ur10_with_backlash(n=40)
     csv = tmp_path / "d.csv"
     csv.write_text(measure(model, truth, q, 0.0, rng).to_csv_text())
-    assert main(["analyze", "ur10", str(csv), "--tip", "tool0", "--backlash", "wrist_2_joint"]) == 0
+    assert main(["analyze", "ur10", str(csv), "--tip", "tool0", "--backlash", "wrist_2_joint",
+                 "--model", "mdh"]) == 0
     out = capsys.readouterr().out
     assert "of 34 free parameters" in out  # 24 MD-H + 9 frames + 1 backlash
     tool_mm = json.loads(out.split("tip frame): ")[1].split(" mm")[0])

@@ -143,7 +143,7 @@ def test_empty_file(tmp_path, capsys):
 def test_too_few_poses_says_how_many(tmp_path, capsys, good_csv):
     text = "\n".join([HEADER] + _rows(good_csv, 6))
     line = _run(["ec66", _csv(tmp_path, text), "--method", "ls"], tmp_path, capsys)
-    assert "needs at least 9 poses" in line and "25 parameters" in line
+    assert "needs at least 10 poses" in line and "27 parameters" in line  # complete model
 
 
 def test_identical_poses_name_what_cannot_be_identified(tmp_path, capsys, good_csv):

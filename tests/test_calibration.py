@@ -6,7 +6,7 @@ from conftest import random_joint_values
 
 from kincal.errors import OptionError
 from kincal.experiments.paper_experiment import rtest_scenario
-from kincal.identification.calibration import CalibrationProblem, calibrate
+from kincal.identification.calibration import CalibrationOptions, CalibrationProblem, calibrate
 from kincal.measurements.data import Measurements
 from kincal.models import mdh
 from kincal.planning.simulation import Truth, cube_poses, measure, planted_table, true_positions
@@ -29,7 +29,8 @@ def _setup(name, tip, tool, seed, design="random", n=60):
 def _identifiable_truth(robot, model, q, tool, rng, scale=1.0):
     """A truth with errors only in the parameters these poses identify."""
     nominal = Truth(model.table, BASE, np.asarray(tool))
-    probe = CalibrationProblem(robot, measure(model, nominal, q, 0.0, rng))
+    probe = CalibrationProblem(robot, measure(model, nominal, q, 0.0, rng),
+                               CalibrationOptions(model="mdh"))
     kept = [n for n in probe.analyze().kept if not n.startswith(("base", "tool"))]
     table = planted_table(model, rng, 0.5e-3 * scale, np.radians(0.05) * scale, names=kept)
     return Truth(table, BASE, np.asarray(tool) + [0.001, -0.002, 0.003]), kept
@@ -41,7 +42,7 @@ def test_planted_errors_are_recovered(name, tip, design):
     rng, robot, model, q = _setup(name, tip, tool, 7, design)
     truth, kept = _identifiable_truth(robot, model, q, tool, rng)
     data = measure(model, truth, q, 0.0, rng)
-    res = calibrate(robot, data, method="ls")
+    res = calibrate(robot, data, model="mdh", method="ls")
     x_true = truth.x(res.space)
     idx = res.space.indices(kept + list(res.space.names[-9:]))
     assert np.abs(res.x[idx] - x_true[idx]).max() < 1e-9
@@ -61,7 +62,7 @@ def test_nominal_robot_gives_zero_correction():
     rng, robot, model, q = _setup("ec66", "flange", tool, 3)
     data = measure(model, Truth(model.table, BASE, tool), q, 0.0, rng)
     for method in ("ls", "l2"):
-        res = calibrate(robot, data, method=method, lam=1.0)
+        res = calibrate(robot, data, model="mdh", method=method, lam=1.0)
         dev = np.array([p.deviation for p in res.parameters if p.status == "identified"
                         and not p.name.startswith(("base", "tool"))])
         assert np.abs(dev).max() < 1e-12
@@ -72,7 +73,7 @@ def test_result_carries_everything():
     tool = np.array([0.04, 0.03, 0.11])
     rng, robot, model, q = _setup("ec66", "flange", tool, 5)
     truth, _ = _identifiable_truth(robot, model, q, tool, rng)
-    res = calibrate(robot, measure(model, truth, q, 2e-5, rng), method="l2")
+    res = calibrate(robot, measure(model, truth, q, 2e-5, rng), model="mdh", method="l2")
     assert res.cv is not None and res.cv.lambdas.size == 50 and res.cv.fold_errors.shape == (50, 5)
     assert res.lam == res.cv.best_lambda == res.cv.lambdas[np.argmin(res.cv.mean_error)]
     assert res.after.rms < res.before.rms
@@ -94,8 +95,8 @@ def test_l2_fits_training_data_nearly_as_well_as_ls():
     q = cube_poses(robot, 60, [0.4, 0.0, 0.25], 0.02, tool, rng, max_tilt=np.radians(15))
     truth = Truth(planted_table(model, rng), BASE, tool + [0.001, 0, 0.002])
     data = measure(model, truth, q, 5e-5, rng)
-    ls = calibrate(robot, data, method="ls")
-    l2 = calibrate(robot, data, method="l2")
+    ls = calibrate(robot, data, model="mdh", method="ls")
+    l2 = calibrate(robot, data, model="mdh", method="l2")
     assert l2.after.mean <= 1.5 * ls.after.mean
 
 
@@ -114,13 +115,13 @@ def test_bad_cv_options_are_rejected():
     rng, robot, model, q = _setup("ec66", "flange", tool, 3, n=8)
     data = measure(model, Truth(model.table, BASE, tool), q, 1e-5, rng)
     with pytest.raises(OptionError, match="folds"):
-        calibrate(robot, data, method="l2", folds=9)
+        calibrate(robot, data, model="mdh", method="l2", folds=9)
     with pytest.raises(OptionError, match="lambda"):
-        calibrate(robot, data, method="l2", lam=-1.0)
+        calibrate(robot, data, model="mdh", method="l2", lam=-1.0)
     with pytest.raises(OptionError, match="grid"):
-        calibrate(robot, data, method="l2", lambda_min=10.0, lambda_max=1.0)
+        calibrate(robot, data, model="mdh", method="l2", lambda_min=10.0, lambda_max=1.0)
     with pytest.raises(OptionError, match="method"):
-        calibrate(robot, data, method="lsq")
+        calibrate(robot, data, model="mdh", method="lsq")
 
 
 def test_sigma_weights_down_a_noisy_sample():
@@ -131,9 +132,9 @@ def test_sigma_weights_down_a_noisy_sample():
     P = np.array(data.positions)
     P[0] += [0.003, -0.002, 0.004]  # one bad sample
     sigma = np.full(len(q), 1e-5)
-    plain = calibrate(robot, Measurements(data.joint_names, q, P), method="ls")
+    plain = calibrate(robot, Measurements(data.joint_names, q, P), model="mdh", method="ls")
     sigma[0] = 1e-2
-    weighted = calibrate(robot, Measurements(data.joint_names, q, P, sigma), method="ls")
+    weighted = calibrate(robot, Measurements(data.joint_names, q, P, sigma), model="mdh", method="ls")
     x_true = truth.x(plain.space)
     k = plain.space.index("joint_4.a")
     assert abs(weighted.x[k] - x_true[k]) < 0.1 * abs(plain.x[k] - x_true[k])
@@ -150,11 +151,11 @@ def test_blas_runs_on_one_thread_while_solving_and_is_restored():
     data = measure(model, Truth(planted_table(model, rng), BASE, tool), q, 1e-5, rng)
     before = blas_threads()
     seen = []
-    res = calibrate(robot, data, method="l2", progress=lambda done, total: seen.append(blas_threads()))
+    res = calibrate(robot, data, model="mdh", method="l2", progress=lambda done, total: seen.append(blas_threads()))
     assert seen and all(s == {1} for s in seen)
     assert blas_threads() == before
     seen.clear()
-    free = calibrate(robot, data, method="l2", blas_threads=None,
+    free = calibrate(robot, data, model="mdh", method="l2", blas_threads=None,
                      progress=lambda done, total: seen.append(blas_threads()))
     assert seen[0] == before
     assert np.allclose(res.x, free.x, rtol=0, atol=1e-12)

@@ -33,7 +33,7 @@ def test_simulate_writes_csv_and_truth(sim):
     header = (sim / "cal.csv").read_text().splitlines()[0].split(",")
     assert header == [f"joint_{i}" for i in range(1, 7)] + ["x", "y", "z"]
     truth = json.loads((sim / "truth.json").read_text())
-    assert len(truth["deviations_si"]) == 24 and truth["seed"] == 3
+    assert len(truth["deviations_si"]) == 36 and truth["seed"] == 3  # 6 placement errors per joint
 
 
 def test_calibrate_writes_urdf_frames_and_report(sim, tmp_path, capsys):
@@ -47,7 +47,7 @@ def test_calibrate_writes_urdf_frames_and_report(sim, tmp_path, capsys):
     frames = json.loads((tmp_path / "frames.json").read_text())
     assert abs(frames["tool"]["z"] - 0.12) < 1e-3 and set(frames["base"]) == {"x", "y", "z", "rx", "ry", "rz"}
     report = json.loads((tmp_path / "report.json").read_text())
-    assert len(report["parameters"]) == 33 and len(report["cross_validation"]["lambdas"]) == 50
+    assert len(report["parameters"]) == 35 and len(report["cross_validation"]["lambdas"]) == 50
     assert report["errors"]["after"]["mean_mm"] < report["errors"]["before"]["mean_mm"]
     # the corrected URDF differs from the input only on origin lines, and loads
     old, new = EC66.read_text().splitlines(), out.read_text().splitlines()
@@ -76,7 +76,7 @@ def test_calibrated_model_evaluates_better_on_held_out_data(sim, tmp_path, capsy
 
 
 def test_analyze_reports_the_paper_selection(sim, capsys):
-    assert main(["analyze", "ec66", str(sim / "cal.csv")]) == 0
+    assert main(["analyze", "ec66", str(sim / "cal.csv"), "--model", "mdh"]) == 0
     out = capsys.readouterr().out
     assert "25 of 33" in out and "dropped joint_2.d ~ +1 joint_4.d" in out
 

@@ -14,6 +14,7 @@ from kincal.identification.calibration import CalibrationOptions, CalibrationPro
 from kincal.identification.parameters import MM, ParameterSpace
 from kincal.identification.selection import analyze
 from kincal.measurements.point import MeasurementModel
+from kincal import models
 from kincal.models import mdh
 from kincal.planning.candidates import random_candidates, read_candidates
 from kincal.planning.pose_selection import EXCHANGE_TOL, select_poses
@@ -43,9 +44,9 @@ def case(request, ec66):
 
 def _normalised_jacobian(robot, candidates, selection, tool=TOOL):
     """Jacobian of the candidates in the criterion's columns, built independently."""
-    model = mdh.extract(robot.geometry)
-    space = ParameterSpace(model.joint_names)
-    x = space.join(model.table, np.zeros(6), np.asarray(tool))
+    model = models.build(models.DEFAULT, robot.geometry)  # select_poses' default model
+    space = ParameterSpace.of_model(model)
+    x = space.join(model.nominal, np.zeros(6), np.asarray(tool))
     J = MeasurementModel(model, candidates).jacobian(x)[1] * (space.reporting_scale() / MM)
     cols = space.indices(selection.parameters)
     return J, J[:, :, cols] / selection.column_scale, space
@@ -105,7 +106,7 @@ def test_chosen_poses_identify_what_the_candidates_identify(case):
     all_ = analyze(J.reshape(-1, space.size), space.names, space.n_kinematic)
     mine = analyze(J[list(s.indices)].reshape(-1, space.size), space.names, space.n_kinematic)
     assert mine.kept == all_.kept == s.parameters
-    assert s.lost == () and len(s.parameters) == 25
+    assert s.lost == () and len(s.parameters) == 27  # 25 MD-H + 2 betas (complete model)
     # and so says the calibration's own analysis, on measurements of the chosen poses
     model = mdh.extract(robot.geometry)
     truth = Truth(model.table, np.array([0.7, 0.2, -0.1, 0.01, 0.02, 0.4]), np.array(TOOL))
@@ -162,7 +163,7 @@ def test_random_candidates_respect_limits(ec66):
 # --------------------------------------------------------------------- errors
 def test_bad_requests_raise_clear_errors(ec66):
     candidates = random_candidates(ec66, 50, np.random.default_rng(5))
-    with pytest.raises(OptionError, match=r"identify 25 parameters.*at least 9 poses"):
+    with pytest.raises(OptionError, match=r"identify 27 parameters.*at least 9 poses"):
         select_poses(ec66, candidates, 8, tool=TOOL)
     with pytest.raises(OptionError, match="cannot choose 51 poses from 50 candidates"):
         select_poses(ec66, candidates, 51, tool=TOOL)

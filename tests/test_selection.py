@@ -20,7 +20,7 @@ def _problem(tool, n=60, seed=0, **options):
     q = random_joint_values(robot.geometry, rng, n)
     truth = Truth(model.table, np.array([0.6, 0.2, -0.1, 0.01, 0.02, 0.5]), np.array(tool))
     data = measure(model, truth, q, 0.0, rng)
-    return CalibrationProblem(robot, data, CalibrationOptions(**options))
+    return CalibrationProblem(robot, data, CalibrationOptions(**{"model": "mdh", **options}))
 
 
 def test_ec66_keeps_25_of_33_like_the_paper():
@@ -32,6 +32,15 @@ def test_ec66_keeps_25_of_33_like_the_paper():
     assert why["joint_2.d"].combination[0][0] == "joint_4.d"
     assert why["joint_1.d"].combination[0][0] == "base.z"
     assert why["joint_6.d"].combination[0][0] == "tool.z"
+
+
+def test_complete_model_adds_the_two_betas_and_drops_a_d_for_each():
+    # EC66 joints 2-3-4 are parallel: Hayati's beta at joints 3 and 4 is identifiable,
+    # and the d of the earlier frame of each parallel pair becomes redundant
+    ident = _problem([0.03, 0.02, 0.12], model="complete").analyze()
+    assert len(ident.free) == 35 and len(ident.kept) == 27
+    assert {"joint_3.beta", "joint_4.beta"} <= set(ident.kept)
+    assert set(ident.dropped) == PAPER_DROPPED
 
 
 def test_selection_is_deterministic_and_stable_as_poses_are_added():

@@ -39,6 +39,8 @@ class ChainGeometry:
     axes: (n, 3) unit joint axis of joint i in its own frame.
     T_base_tip: (4, 4) pose of the tip frame at zero joint values [m].
     lower, upper: (n,) joint limits [rad or m]; +-inf when the URDF gives none.
+    parent_frames: (n, 4, 4) pose of each joint's parent link frame (the frame its URDF
+        ``<origin>`` is written in) at zero joint values [m].
     """
 
     joint_names: tuple[str, ...]
@@ -48,6 +50,7 @@ class ChainGeometry:
     T_base_tip: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    parent_frames: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -187,8 +190,10 @@ class Robot:
         m = self.model
         T_jb_B = _mat(m.frames[self._base_id].placement)
         T = inverse(T_jb_B)  # base joint frame expressed in B
-        frames, axes, kinds = [], [], []
+        frames, axes, kinds, parents = [], [], [], []
         for j in self._chain:
+            fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
+            parents.append(T @ _mat(m.frames[m.frames[fid].parentFrame].placement))
             T = T @ _mat(m.jointPlacements[j])
             frames.append(T.copy())
             axis, kind = self._axis(j)
@@ -206,7 +211,7 @@ class Robot:
                 lower.append(lo if lo > -1e300 else -np.inf)
                 upper.append(hi if hi < 1e300 else np.inf)
         return ChainGeometry(self.joint_names, tuple(kinds), np.array(frames), np.array(axes),
-                             T_tip, np.array(lower), np.array(upper))
+                             T_tip, np.array(lower), np.array(upper), np.array(parents))
 
     def _axis(self, j: int) -> tuple[np.ndarray, str]:
         """Unit axis of joint j in its own frame, read from its motion subspace."""

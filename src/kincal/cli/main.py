@@ -105,6 +105,15 @@ def _add_common(p, data=True):
                    help="initial guess of the tool point in the tip frame, in the length unit")
 
 
+def _add_model(p, allow_all: bool = False, default: str | None = None, help: str | None = None):
+    from kincal.models import DEFAULT, MODELS, SUITS
+
+    choices = MODELS + (("all",) if allow_all else ())
+    p.add_argument("--model", choices=choices, default=default or DEFAULT, metavar="NAME",
+                   help=help or ("error model: " + "; ".join(f"{k}: {v}" for k, v in SUITS.items())
+                                 + ("; all: compare every model" if allow_all else "")))
+
+
 def _options(args, method):
     from kincal.identification.calibration import CalibrationOptions
 
@@ -114,7 +123,7 @@ def _options(args, method):
             lam = float(lam)
         except ValueError:
             raise OptionError(f"--lambda must be 'cv' or a number, got {lam!r}") from None
-    return CalibrationOptions(method=method, lam=lam, folds=args.folds, seed=args.seed,
+    return CalibrationOptions(model=args.model, method=method, lam=lam, folds=args.folds, seed=args.seed,
                               fix=tuple(args.fix), free=tuple(args.free),
                               backlash=tuple(args.backlash),
                               tool_guess=_tool_offset(args), robust=args.robust,
@@ -190,11 +199,11 @@ def cmd_evaluate(args) -> int:
             raise DataError(f"{args.data} has {data.n_points} measured points per pose, "
                             f"{args.frames} has {len(tools)} tool point(s)")
         try:
-            model = MeasurementModel(problem.mdh, data.joint_values, data.approach, backlash,
+            model = MeasurementModel(problem.error_model, data.joint_values, data.approach, backlash,
                                      data.points, len(tools))
         except KincalError as exc:
             raise DataError(f"{args.frames}: {exc}") from None
-        x = model.space.join(problem.mdh.table, base, tools,
+        x = model.space.join(problem.error_model.nominal, base, tools,
                              [backlash[j] for j in model.space.backlash])
         stats = ErrorStats.from_errors(data.positions - model.predict(x))
         how = f"frames from {args.frames}"
@@ -219,32 +228,58 @@ def cmd_evaluate(args) -> int:
 def cmd_analyze(args) -> int:
     from kincal.export import report
     from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.models import MODELS
 
     robot = _robot(args)
     data = _measurements(args, robot)
-    problem = CalibrationProblem(robot, data, CalibrationOptions(
-        fix=tuple(args.fix), backlash=tuple(args.backlash), tool_guess=_tool_offset(args)))
-    ident = problem.analyze()
+    names = MODELS if args.model == "all" else (args.model,)
+    if args.model == "all" and args.fix:
+        raise OptionError("--model all compares the models as they are: give --fix with one "
+                          "model (the parameter names differ between models)")
+    problems = {m: CalibrationProblem(robot, data, CalibrationOptions(
+        model=m, fix=tuple(args.fix), backlash=tuple(args.backlash),
+        tool_guess=_tool_offset(args))) for m in names}
     print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(data)} poses from {args.data}")
-    print(ident.summary())
+    idents = {}
+    for m, problem in problems.items():
+        ident = idents[m] = problem.analyze()
+        if len(names) > 1:
+            print(f"\n== model {m}: {problem.error_model.describe()}")
+        print(ident.summary())
+    problem = problems[names[0]]
     for k, tool in enumerate(problem.space.tools(problem.start()), start=1):
         which = "tool point" if problem.space.n_points == 1 else f"measured point {k}"
         print(f"  {which} (first estimate, tip frame): {np.round(tool * 1e3, 3).tolist()} mm")
+    if len(names) > 1:
+        print("\ncomparison (identified kinematic parameters; '+' what a model identifies that "
+              "mdh cannot express):")
+        base = {n.rsplit(".", 1)[1] for n in ()}  # noqa: F841 - placeholder for clarity
+        mdh_kept = set(idents["mdh"].kept)
+        for m in names:
+            p = problems[m]
+            kin = [n for n in idents[m].kept if n in set(p.space.kinematic_names)]
+            extra = [n for n in kin if n not in mdh_kept and m == "complete"]
+            line = f"  {m:<10} {len(kin):3d} of {p.space.n_kinematic:3d} kinematic parameters identified"
+            if extra:
+                line += f"  (+ {', '.join(extra)})"
+            print(line)
     if args.report:
         from kincal.export.safe_write import write_all
 
-        write_all([(args.report, report.dumps(report.identifiability_dict(ident)))],
+        content = (report.identifiability_dict(idents[names[0]]) if len(names) == 1 else
+                   {m: report.identifiability_dict(i) for m, i in idents.items()})
+        write_all([(args.report, report.dumps(content))],
                   overwrite=args.overwrite, protect=[robot.source, args.data])
     return 0
 
 
 def cmd_simulate(args) -> int:
     from kincal.export.safe_write import write_all
-    from kincal.models import mdh
+    from kincal import models
     from kincal.planning import simulation
 
     robot = _robot(args)
-    model = mdh.extract(robot.geometry)
+    model = models.build(args.model, robot.geometry)
     rng = np.random.default_rng(args.seed)
     design = {"tracker": (0.4, 30.0), "rtest": (0.02, 15.0)}[args.design]
     tilt = args.tilt_deg if args.tilt_deg is not None else design[1]
@@ -276,8 +311,8 @@ def cmd_simulate(args) -> int:
         from kincal.export import report
         from kincal.identification.parameters import ParameterSpace
 
-        sp = ParameterSpace(model.joint_names)
-        x, x0 = truth.x(sp), sp.join(model.table, np.zeros(6), np.zeros(3))
+        sp = ParameterSpace.of_model(model)
+        x, x0 = truth.x(sp), sp.join(model.nominal, np.zeros(6), np.zeros(3))
         files.append((args.truth_out, report.dumps({
             "format": "kincal-truth-1", "robot": str(robot.source), "seed": args.seed,
             "truth_seed": args.truth_seed,
@@ -357,6 +392,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("calibrate", help="identify the kinematics and write a corrected URDF")
     _add_common(p)
+    _add_model(p)
     p.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
     p.add_argument("--lambda", dest="lam", default="cv", help="'cv' (default) or a value >= 0")
     p.add_argument("--folds", type=int, default=5)
@@ -393,6 +429,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("analyze", help="what the data can identify, without solving")
     _add_common(p)
+    _add_model(p, allow_all=True)
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME")
     p.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
                    help="also analyse backlash terms of these joints (see calibrate)")
@@ -402,6 +439,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="a synthetic data set from a robot with planted errors")
     _add_common(p, data=False)
+    _add_model(p, default="placement",
+               help="error model in which the errors are planted (default placement: every "
+                    "component of every joint placement, as a real arm has)")
     p.add_argument("--out", required=True, help="CSV to write (SI units)")
     p.add_argument("--design", choices=("tracker", "rtest"), default="tracker",
                    help="tracker: 400 mm cube; rtest: 20 mm cube, varied orientation")

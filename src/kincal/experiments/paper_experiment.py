@@ -372,7 +372,7 @@ def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] 
     t0 = time.perf_counter()
     robot = Robot.load("ec66")
     model = mdh_layer.extract(robot.geometry)
-    space = ParameterSpace(model.joint_names)
+    space = ParameterSpace.of_model(model)
     n_kin = space.n_kinematic
     # independent streams: changing the CV grid or a pose count leaves the rest alone
     r_truth, r_rtest, r_tracker, r_noise, r_split = (
@@ -382,7 +382,7 @@ def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] 
     tool = np.asarray(cfg.tool_in_flange_m, float)
     table4 = TABLE4_TRACKER * np.array([MM, DEG, MM, DEG]) * cfg.error_scale
     table = planted_table(model, r_truth, cfg.jitter_length_m, math.radians(cfg.jitter_angle_deg))
-    table = table + table4
+    table = table + table4.ravel()  # the MD-H model's vector is its table, row by row
     R_rt = base_rotation(*_RTEST_RPY)
     rtest_base = np.concatenate([-R_rt @ np.asarray(cfg.rtest_center_m, float), _RTEST_RPY])
     truth_rt = Truth(table, rtest_base, tool, cfg.compliance_rad)
@@ -400,7 +400,7 @@ def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] 
 
     guess_err = np.concatenate([r_split.normal(size=3) * cfg.frame_guess_error_m,
                                 r_split.normal(size=3) * math.radians(cfg.frame_guess_error_deg)])
-    common = dict(folds=cfg.folds, seed=cfg.seed, n_lambdas=cfg.n_lambdas,
+    common = dict(model="mdh", folds=cfg.folds, seed=cfg.seed, n_lambdas=cfg.n_lambdas,
                   lambda_min=cfg.lambda_min, lambda_max=cfg.lambda_max)
     rt_opts = CalibrationOptions(base_guess=tuple(rtest_base + guess_err),
                                  tool_guess=tuple(tool + r_split.normal(size=3)
@@ -421,7 +421,7 @@ def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] 
         say(f"validating: {label}")
         fit = fits[key]
         val = _recording(CalibrationProblem(fit.corrected, tracker,
-                                            CalibrationOptions(method="frames")).solve,
+                                            CalibrationOptions(method="frames", model="mdh")).solve,
                          f"{label}, validation", notes)
         dev, ident = _kinematic_deviations(fit, n_kin)
         methods.append(MethodResult(key, label, fit.before, fit.after, val.after,
@@ -429,7 +429,7 @@ def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] 
                                     float(fit.lam)))
 
     in_base = Truth(table, np.zeros(6), tool, cfg.compliance_rad)
-    true_dev = (table - model.table).ravel() / np.where(space.is_length[:n_kin], MM, DEG)
+    true_dev = (np.ravel(table) - model.nominal) / np.where(space.is_length[:n_kin], MM, DEG)
     return ExperimentResult(
         cfg, tuple(methods), space.names[:n_kin], _ro(space.is_length[:n_kin], bool),
         _ro(true_dev), fits["l2_rtest"].cv, float(fits["l2_rtest"].lam),
@@ -673,10 +673,10 @@ def rtest_scenario(seed: int) -> dict:
     data = measure(model, truth, q, 5e-5, rng)
     val = measure(model, truth, q_val, 1e-5, rng)
     row = {"seed": seed}
-    frames = CalibrationOptions(method="frames")
+    frames = CalibrationOptions(method="frames", model="mdh")
     row["before"] = CalibrationProblem(robot, val, frames).solve().after.mean
     for method in ("ls", "l2"):
-        res = CalibrationProblem(robot, data, CalibrationOptions(method=method)).solve()
+        res = CalibrationProblem(robot, data, CalibrationOptions(method=method, model="mdh")).solve()
         # validation as in the paper: kinematics fixed, frames fitted on the validation set
         row[method] = CalibrationProblem(res.corrected, val, frames).solve().after.mean
         row[f"{method}_cal"] = res.after.mean

@@ -39,7 +39,7 @@ from kincal.measurements.checks import (
 )
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
-from kincal.models import mdh as mdh_layer
+from kincal import models as error_models
 from kincal.models.mdh import TOOL_AXIS_WARNING
 from kincal.robot import Robot
 from kincal.rotations import base_angles, base_rotation
@@ -52,10 +52,10 @@ class CalibrationProblem:
         self.robot = robot
         self.options = (options or CalibrationOptions()).validated()
         self.data = data.for_chain(robot.joint_names)
-        self.mdh = mdh_layer.extract(robot.geometry)
-        self.space = ParameterSpace.of_chain(self.mdh.joint_names, self.mdh.kinds,
+        self.error_model = error_models.build(self.options.model, robot.geometry)
+        self.space = ParameterSpace.of_model(self.error_model,
                                              self.options.backlash, self.data.n_points)
-        self.model = MeasurementModel(self.mdh, self.data.joint_values, self.data.approach,
+        self.model = MeasurementModel(self.error_model, self.data.joint_values, self.data.approach,
                                       self.space.backlash, self.data.points,
                                       self.space.n_points)
         o = self.options
@@ -129,7 +129,7 @@ class CalibrationProblem:
 
     @property
     def x_nominal(self) -> np.ndarray:
-        return self.space.join(self.mdh.table, np.zeros(6), np.zeros((self.space.n_points, 3)))
+        return self.space.join(self.error_model.nominal, np.zeros(6), np.zeros((self.space.n_points, 3)))
 
     def start(self) -> np.ndarray:
         """Nominal kinematics with the measurement frame and tool point(s) fitted to the data.
@@ -138,7 +138,7 @@ class CalibrationProblem:
         if self._x_start is not None:
             return self._x_start
         o = self.options
-        R_tip, p_tip = self.model.tip_poses(self.mdh.table)
+        R_tip, p_tip = self.model.tip_poses(self.error_model.nominal)
         P, first = self.data.positions, self.data.points == 0
         guess = np.zeros(3) if o.tool_guess is None else np.asarray(o.tool_guess, float)
         for message in length_unit_warnings(P[first], p_tip[first] + R_tip[first] @ guess,
@@ -153,7 +153,7 @@ class CalibrationProblem:
                 tool = np.asarray(o.tool_guess, dtype=float)
         tools = [tool] + [point_in_tip(R_tip[m], p_tip[m], P[m], Rb, tb)
                           for m in (self.data.points == k for k in range(1, self.space.n_points))]
-        x = self.space.join(self.mdh.table, base, np.array(tools))
+        x = self.space.join(self.error_model.nominal, base, np.array(tools))
         free = self.space.is_frame
         sol = solve(self.residual_function(kinematic=False), x / self.scale, free,
                     options=o.solver)
@@ -216,7 +216,7 @@ class CalibrationProblem:
         q = np.repeat(rng.uniform(lo, hi, size=(2 * self.space.size, g.n)), K, axis=0)
         approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * self.space.size, g.n)), K, axis=0)
         points = np.tile(np.arange(K), 2 * self.space.size)
-        pred, J = MeasurementModel(self.mdh, q, approach, self.space.backlash, points,
+        pred, J = MeasurementModel(self.error_model, q, approach, self.space.backlash, points,
                                    K).jacobian(self.start())
         J = J.reshape(-1, self.space.size) * self.space.reporting_scale() / MM
         free = self._unfixed()
@@ -233,11 +233,11 @@ class CalibrationProblem:
 
     def _tool_axis_note(self) -> str:
         """A warning when every tool point sits near the axis of the last (revolute) joint."""
-        dists = [self.mdh.last_axis_distance(t) for t in self.space.tools(self.start())]
+        dists = [self.error_model.last_axis_distance(t) for t in self.space.tools(self.start())]
         if dists[0] is None or max(dists) >= TOOL_AXIS_WARNING:
             return ""
         dist = max(dists)
-        last = self.mdh.joint_names[-1]
+        last = self.error_model.joint_names[-1]
         which = "tool point is" if len(dists) == 1 else f"{len(dists)} measured points are all"
         return (f"the {which} {dist * 1e3:.2f} mm from the axis of {last}: turning about "
                 f"that axis barely moves it, so {last}.theta and the tilt of that axis "

@@ -22,6 +22,8 @@ METHODS = ("l2", "ls", "frames")
 class CalibrationOptions:
     """Every choice of a calibration, with the paper's defaults.
 
+    model: the error model (kincal.models: "complete" (default), "mdh", "placement",
+        "offsets"): which geometric errors the chain may have.
     method: "l2" (penalty toward nominal), "ls" (plain least squares) or "frames" (fit
         only the measurement frame and tool point; kinematics stay nominal).
     lam: "cv" to choose lambda by cross-validation, or a number >= 0 (method "l2").
@@ -51,6 +53,7 @@ class CalibrationOptions:
     progress: callback(done, total) during the CV sweep, or None.
     """
 
+    model: str = "complete"
     method: str = "l2"
     lam: float | str = "cv"
     folds: int = 5
@@ -75,6 +78,12 @@ class CalibrationOptions:
     progress: Callable | None = field(default=None, compare=False, repr=False)
 
     def validated(self) -> "CalibrationOptions":
+        from kincal.models import MODELS, SUITS
+
+        if self.model not in MODELS:
+            raise OptionError(f"unknown error model {self.model!r}; expected one of "
+                              f"{', '.join(MODELS)} (" + "; ".join(f"{k}: {v}" for k, v in
+                                                                 SUITS.items()) + ")")
         if self.method not in METHODS:
             raise OptionError(f"unknown method {self.method!r}; expected one of {', '.join(METHODS)}")
         if isinstance(self.lam, str):

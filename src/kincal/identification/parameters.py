@@ -2,11 +2,16 @@
 
 The parameter vector x holds absolute values (not errors), in SI units:
 
-    [ <joint_1>.a, .alpha, .d, .theta, ..., <joint_n>.theta,      4 n kinematic (MD-H)
+    [ <joint_1>.a, .alpha, .d, .theta, ..., <joint_n>.theta,      kinematic (error model)
       base.x, base.y, base.z, base.rx, base.ry, base.rz,          measurement frame
       tool.x, tool.y, tool.z,                                      tool point in the tip frame
       tool2.x, ..., tool<K>.z,                                     further measured points
       <joint>.backlash, ... ]                                      optional backlash terms
+
+The kinematic block is the error model's (:mod:`kincal.models`): four MD-H parameters
+per joint for ``mdh``, plus ``.beta`` at nearly parallel axes for ``complete``, six
+``.tx .ty .tz .rx .ry .rz`` per joint for ``placement``, one offset per joint for
+``offsets``.
 
 With K measured points per pose (several targets on the tool: their positions together
 carry its orientation) point 1 is ``tool.*`` and point k >= 2 is ``tool<k>.*``. The
@@ -26,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.errors import ParameterError, listing, suggest
-from kincal.models.mdh import FIELDS, LENGTH_FIELDS
+from kincal.models.base import ErrorModel
 
 BASE = ("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz")
 TOOL = ("tool.x", "tool.y", "tool.z")
@@ -48,12 +53,19 @@ def _check_backlash_joints(joint_names: tuple[str, ...], backlash: tuple[str, ..
 class ParameterSpace:
     """The parameters of one chain: stable names, units and vector layout.
 
+    joint_names: the chain joints. kinematic_names / kinematic_is_length /
+    kinematic_classes / kinematic_joint: the error model's parameters (names, True for
+    lengths, class "length"/"twist"/"offset", chain index of the joint each belongs to).
     backlash: chain joints with a backlash term, in chain order; backlash_is_length: for
     each, True if the joint is prismatic (the term is a length). n_points: measured
     points per pose (K), each with its own position in the tip frame.
     """
 
     joint_names: tuple[str, ...]
+    kinematic_names: tuple[str, ...]
+    kinematic_is_length: tuple[bool, ...]
+    kinematic_classes: tuple[str, ...]
+    kinematic_joint: tuple[int, ...]
     backlash: tuple[str, ...] = ()
     backlash_is_length: tuple[bool, ...] = ()
     n_points: int = 1
@@ -69,13 +81,15 @@ class ParameterSpace:
             raise ParameterError(f"n_points must be an integer >= 1, got {self.n_points!r}")
 
     @classmethod
-    def of_chain(cls, joint_names, kinds, backlash=(), n_points: int = 1) -> "ParameterSpace":
-        """The space of a chain with joint ``kinds``; ``backlash`` joints in any order."""
-        joint_names = tuple(joint_names)
+    def of_model(cls, model: ErrorModel, backlash=(), n_points: int = 1) -> "ParameterSpace":
+        """The space of an error model's chain; ``backlash`` joints in any order."""
+        joint_names = tuple(model.joint_names)
         _check_backlash_joints(joint_names, tuple(backlash))
         chosen = tuple(j for j in joint_names if j in set(backlash))
-        lengths = tuple(kinds[joint_names.index(j)] == "prismatic" for j in chosen)
-        return cls(joint_names, chosen, lengths, int(n_points))
+        lengths = tuple(model.kinds[joint_names.index(j)] == "prismatic" for j in chosen)
+        return cls(joint_names, tuple(model.names), tuple(bool(b) for b in model.is_length),
+                   tuple(model.classes), tuple(int(j) for j in model.joint_of), chosen, lengths,
+                   int(n_points))
 
     @property
     def n_joints(self) -> int:
@@ -83,7 +97,7 @@ class ParameterSpace:
 
     @property
     def n_kinematic(self) -> int:
-        return 4 * self.n_joints
+        return len(self.kinematic_names)
 
     @property
     def n_backlash(self) -> int:
@@ -96,7 +110,7 @@ class ParameterSpace:
 
     @property
     def names(self) -> tuple[str, ...]:
-        kin = tuple(f"{j}.{f}" for j in self.joint_names for f in FIELDS)
+        kin = self.kinematic_names
         tools = TOOL + tuple(f"tool{k}.{c}" for k in range(2, self.n_points + 1)
                              for c in "xyz")
         return kin + BASE + tools + tuple(f"{j}.backlash" for j in self.backlash)
@@ -108,13 +122,12 @@ class ParameterSpace:
     @property
     def is_length(self) -> np.ndarray:
         """(p,) True for lengths [m], False for angles [rad]."""
-        kin = [f in LENGTH_FIELDS for _ in self.joint_names for f in FIELDS]
-        return np.array(kin + [True, True, True, False, False, False] + [True] * 3 * self.n_points
+        return np.array(list(self.kinematic_is_length) + [True, True, True, False, False, False] + [True] * 3 * self.n_points
                         + list(self.backlash_is_length), dtype=bool)
 
     @property
     def is_kinematic(self) -> np.ndarray:
-        """(p,) True for the MD-H parameters (what the corrected URDF carries)."""
+        """(p,) True for the error model's parameters (what the corrected URDF carries)."""
         mask = np.zeros(self.size, dtype=bool)
         mask[: self.n_kinematic] = True
         return mask
@@ -158,9 +171,9 @@ class ParameterSpace:
         return np.array([self.index(n) for n in names], dtype=int)
 
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(table (n, 4), base (6,), tool (3,) of point 1) views of a parameter vector."""
+        """(kinematic (p_k,), base (6,), tool (3,) of point 1) views of a parameter vector."""
         k = self.n_kinematic
-        return x[:k].reshape(self.n_joints, 4), x[k:k + 6], x[k + 6:k + 9]
+        return x[:k], x[k:k + 6], x[k + 6:k + 9]
 
     def tools(self, x: np.ndarray) -> np.ndarray:
         """(n_points, 3) view of the measured points in the tip frame."""
@@ -171,9 +184,17 @@ class ParameterSpace:
         """(n_backlash,) view of the backlash terms of a parameter vector."""
         return x[self.n_kinematic + self.n_frames:]
 
-    def join(self, table, base, tools, backlash=None) -> np.ndarray:
-        """The parameter vector. tools: (3,) with one point, or (n_points, 3); backlash
-        None means zero backlash."""
+    @property
+    def classes(self) -> tuple[str, ...]:
+        """(p,) class of every parameter: the error model's "length" / "twist" / "offset",
+        "frame" for the measurement frame and tool points, "backlash"."""
+        return (self.kinematic_classes + ("frame",) * self.n_frames
+                + ("backlash",) * self.n_backlash)
+
+    def join(self, kinematic, base, tools, backlash=None) -> np.ndarray:
+        """The parameter vector. kinematic: the error model's vector (an MD-H model without
+        beta also takes its (n, 4) table); tools: (3,) with one point, or (n_points, 3);
+        backlash None means zero backlash."""
         b = np.zeros(self.n_backlash) if backlash is None else np.asarray(backlash, float)
         if b.shape != (self.n_backlash,):
             raise ParameterError(f"{self.n_backlash} backlash values expected, got {b.shape}")
@@ -181,5 +202,8 @@ class ParameterSpace:
         if t.size != 3 * self.n_points:
             raise ParameterError(f"{self.n_points} tool point(s) of 3 numbers expected, got "
                                  f"shape {t.shape}")
-        return np.concatenate([np.asarray(table, float).ravel(), np.asarray(base, float),
+        kin = np.asarray(kinematic, float).ravel()
+        if kin.size != self.n_kinematic:
+            raise ParameterError(f"{self.n_kinematic} kinematic parameters expected, got {kin.size}")
+        return np.concatenate([kin, np.asarray(base, float),
                                t.ravel(), b])

@@ -19,7 +19,7 @@ from kincal.identification.solver import SolveSummary
 from kincal.identification.statistics import ErrorStats
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
-from kincal.models import mdh as mdh_layer
+from kincal.models.base import ErrorModel
 from kincal.models.backlash import CONVENTION as BACKLASH_CONVENTION
 from kincal.robot import Robot
 from kincal.rotations import base_rotation
@@ -104,7 +104,7 @@ class CalibrationResult:
     residuals: np.ndarray
     solve: SolveSummary
     identifiability: Identifiability
-    mdh: mdh_layer.MdhModel
+    error_model: ErrorModel
     rows: np.ndarray  # (N,) line numbers of the samples in their source file
     downweighted: tuple[Downweighted, ...] = ()  # samples a robust loss trusted less
     residuals_before: np.ndarray | None = None  # (N, 3) with the start parameters [m]
@@ -127,13 +127,13 @@ class CalibrationResult:
             status = "identified" if free[i] else ("fixed" if name in fixed else "dropped")
             rows.append(ParameterEstimate(name, bool(sp.is_length[i]), float(x_nom[i]),
                                           float(x[i]), float(se[i]), status))
-        table, _, _ = sp.split(x)
-        corrected = problem.robot.with_joint_frames(problem.mdh.joint_frames(table))
+        kin, _, _ = sp.split(x)
+        corrected = problem.robot.with_joint_frames(problem.error_model.joint_frames(kin))
         res_before = problem.position_errors(x_start)
         res = problem.position_errors(x)
         return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
                    x, float(lam), cv, ErrorStats.from_errors(res_before),
-                   ErrorStats.from_errors(res), res, sol, ident, problem.mdh,
+                   ErrorStats.from_errors(res), res, sol, ident, problem.error_model,
                    np.asarray(problem.data.rows), residuals_before=res_before,
                    order_source=problem.data.order_source, points=problem.data.points)
 
@@ -194,7 +194,7 @@ class CalibrationResult:
         q = np.atleast_2d(joint_values)
         g = np.zeros(q.shape) if approach is None else np.atleast_2d(approach)
         idx = np.broadcast_to(np.asarray(points, dtype=int), (len(q),))
-        return MeasurementModel(self.mdh, q, g, self.space.backlash, idx,
+        return MeasurementModel(self.error_model, q, g, self.space.backlash, idx,
                                 self.space.n_points).predict(self.x)
 
     def predict_data(self, data: Measurements) -> np.ndarray:

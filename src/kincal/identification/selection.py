@@ -8,7 +8,7 @@ Selection is an ordered rank-revealing QR: columns are taken in a fixed order of
 preference and a column is kept when the part of it that the kept columns cannot
 reproduce is larger than ``rank_tol`` of its own norm. The order is: measurement frame,
 then tool point, then the kinematic parameters from the last joint back to the first
-(a, alpha, d, theta within a joint), then any other columns after those (backlash terms).
+(within a joint in the error model's order: a, alpha, beta, d, theta for MD-H), then any other columns after those (backlash terms).
 So a kinematic parameter that duplicates the frame or tool is dropped (not the frame),
 of a set of parallel-axis offsets the one nearest the tool is kept, and a backlash term
 the data cannot tell from its joint's offset (samples approached from one side) is
@@ -120,14 +120,20 @@ class Identifiability:
 
 
 def preference_order(names, n_kinematic: int) -> list[int]:
-    """Column indices in the order of preference described in the module notes."""
-    n_joints = n_kinematic // 4
+    """Column indices in the order of preference described in the module notes.
+
+    The first n_kinematic names are ``<joint>.<field>``, grouped by joint in chain order;
+    whatever the error model's fields, joints are taken from the last back to the first,
+    each joint's fields in the model's order."""
     frames_end = n_kinematic
     while frames_end < len(names) and _FRAME.match(names[frames_end]):
         frames_end += 1
     order = list(range(n_kinematic, frames_end))  # base then tool point(s)
-    for j in reversed(range(n_joints)):
-        order += [4 * j + f for f in range(4)]
+    groups: dict[str, list[int]] = {}
+    for c in range(n_kinematic):
+        groups.setdefault(names[c].rsplit(".", 1)[0], []).append(c)
+    for cols in reversed(list(groups.values())):
+        order += cols
     return order + list(range(frames_end, len(names)))
 
 

@@ -1,1 +1,48 @@
-"""Error models: how geometric errors of the chain are parametrised (one module each)."""
+"""Error models: how geometric errors of the chain are parametrised, one module each.
+
+| name | parameters per joint | suits |
+|---|---|---|
+| ``complete`` (default) | MD-H ``.a .alpha .d .theta`` + ``.beta`` at nearly parallel axes | every serial arm: complete, continuous, minimal after selection |
+| ``mdh`` | ``.a .alpha .d .theta`` (Craig's modified DH) | the seed paper's reproduction; arms without parallel axes |
+| ``placement`` | ``.tx .ty .tz .rx .ry .rz`` of the URDF origin | reading corrections as URDF origin changes (FIGAROH's model) |
+| ``offsets`` | ``.theta`` (``.d`` if prismatic) | re-mastering: joint zeros only, few poses |
+
+All share the interface of :mod:`kincal.models.base`, the chain engine of
+:mod:`kincal.models.chain`, and everything downstream (selection, penalty, solver,
+export). :func:`build` makes one by name.
+"""
+
+from __future__ import annotations
+
+from kincal.errors import OptionError
+
+MODELS = ("complete", "mdh", "placement", "offsets")
+DEFAULT = "complete"
+SUITS = {
+    "complete": "MD-H + Hayati's beta at nearly parallel axes: complete and continuous (default)",
+    "mdh": "Craig's modified DH, 4 per joint: the seed paper's model; misses tilts of parallel axes",
+    "placement": "6 errors per URDF joint origin (FIGAROH's full model): complete, redundancy "
+                 "removed by the selection",
+    "offsets": "joint zeros only (re-mastering): few parameters, no link or axis corrections",
+}
+
+
+def build(name: str, geometry):
+    """The error model ``name`` (one of MODELS) of a :class:`kincal.robot.ChainGeometry`."""
+    if name == "complete":
+        from kincal.models import complete
+        return complete.build(geometry)
+    if name == "mdh":
+        from kincal.models import mdh
+        return mdh.extract(geometry)
+    if name == "placement":
+        from kincal.models import placement
+        return placement.build(geometry)
+    if name == "offsets":
+        from kincal.models import offsets
+        return offsets.build(geometry)
+    raise OptionError(f"unknown error model {name!r}; expected one of {', '.join(MODELS)} ("
+                      + "; ".join(f"{k}: {v}" for k, v in SUITS.items()) + ")")
+
+
+__all__ = ["MODELS", "DEFAULT", "SUITS", "build"]

@@ -17,8 +17,9 @@ x_i along that normal. Degenerate cases, each a deliberate choice:
   one closest to the URDF joint frame's x axis, so an MD-H URDF gives back its own table.
 - parallel axes (|z_i x z_{i+1}| < PARALLEL_TOL): the normal's position along the axis is
   free; frame i keeps the URDF joint origin (so d values are the designer's offsets, as
-  in the EC66 table). MD-H cannot express a tilt of a parallel axis within their common
-  plane; the measurement model still reproduces the URDF exactly (see C below).
+  in the EC66 table). Plain MD-H cannot express a tilt of a parallel axis within their
+  common plane; the measurement model still reproduces the URDF exactly (see C below),
+  and Hayati's beta (below, the ``complete`` model) adds the missing direction.
 - coincident axes: no normal at all; x_i is the URDF joint x axis projected onto the
   plane normal to z_i, frame i at the URDF joint origin.
 - prismatic joints: the axis has a direction only; its line is taken through the URDF
@@ -28,6 +29,20 @@ x_i along that normal. Degenerate cases, each a deliberate choice:
   base x axis), so a_0 = alpha_0 = 0; when axis 1 is the base z axis, frame 0 is the base.
 - the last frame n has no next axis: it sits at the URDF joint origin with x_n from the
   URDF joint x axis.
+
+Hayati's beta (``extract(geometry, beta_below=...)``, the ``complete`` model): for a pair
+of axes within the angle whose sine is ``beta_below`` of parallel, row i+1 becomes
+
+    A_{i+1} = Tx(a_i) Rx(alpha_i) Ry(beta_i) Rz(theta_{i+1}) Tz(d_{i+1})
+
+(beta about the y axis of frame i after its twist, as Hayati's beta follows alpha), and
+frame i's x axis points from frame i's origin (the URDF joint origin) to the point where
+axis i+1 pierces the plane normal to axis i there. That point moves smoothly with the
+axes, so the parameters stay continuous as the axes approach, reach and pass parallel
+(MD-H's common normal runs off to infinity instead). The pair's two angles are alpha
+(out of the common plane) and beta (within it); d_i becomes redundant with d_{i+1} and
+the rank-revealing selection drops one. Beta is named ``<joint>.beta`` for joint i+1,
+beside its ``.a`` and ``.alpha``.
 
 Exactness: a fixed offset C_i = F_i^-1 J_i between MD-H frame i (from the product of
 the nominal table) and the URDF joint frame J_i keeps every link rigidly attached to its
@@ -41,6 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
 from kincal.rotations import inverse, transform
 
 PARALLEL_TOL = 1e-6  # |sin| of the angle between axes below which they count as parallel
@@ -49,15 +65,24 @@ _ZERO = 1e-12  # [m] or [-], what counts as zero length in the geometric constru
 
 FIELDS = ("a", "alpha", "d", "theta")  # column order of an MD-H table in kincal
 LENGTH_FIELDS = ("a", "d")
+_CLASS = {"a": LENGTH, "alpha": TWIST, "beta": TWIST, "d": LENGTH, "theta": OFFSET}
 
 
-def mdh_transform(a: float, alpha: float, d: float, theta: float) -> np.ndarray:
-    """A = Rx(alpha) Tx(a) Rz(theta) Tz(d) as a 4x4 array [m, rad]."""
+def mdh_transform(a: float, alpha: float, d: float, theta: float, beta: float = 0.0) -> np.ndarray:
+    """A = Tx(a) Rx(alpha) Ry(beta) Rz(theta) Tz(d) as a 4x4 array [m, rad] (Craig's
+    Rx(alpha) Tx(a) Rz(theta) Tz(d) when beta = 0)."""
     ca, sa, ct, st = np.cos(alpha), np.sin(alpha), np.cos(theta), np.sin(theta)
-    return np.array([[ct, -st, 0.0, a],
-                     [ca * st, ca * ct, -sa, -sa * d],
-                     [sa * st, sa * ct, ca, ca * d],
-                     [0.0, 0.0, 0.0, 1.0]])
+    if beta == 0.0:
+        return np.array([[ct, -st, 0.0, a],
+                         [ca * st, ca * ct, -sa, -sa * d],
+                         [sa * st, sa * ct, ca, ca * d],
+                         [0.0, 0.0, 0.0, 1.0]])
+    cb, sb = np.cos(beta), np.sin(beta)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
+    Ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
+    Rz = np.array([[ct, -st, 0.0], [st, ct, 0.0], [0.0, 0.0, 1.0]])
+    R = Rx @ Ry @ Rz
+    return transform(R, np.array([a, 0.0, 0.0]) + R[:, 2] * d)
 
 
 def mdh_parameters(T: np.ndarray) -> tuple[float, float, float, float]:
@@ -69,62 +94,141 @@ def mdh_parameters(T: np.ndarray) -> tuple[float, float, float, float]:
     return float(p[0]), alpha, d, theta
 
 
-@dataclass(frozen=True)
-class MdhModel:
-    """A chain in MD-H form, exact for the URDF it came from.
+def hayati_parameters(T: np.ndarray) -> tuple[float, float, float, float, float]:
+    """(a, alpha, d, theta, beta) of a transform Tx(a) Rx(alpha) Ry(beta) Rz(theta) Tz(d)
+    whose origin lies on the line through (a, 0, 0) along its z axis."""
+    R, p = T[:3, :3], T[:3, 3]
+    z = R[:, 2]
+    beta = float(np.arcsin(np.clip(z[0], -1.0, 1.0)))
+    alpha = float(np.arctan2(-z[1], z[2]))
+    ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
+    Rxy = np.array([[cb, 0.0, sb], [sa * sb, ca, -sa * cb], [-ca * sb, sa, ca * cb]])
+    Rz = Rxy.T @ R
+    theta = float(np.arctan2(Rz[1, 0], Rz[0, 0]))
+    d = float((p[1] * z[1] + p[2] * z[2]) / (z[1] ** 2 + z[2] ** 2))
+    return float(p[0] - d * z[0]), alpha, d, theta, beta
 
-    joint_names, kinds: as in the chain ("revolute" or "prismatic").
+
+@dataclass(frozen=True)
+class MdhModel(ErrorModel):
+    """A chain in MD-H form (optionally with Hayati's beta), exact for its URDF.
+
+    The kinematic parameters of joint i are, in this order, ``<joint>.a`` (a_{i-1} [m]),
+    ``.alpha`` (alpha_{i-1} [rad]), ``.beta`` (beta_{i-1} [rad], only where has_beta),
+    ``.d`` (d_i [m]) and ``.theta`` (theta_oi [rad]).
+
     table: (n, 4) nominal [a, alpha, d, theta] per joint [m, rad].
-    T_base_0: (4, 4) fixed pose of MD-H frame 0 in the base frame B.
-    offsets: (n, 4, 4) C_i, pose of the URDF joint frame i in MD-H frame i.
-    screw_axes: (n, 3) joint i's axis in MD-H frame i (= C_i axis_i; e_z up to PARALLEL_TOL).
-    screw_points: (n, 3) a point of joint i's axis line in MD-H frame i (the URDF joint
-        origin; on the z axis up to PARALLEL_TOL). The joint turns about this line, so the
-        model is exact even where MD-H frame i is not exactly on the joint axis.
-    T_n_tip: (4, 4) pose of the tip frame in MD-H frame n.
-    notes: one line per joint naming the degenerate case met, if any.
+    beta: (n,) nominal beta (0 where has_beta is False).
+    has_beta: (n,) which joints carry a beta parameter.
+    The placed frames are the MD-H frames; T_first is the fixed frame 0 in the base frame,
+    joint_offsets the C_i, screw_axes/points joint i's axis in MD-H frame i (e_z and the
+    origin up to PARALLEL_TOL), T_last_tip the tip in MD-H frame n.
     """
 
-    joint_names: tuple[str, ...]
-    kinds: tuple[str, ...]
-    table: np.ndarray
-    T_base_0: np.ndarray
-    offsets: np.ndarray
-    screw_axes: np.ndarray
-    T_n_tip: np.ndarray
-    notes: tuple[str, ...]
-    screw_points: np.ndarray | None = None
+    table: np.ndarray = None
+    beta: np.ndarray = None
+    has_beta: np.ndarray = None
+
+    @classmethod
+    def build(cls, name, joint_names, kinds, table, beta, has_beta, T_first, joint_offsets,
+              screw_axes, screw_points, T_last_tip, notes) -> "MdhModel":
+        names, nominal, is_length, classes, joint_of = [], [], [], [], []
+        for i, j in enumerate(joint_names):
+            a, alpha, d, theta = table[i]
+            fields = [("a", a), ("alpha", alpha)] + ([("beta", beta[i])] if has_beta[i] else []) \
+                + [("d", d), ("theta", theta)]
+            for f, v in fields:
+                names.append(f"{j}.{f}")
+                nominal.append(v)
+                is_length.append(f in LENGTH_FIELDS)
+                classes.append(_CLASS[f])
+                joint_of.append(i)
+        # a prismatic joint's zero is its d: that d is its offset
+        classes = [OFFSET if (nm.endswith(".d") and kinds[jo] == "prismatic") else c
+                   for nm, c, jo in zip(names, classes, joint_of)]
+        return cls(name, tuple(joint_names), tuple(kinds), tuple(names), np.array(nominal),
+                   np.array(is_length, dtype=bool), tuple(classes), np.array(joint_of, dtype=int),
+                   T_first, screw_axes, screw_points, joint_offsets, T_last_tip, tuple(notes),
+                   np.asarray(table, float), np.asarray(beta, float), np.asarray(has_beta, bool))
+
+    # compatibility names of the MD-H description
+    @property
+    def T_base_0(self) -> np.ndarray:
+        return self.T_first
 
     @property
-    def n(self) -> int:
-        return len(self.joint_names)
+    def offsets(self) -> np.ndarray:
+        return self.joint_offsets
 
-    def frames(self, table: np.ndarray | None = None) -> np.ndarray:
+    @property
+    def T_n_tip(self) -> np.ndarray:
+        return self.T_last_tip
+
+    def unpack(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """(table (n, 4), beta (n,)) of a kinematic vector x (or of a (n, 4) table when the
+        model has no beta)."""
+        x = np.asarray(x, dtype=float).ravel()
+        if x.size != self.size:
+            raise ValueError(f"{self.size} kinematic parameters expected, got {x.size}")
+        if not self.has_beta.any():
+            return x.reshape(self.n, 4), np.zeros(self.n)
+        table, beta, k = np.empty((self.n, 4)), np.zeros(self.n), 0
+        for i in range(self.n):
+            if self.has_beta[i]:
+                table[i, :2], beta[i], table[i, 2:] = x[k:k + 2], x[k + 2], x[k + 3:k + 5]
+                k += 5
+            else:
+                table[i] = x[k:k + 4]
+                k += 4
+        return table, beta
+
+    def pack(self, table, beta=None) -> np.ndarray:
+        """The kinematic vector of a table (n, 4) and beta (n,) (nominal beta if None)."""
+        table = np.asarray(table, float).reshape(self.n, 4)
+        beta = self.beta if beta is None else np.asarray(beta, float)
+        out = []
+        for i in range(self.n):
+            out += list(table[i, :2]) + ([beta[i]] if self.has_beta[i] else []) + list(table[i, 2:])
+        return np.array(out)
+
+    def placements(self, x) -> np.ndarray:
+        table, beta = self.unpack(x)
+        return np.array([mdh_transform(*row, beta=b) for row, b in zip(table, beta)])
+
+    def twists(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """Twists in frame i-1 (see kincal.models.base): a slides along x, alpha turns about
+        x, beta about Rx(alpha) y through (a, 0, 0), theta about the new z axis through
+        (a, 0, 0), d slides along it."""
+        table, beta = self.unpack(x)
+        w, v = np.zeros((self.size, 3)), np.zeros((self.size, 3))
+        k = 0
+        ex = np.array([1.0, 0.0, 0.0])
+        for i in range(self.n):
+            a, alpha, _, theta = table[i]
+            ca, sa = np.cos(alpha), np.sin(alpha)
+            cb, sb = np.cos(beta[i]), np.sin(beta[i])
+            y1 = np.array([0.0, ca, sa])
+            z = np.array([sb, -sa * cb, ca * cb])
+            c = np.array([a, 0.0, 0.0])
+            v[k] = ex                                   # a
+            w[k + 1] = ex                               # alpha
+            k += 2
+            if self.has_beta[i]:
+                w[k], v[k] = y1, np.cross(c, y1)        # beta
+                k += 1
+            v[k] = z                                    # d
+            w[k + 1], v[k + 1] = z, np.cross(c, z)      # theta
+            k += 2
+        return w, v
+
+    def frames(self, x=None) -> np.ndarray:
         """(n, 4, 4) MD-H frames F_i at zero joint values in the base frame."""
-        table = self.table if table is None else np.asarray(table, dtype=float)
-        F = self.T_base_0
-        out = np.empty((self.n, 4, 4))
-        for i, row in enumerate(table):
-            F = F @ mdh_transform(*row)
+        P = self.placements(self.nominal if x is None else x)
+        out, F = np.empty((self.n, 4, 4)), self.T_first
+        for i in range(self.n):
+            F = F @ P[i]
             out[i] = F
         return out
-
-    def joint_frames(self, table: np.ndarray | None = None) -> np.ndarray:
-        """(n, 4, 4) URDF joint frames T_B_Ji at zero joint values for an MD-H table.
-
-        The table of the nominal model gives back the URDF's own joint frames.
-        """
-        return self.frames(table) @ self.offsets
-
-    def last_axis_distance(self, tool) -> float | None:
-        """Distance [m] of the tool point (tip frame) from the last joint's axis line, or
-        None if the last joint is prismatic. Near 0, turning that joint barely moves the
-        point: its theta (and the tilt of its axis) are weak or unidentifiable."""
-        if self.kinds[-1] != "revolute":
-            return None
-        p = self.T_n_tip[:3, :3] @ np.asarray(tool, float) + self.T_n_tip[:3, 3]  # frame n
-        c = np.zeros(3) if self.screw_points is None else self.screw_points[-1]
-        return float(np.linalg.norm(np.cross(p - c, self.screw_axes[-1])))
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -149,14 +253,20 @@ def _signed_toward(n: np.ndarray, hint: np.ndarray, fallback: np.ndarray) -> np.
     return n if s >= 0 else -n
 
 
-def extract(geometry) -> MdhModel:
-    """The MD-H model of a :class:`kincal.robot.ChainGeometry` (see the module notes)."""
+def extract(geometry, beta_below: float | None = None, name: str | None = None) -> MdhModel:
+    """The MD-H model of a :class:`kincal.robot.ChainGeometry` (see the module notes).
+
+    beta_below: None for plain MD-H; else the sine of the angle below which a pair of
+    consecutive axes counts as nearly parallel and gets Hayati's beta.
+    """
     J = np.asarray(geometry.joint_frames, dtype=float)
     n = len(J)
     z = np.array([_unit(J[i, :3, :3] @ geometry.axes[i]) for i in range(n)])
     o = J[:, :3, 3]
     hints = [_x_hint(J[i], geometry.axes[i]) for i in range(n)]
+    names = geometry.joint_names
     geo, notes = [], []
+    has_beta = np.zeros(n, dtype=bool)
     for i in range(n):
         zi, oi = z[i], o[i]
         note = ""
@@ -166,7 +276,24 @@ def extract(geometry) -> MdhModel:
         else:
             c = np.cross(zi, z[i + 1])
             delta = o[i + 1] - oi
-            if np.linalg.norm(c) > PARALLEL_TOL:
+            nearly = beta_below is not None and np.linalg.norm(c) < beta_below
+            if nearly and i + 1 < n:
+                # Hayati: x toward the point where axis i+1 pierces the plane normal to axis i
+                has_beta[i + 1] = True
+                origin = oi
+                s = -(delta @ zi) / (z[i + 1] @ zi)
+                perp = delta + s * z[i + 1]
+                if np.linalg.norm(perp) > _ZERO:
+                    x = _signed_toward(_unit(perp), hints[i], perp)
+                    what = "are parallel" if np.linalg.norm(c) <= PARALLEL_TOL else \
+                        f"are nearly parallel ({np.degrees(np.arcsin(min(np.linalg.norm(c), 1.0))):.3g} deg)"
+                    note = (f"axes of {names[i]} and {names[i + 1]} {what}: frame kept at the "
+                            f"URDF joint origin, {names[i + 1]}.beta added (Hayati)")
+                else:
+                    x = _perp(hints[i], zi)
+                    note = (f"axes of {names[i]} and {names[i + 1]} meet on the normal plane: "
+                            f"x from the URDF joint frame, {names[i + 1]}.beta added (Hayati)")
+            elif np.linalg.norm(c) > PARALLEL_TOL:
                 cn = _unit(c)
                 # closest point on axis i to axis i+1
                 w = np.cross(z[i + 1], cn)
@@ -175,17 +302,17 @@ def extract(geometry) -> MdhModel:
                 dist = delta @ cn
                 x = _signed_toward(cn, hints[i], cn * (dist if abs(dist) > _ZERO else 1.0))
                 if abs(dist) <= _ZERO:
-                    note = f"axes of {geometry.joint_names[i]} and {geometry.joint_names[i + 1]} intersect"
+                    note = f"axes of {names[i]} and {names[i + 1]} intersect"
             else:
                 origin = oi
                 perp = _perp(delta, zi)
                 if np.linalg.norm(perp) > _ZERO:
                     x = _signed_toward(_unit(perp), hints[i], perp)
-                    note = (f"axes of {geometry.joint_names[i]} and {geometry.joint_names[i + 1]} are "
+                    note = (f"axes of {names[i]} and {names[i + 1]} are "
                             "parallel: frame kept at the URDF joint origin")
                 else:
                     x = _perp(hints[i], zi)
-                    note = (f"axes of {geometry.joint_names[i]} and {geometry.joint_names[i + 1]} "
+                    note = (f"axes of {names[i]} and {names[i + 1]} "
                             "coincide: x from the URDF joint frame")
         x = _unit(_perp(x, zi))
         R = np.column_stack([x, np.cross(zi, x), zi])
@@ -204,18 +331,25 @@ def extract(geometry) -> MdhModel:
     if np.linalg.norm(origin0) > _ZERO or abs(z0[2] - 1.0) > 1e-12:
         notes[0] = (notes[0] + "; " if notes[0] else "") + \
             "first axis is not the base z axis: fixed frame 0 placed on it"
-    table = np.empty((n, 4))
+    table, beta = np.empty((n, 4)), np.zeros(n)
     prev = T_base_0
     for i in range(n):
-        table[i] = mdh_parameters(inverse(prev) @ geo[i])
+        T = inverse(prev) @ geo[i]
+        if has_beta[i]:
+            a, alpha, d, theta, beta[i] = hayati_parameters(T)
+            table[i] = a, alpha, d, theta
+        else:
+            table[i] = mdh_parameters(T)
         prev = geo[i]
     table[0, 0] = table[0, 1] = 0.0  # exact by construction of frame 0
-    model = MdhModel(tuple(geometry.joint_names), tuple(geometry.kinds), table, T_base_0,
-                     np.zeros((n, 4, 4)), np.zeros((n, 3)), np.eye(4), tuple(notes))
+    name = name or ("mdh" if beta_below is None else "complete")
+    eye, zeros = np.eye(4), np.zeros((n, 3))
+    model = MdhModel.build(name, names, geometry.kinds, table, beta, has_beta, T_base_0,
+                           np.zeros((n, 4, 4)), zeros, zeros, eye, notes)
     F = model.frames()
     offsets = inverse(F) @ J
     screw = np.einsum("nij,nj->ni", offsets[:, :3, :3], np.asarray(geometry.axes, dtype=float))
     T_n_tip = inverse(F[-1]) @ geometry.T_base_tip
-    return MdhModel(model.joint_names, model.kinds, table, T_base_0, offsets,
-                    screw / np.linalg.norm(screw, axis=1, keepdims=True), T_n_tip, model.notes,
-                    offsets[:, :3, 3].copy())
+    return MdhModel.build(name, names, geometry.kinds, table, beta, has_beta, T_base_0, offsets,
+                          screw / np.linalg.norm(screw, axis=1, keepdims=True),
+                          offsets[:, :3, 3].copy(), T_n_tip, notes)

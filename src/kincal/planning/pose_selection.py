@@ -58,7 +58,7 @@ from kincal.errors import DataError, KincalWarning, OptionError
 from kincal.identification.parameters import MM, ParameterSpace
 from kincal.identification.selection import RANK_TOL, analyze
 from kincal.measurements.point import MeasurementModel
-from kincal.models import mdh as mdh_layer
+from kincal import models as error_models
 from kincal.models.mdh import TOOL_AXIS_WARNING
 
 if TYPE_CHECKING:
@@ -319,7 +319,8 @@ def _check_indices(keep, m: int) -> list[int]:
 
 def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(), keep=(),
                  method: str = "D", max_swaps: int = 1000, seed: int = 0,
-                 random_subsets: int = RANDOM_SUBSETS) -> PoseSelection:
+                 random_subsets: int = RANDOM_SUBSETS,
+                 model: str = error_models.DEFAULT) -> PoseSelection:
     """Choose ``n`` of the ``candidates`` to measure (see the module notes).
 
     candidates: (M, n_joints) joint values in the chain order of ``robot`` [rad or m];
@@ -329,6 +330,7 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     fix: parameter names held at nominal (left out of the criterion).
     keep: candidate indices that must be in the selection (e.g. poses already measured).
     method: "D" (maximise log det of the information matrix).
+    model: the error model whose parameters the poses should determine (kincal.models).
     max_swaps: bound on the exchange stage. seed, random_subsets: the random baseline.
     """
     if method not in METHODS:
@@ -360,12 +362,12 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     if not (isinstance(random_subsets, (int, np.integer)) and random_subsets >= 1):
         raise OptionError(f"random_subsets must be an integer >= 1, got {random_subsets!r}")
 
-    model = mdh_layer.extract(g)
+    model = error_models.build(model, g)
     _warn_tool_on_axis(model, t)
-    space = ParameterSpace(model.joint_names)
+    space = ParameterSpace.of_model(model)
     free = np.ones(space.size, dtype=bool)
     free[space.indices(fix)] = False  # unknown names raise ParameterError with the list
-    x = space.join(model.table, np.zeros(6), t)
+    x = space.join(model.nominal, np.zeros(6), t)
     # J^T J does not depend on where the measurement frame is: base at the identity
     J = MeasurementModel(model, q).jacobian(x)[1] * (space.reporting_scale() / MM)
     ident = analyze(J.reshape(-1, space.size), space.names, space.n_kinematic, free, RANK_TOL)

@@ -18,7 +18,7 @@ from kincal.identification.parameters import ParameterSpace
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
 from kincal.models.backlash import approach_directions
-from kincal.models.mdh import MdhModel
+from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 from kincal.rotations import rotx
 
@@ -27,7 +27,8 @@ from kincal.rotations import rotx
 class Truth:
     """The simulated robot and sensor setup (SI units).
 
-    table: (n, 4) true MD-H table. base: (6,) true measurement frame. tool: (3,) true
+    table: (p,) true kinematic parameters of the simulating error model (an MD-H
+        model without beta also takes its (n, 4) table). base: (6,) true measurement frame. tool: (3,) true
     tool point in the tip frame, or (K, 3) for K points measured at each pose.
     compliance: [rad] amplitude of the non-geometric error.
     backlash: {joint: half the play [rad or m]} (see kincal.backlash); the poses are
@@ -48,11 +49,12 @@ class Truth:
         return space.join(self.table, self.base, self.tool)
 
 
-def planted_table(mdh: MdhModel, rng: np.random.Generator, length_sd: float = 0.3e-3,
+def planted_table(mdh: ErrorModel, rng: np.random.Generator, length_sd: float = 0.3e-3,
                   angle_sd: float = np.radians(0.03), names=None) -> np.ndarray:
-    """The nominal table plus Gaussian errors [m, rad] on ``names`` (default: all)."""
-    space = ParameterSpace(mdh.joint_names)
-    x = space.join(mdh.table, np.zeros(6), np.zeros(3))
+    """The error model's nominal parameters plus Gaussian errors [m, rad] on ``names``
+    (default: all), as a flat kinematic vector."""
+    space = ParameterSpace.of_model(mdh)
+    x = space.join(mdh.nominal, np.zeros(6), np.zeros(3))
     idx = np.arange(space.n_kinematic) if names is None else space.indices(names)
     sd = np.where(space.is_length[idx], length_sd, angle_sd)
     x[idx] += rng.normal(size=idx.size) * sd
@@ -127,7 +129,7 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     return out
 
 
-def true_positions(mdh: MdhModel, truth: Truth, q: np.ndarray, points=0) -> np.ndarray:
+def true_positions(mdh: ErrorModel, truth: Truth, q: np.ndarray, points=0) -> np.ndarray:
     """(N, 3) exact positions of measured points in the measurement frame [m].
 
     points: which of the truth's points (0 = the first), one for all or (N,) per row.
@@ -146,7 +148,7 @@ def true_positions(mdh: MdhModel, truth: Truth, q: np.ndarray, points=0) -> np.n
     return model.predict(truth.x(model.space))
 
 
-def measure(mdh: MdhModel, truth: Truth, q: np.ndarray, noise_sd: float,
+def measure(mdh: ErrorModel, truth: Truth, q: np.ndarray, noise_sd: float,
             rng: np.random.Generator, source: str = "<simulated>") -> Measurements:
     """Measurements of ``truth`` at joint values ``q`` with Gaussian noise [m] per axis:
     one sample per pose and measured point (pose-major)."""
