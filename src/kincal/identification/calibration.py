@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from kincal.errors import DataError, IdentifiabilityError, KincalWarning
+from kincal.errors import DataError, IdentifiabilityError, KincalWarning, ParameterError
 from kincal.identification import blas_threads
 from kincal.identification.cross_validation import (
     CrossValidation,
@@ -66,7 +66,7 @@ class CalibrationProblem:
             inv = 1.0 / self.data.sigma
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
         for name in o.fix + o.free:
-            self.space.index(name)  # unknown names raise ParameterError listing the valid ones
+            self._check_name(name)
         pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
         self.n_poses = len(pose)
         if self.n_poses < 3:
@@ -82,6 +82,20 @@ class CalibrationProblem:
             warnings.warn(f"{self.data.source}: {message}", KincalWarning)
         self._x_start = None
         self._ident = None
+
+    def _check_name(self, name: str) -> None:
+        """A --fix/--free name of this model; one of another model says which model has it,
+        anything else lists the valid names (ParameterError)."""
+        if name in self.space.names:
+            return
+        for other in error_models.MODELS:
+            if other != self.options.model and \
+                    name in error_models.build(other, self.robot.geometry).names:
+                raise ParameterError(
+                    f"{name!r} is a parameter of error model {other}, not of {self.options.model}"
+                    f" (choose --model {other}, or a name of {self.options.model}: "
+                    f"{', '.join(self.space.kinematic_names[:8])}, ...)", valid=self.space.names)
+        self.space.index(name)  # raises, listing the valid names
 
     # --------------------------------------------------------------- residuals
     def residual_function(self, rows=None, kinematic: bool = True) -> Callable:

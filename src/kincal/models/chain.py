@@ -37,6 +37,9 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+_GATHER_BUDGET = 4_000_000  # floats gathered at once for the kinematic columns (32 MB)
+
+
 class Chain:
     """One error model's chain over N poses.
 
@@ -56,7 +59,11 @@ class Chain:
             raise ValueError(f"backlash terms need approach directions of shape {self.q.shape}")
         self._backlash_of = {i: k for k, i in enumerate(self.backlash)}
         self._motion = [self.joint_motion(i, self.q[:, i]) for i in range(model.n)]
-        self._by_joint = [np.flatnonzero(model.joint_of == i) for i in range(model.n)]
+        # each joint's parameters are contiguous in the vector: slices keep the writes cheap
+        edges = np.searchsorted(model.joint_of, np.arange(model.n + 1))
+        if np.any(np.diff(model.joint_of) < 0):
+            raise ValueError("an error model must list its parameters joint by joint")
+        self._by_joint = [slice(int(edges[i]), int(edges[i + 1])) for i in range(model.n)]
 
     def subset(self, rows) -> "Chain":
         return Chain(self.model, self.q[rows],
@@ -112,24 +119,32 @@ class ChainState:
         self.R_tip, self.p_tip = R_tip, p_tip
         self.before, self.placed = before, placed
 
-    def point_columns(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def point_columns(self, P: np.ndarray, generic: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray]:
         """Derivatives of points P (N, 3) in the base frame, rigidly attached to the tip:
-        (kinematic (N, 3, p), backlash (N, 3, n_backlash))."""
+        (kinematic (N, 3, p), backlash (N, 3, n_backlash)). A model may offer a faster
+        ``point_columns`` of its own (MD-H does); generic=True uses the twists anyway."""
         chain, m = self.chain, self.chain.model
-        w, v = m.twists(self.x)
         N = chain.N
-        K = np.empty((N, 3, m.size))
-        for i, idx in enumerate(chain._by_joint):
-            if not idx.size:
-                continue
-            G = self.before[i]
-            R, o = G[:, :3, :3], G[:, :3, 3]
-            W = np.einsum("nab,kb->nak", R, w[idx])               # (N, 3, k)
-            U = np.einsum("nab,kb->nak", R, v[idx])
-            r = (P - o)[:, :, None]
-            K[:, 0, idx] = W[:, 1] * r[:, 2] - W[:, 2] * r[:, 1] + U[:, 0]
-            K[:, 1, idx] = W[:, 2] * r[:, 0] - W[:, 0] * r[:, 2] + U[:, 1]
-            K[:, 2, idx] = W[:, 0] * r[:, 1] - W[:, 1] * r[:, 0] + U[:, 2]
+        fast = None if generic else getattr(m, "point_columns", None)
+        if fast is not None and self.before:
+            K = fast(self.x, self.before, self.placed, P)
+        elif self.before:
+            K = np.empty((N, 3, m.size))
+            G = np.stack(self.before)                             # (n, N, 4, 4)
+            w, v = m.twists(self.x)
+            jo = m.joint_of
+            # vectorised over parameters, in row blocks to bound the (p, rows, 3, 3) gather
+            step = max(1, _GATHER_BUDGET // max(1, 9 * m.size))
+            for s in range(0, N, step):
+                rows = slice(s, min(N, s + step))
+                R = G[jo, rows, :3, :3]                           # (p, rows, 3, 3)
+                W = np.matmul(R, w[:, None, :, None])[..., 0]     # (p, rows, 3) turn axes
+                U = np.matmul(R, v[:, None, :, None])[..., 0]
+                col = cross_rows(W, P[None, rows] - G[jo, rows, :3, 3]) + U
+                K[rows] = col.transpose(1, 2, 0)
+        else:
+            K = np.empty((N, 3, m.size))
         B = np.empty((N, 3, len(chain.backlash)))
         for k, i in enumerate(chain.backlash):
             H = self.placed[i]
@@ -149,8 +164,8 @@ class ChainState:
         w, _ = m.twists(self.x)
         K = np.empty((chain.N, 3, m.size))
         for i, idx in enumerate(chain._by_joint):
-            if idx.size:
-                K[:, :, idx] = np.einsum("nab,kb->nak", self.before[i][:, :3, :3], w[idx])
+            if idx.start != idx.stop:
+                K[:, :, idx] = self.before[i][:, :3, :3] @ w[idx].T
         B = np.empty((chain.N, 3, len(chain.backlash)))
         for k, i in enumerate(chain.backlash):
             axis = self.placed[i][:, :3, :3] @ m.screw_axes[i]

@@ -53,6 +53,7 @@ even where a nominal axis is parallel only to within PARALLEL_TOL.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -192,34 +193,78 @@ class MdhModel(ErrorModel):
         return np.array(out)
 
     def placements(self, x) -> np.ndarray:
+        """(n, 4, 4) A_i = Tx(a) Rx(alpha) Ry(beta) Rz(theta) Tz(d), vectorised over joints."""
         table, beta = self.unpack(x)
-        return np.array([mdh_transform(*row, beta=b) for row, b in zip(table, beta)])
+        a, alpha, d, theta = table.T
+        ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
+        ct, st = np.cos(theta), np.sin(theta)
+        A = np.zeros((self.n, 4, 4))
+        # R = Rx(alpha) Ry(beta) Rz(theta), written out
+        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2] = cb * ct, -cb * st, sb
+        A[:, 1, 0] = ca * st + sa * sb * ct
+        A[:, 1, 1] = ca * ct - sa * sb * st
+        A[:, 1, 2] = -sa * cb
+        A[:, 2, 0] = sa * st - ca * sb * ct
+        A[:, 2, 1] = sa * ct + ca * sb * st
+        A[:, 2, 2] = ca * cb
+        A[:, :3, 3] = A[:, :3, 2] * d[:, None]
+        A[:, 0, 3] += a
+        A[:, 3, 3] = 1.0
+        return A
 
     def twists(self, x) -> tuple[np.ndarray, np.ndarray]:
         """Twists in frame i-1 (see kincal.models.base): a slides along x, alpha turns about
         x, beta about Rx(alpha) y through (a, 0, 0), theta about the new z axis through
-        (a, 0, 0), d slides along it."""
+        (a, 0, 0), d slides along it. Vectorised over joints (this runs every iteration)."""
         table, beta = self.unpack(x)
+        a, alpha = table[:, 0], table[:, 1]
+        ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
+        z = np.column_stack([sb, -sa * cb, ca * cb])             # new z axis, frame i-1
+        c_cross_z = np.column_stack([np.zeros(self.n), -a * z[:, 2], a * z[:, 1]])
+        ia, ial, ib, idd, ith = self._field_index
         w, v = np.zeros((self.size, 3)), np.zeros((self.size, 3))
-        k = 0
-        ex = np.array([1.0, 0.0, 0.0])
-        for i in range(self.n):
-            a, alpha, _, theta = table[i]
-            ca, sa = np.cos(alpha), np.sin(alpha)
-            cb, sb = np.cos(beta[i]), np.sin(beta[i])
-            y1 = np.array([0.0, ca, sa])
-            z = np.array([sb, -sa * cb, ca * cb])
-            c = np.array([a, 0.0, 0.0])
-            v[k] = ex                                   # a
-            w[k + 1] = ex                               # alpha
-            k += 2
-            if self.has_beta[i]:
-                w[k], v[k] = y1, np.cross(c, y1)        # beta
-                k += 1
-            v[k] = z                                    # d
-            w[k + 1], v[k + 1] = z, np.cross(c, z)      # theta
-            k += 2
+        v[ia, 0] = 1.0                                            # a
+        w[ial, 0] = 1.0                                           # alpha
+        if ib.size:                                               # beta
+            hb = self.has_beta
+            w[ib, 1], w[ib, 2] = ca[hb], sa[hb]
+            v[ib, 1], v[ib, 2] = -a[hb] * sa[hb], a[hb] * ca[hb]
+        v[idd] = z                                                # d
+        w[ith], v[ith] = z, c_cross_z                             # theta
         return w, v
+
+    def point_columns(self, x, before, placed, P) -> np.ndarray:
+        """(N, 3, p) derivatives of points P (N, 3) rigidly attached to the tip, from the
+        frames before (G) and after (H) each placement: the same numbers as the generic
+        twists of :mod:`kincal.models.chain`, written with MD-H's structure because this is
+        the identification's hot path (a slides along x_G, alpha turns about it, d slides
+        along z_H, theta turns about it, beta about Rx(alpha) y_G through o_G + a x_G)."""
+        G, H = np.stack(before), np.stack(placed)                 # (n, N, 4, 4)
+        xg, zh = G[:, :, :3, 0], H[:, :, :3, 2]
+        rg, rh = P - G[:, :, :3, 3], P - H[:, :, :3, 3]
+        ia, ial, ib, idd, ith = self._field_index
+        K = np.empty((len(P), 3, self.size))
+        K[:, :, ia] = xg.transpose(1, 2, 0)
+        K[:, :, ial] = _cross3(xg, rg).transpose(1, 2, 0)
+        K[:, :, idd] = zh.transpose(1, 2, 0)
+        K[:, :, ith] = _cross3(zh, rh).transpose(1, 2, 0)
+        if ib.size:
+            hb = self.has_beta
+            table, _ = self.unpack(x)
+            a, alpha = table[hb, 0], table[hb, 1]
+            Gb = G[hb]
+            y1 = (np.cos(alpha)[:, None, None] * Gb[:, :, :3, 1]
+                  + np.sin(alpha)[:, None, None] * Gb[:, :, :3, 2])
+            c = Gb[:, :, :3, 3] + a[:, None, None] * Gb[:, :, :3, 0]
+            K[:, :, ib] = _cross3(y1, P - c).transpose(1, 2, 0)
+        return K
+
+    @cached_property
+    def _field_index(self) -> tuple[np.ndarray, ...]:
+        """Positions of a, alpha, beta (joints with beta only), d, theta in the vector."""
+        has = self.has_beta.astype(int)
+        start = np.concatenate([[0], np.cumsum(4 + has)[:-1]])
+        return start, start + 1, (start + 2)[self.has_beta], start + 2 + has, start + 3 + has
 
     def frames(self, x=None) -> np.ndarray:
         """(n, 4, 4) MD-H frames F_i at zero joint values in the base frame."""
@@ -229,6 +274,15 @@ class MdhModel(ErrorModel):
             F = F @ P[i]
             out[i] = F
         return out
+
+
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis of equally shaped arrays (np.cross is slow here)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
