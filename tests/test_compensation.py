@@ -162,18 +162,24 @@ def test_fewer_than_six_joints_meet_the_position_and_keep_the_orientation_second
     assert "as far as the 5 joints allow" in comp.summary()
 
 
-def test_a_target_beyond_a_joint_limit_is_flagged_not_clipped(cell):
+def test_a_pose_beyond_a_joint_limit_is_flagged_not_clipped(cell):
     robot, result, frames, q = cell
     g = robot.geometry
     q_out = q[:3].copy()
     q_out[:, 1] = g.upper[1] + 0.3  # joint_2 beyond its upper limit
-    P = result.predict(q_out)
+    P, quats = _targets_from(result, q_out, quaternions=True)
     seeds = np.clip(q_out, g.lower, g.upper)
-    comp = compensate(result.corrected, frames, Targets(seeds, P, None, np.array([5, 6, 7])))
+    comp = compensate(result.corrected, frames, Targets(seeds, P, quats, np.array([5, 6, 7])))
     assert not comp.reached.any()
     assert comp.at_limit[:, 1].all()
+    assert (comp.joint_values <= g.upper).all() and (comp.joint_values >= g.lower).all()
     fails = comp.failures()
     assert len(fails) == 3 and fails[0].startswith("line 5:") and "joint_2 at a joint limit" in fails[0]
+    # a position alone is reached with the other joints; the preferred orientation gives way
+    comp = compensate(result.corrected, frames, Targets(seeds, P, None, np.array([5, 6, 7])))
+    assert comp.reached.all() and comp.at_limit[:, 1].all()
+    assert (comp.joint_values <= g.upper).all() and comp.orientation_error.min() > 1e-3
+    assert "orientation gave way" in comp.summary()
 
 
 def test_targets_in_millimetres_read_as_metres_are_refused(cell):

@@ -93,6 +93,12 @@ class Compensation:
                              f"{np.degrees(change[r][:, rev].max()):.4g} deg (revolute)"
                              + (f", {change[r][:, ~rev].max() * 1e3:.4g} mm (prismatic)"
                                 if (~rev).any() else ""))
+        gave = self.reached & ~self.orientation_required & (self.orientation_error > 1e-6)
+        if gave.any():
+            lines.append(f"  {int(gave.sum())} position targets: the orientation gave way (up to "
+                         f"{np.degrees(self.orientation_error[gave].max()):.3g} deg from the "
+                         "seed's) to keep the joints within their limits or because the chain "
+                         "has fewer than six joints")
         lines += [f"  {note}" for note in self.notes]
         return "\n".join(lines)
 

@@ -13,8 +13,9 @@ Staying on the seed's branch: every configuration starts at its seed, and each
 iteration changes a joint by at most ``max_step`` (the step is scaled down as a whole,
 so its direction is kept), so a solution is reached through small moves from the seed
 as a robot program would, not by jumping to another elbow or wrist branch. Joint
-limits are enforced by clipping after each step; a target reachable only beyond a
-limit is reported as not reached, never clipped silently.
+limits are enforced by clipping after each step, and a joint on a limit that the step
+pushes outward is left out of the next step, so the others take over; a target
+reachable only beyond a limit is reported as not reached, never clipped silently.
 """
 
 from __future__ import annotations
@@ -97,6 +98,16 @@ def _damped_pinv(A: np.ndarray, damping: float) -> np.ndarray:
     return At @ np.linalg.inv(A @ At + damping ** 2 * np.eye(m))
 
 
+def _step(Jp, Jo, e_p, e_o, eye, damping) -> np.ndarray:
+    """(N, n) joint step: the position task, then the orientation in its null space."""
+    Jp_pinv = _damped_pinv(Jp, damping)
+    dq1 = np.einsum("kij,kj->ki", Jp_pinv, e_p)
+    null = eye - Jp_pinv @ Jp
+    dq2 = np.einsum("kij,kj->ki", _damped_pinv(Jo @ null, damping),
+                    e_o - np.einsum("kij,kj->ki", Jo, dq1))
+    return dq1 + np.einsum("kij,kj->ki", null, dq2)
+
+
 def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.ndarray,
           required: np.ndarray, seeds: np.ndarray, lower: np.ndarray, upper: np.ndarray,
           options: IkOptions = IkOptions()) -> IkSolution:
@@ -118,13 +129,13 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         R, p, Jp, Jo = chain.evaluate(q[idx], tool)
         e_p = positions[idx] - p
         e_o = rotation_log(rotations[idx] @ np.swapaxes(R, 1, 2))
-        Jp_pinv = _damped_pinv(Jp, options.damping)
-        dq1 = np.einsum("kij,kj->ki", Jp_pinv, e_p)
-        null = eye - Jp_pinv @ Jp
-        JoN = Jo @ null
-        dq2 = np.einsum("kij,kj->ki", _damped_pinv(JoN, options.damping),
-                        e_o - np.einsum("kij,kj->ki", Jo, dq1))
-        dq = dq1 + np.einsum("kij,kj->ki", null, dq2)
+        dq = _step(Jp, Jo, e_p, e_o, eye, options.damping)
+        # a joint on a limit that the step pushes outward is taken out of the step, so the
+        # other joints meet the position (the orientation gives way first if it must)
+        blocked = ((q[idx] <= lower) & (dq < 0)) | ((q[idx] >= upper) & (dq > 0))
+        if blocked.any():
+            keep = (~blocked)[:, None, :]
+            dq = _step(Jp * keep, Jo * keep, e_p, e_o, eye, options.damping)
         biggest = np.abs(dq).max(axis=1)
         dq *= np.minimum(1.0, options.max_step / np.maximum(biggest, 1e-300))[:, None]
         q_new = np.clip(q[idx] + dq, lower, upper)
