@@ -368,7 +368,8 @@ def cmd_compensate(args) -> int:
                                 source=str(args.program))
         inputs = [args.program, nominal.source]
     else:
-        targets = read_targets(args.targets, robot, args.length_unit, args.angle_unit)
+        targets = read_targets(args.targets, robot, args.length_unit, args.angle_unit,
+                               args.position_columns)
         result = compensate(robot, frames, targets, args.point - 1, options, args.length_unit)
         inputs = [args.targets]
     failures = result.failures()
@@ -536,6 +537,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--program", metavar="PROGRAM.csv",
                    help="joint values planned on the nominal model (chain joint columns)")
     p.add_argument("--nominal", metavar="NOMINAL.urdf", help="the model the program was planned on")
+    p.add_argument("--position-columns", nargs=3, default=("x", "y", "z"), metavar="COL",
+                   help="names of the target position columns (default x y z)")
     p.add_argument("--point", type=int, default=1,
                    help="which measured point of FRAMES.json is targeted (default 1)")
     p.add_argument("--length-unit", choices=("m", "mm"), default="m",

@@ -12,7 +12,9 @@ miss the position.
 Staying on the seed's branch: every configuration starts at its seed, and each
 iteration changes a joint by at most ``max_step`` (the step is scaled down as a whole,
 so its direction is kept), so a solution is reached through small moves from the seed
-as a robot program would, not by jumping to another elbow or wrist branch. Joint
+as a robot program would, not by jumping to another elbow or wrist branch. On a
+redundant chain the freedom left is resolved by the least-norm steps from the seed (no
+explicit pull back toward it: tried, it fought the tasks near singular wrists). Joint
 limits are enforced by clipping after each step, and a joint on a limit that the step
 pushes outward is left out of the next step, so the others take over; a target
 reachable only beyond a limit is reported as not reached, never clipped silently.

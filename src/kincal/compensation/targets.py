@@ -53,13 +53,20 @@ def joint_scales(kinds, length_unit: str, angle_unit: str) -> np.ndarray:
                      for k in kinds])
 
 
-def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad") -> Targets:
+def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
+                 position_columns=("x", "y", "z")) -> Targets:
     """Targets from a CSV file (see the module notes); values outside the joint limits and
-    angles that look like degrees are warned about, as for measurements."""
+    angles that look like degrees are warned about, as for measurements.
+    position_columns: the names of the x, y, z columns."""
+    position_columns = tuple(position_columns)
+    if len(position_columns) != 3:
+        raise OptionError(f"a target has one position: give 3 position columns, got "
+                          f"{len(position_columns)} ({', '.join(position_columns)})")
     g = robot.geometry
     scale = joint_scales(g.kinds, length_unit, angle_unit)
-    table = read_columns(path, list(robot.joint_names) + ["x", "y", "z"], optional=QUATERNION,
-                         kind="targets", expected="the chain joints (seeds) and x, y, z",
+    table = read_columns(path, list(robot.joint_names) + list(position_columns),
+                         optional=QUATERNION, kind="targets",
+                         expected=f"the chain joints (seeds) and {', '.join(position_columns)}",
                          rows_name="targets")
     given = [c for c in QUATERNION if c in table.values]
     if given and len(given) < 4:
@@ -68,7 +75,8 @@ def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad") -
                         f"{', '.join(missing)}; give all of qx, qy, qz, qw (unit quaternion, "
                         "scalar last) or none")
     seeds = np.column_stack([table.values[j] for j in robot.joint_names]) * scale
-    positions = np.column_stack([table.values[c] for c in "xyz"]) * LENGTH_UNITS[length_unit]
+    positions = np.column_stack([table.values[c] for c in position_columns]) * LENGTH_UNITS[
+        length_unit]
     quats = None
     if given:
         quats = np.column_stack([table.values[c] for c in QUATERNION])
