@@ -64,24 +64,10 @@ def _tool_offset(args):
 
 def _read_frames(path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """(base (6,), tool points (K, 3), backlash {joint: value}) in SI from FRAMES.json."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputFileError(f"frames file not found: {path}")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-        base = [float(data["base"][k]) for k in ("x", "y", "z", "rx", "ry", "rz")]
-        tools = [[float(t[k]) for k in ("x", "y", "z")]
-                 for t in data.get("tool_points", [data["tool"]])]
-        backlash = {str(j): float(v) for j, v in data.get("backlash", {}).items()}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise DataError(f"{path}: not a kincal frames file ({exc.__class__.__name__}: {exc}); "
-                        'expected {"base": {"x","y","z","rx","ry","rz"}, "tool": {"x","y","z"}} '
-                        'and optionally "tool_points": [{"x","y","z"}, ...] and "backlash": '
-                        "{joint: value}, in metres and radians") from None
-    values = base + [v for t in tools for v in t] + list(backlash.values())
-    if not tools or not all(math.isfinite(v) for v in values):
-        raise DataError(f"{path}: frames contain a non-finite number or no tool point")
-    return np.array(base), np.array(tools), backlash
+    from kincal.compensation.frames import CellFrames
+
+    frames = CellFrames.read(path)
+    return frames.base, frames.tools, frames.backlash
 
 
 def _add_common(p, data=True):
