@@ -303,3 +303,32 @@ def test_cli_program_filter(cli_cell, tmp_path):
                                                      CellFrames.read(fj)).joint_values, atol=1e-15)
     assert main(["compensate", str(urdf), "--program", str(prog), "--tip", "flange",
                  "--out", str(tmp / "x.csv")]) == 1  # --program without --nominal
+
+
+def test_cli_full_pose_targets_and_bad_quaternions(cli_cell, capsys):
+    result, q, P, urdf, fj, tmp = cli_cell
+    _, quats = _targets_from(result, q, quaternions=True)
+    names = list(result.robot.joint_names)
+    t = tmp / "poses.csv"
+
+    def write(cols, rows):
+        t.write_text(",".join(names + ["x", "y", "z"] + cols) + "\n" + "\n".join(
+            ",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+
+    seeds = q - 0.01 * np.sign(q)
+    write(["qx", "qy", "qz", "qw"], np.hstack([seeds, P, quats]))
+    out = tmp / "joints.csv"
+    assert main(["compensate", str(urdf), str(t), "--tip", "flange", "--frames", str(fj),
+                 "--out", str(out)]) == 0
+    table = np.genfromtxt(out, delimiter=",", names=True)
+    np.testing.assert_allclose(np.column_stack([table[j] for j in names]), q, atol=1e-8)
+    for cols, rows, message in ((["qx", "qy", "qz"], np.hstack([seeds, P, quats[:, :3]]),
+                                 "without qw"),
+                                (["qx", "qy", "qz", "qw"], np.hstack([seeds, P, 2 * quats]),
+                                 "expected a unit quaternion")):
+        write(cols, rows)
+        out.unlink(missing_ok=True)
+        assert main(["compensate", str(urdf), str(t), "--tip", "flange", "--frames", str(fj),
+                     "--out", str(out)]) == 1
+        err = capsys.readouterr().err
+        assert message in err and not out.exists()
