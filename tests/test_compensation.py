@@ -332,3 +332,36 @@ def test_cli_full_pose_targets_and_bad_quaternions(cli_cell, capsys):
                      "--out", str(out)]) == 1
         err = capsys.readouterr().err
         assert message in err and not out.exists()
+
+
+def test_the_second_measured_point_can_be_targeted(cell):
+    robot, result, frames, q = cell
+    second = np.array([-0.05, 0.04, 0.1])
+    d = result.frames_dict()
+    d["tool_points"] = [d["tool"], dict(zip("xyz", second))]
+    two = CellFrames.from_dict(d)
+    T = result.corrected.tip_poses(q)
+    R_MB, t_MB = base_rotation(*result.base[3:]), result.base[:3]
+    P2 = (T[:, :3, :3] @ second + T[:, :3, 3]) @ R_MB.T + t_MB
+    seeds = q - 0.01 * np.sign(q)
+    comp = compensate(result.corrected, two, Targets(seeds, P2, None, np.arange(len(q)) + 2), point=1)
+    assert comp.reached.all()
+    T = result.corrected.tip_poses(comp.joint_values)
+    np.testing.assert_allclose((T[:, :3, :3] @ second + T[:, :3, 3]) @ R_MB.T + t_MB, P2, atol=1e-9)
+    with pytest.raises(Exception, match="measured point 3"):
+        compensate(result.corrected, two, Targets(seeds, P2, None, np.arange(len(q)) + 2), point=2)
+
+
+def test_the_acceptance_script_one_seed():
+    """scripts/compensation_demo.py at one seed: compensation beats the nominal joints and
+    lands within 1.5x of the calibrated model's held-out error."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "compensation_demo.py"
+    spec = importlib.util.spec_from_file_location("compensation_demo", path)
+    demo = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(demo)
+    robot = Robot.load("ec66", tip="flange")
+    nominal, compensated, held_out, _ = demo.one_seed(robot, mdh.extract(robot.geometry), 2)
+    assert compensated < 0.2 * nominal and compensated <= 1.5 * held_out
