@@ -365,3 +365,20 @@ def test_the_acceptance_script_one_seed():
     robot = Robot.load("ec66", tip="flange")
     nominal, compensated, held_out, _ = demo.one_seed(robot, mdh.extract(robot.geometry), 2)
     assert compensated < 0.2 * nominal and compensated <= 1.5 * held_out
+
+
+def test_compensation_imports_neither_pinocchio_nor_the_cli():
+    """Plain numpy below the one Pinocchio boundary (robot.py); no import from a layer above."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "src" / "kincal"
+    files = sorted((root / "compensation").glob("*.py")) + [root / "export" / "cell_exports.py"]
+    assert len(files) >= 6
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            for name in names:
+                assert not name.startswith(("pinocchio", "kincal.cli", "kincal.experiments")), \
+                    f"{path.name} imports {name}"
