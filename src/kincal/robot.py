@@ -258,6 +258,19 @@ class Robot:
             out[k] = _mat(oMb.actInv(oMe))
         return out
 
+    def tip_jacobian(self, joint_values) -> np.ndarray:
+        """(6, n) Pinocchio frame Jacobian of the tip for chain joint values (n,): rows 0-2
+        the velocity of the tip origin, rows 3-5 the angular velocity, both in base-frame
+        axes, per chain joint velocity. The reference for the vectorised numpy kinematics
+        of :mod:`kincal.compensation.kinematics`."""
+        m, d = self.model, self._data
+        qp = self.configuration(joint_values)
+        pin.framesForwardKinematics(m, d, qp)
+        J = np.asarray(pin.computeFrameJacobian(m, d, qp, self._tip_id, pin.LOCAL_WORLD_ALIGNED))
+        J = J.reshape(6, -1)[:, [m.joints[j].idx_v for j in self._chain]]
+        Rb = d.oMf[self._base_id].rotation.T
+        return np.vstack([Rb @ J[:3], Rb @ J[3:]])
+
     # -------------------------------------------------------------- correction
     def with_joint_frames(self, joint_frames: np.ndarray) -> "Robot":
         """A copy whose chain joint frames at zero joint values are ``joint_frames``.

@@ -129,3 +129,38 @@ def kabsch(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
     R = Vt.T @ D @ U.T
     return R, ym - R @ xm
+
+
+def quaternion_to_matrix(q) -> np.ndarray:
+    """Rotation matrix of the unit quaternion q = (qx, qy, qz, qw), scalar last.
+
+    Batches (..., 4) give (..., 3, 3)."""
+    q = np.asarray(q, dtype=float)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+                  2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+                  2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1)
+    return R.reshape(q.shape[:-1] + (3, 3))
+
+
+def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (qx, qy, qz, qw), scalar last and qw >= 0, of rotation R (3, 3).
+
+    Shepperd's method: the largest of the four squared components is taken from the
+    diagonal, the others from off-diagonal sums, so no branch divides by a small number."""
+    R = np.asarray(R, dtype=float)
+    t = np.trace(R)
+    k = int(np.argmax([R[0, 0], R[1, 1], R[2, 2], t]))
+    if k == 3:
+        s = 2.0 * math.sqrt(1.0 + t)
+        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, s / 4]
+    else:
+        i, j, m = k, (k + 1) % 3, (k + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[m, m])
+        q = [0.0] * 4
+        q[i] = s / 4
+        q[j] = (R[j, i] + R[i, j]) / s
+        q[m] = (R[m, i] + R[i, m]) / s
+        q[3] = (R[m, j] - R[j, m]) / s
+    q = np.array(q)
+    return q if q[3] >= 0 else -q

@@ -64,24 +64,10 @@ def _tool_offset(args):
 
 def _read_frames(path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """(base (6,), tool points (K, 3), backlash {joint: value}) in SI from FRAMES.json."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputFileError(f"frames file not found: {path}")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-        base = [float(data["base"][k]) for k in ("x", "y", "z", "rx", "ry", "rz")]
-        tools = [[float(t[k]) for k in ("x", "y", "z")]
-                 for t in data.get("tool_points", [data["tool"]])]
-        backlash = {str(j): float(v) for j, v in data.get("backlash", {}).items()}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise DataError(f"{path}: not a kincal frames file ({exc.__class__.__name__}: {exc}); "
-                        'expected {"base": {"x","y","z","rx","ry","rz"}, "tool": {"x","y","z"}} '
-                        'and optionally "tool_points": [{"x","y","z"}, ...] and "backlash": '
-                        "{joint: value}, in metres and radians") from None
-    values = base + [v for t in tools for v in t] + list(backlash.values())
-    if not tools or not all(math.isfinite(v) for v in values):
-        raise DataError(f"{path}: frames contain a non-finite number or no tool point")
-    return np.array(base), np.array(tools), backlash
+    from kincal.compensation.frames import CellFrames
+
+    frames = CellFrames.read(path)
+    return frames.base, frames.tools, frames.backlash
 
 
 def _add_common(p, data=True):
@@ -164,6 +150,13 @@ def cmd_calibrate(args) -> int:
         files.append((args.frames_out, report.dumps(result.frames_dict())))
     if args.report:
         files.append((args.report, report.dumps(report.result_dict(result, str(args.data)))))
+    if args.yaml_out or args.mdh_out:
+        from kincal.export.cell_exports import kinematics_yaml, mdh_table_csv
+
+        if args.yaml_out:
+            files.append((args.yaml_out, kinematics_yaml(robot, result.corrected)))
+        if args.mdh_out:
+            files.append((args.mdh_out, mdh_table_csv(result.corrected)))
     if args.plots:
         files += _render_plots(result, Path(args.plots))
     protect = [robot.source, args.data]
@@ -366,6 +359,59 @@ def cmd_plan(args) -> int:
     return 0
 
 
+def cmd_compensate(args) -> int:
+    from kincal.compensation import CellFrames, IkOptions, compensate, filter_program, read_targets
+    from kincal.export.safe_write import write_all
+    from kincal.planning.candidates import read_candidates
+
+    if (args.targets is None) == (args.program is None):
+        raise OptionError("give exactly one of TARGETS.csv or --program PROGRAM.csv")
+    if (args.program is None) != (args.nominal is None):
+        raise OptionError("--program and --nominal go together: the program's joint values "
+                          "were planned on the NOMINAL.urdf model")
+    if args.targets is not None and args.frames is None:
+        raise OptionError("targets in the measurement frame need --frames FRAMES.json "
+                          "(from 'kincal calibrate --frames-out')")
+    if not (math.isfinite(args.tolerance_mm) and args.tolerance_mm > 0):
+        raise OptionError(f"--tolerance-mm must be a positive number, got {args.tolerance_mm}")
+    options = IkOptions(position_tolerance=args.tolerance_mm * 1e-3)
+    robot = _robot(args)
+    frames = None if args.frames is None else CellFrames.read(args.frames)
+    if frames is not None:
+        frames.check_chain(robot)  # before reading targets: a wrong file is the likelier error
+    if args.program is not None:
+        from kincal.robot import Robot
+
+        nominal = Robot.load(args.nominal, tip=args.tip, base=args.base)
+        q, lines = read_candidates(args.program, nominal, args.length_unit, args.angle_unit,
+                                   kind="program")
+        result = filter_program(nominal, robot, q, frames, lines, args.point - 1, options,
+                                source=str(args.program))
+        inputs = [args.program, nominal.source]
+    else:
+        targets = read_targets(args.targets, robot, args.length_unit, args.angle_unit,
+                               args.position_columns)
+        result = compensate(robot, frames, targets, args.point - 1, options, args.length_unit)
+        inputs = [args.targets]
+    failures = result.failures()
+    if failures and not args.flag_unreachable:
+        raise DataError(f"{len(failures)} of {len(result)} targets cannot be reached by the "
+                        f"calibrated model within {args.tolerance_mm:g} mm: "
+                        + "; ".join(failures[:10]) + (" ..." if len(failures) > 10 else "")
+                        + "; nothing written; pass --flag-unreachable to write them marked "
+                          "reached=0")
+    written = write_all([(args.out, result.to_csv_text(args.length_unit, args.angle_unit))],
+                        overwrite=args.overwrite,
+                        protect=[robot.source, *inputs] + ([args.frames] if args.frames else []))
+    print(result.summary())
+    for line in failures:
+        print(f"  NOT reached, written with reached=0: {line}")
+    for path in written:
+        print(f"  wrote {path} (joint values in {args.angle_unit} and {args.length_unit}, "
+              "as the input)")
+    return 0
+
+
 def cmd_demo(args) -> int:
     from kincal.experiments.paper_experiment import demo
 
@@ -413,6 +459,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also add the measurement frame and tool point to the URDF as fixed "
                         "frames (kincal_measurement_frame, kincal_tool_point)")
     p.add_argument("--report", help="REPORT.json: the whole result")
+    p.add_argument("--yaml-out", metavar="KINEMATICS.yaml",
+                   help="corrected joint origins as YAML keyed by joint name (x y z roll pitch "
+                        "yaw, ur_description's kinematics layout)")
+    p.add_argument("--mdh-out", metavar="MDH.csv",
+                   help="corrected modified-DH (Craig) table, convention in its header")
     p.add_argument("--plots", help="directory for PNG plots")
     p.add_argument("--overwrite", action="store_true", help="replace existing output files")
     p.add_argument("--quiet", action="store_true")
@@ -495,6 +546,38 @@ def build_parser() -> argparse.ArgumentParser:
                    help="noise per axis [mm] for the predicted standard errors (default 0.05)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     p.set_defaults(func=cmd_plan)
+
+    p = sub.add_parser("compensate", help="joint values with which the calibrated robot "
+                       "reaches given targets (or a nominal program's poses)",
+                       description="Solve the calibrated model's inverse kinematics from seed "
+                       "joint values: TARGETS.csv has the chain joints (seeds) and x,y,z of the "
+                       "tool point in the measurement frame (optionally qx,qy,qz,qw); or "
+                       "--program PROGRAM.csv with --nominal NOMINAL.urdf corrects joint values "
+                       "planned on the nominal model.")
+    p.add_argument("robot", help="the calibrated URDF (or any robot name, see calibrate)")
+    p.add_argument("targets", nargs="?", metavar="TARGETS.csv",
+                   help="seed joint columns and x,y,z [qx,qy,qz,qw] in the measurement frame")
+    p.add_argument("--tip", help="tip frame (as in the calibration)")
+    p.add_argument("--base", help="base frame (default: the URDF root link)")
+    p.add_argument("--frames", help="FRAMES.json from 'kincal calibrate --frames-out'")
+    p.add_argument("--program", metavar="PROGRAM.csv",
+                   help="joint values planned on the nominal model (chain joint columns)")
+    p.add_argument("--nominal", metavar="NOMINAL.urdf", help="the model the program was planned on")
+    p.add_argument("--position-columns", nargs=3, default=("x", "y", "z"), metavar="COL",
+                   help="names of the target position columns (default x y z)")
+    p.add_argument("--point", type=int, default=1,
+                   help="which measured point of FRAMES.json is targeted (default 1)")
+    p.add_argument("--length-unit", choices=("m", "mm"), default="m",
+                   help="unit of positions and prismatic joints, in and out (default m)")
+    p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad",
+                   help="unit of revolute joints, in and out (default rad)")
+    p.add_argument("--tolerance-mm", type=float, default=0.001,
+                   help="a target counts as reached within this distance (default 0.001 mm)")
+    p.add_argument("--flag-unreachable", action="store_true",
+                   help="write unreachable targets marked reached=0 instead of failing")
+    p.add_argument("--out", required=True, help="JOINTS.csv to write")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    p.set_defaults(func=cmd_compensate)
 
     p = sub.add_parser("demo", help="the paper's experiment, simulated at a small size")
     p.add_argument("--out", default=DEMO_DIR, help=f"output directory (default {DEMO_DIR})")

@@ -76,6 +76,25 @@ def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam:
     return out
 
 
+def frame_transforms(base: np.ndarray, tools: np.ndarray) -> dict:
+    """The frames as 4x4 matrices and quaternions, for cells that take those.
+
+    ``T_measurement_base``: pose of the base frame B in the measurement frame M (P_M =
+    T P_B); ``T_tip_tool``, ``T_tip_tool_<k>``: the tool points as translations in the tip
+    frame; ``pose_measurement_base``: the same as x, y, z [m] and a unit quaternion qx, qy,
+    qz, qw (scalar last)."""
+    from kincal.rotations import matrix_to_quaternion, transform
+
+    T = transform(base_rotation(*base[3:]), base[:3])
+    out = {"T_measurement_base": T.tolist(),
+           "pose_measurement_base": dict(zip(("x", "y", "z", "qx", "qy", "qz", "qw"),
+                                             [*map(float, base[:3]),
+                                              *map(float, matrix_to_quaternion(T[:3, :3]))]))}
+    for k, t in enumerate(np.atleast_2d(tools), start=1):
+        out["T_tip_tool" + ("" if k == 1 else f"_{k}")] = transform(None, t).tolist()
+    return out
+
+
 @dataclass(frozen=True)
 class CalibrationResult:
     """Everything a calibration produced. Values in SI; reports in mm and degrees.
@@ -175,7 +194,9 @@ class CalibrationResult:
                "tool": dict(zip(("x", "y", "z"), map(float, t))),
                "convention": "P_measured = R_base (p_tip + R_tip t_tool) + t_base, "
                              "R_base = rotx(rx) roty(ry) rotz(rz); metres and radians",
-               "base_frame": self.robot.base, "tip_frame": self.robot.tip}
+               "base_frame": self.robot.base, "tip_frame": self.robot.tip,
+               "joints": list(self.robot.joint_names)}
+        out.update(frame_transforms(b, self.tools))
         if self.space.n_points > 1:
             out["tool_points"] = [dict(zip(("x", "y", "z"), map(float, t))) for t in self.tools]
         if self.space.n_backlash:

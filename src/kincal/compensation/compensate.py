@@ -1,0 +1,245 @@
+"""Compensated joint values: what to command so the calibrated robot reaches a target.
+
+Two forms, one solver (:mod:`kincal.compensation.ik`) on the corrected model:
+
+- :func:`compensate`: targets given as positions of the measured tool point in the
+  measurement frame (optionally full poses), each with seed joint values (the user's
+  program). For a position-only target the tool keeps the orientation the calibrated
+  model gives it at the seed (the orientation the real robot has there), as a task
+  below the position: met exactly on six or more joints, as closely as the chain
+  allows on fewer.
+- :func:`filter_program`: joint values planned on the nominal model; the compensated
+  values make the calibrated model reach the pose (tool point and tip orientation) the
+  nominal model predicted at them, in the robot's base frame. The measurement frame
+  plays no part; only the tool point of the frames matters.
+
+Backlash terms (FRAMES.json) are not compensated: the approach direction of a future
+motion is not known from a target file, so targets are reached with every joint in the
+middle of its play (the corrected URDF's model), and the summary says how large the
+remaining play is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kincal.compensation.frames import CellFrames
+from kincal.compensation.ik import IkOptions, IkSolution, solve
+from kincal.compensation.kinematics import ChainKinematics
+from kincal.compensation.targets import Targets, joint_scales
+from kincal.errors import DataError, FrameError
+from kincal.measurements.checks import UNIT_RATIO, spread
+from kincal.rotations import base_rotation, quaternion_to_matrix
+
+REACH_MARGIN = 1.05  # targets beyond this multiple of the chain's reach cannot be reached
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """Compensated joint values of N targets (SI inside).
+
+    joint_names, kinds: the chain. seeds, joint_values: (N, n) [rad or m]. lines: (N,)
+    line numbers of the targets in their file. position_error: (N,) distance [m] of the
+    calibrated model's tool point from the target; orientation_error: (N,) [rad] of its
+    tip orientation from the wanted one; orientation_required: (N,) whether that
+    orientation had to be met (a full pose) or was only kept where possible. reached:
+    (N,) within the tolerances. at_limit: (N, n). notes: what a user should know.
+    """
+
+    joint_names: tuple[str, ...]
+    kinds: tuple[str, ...]
+    seeds: np.ndarray
+    joint_values: np.ndarray
+    lines: np.ndarray
+    position_error: np.ndarray
+    orientation_error: np.ndarray
+    orientation_required: np.ndarray
+    reached: np.ndarray
+    at_limit: np.ndarray
+    source: str = "<targets>"
+    notes: tuple[str, ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.joint_values)
+
+    def failures(self) -> list[str]:
+        """One line per target not reached: where, by how much, and why if known."""
+        out = []
+        for k in np.flatnonzero(~self.reached):
+            why = [f"the tool point stays {self.position_error[k] * 1e3:.4g} mm from the target"]
+            if self.orientation_required[k]:
+                why.append(f"the orientation {np.degrees(self.orientation_error[k]):.3g} deg off")
+            limits = [self.joint_names[j] for j in np.flatnonzero(self.at_limit[k])]
+            if limits:
+                why.append(f"{', '.join(limits)} at a joint limit")
+            out.append(f"line {self.lines[k]}: " + ", ".join(why))
+        return out
+
+    def summary(self) -> str:
+        n, ok = len(self), int(self.reached.sum())
+        change = np.abs(self.joint_values - self.seeds)
+        rev = np.array([k != "prismatic" for k in self.kinds])
+        lines = [f"compensated {ok} of {n} targets from {self.source}"
+                 + ("" if ok == n else f" ({n - ok} NOT reached)")]
+        if ok:
+            r = self.reached
+            lines.append(f"  residual of the calibrated model: position max "
+                         f"{self.position_error[r].max() * 1e3:.3g} mm, orientation max "
+                         f"{np.degrees(self.orientation_error[r].max()):.3g} deg")
+            if rev.any():
+                lines.append(f"  joint change from the seeds: max "
+                             f"{np.degrees(change[r][:, rev].max()):.4g} deg (revolute)"
+                             + (f", {change[r][:, ~rev].max() * 1e3:.4g} mm (prismatic)"
+                                if (~rev).any() else ""))
+        gave = self.reached & ~self.orientation_required & (self.orientation_error > 1e-6)
+        if gave.any():
+            lines.append(f"  {int(gave.sum())} position targets: the orientation gave way (up to "
+                         f"{np.degrees(self.orientation_error[gave].max()):.3g} deg from the "
+                         "seed's) to keep the joints within their limits or because the chain "
+                         "has fewer than six joints")
+        lines += [f"  {note}" for note in self.notes]
+        return "\n".join(lines)
+
+    def to_csv_text(self, length_unit: str = "m", angle_unit: str = "rad") -> str:
+        """CSV: the file's line of each target, the compensated joint values in the given
+        units, the residual in mm and degrees, and reached (1/0)."""
+        scale = joint_scales(self.kinds, length_unit, angle_unit)
+        rows = [",".join(["target_line", *self.joint_names, "position_error_mm",
+                          "orientation_error_deg", "reached"])]
+        for k in range(len(self)):
+            cells = [str(int(self.lines[k]))] + [repr(float(v)) for v in
+                                                 self.joint_values[k] / scale]
+            cells += [f"{self.position_error[k] * 1e3:.6g}",
+                      f"{np.degrees(self.orientation_error[k]):.6g}", str(int(self.reached[k]))]
+            rows.append(",".join(cells))
+        return "\n".join(rows) + "\n"
+
+
+def _reach(chain: ChainKinematics, tool: np.ndarray, lower, upper) -> tuple[np.ndarray, float]:
+    """(first joint's origin in B, an upper bound of the tool point's distance from it) [m]."""
+    lengths = np.linalg.norm(chain.placements[1:, :3, 3], axis=1).sum()
+    travel = np.where(chain.prismatic, np.maximum(np.abs(lower), np.abs(upper)), 0.0)
+    bound = lengths + np.where(np.isfinite(travel), travel, 0.0).sum() + np.linalg.norm(
+        chain.T_last_tip[:3, 3]) + np.linalg.norm(tool)
+    if not np.all(np.isfinite(travel)):
+        bound = np.inf  # a prismatic joint without limits reaches anywhere along its axis
+    return chain.placements[0, :3, 3], float(bound)
+
+
+def _check_units(chain, tool, lower, upper, targets_B, targets_M, at_seeds_M, source, unit):
+    """Refuse targets in the wrong length unit, with the likely cause (nothing is solved).
+
+    The plausibility gate of the measurements (:mod:`kincal.measurements.checks`): the
+    targets should spread about as much as the calibrated model's tool point at the
+    seeds, and lie within the chain's reach."""
+    s_t, s_q = spread(targets_M), spread(at_seeds_M)
+    if len(targets_M) >= 3 and s_q > 1e-3:
+        if s_t > UNIT_RATIO * s_q:
+            raise DataError(f"{source}: the targets spread {s_t:.4g} m while the tool point at the "
+                            f"seeds moves by {s_q:.3g} m: were they millimetres? Read them with "
+                            "--length-unit mm (Python: length_unit='mm')")
+        if s_t < s_q / (10 * UNIT_RATIO):
+            raise DataError(f"{source}: the targets spread only {s_t * 1e3:.3g} mm while the tool "
+                            f"point at the seeds moves by {s_q * 1e3:.3g} mm: "
+                            + ("were they metres read as millimetres? Drop --length-unit mm"
+                               if unit == "mm" else "check their unit and the frames file"))
+    origin, bound = _reach(chain, tool, lower, upper)
+    far = np.linalg.norm(targets_B - origin, axis=1) / bound
+    if far.size and far.min() > UNIT_RATIO:
+        raise DataError(f"{source}: every target is at least {far.min():.0f} times farther from "
+                        f"the robot than it can reach ({bound:.3g} m): "
+                        + ("were they millimetres? Read them with --length-unit mm (Python: "
+                           "length_unit='mm')" if unit == "m" else "check their unit and the "
+                           "frames file"))
+
+
+def _solution(chain_robot, sol: IkSolution, seeds, lines, required, source, notes):
+    g = chain_robot.geometry
+    return Compensation(tuple(g.joint_names), tuple(g.kinds), np.array(seeds, float), sol.q,
+                        np.asarray(lines), sol.position_error, sol.orientation_error,
+                        np.asarray(required, bool), sol.reached, sol.at_limit, source,
+                        tuple(notes))
+
+
+def _backlash_notes(frames: CellFrames | None, robot) -> list[str]:
+    if frames is None or not frames.backlash:
+        return []
+    kinds = dict(zip(robot.joint_names, robot.geometry.kinds))
+    parts = [f"{j} +-{np.degrees(b):.3g} deg" if kinds[j] != "prismatic" else f"{j} +-{b * 1e3:.3g} mm"
+             for j, b in frames.backlash.items()]
+    return [f"backlash not compensated ({', '.join(parts)}): every joint is taken in the middle "
+            "of its play, the side it is approached from moves the tool by up to that much"]
+
+
+def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
+               options: IkOptions = IkOptions(), length_unit: str = "m") -> Compensation:
+    """Joint values with which the calibrated ``robot`` reaches each target.
+
+    robot: the corrected :class:`kincal.robot.Robot` (e.g. ``result.corrected`` or the
+    corrected URDF). frames: its measurement frame and tool points. targets: seeds and
+    positions (poses) in the measurement frame. point: which measured point is targeted
+    (0 = point 1). length_unit: the unit the targets were read in, for the message when
+    they look like another one. Raises DataError for frames of another chain or targets
+    in the wrong unit; targets that cannot be reached are flagged (``reached``), see
+    :meth:`Compensation.failures`.
+    """
+    frames.check_chain(robot)
+    if not 0 <= point < len(frames.tools):
+        raise FrameError(f"measured point {point + 1} asked for, {frames.source} has "
+                         f"{len(frames.tools)} tool point(s)")
+    g = robot.geometry
+    chain = ChainKinematics.of(g)
+    tool = frames.tools[point]
+    R_MB = base_rotation(*frames.base[3:])
+    t_MB = frames.base[:3]
+    positions_B = (targets.positions - t_MB) @ R_MB  # R_MB^T (p - t) row-wise
+    R_seed, p_seed, _, _ = chain.evaluate(targets.seeds, tool)
+    _check_units(chain, tool, g.lower, g.upper, positions_B, targets.positions,
+                 p_seed @ R_MB.T + t_MB, targets.source, length_unit)
+    if targets.quaternions is None:
+        rotations, required = R_seed, np.zeros(len(targets), bool)
+        notes = ["position targets: the tool keeps the orientation it has at the seed"
+                 + ("" if g.n >= 6 else f" as far as the {g.n} joints allow")]
+    else:
+        rotations = R_MB.T @ quaternion_to_matrix(targets.quaternions)
+        required, notes = np.ones(len(targets), bool), []
+    sol = solve(chain, tool, positions_B, rotations, required, targets.seeds, g.lower, g.upper,
+                options)
+    return _solution(robot, sol, targets.seeds, targets.lines, required, targets.source,
+                     notes + _backlash_notes(frames, robot))
+
+
+def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames | None = None,
+                   lines=None, point: int = 0, options: IkOptions = IkOptions(),
+                   source: str = "<program>") -> Compensation:
+    """Correct joint values planned on the ``nominal`` robot for the ``calibrated`` one.
+
+    program: (N, n) joint values [rad or m]. The compensated values put the tool point
+    (of ``frames``, or the tip origin without frames) where the nominal model puts it at
+    the program's values, with the tip orientation the nominal model gives (required on
+    six or more joints, kept as closely as possible on fewer). Both robots must have the
+    same chain joints.
+    """
+    if tuple(nominal.joint_names) != tuple(calibrated.joint_names):
+        raise DataError(f"the nominal robot's chain ({', '.join(nominal.joint_names)}) differs "
+                        f"from the calibrated one's ({', '.join(calibrated.joint_names)})")
+    tool = np.zeros(3)
+    if frames is not None:
+        frames.check_chain(calibrated)
+        if not 0 <= point < len(frames.tools):
+            raise FrameError(f"measured point {point + 1} asked for, {frames.source} has "
+                             f"{len(frames.tools)} tool point(s)")
+        tool = frames.tools[point]
+    program = np.atleast_2d(np.asarray(program, dtype=float))
+    R_nom, p_nom, _, _ = ChainKinematics.of(nominal.geometry).evaluate(program, tool)
+    g = calibrated.geometry
+    required = np.full(len(program), g.n >= 6)
+    sol = solve(ChainKinematics.of(g), tool, p_nom, R_nom, required, program, g.lower, g.upper,
+                options)
+    notes = ["program filter: each pose of the nominal model at the program's joint values "
+             "(tool point and orientation, base frame) is reached by the calibrated model"]
+    lines = np.arange(2, len(program) + 2) if lines is None else lines
+    return _solution(calibrated, sol, program, lines, required, source,
+                     notes + _backlash_notes(frames, calibrated))

@@ -1,0 +1,158 @@
+"""Inverse kinematics of many targets at once: damped least squares from a seed.
+
+Each target is a position of a tool point in the base frame B, with an orientation of
+the tip frame that is either *required* (a full pose) or *preferred* (kept if the chain
+can, e.g. the seed's own orientation for a position-only target). The two are solved as
+prioritised tasks (Siciliano and Slotine's task priority): the position first, the
+orientation in the null space of the position task. On a chain of six or more joints
+both are met; on fewer joints the position is still met exactly and the orientation is
+as close as the remaining freedom allows, instead of a weighted compromise that would
+miss the position.
+
+Staying on the seed's branch: every configuration starts at its seed, and each
+iteration changes a joint by at most ``max_step`` (the step is scaled down as a whole,
+so its direction is kept), so a solution is reached through small moves from the seed
+as a robot program would, not by jumping to another elbow or wrist branch. On a
+redundant chain the freedom left is resolved by the least-norm steps from the seed (no
+explicit pull back toward it: tried, it fought the tasks near singular wrists). Joint
+limits are enforced by clipping after each step, and a joint on a limit that the step
+pushes outward is left out of the next step, so the others take over; a target
+reachable only beyond a limit is reported as not reached, never clipped silently.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kincal.compensation.kinematics import ChainKinematics
+from kincal.errors import OptionError
+
+
+@dataclass(frozen=True)
+class IkOptions:
+    """Settings of the batched inverse kinematics.
+
+    position_tolerance: [m] a target is reached when its tool point is this close.
+    orientation_tolerance: [rad] the same for a required orientation.
+    max_iterations: iterations per target (Newton converges in a few near the seed).
+    max_step: [rad or m] largest change of one joint in one iteration.
+    damping: [m] Levenberg damping of the least-squares steps; keeps the steps bounded
+        near singular configurations, negligible elsewhere.
+    """
+
+    position_tolerance: float = 1e-6
+    orientation_tolerance: float = 1e-6
+    max_iterations: int = 100
+    max_step: float = 0.1
+    damping: float = 1e-6
+
+    def __post_init__(self):
+        for name in ("position_tolerance", "orientation_tolerance", "max_step", "damping"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise OptionError(f"IkOptions.{name} must be a positive number, got {v!r}")
+        if int(self.max_iterations) < 1:
+            raise OptionError(f"IkOptions.max_iterations must be >= 1, got {self.max_iterations}")
+
+
+@dataclass(frozen=True)
+class IkSolution:
+    """Result per target (N rows).
+
+    q: (N, n) joint values [rad or m]. position_error: (N,) distance of the tool point
+    from its target [m]. orientation_error: (N,) angle between the tip orientation and
+    its target [rad]. reached: (N,) position within tolerance, and the orientation too
+    where it was required. at_limit: (N, n) joints sitting on a limit. iterations: (N,).
+    """
+
+    q: np.ndarray
+    position_error: np.ndarray
+    orientation_error: np.ndarray
+    reached: np.ndarray
+    at_limit: np.ndarray
+    iterations: np.ndarray
+
+
+def rotation_log(R: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors [rad] of rotations (N, 3, 3) (angle in [0, pi])."""
+    w = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1)
+    s = np.linalg.norm(w, axis=1) / 2.0
+    c = (np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0
+    angle = np.arctan2(s, c)
+    small = s < 1e-9
+    scale = np.where(small, 0.5, angle / (2.0 * np.where(small, 1.0, s)))
+    out = w * scale[:, None]
+    # near pi the antisymmetric part vanishes: take the axis from the symmetric part
+    flip = small & (c < 0)
+    for k in np.flatnonzero(flip):
+        B = (R[k] + np.eye(3)) / 2.0
+        axis = B[np.argmax(np.diag(B))]
+        out[k] = np.pi * axis / np.linalg.norm(axis)
+    return out
+
+
+def _damped_pinv(A: np.ndarray, damping: float) -> np.ndarray:
+    """(N, n, m) damped pseudo-inverses A^T (A A^T + d^2 I)^-1 of (N, m, n) matrices."""
+    m = A.shape[1]
+    At = np.swapaxes(A, 1, 2)
+    return At @ np.linalg.inv(A @ At + damping ** 2 * np.eye(m))
+
+
+def _step(Jp, Jo, e_p, e_o, eye, damping) -> np.ndarray:
+    """(N, n) joint step: the position task, then the orientation in its null space."""
+    Jp_pinv = _damped_pinv(Jp, damping)
+    dq1 = np.einsum("kij,kj->ki", Jp_pinv, e_p)
+    null = eye - Jp_pinv @ Jp
+    dq2 = np.einsum("kij,kj->ki", _damped_pinv(Jo @ null, damping),
+                    e_o - np.einsum("kij,kj->ki", Jo, dq1))
+    return dq1 + np.einsum("kij,kj->ki", null, dq2)
+
+
+def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.ndarray,
+          required: np.ndarray, seeds: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+          options: IkOptions = IkOptions()) -> IkSolution:
+    """Joint values putting ``tool`` (3,) [m, tip frame] at ``positions`` (N, 3) [m, B].
+
+    rotations: (N, 3, 3) wanted tip orientations in B; required: (N,) bool, True where
+    the orientation must be met, False where it is only preferred. seeds: (N, n) start
+    values; lower, upper: (n,) joint limits (+-inf allowed).
+    """
+    q = np.clip(np.array(seeds, dtype=float), lower, upper)
+    N, n = q.shape
+    eye = np.eye(n)
+    active = np.ones(N, dtype=bool)
+    iterations = np.zeros(N, dtype=int)
+    for _ in range(options.max_iterations):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        R, p, Jp, Jo = chain.evaluate(q[idx], tool)
+        e_p = positions[idx] - p
+        e_o = rotation_log(rotations[idx] @ np.swapaxes(R, 1, 2))
+        dq = _step(Jp, Jo, e_p, e_o, eye, options.damping)
+        # a joint on a limit that the step pushes outward is taken out of the step, so the
+        # other joints meet the position (the orientation gives way first if it must)
+        blocked = ((q[idx] <= lower) & (dq < 0)) | ((q[idx] >= upper) & (dq > 0))
+        if blocked.any():
+            keep = (~blocked)[:, None, :]
+            dq = _step(Jp * keep, Jo * keep, e_p, e_o, eye, options.damping)
+        biggest = np.abs(dq).max(axis=1)
+        dq *= np.minimum(1.0, options.max_step / np.maximum(biggest, 1e-300))[:, None]
+        q_new = np.clip(q[idx] + dq, lower, upper)
+        moved = np.abs(q_new - q[idx]).max(axis=1)
+        q[idx] = q_new
+        iterations[idx] += 1
+        # done when the step no longer changes anything that matters
+        done = (np.linalg.norm(e_p, axis=1) < 1e-3 * options.position_tolerance) & (
+            np.linalg.norm(e_o, axis=1) < 1e-3 * options.orientation_tolerance)
+        active[idx[done | (moved < 1e-14)]] = False
+    R, p, _, _ = chain.evaluate(q, tool)
+    pos_err = np.linalg.norm(positions - p, axis=1)
+    rot_err = np.linalg.norm(rotation_log(rotations @ np.swapaxes(R, 1, 2)), axis=1)
+    reached = (pos_err <= options.position_tolerance) & (
+        ~np.asarray(required, bool) | (rot_err <= options.orientation_tolerance))
+    span = np.maximum(np.where(np.isfinite(upper - lower), upper - lower, 1.0), 1e-12)
+    at_limit = (q - lower <= 1e-9 * span) | (upper - q <= 1e-9 * span)
+    return IkSolution(q, pos_err, rot_err, reached, at_limit, iterations)

@@ -1,0 +1,109 @@
+"""Exports for robot cells whose software does not read URDF.
+
+- :func:`kinematics_yaml`: the corrected joint origins as a YAML overlay keyed by URDF
+  joint name, ``x, y, z`` [m] and ``roll, pitch, yaw`` [rad] (URDF rpy) per joint, the
+  layout of ur_description's ``default_kinematics.yaml`` (there keyed by its own segment
+  names). Every chain joint is listed, changed or not, so the file is the whole chain.
+- :func:`mdh_table_csv`: the corrected chain as a modified Denavit-Hartenberg (Craig)
+  table, extracted afresh from the corrected geometry (:func:`kincal.models.mdh.extract`),
+  with the convention and the two fixed transforms stated in its header.
+
+Numbers are written with ``repr`` (17 significant digits), so a file read back gives the
+corrected model to machine precision; tests check it through an independent product.
+YAML is written by hand: the file is flat, and PyYAML is not a dependency.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kincal.errors import ExportError
+from kincal.models.mdh import extract
+from kincal.rotations import matrix_to_rpy, rpy_to_matrix
+
+EXACT = 1e-12  # [m] or [rad]: how far an MD-H screw may leave the z axis and stay exact
+
+
+def _num(v: float) -> str:
+    v = float(v)
+    return repr(0.0 if v == 0.0 else v)  # no "-0.0"
+
+
+def kinematics_yaml(nominal, corrected) -> str:
+    """The corrected URDF origins of every chain joint as YAML text.
+
+    nominal: the robot the calibration started from (its rpy are the reference the
+    corrected triples stay closest to); corrected: ``result.corrected``. Applying the
+    values to the nominal URDF's ``<origin>`` elements reproduces the corrected model.
+    """
+    old, new = nominal.urdf_origins(), corrected.urdf_origins()
+    lines = [f"# kincal: corrected joint origins of {corrected.name} ({corrected.base} -> "
+             f"{corrected.tip})",
+             "# per joint: the <origin> of the URDF joint, the pose of the joint frame in its",
+             "# parent link: x, y, z [m]; roll, pitch, yaw [rad], R = Rz(yaw) Ry(pitch) Rx(roll)",
+             "kinematics:"]
+    for name in corrected.joint_names:
+        T = new[name]
+        rpy = matrix_to_rpy(T[:3, :3], near=matrix_to_rpy(old[name][:3, :3]))
+        lines.append(f"  {name}:")
+        lines += [f"    {k}: {_num(v)}" for k, v in zip(("x", "y", "z"), T[:3, 3])]
+        lines += [f"    {k}: {_num(v)}" for k, v in zip(("roll", "pitch", "yaw"), rpy)]
+    return "\n".join(lines) + "\n"
+
+
+def read_kinematics_yaml(text: str) -> dict[str, np.ndarray]:
+    """{joint: (4, 4) origin} from :func:`kinematics_yaml` text (this flat layout only)."""
+    values: dict[str, dict[str, float]] = {}
+    joint = None
+    for raw in text.splitlines():
+        line = raw.split("#", 1)[0].rstrip()
+        if not line.strip() or line.strip() == "kinematics:":
+            continue
+        key, _, value = line.strip().partition(":")
+        if not value.strip():
+            joint = key
+            values[joint] = {}
+        elif joint is not None:
+            values[joint][key] = float(value)
+    out = {}
+    for joint, v in values.items():
+        T = np.eye(4)
+        T[:3, :3] = rpy_to_matrix([v["roll"], v["pitch"], v["yaw"]])
+        T[:3, 3] = [v["x"], v["y"], v["z"]]
+        out[joint] = T
+    return out
+
+
+def _xyz_rpy(T: np.ndarray) -> str:
+    return " ".join(_num(v) for v in (*T[:3, 3], *matrix_to_rpy(T[:3, :3])))
+
+
+def mdh_table_csv(corrected) -> str:
+    """The corrected chain as an MD-H table (CSV text, SI units).
+
+    Raises ExportError where MD-H cannot describe the corrected chain exactly (a joint
+    axis parallel to the next one only to within the extraction's tolerance).
+    """
+    m = extract(corrected.geometry)
+    off_axis = np.abs(m.screw_axes - [0.0, 0.0, 1.0]).max(axis=1)
+    off_line = np.abs(m.screw_points[:, :2]).max(axis=1)
+    bad = np.flatnonzero((off_axis > EXACT) | (off_line > EXACT))
+    if bad.size:
+        raise ExportError("an MD-H table cannot describe the corrected chain exactly: the axis of "
+                          + ", ".join(m.joint_names[i] for i in bad) + " is parallel to the next "
+                          "one only to within the extraction tolerance; use the URDF or the YAML "
+                          "overlay instead")
+    lines = [f"# kincal: corrected modified Denavit-Hartenberg table (Craig) of {corrected.name}, "
+             f"{corrected.base} -> {corrected.tip}",
+             "# A_i = Rx(alpha_i) Tx(a_i) Rz(theta_i + q_i) Tz(d_i) for a revolute joint, "
+             "Rx(alpha_i) Tx(a_i) Rz(theta_i) Tz(d_i + q_i) for a prismatic one;",
+             "# a_i, alpha_i of row i are Craig's a_(i-1), alpha_(i-1); q_i is the URDF joint "
+             "value, same sign; metres and radians",
+             "# T_base_tip(q) = T_base_0 A_1 ... A_n T_n_tip, the fixed transforms as x y z "
+             "[m] roll pitch yaw [rad] (URDF rpy):",
+             f"# T_base_0: {_xyz_rpy(m.T_base_0)}",
+             f"# T_n_tip: {_xyz_rpy(m.T_n_tip)}",
+             "joint,type,a_m,alpha_rad,d_m,theta_rad"]
+    for name, kind, row in zip(m.joint_names, m.kinds, m.table):
+        lines.append(",".join([name, kind, *(_num(v) for v in row)]))
+    return "\n".join(lines) + "\n"
