@@ -246,7 +246,6 @@ def cmd_analyze(args) -> int:
     if len(names) > 1:
         print("\ncomparison (identified kinematic parameters; '+' what a model identifies that "
               "mdh cannot express):")
-        base = {n.rsplit(".", 1)[1] for n in ()}  # noqa: F841 - placeholder for clarity
         mdh_kept = set(idents["mdh"].kept)
         for m in names:
             p = problems[m]
