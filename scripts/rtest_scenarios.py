@@ -7,7 +7,7 @@ validation poses in a 400 mm cube (10 um noise). Validation as in the paper: the
 identified kinematics stay fixed and only the measurement frame and tool point are
 fitted on the validation set. Errors are mean Euclidean position errors [mm].
 
-Usage: python scripts/rtest_scenarios.py [--seeds 10]
+Usage: python scripts/rtest_scenarios.py [--seeds 10] [--model mdh]
 """
 
 from __future__ import annotations
@@ -24,10 +24,11 @@ from kincal.experiments.paper_experiment import rtest_scenario
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--model", default="mdh", help="error model (default mdh, the paper's)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")  # LS on 20 mm data may stop at the iteration limit
     t = time.perf_counter()
-    rows = [rtest_scenario(s) for s in range(args.seeds)]
+    rows = [rtest_scenario(s, args.model) for s in range(args.seeds)]
     print("| seed | before [mm] | LS + R-test [mm] | L2 + R-test [mm] | lambda (CV) | L2 better |")
     print("|---|---|---|---|---|---|")
     for r in rows:
