@@ -169,3 +169,41 @@ def test_cli_joint_columns_and_note(plain, tmp_path, capsys):
     assert main(["plan", "ec66", str(data), "--poses", "12", "--out", str(out),
                  "--joint-columns", *args]) == 0
     assert out.read_text().startswith("joint_1,joint_2")
+
+
+def test_parameter_patterns(ec66):
+    from kincal.errors import ParameterError
+    from kincal.identification.parameters import ParameterSpace
+
+    space = ParameterSpace.of_chain(JOINTS, ("revolute",) * 6)
+    assert space.expand(["*.d"]) == tuple(f"{j}.d" for j in JOINTS)
+    assert space.expand(("joint_[456].a", "joint_4.a", "tool.*")) == (
+        "joint_4.a", "joint_5.a", "joint_6.a", "tool.x", "tool.y", "tool.z")
+    assert space.expand("base.r?") == ("base.rx", "base.ry", "base.rz")
+    np.testing.assert_array_equal(space.indices(["joint_1.*"]), [0, 1, 2, 3])
+    np.testing.assert_array_equal(space.indices(["joint_1.?"]), [0, 2])
+    with pytest.raises(ParameterError, match="pattern 'joint_9.*' matches no parameter. "
+                                             "Valid names: joint_1.a"):
+        space.expand(["joint_9.*"])
+    with pytest.raises(ParameterError, match="unknown parameter 'joint_1.b'"):
+        space.expand(["joint_1.b"])
+
+
+def test_fix_patterns_in_a_calibration(ec66, plain, tmp_path, capsys):
+    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+
+    data = Measurements.from_csv(plain[0], JOINTS)
+    by_name = CalibrationProblem(ec66, data, CalibrationOptions(
+        method="ls", fix=tuple(f"{j}.d" for j in JOINTS))).analyze()
+    by_pattern = CalibrationProblem(ec66, data, CalibrationOptions(
+        method="ls", fix=("*.d",))).analyze()
+    assert by_pattern.fixed == by_name.fixed == tuple(f"{j}.d" for j in JOINTS)
+    assert by_pattern.kept == by_name.kept
+    out = tmp_path / "cal.urdf"
+    assert main(["calibrate", "ec66", str(plain[0]), "--method", "ls", "--fix", "*.d",
+                 "joint_[56].theta", "--out", str(out), "--quiet"]) == 0 and out.exists()
+    assert main(["calibrate", "ec66", str(plain[0]), "--fix", "*.beta", "--out",
+                 str(tmp_path / "no.urdf")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert [e for e in err if "error" in e] == [err[-1]] and "'*.beta' matches no" in err[-1]
+    assert not (tmp_path / "no.urdf").exists()

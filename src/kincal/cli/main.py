@@ -392,9 +392,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lambda", dest="lam", default="cv", help="'cv' (default) or a value >= 0")
     p.add_argument("--folds", type=int, default=5)
     p.add_argument("--seed", type=int, default=0, help="seed of the CV fold split")
-    p.add_argument("--fix", nargs="+", default=[], metavar="NAME", help="parameters held nominal")
+    p.add_argument("--fix", nargs="+", default=[], metavar="NAME",
+                   help="parameters held nominal: names (joint_3.a, tool.z) or quoted shell "
+                        "patterns ('*.d', 'joint_[456].*')")
     p.add_argument("--free", nargs="+", default=[], metavar="NAME",
-                   help="parameters kept even if found redundant (method l2)")
+                   help="parameters kept even if found redundant (method l2); names or patterns")
     p.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
                    help="give these joints a backlash term (needs the acquisition order: "
                         "rows in order, or --order-column)")

@@ -65,8 +65,8 @@ class CalibrationProblem:
         else:
             inv = 1.0 / self.data.sigma
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
-        for name in o.fix + o.free:
-            self.space.index(name)  # unknown names raise ParameterError listing the valid ones
+        # unknown names, and patterns matching nothing, raise ParameterError with the list
+        self.space.expand(o.fix), self.space.expand(o.free)
         pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
         self.n_poses = len(pose)
         if self.n_poses < 3:
