@@ -8,17 +8,22 @@ EC66, tracker-like poses in a 400 mm cube (and an R-test-like 20 mm cube for the
   the fit, to show it grows linearly with the number of poses;
 - the 10,000-pose fit again with both cores kept busy by two spinning processes, with
   kincal's default of one BLAS thread and with BLAS left at its own threads
-  (CalibrationOptions.blas_threads = 1 / None; skipped with --no-busy).
+  (CalibrationOptions.blas_threads = 1 / None; skipped with --no-busy);
+- the command line as a user meets it, wall time of a new process (start-up and imports
+  included): `kincal --help` and `kincal calibrate --method ls` on the 60 poses
+  (targets 0.3 s and 0.8 s; --cli-only runs just these).
 
-Usage: python scripts/bench_identification.py [--repeats 5] [--no-busy]
+Usage: python scripts/bench_identification.py [--repeats 5] [--no-busy] [--cli-only]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import tracemalloc
 import warnings
@@ -52,10 +57,32 @@ def _time(fn, repeats):
     return float(np.median(times)), out
 
 
+def _cli_times(data, repeats):
+    """Median wall times [s] of `kincal --help` and of a 60-pose `kincal calibrate --method
+    ls`, each a new process as from a shell."""
+    exe = shutil.which("kincal")
+    kincal = [exe] if exe else [sys.executable, "-c",
+                                "import sys; from kincal.cli import main; sys.exit(main())"]
+    with tempfile.TemporaryDirectory(prefix="kincal-bench-") as tmp:
+        csv = os.path.join(tmp, "poses.csv")
+        with open(csv, "w") as fh:
+            fh.write(data.to_csv_text())
+        runs = {"help": kincal + ["--help"],
+                "calibrate": kincal + ["calibrate", "ec66", csv, "--method", "ls", "--out",
+                                       os.path.join(tmp, "out.urdf"), "--overwrite", "--quiet"]}
+        out = {}
+        for name, cmd in runs.items():
+            subprocess.run(cmd, check=True, capture_output=True)  # warm the file cache
+            out[name], _ = _time(lambda: subprocess.run(cmd, check=True, capture_output=True),
+                                 repeats)
+    return out["help"], out["calibrate"]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--no-busy", action="store_true", help="skip the busy-machine figures")
+    ap.add_argument("--cli-only", action="store_true", help="only the command-line wall times")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(0)
@@ -65,6 +92,13 @@ def main(argv=None):
           f"{args.repeats} runs, whole calls from data to result")
     tracker = _data(robot, model, 60, 0.4, rng)
     rtest = _data(robot, model, 60, 0.02, rng, tilt=15)
+    print(f"load average at the start: {os.getloadavg()[0]:.2f}")
+    t_help, t_cal = _cli_times(tracker, args.repeats)
+    print(f"kincal --help, new process:                {t_help:8.3f} s   (target < 0.3 s)")
+    print(f"kincal calibrate --method ls, 60 poses:    {t_cal:8.3f} s   (new process, from "
+          "CSV to written URDF; target < 0.8 s)")
+    if args.cli_only:
+        return
     t, res = _time(lambda: CalibrationProblem(robot, tracker, CalibrationOptions(method="ls")).solve(),
                    args.repeats)
     print(f"LS fit, 60 poses (400 mm cube):            {t * 1e3:8.1f} ms  "
