@@ -5,6 +5,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from conftest import random_joint_values
 
 from kincal.cli.main import main
@@ -207,3 +209,30 @@ def test_fix_patterns_in_a_calibration(ec66, plain, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert [e for e in err if "error" in e] == [err[-1]] and "'*.beta' matches no" in err[-1]
     assert not (tmp_path / "no.urdf").exists()
+
+
+@settings(max_examples=60, deadline=None)
+@given(values=st.lists(st.lists(st.floats(-1e6, 1e6, allow_nan=False), min_size=3, max_size=3),
+                       min_size=1, max_size=8),
+       sep=st.sampled_from([",", ";", "\t"]), eol=st.sampled_from(["\n", "\r\n", "\r"]),
+       bom=st.booleans(), comments=st.lists(st.integers(0, 9), max_size=4),
+       blank=st.lists(st.integers(0, 9), max_size=3))
+def test_any_dialect_reads_the_same_numbers_and_lines(tmp_path_factory, values, sep, eol, bom,
+                                                      comments, blank):
+    from kincal.measurements.csv_table import read_columns
+
+    rows = [sep.join(["a", "b c", "d"])] + [sep.join(repr(v) for v in row) for row in values]
+    lines, numbers = [], []
+    for k, row in enumerate(rows):  # comment and blank lines before some rows
+        lines += ["# note, with; separators\tinside"] * comments.count(k) + [""] * blank.count(k)
+        lines.append(row)
+        numbers.append(len(lines))
+    path = tmp_path_factory.mktemp("fuzz") / "f.csv"
+    path.write_bytes((("\ufeff" if bom else "") + eol.join(lines) + eol).encode("utf-8"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalNote)
+        table = read_columns(path, ["a", "b c", "d"])
+    assert table.separator == sep
+    np.testing.assert_array_equal(np.column_stack([table.values[c] for c in ("a", "b c", "d")]),
+                                  np.array(values))
+    np.testing.assert_array_equal(table.lines, numbers[1:])
