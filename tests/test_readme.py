@@ -60,7 +60,13 @@ def _blocks(text: str):
 def _steps(language: str, first: int, lines: list[str]) -> list[Step]:
     steps: list[Step] = []
     if language == "bash":
+        joined: list[tuple[int, str]] = []  # lines continued with a backslash, joined
         for n, line in enumerate(lines, start=first):
+            if joined and joined[-1][1].endswith("\\"):
+                joined[-1] = (joined[-1][0], joined[-1][1][:-1].rstrip() + " " + line.strip())
+            else:
+                joined.append((n, line))
+        for n, line in joined:
             if line.startswith("#   ") and steps:  # the output of the command above
                 last = steps[-1]
                 steps[-1] = Step(last.line, last.command, last.expected + (line[1:].strip(),))
@@ -283,3 +289,17 @@ def test_inline_commands_name_real_options():
             except SystemExit:
                 problems.append(f"`{span}` does not parse")
     assert not problems, "\n".join(problems)
+
+
+def test_block_parsing_rules():
+    bash = ["# a comment", "kincal simulate ec66 \\", "    --out a.csv", "#   simulated 60 poses",
+            "", "pip install . && kincal demo"]
+    assert _steps("bash", 10, bash) == [
+        Step(11, "kincal simulate ec66 --out a.csv", ("simulated 60 poses",)),
+        Step(15, "pip install .", ()), Step(15, "kincal demo", ())]
+    transcript = ["$ kincal plan ec66", "$ kincal analyze ec66 a.csv", "shown line", "  ...",
+                  "  more ..."]
+    assert _steps("", 1, transcript) == [Step(1, "kincal plan ec66", ()),
+                                         Step(2, "kincal analyze ec66 a.csv", ("shown line",))]
+    assert _steps("", 1, ["output without a command"]) == []
+    assert _steps("python", 1, ["$ kincal demo"]) == []
