@@ -13,7 +13,8 @@ from kincal.urdf_source import check_urdf_text, read_urdf_text
 XACRO = """<?xml version="1.0"?>
 <robot name="arm" xmlns:xacro="http://www.ros.org/wiki/xacro">
   <!-- properties, math and a macro, as published descriptions use them -->
-  <xacro:property name="upper_len" value="0.4"/>
+  <xacro:include filename="common.xacro"/>  <!-- relative to this file -->
+  <xacro:property name="upper_len" value="${2 * half_upper}"/>
   <xacro:property name="twist" value="${pi / 2}"/>
   <xacro:macro name="segment" params="i parent length roll:=0">
     <link name="link_${i}"/>
@@ -79,6 +80,9 @@ def workspace(tmp_path):
     arm = tmp_path / "src" / "arm_pkg" / "urdf" / "arm.urdf.xacro"
     arm.write_text(XACRO)
     (tmp_path / "src" / "tool_pkg" / "urdf" / "tool.xacro").write_text(TOOL)
+    (arm.parent / "common.xacro").write_text(
+        '<robot xmlns:xacro="http://www.ros.org/wiki/xacro">'
+        '<xacro:property name="half_upper" value="0.2"/></robot>')
     plain = tmp_path / "arm.urdf"
     plain.write_text(URDF)
     return arm, plain
@@ -113,6 +117,7 @@ def test_find_through_ros_package_path(workspace, tmp_path, monkeypatch):
     elsewhere = tmp_path / "elsewhere" / "arm.urdf.xacro"  # not inside the source tree
     elsewhere.parent.mkdir()
     elsewhere.write_text(XACRO)
+    (elsewhere.parent / "common.xacro").write_text((arm.parent / "common.xacro").read_text())
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
     with pytest.raises(UrdfError, match=r"xacro expansion failed: \$\(find tool_pkg\): package "
                                         "'tool_pkg' not found.*ROS_PACKAGE_PATH"):
