@@ -1,8 +1,9 @@
 """Measured samples: joint values and the measured 3-D position of the tool point.
 
-A CSV file has a header naming the chain joints as in the URDF plus the position columns
-(``x,y,z`` by default), and optionally ``sigma`` (per-sample standard deviation of the
-position). Units: metres and radians by default; ``length_unit="mm"`` reads positions,
+A CSV file has a header naming the chain joints as in the URDF (or other names, mapped
+with ``joint_columns``) plus the position columns (``x,y,z`` by default), and optionally
+``sigma`` (per-sample standard deviation of the position); for separators, comments and
+line ends see :mod:`kincal.measurements.csv_table`. Units: metres and radians by default; ``length_unit="mm"`` reads positions,
 sigma and prismatic joints in millimetres, ``angle_unit="deg"`` reads revolute joints in
 degrees. Inside, everything is SI. Other columns are kept out of the fit and reported.
 
