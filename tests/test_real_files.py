@@ -167,9 +167,12 @@ def test_cli_joint_columns_and_note(plain, tmp_path, capsys):
     assert main(["analyze", "ec66", str(data), "--joint-columns", "joint_9=J1"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("kincal: error:") and "joint_9" in err[0]
+    assert main(["analyze", "ec66", str(data), "--joint-columns", "joint_1=J1",
+                 "joint_1=J2"]) == 1
+    assert "names joint joint_1 twice" in capsys.readouterr().err
     out = tmp_path / "chosen.csv"
     assert main(["plan", "ec66", str(data), "--poses", "12", "--out", str(out),
-                 "--joint-columns", *args]) == 0
+                 "--joint-columns", *args[:3], "--joint-columns", *args[3:]]) == 0  # both kept
     assert out.read_text().startswith("joint_1,joint_2")
 
 

@@ -79,8 +79,9 @@ def _joint_columns(args) -> dict[str, str] | None:
 
 
 def _add_joint_columns(p, files="DATA"):
-    p.add_argument("--joint-columns", nargs="+", type=_joint_column_pair, default=[],
-                   metavar="URDF_NAME=CSV_NAME",
+    # "extend": --joint-columns given twice adds to the mapping instead of replacing it
+    p.add_argument("--joint-columns", nargs="+", action="extend", type=_joint_column_pair,
+                   default=[], metavar="URDF_NAME=CSV_NAME",
                    help=f"read a chain joint from a column of another name in {files} "
                         "(default: the column named as the URDF joint)")
 
