@@ -160,6 +160,8 @@ def test_cli_joint_columns_and_note(plain, tmp_path, capsys):
     captured = capsys.readouterr()
     assert "kincal: note:" in captured.err and "semicolon" in captured.err
     assert "20 poses" in captured.out
+    assert main(["evaluate", "ec66", str(data), "--fit-frames", "--joint-columns", *args]) == 0
+    assert "(n = 20)" in capsys.readouterr().out
     # a malformed pair is a usage error (exit 2); an unknown joint one line, exit 1
     with pytest.raises(SystemExit) as exc:
         main(["analyze", "ec66", str(data), "--joint-columns", "joint_1"])
