@@ -8,17 +8,22 @@ EC66, tracker-like poses in a 400 mm cube (and an R-test-like 20 mm cube for the
   the fit, to show it grows linearly with the number of poses;
 - the 10,000-pose fit again with both cores kept busy by two spinning processes, with
   kincal's default of one BLAS thread and with BLAS left at its own threads
-  (CalibrationOptions.blas_threads = 1 / None; skipped with --no-busy).
+  (CalibrationOptions.blas_threads = 1 / None; skipped with --no-busy);
+- the command line as a user meets it, wall time of a new process (start-up and imports
+  included): `kincal --help` and `kincal calibrate --method ls` on the 60 poses
+  (targets 0.3 s and 0.8 s; --cli-only runs just these).
 
-Usage: python scripts/bench_identification.py [--repeats 5] [--no-busy]
+Usage: python scripts/bench_identification.py [--repeats 5] [--no-busy] [--cli-only]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import tracemalloc
 import warnings
@@ -52,10 +57,42 @@ def _time(fn, repeats):
     return float(np.median(times)), out
 
 
+def _cli_times(data, repeats):
+    """{name: (median wall time, median CPU time)} [s] of `kincal --help` and of a 60-pose
+    `kincal calibrate --method ls`, each a new process as from a shell. The CPU time (user +
+    system of the child) is what the wall time would be on an idle machine; on a shared
+    one the wall time also counts waiting for a core."""
+    exe = shutil.which("kincal")
+    kincal = [exe] if exe else [sys.executable, "-c",
+                                "import sys; from kincal.cli import main; sys.exit(main())"]
+    with tempfile.TemporaryDirectory(prefix="kincal-bench-") as tmp:
+        csv = os.path.join(tmp, "poses.csv")
+        with open(csv, "w") as fh:
+            fh.write(data.to_csv_text())
+        runs = {"help": kincal + ["--help"],
+                "calibrate": kincal + ["calibrate", "ec66", csv, "--method", "ls", "--out",
+                                       os.path.join(tmp, "out.urdf"), "--overwrite", "--quiet"]}
+        out = {}
+        for name, cmd in runs.items():
+            subprocess.run(cmd, check=True, capture_output=True)  # warm the file cache
+            wall, cpu = [], []
+            for _ in range(repeats):
+                before = os.times()
+                t = time.perf_counter()
+                subprocess.run(cmd, check=True, capture_output=True)
+                wall.append(time.perf_counter() - t)
+                after = os.times()
+                cpu.append(after.children_user - before.children_user
+                           + after.children_system - before.children_system)
+            out[name] = (float(np.median(wall)), float(np.median(cpu)))
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--no-busy", action="store_true", help="skip the busy-machine figures")
+    ap.add_argument("--cli-only", action="store_true", help="only the command-line wall times")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(0)
@@ -65,6 +102,15 @@ def main(argv=None):
           f"{args.repeats} runs, whole calls from data to result")
     tracker = _data(robot, model, 60, 0.4, rng)
     rtest = _data(robot, model, 60, 0.02, rng, tilt=15)
+    print(f"load average at the start: {os.getloadavg()[0]:.2f}")
+    cli = _cli_times(tracker, args.repeats)
+    for name, label, target in (("help", "kincal --help", 0.3),
+                                ("calibrate", "kincal calibrate --method ls, 60 poses", 0.8)):
+        wall, cpu = cli[name]
+        print(f"{label + ',':<40} new process: {wall:6.3f} s wall, {cpu:6.3f} s CPU  "
+              f"(target < {target} s)")
+    if args.cli_only:
+        return
     for name in MODELS:
         opts = CalibrationOptions(method="ls", model=name)
         t, res = _time(lambda: CalibrationProblem(robot, tracker, opts).solve(), args.repeats)

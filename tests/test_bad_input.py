@@ -87,12 +87,14 @@ def test_entity_bomb_is_rejected_fast(tmp_path, capsys, good_csv):
     assert "entit" in line.lower() or "doctype" in line.lower()
 
 
-def test_xacro_left_in(tmp_path, capsys, good_csv):
+def test_xacro_that_does_not_expand(tmp_path, capsys, good_csv):
+    # xacro is expanded (tests/test_xacro.py); one that cannot be is one line naming why
     text = EC66.read_text().replace('<robot name="ec66">',
                                     '<robot name="ec66" xmlns:xacro="http://www.ros.org/wiki/xacro">'
-                                    '<xacro:property name="d1" value="0.0955"/>')
+                                    '<xacro:property name="d1" value="${d0 * 2}"/>'
+                                    '<link name="x${d1}"/>')
     line = _run([_csv(tmp_path, text, "x.urdf"), str(good_csv), "--tip", "flange"], tmp_path, capsys)
-    assert "xacro" in line
+    assert "xacro expansion failed" in line and "d0" in line
 
 
 def test_missing_csv(tmp_path, capsys):

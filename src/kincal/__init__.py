@@ -12,18 +12,37 @@
 __version__ = "0.1.0"
 
 from kincal.errors import KincalError, KincalWarning  # noqa: E402
-from kincal.identification.calibration import (  # noqa: E402
-                                               CalibrationOptions,
-                                               CalibrationProblem,
-                                               CalibrationResult,
-                                               calibrate,
-)
-from kincal.identification.solver import SolverOptions  # noqa: E402
-from kincal.measurements.data import Measurements  # noqa: E402
-from kincal.planning.candidates import random_candidates, read_candidates  # noqa: E402
-from kincal.planning.pose_selection import PoseSelection, select_poses  # noqa: E402
-from kincal.robot import Robot  # noqa: E402
+
+# The public names are imported on first use (PEP 562), so that `import kincal` and
+# `kincal --help` do not pay for Pinocchio, scipy and matplotlib (about 0.5 s).
+_LAZY = {
+    "CalibrationOptions": "kincal.identification.calibration",
+    "CalibrationProblem": "kincal.identification.calibration",
+    "CalibrationResult": "kincal.identification.calibration",
+    "calibrate": "kincal.identification.calibration",
+    "SolverOptions": "kincal.identification.solver",
+    "Measurements": "kincal.measurements.data",
+    "random_candidates": "kincal.planning.candidates",
+    "read_candidates": "kincal.planning.candidates",
+    "PoseSelection": "kincal.planning.pose_selection",
+    "select_poses": "kincal.planning.pose_selection",
+    "Robot": "kincal.robot",
+}
 
 __all__ = ["Robot", "Measurements", "calibrate", "CalibrationOptions", "CalibrationProblem",
            "CalibrationResult", "SolverOptions", "select_poses", "PoseSelection",
            "random_candidates", "read_candidates", "KincalError", "KincalWarning", "__version__"]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value  # later look-ups skip this function
+        return value
+    raise AttributeError(f"module 'kincal' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

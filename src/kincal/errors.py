@@ -80,3 +80,10 @@ def listing(valid, limit: int = 40) -> str:
 
 class KincalWarning(UserWarning):
     """Something the user should know that does not stop the run (weak parameters, units)."""
+
+
+class KincalNote(KincalWarning):
+    """How an input was read, when kincal had to guess (a sniffed CSV separator).
+
+    The command line prints these as ``kincal: note: ...``; nothing is wrong.
+    """

@@ -4,6 +4,9 @@ The text is returned unchanged (line endings, comments and all) so that
 :mod:`kincal.urdf_export` can later write corrected joint origins into it and
 nothing else. The checks run on stdlib expat, which reports entity declarations
 before expanding them, so an entity bomb is rejected without being expanded.
+
+A xacro file (``.xacro`` suffix, or xacro elements or substitutions in the text) is
+expanded first (:mod:`kincal.xacro_source`) and the expanded text checked and returned.
 """
 
 from __future__ import annotations
@@ -18,6 +21,10 @@ MAX_URDF_BYTES = 50 * 1024 * 1024
 """Largest URDF accepted [bytes]; real robots are well under 1 MB."""
 
 XACRO_HINT = "run `xacro file.urdf.xacro > file.urdf` first and pass the generated URDF"
+
+
+class XacroLeftError(UrdfError):
+    """Xacro elements or substitutions in text that should be plain URDF."""
 
 # Namespace URIs that xacro files bind (both spellings occur in the wild).
 _XACRO_URIS = ("ros.org/wiki/xacro",)
@@ -34,7 +41,8 @@ def read_urdf_text(path) -> str:
 
     Raises :class:`InputFileError` for a missing, unreadable or directory path and
     :class:`UrdfError` for a file over :data:`MAX_URDF_BYTES`, text that is not
-    UTF-8, or anything :func:`check_urdf_text` rejects. Line endings are kept.
+    UTF-8, or anything :func:`check_urdf_text` rejects. Line endings are kept. A xacro
+    file comes back expanded (see the module notes).
     """
     p = Path(path)
     try:
@@ -61,7 +69,17 @@ def read_urdf_text(path) -> str:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise UrdfError(f"{p}: not UTF-8 text (invalid byte at offset {exc.start})") from None
-    check_urdf_text(text, source=str(p))
+    try:
+        check_urdf_text(text, source=str(p))
+    except XacroLeftError:
+        pass  # a xacro file: expanded below
+    else:
+        if p.suffix != ".xacro":
+            return text
+    from kincal.xacro_source import expand_xacro
+
+    text = expand_xacro(p, MAX_URDF_BYTES)
+    check_urdf_text(text, source=f"{p} (expanded by xacro)")
     return text
 
 
@@ -81,9 +99,9 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
     xacro_prefixes = {"xacro"}
     seen_root = False
 
-    def fail(problem: str):
+    def fail(problem: str, error=UrdfError):
         where = f"{source}:{parser.CurrentLineNumber}:{parser.CurrentColumnNumber + 1}"
-        raise UrdfError(f"{where}: {problem}")
+        raise error(f"{where}: {problem}")
 
     def on_doctype(name, system_id, public_id, has_internal_subset):
         # Called before the internal subset is read: a bomb stops here, unexpanded.
@@ -104,10 +122,11 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
                 xacro_prefixes.add(key[len("xmlns:"):])
         prefix, colon, _ = name.partition(":")
         if colon and prefix in xacro_prefixes:
-            fail(f"xacro element <{name}> left in the URDF; {XACRO_HINT}")
+            fail(f"xacro element <{name}> left in the URDF; {XACRO_HINT}", XacroLeftError)
         for key, value in attrs.items():
             if _SUBSTITUTION.search(value):
-                fail(f"xacro substitution in <{name} {key}={value!r}>; {XACRO_HINT}")
+                fail(f"xacro substitution in <{name} {key}={value!r}>; {XACRO_HINT}",
+                     XacroLeftError)
         if not seen_root:
             seen_root = True
             if name != "robot":

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from kincal import __version__
-from kincal.errors import DataError, InputFileError, KincalError, KincalWarning, OptionError
+from kincal.errors import (DataError, InputFileError, KincalError, KincalNote, KincalWarning,
+                           OptionError)
 
 DEMO_DIR = "kincal-demo"
 
@@ -53,7 +54,36 @@ def _measurements(args, robot):
     return Measurements.from_csv(args.data, robot.joint_names, prismatic=prismatic,
                                  length_unit=args.length_unit, angle_unit=args.angle_unit,
                                  position_columns=tuple(args.position_columns),
-                                 order_column=args.order_column)
+                                 order_column=args.order_column,
+                                 joint_columns=_joint_columns(args))
+
+
+def _joint_column_pair(text: str) -> tuple[str, str]:
+    """argparse type of --joint-columns: URDF_NAME=CSV_NAME."""
+    urdf, eq, column = text.partition("=")
+    if not eq or not urdf.strip() or not column.strip():
+        raise argparse.ArgumentTypeError(f"expected URDF_NAME=CSV_NAME, got {text!r}")
+    return urdf.strip(), column.strip()
+
+
+def _joint_columns(args) -> dict[str, str] | None:
+    pairs = getattr(args, "joint_columns", None)
+    if not pairs:
+        return None
+    mapping: dict[str, str] = {}
+    for urdf, column in pairs:
+        if urdf in mapping:
+            raise OptionError(f"--joint-columns names joint {urdf} twice")
+        mapping[urdf] = column
+    return mapping
+
+
+def _add_joint_columns(p, files="DATA"):
+    # "extend": --joint-columns given twice adds to the mapping instead of replacing it
+    p.add_argument("--joint-columns", nargs="+", action="extend", type=_joint_column_pair,
+                   default=[], metavar="URDF_NAME=CSV_NAME",
+                   help=f"read a chain joint from a column of another name in {files} "
+                        "(default: the column named as the URDF joint)")
 
 
 def _tool_offset(args):
@@ -87,6 +117,7 @@ def _add_common(p, data=True):
         p.add_argument("--order-column", metavar="COL",
                        help="column giving the acquisition order (e.g. a time stamp), for the "
                             "approach directions of backlash terms; default: the row order")
+        _add_joint_columns(p)
     p.add_argument("--tool-offset", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="initial guess of the tool point in the tip frame, in the length unit")
 
@@ -329,7 +360,8 @@ def cmd_plan(args) -> int:
         raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
     robot = _robot(args)
     if args.candidates is not None:
-        q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit)
+        q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit,
+                                   joint_columns=_joint_columns(args))
         source = f"{len(q)} candidates from {args.candidates}"
     else:
         q, lines = random_candidates(robot, args.random, args.seed), None
@@ -337,7 +369,7 @@ def cmd_plan(args) -> int:
     measured = np.zeros((0, q.shape[1]))
     if args.measured is not None:  # poses already measured: kept, and only new ones written
         measured, _ = read_candidates(args.measured, robot, args.length_unit, args.angle_unit,
-                                      kind="measured poses")
+                                      kind="measured poses", joint_columns=_joint_columns(args))
         source += f", plus the {len(measured)} poses already measured in {args.measured}"
     k = len(measured)
     tool = _tool_offset(args)
@@ -442,9 +474,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lambda", dest="lam", default="cv", help="'cv' (default) or a value >= 0")
     p.add_argument("--folds", type=int, default=5)
     p.add_argument("--seed", type=int, default=0, help="seed of the CV fold split")
-    p.add_argument("--fix", nargs="+", default=[], metavar="NAME", help="parameters held nominal")
+    p.add_argument("--fix", nargs="+", default=[], metavar="NAME",
+                   help="parameters held nominal: names (joint_3.a, tool.z) or quoted shell "
+                        "patterns ('*.d', 'joint_[456].*')")
     p.add_argument("--free", nargs="+", default=[], metavar="NAME",
-                   help="parameters kept even if found redundant (method l2)")
+                   help="parameters kept even if found redundant (method l2); names or patterns")
     p.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
                    help="give these joints a backlash term (needs the acquisition order: "
                         "rows in order, or --order-column)")
@@ -543,6 +577,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="parameters held nominal (left out of the criterion)")
     p.add_argument("--noise-mm", type=float, default=0.05,
                    help="noise per axis [mm] for the predicted standard errors (default 0.05)")
+    _add_joint_columns(p, "CANDIDATES and --measured")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     p.set_defaults(func=cmd_plan)
 
@@ -603,7 +638,8 @@ def main(argv=None) -> int:
         finally:
             for w in caught:
                 if issubclass(w.category, KincalWarning):
-                    print(f"kincal: warning: {w.message}", file=sys.stderr)
+                    kind = "note" if issubclass(w.category, KincalNote) else "warning"
+                    print(f"kincal: {kind}: {w.message}", file=sys.stderr)
     return code
 
 

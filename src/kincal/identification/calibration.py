@@ -66,7 +66,10 @@ class CalibrationProblem:
             inv = 1.0 / self.data.sigma
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
         for name in o.fix + o.free:
-            self._check_name(name)
+            if not any(c in name for c in "*?["):
+                self._check_name(name)  # a name of another model says which model has it
+        # unknown names, and patterns matching nothing, raise ParameterError with the list
+        self.space.expand(o.fix), self.space.expand(o.free)
         pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
         self.n_poses = len(pose)
         if self.n_poses < 3:

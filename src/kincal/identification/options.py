@@ -31,9 +31,10 @@ class CalibrationOptions:
     lambda_min, lambda_max, n_lambdas: the CV grid (log-spaced; paper: 1e-6, 1e3, 50).
     length_scale [m], angle_scale [rad]: the unit s of the penalty
         lambda * sum(((x - x0) / s)^2); 1 mm and 1 deg by default, the paper's units.
-    fix: parameter names held at their nominal values.
-    free: parameter names kept in the fit even if the analysis finds them redundant
-        (sensible only with method "l2", whose penalty keeps them bounded).
+    fix: parameter names held at their nominal values; shell-style patterns select
+        several (``"*.d"``, ``"joint_[456].*"``, ``"tool.*"``), see ParameterSpace.expand.
+    free: parameter names (or patterns) kept in the fit even if the analysis finds them
+        redundant (sensible only with method "l2", whose penalty keeps them bounded).
     backlash: chain joints given a backlash term ``<joint>.backlash`` (half the play,
         nominally 0; see kincal.backlash), identified from the approach directions of
         the samples. Methods "l2" and "ls".

@@ -167,8 +167,38 @@ class ParameterSpace:
             raise ParameterError(f"unknown parameter {name!r}." + suggest(name, names)
                                  + f" Valid names: {listing(names, 60)}", valid=names) from None
 
+    def expand(self, patterns) -> tuple[str, ...]:
+        """The parameter names that ``patterns`` select, in parameter order, each once.
+
+        A pattern is a name (``"joint_3.a"``) or a shell-style pattern (``"*.d"``,
+        ``"joint_[456].*"``, ``"tool*"``; :func:`fnmatch.fnmatchcase`). A single string
+        is one pattern. An unknown name, or a pattern that matches nothing, raises
+        :class:`ParameterError` listing the valid names.
+        """
+        import fnmatch
+
+        if isinstance(patterns, str):
+            patterns = (patterns,)
+        names = self.names
+        chosen = set()
+        for pattern in patterns:
+            if not isinstance(pattern, str):
+                raise ParameterError(f"a parameter name or pattern must be a string, got "
+                                     f"{pattern!r}", valid=names)
+            if not any(c in pattern for c in "*?["):
+                chosen.add(self.index(pattern))
+                continue
+            hits = [k for k, n in enumerate(names) if fnmatch.fnmatchcase(n, pattern)]
+            if not hits:
+                raise ParameterError(f"pattern {pattern!r} matches no parameter. Valid names: "
+                                     f"{listing(names, 60)}", valid=names)
+            chosen.update(hits)
+        return tuple(names[k] for k in sorted(chosen))
+
     def indices(self, names) -> np.ndarray:
-        return np.array([self.index(n) for n in names], dtype=int)
+        """(k,) indices of the parameters that ``names`` select (names or patterns, see
+        :meth:`expand`)."""
+        return np.array([self.index(n) for n in self.expand(names)], dtype=int)
 
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(kinematic (p_k,), base (6,), tool (3,) of point 1) views of a parameter vector."""

@@ -1,21 +1,33 @@
 """Numeric columns of a CSV file, with errors that name the file, line and column.
 
 The one CSV reader behind :class:`kincal.measurements.Measurements` and the candidate
-poses of :mod:`kincal.candidates`. A header row names the columns; blank lines are
-skipped (line numbers stay those of the file); a byte-order mark is accepted. Every cell
-of a wanted column must be a finite number.
+poses of :mod:`kincal.candidates`. A header row names the columns; blank lines and lines
+starting with ``#`` are skipped (line numbers stay those of the file); a byte-order mark
+and CRLF or CR line ends are accepted. The separator is a comma, or a semicolon or a tab
+when the header has one of those and no comma (sniffed from the header, and said in a
+:class:`KincalNote`). Every cell of a wanted column must be a finite number with a
+decimal point: a decimal comma ("0,5") is refused with a message saying so, never read as
+two cells or as 5.
 """
 
 from __future__ import annotations
 
 import csv
 import math
+import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from kincal.errors import DataError, InputFileError, listing, suggest
+from kincal.errors import DataError, InputFileError, KincalNote, listing, suggest
+
+SEPARATORS = {",": "a comma", ";": "a semicolon", "\t": "a tab"}
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+(?:[eE][+-]?\d+)?$")
+_DECIMAL_COMMA_HINT = ("kincal reads numbers with a decimal point only; if the file uses decimal "
+                       "commas, export it with decimal points (e.g. LC_NUMERIC=C, or a spreadsheet "
+                       "set to English)")
 
 
 @dataclass(frozen=True)
@@ -31,29 +43,71 @@ class Columns:
     values: dict
     lines: np.ndarray
     header: tuple[str, ...]
+    separator: str = ","
 
     def ignored(self) -> tuple[str, ...]:
         """The columns of the file that were not read."""
         return tuple(h for h in self.header if h not in self.values)
 
 
+def _content_lines(fh):
+    """The lines of ``fh`` with ``#`` comment lines blanked (so line numbers stay)."""
+    for line in fh:
+        yield "\n" if line.lstrip().startswith("#") else line
+
+
+def _column_hint(name: str, columns) -> str:
+    """' Did you mean ...?' for a missing column: a close spelling, or a column that
+    starts with the name (a unit or note added: 'joint_3 [deg]', 'J3 (rad)')."""
+    close = suggest(name, columns)
+    if close:
+        return close
+    key = name.lower()
+    starts = [c for c in columns if c.lower().startswith(key) and not c[len(key):][:1].isalnum()]
+    return (" Did you mean " + " or ".join(repr(c) for c in starts[:3]) + "?") if starts else ""
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return bool(_DECIMAL_COMMA.match(cell.strip()))
+    return True
+
+
+def sniff_separator(header_line: str) -> str:
+    """The separator of a CSV file from its header line: a comma if there is one, else a
+    semicolon or a tab, whichever occurs (a one-column header: a comma)."""
+    if "," in header_line:
+        return ","
+    counts = {sep: header_line.count(sep) for sep in (";", "\t")}
+    best = max(counts, key=counts.get)
+    return best if counts[best] else ","
+
+
 def read_columns(path, required, optional=(), kind: str = "data", expected: str = "",
-                 rows_name: str = "samples") -> Columns:
+                 rows_name: str = "samples", aliases=None) -> Columns:
     """Read the ``required`` (and any ``optional``) columns of the CSV file ``path``.
 
     kind: what the file is, for "<kind> file not found". expected: what the required
-    columns are, for the message on missing ones. rows_name: what a row is.
+    columns are, for the message on missing ones. rows_name: what a row is. aliases:
+    {column: what it stands for} (e.g. the URDF joint a renamed column holds), for
+    messages. Warns a :class:`KincalNote` when the separator is not a comma.
     """
     path = Path(path)
     required, optional = list(required), list(optional)
+    aliases = dict(aliases or {})
     if not path.exists():
         raise InputFileError(f"{kind} file not found: {path}")
     if path.is_dir():
         raise InputFileError(f"expected a CSV file, got a directory: {path}")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
-            table = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
+            lines = list(_content_lines(fh))
+        header_line = next((ln for ln in lines if ln.strip()), "")
+        separator = sniff_separator(header_line)
+        reader = csv.reader(lines, delimiter=separator)
+        table = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputFileError(f"cannot read {path}: {exc}") from exc
     if not table:
@@ -65,8 +119,12 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     missing = [c for c in required if c not in header]
     if missing:
         extra = [h for h in header if h not in required]
-        hints = "".join(suggest(m, extra) for m in missing)
-        raise DataError(f"{path}: missing column(s) {', '.join(missing)}.{hints} Expected "
+        hints = "".join(_column_hint(m, extra) for m in missing)
+        named = [f"{m} (for {aliases[m]})" if m in aliases else m for m in missing]
+        if all(_is_number(h) for h in header):  # e.g. numpy.savetxt writes "# a,b,c"
+            hints += (f" Line {table[0][0]} holds numbers, not column names: the header is "
+                      "missing (or commented out with '#').")
+        raise DataError(f"{path}: missing column(s) {', '.join(named)}.{hints} Expected "
                         f"{expected + ': ' if expected else ''}{', '.join(required)}; the header "
                         f"has {listing(header)}")
     if len(table) == 1:
@@ -76,7 +134,10 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     values = np.empty((len(table) - 1, len(cols)))
     for r, (line, row) in enumerate(table[1:]):
         if len(row) != len(header):
-            raise DataError(f"{path}, line {line}: {len(row)} cells, the header has {len(header)}")
+            hint = (f" (decimal commas? {_DECIMAL_COMMA_HINT})"
+                    if separator == "," and len(row) > len(header) else "")
+            raise DataError(f"{path}, line {line}: {len(row)} cells, the header has "
+                            f"{len(header)}{hint}")
         for k, c in enumerate(cols):
             cell = row[c].strip()
             try:
@@ -85,8 +146,14 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                 v = math.nan
             if not math.isfinite(v):
                 what = "an empty cell" if cell == "" else repr(cell)
+                if _DECIMAL_COMMA.match(cell):
+                    raise DataError(f"{path}, line {line}, column {header[c]!r}: {what} has a "
+                                    f"decimal comma; {_DECIMAL_COMMA_HINT}")
                 raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; expected a "
                                 "finite number")
             values[r, k] = v
+    if separator != ",":
+        warnings.warn(f"{path}: columns separated by {SEPARATORS[separator]} (read from the "
+                      "header line)", KincalNote)
     return Columns(path, {c: values[:, k] for k, c in enumerate(wanted)},
-                   np.array([line for line, _ in table[1:]]), tuple(header))
+                   np.array([line for line, _ in table[1:]]), tuple(header), separator)

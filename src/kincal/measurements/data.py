@@ -1,8 +1,9 @@
 """Measured samples: joint values and the measured 3-D position of the tool point.
 
-A CSV file has a header naming the chain joints as in the URDF plus the position columns
-(``x,y,z`` by default), and optionally ``sigma`` (per-sample standard deviation of the
-position). Units: metres and radians by default; ``length_unit="mm"`` reads positions,
+A CSV file has a header naming the chain joints as in the URDF (or other names, mapped
+with ``joint_columns``) plus the position columns (``x,y,z`` by default), and optionally
+``sigma`` (per-sample standard deviation of the position); for separators, comments and
+line ends see :mod:`kincal.measurements.csv_table`. Units: metres and radians by default; ``length_unit="mm"`` reads positions,
 sigma and prismatic joints in millimetres, ``angle_unit="deg"`` reads revolute joints in
 degrees. Inside, everything is SI. Other columns are kept out of the fit and reported.
 
@@ -30,6 +31,37 @@ def _readonly(a) -> np.ndarray:
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
+
+
+def joint_column_names(joint_names, joint_columns=None) -> dict[str, str]:
+    """{URDF joint: CSV column} for the chain ``joint_names``, checked.
+
+    joint_columns: a mapping {URDF joint name: CSV column name}, or None; joints it does
+    not name are read from the column of their own name. Raises :class:`DataError` for a
+    name that is not a chain joint (with suggestions), an empty column name, or two
+    joints read from one column.
+    """
+    joint_names = tuple(joint_names)
+    if joint_columns is None:
+        return {j: j for j in joint_names}
+    if not hasattr(joint_columns, "items"):
+        raise DataError("joint_columns must be a mapping {URDF joint name: CSV column name}, "
+                        f"got {type(joint_columns).__name__}")
+    for urdf, column in joint_columns.items():
+        if urdf not in joint_names:
+            raise DataError(f"joint column mapping names {urdf!r}, which is not a joint of the "
+                            f"chain.{suggest(str(urdf), joint_names)} Chain joints: "
+                            f"{listing(joint_names)}")
+        if not isinstance(column, str) or not column.strip():
+            raise DataError(f"joint column mapping {urdf}={column!r}: expected a CSV column name")
+    columns = {j: str(joint_columns.get(j, j)).strip() for j in joint_names}
+    seen: dict[str, str] = {}
+    for j, c in columns.items():
+        if c in seen:
+            raise DataError(f"joints {seen[c]} and {j} would both be read from column {c!r}; "
+                            "map each chain joint to its own column")
+        seen[c] = j
+    return columns
 
 
 @dataclass(frozen=True)
@@ -143,9 +175,12 @@ class Measurements:
     def from_csv(cls, path, joint_names, prismatic=(), length_unit: str = "m",
                  angle_unit: str = "rad", position_columns=("x", "y", "z"),
                  sigma_column: str | None = "sigma",
-                 order_column: str | None = None) -> "Measurements":
+                 order_column: str | None = None, joint_columns=None) -> "Measurements":
         """Read a CSV file for the chain ``joint_names`` (see the module notes).
 
+        joint_columns: {URDF joint name: CSV column} for files whose joint columns are
+            not named after the URDF (joints not in it: their own name). The samples
+            carry the URDF names.
         prismatic: names of prismatic chain joints (read with the length unit).
         position_columns: 3 names (x, y, z of the measured point), or 3 K names for K
             points measured at each pose (x1, y1, z1, x2, ...): each row then gives K
@@ -163,10 +198,12 @@ class Measurements:
             raise DataError(f"unknown length unit {length_unit!r}; expected one of m, mm")
         if angle_unit not in ANGLE_UNITS:
             raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
-        wanted = list(joint_names) + list(position_columns)
+        columns = joint_column_names(joint_names, joint_columns)
+        wanted = list(columns.values()) + list(position_columns)
         extra = [c for c in (sigma_column, order_column) if c is not None]
         table = read_columns(path, wanted, extra, kind="data",
-                             expected="the chain joints and positions")
+                             expected="the chain joints and positions",
+                             aliases={c: j for j, c in columns.items() if c != j})
         path = table.path
         if order_column is not None and order_column not in table.values:
             raise DataError(f"{path}: no order column {order_column!r}."
@@ -175,7 +212,8 @@ class Measurements:
         rows = table.lines
         L, A = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
         v = table.values
-        q = np.column_stack([v[j] * (L if j in set(prismatic) else A) for j in joint_names])
+        q = np.column_stack([v[columns[j]] * (L if j in set(prismatic) else A)
+                             for j in joint_names])
         K = len(position_columns) // 3
         P = np.stack([np.column_stack([v[c] for c in position_columns[3 * k:3 * k + 3]])
                       for k in range(K)], axis=1) * L  # (rows, K, 3)

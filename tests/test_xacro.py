@@ -1,0 +1,162 @@
+"""xacro files are expanded in Python (the PyPI xacro package) and then read as URDF."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from kincal.cli.main import main
+from kincal.errors import KincalNote, UrdfError
+from kincal.robot import Robot
+from kincal.urdf_source import check_urdf_text, read_urdf_text
+
+XACRO = """<?xml version="1.0"?>
+<robot name="arm" xmlns:xacro="http://www.ros.org/wiki/xacro">
+  <!-- properties, math and a macro, as published descriptions use them -->
+  <xacro:include filename="common.xacro"/>  <!-- relative to this file -->
+  <xacro:property name="upper_len" value="${2 * half_upper}"/>
+  <xacro:property name="twist" value="${pi / 2}"/>
+  <xacro:macro name="segment" params="i parent length roll:=0">
+    <link name="link_${i}"/>
+    <joint name="joint_${i}" type="revolute">
+      <parent link="${parent}"/>
+      <child link="link_${i}"/>
+      <origin xyz="${length * cos(roll)} 0.05 ${length}" rpy="${roll} 0 ${-twist / 3}"/>
+      <axis xyz="0 0 1"/>
+      <limit lower="${-radians(170)}" upper="${radians(170)}" effort="10" velocity="1"/>
+    </joint>
+  </xacro:macro>
+  <link name="base_link"/>
+  <xacro:segment i="1" parent="base_link" length="0.1"/>
+  <xacro:segment i="2" parent="link_1" length="${upper_len}" roll="${twist}"/>
+  <xacro:segment i="3" parent="link_2" length="${upper_len * 0.75}"/>
+  <xacro:include filename="$(find tool_pkg)/urdf/tool.xacro"/>
+  <xacro:tool parent="link_3"/>
+</robot>
+"""
+
+TOOL = """<?xml version="1.0"?>
+<robot xmlns:xacro="http://www.ros.org/wiki/xacro">
+  <xacro:macro name="tool" params="parent">
+    <link name="flange"/>
+    <joint name="flange_joint" type="fixed">
+      <parent link="${parent}"/><child link="flange"/>
+      <origin xyz="0 0 ${0.1 + 0.02}" rpy="0 0 0"/>
+    </joint>
+  </xacro:macro>
+</robot>
+"""
+
+def _segment(i, parent, length, roll=0.0):
+    length, roll = float(length), float(roll)
+    return f"""<link name="link_{i}"/>
+  <joint name="joint_{i}" type="revolute"><parent link="{parent}"/><child link="link_{i}"/>
+    <origin xyz="{length * float(np.cos(roll))!r} 0.05 {length!r}" rpy="{roll!r} 0 {-float(np.pi) / 6!r}"/>
+    <axis xyz="0 0 1"/>
+    <limit lower="{-float(np.radians(170))!r}" upper="{float(np.radians(170))!r}" effort="10" velocity="1"/>
+  </joint>"""
+
+
+# the same robot written out by hand
+URDF = f"""<robot name="arm">
+  <link name="base_link"/>
+  {_segment(1, "base_link", 0.1)}
+  {_segment(2, "link_1", 0.4, np.pi / 2)}
+  {_segment(3, "link_2", 0.3)}
+  <link name="flange"/>
+  <joint name="flange_joint" type="fixed"><parent link="link_3"/><child link="flange"/>
+    <origin xyz="0 0 0.12" rpy="0 0 0"/></joint>
+</robot>
+"""
+
+
+@pytest.fixture
+def workspace(tmp_path):
+    """A ROS-like source tree: src/arm_pkg/urdf/arm.urdf.xacro and src/tool_pkg."""
+    for pkg in ("arm_pkg", "tool_pkg"):
+        (tmp_path / "src" / pkg / "urdf").mkdir(parents=True)
+        (tmp_path / "src" / pkg / "package.xml").write_text(
+            f"<?xml version='1.0'?>\n<package format='3'>\n  <name>{pkg}</name>\n</package>\n")
+    arm = tmp_path / "src" / "arm_pkg" / "urdf" / "arm.urdf.xacro"
+    arm.write_text(XACRO)
+    (tmp_path / "src" / "tool_pkg" / "urdf" / "tool.xacro").write_text(TOOL)
+    (arm.parent / "common.xacro").write_text(
+        '<robot xmlns:xacro="http://www.ros.org/wiki/xacro">'
+        '<xacro:property name="half_upper" value="0.2"/></robot>')
+    plain = tmp_path / "arm.urdf"
+    plain.write_text(URDF)
+    return arm, plain
+
+
+def test_xacro_loads_like_the_urdf_it_stands_for(workspace):
+    arm, plain = workspace
+    with pytest.warns(KincalNote, match="expanded with xacro"):
+        robot = Robot.load(arm, tip="flange")
+    reference = Robot.load(plain, tip="flange")
+    assert robot.joint_names == reference.joint_names == ("joint_1", "joint_2", "joint_3")
+    g, h = robot.geometry, reference.geometry
+    np.testing.assert_allclose(g.joint_frames, h.joint_frames, atol=1e-12)
+    np.testing.assert_allclose(g.T_base_tip, h.T_base_tip, atol=1e-12)
+    np.testing.assert_allclose(g.upper, np.radians(170), atol=1e-12)
+    check_urdf_text(robot.urdf_text)  # plain URDF, no xacro left
+
+
+def test_xacro_namespace_alone_is_not_expanded(tmp_path):
+    # generated URDFs often keep the xmlns:xacro declaration: read as they are, unchanged
+    path = tmp_path / "generated.urdf"
+    text = URDF.replace('<robot name="arm">',
+                        '<robot name="arm" xmlns:xacro="http://www.ros.org/wiki/xacro">')
+    path.write_text(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert read_urdf_text(path) == text
+
+
+def test_find_through_ros_package_path(workspace, tmp_path, monkeypatch):
+    arm, _ = workspace
+    elsewhere = tmp_path / "elsewhere" / "arm.urdf.xacro"  # not inside the source tree
+    elsewhere.parent.mkdir()
+    elsewhere.write_text(XACRO)
+    (elsewhere.parent / "common.xacro").write_text((arm.parent / "common.xacro").read_text())
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    with pytest.raises(UrdfError, match=r"xacro expansion failed: \$\(find tool_pkg\): package "
+                                        "'tool_pkg' not found.*ROS_PACKAGE_PATH"):
+        read_urdf_text(elsewhere)
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "src"))
+    with pytest.warns(KincalNote):
+        assert "flange_joint" in read_urdf_text(elsewhere)
+
+
+@pytest.mark.parametrize("change, reason", [
+    (('length="0.1"', 'length="${shoulder}"'), "name 'shoulder' is not defined"),
+    (("<xacro:tool parent", "<xacro:gripper parent"), "unknown macro name: xacro:gripper"),
+    (("${upper_len * 0.75}", "${upper_len / 0}"), "division by zero"),
+    (("<link name=\"base_link\"/>", "<link name=\"base_link\">"), "mismatched tag"),
+])
+def test_expansion_errors_are_one_line(workspace, change, reason):
+    arm, _ = workspace
+    arm.write_text(XACRO.replace(*change))
+    with pytest.raises(UrdfError) as info:
+        read_urdf_text(arm)
+    message = str(info.value)
+    assert reason in message and str(arm) in message and "\n" not in message
+
+
+def test_calibrate_a_xacro_file_through_the_cli(workspace, tmp_path, capsys):
+    arm, _ = workspace
+    robot = Robot.load(workspace[1], tip="flange")
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-2.5, 2.5, size=(25, 3))
+    points = robot.tip_poses(q)[:, :3, 3] + [0.5, 0.1, 0.2]  # a measurement frame offset
+    data = tmp_path / "data.csv"
+    data.write_text("joint_1,joint_2,joint_3,x,y,z\n" + "".join(
+        ",".join(repr(float(v)) for v in (*qk, *p)) + "\n" for qk, p in zip(q, points)))
+    out = tmp_path / "cal.urdf"
+    assert main(["analyze", str(arm), str(data), "--tip", "flange"]) == 0
+    assert "expanded with xacro" in capsys.readouterr().err
+    assert main(["calibrate", str(arm), str(data), "--tip", "flange", "--method", "frames",
+                 "--out", str(out), "--quiet"]) == 0
+    written = out.read_text()
+    check_urdf_text(written)
+    assert "flange_joint" in written and arm.read_text() == XACRO  # the xacro is untouched
+    assert main(["analyze", str(arm).replace("arm.urdf", "nothere.urdf"), str(data)]) == 1
