@@ -652,7 +652,7 @@ def demo(out_dir, config: ExperimentConfig | None = None,
     return replace(summary, files=tuple(files), elapsed_s=time.perf_counter() - t0)
 
 
-def rtest_scenario(seed: int, model: str = "mdh") -> dict:
+def rtest_scenario(seed: int, error_model: str = "mdh") -> dict:
     """LS versus L2 + CV on one R-test-like scenario (README table, acceptance test).
 
     EC66 with planted errors (0.3 mm / 0.03 deg sd), tool point 120 mm along the flange
@@ -673,10 +673,10 @@ def rtest_scenario(seed: int, model: str = "mdh") -> dict:
     data = measure(model, truth, q, 5e-5, rng)
     val = measure(model, truth, q_val, 1e-5, rng)
     row = {"seed": seed}
-    frames = CalibrationOptions(method="frames", model=model)
+    frames = CalibrationOptions(method="frames", model=error_model)
     row["before"] = CalibrationProblem(robot, val, frames).solve().after.mean
     for method in ("ls", "l2"):
-        res = CalibrationProblem(robot, data, CalibrationOptions(method=method, model=model)).solve()
+        res = CalibrationProblem(robot, data, CalibrationOptions(method=method, model=error_model)).solve()
         # validation as in the paper: kinematics fixed, frames fitted on the validation set
         row[method] = CalibrationProblem(res.corrected, val, frames).solve().after.mean
         row[f"{method}_cal"] = res.after.mean
