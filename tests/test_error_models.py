@@ -99,9 +99,9 @@ def test_jacobian_with_axes_parallel_within_1e_4(model_name, tmp_path, rng):
 
 
 @pytest.mark.parametrize("name,tip", ROBOTS)
-def test_mdh_fast_columns_equal_the_generic_twists(name, tip, rng):
+def test_fast_columns_equal_the_generic_twists(name, tip, rng):
     robot = _load(name, tip)
-    for model in (models.build("mdh", robot.geometry), models.build("complete", robot.geometry)):
+    for model in (models.build(m, robot.geometry) for m in ("mdh", "complete", "placement")):
         mm = MeasurementModel(model, random_joint_values(robot.geometry, rng, 20))
         state = mm.chain.state(_perturbed(model, rng, 3.0))
         P = state.p_tip + state.R_tip @ np.array([0.03, -0.02, 0.1])

@@ -61,6 +61,27 @@ class PlacementModel(ErrorModel):
         return w, v
 
 
+    def point_columns(self, x, before, placed, P) -> np.ndarray:
+        """(N, 3, p) derivatives of points P (N, 3) rigidly attached to the tip: the generic
+        twists of kincal.models.chain written with this model's structure (the hot path):
+        t slides along the parent link's axes, r turns about them through the joint
+        origin (the origin of the placed frame)."""
+        e = np.asarray(x, float).reshape(self.n, 6)
+        G, H = np.stack(before), np.stack(placed)                 # (n, N, 4, 4)
+        F = G[:, :, :3, :3] @ self.parent_in_before[:, None, :3, :3]  # parent link axes
+        c, s = np.cos(e[:, 3]), np.sin(e[:, 3])
+        cy, sy = np.cos(e[:, 4]), np.sin(e[:, 4])
+        u_y = np.stack([np.zeros(self.n), c, s], axis=1)           # Rx(rx) e_y
+        u_z = np.stack([sy, -s * cy, c * cy], axis=1)              # Rx(rx) Ry(ry) e_z
+        r = P - H[:, :, :3, 3]                                     # (n, N, 3) from the origin
+        cols = np.empty((self.n, 6, len(P), 3))
+        cols[:, 0], cols[:, 1], cols[:, 2] = F[..., 0], F[..., 1], F[..., 2]
+        for k, axis in enumerate((F[..., 0], (F @ u_y[:, None, :, None])[..., 0],
+                                  (F @ u_z[:, None, :, None])[..., 0])):
+            cols[:, 3 + k] = np.cross(axis, r)
+        return cols.reshape(6 * self.n, len(P), 3).transpose(1, 2, 0)
+
+
 def build(geometry) -> PlacementModel:
     """The placement model of a :class:`kincal.robot.ChainGeometry`."""
     J = np.asarray(geometry.joint_frames, float)
