@@ -211,7 +211,10 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
 
 def write_html_report(result, path, *, overwrite: bool = False, **kwargs):
     """Write :func:`html_report` to ``path`` atomically; returns the path."""
+    from kincal.export.safe_write import _check_target
+
     protect = (result.robot.source,) if result.robot.source is not None else ()
+    _check_target(path, overwrite, protect)  # refuse before the (slow) rendering
     return write_text_atomic(path, html_report(result, **kwargs), overwrite=overwrite,
                              protect=protect)
 

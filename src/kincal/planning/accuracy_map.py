@@ -230,12 +230,11 @@ def design_covariance(problem, noise: float, lam: float = 0.0) -> np.ndarray:
 
 
 def design_accuracy_map(problem, noise: float, *, cube=None, grid: int = 5,
-                        joint_values=None, lam: float = 0.0) -> AccuracyMap:
+                        joint_values=None, lam: float = 0.0, targets: str = "") -> AccuracyMap:
     """The map a calibration from ``problem``'s poses is predicted to give, at noise
     ``noise`` [m] per axis (see :func:`design_covariance`); default targets: the poses."""
     x = problem.start()
     seeds = np.unique(problem.data.joint_values, axis=0)
-    targets = ""
     if cube is None and joint_values is None:
         joint_values, targets = seeds, f"the {len(seeds)} measured poses"
     how = "least squares" if lam == 0 else f"L2, lambda {lam:g}"
