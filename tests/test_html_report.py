@@ -1,6 +1,7 @@
 """The HTML report: complete, self-contained (no network), and rendered by a real browser."""
 
 import json
+import re
 import shutil
 import struct
 import subprocess
@@ -92,6 +93,11 @@ def test_every_section_present_and_nothing_external(result, page, tmp_path):
     assert "a &lt;warning&gt; &amp; more" in text  # escaped, not markup
     for d in result.identifiability.duplicates:  # dropped and why
         assert d.describe().replace(">", "&gt;") in text
+        # its table row: status dropped, and no deviation or standard error shown
+        row = re.search(rf'<tr class="dropped"[^>]*><td class="name">{re.escape(d.name)}</td>'
+                        r"(.*?)</tr>", text)
+        cells = re.findall(r"<td[^>]*>(.*?)</td>", row.group(1))
+        assert cells[0] == "dropped" and cells[2] == "" and cells[4] == ""
     assert "approached from" not in text  # (legend text is inside the PNG, not the page)
     assert "joint_6.backlash" in text and "predicted accuracy" in text
     assert text.startswith("<!DOCTYPE html>")
