@@ -12,7 +12,6 @@ from kincal.planning.accuracy_map import (
     cube_grid,
     design_accuracy_map,
     result_accuracy_map,
-    tool_positions,
 )
 from kincal.planning.simulation import Truth, measure, planted_table
 from kincal.robot import Robot
@@ -99,8 +98,10 @@ def test_cube_points_are_reached_and_unreachable_ones_counted(setup):
     center = np.array([0.45, 0.1, 0.35])
     amap = result_accuracy_map(res, cube=(center, 0.2), grid=3)
     assert len(amap.std) + len(amap.skipped) == 27 and len(amap.std) >= 20
-    # each reached pose puts the identified tool point on its grid point
-    reached = tool_positions(res.mdh, res.space, res.x, amap.joint_values)
+    # each reached pose puts the identified tool point on its grid point (Pinocchio's
+    # forward kinematics of the corrected robot, independent of the map's own model)
+    T = res.corrected.tip_poses(amap.joint_values)
+    reached = T[:, :3, 3] + T[:, :3, :3] @ res.tool
     grid = cube_grid(center, 0.2, 3)
     d = np.min(np.linalg.norm(reached[:, None] - grid[None], axis=2), axis=1)
     assert np.all(d < 1e-6)

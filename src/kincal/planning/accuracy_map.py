@@ -28,9 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.errors import OptionError
-from kincal.identification.parameters import MM, ParameterSpace
+from kincal.identification.parameters import BASE, MM, ParameterSpace
 from kincal.measurements.point import MeasurementModel
-from kincal.models.mdh import MdhModel
 from kincal.robot import Robot
 
 
@@ -93,29 +92,40 @@ class AccuracyMap:
                 "skipped_positions_m": self.skipped.tolist()}
 
 
-def predicted_std(mdh: MdhModel, space: ParameterSpace, x: np.ndarray, covariance: np.ndarray,
+def _chain_model(owner):
+    """The chain's error model of a CalibrationResult or CalibrationProblem (what
+    MeasurementModel takes); the one place that names the attribute."""
+    return owner.mdh
+
+
+def _measurement_model(chain, space: ParameterSpace, q: np.ndarray) -> MeasurementModel:
+    """Point 1 at the poses q, backlash terms (if any) in the middle of their play."""
+    return MeasurementModel(chain, q, np.zeros(q.shape), space.backlash,
+                            np.zeros(len(q), dtype=int), space.n_points)
+
+
+def predicted_std(chain, space: ParameterSpace, x: np.ndarray, covariance: np.ndarray,
                   joint_values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((M,) sqrt(trace Sigma_k), (M,) sqrt(max eig Sigma_k)) [m] of point 1 at the poses.
 
-    covariance: (p, p) over ``space.names`` [SI]. Backlash terms, if any, are taken in the
-    middle of their play (no approach direction), so their columns do not contribute.
+    chain: the chain's error model (``result.mdh``). covariance: (p, p) over
+    ``space.names`` [SI]. Backlash terms are taken in the middle of their play (no
+    approach direction), so their columns do not contribute.
     """
     q = np.atleast_2d(np.asarray(joint_values, float))
-    model = MeasurementModel(mdh, q, np.zeros(q.shape), space.backlash,
-                             np.zeros(len(q), dtype=int), space.n_points)
-    _, J = model.jacobian(x)                                     # (M, 3, p)
+    _, J = _measurement_model(chain, space, q).jacobian(x)       # (M, 3, p)
     S = np.einsum("mip,pq,mjq->mij", J, covariance, J)           # (M, 3, 3)
     eig = np.linalg.eigvalsh(S)
     return np.sqrt(np.maximum(eig.sum(axis=1), 0.0)), np.sqrt(np.maximum(eig[:, -1], 0.0))
 
 
-def tool_positions(mdh: MdhModel, space: ParameterSpace, x: np.ndarray,
+def tool_positions(chain, space: ParameterSpace, x: np.ndarray,
                    joint_values: np.ndarray) -> np.ndarray:
     """(M, 3) point 1 in the chain's base frame [m] at the poses, with parameters x."""
     q = np.atleast_2d(np.asarray(joint_values, float))
-    table, _, _ = space.split(x)
-    R, p = MeasurementModel(mdh, q).tip_poses(table)
-    return p + R @ space.tools(x)[0]
+    x_base = np.array(x, dtype=float)
+    x_base[space.indices(BASE)] = 0.0  # identity measurement frame: the base frame itself
+    return _measurement_model(chain, space, q).predict(x_base)
 
 
 def cube_grid(center, edge: float, n: int = 5) -> np.ndarray:
@@ -153,7 +163,7 @@ def reach(robot: Robot, targets: np.ndarray, tool: np.ndarray, seeds: np.ndarray
     return q_out, ok
 
 
-def accuracy_map(robot: Robot, mdh: MdhModel, space: ParameterSpace, x: np.ndarray,
+def accuracy_map(robot: Robot, chain, space: ParameterSpace, x: np.ndarray,
                  covariance: np.ndarray, seeds: np.ndarray, *, cube=None, grid: int = 5,
                  joint_values=None, targets: str = "", covariance_source: str = ""
                  ) -> AccuracyMap:
@@ -161,7 +171,7 @@ def accuracy_map(robot: Robot, mdh: MdhModel, space: ParameterSpace, x: np.ndarr
     poses ``joint_values`` (M, n); exactly one of them.
 
     robot: the robot to reach grid points with (the corrected one after a calibration),
-    consistent with ``mdh`` and ``x``. seeds: (S, n) joint values to start inverse
+    consistent with ``chain`` (the error model) and ``x``. seeds: (S, n) joint values to start inverse
     kinematics from (the calibration poses).
     """
     if (cube is None) == (joint_values is None):
@@ -172,7 +182,7 @@ def accuracy_map(robot: Robot, mdh: MdhModel, space: ParameterSpace, x: np.ndarr
         center, edge = cube
         points = cube_grid(center, edge, grid)
         seeds = np.atleast_2d(np.asarray(seeds, float))
-        q, ok = reach(robot, points, tool, seeds, tool_positions(mdh, space, x, seeds))
+        q, ok = reach(robot, points, tool, seeds, tool_positions(chain, space, x, seeds))
         q, skipped = q[ok], points[~ok]
         targets = targets or (f"a {grid}x{grid}x{grid} grid in a {edge / MM:g} mm cube at "
                               f"{np.round(np.asarray(center) / MM, 1).tolist()} mm "
@@ -181,8 +191,8 @@ def accuracy_map(robot: Robot, mdh: MdhModel, space: ParameterSpace, x: np.ndarr
         q = np.atleast_2d(np.asarray(joint_values, float))
         targets = targets or f"{len(q)} poses"
     if len(q):
-        std, worst = predicted_std(mdh, space, x, covariance, q)
-        pos = tool_positions(mdh, space, x, q)
+        std, worst = predicted_std(chain, space, x, covariance, q)
+        pos = tool_positions(chain, space, x, q)
     else:
         std = worst = np.zeros(0)
         pos = np.zeros((0, 3))
@@ -201,7 +211,7 @@ def result_accuracy_map(result, *, cube=None, grid: int = 5, joint_values=None,
     if cube is None and joint_values is None:
         joint_values = seeds
         targets = targets or f"the {len(seeds)} calibration poses"
-    return accuracy_map(result.corrected, result.mdh, result.space, result.x,
+    return accuracy_map(result.corrected, _chain_model(result), result.space, result.x,
                         result.covariance, seeds, cube=cube, grid=grid,
                         joint_values=joint_values, targets=targets,
                         covariance_source=f"from the calibration ({result.options.method}, "
@@ -238,7 +248,7 @@ def design_accuracy_map(problem, noise: float, *, cube=None, grid: int = 5,
     if cube is None and joint_values is None:
         joint_values, targets = seeds, f"the {len(seeds)} measured poses"
     how = "least squares" if lam == 0 else f"L2, lambda {lam:g}"
-    return accuracy_map(problem.robot, problem.mdh, problem.space, x,
+    return accuracy_map(problem.robot, _chain_model(problem), problem.space, x,
                         design_covariance(problem, noise, lam), seeds, cube=cube, grid=grid,
                         joint_values=joint_values, targets=targets,
                         covariance_source=f"predicted before solving: {how}, noise "
