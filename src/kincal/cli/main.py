@@ -169,6 +169,19 @@ def _accuracy_targets(args, robot) -> dict:
     return {}
 
 
+def _design_accuracy(args, robot, problem):
+    """The accuracy map ``kincal analyze`` predicts before solving, or None if not asked."""
+    if args.accuracy_map is None and args.accuracy_poses is None:
+        if args.accuracy_plot:
+            raise OptionError("--accuracy-plot needs --accuracy-map or --accuracy-poses")
+        return None
+    from kincal.planning.accuracy_map import design_accuracy_map
+
+    if not (math.isfinite(args.noise_mm) and args.noise_mm > 0):
+        raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
+    return design_accuracy_map(problem, args.noise_mm * 1e-3, **_accuracy_targets(args, robot))
+
+
 # -------------------------------------------------------------- subcommands
 def cmd_calibrate(args) -> int:
     from kincal.export import report
@@ -282,16 +295,7 @@ def cmd_analyze(args) -> int:
     problem = CalibrationProblem(robot, data, CalibrationOptions(
         fix=tuple(args.fix), backlash=tuple(args.backlash), tool_guess=_tool_offset(args)))
     ident = problem.analyze()
-    amap = None
-    if args.accuracy_map is not None or args.accuracy_poses is not None:
-        from kincal.planning.accuracy_map import design_accuracy_map
-
-        if not (math.isfinite(args.noise_mm) and args.noise_mm > 0):
-            raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
-        amap = design_accuracy_map(problem, args.noise_mm * 1e-3,
-                                   **_accuracy_targets(args, robot))
-    elif args.accuracy_plot:
-        raise OptionError("--accuracy-plot needs --accuracy-map or --accuracy-poses")
+    amap = _design_accuracy(args, robot, problem)
     print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(data)} poses from {args.data}")
     print(ident.summary())
     for k, tool in enumerate(problem.space.tools(problem.start()), start=1):
