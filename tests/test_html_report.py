@@ -5,6 +5,7 @@ import re
 import shutil
 import struct
 import subprocess
+from dataclasses import replace
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -106,6 +107,22 @@ def test_every_section_present_and_nothing_external(result, page, tmp_path):
     with pytest.raises(ExportError, match="already exists"):
         write_html_report(result, path)
     assert path.read_text() == "a user's file"
+
+
+def test_evidence_choice_is_reported_where_a_result_carries_one(result):
+    # the evidence estimator's result field (EvidenceFit) as the report reads it
+    class Fit:
+        iterations, converged = 3, True
+        log_evidence = np.array([-120.5, -118.25, -118.0])
+
+        def line(self):
+            return "prior scales length 0.3 mm; noise 0.05 mm"
+
+    res = replace(result, lam=float("nan"))
+    object.__setattr__(res, "evidence", Fit())
+    section = re.search(r'<section id="cv">(.*?)</section>', html_report(res), re.S).group(1)
+    assert "maximum evidence: prior scales length 0.3 mm; noise 0.05 mm" in section
+    assert "-118.00" in section and "<img" not in section
 
 
 def test_report_without_cv_or_map_says_so():

@@ -62,7 +62,8 @@ def _summary(result, data_source) -> str:
     rows = [("robot", f"{r.name} ({r.base} -> {r.tip})"), ("URDF", r.source),
             ("data", data_source or "(not given)"),
             ("samples", f"{len(result.residuals)} ({result.space.n_points} point(s) per pose)"),
-            ("method", o.method + (f", lambda = {result.lam:.4g}" if o.method == "l2" else "")
+            ("method", o.method + (f", lambda = {result.lam:.4g}" if o.method == "l2"
+                                   and math.isfinite(result.lam) else "")
              + (" (chosen by cross-validation)" if result.cv is not None else "")),
             ("before", result.before.line()), ("after", result.after.line()),
             ("solver", f"{result.solve.iterations} iterations, {result.solve.reason}"
@@ -127,6 +128,14 @@ def _parameters(result, png) -> str:
 
 
 def _cv(result, png) -> str:
+    # the evidence estimator (lam "evidence") sets result.evidence where it is available
+    ev = getattr(result, "evidence", None)
+    if ev is not None:
+        trace = ", ".join(f"{v:.2f}" for v in ev.log_evidence)
+        return (f"<p>Pull toward nominal chosen by maximum evidence: {_e(ev.line())}. "
+                f"{ev.iterations} outer iterations"
+                + ("" if ev.converged else " (hyperparameters not settled)")
+                + f"; log evidence per iteration [nats]: {_e(trace)}.</p>")
     if result.cv is None:
         how = ("least squares: no penalty, no lambda" if result.options.method != "l2"
                else f"lambda = {result.lam:.4g} given by the user")
@@ -171,7 +180,8 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
 
     kin = list(result.parameters[:result.space.n_kinematic])
     weak = {w.name for w in result.identifiability.weak}
-    how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")
+    how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam and
+                                   math.isfinite(result.lam) else "")
     par_png = (plots._plot_estimates(kin, None, False, source,
                                      f"Identified deviations from nominal ({how})", weak)
                if any(p.status == "identified" for p in kin) else None)

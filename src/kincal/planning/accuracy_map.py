@@ -215,7 +215,9 @@ def result_accuracy_map(result, *, cube=None, grid: int = 5, joint_values=None,
                         result.covariance, seeds, cube=cube, grid=grid,
                         joint_values=joint_values, targets=targets,
                         covariance_source=f"from the calibration ({result.options.method}, "
-                                          f"lambda {result.lam:.3g}, sandwich covariance)")
+                                          + (f"lambda {result.lam:.3g}" if np.isfinite(result.lam)
+                                             else "priors per class")  # evidence: no one lambda
+                                          + ", sandwich covariance)")
 
 
 def design_covariance(problem, noise: float, lam: float = 0.0) -> np.ndarray:
