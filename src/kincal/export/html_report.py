@@ -65,15 +65,20 @@ def _summary(result, data_source) -> str:
             ("method", o.method + (f", lambda = {result.lam:.4g}" if o.method == "l2"
                                    and math.isfinite(result.lam) else "")
              + (" (chosen by cross-validation)" if result.cv is not None else "")),
+            ("identifiable", result.identifiability.summary().splitlines()[0]
+             .removeprefix("identifiable: ")),
             ("before", result.before.line()), ("after", result.after.line()),
             ("solver", f"{result.solve.iterations} iterations, {result.solve.reason}"
              + ("" if result.converged else "  [NOT CONVERGED]"))]
     table = "<table>" + "".join(f'<tr><th class="name">{_e(k)}</th><td class="name">{_e(v)}'
                                 "</td></tr>" for k, v in rows) + "</table>"
-    # the console summary without its parameter table (the Parameters section has it)
+    # the console summary's other lines (robust loss, backlash, several points), without
+    # what the table shows and without its parameter table (the Parameters section has it)
     text = result.summary().splitlines()
     cut = next((i for i, line in enumerate(text) if line.startswith("  parameter ")), len(text))
-    return table + f"<pre>{_e(chr(10).join(text[:cut]))}</pre>"
+    extra = [line.strip() for line in text[1:cut]
+             if not line.strip().startswith(("identifiable:", "before:", "after:", "solver:"))]
+    return table + "".join(f"<p>{_e(line)}</p>" for line in extra)
 
 
 def _identification(result) -> str:
