@@ -1,8 +1,9 @@
 """The HTML report: complete, self-contained (no network), and rendered by a real browser."""
 
 import json
+import os
 import re
-import shutil
+import signal
 import struct
 import subprocess
 from dataclasses import replace
@@ -158,11 +159,21 @@ def _screenshot(html: Path, tmp_path: Path) -> Path:
     if not CHROMIUM.exists():
         pytest.skip("chromium is not installed (apt-get install chromium)")
     out = tmp_path / "shot.png"
-    subprocess.run([str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu",
-                    "--disable-background-networking", "--disable-component-update",
-                    "--disable-sync", "--no-first-run", f"--user-data-dir={tmp_path / 'prof'}",
-                    f"--screenshot={out}", "--window-size=1200,6000", html.as_uri()],
-                   check=True, capture_output=True, timeout=120)
+    # its own process group, so a hung browser and its helpers can all be stopped
+    proc = subprocess.Popen([str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu",
+                             "--disable-background-networking", "--disable-component-update",
+                             "--disable-sync", "--no-first-run",
+                             f"--user-data-dir={tmp_path / 'prof'}", f"--screenshot={out}",
+                             "--window-size=1200,6000", html.as_uri()],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        _, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise
+    assert proc.returncode == 0, err.decode(errors="replace")[-2000:]
     return out
 
 
@@ -226,5 +237,5 @@ def test_tiago_report_complete_small_and_rendered(tmp_path):
     text = out.read_text(encoding="utf-8")
     _assert_self_contained(text, min_images=5)
     assert "arm_4_joint" in text  # the export note about the gimbal-locked rpy
-    if shutil.which(str(CHROMIUM)) is not None:
+    if CHROMIUM.exists():  # (the checks above stand without a browser)
         _png_ok(_screenshot(out, tmp_path))
