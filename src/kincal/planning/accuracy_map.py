@@ -171,8 +171,8 @@ def accuracy_map(robot: Robot, chain, space: ParameterSpace, x: np.ndarray,
     poses ``joint_values`` (M, n); exactly one of them.
 
     robot: the robot to reach grid points with (the corrected one after a calibration),
-    consistent with ``chain`` (the error model) and ``x``. seeds: (S, n) joint values to start inverse
-    kinematics from (the calibration poses).
+    consistent with ``chain`` (the error model) and ``x``. seeds: (S, n) joint values to
+    start inverse kinematics from (the calibration poses).
     """
     if (cube is None) == (joint_values is None):
         raise OptionError("give exactly one of a cube or a set of poses for the accuracy map")
