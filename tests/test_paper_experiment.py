@@ -92,6 +92,20 @@ def test_plots_are_png_files_with_content_and_never_replace_a_users_file(result,
     assert (out / "point_sets.png").read_bytes().endswith(b"a user's picture")
 
 
+def test_weak_and_dropped_parameters_are_known_to_the_deviation_plot(result):
+    # the plot marks dropped (not identified) parameters and hatches weak ones: both flags
+    # must be there, and a weak parameter is always an identified one
+    for m in result.methods:
+        assert m.weak.shape == m.identified.shape and not np.any(m.weak & ~m.identified)
+    ls = result.method("ls_rtest")
+    assert ls.weak.any() and not ls.identified.all()
+    png = plots.plot_parameter_deviations(
+        result.parameter_names, result.is_length,
+        [(m.label, m.deviations, m.identified, m.weak) for m in result.methods[1:]]
+        + [("Truth", result.true_deviations)], None)
+    assert png[:8] == PNG_SIGNATURE
+
+
 def test_plot_calibration_of_one_result(tmp_path):
     from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
     from kincal.models import mdh

@@ -165,6 +165,49 @@ def _render_plots(result, out_dir: Path):
     return pngs
 
 
+def _add_accuracy_options(p):
+    p.add_argument("--accuracy-map", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
+                   help="predicted accuracy over a cube: centre and edge in the chain's base "
+                        "frame, in the length unit; grid points reached by inverse kinematics")
+    p.add_argument("--grid", type=int, default=5,
+                   help="grid points per edge of the --accuracy-map cube (default 5)")
+    p.add_argument("--accuracy-poses", metavar="POSES.csv",
+                   help="predicted accuracy at these poses instead (chain joint columns)")
+
+
+def _accuracy_targets(args, robot) -> dict:
+    """Keyword arguments of the accuracy-map functions from --accuracy-map/--accuracy-poses."""
+    if args.accuracy_map is not None and args.accuracy_poses is not None:
+        raise OptionError("give at most one of --accuracy-map and --accuracy-poses")
+    k = 1e-3 if args.length_unit == "mm" else 1.0
+    if args.accuracy_map is not None:
+        from kincal.planning.accuracy_map import cube_grid
+
+        c = args.accuracy_map
+        cube_grid(np.array(c[:3]) * k, c[3] * k, args.grid)  # raises on bad values
+        return {"cube": (np.array(c[:3]) * k, c[3] * k), "grid": args.grid}
+    if args.accuracy_poses is not None:
+        from kincal.planning.candidates import read_candidates
+
+        q, _ = read_candidates(args.accuracy_poses, robot, args.length_unit, args.angle_unit,
+                               kind="accuracy poses")
+        return {"joint_values": q, "targets": f"the {len(q)} poses of {args.accuracy_poses}"}
+    return {}
+
+
+def _design_accuracy(args, robot, problem):
+    """The accuracy map ``kincal analyze`` predicts before solving, or None if not asked."""
+    if args.accuracy_map is None and args.accuracy_poses is None:
+        if args.accuracy_plot:
+            raise OptionError("--accuracy-plot needs --accuracy-map or --accuracy-poses")
+        return None
+    from kincal.planning.accuracy_map import design_accuracy_map
+
+    if not (math.isfinite(args.noise_mm) and args.noise_mm > 0):
+        raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
+    return design_accuracy_map(problem, args.noise_mm * 1e-3, **_accuracy_targets(args, robot))
+
+
 # -------------------------------------------------------------- subcommands
 def cmd_calibrate(args) -> int:
     from kincal.export import report
@@ -173,14 +216,28 @@ def cmd_calibrate(args) -> int:
 
     robot = _robot(args)
     data = _measurements(args, robot)
-    result = CalibrationProblem(robot, data, _options(args, args.method)).solve()
+    with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
+        warnings.simplefilter("always", KincalWarning)
+        targets = _accuracy_targets(args, robot)  # bad values fail here, before solving
+        result = CalibrationProblem(robot, data, _options(args, args.method)).solve()
+    for w in caught:  # and passed on to be printed as usual
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    amap = None
+    if targets or args.html:
+        from kincal.planning.accuracy_map import result_accuracy_map
+
+        if result.covariance is not None or targets:
+            amap = result_accuracy_map(result, **targets)
     edits, moved = result.export_edits()
     text = result.urdf_with_frames(edits.text) if args.add_frames else edits.text
     files = [(args.out, text)]
     if args.frames_out:
         files.append((args.frames_out, report.dumps(result.frames_dict())))
     if args.report:
-        files.append((args.report, report.dumps(report.result_dict(result, str(args.data)))))
+        content = report.result_dict(result, str(args.data))
+        if amap is not None:
+            content["accuracy_map"] = amap.as_dict()
+        files.append((args.report, report.dumps(content)))
     if args.yaml_out or args.mdh_out:
         from kincal.export.cell_exports import kinematics_yaml, mdh_table_csv
 
@@ -190,6 +247,17 @@ def cmd_calibrate(args) -> int:
             files.append((args.mdh_out, mdh_table_csv(result.corrected)))
     if args.plots:
         files += _render_plots(result, Path(args.plots))
+        if amap is not None and len(amap.std):
+            from kincal.export.diagnostic_plots import plot_accuracy_map
+
+            files.append((Path(args.plots) / "accuracy_map.png", plot_accuracy_map(amap)))
+    if args.html:
+        from kincal.export.html_report import html_report
+
+        files.append((args.html, html_report(
+            result, accuracy=amap, data_source=str(args.data),
+            warnings=[str(w.message) for w in caught if issubclass(w.category, KincalWarning)],
+            notes=[f"export: {m.describe()}" for m in moved])))
     protect = [robot.source, args.data]
     written = write_all(files, overwrite=args.overwrite, protect=protect)
     if not args.quiet:
@@ -199,6 +267,8 @@ def cmd_calibrate(args) -> int:
                 print(f"  {line}")
         for m in moved:
             print(f"  export: {m.describe()}")
+        if amap is not None:
+            print("  " + amap.summary().replace("\n", "\n  "))
         for path in written:
             print(f"  wrote {path}")
     return 0
@@ -286,13 +356,24 @@ def cmd_analyze(args) -> int:
             if extra:
                 line += f"  (+ {', '.join(extra)})"
             print(line)
+    amap = _design_accuracy(args, robot, problem)
+    if amap is not None:
+        print(amap.summary())
+    files = []
     if args.report:
-        from kincal.export.safe_write import write_all
-
         content = (report.identifiability_dict(idents[names[0]]) if len(names) == 1 else
                    {m: report.identifiability_dict(i) for m, i in idents.items()})
-        write_all([(args.report, report.dumps(content))],
-                  overwrite=args.overwrite, protect=[robot.source, args.data])
+        if amap is not None:
+            content["accuracy_map"] = amap.as_dict()
+        files.append((args.report, report.dumps(content)))
+    if args.accuracy_plot and amap is not None and len(amap.std):
+        from kincal.export.diagnostic_plots import plot_accuracy_map
+
+        files.append((args.accuracy_plot, plot_accuracy_map(amap)))
+    if files:
+        from kincal.export.safe_write import write_all
+
+        write_all(files, overwrite=args.overwrite, protect=[robot.source, args.data])
     return 0
 
 
@@ -498,6 +579,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mdh-out", metavar="MDH.csv",
                    help="corrected modified-DH (Craig) table, convention in its header")
     p.add_argument("--plots", help="directory for PNG plots")
+    p.add_argument("--html", metavar="REPORT.html",
+                   help="one self-contained HTML report (plots embedded, opens offline)")
+    _add_accuracy_options(p)
     p.add_argument("--overwrite", action="store_true", help="replace existing output files")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_calibrate)
@@ -518,6 +602,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
                    help="also analyse backlash terms of these joints (see calibrate)")
     p.add_argument("--report", help="write the identifiability report as JSON")
+    _add_accuracy_options(p)
+    p.add_argument("--noise-mm", type=float, default=0.05,
+                   help="noise per axis [mm] for the predicted accuracy (least squares on "
+                        "these poses; default 0.05)")
+    p.add_argument("--accuracy-plot", metavar="MAP.png", help="plot of the accuracy map")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_analyze)
 

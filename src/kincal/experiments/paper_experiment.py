@@ -229,6 +229,8 @@ class MethodResult:
     deviations: (4 n,) identified minus nominal kinematic parameters, mm or deg.
     identified: (4 n,) whether the method estimated each (else held at nominal).
     lam: the penalty weight used (0 for LS and before).
+    weak: (4 n,) identified but barely told apart from the others on these data (their
+    deviations trade off against each other and mean little one by one).
     """
 
     key: str
@@ -240,6 +242,7 @@ class MethodResult:
     deviations: np.ndarray
     identified: np.ndarray
     lam: float
+    weak: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -358,10 +361,12 @@ def _recording(solve: Callable, name: str, notes: list):
 
 def _kinematic_deviations(result: CalibrationResult, n_kin: int):
     dev, ident = [], []
+    weak = {w.name for w in result.identifiability.weak}
     for p in result.parameters[:n_kin]:
         dev.append(p.reported()[1])
         ident.append(p.status == "identified")
-    return _ro(dev), _ro(ident, bool)
+    return _ro(dev), _ro(ident, bool), _ro([p.name in weak for p in result.parameters[:n_kin]],
+                                           bool)
 
 
 def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] | None = None
@@ -423,10 +428,10 @@ def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] 
         val = _recording(CalibrationProblem(fit.corrected, tracker,
                                             CalibrationOptions(method="frames", model="mdh")).solve,
                          f"{label}, validation", notes)
-        dev, ident = _kinematic_deviations(fit, n_kin)
+        dev, ident, weak = _kinematic_deviations(fit, n_kin)
         methods.append(MethodResult(key, label, fit.before, fit.after, val.after,
                                     _ro(np.linalg.norm(val.residuals, axis=1) / MM), dev, ident,
-                                    float(fit.lam)))
+                                    float(fit.lam), weak))
 
     in_base = Truth(table, np.zeros(6), tool, cfg.compliance_rad)
     true_dev = (np.ravel(table) - model.nominal) / np.where(space.is_length[:n_kin], MM, DEG)
@@ -565,7 +570,8 @@ def write_plots(result: ExperimentResult, out_dir, overwrite: bool = False,
                                              f"({len(result.tracker_points_mm)} points)"),
         plots.plot_parameter_deviations(
             result.parameter_names, result.is_length,
-            [(result.method(k).label, result.method(k).deviations, result.method(k).identified)
+            [(result.method(k).label, result.method(k).deviations, result.method(k).identified,
+              result.method(k).weak)
              for k in ("ls_rtest", "ls_tracker", "l2_rtest")]
             + [("Truth (planted)", result.true_deviations, np.ones(len(result.is_length), bool))],
             out_dir / PLOT_FILES[3], overwrite=overwrite, source=source),

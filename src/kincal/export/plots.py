@@ -35,9 +35,12 @@ def _figure(width: float, height: float):
     return fig
 
 
-def _save(fig, path, overwrite: bool, source: str) -> Path:
+def _save(fig, path, overwrite: bool, source: str) -> Path | bytes:
+    """Write the PNG to ``path``; with path None return its bytes (to embed, e.g. in HTML)."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", metadata={"Software": source})
+    if path is None:
+        return buf.getvalue()
     return write_bytes_atomic(path, buf.getvalue(), overwrite=overwrite)
 
 
@@ -142,17 +145,22 @@ def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
 
     names: (P,) parameter names; is_length: (P,) bool.
     columns: (label, (P,) deviations in mm or deg, (P,) bool shown) triples, or pairs
-        (label, deviations) when every value is shown. Parameters no column shows are
-        left out. Bars beyond 4x the largest deviation of the last column (the
-        reference, e.g. the truth) are clipped and their value written at the edge.
+        (label, deviations) when every value is shown, or quadruples with a last (P,)
+        bool or None: weak (identified, but barely told apart from the others). Parameters
+        no column shows are left out. Values not shown (dropped as redundant) are marked
+        with an x on the axis, weak ones drawn hatched and faint. Bars beyond 4x the
+        largest deviation of the last column (the reference, e.g. the truth) are clipped
+        and their value written at the edge.
     """
     names = list(names)
     is_length = np.asarray(is_length, bool)
-    cols = []
+    cols, weak = [], []
     for c in columns:
         vals = np.asarray(c[1], float)
         shown = np.asarray(c[2], bool) if len(c) > 2 else np.ones(len(names), bool)
         cols.append((c[0], np.where(shown, vals, np.nan)))
+        weak.append(np.asarray(c[3], bool) if len(c) > 3 and c[3] is not None
+                    else np.zeros(len(names), bool))
     keep = np.any([np.isfinite(v) & (np.abs(v) > 0) for _, v in cols], axis=0)
     fig = _figure(8.4, 6.0)
     axes = fig.subplots(2, 1)
@@ -171,7 +179,18 @@ def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
             if limit is not None:
                 shown = np.clip(shown, -limit, limit)
             xs = x - 0.4 + w * (j + 0.5)
-            ax.bar(xs, shown, w, label=label, color=_COLORS[(j + 1) % len(_COLORS)])
+            color = _COLORS[(j + 1) % len(_COLORS)]
+            faint = weak[j][idx]
+            ax.bar(xs[~faint], shown[~faint], w, color=color)
+            if faint.any():
+                ax.bar(xs[faint], shown[faint], w, color=color, alpha=0.35, hatch="///",
+                       edgecolor=color, lw=0)
+            # a redundant parameter has no deviation of its own (it is held at nominal and
+            # the others absorb its effect): a mark on the axis, never a bar
+            gone = ~np.isfinite(v)
+            if gone.any():
+                ax.plot(xs[gone], np.zeros(gone.sum()), "x", ms=5, mew=1.2,
+                        color=_COLORS[(j + 1) % len(_COLORS)])
             if limit is not None:
                 for xi, vi in zip(xs, v):
                     if np.isfinite(vi) and abs(vi) > limit:
@@ -184,8 +203,21 @@ def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
         ax.set_ylabel(f"deviation ({unit})")
         ax.grid(True, axis="y", alpha=0.3)
     fig.suptitle(title, fontsize=10)
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=min(4, len(cols)), fontsize=8)
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    # proxies: a column may have only weak (hatched) bars, or none on the first axes
+    handles = [Patch(facecolor=_COLORS[(j + 1) % len(_COLORS)]) for j in range(len(cols))]
+    labels = [label for label, _ in cols]
+    if any(np.any(~np.isfinite(v[keep])) for _, v in cols):
+
+        handles.append(Line2D([], [], ls="", marker="x", color="k"))
+        labels.append("x: dropped as redundant (held at nominal)")
+    if any(np.any(wk[keep]) for wk in weak):
+        handles.append(Patch(facecolor="0.7", hatch="///", edgecolor="0.4", lw=0))
+        labels.append("hatched: weak (trades off against others)")
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(3, len(handles)),
+               fontsize=8)
     return _save(fig, path, overwrite, source)
 
 
@@ -213,16 +245,23 @@ def plot_calibration(result, out_dir, overwrite: bool = False,
              f" max {result.before.max:.3f} mm")
     paths.append(plot_error_distributions(series, out_dir / "residuals.png", title=title,
                                           overwrite=overwrite, source=source))
-    kin = [p for p in result.parameters[:result.space.n_kinematic] if p.status == "identified"]
-    if kin:
+    kin = list(result.parameters[:result.space.n_kinematic])
+    if any(p.status == "identified" for p in kin):
         how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")
+        weak = {w.name for w in result.identifiability.weak}
         paths.append(_plot_estimates(kin, out_dir / "parameters.png", overwrite, source,
-                                     f"Identified deviations from nominal ({how})"))
+                                     f"Identified deviations from nominal ({how})", weak))
     return paths
 
 
-def _plot_estimates(params, path, overwrite, source, title) -> Path:
-    """Bars of deviations with +-1 standard error, lengths [mm] above angles [deg]."""
+def _plot_estimates(params, path, overwrite, source, title, weak=frozenset()) -> Path:
+    """Bars of deviations with +-1 standard error, lengths [mm] above angles [deg].
+
+    Parameters not identified (dropped as redundant, or fixed) get a grey mark on the axis
+    and their status beside their name, no bar: they have no deviation of their own.
+    Weak ones (names in ``weak``) are hatched and faint; when they dwarf the others the
+    axis is clipped to 4x the largest other bar and their values are written at the edge.
+    """
     fig = _figure(8.0, 5.6)
     axes = fig.subplots(2, 1)
     for ax, length, unit in ((axes[0], True, "mm"), (axes[1], False, "deg")):
@@ -232,10 +271,36 @@ def _plot_estimates(params, path, overwrite, source, title) -> Path:
             continue
         rep = np.array([p.reported()[1:3] for p in ps], float)
         x = np.arange(len(ps))
+        ident = np.array([p.status == "identified" for p in ps])
         err = np.where(np.isfinite(rep[:, 1]), rep[:, 1], 0.0)
-        ax.bar(x, rep[:, 0], 0.6, yerr=err, capsize=3, color=_COLORS[2 if length else 3])
+        color = _COLORS[2 if length else 3]
+        faint = np.array([p.name in weak for p in ps]) & ident
+        strong = ident & ~faint
+        ax.bar(x[strong], rep[strong, 0], 0.6, yerr=err[strong], capsize=3, color=color)
+        if faint.any():
+            ax.bar(x[faint], rep[faint, 0], 0.6, yerr=err[faint], capsize=3, color=color,
+                   alpha=0.35, hatch="///", edgecolor=color, lw=0,
+                   label="weak: barely told apart from others (trades off against them)")
+            ref = np.max(np.abs(rep[strong, 0]) + err[strong]) if strong.any() else 0.0
+            big = faint & (np.abs(rep[:, 0]) + err > 4 * ref)
+            if ref > 0 and big.any():
+                ax.set_ylim(-4.4 * ref, 4.4 * ref)
+                for i in np.flatnonzero(big):
+                    ax.annotate(f"{rep[i, 0]:.3g}", (x[i], np.clip(rep[i, 0], -4 * ref, 4 * ref)),
+                                ha="center", va="bottom" if rep[i, 0] > 0 else "top",
+                                fontsize=7, rotation=90)
+        if (~ident).any():
+            ax.plot(x[~ident], np.zeros((~ident).sum()), "x", color="0.5", ms=6, mew=1.2,
+                    label="not identified: dropped as redundant, or fixed (held at nominal)")
+        if (~ident).any() or faint.any():
+            ax.legend(fontsize=7, loc="best")
         ax.axhline(0, color="k", lw=0.6)
-        ax.set_xticks(x, [p.name for p in ps], rotation=30, ha="right", fontsize=8)
+        ax.set_xticks(x, [p.name + (f" ({p.status})" if p.status != "identified" else
+                                    " (weak)" if p.name in weak else "")
+                          for p in ps], rotation=30, ha="right", fontsize=8)
+        for tick, ok in zip(ax.get_xticklabels(), ident):
+            if not ok:
+                tick.set_color("0.5")
         ax.set_ylabel(f"deviation ({unit})")
         ax.grid(True, axis="y", alpha=0.3)
     axes[0].set_title(title + "; error bars: one standard error", fontsize=10)

@@ -56,24 +56,30 @@ class ParameterEstimate:
 
 
 def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam: float,
-                scale: np.ndarray) -> np.ndarray:
-    """Sandwich standard errors [SI] of the free parameters (NaN for the others)."""
+                scale: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Sandwich standard errors [SI] of the free parameters (NaN for the others), and their
+    (p, p) covariance [SI] (zero rows and columns for the parameters held fixed), or None
+    when it cannot be estimated."""
     J = sol.jacobian[:, free]
     H = J.T @ J + lam * np.diag(penalised[free].astype(float))
     out = np.full(scale.size, np.nan)
     try:
         Hi = np.linalg.inv(H)
     except np.linalg.LinAlgError:
-        return out
+        return out, None
     JtJ = J.T @ J
     dof = float(np.trace(Hi @ JtJ))  # effective number of parameters, trace of the hat matrix
     m = J.shape[0]
     if m - dof <= 0.5:
-        return out
+        return out, None
     s2 = float(sol.residual @ sol.residual) / (m - dof)
     cov = s2 * Hi @ JtJ @ Hi
     out[free] = np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale[free]
-    return out
+    # cov is of u = x / scale (the solver's variables): the SI one is S cov S, S = diag(scale)
+    full = np.zeros((scale.size, scale.size))
+    full[np.ix_(free, free)] = cov * np.outer(scale[free], scale[free])
+    full.flags.writeable = False
+    return out, full
 
 
 def frame_transforms(base: np.ndarray, tools: np.ndarray) -> dict:
@@ -129,13 +135,19 @@ class CalibrationResult:
     residuals_before: np.ndarray | None = None  # (N, 3) with the start parameters [m]
     order_source: str = ""  # how the samples' acquisition order was known (backlash terms)
     points: np.ndarray | None = None  # (N,) the measured point of each sample (0 = point 1)
+    # (p, p) read-only sandwich covariance of the parameters [SI, in the order of
+    # space.names]; rows and columns of the parameters not identified are zero (held at
+    # their values). None when the data leave no degrees of freedom to estimate it.
+    covariance: np.ndarray | None = None
+    joint_values: np.ndarray | None = None  # (N, n) chain joint values of the samples [rad, m]
+    approach: np.ndarray | None = None  # (N, n) approach directions of the samples (+1/-1/0)
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
         sp = problem.space
         x = sol.u * problem.scale
         free = problem.free_mask()
-        se = _std_errors(sol, free, sp.is_penalised, lam, problem.scale)
+        se, covariance = _std_errors(sol, free, sp.is_penalised, lam, problem.scale)
         fixed = set(ident.fixed)
         x_nom = problem.x_nominal.copy()
         x_start = problem.start()
@@ -154,7 +166,9 @@ class CalibrationResult:
                    x, float(lam), cv, ErrorStats.from_errors(res_before),
                    ErrorStats.from_errors(res), res, sol, ident, problem.error_model,
                    np.asarray(problem.data.rows), residuals_before=res_before,
-                   order_source=problem.data.order_source, points=problem.data.points)
+                   order_source=problem.data.order_source, points=problem.data.points,
+                   covariance=covariance, joint_values=problem.data.joint_values,
+                   approach=problem.data.approach)
 
     # ------------------------------------------------------------ accessors
     @property

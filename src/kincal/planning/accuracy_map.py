@@ -1,0 +1,257 @@
+"""Predicted accuracy map: how well a calibration locates the tool point, pose by pose.
+
+The parameter covariance C of a calibration [SI] and the measurement model's Jacobian
+J_k = dP_k/dx (3, p) at a target pose k give the covariance of the predicted tool point,
+Sigma_k = J_k C J_k^T [m^2], in the measurement frame (it includes the uncertainty of
+the measurement frame and tool point: it is what an instrument in that frame would see
+scatter over repeated calibrations with the same poses). Two numbers per pose, in mm:
+
+- ``std``: sqrt(trace Sigma_k), the RMS length of the 3-D position error;
+- ``worst_axis``: sqrt of the largest eigenvalue, the standard deviation along the
+  worst direction.
+
+Targets are either joint configurations (the calibration poses, or a candidates file), or
+a cube of grid points in the chain's base frame, each reached by inverse kinematics on
+the (corrected) robot from the nearest calibration pose, so the map stays on the branch
+the robot was measured on. Unreachable grid points are skipped and counted.
+
+This is the variance part of the error only: a bias (the pull of the L2 penalty, or
+errors no MD-H model has, such as compliance) is not in it. It lives in planning because
+it answers the planning question "where will the calibrated robot be accurate, and would
+more poses help", and it takes a calibration's output as its input.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kincal.errors import OptionError
+from kincal.identification.parameters import BASE, MM, ParameterSpace
+from kincal.measurements.point import MeasurementModel
+from kincal.robot import Robot
+
+
+def _ro(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class AccuracyMap:
+    """Predicted standard deviations of the tool point at M target poses.
+
+    positions: (M, 3) tool point in the chain's base frame [m]. joint_values: (M, n)
+    [rad, m]. std: (M,) sqrt(trace of the 3x3 covariance) [m]; worst_axis: (M,) standard
+    deviation along the worst direction [m]. skipped: (K, 3) cube grid points no
+    configuration within the joint limits reached [m] (empty for pose sets).
+    targets: what the poses are, for reports ("5x5x5 grid ...", "the 60 calibration poses").
+    covariance_source: where C came from ("calibration (sandwich)", "design, noise ...").
+    """
+
+    positions: np.ndarray
+    joint_values: np.ndarray
+    std: np.ndarray
+    worst_axis: np.ndarray
+    skipped: np.ndarray
+    targets: str
+    covariance_source: str
+
+    def summary(self) -> str:
+        """A few lines with the figures in mm."""
+        lines = [f"predicted accuracy (1 sd of the tool point, {self.covariance_source}) at "
+                 f"{self.targets}:"]
+        if len(self.std):
+            s = self.std / MM
+            lines.append(f"  3-D std: median {np.median(s):.4f}  mean {np.mean(s):.4f}  "
+                         f"min {np.min(s):.4f}  max {np.max(s):.4f} mm  (n = {len(s)}); "
+                         f"worst axis up to {np.max(self.worst_axis) / MM:.4f} mm")
+        else:
+            lines.append("  no target reached")
+        if len(self.skipped):
+            lines.append(f"  {len(self.skipped)} of {len(self.skipped) + len(self.std)} grid "
+                         "points skipped: not reachable within the joint limits from the "
+                         "calibration poses' branch")
+        return "\n".join(lines)
+
+    def as_dict(self) -> dict:
+        """JSON-ready content (SI positions, figures in mm)."""
+        s = self.std / MM
+        return {"targets": self.targets, "covariance": self.covariance_source,
+                "frame": "positions in the chain's base frame [m]; std of the predicted "
+                         "point in the measurement frame [mm]",
+                "reached": int(len(self.std)), "skipped": int(len(self.skipped)),
+                "std_mm": {"median": float(np.median(s)) if len(s) else None,
+                           "mean": float(np.mean(s)) if len(s) else None,
+                           "max": float(np.max(s)) if len(s) else None},
+                "positions_m": self.positions.tolist(),
+                "joint_values": self.joint_values.tolist(),
+                "std_3d_mm": s.tolist(), "worst_axis_mm": (self.worst_axis / MM).tolist(),
+                "skipped_positions_m": self.skipped.tolist()}
+
+
+def _chain_model(owner):
+    """The chain's error model of a CalibrationResult or CalibrationProblem (what
+    MeasurementModel takes); the one place that names the attribute."""
+    return owner.error_model
+
+
+def _measurement_model(chain, space: ParameterSpace, q: np.ndarray) -> MeasurementModel:
+    """Point 1 at the poses q, backlash terms (if any) in the middle of their play."""
+    return MeasurementModel(chain, q, np.zeros(q.shape), space.backlash,
+                            np.zeros(len(q), dtype=int), space.n_points)
+
+
+def predicted_std(chain, space: ParameterSpace, x: np.ndarray, covariance: np.ndarray,
+                  joint_values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((M,) sqrt(trace Sigma_k), (M,) sqrt(max eig Sigma_k)) [m] of point 1 at the poses.
+
+    chain: the chain's error model (``result.error_model``). covariance: (p, p) over
+    ``space.names`` [SI]. Backlash terms are taken in the middle of their play (no
+    approach direction), so their columns do not contribute.
+    """
+    q = np.atleast_2d(np.asarray(joint_values, float))
+    _, J = _measurement_model(chain, space, q).jacobian(x)       # (M, 3, p)
+    S = np.einsum("mip,pq,mjq->mij", J, covariance, J)           # (M, 3, 3)
+    eig = np.linalg.eigvalsh(S)
+    return np.sqrt(np.maximum(eig.sum(axis=1), 0.0)), np.sqrt(np.maximum(eig[:, -1], 0.0))
+
+
+def tool_positions(chain, space: ParameterSpace, x: np.ndarray,
+                   joint_values: np.ndarray) -> np.ndarray:
+    """(M, 3) point 1 in the chain's base frame [m] at the poses, with parameters x."""
+    q = np.atleast_2d(np.asarray(joint_values, float))
+    x_base = np.array(x, dtype=float)
+    x_base[space.indices(BASE)] = 0.0  # identity measurement frame: the base frame itself
+    return _measurement_model(chain, space, q).predict(x_base)
+
+
+def cube_grid(center, edge: float, n: int = 5) -> np.ndarray:
+    """(n^3, 3) points of an n x n x n grid filling a cube [m] (n = 1: the centre)."""
+    c = np.asarray(center, float)
+    if c.shape != (3,) or not np.all(np.isfinite(c)):
+        raise OptionError(f"the cube centre must be 3 finite numbers, got {center!r}")
+    if not (np.isfinite(edge) and edge > 0):
+        raise OptionError(f"the cube edge must be a positive length, got {edge!r}")
+    if isinstance(n, bool) or int(n) != n or not 1 <= n <= 25:
+        raise OptionError(f"the grid must have 1 to 25 points per edge, got {n!r}")
+    t = np.linspace(-edge / 2, edge / 2, int(n)) if n > 1 else np.zeros(1)
+    g = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
+    return c + g
+
+
+def reach(robot: Robot, targets: np.ndarray, tool: np.ndarray, seeds: np.ndarray,
+          seed_positions: np.ndarray, tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """((M, n) joint values, (M,) reached) putting the tool point at each target [m].
+
+    Inverse kinematics on ``robot`` from the seed whose tool point is nearest the target,
+    then from the next two nearest if that fails; reached means within ``tol`` [m] and
+    the joint limits.
+    """
+    q_out = np.zeros((len(targets), len(robot.joint_names)))
+    ok = np.zeros(len(targets), dtype=bool)
+    for k, target in enumerate(targets):
+        order = np.argsort(np.linalg.norm(seed_positions - target, axis=1))[:3]
+        for s in order:
+            q, converged = robot.inverse_kinematics(target, tool=tool, start=seeds[s],
+                                                    tolerance=tol)
+            if converged:
+                q_out[k], ok[k] = q, True
+                break
+    return q_out, ok
+
+
+def accuracy_map(robot: Robot, chain, space: ParameterSpace, x: np.ndarray,
+                 covariance: np.ndarray, seeds: np.ndarray, *, cube=None, grid: int = 5,
+                 joint_values=None, targets: str = "", covariance_source: str = ""
+                 ) -> AccuracyMap:
+    """The map over a cube (``cube=(center (3,) [m], edge [m])``, base frame) or at the
+    poses ``joint_values`` (M, n); exactly one of them.
+
+    robot: the robot to reach grid points with (the corrected one after a calibration),
+    consistent with ``chain`` (the error model) and ``x``. seeds: (S, n) joint values to
+    start inverse kinematics from (the calibration poses).
+    """
+    if (cube is None) == (joint_values is None):
+        raise OptionError("give exactly one of a cube or a set of poses for the accuracy map")
+    tool = space.tools(x)[0]
+    skipped = np.zeros((0, 3))
+    if cube is not None:
+        center, edge = cube
+        points = cube_grid(center, edge, grid)
+        seeds = np.atleast_2d(np.asarray(seeds, float))
+        q, ok = reach(robot, points, tool, seeds, tool_positions(chain, space, x, seeds))
+        q, skipped = q[ok], points[~ok]
+        targets = targets or (f"a {grid}x{grid}x{grid} grid in a {edge / MM:g} mm cube at "
+                              f"{np.round(np.asarray(center) / MM, 1).tolist()} mm "
+                              f"({robot.base} frame)")
+    else:
+        q = np.atleast_2d(np.asarray(joint_values, float))
+        targets = targets or f"{len(q)} poses"
+    if len(q):
+        std, worst = predicted_std(chain, space, x, covariance, q)
+        pos = tool_positions(chain, space, x, q)
+    else:
+        std = worst = np.zeros(0)
+        pos = np.zeros((0, 3))
+    return AccuracyMap(_ro(pos), _ro(q), _ro(std), _ro(worst),
+                       _ro(skipped), targets, covariance_source)
+
+
+def result_accuracy_map(result, *, cube=None, grid: int = 5, joint_values=None,
+                        targets: str = "") -> AccuracyMap:
+    """The map of a :class:`~kincal.identification.result.CalibrationResult`, from its
+    sandwich covariance; default targets: the calibration poses."""
+    if result.covariance is None:
+        raise OptionError("this calibration has no parameter covariance (no degrees of "
+                          "freedom left to estimate the noise): no accuracy map")
+    seeds = np.unique(np.asarray(result.joint_values), axis=0)
+    if cube is None and joint_values is None:
+        joint_values = seeds
+        targets = targets or f"the {len(seeds)} calibration poses"
+    return accuracy_map(result.corrected, _chain_model(result), result.space, result.x,
+                        result.covariance, seeds, cube=cube, grid=grid,
+                        joint_values=joint_values, targets=targets,
+                        covariance_source=f"from the calibration ({result.options.method}, "
+                                          + (f"lambda {result.lam:.3g}" if np.isfinite(result.lam)
+                                             else "priors per class")  # evidence: no one lambda
+                                          + ", sandwich covariance)")
+
+
+def design_covariance(problem, noise: float, lam: float = 0.0) -> np.ndarray:
+    """(p, p) predicted covariance [SI] of a fit of ``problem``'s data before solving.
+
+    At the starting point (nominal kinematics, fitted frames), for independent noise of
+    sd ``noise`` [m] per axis: sigma^2 H^-1 J^T J H^-1 with H = J^T J + lam P (lam in the
+    penalty's units, 0: least squares), over the parameters the data identify.
+    """
+    if not (np.isfinite(noise) and noise > 0):
+        raise OptionError(f"the noise level must be a positive length, got {noise!r}")
+    free = problem.free_mask()
+    _, J = problem.residual_function()(problem.start() / problem.scale, True)
+    J = J[:, free]
+    JtJ = J.T @ J
+    Hi = np.linalg.pinv(JtJ + lam * np.diag(problem.space.is_penalised[free].astype(float)))
+    cov = (noise / MM) ** 2 * Hi @ JtJ @ Hi  # residuals in mm
+    s = problem.scale[free]
+    full = np.zeros((free.size, free.size))
+    full[np.ix_(free, free)] = cov * np.outer(s, s)
+    return full
+
+
+def design_accuracy_map(problem, noise: float, *, cube=None, grid: int = 5,
+                        joint_values=None, lam: float = 0.0, targets: str = "") -> AccuracyMap:
+    """The map a calibration from ``problem``'s poses is predicted to give, at noise
+    ``noise`` [m] per axis (see :func:`design_covariance`); default targets: the poses."""
+    x = problem.start()
+    seeds = np.unique(problem.data.joint_values, axis=0)
+    if cube is None and joint_values is None:
+        joint_values, targets = seeds, f"the {len(seeds)} measured poses"
+    how = "least squares" if lam == 0 else f"L2, lambda {lam:g}"
+    return accuracy_map(problem.robot, _chain_model(problem), problem.space, x,
+                        design_covariance(problem, noise, lam), seeds, cube=cube, grid=grid,
+                        joint_values=joint_values, targets=targets,
+                        covariance_source=f"predicted before solving: {how}, noise "
+                                          f"{noise / MM:g} mm per axis")
