@@ -8,7 +8,6 @@ outputs last, all or none; a KincalError becomes one line on stderr and exit cod
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import warnings
@@ -17,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from kincal import __version__
-from kincal.errors import (DataError, InputFileError, KincalError, KincalNote, KincalWarning,
+from kincal.errors import (DataError, KincalError, KincalNote, KincalWarning,
                            OptionError)
 
 DEMO_DIR = "kincal-demo"
