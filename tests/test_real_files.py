@@ -182,7 +182,9 @@ def test_parameter_patterns(ec66):
     from kincal.errors import ParameterError
     from kincal.identification.parameters import ParameterSpace
 
-    space = ParameterSpace.of_chain(JOINTS, ("revolute",) * 6)
+    from kincal import models
+
+    space = ParameterSpace.of_model(models.build("mdh", ec66.geometry))
     assert space.expand(["*.d"]) == tuple(f"{j}.d" for j in JOINTS)
     assert space.expand(("joint_[456].a", "joint_4.a", "tool.*")) == (
         "joint_4.a", "joint_5.a", "joint_6.a", "tool.x", "tool.y", "tool.z")
@@ -209,10 +211,10 @@ def test_fix_patterns_in_a_calibration(ec66, plain, tmp_path, capsys):
     out = tmp_path / "cal.urdf"
     assert main(["calibrate", "ec66", str(plain[0]), "--method", "ls", "--fix", "*.d",
                  "joint_[56].theta", "--out", str(out), "--quiet"]) == 0 and out.exists()
-    assert main(["calibrate", "ec66", str(plain[0]), "--fix", "*.beta", "--out",
+    assert main(["calibrate", "ec66", str(plain[0]), "--fix", "*.gamma", "--out",
                  str(tmp_path / "no.urdf")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert [e for e in err if "error" in e] == [err[-1]] and "'*.beta' matches no" in err[-1]
+    assert [e for e in err if "error" in e] == [err[-1]] and "'*.gamma' matches no" in err[-1]
     assert not (tmp_path / "no.urdf").exists()
 
 
