@@ -109,12 +109,15 @@ def _options(args, method):
     from kincal.identification.calibration import CalibrationOptions
 
     lam = args.lam
-    if lam != "cv":
+    if lam not in ("cv", "evidence"):
         try:
             lam = float(lam)
         except ValueError:
-            raise OptionError(f"--lambda must be 'cv' or a number, got {lam!r}") from None
+            raise OptionError(f"--lambda must be 'cv', 'evidence' or a number, got "
+                              f"{lam!r}") from None
     return CalibrationOptions(method=method, lam=lam, folds=args.folds, seed=args.seed,
+                              prior_mm=args.prior_mm, prior_deg=args.prior_deg,
+                              noise_mm=args.noise_mm,
                               fix=tuple(args.fix), free=tuple(args.free),
                               backlash=tuple(args.backlash),
                               tool_guess=_tool_offset(args), robust=args.robust,
@@ -358,7 +361,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("calibrate", help="identify the kinematics and write a corrected URDF")
     _add_common(p)
     p.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
-    p.add_argument("--lambda", dest="lam", default="cv", help="'cv' (default) or a value >= 0")
+    p.add_argument("--lambda", dest="lam", default="cv",
+                   help="'cv' (default: the paper's k-fold CV), 'evidence' (priors toward "
+                        "nominal per parameter class, scales and noise by maximum evidence) "
+                        "or a value >= 0")
+    p.add_argument("--prior-mm", type=float, metavar="MM",
+                   help="with --lambda evidence: tolerance (prior std) of the lengths [mm], "
+                        "given instead of estimated")
+    p.add_argument("--prior-deg", type=float, metavar="DEG",
+                   help="with --lambda evidence: tolerance of the twists and joint offsets "
+                        "[deg], given instead of estimated")
+    p.add_argument("--noise-mm", type=float, metavar="MM",
+                   help="with --lambda evidence: measurement noise, std per axis [mm], given "
+                        "instead of estimated")
     p.add_argument("--folds", type=int, default=5)
     p.add_argument("--seed", type=int, default=0, help="seed of the CV fold split")
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME", help="parameters held nominal")

@@ -216,6 +216,8 @@ def plot_calibration(result, out_dir, overwrite: bool = False,
     kin = [p for p in result.parameters[:result.space.n_kinematic] if p.status == "identified"]
     if kin:
         how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")
+        if result.evidence is not None:  # one weight per class, no single lambda
+            how = result.options.method + ", evidence priors"
         paths.append(_plot_estimates(kin, out_dir / "parameters.png", overwrite, source,
                                      f"Identified deviations from nominal ({how})"))
     return paths

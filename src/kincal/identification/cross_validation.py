@@ -96,3 +96,37 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
     mean = errors.mean(axis=1)
     best = int(np.argmin(mean))
     return CrossValidation(lambdas, errors, mean, best, float(lambdas[best]), folds, seed)
+
+
+# The guard's thresholds. CV judges prediction inside the volume the data cover; when that
+# volume is a small part of the workspace and CV prefers (almost) no pull toward nominal,
+# or cannot tell the candidates apart, nothing in the data tells how the fit extrapolates.
+SMALL_VOLUME = 0.1  # data extent / reach below this: a small measurement volume
+FLAT_CURVE = 0.02  # (max - min) / min of the CV curve below this: a flat curve
+NEAR_ZERO = 1e-3  # chosen lambda below this [penalty in mm and deg]: almost no pull
+
+
+def small_volume_warning(cv: CrossValidation, extent_m: float, reach_m: float) -> str:
+    """A warning (or "") when CV's choice cannot be trusted to extrapolate.
+
+    extent_m: largest distance of a measured position from their centroid [m];
+    reach_m: largest distance of the tool point from the robot base [m].
+    """
+    ratio = extent_m / reach_m if reach_m > 0 else 0.0
+    lo, hi = float(np.min(cv.mean_error)), float(np.max(cv.mean_error))
+    flat = hi - lo <= FLAT_CURVE * lo
+    near_zero = cv.best_lambda < NEAR_ZERO or cv.best_index == 0
+    if ratio >= SMALL_VOLUME or not (flat or near_zero):
+        return ""
+    why = []
+    if near_zero:
+        why.append(f"it chose lambda = {cv.best_lambda:.3g}, almost no pull toward nominal")
+    if flat:
+        why.append(f"its curve is flat (validation error {lo:.4g} to {hi:.4g} mm over "
+                   f"lambda {cv.lambdas[0]:.3g} to {cv.lambdas[-1]:.3g})")
+    return (f"cross-validation: {' and '.join(why)}, on data within {extent_m * 1e3:.1f} mm "
+            f"of their centre, {100 * ratio:.1f} % of the arm's reach ({reach_m * 1e3:.0f} mm): "
+            "CV judges prediction inside this small volume only and cannot see how the fit "
+            "extrapolates. Use --lambda evidence (priors toward nominal chosen from the "
+            "data), or give the tolerances (--lambda evidence --prior-mm --prior-deg), or "
+            "measure poses spread over more of the workspace or with more tool tilt")
