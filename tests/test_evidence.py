@@ -1,5 +1,6 @@
 """The evidence estimator: per-class prior scales and noise by maximum marginal likelihood."""
 
+import json
 import math
 
 import numpy as np
@@ -181,7 +182,7 @@ def test_given_priors_and_noise_are_used_and_reported():
 
 
 def test_evidence_settings_need_the_evidence_estimator():
-    with pytest.raises(OptionError, match="prior_mm is a setting of the evidence estimator"):
+    with pytest.raises(OptionError, match=r"prior_mm \(--prior-mm\) is a setting of the evidence estimator"):
         CalibrationOptions(prior_mm=0.1).validated()
     with pytest.raises(OptionError, match="noise_mm must be a finite number > 0"):
         CalibrationOptions(lam="evidence", noise_mm=-1.0).validated()
@@ -206,3 +207,57 @@ def test_cv_guard_warns_on_small_volume_with_near_zero_or_flat_curve():
     assert "flat" in small_volume_warning(flat, 0.017, 0.9)
     assert small_volume_warning(clear, 0.017, 0.9) == ""  # a clear interior minimum
     assert small_volume_warning(near_zero, 0.35, 0.9) == ""  # data over the workspace
+
+
+@pytest.fixture(scope="module")
+def rtest_csv(tmp_path_factory):
+    from kincal.cli.main import main
+
+    d = tmp_path_factory.mktemp("rtest")
+    assert main(["simulate", "ec66", "--design", "rtest", "--out", str(d / "rt.csv"),
+                 "--seed", "1"]) == 0
+    return d / "rt.csv"
+
+
+def test_cli_evidence_summary_and_report(rtest_csv, tmp_path, capsys):
+    from kincal.cli.main import main
+
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(rtest_csv), "--out", str(tmp_path / "c.urdf"),
+                 "--lambda", "evidence", "--report", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    assert "chosen by maximum evidence" in out and "noise" in out
+    report = json.loads((tmp_path / "r.json").read_text())
+    ev = report["evidence"]
+    assert set(ev["prior_scales"]) == {"length", "twist", "offset"}
+    assert 0.01 < ev["noise_mm"] < 0.2 and report["cross_validation"] is None
+    assert report["options"]["lambda"] == "evidence"
+
+
+def test_cli_given_tolerances_and_misuse(rtest_csv, tmp_path, capsys):
+    from kincal.cli.main import main
+
+    assert main(["calibrate", "ec66", str(rtest_csv), "--out", str(tmp_path / "c.urdf"),
+                 "--lambda", "evidence", "--prior-mm", "0.3", "--prior-deg", "0.03",
+                 "--noise-mm", "0.05"]) == 0
+    out = capsys.readouterr().out
+    assert "length 0.3 mm (given)" in out and "noise 0.05 mm (given)" in out
+    code = main(["calibrate", "ec66", str(rtest_csv), "--out", str(tmp_path / "d.urdf"),
+                 "--prior-mm", "0.3"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and not (tmp_path / "d.urdf").exists()
+    assert [line for line in err if line.startswith("kincal: error:")] == [
+        "kincal: error: prior_mm (--prior-mm) is a setting of the evidence estimator: use it "
+        "with method l2 and lambda 'evidence' (got method l2, lambda 'cv')"]
+
+
+def test_cv_guard_reaches_the_user_on_small_volume_data(rtest_csv):
+    from kincal.measurements.data import Measurements
+
+    robot = Robot.load("ec66")
+    data = Measurements.from_csv(rtest_csv, robot.joint_names)
+    # a grid of tiny lambdas only: CV must pick almost no penalty on 20 mm-cube data
+    options = CalibrationOptions(lambda_min=1e-6, lambda_max=1e-4, n_lambdas=3)
+    with pytest.warns(UserWarning, match=r"cross-validation: it chose lambda = .* of the arm's "
+                                          r"reach .* --lambda evidence"):
+        CalibrationProblem(robot, data, options).solve()

@@ -99,8 +99,9 @@ class CalibrationOptions:
             if value is None:
                 continue
             if self.lam != "evidence" or self.method != "l2":
-                raise OptionError(f"{key} is a setting of the evidence estimator: use it with "
-                                  f"method l2 and lambda 'evidence' (got method "
+                flag = "--" + key.replace("_", "-")
+                raise OptionError(f"{key} ({flag}) is a setting of the evidence estimator: use "
+                                  f"it with method l2 and lambda 'evidence' (got method "
                                   f"{self.method}, lambda {self.lam!r})")
             if not (math.isfinite(float(value)) and float(value) > 0):
                 raise OptionError(f"{key} must be a finite number > 0, got {value!r}")
