@@ -201,12 +201,14 @@ def test_cv_guard_warns_on_small_volume_with_near_zero_or_flat_curve():
     near_zero = _cv([0.10, 0.11, 0.12, 0.2, 0.4])
     flat = _cv([0.101, 0.100, 0.1005, 0.1009, 0.1010])
     clear = _cv([0.30, 0.2, 0.1, 0.2, 0.4])
-    note = small_volume_warning(near_zero, 0.017, 0.9)
+    note = small_volume_warning(near_zero, 0.017, 0.9, 0.99)
     assert "lambda = 1e-06" in note and "17.0 mm" in note and "1.9 %" in note
-    assert "--lambda evidence" in note
-    assert "flat" in small_volume_warning(flat, 0.017, 0.9)
-    assert small_volume_warning(clear, 0.017, 0.9) == ""  # a clear interior minimum
-    assert small_volume_warning(near_zero, 0.35, 0.9) == ""  # data over the workspace
+    assert "99 % of the pulled parameters free" in note and "--lambda evidence" in note
+    assert "flat" in small_volume_warning(flat, 0.017, 0.9, 0.5)
+    assert small_volume_warning(clear, 0.017, 0.9, 0.5) == ""  # a clear interior minimum
+    # an interior minimum that still leaves almost everything free
+    assert "95 %" in small_volume_warning(clear, 0.017, 0.9, 0.95)
+    assert small_volume_warning(near_zero, 0.35, 0.9, 0.99) == ""  # data over the workspace
 
 
 @pytest.fixture(scope="module")

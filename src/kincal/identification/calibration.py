@@ -329,9 +329,6 @@ class CalibrationProblem:
             if o.lam == "cv":
                 cv = self.cross_validate()
                 lam = cv.best_lambda
-                note = small_volume_warning(cv, self.data_extent(), self.reach())
-                if note:
-                    warnings.warn(f"{self.data.source}: {note}", KincalWarning)
             elif o.lam == "evidence":
                 sol, evidence = self.fit_evidence()
                 lam = evidence.weights(self.prior_classes())
@@ -341,6 +338,11 @@ class CalibrationProblem:
             lam = 0.0
         if sol is None:
             sol = self.fit(lam)
+        if cv is not None:
+            note = small_volume_warning(cv, self.data_extent(), self.reach(),
+                                        self.free_fraction(sol, lam))
+            if note:
+                warnings.warn(f"{self.data.source}: {note}", KincalWarning)
         downweighted = ()
         if o.robust is not None:
             sol, downweighted = self._irls(sol, lam)
@@ -370,6 +372,21 @@ class CalibrationProblem:
             lambda w, u: self.fit(w, start=u * self.scale, free=free, residual=residual),
             lambda u: residual(u, True), u_prior, u_prior, free, self.prior_classes(),
             given, o.noise_mm)
+
+    def free_fraction(self, sol: SolveSummary, lam: float) -> float:
+        """Effective number of free penalised parameters (hat-matrix trace, frames
+        excepted) over their number, at the solution: 1 = no pull, 0 = held at nominal."""
+        free = self.free_mask()
+        pen = self.space.is_penalised[free]
+        if not pen.any():
+            return 1.0
+        J = sol.jacobian[:, free]
+        JtJ = J.T @ J
+        try:
+            hat = np.linalg.solve(JtJ + lam * np.diag(pen.astype(float)), JtJ)
+        except np.linalg.LinAlgError:
+            return 1.0
+        return float((np.trace(hat) - np.sum(~pen)) / np.sum(pen))
 
     def data_extent(self) -> float:
         """[m] largest distance of a measured position (point 1) from their centroid."""
