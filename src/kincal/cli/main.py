@@ -361,9 +361,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("calibrate", help="identify the kinematics and write a corrected URDF")
     _add_common(p)
     p.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
-    p.add_argument("--lambda", dest="lam", default="cv",
-                   help="'cv' (default: the paper's k-fold CV), 'evidence' (priors toward "
-                        "nominal per parameter class, scales and noise by maximum evidence) "
+    p.add_argument("--lambda", dest="lam", default="evidence",
+                   help="'evidence' (default: priors toward nominal per parameter class, "
+                        "scales and noise by maximum evidence), 'cv' (the paper's k-fold CV) "
                         "or a value >= 0")
     p.add_argument("--prior-mm", type=float, metavar="MM",
                    help="with --lambda evidence: tolerance (prior std) of the lengths [mm], "

@@ -24,10 +24,11 @@ class CalibrationOptions:
 
     method: "l2" (penalty toward nominal), "ls" (plain least squares) or "frames" (fit
         only the measurement frame and tool point; kinematics stay nominal).
-    lam: "cv" to choose lambda by cross-validation (the paper's Algorithm 1), "evidence"
-        for Gaussian priors toward nominal per parameter class (lengths, twists, joint
-        offsets, backlash) whose scales and the noise maximise the marginal likelihood
-        (kincal.identification.evidence), or a number >= 0 (method "l2").
+    lam: "evidence" (default) for Gaussian priors toward nominal per parameter class
+        (lengths, twists, joint offsets, backlash) whose scales and the noise maximise the
+        marginal likelihood (kincal.identification.evidence); "cv" to choose one lambda by
+        cross-validation (the paper's Algorithm 1); or a number >= 0 (method "l2"). The
+        default was chosen from scripts/estimators.py (README, "Choosing the penalty").
     prior_mm, prior_deg: with lam "evidence", the prior standard deviation [mm] of the
         length class and [deg] of the twist and joint-offset classes (tolerances), kept
         instead of estimated; None: estimated. noise_mm: likewise the measurement noise,
@@ -59,7 +60,7 @@ class CalibrationOptions:
     """
 
     method: str = "l2"
-    lam: float | str = "cv"
+    lam: float | str = "evidence"
     prior_mm: float | None = None
     prior_deg: float | None = None
     noise_mm: float | None = None
