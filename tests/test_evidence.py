@@ -183,7 +183,9 @@ def test_given_priors_and_noise_are_used_and_reported():
 
 def test_evidence_settings_need_the_evidence_estimator():
     with pytest.raises(OptionError, match=r"prior_mm \(--prior-mm\) is a setting of the evidence estimator"):
-        CalibrationOptions(prior_mm=0.1).validated()
+        CalibrationOptions(lam="cv", prior_mm=0.1).validated()
+    with pytest.raises(OptionError, match=r"noise_mm \(--noise-mm\).*got method ls"):
+        CalibrationOptions(method="ls", noise_mm=0.1).validated()
     with pytest.raises(OptionError, match="noise_mm must be a finite number > 0"):
         CalibrationOptions(lam="evidence", noise_mm=-1.0).validated()
     with pytest.raises(OptionError, match="'cv', 'evidence' or a number"):
@@ -245,7 +247,7 @@ def test_cli_given_tolerances_and_misuse(rtest_csv, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "length 0.3 mm (given)" in out and "noise 0.05 mm (given)" in out
     code = main(["calibrate", "ec66", str(rtest_csv), "--out", str(tmp_path / "d.urdf"),
-                 "--prior-mm", "0.3"])
+                 "--lambda", "cv", "--prior-mm", "0.3"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and not (tmp_path / "d.urdf").exists()
     assert [line for line in err if line.startswith("kincal: error:")] == [
@@ -259,7 +261,7 @@ def test_cv_guard_reaches_the_user_on_small_volume_data(rtest_csv):
     robot = Robot.load("ec66")
     data = Measurements.from_csv(rtest_csv, robot.joint_names)
     # a grid of tiny lambdas only: CV must pick almost no penalty on 20 mm-cube data
-    options = CalibrationOptions(lambda_min=1e-6, lambda_max=1e-4, n_lambdas=3)
+    options = CalibrationOptions(lam="cv", lambda_min=1e-6, lambda_max=1e-4, n_lambdas=3)
     with pytest.warns(UserWarning, match=r"cross-validation: it chose lambda = .* of the arm's "
                                           r"reach .* --lambda evidence"):
         CalibrationProblem(robot, data, options).solve()
