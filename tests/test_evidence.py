@@ -265,3 +265,17 @@ def test_cv_guard_reaches_the_user_on_small_volume_data(rtest_csv):
     with pytest.warns(UserWarning, match=r"cross-validation: it chose lambda = .* of the arm's "
                                           r"reach .* --lambda evidence"):
         CalibrationProblem(robot, data, options).solve()
+
+
+def test_fewer_residuals_than_parameters():
+    """5 poses, 15 equations for 25 parameters: the priors make it solvable."""
+    J, y, groups = _linear(7, m=12, per_class=(5, 5, 5), flat=3)
+    problem = LinearEvidence.of(J, y, groups)
+    scales, noise = np.array([0.2, 0.07, 0.5]), 0.08
+    assert problem.log_evidence(1 / scales ** 2, 1 / noise ** 2) == pytest.approx(
+        _direct_log_evidence(J, y, groups, scales, noise), abs=1e-3)
+    _, _, history, _ = maximise(problem, 3, np.ones(3), 1.0)
+    assert np.all(np.diff(history) >= -1e-9 * abs(history[-1]))
+    robot, _, _, data = _ec66_data(8, n=5)
+    res = CalibrationProblem(robot, data, CalibrationOptions(lam="evidence")).solve()
+    assert res.evidence is not None and np.all(np.isfinite(res.x))

@@ -108,7 +108,7 @@ class LinearEvidence:
     """The linear Gaussian problem y = J d + e in the compressed form of J = Q R.
 
     R: (p, p) triangle, z: (p,) Q^T y, rest2: ||y||^2 - ||z||^2 (the part of y no
-    parameter can fit), m: number of residuals (m > p). groups: (p,) class index per parameter, -1 = flat.
+    parameter can fit), m: number of residuals (any; m <= p leaves rows of R zero). groups: (p,) class index per parameter, -1 = flat.
     """
 
     R: np.ndarray
@@ -121,8 +121,10 @@ class LinearEvidence:
     def of(cls, J: np.ndarray, y: np.ndarray, groups) -> "LinearEvidence":
         p = J.shape[1]
         Rz = triangular_factor(np.column_stack([J, y]))  # no Q: one pass over the rows
-        rest2 = float(Rz[p, p] ** 2) if Rz.shape[0] > p else 0.0
-        return cls(Rz[:p, :p], Rz[:p, p], rest2, J.shape[0], np.asarray(groups, int))
+        if Rz.shape[0] < p + 1:  # fewer residuals than parameters: the prior decides
+            Rz = np.vstack([Rz, np.zeros((p + 1 - Rz.shape[0], p + 1))])
+        return cls(Rz[:p, :p], Rz[:p, p], float(Rz[p, p] ** 2), J.shape[0],
+                   np.asarray(groups, int))
 
     def posterior(self, alpha: np.ndarray, beta: float):
         """(mean (p,), diag of covariance (p,), ||R (R_H^-1)||_F^2, log|H|, E_D) with prior
