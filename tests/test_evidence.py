@@ -279,3 +279,21 @@ def test_fewer_residuals_than_parameters():
     robot, _, _, data = _ec66_data(8, n=5)
     res = CalibrationProblem(robot, data, CalibrationOptions(lam="evidence")).solve()
     assert res.evidence is not None and np.all(np.isfinite(res.x))
+
+
+def test_estimators_script_runs_in_a_reduced_size():
+    """scripts/estimators.py (the README's estimator table) cannot rot: one tracker-like
+    seed through each estimator, and its table."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "estimators.py"
+    spec = importlib.util.spec_from_file_location("estimators_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    row = dict(script.simulated(0, "tracker"), seed=0)
+    # wide, accurate data: every estimator predicts within 15 % of the true parameters
+    for name in ("ls", "cv", "evidence"):
+        assert row[name] < 1.15 * row["truth"], (name, row)
+    table = script._table("title", [row], True)
+    assert table[1].startswith("| case | ls | cv | evidence | truth") and "x)" in table[3]
