@@ -297,3 +297,14 @@ def test_estimators_script_runs_in_a_reduced_size():
         assert row[name] < 1.15 * row["truth"], (name, row)
     table = script._table("title", [row], True)
     assert table[1].startswith("| case | ls | cv | evidence | truth") and "x)" in table[3]
+
+
+def test_free_fraction_of_the_penalty():
+    from kincal.identification.cross_validation import free_fraction
+
+    J = np.diag([1.0, 2.0, 3.0])
+    pen = np.array([True, True, False])
+    assert free_fraction(J, pen, 0.0) == pytest.approx(1.0)
+    # hat diagonal s^2 / (s^2 + lam) per penalised column: 1/2 and 4/5
+    assert free_fraction(J, pen, 1.0) == pytest.approx((0.5 + 0.8) / 2)
+    assert free_fraction(J, pen, 1e12) == pytest.approx(0.0, abs=1e-9)

@@ -354,7 +354,8 @@ def cmd_demo(args) -> int:
 # ------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="kincal", description="Kinematic calibration of serial "
-                                 "robots from URDF (MD-H errors, L2 toward nominal, k-fold CV).")
+                                 "robots from URDF (MD-H errors, L2 toward nominal, evidence "
+                                 "or k-fold CV).")
     ap.add_argument("--version", action="version", version=f"kincal {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
 

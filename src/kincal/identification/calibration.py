@@ -2,7 +2,8 @@
 
 ``CalibrationProblem(robot, data, options)`` builds; ``.analyze()`` returns the
 identifiability of the parameters on these data; ``.solve()`` runs the identification
-(plain least squares, or L2 toward nominal with lambda given or chosen by k-fold CV) and
+(plain least squares, or L2 toward nominal: per-class priors chosen by maximum evidence,
+lambda chosen by k-fold CV, or lambda given) and
 returns a :class:`CalibrationResult`. ``calibrate(...)`` does all three. Options: :mod:`.options`; results: :mod:`.result`.
 """
 
@@ -23,6 +24,7 @@ from kincal.identification.cross_validation import (
     CrossValidation,
     cross_validate,
     lambda_grid,
+    free_fraction,
     small_volume_warning,
 )
 from kincal.identification.frames_init import initial_frames, point_in_tip
@@ -339,8 +341,11 @@ class CalibrationProblem:
         if sol is None:
             sol = self.fit(lam)
         if cv is not None:
-            note = small_volume_warning(cv, self.data_extent(), self.reach(),
-                                        self.free_fraction(sol, lam))
+            free = self.free_mask()
+            P = self.data.positions[self.data.points == 0]
+            note = small_volume_warning(
+                cv, float(np.max(np.linalg.norm(P - P.mean(axis=0), axis=1))), self.reach(),
+                free_fraction(sol.jacobian[:, free], self.space.is_penalised[free], lam))
             if note:
                 warnings.warn(f"{self.data.source}: {note}", KincalWarning)
         downweighted = ()
@@ -372,26 +377,6 @@ class CalibrationProblem:
             lambda w, u: self.fit(w, start=u * self.scale, free=free, residual=residual),
             lambda u: residual(u, True), u_prior, u_prior, free, self.prior_classes(),
             given, o.noise_mm)
-
-    def free_fraction(self, sol: SolveSummary, lam: float) -> float:
-        """Effective number of free penalised parameters (hat-matrix trace, frames
-        excepted) over their number, at the solution: 1 = no pull, 0 = held at nominal."""
-        free = self.free_mask()
-        pen = self.space.is_penalised[free]
-        if not pen.any():
-            return 1.0
-        J = sol.jacobian[:, free]
-        JtJ = J.T @ J
-        try:
-            hat = np.linalg.solve(JtJ + lam * np.diag(pen.astype(float)), JtJ)
-        except np.linalg.LinAlgError:
-            return 1.0
-        return float((np.trace(hat) - np.sum(~pen)) / np.sum(pen))
-
-    def data_extent(self) -> float:
-        """[m] largest distance of a measured position (point 1) from their centroid."""
-        P = self.data.positions[self.data.points == 0]
-        return float(np.max(np.linalg.norm(P - P.mean(axis=0), axis=1)))
 
     def reach(self, samples: int = 500) -> float:
         """[m] largest distance of the tool point from the base frame's origin over seeded

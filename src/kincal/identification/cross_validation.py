@@ -110,6 +110,21 @@ FLAT_CURVE = 0.02  # (max - min) / min of the CV curve below this: a flat curve
 LITTLE_PULL = 0.6  # the penalty leaves at least this fraction of the parameters free
 
 
+def free_fraction(J: np.ndarray, penalised: np.ndarray, lam: float) -> float:
+    """Effective number of free penalised parameters over their number: 1 = no pull
+    toward nominal, 0 = all held at nominal. J: (m, p) Jacobian of the free parameters
+    (reporting units); penalised: (p,) bool; the effective number is the trace of the
+    hat matrix (J^T J + lam P)^-1 J^T J less the unpenalised parameters."""
+    if not penalised.any():
+        return 1.0
+    JtJ = J.T @ J
+    try:
+        hat = np.linalg.solve(JtJ + lam * np.diag(penalised.astype(float)), JtJ)
+    except np.linalg.LinAlgError:
+        return 1.0
+    return float((np.trace(hat) - np.sum(~penalised)) / np.sum(penalised))
+
+
 def small_volume_warning(cv: CrossValidation, extent_m: float, reach_m: float,
                          free_fraction: float) -> str:
     """A warning (or "") when CV's choice cannot be trusted to extrapolate.
