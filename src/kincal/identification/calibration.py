@@ -19,13 +19,11 @@ import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError, KincalWarning
 from kincal.identification import blas_threads
-from kincal.identification import evidence as evidence_estimator
+from kincal.identification import penalty_choice
 from kincal.identification.cross_validation import (
     CrossValidation,
     cross_validate,
     lambda_grid,
-    free_fraction,
-    small_volume_warning,
 )
 from kincal.identification.frames_init import initial_frames, point_in_tip
 from kincal.identification.options import CalibrationOptions
@@ -332,8 +330,8 @@ class CalibrationProblem:
                 cv = self.cross_validate()
                 lam = cv.best_lambda
             elif o.lam == "evidence":
-                sol, evidence = self.fit_evidence()
-                lam = evidence.weights(self.prior_classes())
+                sol, evidence = penalty_choice.fit_evidence(self)
+                lam = evidence.weights(penalty_choice.prior_classes(self))
             else:
                 lam = float(o.lam)
         else:
@@ -341,11 +339,7 @@ class CalibrationProblem:
         if sol is None:
             sol = self.fit(lam)
         if cv is not None:
-            free = self.free_mask()
-            P = self.data.positions[self.data.points == 0]
-            note = small_volume_warning(
-                cv, float(np.max(np.linalg.norm(P - P.mean(axis=0), axis=1))), self.reach(),
-                free_fraction(sol.jacobian[:, free], self.space.is_penalised[free], lam))
+            note = penalty_choice.cv_warning(self, cv, sol, lam)
             if note:
                 warnings.warn(f"{self.data.source}: {note}", KincalWarning)
         downweighted = ()
@@ -356,40 +350,6 @@ class CalibrationProblem:
                           "result is the best iterate and is flagged not converged", KincalWarning)
         result = CalibrationResult._build(self, sol, lam, cv, ident, evidence)
         return replace(result, downweighted=downweighted)
-
-    # --------------------------------------------------------------- evidence
-    def prior_classes(self) -> tuple[str | None, ...]:
-        """(p,) prior class of every parameter (None: flat prior, frames and tools)."""
-        return tuple(evidence_estimator.prior_class(n, bool(pen))
-                     for n, pen in zip(self.space.names, self.space.is_penalised))
-
-    def fit_evidence(self):
-        """(SolveSummary, EvidenceFit): per-class priors and noise by maximum evidence,
-        iterated with the fit (see kincal.identification.evidence)."""
-        o = self.options
-        free = self.free_mask()
-        residual = self.residual_function()
-        u_prior = self.start() / self.scale
-        given = {} if o.prior_mm is None else {"length": o.prior_mm}
-        if o.prior_deg is not None:
-            given.update(twist=o.prior_deg, offset=o.prior_deg)
-        return evidence_estimator.estimate(
-            lambda w, u: self.fit(w, start=u * self.scale, free=free, residual=residual),
-            lambda u: residual(u, True), u_prior, u_prior, free, self.prior_classes(),
-            given, o.noise_mm)
-
-    def reach(self, samples: int = 500) -> float:
-        """[m] largest distance of the tool point from the base frame's origin over seeded
-        random joint values within the limits (joints without limits: +-pi)."""
-        g = self.robot.geometry
-        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
-        q = np.random.default_rng(0).uniform(lo, hi, size=(samples, g.n))
-        x = self.start().copy()
-        x[self.space.n_kinematic:self.space.n_kinematic + 6] = 0.0  # measure in the base frame
-        model = MeasurementModel(self.mdh, q, np.zeros_like(q), self.space.backlash,
-                                 np.zeros(samples, dtype=int), self.space.n_points)
-        return float(np.max(np.linalg.norm(model.predict(x), axis=1)))
 
     def _irls(self, sol: SolveSummary, lam: float, rounds: int = 20):
         """Reweight poses by the robust loss until the weights settle (see kincal.robust)."""
