@@ -138,8 +138,9 @@ def main(argv=None) -> int:
     warnings.simplefilter("ignore")  # LS in a 20 mm cube may stop at the iteration limit
     t0 = time.perf_counter()
     lines = []
-    for design, title in () if args.seeds < 1 else (("rtest", "R-test-like: 60 poses, 20 mm cube, tilt 15 deg, 0.05 mm"),
-                          ("tracker", "Tracker-like: 60 poses, 400 mm cube, tilt 30 deg, 0.01 mm")):
+    designs = (("rtest", "R-test-like: 60 poses, 20 mm cube, tilt 15 deg, 0.05 mm"),
+               ("tracker", "Tracker-like: 60 poses, 400 mm cube, tilt 30 deg, 0.01 mm"))
+    for design, title in designs if args.seeds > 0 else ():
         rows = [dict(simulated(s, design), seed=s) for s in range(args.seeds)]
         lines += _table(f"{title}; held-out mean [mm] (ratio to the true parameters')", rows,
                         True)

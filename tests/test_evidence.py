@@ -182,7 +182,8 @@ def test_given_priors_and_noise_are_used_and_reported():
 
 
 def test_evidence_settings_need_the_evidence_estimator():
-    with pytest.raises(OptionError, match=r"prior_mm \(--prior-mm\) is a setting of the evidence estimator"):
+    with pytest.raises(OptionError,
+                       match=r"prior_mm \(--prior-mm\) is a setting of the evidence estimator"):
         CalibrationOptions(lam="cv", prior_mm=0.1).validated()
     with pytest.raises(OptionError, match=r"noise_mm \(--noise-mm\).*got method ls"):
         CalibrationOptions(method="ls", noise_mm=0.1).validated()

@@ -108,7 +108,8 @@ class LinearEvidence:
     """The linear Gaussian problem y = J d + e in the compressed form of J = Q R.
 
     R: (p, p) triangle, z: (p,) Q^T y, rest2: ||y||^2 - ||z||^2 (the part of y no
-    parameter can fit), m: number of residuals (any; m <= p leaves rows of R zero). groups: (p,) class index per parameter, -1 = flat.
+    parameter can fit), m: number of residuals (any; m <= p leaves rows of R zero).
+    groups: (p,) class index per parameter, -1 = flat.
     """
 
     R: np.ndarray
