@@ -598,7 +598,7 @@ def api_fit(study: Study, model: Model):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalWarning)  # reported once, at load
         return CalibrationProblem(study.robot, study.train.markers[0], CalibrationOptions(
-            method=method, fix=fix, backlash=joints)).solve()
+            method=method, lam="cv", fix=fix, backlash=joints)).solve()
 
 
 def run_row(study: Study, model: Model, nested: bool) -> Row:
@@ -741,7 +741,7 @@ def cli_demo(study: Study, shared: Path, model: Model) -> str:
         if joints:
             common += ["--order-column", ORDER_COLUMN]
         cal = ["calibrate", str(study.paths["urdf"]), str(study.paths["train"]), *common,
-               "--method", method, *(["--fix", *fix] if fix else []),
+               "--method", method, "--lambda", "cv", *(["--fix", *fix] if fix else []),
                *(["--backlash", *joints] if joints else []),
                "--out", str(tmp / "tiago_calibrated.urdf"),
                "--frames-out", str(tmp / "frames.json"), "--quiet"]

@@ -73,7 +73,7 @@ def test_result_carries_everything():
     tool = np.array([0.04, 0.03, 0.11])
     rng, robot, model, q = _setup("ec66", "flange", tool, 5)
     truth, _ = _identifiable_truth(robot, model, q, tool, rng)
-    res = calibrate(robot, measure(model, truth, q, 2e-5, rng), model="mdh", method="l2")
+    res = calibrate(robot, measure(model, truth, q, 2e-5, rng), model="mdh", method="l2", lam="cv")
     assert res.cv is not None and res.cv.lambdas.size == 50 and res.cv.fold_errors.shape == (50, 5)
     assert res.lam == res.cv.best_lambda == res.cv.lambdas[np.argmin(res.cv.mean_error)]
     assert res.after.rms < res.before.rms
@@ -115,7 +115,7 @@ def test_bad_cv_options_are_rejected():
     rng, robot, model, q = _setup("ec66", "flange", tool, 3, n=8)
     data = measure(model, Truth(model.table, BASE, tool), q, 1e-5, rng)
     with pytest.raises(OptionError, match="folds"):
-        calibrate(robot, data, model="mdh", method="l2", folds=9)
+        calibrate(robot, data, model="mdh", method="l2", lam="cv", folds=9)
     with pytest.raises(OptionError, match="lambda"):
         calibrate(robot, data, model="mdh", method="l2", lam=-1.0)
     with pytest.raises(OptionError, match="grid"):
@@ -151,11 +151,11 @@ def test_blas_runs_on_one_thread_while_solving_and_is_restored():
     data = measure(model, Truth(planted_table(model, rng), BASE, tool), q, 1e-5, rng)
     before = blas_threads()
     seen = []
-    res = calibrate(robot, data, model="mdh", method="l2", progress=lambda done, total: seen.append(blas_threads()))
+    res = calibrate(robot, data, model="mdh", method="l2", lam="cv", progress=lambda done, total: seen.append(blas_threads()))
     assert seen and all(s == {1} for s in seen)
     assert blas_threads() == before
     seen.clear()
-    free = calibrate(robot, data, model="mdh", method="l2", blas_threads=None,
+    free = calibrate(robot, data, model="mdh", method="l2", lam="cv", blas_threads=None,
                      progress=lambda done, total: seen.append(blas_threads()))
     assert seen[0] == before
     assert np.allclose(res.x, free.x, rtol=0, atol=1e-12)

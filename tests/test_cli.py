@@ -101,7 +101,7 @@ def test_bad_input_fails_cleanly_with_no_output(case, sim, tmp_path, capsys):
             "unknown_tip": ["ec66", str(data), "--tip", "flang"],
             "unknown_robot": ["ec77", str(data)],
             "bad_lambda": ["ec66", str(data), "--lambda", "much"],
-            "too_many_folds": ["ec66", str(data), "--folds", "1000"],
+            "too_many_folds": ["ec66", str(data), "--lambda", "cv", "--folds", "1000"],
             "unknown_fix": ["ec66", str(data), "--fix", "joint_9.a"]}[case]
     out = tmp_path / "out.urdf"
     assert main(["calibrate", *args, "--out", str(out), "--report", str(tmp_path / "r.json")]) == 1

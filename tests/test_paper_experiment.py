@@ -120,7 +120,8 @@ def test_plot_calibration_of_one_result(tmp_path):
     truth = Truth(planted_table(model, rng), np.array([1.0, 0.2, 0.1, 0.01, 0.02, 0.3]),
                   np.array([0.03, 0.0, 0.1]))
     data = measure(model, truth, q, 5e-5, rng)
-    res = CalibrationProblem(robot, data, CalibrationOptions(n_lambdas=6, folds=3)).solve()
+    res = CalibrationProblem(robot, data, CalibrationOptions(lam="cv", n_lambdas=6,
+                                                                folds=3)).solve()
     paths = plots.plot_calibration(res, tmp_path)
     assert [p.name for p in paths] == ["cv_curve.png", "residuals.png", "parameters.png"]
     for p in paths:

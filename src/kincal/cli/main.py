@@ -134,12 +134,15 @@ def _options(args, method):
     from kincal.identification.calibration import CalibrationOptions
 
     lam = args.lam
-    if lam != "cv":
+    if lam not in ("cv", "evidence"):
         try:
             lam = float(lam)
         except ValueError:
-            raise OptionError(f"--lambda must be 'cv' or a number, got {lam!r}") from None
+            raise OptionError(f"--lambda must be 'cv', 'evidence' or a number, got "
+                              f"{lam!r}") from None
     return CalibrationOptions(model=args.model, method=method, lam=lam, folds=args.folds, seed=args.seed,
+                              prior_mm=args.prior_mm, prior_deg=args.prior_deg,
+                              noise_mm=args.noise_mm,
                               fix=tuple(args.fix), free=tuple(args.free),
                               backlash=tuple(args.backlash),
                               tool_guess=_tool_offset(args), robust=args.robust,
@@ -543,7 +546,8 @@ def cmd_demo(args) -> int:
 # ------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="kincal", description="Kinematic calibration of serial "
-                                 "robots from URDF (MD-H errors, L2 toward nominal, k-fold CV).")
+                                 "robots from URDF (MD-H errors, L2 toward nominal, evidence "
+                                 "or k-fold CV).")
     ap.add_argument("--version", action="version", version=f"kincal {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
 
@@ -551,7 +555,19 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     _add_model(p)
     p.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
-    p.add_argument("--lambda", dest="lam", default="cv", help="'cv' (default) or a value >= 0")
+    p.add_argument("--lambda", dest="lam", default="evidence",
+                   help="'evidence' (default: priors toward nominal per parameter class, "
+                        "scales and noise by maximum evidence), 'cv' (the paper's k-fold CV) "
+                        "or a value >= 0")
+    p.add_argument("--prior-mm", type=float, metavar="MM",
+                   help="with --lambda evidence: tolerance (prior std) of the lengths [mm], "
+                        "given instead of estimated")
+    p.add_argument("--prior-deg", type=float, metavar="DEG",
+                   help="with --lambda evidence: tolerance of the twists and joint offsets "
+                        "[deg], given instead of estimated")
+    p.add_argument("--noise-mm", type=float, metavar="MM",
+                   help="with --lambda evidence: measurement noise, std per axis [mm], given "
+                        "instead of estimated")
     p.add_argument("--folds", type=int, default=5)
     p.add_argument("--seed", type=int, default=0, help="seed of the CV fold split")
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME",

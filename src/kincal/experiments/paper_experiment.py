@@ -177,6 +177,8 @@ class ExperimentConfig:
     frame_guess_error_m, frame_guess_error_deg: error of the coarse (hand-eye) R-test
         frame and tool guess the fits start from (per axis, Gaussian).
     n_lambdas, folds, lambda_min, lambda_max: the CV of L2 (paper: 50, 5, 1e-6, 1e3).
+    l2_lambda: how "L2 + R-test" sets its penalty: "cv" (the paper's Algorithm 1, always
+        named explicitly here, whatever kincal's default), "evidence" or a number.
     """
 
     seed: int = 0
@@ -202,6 +204,7 @@ class ExperimentConfig:
     folds: int = 5
     lambda_min: float = 1e-6
     lambda_max: float = 1e3
+    l2_lambda: float | str = "cv"
 
     @classmethod
     def small(cls, seed: int = 0) -> "ExperimentConfig":
@@ -407,7 +410,7 @@ def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] 
                                 r_split.normal(size=3) * math.radians(cfg.frame_guess_error_deg)])
     common = dict(model="mdh", folds=cfg.folds, seed=cfg.seed, n_lambdas=cfg.n_lambdas,
                   lambda_min=cfg.lambda_min, lambda_max=cfg.lambda_max)
-    rt_opts = CalibrationOptions(base_guess=tuple(rtest_base + guess_err),
+    rt_opts = CalibrationOptions(lam=cfg.l2_lambda, base_guess=tuple(rtest_base + guess_err),
                                  tool_guess=tuple(tool + r_split.normal(size=3)
                                                   * cfg.frame_guess_error_m), **common)
     fits, notes = {}, []
@@ -682,7 +685,7 @@ def rtest_scenario(seed: int, error_model: str = "mdh") -> dict:
     frames = CalibrationOptions(method="frames", model=error_model)
     row["before"] = CalibrationProblem(robot, val, frames).solve().after.mean
     for method in ("ls", "l2"):
-        res = CalibrationProblem(robot, data, CalibrationOptions(method=method, model=error_model)).solve()
+        res = CalibrationProblem(robot, data, CalibrationOptions(method=method, model=error_model, lam="cv")).solve()
         # validation as in the paper: kinematics fixed, frames fitted on the validation set
         row[method] = CalibrationProblem(res.corrected, val, frames).solve().after.mean
         row[f"{method}_cal"] = res.after.mean

@@ -248,6 +248,8 @@ def plot_calibration(result, out_dir, overwrite: bool = False,
     kin = list(result.parameters[:result.space.n_kinematic])
     if any(p.status == "identified" for p in kin):
         how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")
+        if result.evidence is not None:  # one weight per class, no single lambda
+            how = result.options.method + ", evidence priors"
         weak = {w.name for w in result.identifiability.weak}
         paths.append(_plot_estimates(kin, out_dir / "parameters.png", overwrite, source,
                                      f"Identified deviations from nominal ({how})", weak))

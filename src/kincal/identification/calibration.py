@@ -2,7 +2,8 @@
 
 ``CalibrationProblem(robot, data, options)`` builds; ``.analyze()`` returns the
 identifiability of the parameters on these data; ``.solve()`` runs the identification
-(plain least squares, or L2 toward nominal with lambda given or chosen by k-fold CV) and
+(plain least squares, or L2 toward nominal: per-class priors chosen by maximum evidence,
+lambda chosen by k-fold CV, or lambda given) and
 returns a :class:`CalibrationResult`. ``calibrate(...)`` does all three. Options: :mod:`.options`; results: :mod:`.result`.
 """
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError, KincalWarning, ParameterError
 from kincal.identification import blas_threads
+from kincal.identification import penalty_choice
 from kincal.identification.cross_validation import (
     CrossValidation,
     cross_validate,
@@ -339,23 +341,31 @@ class CalibrationProblem:
                 f"{math.ceil((len(general.kept) + 1) / per_pose)} poses (and many more spread over the "
                 "workspace); with these poses it would only interpolate. Method l2 can work "
                 "with fewer, pulling what the data cannot fix toward nominal")
-        cv = None
+        cv = evidence = sol = None
         if o.method == "l2":
             if o.lam == "cv":
                 cv = self.cross_validate()
                 lam = cv.best_lambda
+            elif o.lam == "evidence":
+                sol, evidence = penalty_choice.fit_evidence(self)
+                lam = evidence.weights(penalty_choice.prior_classes(self))
             else:
                 lam = float(o.lam)
         else:
             lam = 0.0
-        sol = self.fit(lam)
+        if sol is None:
+            sol = self.fit(lam)
+        if cv is not None:
+            note = penalty_choice.cv_warning(self, cv, sol, lam)
+            if note:
+                warnings.warn(f"{self.data.source}: {note}", KincalWarning)
         downweighted = ()
         if o.robust is not None:
             sol, downweighted = self._irls(sol, lam)
         if not sol.converged:
             warnings.warn(f"the solver did not converge in {sol.iterations} iterations; the "
                           "result is the best iterate and is flagged not converged", KincalWarning)
-        result = CalibrationResult._build(self, sol, lam, cv, ident)
+        result = CalibrationResult._build(self, sol, lam, cv, ident, evidence)
         return replace(result, downweighted=downweighted)
 
     def _irls(self, sol: SolveSummary, lam: float, rounds: int = 20):

@@ -96,3 +96,62 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
     mean = errors.mean(axis=1)
     best = int(np.argmin(mean))
     return CrossValidation(lambdas, errors, mean, best, float(lambdas[best]), folds, seed)
+
+
+# The guard's thresholds. CV judges prediction inside the volume the data cover; when that
+# volume is a small part of the workspace and CV prefers little pull toward nominal, or
+# cannot tell the candidates apart, nothing in the data tells how the fit extrapolates.
+# Set from the ten R-test-like seeds of scripts/estimators.py (extent / reach 0.013, the
+# tracker-like sets 0.25-0.28): the two seeds where CV extrapolated worst (4.5x and 2.7x
+# the evidence estimator's held-out error) left 0.68 and 0.67 of the parameters free,
+# the other eight 0.11-0.52.
+SMALL_VOLUME = 0.1  # data extent / reach below this: a small measurement volume
+FLAT_CURVE = 0.02  # (max - min) / min of the CV curve below this: a flat curve
+LITTLE_PULL = 0.6  # the penalty leaves at least this fraction of the parameters free
+
+
+def free_fraction(J: np.ndarray, penalised: np.ndarray, lam: float) -> float:
+    """Effective number of free penalised parameters over their number: 1 = no pull
+    toward nominal, 0 = all held at nominal. J: (m, p) Jacobian of the free parameters
+    (reporting units); penalised: (p,) bool; the effective number is the trace of the
+    hat matrix (J^T J + lam P)^-1 J^T J less the unpenalised parameters."""
+    if not penalised.any():
+        return 1.0
+    JtJ = J.T @ J
+    try:
+        hat = np.linalg.solve(JtJ + lam * np.diag(penalised.astype(float)), JtJ)
+    except np.linalg.LinAlgError:
+        return 1.0
+    return float((np.trace(hat) - np.sum(~penalised)) / np.sum(penalised))
+
+
+def small_volume_warning(cv: CrossValidation, extent_m: float, reach_m: float,
+                         free_fraction: float) -> str:
+    """A warning (or "") when CV's choice cannot be trusted to extrapolate.
+
+    extent_m: largest distance of a measured position from their centroid [m];
+    reach_m: largest distance of the tool point from the robot base [m];
+    free_fraction: effective number of penalised parameters the fit leaves free (trace of
+    the hat matrix, frames excepted) over their number: 1 = no pull toward nominal.
+    Scale-free where lambda is not: what counts as a small lambda depends on the data.
+    """
+    ratio = extent_m / reach_m if reach_m > 0 else 0.0
+    lo, hi = float(np.min(cv.mean_error)), float(np.max(cv.mean_error))
+    flat = hi - lo <= FLAT_CURVE * lo
+    near_zero = free_fraction >= LITTLE_PULL or cv.best_index == 0
+    if ratio >= SMALL_VOLUME or not (flat or near_zero):
+        return ""
+    why = []
+    if near_zero:
+        why.append(f"it chose lambda = {cv.best_lambda:.3g}, which leaves "
+                   f"{100 * free_fraction:.0f} % of the pulled parameters free (little "
+                   "pull toward nominal)")
+    if flat:
+        why.append(f"its curve is flat (validation error {lo:.4g} to {hi:.4g} mm over "
+                   f"lambda {cv.lambdas[0]:.3g} to {cv.lambdas[-1]:.3g})")
+    return (f"cross-validation: {' and '.join(why)}, on data within {extent_m * 1e3:.1f} mm "
+            f"of their centre, {100 * ratio:.1f} % of the arm's reach ({reach_m * 1e3:.0f} mm): "
+            "CV judges prediction inside this small volume only and cannot see how the fit "
+            "extrapolates. Use --lambda evidence (priors toward nominal chosen from the "
+            "data), or give the tolerances (--lambda evidence --prior-mm --prior-deg), or "
+            "measure poses spread over more of the workspace or with more tool tilt")

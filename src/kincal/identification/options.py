@@ -26,7 +26,15 @@ class CalibrationOptions:
         "offsets"): which geometric errors the chain may have.
     method: "l2" (penalty toward nominal), "ls" (plain least squares) or "frames" (fit
         only the measurement frame and tool point; kinematics stay nominal).
-    lam: "cv" to choose lambda by cross-validation, or a number >= 0 (method "l2").
+    lam: "evidence" (default) for Gaussian priors toward nominal per parameter class
+        (lengths, twists, joint offsets, backlash) whose scales and the noise maximise the
+        marginal likelihood (kincal.identification.evidence); "cv" to choose one lambda by
+        cross-validation (the paper's Algorithm 1); or a number >= 0 (method "l2"). The
+        default was chosen from scripts/estimators.py (README, "Choosing the penalty").
+    prior_mm, prior_deg: with lam "evidence", the prior standard deviation [mm] of the
+        length class and [deg] of the twist and joint-offset classes (tolerances), kept
+        instead of estimated; None: estimated. noise_mm: likewise the measurement noise,
+        standard deviation per axis of a unit-weight sample [mm].
     folds, seed: k and the seed of the fold split.
     lambda_min, lambda_max, n_lambdas: the CV grid (log-spaced; paper: 1e-6, 1e3, 50).
     length_scale [m], angle_scale [rad]: the unit s of the penalty
@@ -56,7 +64,10 @@ class CalibrationOptions:
 
     model: str = "complete"
     method: str = "l2"
-    lam: float | str = "cv"
+    lam: float | str = "evidence"
+    prior_mm: float | None = None
+    prior_deg: float | None = None
+    noise_mm: float | None = None
     folds: int = 5
     seed: int = 0
     lambda_min: float = 1e-6
@@ -88,10 +99,23 @@ class CalibrationOptions:
         if self.method not in METHODS:
             raise OptionError(f"unknown method {self.method!r}; expected one of {', '.join(METHODS)}")
         if isinstance(self.lam, str):
-            if self.lam != "cv":
-                raise OptionError(f"lambda must be 'cv' or a number >= 0, got {self.lam!r}")
+            if self.lam not in ("cv", "evidence"):
+                raise OptionError(f"lambda must be 'cv', 'evidence' or a number >= 0, got "
+                                  f"{self.lam!r}")
         elif not (math.isfinite(float(self.lam)) and float(self.lam) >= 0):
-            raise OptionError(f"lambda must be 'cv' or a finite number >= 0, got {self.lam!r}")
+            raise OptionError(f"lambda must be 'cv', 'evidence' or a finite number >= 0, got "
+                              f"{self.lam!r}")
+        for key in ("prior_mm", "prior_deg", "noise_mm"):
+            value = getattr(self, key)
+            if value is None:
+                continue
+            if self.lam != "evidence" or self.method != "l2":
+                flag = "--" + key.replace("_", "-")
+                raise OptionError(f"{key} ({flag}) is a setting of the evidence estimator: use "
+                                  f"it with method l2 and lambda 'evidence' (got method "
+                                  f"{self.method}, lambda {self.lam!r})")
+            if not (math.isfinite(float(value)) and float(value) > 0):
+                raise OptionError(f"{key} must be a finite number > 0, got {value!r}")
         if not (self.length_scale > 0 and self.angle_scale > 0):
             raise OptionError("length_scale and angle_scale must be > 0")
         if self.tool_guess is not None and np.shape(self.tool_guess) != (3,):

@@ -11,6 +11,7 @@ import numpy as np
 from kincal.identification.cross_validation import (
     CrossValidation,
 )
+from kincal.identification.evidence import EvidenceFit
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.parameters import ParameterSpace
 from kincal.identification.robust import Downweighted
@@ -55,13 +56,15 @@ class ParameterEstimate:
 
 
 
-def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam: float,
+def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam,
                 scale: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """Sandwich standard errors [SI] of the free parameters (NaN for the others), and their
     (p, p) covariance [SI] (zero rows and columns for the parameters held fixed), or None
-    when it cannot be estimated."""
+    when it cannot be estimated.
+
+    lam: one weight, or (p,) weights per parameter (evidence priors)."""
     J = sol.jacobian[:, free]
-    H = J.T @ J + lam * np.diag(penalised[free].astype(float))
+    H = J.T @ J + np.diag((np.broadcast_to(lam, penalised.shape) * penalised)[free])
     out = np.full(scale.size, np.nan)
     try:
         Hi = np.linalg.inv(H)
@@ -108,8 +111,9 @@ class CalibrationResult:
     robot: the nominal robot; corrected: the robot with identified joint placements.
     parameters: one ParameterEstimate per parameter (kinematic, base, tool).
     x_nominal / x_start / x: parameter vectors (nominal; nominal kinematics with fitted
-    frames; identified). lam: the penalty weight used (0 for LS). cv: the CV curve or
-    None. before / after: position errors on the calibration data [mm] with the start
+    frames; identified). lam: the penalty weight used (0 for LS; NaN with evidence
+    priors, whose weights differ per class). cv: the CV curve or None. evidence: the
+    prior scales and noise chosen by evidence (lam "evidence"), or None. before / after: position errors on the calibration data [mm] with the start
     and the identified parameters. residuals: (N, 3) after calibration [m].
     solve: the final solve's summary (cost history, convergence).
     """
@@ -141,9 +145,11 @@ class CalibrationResult:
     covariance: np.ndarray | None = None
     joint_values: np.ndarray | None = None  # (N, n) chain joint values of the samples [rad, m]
     approach: np.ndarray | None = None  # (N, n) approach directions of the samples (+1/-1/0)
+    evidence: EvidenceFit | None = None
 
     @classmethod
-    def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
+    def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
+               evidence: EvidenceFit | None = None):
         sp = problem.space
         x = sol.u * problem.scale
         free = problem.free_mask()
@@ -163,12 +169,12 @@ class CalibrationResult:
         res_before = problem.position_errors(x_start)
         res = problem.position_errors(x)
         return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
-                   x, float(lam), cv, ErrorStats.from_errors(res_before),
+                   x, float(lam) if evidence is None else math.nan, cv, ErrorStats.from_errors(res_before),
                    ErrorStats.from_errors(res), res, sol, ident, problem.error_model,
                    np.asarray(problem.data.rows), residuals_before=res_before,
                    order_source=problem.data.order_source, points=problem.data.points,
                    covariance=covariance, joint_values=problem.data.joint_values,
-                   approach=problem.data.approach)
+                   approach=problem.data.approach, evidence=evidence)
 
     # ------------------------------------------------------------ accessors
     @property
@@ -276,9 +282,16 @@ class CalibrationResult:
                                  protect=protect)
 
     def summary(self) -> str:
+        ev = self.evidence
         lines = [f"kincal calibration of {self.robot.name} ({self.robot.base} -> {self.robot.tip}), "
-                 f"method {self.options.method}, lambda = {self.lam:.4g}"
+                 f"method {self.options.method}, "
+                 + (f"lambda = {self.lam:.4g}" if ev is None else "priors toward nominal per "
+                    "class, " + ("given" if ev.given.all() and ev.noise_given
+                                 else "chosen by maximum evidence"))
                  + (" (chosen by cross-validation)" if self.cv is not None else ""),
+                 *([f"  {ev.line()}"
+                    + ("" if ev.converged else f" [NOT SETTLED in {ev.iterations} rounds]")]
+                   if ev is not None else []),
                  f"  {self.identifiability.summary().splitlines()[0]}",
                  *([f"  {self.space.n_points} measured points per pose: statistics are over "
                     "every point"] if self.space.n_points > 1 else []),

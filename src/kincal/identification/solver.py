@@ -82,7 +82,7 @@ def triangular_factor(A: np.ndarray) -> np.ndarray:
         return np.linalg.qr(A, mode="r")
 
 
-def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float = 0.0,
+def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.ndarray = 0.0,
           penalised: np.ndarray | None = None, prior: np.ndarray | None = None,
           options: SolverOptions = SolverOptions()) -> SolveSummary:
     """Minimise F from ``u0`` over the parameters where ``free`` is True.
@@ -91,17 +91,22 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float = 0.0
         and their Jacobian with respect to u (measured minus predicted has J = -dP/du;
         either sign convention works as long as J = dr/du).
     penalised: (p,) bool, parameters pulled toward ``prior`` with weight lam.
+    lam: one weight for every penalised parameter, or (p,) weights, one per parameter
+        (per-class priors, kincal.identification.evidence; entries off ``penalised`` unused).
     """
     p = u0.size
     free_idx = np.flatnonzero(free)
     pen = np.zeros(p, dtype=bool) if penalised is None else np.asarray(penalised, dtype=bool)
     prior = u0.copy() if prior is None else np.asarray(prior, dtype=float)
     pen_f = pen[free_idx]
-    sq = np.sqrt(lam) if lam > 0 else 0.0
+    lam_p = np.broadcast_to(np.asarray(lam, dtype=float), (p,))
+    sq_f = np.sqrt(np.maximum(lam_p[free_idx][pen_f], 0.0))  # per penalised free parameter
 
     def objective(u, r):
         d = (u - prior)[pen]
-        return float(r @ r), float(lam * (d @ d))
+        if np.ndim(lam) == 0:  # the paper's single weight: the original arithmetic
+            return float(r @ r), float(lam * (d @ d))
+        return float(r @ r), float(lam_p[pen] @ (d * d))
 
     u = u0.astype(float).copy()
     r, J = residual(u, True)
@@ -123,11 +128,11 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float = 0.0
         k = free_idx.size
         rows, rhs = [Rz[:k, :k]], [Rz[:k, k]]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
-        if sq > 0 and pen_f.any():
+        if np.any(sq_f > 0):
             P = np.zeros((pen_f.sum(), free_idx.size))
-            P[np.arange(pen_f.sum()), np.flatnonzero(pen_f)] = sq
+            P[np.arange(pen_f.sum()), np.flatnonzero(pen_f)] = sq_f
             rows.append(P)
-            rhs.append(-sq * (u - prior)[free_idx][pen_f])
+            rhs.append(-sq_f * (u - prior)[free_idx][pen_f])
         A0, b0 = np.vstack(rows), np.concatenate(rhs)
         colnorm2 = np.maximum(np.einsum("ij,ij->j", A0, A0), 1e-30)
         accepted = False

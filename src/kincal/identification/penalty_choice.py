@@ -1,0 +1,74 @@
+"""Choosing the pull toward nominal on a calibration problem: the evidence priors, and the
+guard on cross-validation's choice.
+
+The glue between :class:`~kincal.identification.calibration.CalibrationProblem` and the
+plain-numpy estimators (:mod:`kincal.identification.evidence`,
+:mod:`kincal.identification.cross_validation`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from kincal.identification import evidence
+from kincal.identification.cross_validation import (
+    CrossValidation,
+    free_fraction,
+    small_volume_warning,
+)
+from kincal.identification.solver import SolveSummary
+from kincal.measurements.point import MeasurementModel
+
+if TYPE_CHECKING:
+    from kincal.identification.calibration import CalibrationProblem
+
+
+def prior_classes(problem: CalibrationProblem) -> tuple[str | None, ...]:
+    """(p,) prior class of every parameter (None: flat prior, frames and tools)."""
+    sp = problem.space
+    return tuple(evidence.prior_class(n, bool(pen)) for n, pen in zip(sp.names, sp.is_penalised))
+
+
+def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.EvidenceFit]:
+    """Per-class priors and the noise by maximum evidence, iterated with the fit; the
+    options' prior_mm / prior_deg / noise_mm are kept where given."""
+    o = problem.options
+    free = problem.free_mask()
+    residual = problem.residual_function()
+    u_prior = problem.start() / problem.scale
+    given = {} if o.prior_mm is None else {"length": o.prior_mm}
+    if o.prior_deg is not None:
+        given.update(twist=o.prior_deg, offset=o.prior_deg)
+    return evidence.estimate(
+        lambda w, u: problem.fit(w, start=u * problem.scale, free=free, residual=residual),
+        lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,
+        o.noise_mm)
+
+
+def reach(problem: CalibrationProblem, samples: int = 500) -> float:
+    """[m] largest distance of the tool point from the base frame's origin over seeded
+    random joint values within the limits (joints without limits: +-pi)."""
+    g = problem.robot.geometry
+    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+    q = np.random.default_rng(0).uniform(lo, hi, size=(samples, g.n))
+    sp = problem.space
+    x = problem.start().copy()
+    x[sp.n_kinematic:sp.n_kinematic + 6] = 0.0  # the measurement frame at the base frame
+    model = MeasurementModel(problem.mdh, q, np.zeros_like(q), sp.backlash,
+                             np.zeros(samples, dtype=int), sp.n_points)
+    return float(np.max(np.linalg.norm(model.predict(x), axis=1)))
+
+
+def cv_warning(problem: CalibrationProblem, cv: CrossValidation, sol: SolveSummary,
+               lam: float) -> str:
+    """The guard's warning (or "") for CV's lambda on these data: small measurement volume
+    and little pull or a flat curve (see cross_validation.small_volume_warning)."""
+    free = problem.free_mask()
+    P = problem.data.positions[problem.data.points == 0]
+    extent = float(np.max(np.linalg.norm(P - P.mean(axis=0), axis=1)))
+    return small_volume_warning(cv, extent, reach(problem),
+                                free_fraction(sol.jacobian[:, free],
+                                              problem.space.is_penalised[free], lam))

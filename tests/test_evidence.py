@@ -1,0 +1,311 @@
+"""The evidence estimator: per-class prior scales and noise by maximum marginal likelihood."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import scipy.optimize
+from conftest import random_joint_values
+
+from kincal.errors import OptionError
+from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.cross_validation import CrossValidation, small_volume_warning
+from kincal.identification.evidence import LinearEvidence, maximise, prior_class
+from kincal.identification.solver import SolverOptions, solve
+from kincal.models import mdh
+from kincal.planning.simulation import Truth, measure, planted_table, true_positions
+from kincal.robot import Robot
+
+
+def _linear(seed, m=300, per_class=(15, 15, 15), flat=4, scales=(0.3, 0.05, 1.0), noise=0.1):
+    """y = J d + e with d_i ~ N(0, scale of its class^2), flat-prior columns last."""
+    rng = np.random.default_rng(seed)
+    groups = np.concatenate([np.full(n, c) for c, n in enumerate(per_class)]
+                            + [np.full(flat, -1)])
+    J = rng.normal(size=(m, groups.size)) * rng.uniform(0.3, 3.0, size=groups.size)
+    d = np.where(groups >= 0, np.asarray(scales)[np.maximum(groups, 0)], 10.0)
+    d = d * rng.normal(size=groups.size)
+    y = J @ d + rng.normal(size=m) * noise
+    return J, y, groups
+
+
+def _direct_log_evidence(J, y, groups, scales, noise, flat_var=1e6):
+    """log N(y; 0, noise^2 I + J S J^T) by the m x m covariance, flat priors as a huge
+    variance with its log-normaliser removed (the limit the estimator uses; the error
+    is O(1 / flat_var), and much larger variances lose the m x m determinant to rounding)."""
+    var = np.where(groups >= 0, np.asarray(scales, float)[np.maximum(groups, 0)] ** 2,
+                   flat_var)
+    C = noise ** 2 * np.eye(len(y)) + (J * var) @ J.T
+    _, logdet = np.linalg.slogdet(C)
+    n_flat = int(np.sum(groups < 0))
+    return float(-0.5 * (y @ np.linalg.solve(C, y) + logdet + len(y) * math.log(2 * math.pi))
+                 + 0.5 * n_flat * math.log(flat_var))
+
+
+def test_log_evidence_matches_the_direct_gaussian_marginal():
+    J, y, groups = _linear(0, m=120, per_class=(6, 5, 4), flat=3)
+    scales, noise = np.array([0.2, 0.07, 0.5]), 0.08
+    fast = LinearEvidence.of(J, y, groups).log_evidence(1 / scales ** 2, 1 / noise ** 2)
+    assert fast == pytest.approx(_direct_log_evidence(J, y, groups, scales, noise), abs=1e-3)
+    # without flat parameters the two are the same formula, to rounding
+    keep = groups >= 0
+    fast = LinearEvidence.of(J[:, keep], y, groups[keep]).log_evidence(1 / scales ** 2,
+                                                                        1 / noise ** 2)
+    exact = _direct_log_evidence(J[:, keep], y, groups[keep], scales, noise)
+    assert fast == pytest.approx(exact, rel=1e-10, abs=1e-8)
+
+
+def test_maximiser_is_the_brute_force_maximum_and_monotone():
+    J, y, groups = _linear(1, m=90, per_class=(6, 6, 6), flat=3)
+    problem = LinearEvidence.of(J, y, groups)
+    alpha, beta, history, converged = maximise(problem, 3, np.ones(3), 1.0)
+    assert converged
+    # every iteration raised (never lowered) the evidence
+    assert np.all(np.diff(history) >= -1e-9 * abs(history[-1]))
+    assert history[-1] > history[0] + 1.0
+
+    # independent: a grid over log scales and log noise on the m x m formula, then
+    # Nelder-Mead from the best grid point (from a poor start it stalls: not concave)
+    def negative(v):
+        return -_direct_log_evidence(J, y, groups, np.exp(v[:3]), np.exp(v[3]))
+
+    axis = np.log(np.logspace(-2, 1, 7))
+    grid = np.array(np.meshgrid(axis, axis, axis, axis)).reshape(4, -1).T
+    start = grid[np.argmin([negative(v) for v in grid])]
+    simplex = start + 0.3 * np.vstack([np.zeros(4), np.eye(4)])  # one grid step
+    brute = scipy.optimize.minimize(negative, start, method="Nelder-Mead",
+                                    options=dict(xatol=1e-6, fatol=1e-9, maxiter=4000,
+                                                 maxfev=4000, initial_simplex=simplex))
+    assert np.exp(brute.x[:3]) == pytest.approx(1 / np.sqrt(alpha), rel=2e-3)
+    assert np.exp(brute.x[3]) == pytest.approx(1 / math.sqrt(beta), rel=2e-3)
+    assert -brute.fun == pytest.approx(history[-1], abs=1e-3)
+
+
+def test_recovers_known_prior_scales_and_noise():
+    scales, noise = np.array([0.3, 0.05, 1.0]), 0.1
+    J, y, groups = _linear(2, m=1500, per_class=(50, 50, 50), flat=6, scales=scales,
+                           noise=noise)
+    alpha, beta, _, converged = maximise(LinearEvidence.of(J, y, groups), 3, np.ones(3), 1.0)
+    assert converged
+    # 50 draws per class: a scale is known to ~1/sqrt(100), 10 %
+    assert 1 / np.sqrt(alpha) == pytest.approx(scales, rel=0.3)
+    assert 1 / math.sqrt(beta) == pytest.approx(noise, rel=0.05)
+
+
+def test_given_hyperparameters_stay_put():
+    J, y, groups = _linear(3, m=200)
+    alpha0 = np.array([4.0, 100.0, 1.0])
+    alpha, beta, history, _ = maximise(LinearEvidence.of(J, y, groups), 3, alpha0, 50.0,
+                                       alpha_fixed=np.array([True, False, True]),
+                                       beta_fixed=True)
+    assert alpha[0] == 4.0 and alpha[2] == 1.0 and beta == 50.0
+    assert alpha[1] != 100.0
+    assert np.all(np.diff(history) >= -1e-9 * abs(history[-1]))
+
+
+@pytest.mark.parametrize("name, cls", [
+    ("joint_3.a", "length"), ("joint_3.d", "length"), ("arm_2_joint.tx", "length"),
+    ("j.ty", "length"), ("j.tz", "length"), ("joint_3.alpha", "twist"),
+    ("joint_3.beta", "twist"), ("j.rx", "twist"), ("j.ry", "twist"), ("j.rz", "twist"),
+    ("joint_3.theta", "offset"), ("joint_6.backlash", "backlash")])
+def test_prior_class_by_suffix(name, cls):
+    assert prior_class(name) == cls
+
+
+def test_prior_class_flat_and_unknown():
+    assert prior_class("base.rz", penalised=False) is None
+    with pytest.raises(ValueError, match="no prior class.*'foo'"):
+        prior_class("joint_3.foo")
+
+
+def test_per_parameter_weights_give_the_closed_form():
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(40, 6))
+    b = rng.normal(size=40)
+    u0 = rng.normal(size=6)
+    pen = np.array([1, 1, 1, 1, 0, 0], dtype=bool)
+    lam = np.array([0.1, 3.0, 30.0, 0.0, 99.0, 99.0])  # off-penalised entries unused
+    sol = solve(lambda u, jac: (A @ u - b, A if jac else None), u0, np.ones(6, bool),
+                lam=lam, penalised=pen, prior=u0, options=SolverOptions(step_tol=1e-14))
+    L = np.diag(np.where(pen, lam, 0.0))
+    expected = np.linalg.solve(A.T @ A + L, A.T @ b + L @ u0)
+    assert np.abs(sol.u - expected).max() < 1e-9
+
+
+def _ec66_data(seed, n=60, noise=1e-5):
+    rng = np.random.default_rng(seed)
+    robot = Robot.load("ec66")
+    model = mdh.extract(robot.geometry)
+    q = random_joint_values(robot.geometry, rng, n)
+    truth = Truth(planted_table(model, rng), np.array([0.6, 0.2, -0.1, 0.01, 0.02, 0.5]),
+                  np.array([0.03, 0.02, 0.12]))
+    return robot, model, truth, measure(model, truth, q, noise, rng)
+
+
+def test_calibration_with_evidence_recovers_planted_errors():
+    robot, model, truth, data = _ec66_data(5)
+    res = CalibrationProblem(robot, data, CalibrationOptions(lam="evidence")).solve()
+    ev = res.evidence
+    assert ev is not None and ev.converged and math.isnan(res.lam)
+    # the noise (0.01 mm per axis) is found, and the fit leaves only noise behind
+    assert ev.noise_mm == pytest.approx(0.01, rel=0.2)
+    assert res.after.rms < 0.02
+    # planted errors of 0.3 mm / 0.03 deg (redundant ones absorbed by the kept ones, so
+    # compare predictions): on 200 new poses the model predicts the true robot to within
+    # the noise, as plain least squares does on these well-spread poses
+    q = random_joint_values(robot.geometry, np.random.default_rng(50), 200)
+    true = true_positions(model, truth, q)
+    err = np.linalg.norm(res.predict(q) - true, axis=1).mean()
+    ls = CalibrationProblem(robot, data, CalibrationOptions(method="ls")).solve()
+    err_ls = np.linalg.norm(ls.predict(q) - true, axis=1).mean()
+    nominal = CalibrationProblem(robot, data, CalibrationOptions(method="frames")).solve()
+    err_nominal = np.linalg.norm(nominal.predict(q) - true, axis=1).mean()
+    assert err < 0.01e-3 and err < 1.2 * err_ls and err < 0.05 * err_nominal
+    assert "chosen by maximum evidence" in res.summary()
+    assert "prior scales length" in res.summary()
+
+
+def test_given_priors_and_noise_are_used_and_reported():
+    robot, _, _, data = _ec66_data(6, n=30)
+    res = CalibrationProblem(robot, data, CalibrationOptions(
+        lam="evidence", prior_mm=0.5, prior_deg=0.05, noise_mm=0.02)).solve()
+    ev = res.evidence
+    assert ev.noise_mm == 0.02 and ev.noise_given and ev.given.all()
+    assert ev.scale_of("length") == 0.5 and ev.scale_of("offset") == 0.05
+    # the same fit as the L2 solve with those per-class weights
+    from kincal.export.report import result_dict
+    d = result_dict(res)
+    assert d["evidence"]["prior_scales"]["twist"]["scale"] == 0.05
+    assert d["lambda"] is None
+    assert "given" in res.summary().splitlines()[0]
+
+
+def test_evidence_settings_need_the_evidence_estimator():
+    with pytest.raises(OptionError,
+                       match=r"prior_mm \(--prior-mm\) is a setting of the evidence estimator"):
+        CalibrationOptions(lam="cv", prior_mm=0.1).validated()
+    with pytest.raises(OptionError, match=r"noise_mm \(--noise-mm\).*got method ls"):
+        CalibrationOptions(method="ls", noise_mm=0.1).validated()
+    with pytest.raises(OptionError, match="noise_mm must be a finite number > 0"):
+        CalibrationOptions(lam="evidence", noise_mm=-1.0).validated()
+    with pytest.raises(OptionError, match="'cv', 'evidence' or a number"):
+        CalibrationOptions(lam="bayes").validated()
+
+
+def _cv(mean, lambdas=None):
+    lambdas = np.logspace(-6, 3, len(mean)) if lambdas is None else lambdas
+    mean = np.asarray(mean, float)
+    best = int(np.argmin(mean))
+    return CrossValidation(lambdas, mean[:, None], mean, best, float(lambdas[best]), (), 0)
+
+
+def test_cv_guard_warns_on_small_volume_with_near_zero_or_flat_curve():
+    near_zero = _cv([0.10, 0.11, 0.12, 0.2, 0.4])
+    flat = _cv([0.101, 0.100, 0.1005, 0.1009, 0.1010])
+    clear = _cv([0.30, 0.2, 0.1, 0.2, 0.4])
+    note = small_volume_warning(near_zero, 0.017, 0.9, 0.99)
+    assert "lambda = 1e-06" in note and "17.0 mm" in note and "1.9 %" in note
+    assert "99 % of the pulled parameters free" in note and "--lambda evidence" in note
+    assert "flat" in small_volume_warning(flat, 0.017, 0.9, 0.5)
+    assert small_volume_warning(clear, 0.017, 0.9, 0.5) == ""  # a clear interior minimum
+    # an interior minimum that still leaves almost everything free
+    assert "95 %" in small_volume_warning(clear, 0.017, 0.9, 0.95)
+    assert small_volume_warning(near_zero, 0.35, 0.9, 0.99) == ""  # data over the workspace
+
+
+@pytest.fixture(scope="module")
+def rtest_csv(tmp_path_factory):
+    from kincal.cli.main import main
+
+    d = tmp_path_factory.mktemp("rtest")
+    assert main(["simulate", "ec66", "--design", "rtest", "--out", str(d / "rt.csv"),
+                 "--seed", "1"]) == 0
+    return d / "rt.csv"
+
+
+def test_cli_evidence_summary_and_report(rtest_csv, tmp_path, capsys):
+    from kincal.cli.main import main
+
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(rtest_csv), "--out", str(tmp_path / "c.urdf"),
+                 "--lambda", "evidence", "--report", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    assert "chosen by maximum evidence" in out and "noise" in out
+    report = json.loads((tmp_path / "r.json").read_text())
+    ev = report["evidence"]
+    assert set(ev["prior_scales"]) == {"length", "twist", "offset"}
+    assert 0.01 < ev["noise_mm"] < 0.2 and report["cross_validation"] is None
+    assert report["options"]["lambda"] == "evidence"
+
+
+def test_cli_given_tolerances_and_misuse(rtest_csv, tmp_path, capsys):
+    from kincal.cli.main import main
+
+    assert main(["calibrate", "ec66", str(rtest_csv), "--out", str(tmp_path / "c.urdf"),
+                 "--lambda", "evidence", "--prior-mm", "0.3", "--prior-deg", "0.03",
+                 "--noise-mm", "0.05"]) == 0
+    out = capsys.readouterr().out
+    assert "length 0.3 mm (given)" in out and "noise 0.05 mm (given)" in out
+    code = main(["calibrate", "ec66", str(rtest_csv), "--out", str(tmp_path / "d.urdf"),
+                 "--lambda", "cv", "--prior-mm", "0.3"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and not (tmp_path / "d.urdf").exists()
+    assert [line for line in err if line.startswith("kincal: error:")] == [
+        "kincal: error: prior_mm (--prior-mm) is a setting of the evidence estimator: use it "
+        "with method l2 and lambda 'evidence' (got method l2, lambda 'cv')"]
+
+
+def test_cv_guard_reaches_the_user_on_small_volume_data(rtest_csv):
+    from kincal.measurements.data import Measurements
+
+    robot = Robot.load("ec66")
+    data = Measurements.from_csv(rtest_csv, robot.joint_names)
+    # a grid of tiny lambdas only: CV must pick almost no penalty on 20 mm-cube data
+    options = CalibrationOptions(lam="cv", lambda_min=1e-6, lambda_max=1e-4, n_lambdas=3)
+    with pytest.warns(UserWarning, match=r"cross-validation: it chose lambda = .* of the arm's "
+                                          r"reach .* --lambda evidence"):
+        CalibrationProblem(robot, data, options).solve()
+
+
+def test_fewer_residuals_than_parameters():
+    """5 poses, 15 equations for 25 parameters: the priors make it solvable."""
+    J, y, groups = _linear(7, m=12, per_class=(5, 5, 5), flat=3)
+    problem = LinearEvidence.of(J, y, groups)
+    scales, noise = np.array([0.2, 0.07, 0.5]), 0.08
+    assert problem.log_evidence(1 / scales ** 2, 1 / noise ** 2) == pytest.approx(
+        _direct_log_evidence(J, y, groups, scales, noise), abs=1e-3)
+    _, _, history, _ = maximise(problem, 3, np.ones(3), 1.0)
+    assert np.all(np.diff(history) >= -1e-9 * abs(history[-1]))
+    robot, _, _, data = _ec66_data(8, n=5)
+    res = CalibrationProblem(robot, data, CalibrationOptions(lam="evidence")).solve()
+    assert res.evidence is not None and np.all(np.isfinite(res.x))
+
+
+def test_estimators_script_runs_in_a_reduced_size():
+    """scripts/estimators.py (the README's estimator table) cannot rot: one tracker-like
+    seed through each estimator, and its table."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "estimators.py"
+    spec = importlib.util.spec_from_file_location("estimators_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    row = dict(script.simulated(0, "tracker"), seed=0)
+    # wide, accurate data: every estimator predicts within 15 % of the true parameters
+    for name in ("ls", "cv", "evidence"):
+        assert row[name] < 1.15 * row["truth"], (name, row)
+    table = script._table("title", [row], True)
+    assert table[1].startswith("| case | ls | cv | evidence | truth") and "x)" in table[3]
+
+
+def test_free_fraction_of_the_penalty():
+    from kincal.identification.cross_validation import free_fraction
+
+    J = np.diag([1.0, 2.0, 3.0])
+    pen = np.array([True, True, False])
+    assert free_fraction(J, pen, 0.0) == pytest.approx(1.0)
+    # hat diagonal s^2 / (s^2 + lam) per penalised column: 1/2 and 4/5
+    assert free_fraction(J, pen, 1.0) == pytest.approx((0.5 + 0.8) / 2)
+    assert free_fraction(J, pen, 1e12) == pytest.approx(0.0, abs=1e-9)
