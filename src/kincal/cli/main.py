@@ -134,11 +134,11 @@ def _options(args, method):
     from kincal.identification.calibration import CalibrationOptions
 
     lam = args.lam
-    if lam not in ("cv", "evidence"):
+    if lam not in ("auto", "cv", "evidence"):
         try:
             lam = float(lam)
         except ValueError:
-            raise OptionError(f"--lambda must be 'cv', 'evidence' or a number, got "
+            raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
                               f"{lam!r}") from None
     return CalibrationOptions(model=args.model, method=method, lam=lam, folds=args.folds, seed=args.seed,
                               prior_mm=args.prior_mm, prior_deg=args.prior_deg,
@@ -555,10 +555,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     _add_model(p)
     p.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
-    p.add_argument("--lambda", dest="lam", default="evidence",
-                   help="'evidence' (default: priors toward nominal per parameter class, "
-                        "scales and noise by maximum evidence), 'cv' (the paper's k-fold CV) "
-                        "or a value >= 0")
+    p.add_argument("--lambda", dest="lam", default="auto",
+                   help="'auto' (default: 'evidence' on data from a small measurement volume, "
+                        "'cv' otherwise), 'evidence' (priors toward nominal per parameter "
+                        "class, scales and noise by maximum evidence), 'cv' (the paper's "
+                        "k-fold CV) or a value >= 0")
     p.add_argument("--prior-mm", type=float, metavar="MM",
                    help="with --lambda evidence: tolerance (prior std) of the lengths [mm], "
                         "given instead of estimated")

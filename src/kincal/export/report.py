@@ -99,6 +99,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "lambda": result.lam,
         "cross_validation": None if result.cv is None else result.cv.as_dict(),
         "evidence": None if result.evidence is None else result.evidence.as_dict(),
+        "penalty_choice": result.penalty_choice,
         "identifiability": identifiability_dict(result.identifiability),
         "parameters": params,
         "frames": result.frames_dict(),

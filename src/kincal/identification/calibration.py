@@ -342,11 +342,14 @@ class CalibrationProblem:
                 "workspace); with these poses it would only interpolate. Method l2 can work "
                 "with fewer, pulling what the data cannot fix toward nominal")
         cv = evidence = sol = None
+        how, why = o.lam, ""
+        if o.method == "l2" and o.lam == "auto":
+            how, why = penalty_choice.automatic(self)
         if o.method == "l2":
-            if o.lam == "cv":
+            if how == "cv":
                 cv = self.cross_validate()
                 lam = cv.best_lambda
-            elif o.lam == "evidence":
+            elif how == "evidence":
                 sol, evidence = penalty_choice.fit_evidence(self)
                 lam = evidence.weights(penalty_choice.prior_classes(self))
             else:
@@ -366,7 +369,8 @@ class CalibrationProblem:
             warnings.warn(f"the solver did not converge in {sol.iterations} iterations; the "
                           "result is the best iterate and is flagged not converged", KincalWarning)
         result = CalibrationResult._build(self, sol, lam, cv, ident, evidence)
-        return replace(result, downweighted=downweighted)
+        return replace(result, downweighted=downweighted,
+                       penalty_choice=f"{how}, chosen automatically: {why}" if why else "")
 
     def _irls(self, sol: SolveSummary, lam: float, rounds: int = 20):
         """Reweight poses by the robust loss until the weights settle (see kincal.robust)."""

@@ -26,11 +26,14 @@ class CalibrationOptions:
         "offsets"): which geometric errors the chain may have.
     method: "l2" (penalty toward nominal), "ls" (plain least squares) or "frames" (fit
         only the measurement frame and tool point; kinematics stay nominal).
-    lam: "evidence" (default) for Gaussian priors toward nominal per parameter class
-        (lengths, twists, joint offsets, backlash) whose scales and the noise maximise the
-        marginal likelihood (kincal.identification.evidence); "cv" to choose one lambda by
-        cross-validation (the paper's Algorithm 1); or a number >= 0 (method "l2"). The
-        default was chosen from scripts/estimators.py (README, "Choosing the penalty").
+    lam: "auto" (default): "evidence" when the data cover a small measurement volume
+        (their extent below SMALL_VOLUME of the arm's reach, where CV judges only
+        interpolation), else "cv"; "evidence" for Gaussian priors toward nominal per
+        parameter class (lengths, twists, joint offsets, backlash) whose scales and the
+        noise maximise the marginal likelihood (kincal.identification.evidence); "cv" to
+        choose one lambda by cross-validation (the paper's Algorithm 1); or a number >= 0
+        (method "l2"). The rule was chosen from scripts/estimators.py (README, "Choosing
+        the penalty"). Given prior_mm / prior_deg / noise_mm make "auto" use evidence.
     prior_mm, prior_deg: with lam "evidence", the prior standard deviation [mm] of the
         length class and [deg] of the twist and joint-offset classes (tolerances), kept
         instead of estimated; None: estimated. noise_mm: likewise the measurement noise,
@@ -64,7 +67,7 @@ class CalibrationOptions:
 
     model: str = "complete"
     method: str = "l2"
-    lam: float | str = "evidence"
+    lam: float | str = "auto"
     prior_mm: float | None = None
     prior_deg: float | None = None
     noise_mm: float | None = None
@@ -99,17 +102,17 @@ class CalibrationOptions:
         if self.method not in METHODS:
             raise OptionError(f"unknown method {self.method!r}; expected one of {', '.join(METHODS)}")
         if isinstance(self.lam, str):
-            if self.lam not in ("cv", "evidence"):
-                raise OptionError(f"lambda must be 'cv', 'evidence' or a number >= 0, got "
+            if self.lam not in ("auto", "cv", "evidence"):
+                raise OptionError(f"lambda must be 'auto', 'cv', 'evidence' or a number >= 0, got "
                                   f"{self.lam!r}")
         elif not (math.isfinite(float(self.lam)) and float(self.lam) >= 0):
-            raise OptionError(f"lambda must be 'cv', 'evidence' or a finite number >= 0, got "
+            raise OptionError(f"lambda must be 'auto', 'cv', 'evidence' or a finite number >= 0, got "
                               f"{self.lam!r}")
         for key in ("prior_mm", "prior_deg", "noise_mm"):
             value = getattr(self, key)
             if value is None:
                 continue
-            if self.lam != "evidence" or self.method != "l2":
+            if self.lam not in ("evidence", "auto") or self.method != "l2":
                 flag = "--" + key.replace("_", "-")
                 raise OptionError(f"{key} ({flag}) is a setting of the evidence estimator: use "
                                   f"it with method l2 and lambda 'evidence' (got method "

@@ -16,8 +16,7 @@ from kincal.identification import evidence
 from kincal.identification.cross_validation import (
     CrossValidation,
     free_fraction,
-    small_volume_warning,
-)
+    small_volume_warning, SMALL_VOLUME)
 from kincal.identification.solver import SolveSummary
 from kincal.measurements.point import MeasurementModel
 
@@ -57,9 +56,34 @@ def reach(problem: CalibrationProblem, samples: int = 500) -> float:
     sp = problem.space
     x = problem.start().copy()
     x[sp.n_kinematic:sp.n_kinematic + 6] = 0.0  # the measurement frame at the base frame
-    model = MeasurementModel(problem.mdh, q, np.zeros_like(q), sp.backlash,
+    model = MeasurementModel(problem.error_model, q, np.zeros_like(q), sp.backlash,
                              np.zeros(samples, dtype=int), sp.n_points)
     return float(np.max(np.linalg.norm(model.predict(x), axis=1)))
+
+
+def extent_ratio(problem: CalibrationProblem) -> tuple[float, float, float]:
+    """(extent [m], reach [m], extent / reach) of the measured positions: the largest
+    distance of a measured point from their centroid, against the arm's reach."""
+    P = problem.data.positions[problem.data.points == 0]
+    extent = float(np.max(np.linalg.norm(P - P.mean(axis=0), axis=1)))
+    r = reach(problem)
+    return extent, r, extent / r if r > 0 else 0.0
+
+
+def automatic(problem: CalibrationProblem) -> tuple[str, str]:
+    """("evidence" or "cv", why) for lambda "auto": evidence when the data cover a small
+    measurement volume (CV inside it judges only interpolation and may choose almost no
+    penalty), CV otherwise (it judges prediction where the robot is used, and is robust to
+    errors no model carries, such as backlash)."""
+    o = problem.options
+    if any(v is not None for v in (o.prior_mm, o.prior_deg, o.noise_mm)):
+        return "evidence", "tolerances or noise given"
+    extent, r, ratio = extent_ratio(problem)
+    where = (f"the data span {extent * 1e3:.0f} mm from their centre, {100 * ratio:.1f} % of "
+             f"the arm's reach")
+    if ratio < SMALL_VOLUME:
+        return "evidence", where + f" (< {100 * SMALL_VOLUME:.0f} %: a small measurement volume)"
+    return "cv", where
 
 
 def cv_warning(problem: CalibrationProblem, cv: CrossValidation, sol: SolveSummary,
@@ -67,8 +91,7 @@ def cv_warning(problem: CalibrationProblem, cv: CrossValidation, sol: SolveSumma
     """The guard's warning (or "") for CV's lambda on these data: small measurement volume
     and little pull or a flat curve (see cross_validation.small_volume_warning)."""
     free = problem.free_mask()
-    P = problem.data.positions[problem.data.points == 0]
-    extent = float(np.max(np.linalg.norm(P - P.mean(axis=0), axis=1)))
-    return small_volume_warning(cv, extent, reach(problem),
+    extent, r, _ = extent_ratio(problem)
+    return small_volume_warning(cv, extent, r,
                                 free_fraction(sol.jacobian[:, free],
                                               problem.space.is_penalised[free], lam))

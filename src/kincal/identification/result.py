@@ -146,6 +146,7 @@ class CalibrationResult:
     joint_values: np.ndarray | None = None  # (N, n) chain joint values of the samples [rad, m]
     approach: np.ndarray | None = None  # (N, n) approach directions of the samples (+1/-1/0)
     evidence: EvidenceFit | None = None
+    penalty_choice: str = ""  # with lambda "auto": which estimator ran, and why
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
@@ -289,6 +290,7 @@ class CalibrationResult:
                     "class, " + ("given" if ev.given.all() and ev.noise_given
                                  else "chosen by maximum evidence"))
                  + (" (chosen by cross-validation)" if self.cv is not None else ""),
+                 *([f"  penalty: {self.penalty_choice}"] if self.penalty_choice else []),
                  *([f"  {ev.line()}"
                     + ("" if ev.converged else f" [NOT SETTLED in {ev.iterations} rounds]")]
                    if ev is not None else []),
