@@ -105,6 +105,51 @@ def _add_common(p, data=True):
                    help="initial guess of the tool point in the tip frame, in the length unit")
 
 
+def _volume_spec(args, robot, unit: float, tool):
+    """A VolumeSpec from --in-cube/--in-sphere, --max-tilt, --tilt-direction, --home, --floor
+    (lengths in ``unit`` [m per unit], --home in the plan's joint units), or None."""
+    from kincal.planning.volume_candidates import Volume, VolumeSpec
+
+    if args.in_cube is not None and args.in_sphere is not None:
+        raise OptionError("give at most one of --in-cube and --in-sphere")
+    if args.in_cube is None and args.in_sphere is None:
+        for flag in ("max_tilt", "tilt_direction", "home"):
+            if getattr(args, flag, None) is not None:
+                raise OptionError(f"--{flag.replace('_', '-')} needs a volume: --in-cube or --in-sphere")
+        return None
+    c = args.in_cube if args.in_cube is not None else args.in_sphere
+    make = Volume.cube if args.in_cube is not None else Volume.sphere
+    volume = make([v * unit for v in c[:3]], c[3] * unit)
+    home = None
+    if getattr(args, "home", None) is not None:
+        angle = math.radians(1.0) if getattr(args, "angle_unit", "rad") == "deg" else 1.0
+        if len(args.home) != len(robot.joint_names):
+            raise OptionError(f"--home needs {len(robot.joint_names)} values "
+                              f"({', '.join(robot.joint_names)}), got {len(args.home)}")
+        home = [v * (unit if k == "prismatic" else angle)
+                for v, k in zip(args.home, robot.geometry.kinds)]
+    floor = None if args.no_floor else args.floor * unit
+    return VolumeSpec(volume, tuple(tool), math.radians(30.0 if args.max_tilt is None
+                                                        else args.max_tilt),
+                      tuple(args.tilt_direction or (0.0, 0.0, -1.0)), home, floor)
+
+
+def _add_volume(p, unit_help):
+    p.add_argument("--in-cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
+                   help=f"poses with the tool point inside this axis-aligned cube of the base "
+                        f"frame ({unit_help})")
+    p.add_argument("--in-sphere", nargs=4, type=float, metavar=("CX", "CY", "CZ", "R"),
+                   help=f"or inside this sphere ({unit_help})")
+    p.add_argument("--max-tilt", type=float, metavar="DEG",
+                   help="largest angle of the tip z axis from --tilt-direction (default 30)")
+    p.add_argument("--tilt-direction", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="mean direction of the tip z axis in the base frame (default 0 0 -1)")
+    p.add_argument("--floor", type=float, default=0.0, metavar="Z",
+                   help=f"height of the floor in the base frame ({unit_help}; default 0): no "
+                        "link may go below it")
+    p.add_argument("--no-floor", action="store_true", help="no floor check")
+
+
 def _options(args, method):
     from kincal.identification.calibration import CalibrationOptions
 
@@ -260,8 +305,24 @@ def cmd_simulate(args) -> int:
         from kincal.descriptions import max_cube
 
         size = max_cube(robot.name, design[0])
-    q = simulation.cube_poses(robot, args.poses, center, size, tool, rng,
-                              max_tilt=math.radians(tilt))
+    spec = _volume_spec(args, robot, 1.0, tool)
+    if args.poses_file is not None:
+        from kincal.planning.candidates import read_candidates
+
+        if spec is not None:
+            raise OptionError("give either --poses-file or a volume (--in-cube/--in-sphere)")
+        q, _ = read_candidates(args.poses_file, robot, kind="poses")
+        where = f"the {len(q)} poses of {args.poses_file}"
+    elif spec is not None:
+        from kincal.planning.volume_candidates import volume_candidates
+
+        q = np.array(volume_candidates(robot, spec, args.poses, seed=args.seed).joint_values)
+        where = (f"{spec.volume.describe()}, tilt <= {math.degrees(spec.max_tilt):g} deg, "
+                 "random poses on one branch")
+    else:
+        q = simulation.cube_poses(robot, args.poses, center, size, tool, rng,
+                                  max_tilt=math.radians(tilt))
+        where = f"{size * 1e3:g} mm cube at {np.round(center, 3).tolist()} m"
     # the robot's errors have their own seed, so data sets with different pose seeds
     # (calibration, validation) come from one and the same simulated robot
     table = simulation.planted_table(model, np.random.default_rng(args.truth_seed),
@@ -285,9 +346,8 @@ def cmd_simulate(args) -> int:
             "deviations_si": dict(zip(sp.names[:sp.n_kinematic], (x - x0)[:sp.n_kinematic].tolist())),
             "noise_m": args.noise_mm * 1e-3})))
     written = write_all(files, overwrite=args.overwrite, protect=[robot.source])
-    print(f"simulated {len(q)} poses of {robot.name} ({args.design}, {size * 1e3:g} mm cube "
-          f"at {np.round(center, 3).tolist()} m, noise {args.noise_mm} mm): "
-          + ", ".join(str(p) for p in written))
+    print(f"simulated {len(q)} poses of {robot.name} ({args.design}, {where}, noise "
+          f"{args.noise_mm} mm): " + ", ".join(str(p) for p in written))
     return 0
 
 
@@ -296,12 +356,33 @@ def cmd_plan(args) -> int:
     from kincal.planning.candidates import candidates_csv_text, random_candidates, read_candidates
     from kincal.planning.pose_selection import select_poses
 
-    if (args.candidates is None) == (args.random is None):
-        raise OptionError("give exactly one of CANDIDATES.csv or --random M")
+    volume = args.in_cube is not None or args.in_sphere is not None
+    if volume and args.candidates is not None:
+        raise OptionError("give either CANDIDATES.csv or a volume (--in-cube/--in-sphere)")
+    if not volume and (args.candidates is None) == (args.random is None):
+        raise OptionError("give exactly one of CANDIDATES.csv, --random M or --in-cube/--in-sphere")
     if not (math.isfinite(args.noise_mm) and args.noise_mm > 0):
         raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
+    criterion = args.criterion.upper()
+    if (criterion == "I") != (args.target_cube is not None):
+        raise OptionError("--criterion i needs --target-cube CX CY CZ EDGE, and --target-cube "
+                          "is for --criterion i")
     robot = _robot(args)
-    if args.candidates is not None:
+    unit = 1e-3 if args.length_unit == "mm" else 1.0
+    tool = _tool_offset(args)
+    spec = _volume_spec(args, robot, unit, (0.0, 0.0, 0.0) if tool is None else tool)
+    targets = None
+    if spec is not None:
+        from kincal.planning.volume_candidates import volume_candidates
+
+        m = 2000 if args.random is None else args.random
+        if m < args.poses:
+            raise OptionError(f"--random {m} candidates are fewer than the {args.poses} poses to "
+                              "choose: ask for more candidates or fewer poses")
+        vc = volume_candidates(robot, spec, m, seed=args.seed)
+        q, lines = np.array(vc.joint_values), None
+        source = vc.summary()
+    elif args.candidates is not None:
         q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit)
         source = f"{len(q)} candidates from {args.candidates}"
     else:
@@ -313,10 +394,26 @@ def cmd_plan(args) -> int:
                                       kind="measured poses")
         source += f", plus the {len(measured)} poses already measured in {args.measured}"
     k = len(measured)
-    tool = _tool_offset(args)
+    if args.target_cube is not None:
+        import dataclasses
+
+        from kincal.planning.volume_candidates import Volume, volume_candidates
+
+        c = args.target_cube
+        base_spec = spec if spec is not None else _volume_spec(
+            argparse.Namespace(**{**vars(args), "in_cube": c}), robot, unit,
+            (0.0, 0.0, 0.0) if tool is None else tool)
+        tspec = dataclasses.replace(base_spec, volume=Volume.cube([v * unit for v in c[:3]],
+                                                                  c[3] * unit),
+                                    home=None if spec is None else tuple(vc.home))
+        targets = np.array(volume_candidates(robot, tspec, args.target_poses,
+                                             seed=args.seed + 1).joint_values)
+        source += (f"\n  {len(targets)} target poses in the {tspec.volume.describe()} (same tilt "
+                   "range and branch)")
     selection = select_poses(robot, np.vstack([measured, q]), k + args.poses,
                              tool=(0.0, 0.0, 0.0) if tool is None else tool,
-                             fix=tuple(args.fix), keep=tuple(range(k)))
+                             fix=tuple(args.fix), keep=tuple(range(k)), method=criterion,
+                             targets=targets)
     new = [i - k for i in selection.indices if i >= k]
     protect = [robot.source] + [f for f in (args.candidates, args.measured) if f is not None]
     written = write_all([(args.out, candidates_csv_text(
@@ -423,6 +520,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth-seed", type=int, default=0,
                    help="seed of the planted errors: equal seeds, equal robot")
     p.add_argument("--truth-out", help="JSON with the planted parameters")
+    _add_volume(p, "metres")
+    p.add_argument("--poses-file", metavar="CHOSEN.csv",
+                   help="simulate at these poses (chain joint columns in rad and m, e.g. from "
+                        "'kincal plan') instead of drawing them")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_simulate)
 
@@ -435,7 +536,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("candidates", nargs="?", metavar="CANDIDATES.csv",
                    help="CSV with the chain joint columns (no positions needed); or use --random")
     p.add_argument("--random", type=int, metavar="M",
-                   help="instead of a CSV: M random candidates uniform within the joint limits")
+                   help="instead of a CSV: M random candidates uniform within the joint limits; "
+                        "with --in-cube/--in-sphere: M candidates in the volume (default 2000)")
     p.add_argument("--seed", type=int, default=0, help="seed of --random")
     p.add_argument("--poses", type=int, required=True, metavar="N", help="poses to choose")
     p.add_argument("--measured", metavar="DATA.csv",
@@ -454,6 +556,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-mm", type=float, default=0.05,
                    help="noise per axis [mm] for the predicted standard errors (default 0.05)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    _add_volume(p, "in --length-unit")
+    p.add_argument("--home", nargs="+", type=float, metavar="J",
+                   help="with a volume: a configuration on the arm branch to keep (in "
+                        "--angle-unit/--length-unit); default: found automatically")
+    p.add_argument("--criterion", choices=("d", "i"), default="d",
+                   help="d: D-optimal (default); i: I-optimal over --target-cube")
+    p.add_argument("--target-cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
+                   help="with --criterion i: the working volume whose mean predicted position "
+                        "variance is minimised (in --length-unit)")
+    p.add_argument("--target-poses", type=int, default=200, metavar="T",
+                   help="poses drawn in the target cube (default 200)")
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("demo", help="the paper's experiment, simulated at a small size")
