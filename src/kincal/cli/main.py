@@ -410,10 +410,13 @@ def cmd_plan(args) -> int:
                                              seed=args.seed + 1).joint_values)
         source += (f"\n  {len(targets)} target poses in the {tspec.volume.describe()} (same tilt "
                    "range and branch)")
-    selection = select_poses(robot, np.vstack([measured, q]), k + args.poses,
-                             tool=(0.0, 0.0, 0.0) if tool is None else tool,
-                             fix=tuple(args.fix), keep=tuple(range(k)), method=criterion,
-                             targets=targets)
+    from kincal.identification.blas_threads import limited
+
+    with limited(1):  # small batched matrices: BLAS threads would only wait for each other
+        selection = select_poses(robot, np.vstack([measured, q]), k + args.poses,
+                                 tool=(0.0, 0.0, 0.0) if tool is None else tool,
+                                 fix=tuple(args.fix), keep=tuple(range(k)), method=criterion,
+                                 targets=targets)
     new = [i - k for i in selection.indices if i >= k]
     protect = [robot.source] + [f for f in (args.candidates, args.measured) if f is not None]
     written = write_all([(args.out, candidates_csv_text(

@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kincal.errors import OptionError
+from kincal.identification import blas_threads
 from kincal.measurements.point import MeasurementModel
 from kincal.models import mdh as mdh_layer
 
@@ -383,6 +384,12 @@ def volume_candidates(robot: "Robot", spec: VolumeSpec, m: int, seed: int = 0,
     """
     if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
         raise OptionError(f"the number of candidates must be an integer >= 1, got {m!r}")
+    # small batched matrices: BLAS threads only wait for each other (see blas_threads)
+    with blas_threads.limited(1):
+        return _generate(robot, spec, int(m), seed, batch)
+
+
+def _generate(robot, spec, m, seed, batch) -> VolumeCandidates:
     kin = _Kinematics(robot, spec.tool)
     collisions = _Collisions(robot, spec.floor_z)
     if spec.home is None:
