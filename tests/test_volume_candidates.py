@@ -287,3 +287,34 @@ def test_plan_criterion_i_cli(tmp_path, capsys):
     assert main(["plan", "ec66", "--random", "50", "--poses", "20", "--criterion", "i",
                  "--out", str(tmp_path / "x.csv")]) == 1
     assert "--criterion i needs --target-cube" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["plan", "ec66", "--random", "50", "--poses", "20", "--max-tilt", "40"],
+     "--max-tilt needs a volume"),
+    (["plan", "ec66", "--in-cube", "0.4", "0", "0.25", "0.02", "--home", "0", "1", "--poses",
+      "20"], "--home needs 6 values"),
+    (["plan", "ec66", "--in-cube", "0.4", "0", "0.25", "0.02", "--in-sphere", "0.4", "0", "0.25",
+      "0.02", "--poses", "20"], "at most one of --in-cube and --in-sphere"),
+    (["plan", "ec66", "--in-cube", "1.6", "0", "0.25", "0.02", "--poses", "20"],
+     "cannot reach the centre"),
+    (["simulate", "ec66", "--in-cube", "0.4", "0", "0.25", "0.02", "--poses-file", "x.csv"],
+     "either --poses-file or a volume"),
+])
+def test_cli_volume_option_errors(tmp_path, capsys, argv, message):
+    out = tmp_path / "o.csv"
+    assert main(argv + ["--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_simulate_in_cube_takes_the_design_tilt(tmp_path, capsys, ec66):
+    out = tmp_path / "rt.csv"
+    assert main(["simulate", "ec66", "--design", "rtest", "--in-cube", "0.4", "0", "0.25", "0.02",
+                 "--poses", "30", "--tool-m", *map(str, TOOL), "--out", str(out)]) == 0
+    assert "tilt <= 15 deg" in capsys.readouterr().out
+    from kincal.measurements.data import Measurements
+
+    q = Measurements.from_csv(out, ec66.joint_names).joint_values
+    spec = VolumeSpec(Volume.cube(*CUBE), TOOL, math.radians(15))
+    _check_constraints(ec66, spec, q, q[0])

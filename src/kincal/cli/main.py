@@ -105,9 +105,10 @@ def _add_common(p, data=True):
                    help="initial guess of the tool point in the tip frame, in the length unit")
 
 
-def _volume_spec(args, robot, unit: float, tool):
+def _volume_spec(args, robot, unit: float, tool, default_tilt: float = 30.0):
     """A VolumeSpec from --in-cube/--in-sphere, --max-tilt, --tilt-direction, --home, --floor
-    (lengths in ``unit`` [m per unit], --home in the plan's joint units), or None."""
+    (lengths in ``unit`` [m per unit], --home in the plan's joint units), or None.
+    default_tilt: [deg] when --max-tilt is not given."""
     from kincal.planning.volume_candidates import Volume, VolumeSpec
 
     if args.in_cube is not None and args.in_sphere is not None:
@@ -129,7 +130,7 @@ def _volume_spec(args, robot, unit: float, tool):
         home = [v * (unit if k == "prismatic" else angle)
                 for v, k in zip(args.home, robot.geometry.kinds)]
     floor = None if args.no_floor else args.floor * unit
-    return VolumeSpec(volume, tuple(tool), math.radians(30.0 if args.max_tilt is None
+    return VolumeSpec(volume, tuple(tool), math.radians(default_tilt if args.max_tilt is None
                                                         else args.max_tilt),
                       tuple(args.tilt_direction or (0.0, 0.0, -1.0)), home, floor)
 
@@ -141,7 +142,8 @@ def _add_volume(p, unit_help):
     p.add_argument("--in-sphere", nargs=4, type=float, metavar=("CX", "CY", "CZ", "R"),
                    help=f"or inside this sphere ({unit_help})")
     p.add_argument("--max-tilt", type=float, metavar="DEG",
-                   help="largest angle of the tip z axis from --tilt-direction (default 30)")
+                   help="largest angle of the tip z axis from --tilt-direction (default 30; "
+                        "simulate: as --tilt-deg)")
     p.add_argument("--tilt-direction", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="mean direction of the tip z axis in the base frame (default 0 0 -1)")
     p.add_argument("--floor", type=float, default=0.0, metavar="Z",
@@ -305,7 +307,9 @@ def cmd_simulate(args) -> int:
         from kincal.descriptions import max_cube
 
         size = max_cube(robot.name, design[0])
-    spec = _volume_spec(args, robot, 1.0, tool)
+    if args.tilt_deg is not None and args.max_tilt is not None:
+        raise OptionError("give --max-tilt or --tilt-deg, not both (the same limit)")
+    spec = _volume_spec(args, robot, 1.0, tool, default_tilt=tilt)
     if args.poses_file is not None:
         from kincal.planning.candidates import read_candidates
 
