@@ -316,17 +316,17 @@ def cmd_simulate(args) -> int:
         if spec is not None:
             raise OptionError("give either --poses-file or a volume (--in-cube/--in-sphere)")
         q, _ = read_candidates(args.poses_file, robot, kind="poses")
-        where = f"the {len(q)} poses of {args.poses_file}"
+        where = f"at the {len(q)} poses of {args.poses_file}"
     elif spec is not None:
         from kincal.planning.volume_candidates import volume_candidates
 
         q = np.array(volume_candidates(robot, spec, args.poses, seed=args.seed).joint_values)
-        where = (f"{spec.volume.describe()}, tilt <= {math.degrees(spec.max_tilt):g} deg, "
-                 "random poses on one branch")
+        where = (f"{args.design}: {spec.volume.describe()}, tilt <= "
+                 f"{math.degrees(spec.max_tilt):g} deg, random poses on one branch")
     else:
         q = simulation.cube_poses(robot, args.poses, center, size, tool, rng,
                                   max_tilt=math.radians(tilt))
-        where = f"{size * 1e3:g} mm cube at {np.round(center, 3).tolist()} m"
+        where = f"{args.design}: {size * 1e3:g} mm cube at {np.round(center, 3).tolist()} m"
     # the robot's errors have their own seed, so data sets with different pose seeds
     # (calibration, validation) come from one and the same simulated robot
     table = simulation.planted_table(model, np.random.default_rng(args.truth_seed),
@@ -350,7 +350,7 @@ def cmd_simulate(args) -> int:
             "deviations_si": dict(zip(sp.names[:sp.n_kinematic], (x - x0)[:sp.n_kinematic].tolist())),
             "noise_m": args.noise_mm * 1e-3})))
     written = write_all(files, overwrite=args.overwrite, protect=[robot.source])
-    print(f"simulated {len(q)} poses of {robot.name} ({args.design}, {where}, noise "
+    print(f"simulated {len(q)} poses of {robot.name} ({where}, noise "
           f"{args.noise_mm} mm): " + ", ".join(str(p) for p in written))
     return 0
 
@@ -427,7 +427,8 @@ def cmd_plan(args) -> int:
         selection.joint_names, q[new], None if lines is None else lines[new]))],
         overwrite=args.overwrite, protect=protect)
     print(f"{source}:")
-    print(selection.summary(args.noise_mm))
+    print(selection.summary(args.noise_mm, checked=None if spec is None else
+                            "candidates checked as above; line of sight is not checked"))
     if k:
         print(f"  (the selection includes the {k} poses already measured; {len(new)} new)")
     for path in written:

@@ -144,8 +144,11 @@ class PoseSelection:
         """(p,) the same for random subsets (median variance over the draws)."""
         return np.sqrt(self.random_variances) * float(sigma_mm)
 
-    def summary(self, sigma_mm: float = 0.05, largest: int = 4) -> str:
-        """Human report: criterion and condition vs random, largest predicted std errors."""
+    def summary(self, sigma_mm: float = 0.05, largest: int = 4, checked: str | None = None) -> str:
+        """Human report: criterion and condition vs random, largest predicted std errors.
+
+        checked: what the candidates were checked for, when kincal made them (e.g. by
+        :func:`kincal.planning.volume_candidates.volume_candidates`)."""
         n, p = len(self.indices), len(self.parameters)
         lines = [f"{self.criterion}-optimal selection of {n} of {self.n_candidates} candidate poses, "
                  f"{self.chain}",
@@ -179,8 +182,9 @@ class PoseSelection:
             idx = [i for i in range(p) if self.units[i] == unit]
             for i in sorted(idx, key=lambda i: -se[i])[:largest]:
                 lines.append(f"    {self.parameters[i]:<22} {se[i]:>10.4g} {se_r[i]:>10.4g}  {unit}")
-        lines.append("  (linearised at the nominal robot and tool guess; the candidates must be "
-                     "safe and measurable, kincal does not check)")
+        lines.append("  (linearised at the nominal robot and tool guess; "
+                     + (checked or "the candidates must be safe and measurable, kincal does not "
+                        "check") + ")")
         return "\n".join(lines)
 
 
