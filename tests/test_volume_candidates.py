@@ -12,8 +12,8 @@ from kincal.errors import OptionError
 from kincal.planning import i_optimal
 from kincal.planning.candidates import read_candidates
 from kincal.planning.pose_selection import select_poses
-from kincal.planning.volume_candidates import (Volume, VolumeSpec, _cap_directions, _Kinematics,
-                                               volume_candidates)
+from kincal.planning.batch_ik import BatchKinematics
+from kincal.planning.volume_candidates import Volume, VolumeSpec, _cap_directions, volume_candidates
 from kincal.robot import Robot
 
 TOOL = (0.03, 0.02, 0.12)  # [m]
@@ -94,7 +94,7 @@ def test_other_branch_home_gives_other_branch(ec66):
     """An elbow-down home yields elbow-down candidates: the branch follows home."""
     spec = VolumeSpec(Volume.cube(*CUBE), TOOL, math.radians(30))
     up = volume_candidates(ec66, spec, 50, seed=0)
-    kin = _Kinematics(ec66, TOOL)
+    kin = BatchKinematics(ec66, TOOL)
     starts = np.tile(up.home, (32, 1))
     starts[:, 2] = -up.home[2]  # flip the elbow
     starts[:, 1] += np.linspace(-1, 1, 32)
@@ -120,7 +120,7 @@ def test_ik_jacobian_matches_central_differences(name):
     if name != "ec66":
         ur10_path()  # skips without example-robot-data
     robot = Robot.load(name)
-    kin = _Kinematics(robot, TOOL)
+    kin = BatchKinematics(robot, TOOL)
     rng = np.random.default_rng(1)
     Q = np.vstack([np.zeros(kin.n), rng.uniform(kin.lo, kin.hi, (5, kin.n))])
     R, P, Jp, Jw = kin.jacobians(Q)

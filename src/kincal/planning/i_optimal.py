@@ -42,6 +42,17 @@ def mean_variance(Minv: np.ndarray, A: np.ndarray) -> float:
     return float(np.einsum("pq,qp->", Minv, A)) / 3.0
 
 
+def mean_variances(Jn: np.ndarray, A: np.ndarray, subsets: np.ndarray) -> np.ndarray:
+    """(K,) V of each subset (K, n) of candidate rows; inf where its M is singular."""
+    X = Jn[subsets].reshape(len(subsets), -1, Jn.shape[2])
+    out = np.full(len(subsets), np.inf)
+    for k, Xk in enumerate(X):
+        Minv = _exact_inverse(Xk.T @ Xk)
+        if Minv is not None:
+            out[k] = mean_variance(Minv, A)
+    return out
+
+
 def _gains(Jn: np.ndarray, Minv: np.ndarray, A: np.ndarray) -> np.ndarray:
     """(M,) decrease of 3 V when each candidate is added to the set of M^-1."""
     B = Jn @ Minv                                                   # (M, 3, p)

@@ -309,18 +309,6 @@ def _set_figures(Jn: np.ndarray, scale: np.ndarray, subsets: np.ndarray):
     return log_det, cond, var
 
 
-def _mean_variances(Jn: np.ndarray, A: np.ndarray, subsets: np.ndarray) -> np.ndarray:
-    """(K,) mean predicted variance over the targets (i_optimal) of each subset (K, n)."""
-    X = Jn[subsets].reshape(len(subsets), -1, Jn.shape[2])
-    G = X.transpose(0, 2, 1) @ X
-    out = np.full(len(subsets), np.inf)
-    for k, Gk in enumerate(G):
-        exact = _exact_inverse(Gk)
-        if exact is not None:
-            out[k] = i_optimal.mean_variance(exact[0], A)
-    return out
-
-
 # -------------------------------------------------------------- selection
 
 
@@ -455,7 +443,7 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     lost = tuple(name for name in ident.kept if name not in mine.kept)
     mean_var = r_mean_var = math.nan
     if A is not None:
-        mean_var, r_mean_var = (float(np.median(_mean_variances(Jn, A, np.array(s))))
+        mean_var, r_mean_var = (float(np.median(i_optimal.mean_variances(Jn, A, np.array(s))))
                                 for s in ([chosen], draws))
     units = tuple("mm" if space.is_length[c] else "deg" for c in cols)
     return PoseSelection(f"{robot.name} ({robot.base} -> {robot.tip})", tuple(g.joint_names), M, tuple(chosen), _readonly(q[chosen]),
