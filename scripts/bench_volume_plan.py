@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from kincal.cli.main import main as kincal
+from kincal.identification.blas_threads import limited
 from kincal.planning.pose_selection import select_poses
 from kincal.planning.volume_candidates import Volume, VolumeSpec, volume_candidates
 from kincal.robot import Robot
@@ -56,7 +57,8 @@ def main(argv=None):
                 assert code == 0
                 whole.append((w, c))
             cands, w1, c1 = _timed(lambda: volume_candidates(robot, spec, m, seed=r))
-            _, w2, c2 = _timed(lambda: select_poses(robot, cands.joint_values, 60, tool=TOOL))
+            with limited(1):  # as kincal plan does
+                _, w2, c2 = _timed(lambda: select_poses(robot, cands.joint_values, 60, tool=TOOL))
             gen.append((w1, c1))
             sel.append((w2, c2))
 
