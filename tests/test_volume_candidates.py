@@ -318,3 +318,21 @@ def test_simulate_in_cube_takes_the_design_tilt(tmp_path, capsys, ec66):
     q = Measurements.from_csv(out, ec66.joint_names).joint_values
     spec = VolumeSpec(Volume.cube(*CUBE), TOOL, math.radians(15))
     _check_constraints(ec66, spec, q, q[0])
+
+
+def test_only_robot_py_imports_pinocchio_or_coal():
+    """The one Pinocchio boundary: planning (IK, collisions) goes through kincal.robot."""
+    import ast
+    from pathlib import Path
+
+    import kincal
+
+    root = Path(kincal.__file__).parent
+    offenders = []
+    for path in root.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            if any(n.split(".")[0] in ("pinocchio", "coal", "hppfcl") for n in names):
+                offenders.append(str(path.relative_to(root)))
+    assert sorted(set(offenders)) == ["robot.py"]

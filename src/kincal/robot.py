@@ -387,7 +387,10 @@ class CollisionChecker:
     """
 
     def __init__(self, robot: Robot, floor_z: float | None = None):
-        import coal
+        try:
+            import coal
+        except ImportError:  # Pinocchio 2.x ships the same library as hppfcl
+            import hppfcl as coal
 
         m = robot.model
         self.robot = robot
