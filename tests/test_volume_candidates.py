@@ -336,3 +336,15 @@ def test_only_robot_py_imports_pinocchio_or_coal():
             if any(n.split(".")[0] in ("pinocchio", "coal", "hppfcl") for n in names):
                 offenders.append(str(path.relative_to(root)))
     assert sorted(set(offenders)) == ["robot.py"]
+
+
+def test_floor_without_collision_geometry_keeps_tool_and_tip_above(ec66):
+    """The EC66 has no collision geometry: a cube reaching below the floor loses those poses."""
+    spec = VolumeSpec(Volume.cube((0.4, 0.0, 0.0), 0.1), TOOL, math.radians(10), floor_z=0.0)
+    c = volume_candidates(ec66, spec, 50, seed=0)
+    T = ec66.tip_poses(c.joint_values)
+    assert np.all(c.points[:, 2] > 0) and np.all(T[:, 2, 3] > 0)
+    assert c.rejections.collision > 0 and "NOT checked" in c.collision_note
+    free = volume_candidates(ec66, VolumeSpec(Volume.cube((0.4, 0.0, 0.0), 0.1), TOOL,
+                                              math.radians(10), floor_z=None), 50, seed=0)
+    assert free.rejections.collision == 0 and (free.points[:, 2] < 0).any()

@@ -231,9 +231,10 @@ def _on_branch(kin: BatchKinematics, home, sigma_home: float, Q) -> np.ndarray:
 class _Collisions:
     """Collision geometry when the URDF has it; tool point and tip above the floor always."""
 
-    def __init__(self, robot, floor_z):
-        self.checker = robot.collision_checker(floor_z) if floor_z is not None or True else None
+    def __init__(self, robot, floor_z, tool):
+        self.checker = robot.collision_checker(floor_z)
         self.floor_z = floor_z
+        self.tool = np.asarray(tool, float)
         if self.checker.has_geometry:
             what = f"{len(self.checker.pairs)} collision pairs checked (self"
             what += f" and a floor at z = {floor_z:g} m)" if floor_z is not None else ")"
@@ -249,7 +250,8 @@ class _Collisions:
     def free(self, Q, R, P) -> np.ndarray:
         ok = np.ones(len(Q), dtype=bool)
         if self.floor_z is not None:
-            ok &= (P[:, 2] > self.floor_z)
+            tip = P - R @ self.tool
+            ok &= (P[:, 2] > self.floor_z) & (tip[:, 2] > self.floor_z)
         if self.checker.has_geometry and ok.any():
             ok[ok] = ~self.checker.colliding(Q[ok])
         return ok
@@ -260,7 +262,7 @@ def find_home(robot: "Robot", spec: VolumeSpec, kin: BatchKinematics | None = No
               collisions: _Collisions | None = None) -> np.ndarray:
     """(n,) a home configuration for ``spec`` (see the module notes); raises OptionError."""
     kin = kin or BatchKinematics(robot, spec.tool)
-    collisions = collisions or _Collisions(robot, spec.floor_z)
+    collisions = collisions or _Collisions(robot, spec.floor_z, spec.tool)
     rng = np.random.default_rng(0)
     c = np.asarray(spec.volume.center)[None]
     u = np.asarray(spec.tilt_direction)[None]
@@ -318,7 +320,7 @@ def volume_candidates(robot: "Robot", spec: VolumeSpec, m: int, seed: int = 0,
 
 def _generate(robot, spec, m, seed, batch) -> VolumeCandidates:
     kin = BatchKinematics(robot, spec.tool)
-    collisions = _Collisions(robot, spec.floor_z)
+    collisions = _Collisions(robot, spec.floor_z, spec.tool)
     if spec.home is None:
         home, found = find_home(robot, spec, kin, collisions), True
     else:
