@@ -115,8 +115,8 @@ def test_cap_directions_are_uniform_on_the_cap():
     assert abs(cos.mean() - 0.75) < 0.005 and abs(np.median(cos) - 0.75) < 0.01
 
 
-@pytest.mark.parametrize("name", ["ec66", "panda"])
-def test_ik_jacobian_matches_central_differences(name):
+@pytest.mark.parametrize("name", ["ec66", "panda", "tiago"])  # tiago: a prismatic torso
+def test_batch_kinematics_match_pinocchio_and_central_differences(name):
     if name != "ec66":
         ur10_path()  # skips without example-robot-data
     robot = Robot.load(name)
@@ -124,6 +124,9 @@ def test_ik_jacobian_matches_central_differences(name):
     rng = np.random.default_rng(1)
     Q = np.vstack([np.zeros(kin.n), rng.uniform(kin.lo, kin.hi, (5, kin.n))])
     R, P, Jp, Jw = kin.jacobians(Q)
+    T = robot.tip_poses(Q)
+    assert np.allclose(R, T[:, :3, :3], atol=1e-12)
+    assert np.allclose(P, T[:, :3, 3] + T[:, :3, :3] @ np.asarray(TOOL), atol=1e-12)
     h = 1e-6
     for i in range(kin.n):
         dq = np.zeros(kin.n)

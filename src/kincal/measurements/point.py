@@ -129,22 +129,6 @@ class MeasurementModel:
         R, p, _ = self._chain(table, backlash, keep=False)
         return R, p
 
-    def tip_poses_and_axes(self, table: np.ndarray):
-        """(R (N, 3, 3), p (N, 3), axes (N, n, 3), points (N, n, 3)) in the base frame.
-
-        The tip pose, and each joint's axis line at these poses: a unit direction and a
-        point on it [m] (any point for a prismatic joint). They give the joint-space
-        Jacobian of any point x fixed to the tip: w_i x (x - c_i) (revolute), w_i (prismatic).
-        """
-        R, p, stages = self._chain(table, None, keep=True)
-        axes = np.empty((self.N, self.mdh.n, 3))
-        points = np.empty((self.N, self.mdh.n, 3))
-        for i, (_, H) in enumerate(stages):
-            Hr, Ht = H[:, :3, :3], H[:, :3, 3]
-            axes[:, i] = Hr @ self.mdh.screw_axes[i]
-            points[:, i] = Ht if self.mdh.screw_points is None else Ht + Hr @ self.mdh.screw_points[i]
-        return R, p, axes, points
-
     def _chain(self, table, backlash, keep: bool):
         G = np.broadcast_to(self.mdh.T_base_0, (self.N, 4, 4)) if keep else self.mdh.T_base_0
         stages = []
