@@ -105,6 +105,40 @@ def _add_common(p, data=True):
                    help="initial guess of the tool point in the tip frame, in the length unit")
 
 
+def _options(args, method):
+    from kincal.identification.calibration import CalibrationOptions
+
+    lam = args.lam
+    if lam != "cv":
+        try:
+            lam = float(lam)
+        except ValueError:
+            raise OptionError(f"--lambda must be 'cv' or a number, got {lam!r}") from None
+    return CalibrationOptions(method=method, lam=lam, folds=args.folds, seed=args.seed,
+                              fix=tuple(args.fix), free=tuple(args.free),
+                              backlash=tuple(args.backlash),
+                              tool_guess=_tool_offset(args), robust=args.robust,
+                              robust_scale_mm=args.robust_scale_mm, progress=_progress_bar())
+
+
+def _render_plots(result, out_dir: Path):
+    """(path, png bytes) pairs of the calibration plots, rendered away from ``out_dir``.
+
+    Rendering first into a scratch folder keeps the outputs all-or-none: the PNGs go
+    to ``out_dir`` in the same transaction as the URDF and the reports.
+    """
+    import tempfile
+
+    from kincal.export.plots import plot_calibration
+
+    with tempfile.TemporaryDirectory(prefix="kincal-plots-") as tmp:
+        paths = plot_calibration(result, Path(tmp))
+        pngs = [(out_dir / Path(p).name, Path(p).read_bytes()) for p in paths]
+    if not out_dir.exists():
+        out_dir.mkdir(parents=True)  # an output folder of its own; files inside are checked
+    return pngs
+
+
 def _volume_spec(args, robot, unit: float, tool, default_tilt: float = 30.0):
     """A VolumeSpec from --in-cube/--in-sphere, --max-tilt, --tilt-direction, --home, --floor
     (lengths in ``unit`` [m per unit], --home in the plan's joint units), or None.
@@ -150,40 +184,6 @@ def _add_volume(p, unit_help):
                    help=f"height of the floor in the base frame ({unit_help}; default 0): no "
                         "link may go below it")
     p.add_argument("--no-floor", action="store_true", help="no floor check")
-
-
-def _options(args, method):
-    from kincal.identification.calibration import CalibrationOptions
-
-    lam = args.lam
-    if lam != "cv":
-        try:
-            lam = float(lam)
-        except ValueError:
-            raise OptionError(f"--lambda must be 'cv' or a number, got {lam!r}") from None
-    return CalibrationOptions(method=method, lam=lam, folds=args.folds, seed=args.seed,
-                              fix=tuple(args.fix), free=tuple(args.free),
-                              backlash=tuple(args.backlash),
-                              tool_guess=_tool_offset(args), robust=args.robust,
-                              robust_scale_mm=args.robust_scale_mm, progress=_progress_bar())
-
-
-def _render_plots(result, out_dir: Path):
-    """(path, png bytes) pairs of the calibration plots, rendered away from ``out_dir``.
-
-    Rendering first into a scratch folder keeps the outputs all-or-none: the PNGs go
-    to ``out_dir`` in the same transaction as the URDF and the reports.
-    """
-    import tempfile
-
-    from kincal.export.plots import plot_calibration
-
-    with tempfile.TemporaryDirectory(prefix="kincal-plots-") as tmp:
-        paths = plot_calibration(result, Path(tmp))
-        pngs = [(out_dir / Path(p).name, Path(p).read_bytes()) for p in paths]
-    if not out_dir.exists():
-        out_dir.mkdir(parents=True)  # an output folder of its own; files inside are checked
-    return pngs
 
 
 # -------------------------------------------------------------- subcommands

@@ -345,11 +345,12 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
         last joint's theta (and alpha) can be seen at all, so give a realistic one.
     fix: parameter names held at nominal (left out of the criterion).
     keep: candidate indices that must be in the selection (e.g. poses already measured).
-    method: "D" (maximise log det of the information matrix) or "I" (minimise the mean
-        predicted position variance over ``targets``, :mod:`kincal.planning.i_optimal`).
+    method: "D" (maximise log det of the information matrix).
+    max_swaps: bound on the exchange stage. seed, random_subsets: the random baseline.
+    method "I": minimise the mean predicted position variance over ``targets``
+        (:mod:`kincal.planning.i_optimal`).
     targets: (T, n_joints) poses where the calibrated robot will work (method "I"; with
         "D" they only add the predicted position std to the report).
-    max_swaps: bound on the exchange stage. seed, random_subsets: the random baseline.
     """
     if method not in METHODS:
         raise OptionError(f"unknown selection method {method!r}; expected one of {', '.join(METHODS)}")
@@ -379,7 +380,6 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
         raise OptionError(f"max_swaps must be an integer >= 0, got {max_swaps!r}")
     if not (isinstance(random_subsets, (int, np.integer)) and random_subsets >= 1):
         raise OptionError(f"random_subsets must be an integer >= 1, got {random_subsets!r}")
-
     if method == "I" and targets is None:
         raise OptionError("I-optimal selection needs target poses (the volume where the robot "
                           "will work), e.g. --target-cube")
@@ -389,6 +389,7 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                 or not np.all(np.isfinite(targets)):
             raise DataError(f"targets must be a non-empty (T, {g.n}) array of finite joint "
                             f"values; got shape {targets.shape}")
+
     model = mdh_layer.extract(g)
     _warn_tool_on_axis(model, t)
     space = ParameterSpace(model.joint_names)
