@@ -22,10 +22,8 @@ from kincal.identification.solver import SolverOptions  # noqa: E402
 from kincal.measurements.data import Measurements  # noqa: E402
 from kincal.planning.candidates import random_candidates, read_candidates  # noqa: E402
 from kincal.planning.pose_selection import PoseSelection, select_poses  # noqa: E402
-from kincal.planning.volume_candidates import Volume, VolumeSpec, volume_candidates  # noqa: E402
 from kincal.robot import Robot  # noqa: E402
 
 __all__ = ["Robot", "Measurements", "calibrate", "CalibrationOptions", "CalibrationProblem",
            "CalibrationResult", "SolverOptions", "select_poses", "PoseSelection",
-           "random_candidates", "read_candidates", "Volume", "VolumeSpec", "volume_candidates",
-           "KincalError", "KincalWarning", "__version__"]
+           "random_candidates", "read_candidates", "KincalError", "KincalWarning", "__version__"]

@@ -386,10 +386,10 @@ def cmd_plan(args) -> int:
         vc = volume_candidates(robot, spec, m, seed=args.seed)
         q, lines = np.array(vc.joint_values), None
         source = vc.summary()
-    elif args.candidates is not None:
+    if args.candidates is not None:
         q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit)
         source = f"{len(q)} candidates from {args.candidates}"
-    else:
+    elif spec is None:
         q, lines = random_candidates(robot, args.random, args.seed), None
         source = f"{len(q)} random candidates within the joint limits (seed {args.seed})"
     measured = np.zeros((0, q.shape[1]))

@@ -120,7 +120,8 @@ class BatchKinematics:
             act, r, J = act[~ok], r[~ok], J[~ok]
             JtJ = J.transpose(0, 2, 1) @ J
             mu = 1e-6 * (np.trace(JtJ, axis1=1, axis2=2)[:, None, None] + 1e-12)
-            dq = -np.linalg.solve(JtJ + mu * np.eye(self.n), (J.transpose(0, 2, 1) @ r[..., None]))[..., 0]
+            g = J.transpose(0, 2, 1) @ r[..., None]
+            dq = -np.linalg.solve(JtJ + mu * np.eye(self.n), g)[..., 0]
             big = np.max(np.abs(dq), axis=1, keepdims=True)
             dq *= np.minimum(1.0, MAX_STEP / np.maximum(big, 1e-300))
             Q[act] = np.clip(Q[act] + dq, self.lo, self.hi)

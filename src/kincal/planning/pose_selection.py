@@ -334,9 +334,9 @@ def _check_indices(keep, m: int) -> list[int]:
     return out
 
 
-def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(), keep=(),
+def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(), keep=(), targets=None,
                  method: str = "D", max_swaps: int = 1000, seed: int = 0,
-                 random_subsets: int = RANDOM_SUBSETS, targets=None) -> PoseSelection:
+                 random_subsets: int = RANDOM_SUBSETS) -> PoseSelection:
     """Choose ``n`` of the ``candidates`` to measure (see the module notes).
 
     candidates: (M, n_joints) joint values in the chain order of ``robot`` [rad or m];

@@ -25,17 +25,17 @@ step. Batches are drawn until ``m`` candidates pass every check, or a bound on t
 attempts is met, in which case the error says which constraint rejected most.
 
 Branches. A 6-axis arm reaches most poses in several ways (shoulder left/right, elbow
-up/down, wrist flipped or not); they are separated by singular configurations, where
-the 6 x n Jacobian of the tip (linear part divided by the arm's reach) loses rank. A
+up/down, wrist flipped or not); they are separated by singular configurations, where the
+6 x n Jacobian of the tip (linear part divided by the arm's reach) loses rank. A
 candidate is on the branch of ``home`` when the straight joint-space path from ``home``
 to it (the last joint held: the Jacobian's rank does not depend on it, as every joint
-screw is set by the joints before it) keeps the smallest singular value of that Jacobian above ``BRANCH_MARGIN`` times
-its value at ``home``, checked at steps of at most ``BRANCH_STEP`` rad. So no
-configuration sign (elbow, wrist, shoulder) can flip without the path coming near a
-singularity, whatever the arm. The default home is found once, deterministically: the
-solution at the volume's centre, pointing along ``tilt_direction``, from a fixed set of
-starts, that is farthest from singularity (largest smallest singular value) among those
-inside the limits and free of collision.
+screw is set by the joints before it) keeps the smallest singular value of that Jacobian
+above ``BRANCH_MARGIN`` times its value at ``home``, checked at steps of at most
+``BRANCH_STEP`` rad. So no configuration sign (elbow, wrist, shoulder) can flip without
+the path coming near a singularity, whatever the arm. The default home is found once,
+deterministically: the solution at the volume's centre, pointing along
+``tilt_direction``, from a fixed set of starts, that is farthest from singularity
+(largest smallest singular value) among those inside the limits and free of collision.
 """
 
 from __future__ import annotations
@@ -77,10 +77,12 @@ class Volume:
             raise OptionError(f"unknown volume shape {self.shape!r}; expected cube or sphere")
         c = np.asarray(self.center, float)
         if c.shape != (3,) or not np.all(np.isfinite(c)):
-            raise OptionError(f"the {self.shape} centre needs 3 finite numbers [m], got {self.center!r}")
+            raise OptionError(f"the {self.shape} centre needs 3 finite numbers [m], "
+                              f"got {self.center!r}")
         if not (math.isfinite(self.size) and self.size > 0):
             what = "edge" if self.shape == "cube" else "radius"
-            raise OptionError(f"the {self.shape} {what} must be a positive number [m], got {self.size!r}")
+            raise OptionError(f"the {self.shape} {what} must be a positive number [m], "
+                              f"got {self.size!r}")
         object.__setattr__(self, "center", tuple(float(v) for v in c))
 
     @classmethod
@@ -276,7 +278,8 @@ def find_home(robot: "Robot", spec: VolumeSpec, kin: BatchKinematics | None = No
     if len(Q) == 0:
         raise OptionError(f"every configuration that reaches the centre of the "
                           f"{spec.volume.describe()} pointing along "
-                          f"{np.round(spec.tilt_direction, 3).tolist()} collides ({collisions.note}): "
+                          f"{np.round(spec.tilt_direction, 3).tolist()} collides "
+                          f"({collisions.note}): "
                           "move the volume or change --tilt-direction")
     home = Q[int(np.argmax(kin.sigma_min(Q)))].copy()
     # a revolute joint turned by a full turn gives the same pose: take the turn nearest zero
