@@ -6,6 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import ur10_path
+from test_pose_selection import _normalised_jacobian
 
 from kincal.cli.main import main
 from kincal.errors import OptionError
@@ -222,18 +223,10 @@ def test_i_optimal_gain_formula_and_selection(ec66, cands):
     s_d = select_poses(ec66, q, 30, tool=TOOL, method="D", targets=targets)
     assert s_i.criterion == "I" and s_i.n_targets == 60
     assert s_i.mean_variance < s_d.mean_variance < s_d.random_mean_variance
-    # the reported figure is trace(M^-1 A)/3, recomputed from scratch
-    J = select_poses.__globals__["MeasurementModel"]  # the same model class, built here
-    from kincal.identification.parameters import MM, ParameterSpace
-    from kincal.models import mdh
-
-    model = mdh.extract(ec66.geometry)
-    sp = ParameterSpace(model.joint_names)
-    x = sp.join(model.table, np.zeros(6), np.asarray(TOOL))
-    cols = sp.indices(s_i.parameters)
-    Js = J(model, q[list(s_i.indices)]).jacobian(x)[1][:, :, cols] * (sp.reporting_scale()[cols] / MM)
-    Jt = J(model, targets).jacobian(x)[1][:, :, cols] * (sp.reporting_scale()[cols] / MM)
-    G = np.einsum("kip,kiq->pq", Js, Js)
+    # the reported figure is trace(M^-1 A)/3, recomputed from Jacobians built independently
+    _, Jc, _ = _normalised_jacobian(ec66, q[list(s_i.indices)], s_i)
+    _, Jt, _ = _normalised_jacobian(ec66, targets, s_i)
+    G = np.einsum("kip,kiq->pq", Jc, Jc)
     V = np.trace(np.linalg.solve(G, np.einsum("kip,kiq->pq", Jt, Jt))) / len(Jt) / 3
     assert s_i.mean_variance == pytest.approx(V, rel=1e-6)
     assert "I-optimal selection of 30" in s_i.summary()
