@@ -139,53 +139,6 @@ def _render_plots(result, out_dir: Path):
     return pngs
 
 
-def _volume_spec(args, robot, unit: float, tool, default_tilt: float = 30.0):
-    """A VolumeSpec from --in-cube/--in-sphere, --max-tilt, --tilt-direction, --home, --floor
-    (lengths in ``unit`` [m per unit], --home in the plan's joint units), or None.
-    default_tilt: [deg] when --max-tilt is not given."""
-    from kincal.planning.volume_candidates import Volume, VolumeSpec
-
-    if args.in_cube is not None and args.in_sphere is not None:
-        raise OptionError("give at most one of --in-cube and --in-sphere")
-    if args.in_cube is None and args.in_sphere is None:
-        for flag in ("max_tilt", "tilt_direction", "home"):
-            if getattr(args, flag, None) is not None:
-                raise OptionError(f"--{flag.replace('_', '-')} needs a volume: --in-cube or --in-sphere")
-        return None
-    c = args.in_cube if args.in_cube is not None else args.in_sphere
-    make = Volume.cube if args.in_cube is not None else Volume.sphere
-    volume = make([v * unit for v in c[:3]], c[3] * unit)
-    home = None
-    if getattr(args, "home", None) is not None:
-        angle = math.radians(1.0) if getattr(args, "angle_unit", "rad") == "deg" else 1.0
-        if len(args.home) != len(robot.joint_names):
-            raise OptionError(f"--home needs {len(robot.joint_names)} values "
-                              f"({', '.join(robot.joint_names)}), got {len(args.home)}")
-        home = [v * (unit if k == "prismatic" else angle)
-                for v, k in zip(args.home, robot.geometry.kinds)]
-    floor = None if args.no_floor else args.floor * unit
-    return VolumeSpec(volume, tuple(tool), math.radians(default_tilt if args.max_tilt is None
-                                                        else args.max_tilt),
-                      tuple(args.tilt_direction or (0.0, 0.0, -1.0)), home, floor)
-
-
-def _add_volume(p, unit_help):
-    p.add_argument("--in-cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
-                   help=f"poses with the tool point inside this axis-aligned cube of the base "
-                        f"frame ({unit_help})")
-    p.add_argument("--in-sphere", nargs=4, type=float, metavar=("CX", "CY", "CZ", "R"),
-                   help=f"or inside this sphere ({unit_help})")
-    p.add_argument("--max-tilt", type=float, metavar="DEG",
-                   help="largest angle of the tip z axis from --tilt-direction (default 30; "
-                        "simulate: as --tilt-deg)")
-    p.add_argument("--tilt-direction", nargs=3, type=float, metavar=("X", "Y", "Z"),
-                   help="mean direction of the tip z axis in the base frame (default 0 0 -1)")
-    p.add_argument("--floor", type=float, default=0.0, metavar="Z",
-                   help=f"height of the floor in the base frame ({unit_help}; default 0): no "
-                        "link may go below it")
-    p.add_argument("--no-floor", action="store_true", help="no floor check")
-
-
 # -------------------------------------------------------------- subcommands
 def cmd_calibrate(args) -> int:
     from kincal.export import report
@@ -309,7 +262,9 @@ def cmd_simulate(args) -> int:
         size = max_cube(robot.name, design[0])
     if args.tilt_deg is not None and args.max_tilt is not None:
         raise OptionError("give --max-tilt or --tilt-deg, not both (the same limit)")
-    spec = _volume_spec(args, robot, 1.0, tool, default_tilt=tilt)
+    from kincal.cli.volume_options import volume_spec
+
+    spec = volume_spec(args, robot, 1.0, tool, default_tilt=tilt)
     if args.poses_file is not None:
         from kincal.planning.candidates import read_candidates
 
@@ -374,7 +329,9 @@ def cmd_plan(args) -> int:
     robot = _robot(args)
     unit = 1e-3 if args.length_unit == "mm" else 1.0
     tool = _tool_offset(args)
-    spec = _volume_spec(args, robot, unit, (0.0, 0.0, 0.0) if tool is None else tool)
+    from kincal.cli.volume_options import volume_spec
+
+    spec = volume_spec(args, robot, unit, (0.0, 0.0, 0.0) if tool is None else tool)
     targets = None
     if spec is not None:
         from kincal.planning.volume_candidates import volume_candidates
@@ -404,7 +361,7 @@ def cmd_plan(args) -> int:
         from kincal.planning.volume_candidates import Volume, volume_candidates
 
         c = args.target_cube
-        base_spec = spec if spec is not None else _volume_spec(
+        base_spec = spec if spec is not None else volume_spec(
             argparse.Namespace(**{**vars(args), "in_cube": c}), robot, unit,
             (0.0, 0.0, 0.0) if tool is None else tool)
         tspec = dataclasses.replace(base_spec, volume=Volume.cube([v * unit for v in c[:3]],
@@ -528,7 +485,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth-seed", type=int, default=0,
                    help="seed of the planted errors: equal seeds, equal robot")
     p.add_argument("--truth-out", help="JSON with the planted parameters")
-    _add_volume(p, "metres")
+    from kincal.cli.volume_options import add_volume_options
+
+    add_volume_options(p, "metres")
     p.add_argument("--poses-file", metavar="CHOSEN.csv",
                    help="simulate at these poses (chain joint columns in rad and m, e.g. from "
                         "'kincal plan') instead of drawing them")
@@ -564,7 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-mm", type=float, default=0.05,
                    help="noise per axis [mm] for the predicted standard errors (default 0.05)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
-    _add_volume(p, "in --length-unit")
+    add_volume_options(p, "in --length-unit")
     p.add_argument("--home", nargs="+", type=float, metavar="J",
                    help="with a volume: a configuration on the arm branch to keep (in "
                         "--angle-unit/--length-unit); default: found automatically")
