@@ -382,3 +382,109 @@ class Robot:
         child = next(i for i, g in enumerate(m.frames)
                      if g.type == pin.FrameType.BODY and g.parentFrame == fid)
         return m.frames[child].name, np.eye(4)
+
+    # ---------------------------------------------------------------- collisions
+    def collision_checker(self, floor_z: float | None = None) -> "CollisionChecker":
+        """Self-collision (and floor) checks of chain configurations; see CollisionChecker."""
+        return CollisionChecker(self, floor_z)
+
+
+class CollisionChecker:
+    """Which chain configurations collide, from the URDF's ``<collision>`` geometry (coal).
+
+    Pairs checked: two geometries of links that the chain moves relative to each other
+    (at least one below a chain joint), except links attached to the same joint or to a
+    parent and child joint (adjacent links touch by design), and except pairs already in
+    contact at zero joint values (overlapping meshes, which an SRDF would disable). With
+    ``floor_z`` [m], also a floor: the half-space below z = floor_z of the base frame,
+    against every geometry the chain moves except the first chain link (it stands on
+    the base).
+    Meshes are checked as their convex hulls.
+    ``has_geometry`` is False when the URDF has no collision geometry; nothing is then
+    checked here and :meth:`colliding` is all False (callers say so).
+    """
+
+    def __init__(self, robot: Robot, floor_z: float | None = None):
+        try:
+            import coal
+        except ImportError:  # Pinocchio 2.x ships the same library as hppfcl
+            import hppfcl as coal
+
+        m = robot.model
+        self.robot = robot
+        dirs = [str(p) for p in robot.source.parents] if robot.source is not None else []
+        try:
+            geom = pin.buildGeomFromUrdfString(m, robot.urdf_text, pin.COLLISION,
+                                               package_dirs=dirs)
+        except (ValueError, RuntimeError) as exc:
+            raise UrdfError(f"{robot.source}: the collision geometry could not be loaded: {exc}"
+                            ) from None
+        self.has_geometry = geom.ngeoms > 0
+        for obj in geom.geometryObjects:
+            # meshes become their convex hulls: ~100x faster, and conservative (a pose the
+            # hulls find free is free; one they find colliding may be a near miss)
+            if isinstance(obj.geometry, coal.BVHModelBase):
+                obj.geometry.buildConvexRepresentation(False)
+                obj.geometry = obj.geometry.convex
+        moved = set()
+        for j in range(1, m.njoints):
+            k = j
+            while k > 0 and k not in robot._chain:
+                k = m.parents[k]
+            if k > 0:
+                moved.add(j)
+        objs = list(geom.geometryObjects)
+        pairs = []
+        for a in range(len(objs)):
+            for b in range(a + 1, len(objs)):
+                ja, jb = objs[a].parentJoint, objs[b].parentJoint
+                if ja == jb or (ja not in moved and jb not in moved):
+                    continue
+                if m.parents[ja] == jb or m.parents[jb] == ja:
+                    continue
+                pairs.append((a, b))
+        self.floor_z = floor_z
+        if floor_z is not None and self.has_geometry:
+            d = m.createData()
+            pin.framesForwardKinematics(m, d, robot.configuration(np.zeros(robot.geometry.n)))
+            oMb = d.oMf[robot._base_id]
+            n_world = oMb.rotation @ np.array([0.0, 0.0, 1.0])
+            # the solid is {x: n.x <= d}: everything below the floor plane
+            half = coal.Halfspace(n_world, float(n_world @ oMb.translation) + float(floor_z))
+            floor = geom.addGeometryObject(pin.GeometryObject("kincal_floor", 0, pin.SE3.Identity(),
+                                                              half))
+            # the first chain link stands on the base, and so on the floor
+            pairs += [(k, floor) for k, o in enumerate(objs)
+                      if o.parentJoint in moved and o.parentJoint != robot._chain[0]]
+        for a, b in pairs:
+            geom.addCollisionPair(pin.CollisionPair(a, b))
+        self._geom, self._gdata, self._data = geom, pin.GeometryData(geom), m.createData()
+        zero = self._pair_hits(np.zeros(robot.geometry.n))
+        zero &= np.array([self._geom.geometryObjects[int(cp.second)].name != "kincal_floor"
+                          for cp in geom.collisionPairs], dtype=bool)
+        self.excluded = tuple(self._pair_name(k) for k in np.flatnonzero(zero))
+        for k in sorted(np.flatnonzero(zero), reverse=True):
+            geom.removeCollisionPair(geom.collisionPairs[int(k)])
+        self._gdata = pin.GeometryData(geom)
+        self.pairs = tuple(self._pair_name(k) for k in range(len(geom.collisionPairs)))
+
+    def _pair_name(self, k: int) -> str:
+        cp = self._geom.collisionPairs[int(k)]
+        names = [self._geom.geometryObjects[i].name for i in (cp.first, cp.second)]
+        return " / ".join(names)
+
+    def _pair_hits(self, joint_values) -> np.ndarray:
+        pin.computeCollisions(self.robot.model, self._data, self._geom, self._gdata,
+                              self.robot.configuration(joint_values), False)
+        return np.array([r.isCollision() for r in self._gdata.collisionResults], dtype=bool)
+
+    def colliding(self, joint_values) -> np.ndarray:
+        """(N,) True where the configuration (N, n) [rad or m] has a checked pair in contact."""
+        Q = np.atleast_2d(np.asarray(joint_values, dtype=float))
+        out = np.zeros(len(Q), dtype=bool)
+        if not self.pairs:
+            return out
+        m, d, g, gd = self.robot.model, self._data, self._geom, self._gdata
+        for k, q in enumerate(Q):
+            out[k] = pin.computeCollisions(m, d, g, gd, self.robot.configuration(q), True)
+        return out

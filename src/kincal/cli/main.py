@@ -401,8 +401,28 @@ def cmd_simulate(args) -> int:
         from kincal.descriptions import max_cube
 
         size = max_cube(robot.name, design[0])
-    q = simulation.cube_poses(robot, args.poses, center, size, tool, rng,
-                              max_tilt=math.radians(tilt))
+    if args.tilt_deg is not None and args.max_tilt is not None:
+        raise OptionError("give --max-tilt or --tilt-deg, not both (the same limit)")
+    from kincal.cli.volume_options import volume_spec
+
+    spec = volume_spec(args, robot, 1.0, tool, default_tilt=tilt)
+    if args.poses_file is not None:
+        from kincal.planning.candidates import read_candidates
+
+        if spec is not None:
+            raise OptionError("give either --poses-file or a volume (--in-cube/--in-sphere)")
+        q, _ = read_candidates(args.poses_file, robot, kind="poses")
+        where = f"at the {len(q)} poses of {args.poses_file}"
+    elif spec is not None:
+        from kincal.planning.volume_candidates import volume_candidates
+
+        q = np.array(volume_candidates(robot, spec, args.poses, seed=args.seed).joint_values)
+        where = (f"{args.design}: {spec.volume.describe()}, tilt <= "
+                 f"{math.degrees(spec.max_tilt):g} deg, random poses on one branch")
+    else:
+        q = simulation.cube_poses(robot, args.poses, center, size, tool, rng,
+                                  max_tilt=math.radians(tilt))
+        where = f"{args.design}: {size * 1e3:g} mm cube at {np.round(center, 3).tolist()} m"
     # the robot's errors have their own seed, so data sets with different pose seeds
     # (calibration, validation) come from one and the same simulated robot
     table = simulation.planted_table(model, np.random.default_rng(args.truth_seed),
@@ -426,9 +446,8 @@ def cmd_simulate(args) -> int:
             "deviations_si": dict(zip(sp.names[:sp.n_kinematic], (x - x0)[:sp.n_kinematic].tolist())),
             "noise_m": args.noise_mm * 1e-3})))
     written = write_all(files, overwrite=args.overwrite, protect=[robot.source])
-    print(f"simulated {len(q)} poses of {robot.name} ({args.design}, {size * 1e3:g} mm cube "
-          f"at {np.round(center, 3).tolist()} m, noise {args.noise_mm} mm): "
-          + ", ".join(str(p) for p in written))
+    print(f"simulated {len(q)} poses of {robot.name} ({where}, noise "
+          f"{args.noise_mm} mm): " + ", ".join(str(p) for p in written))
     return 0
 
 
@@ -437,16 +456,39 @@ def cmd_plan(args) -> int:
     from kincal.planning.candidates import candidates_csv_text, random_candidates, read_candidates
     from kincal.planning.pose_selection import select_poses
 
-    if (args.candidates is None) == (args.random is None):
-        raise OptionError("give exactly one of CANDIDATES.csv or --random M")
+    volume = args.in_cube is not None or args.in_sphere is not None
+    if volume and args.candidates is not None:
+        raise OptionError("give either CANDIDATES.csv or a volume (--in-cube/--in-sphere)")
+    if not volume and (args.candidates is None) == (args.random is None):
+        raise OptionError("give exactly one of CANDIDATES.csv, --random M or --in-cube/--in-sphere")
     if not (math.isfinite(args.noise_mm) and args.noise_mm > 0):
         raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
+    criterion = args.criterion.upper()
+    if (criterion == "I") != (args.target_cube is not None):
+        raise OptionError("--criterion i needs --target-cube CX CY CZ EDGE, and --target-cube "
+                          "is for --criterion i")
     robot = _robot(args)
+    unit = 1e-3 if args.length_unit == "mm" else 1.0
+    tool = _tool_offset(args)
+    from kincal.cli.volume_options import volume_spec
+
+    spec = volume_spec(args, robot, unit, (0.0, 0.0, 0.0) if tool is None else tool)
+    targets = None
+    if spec is not None:
+        from kincal.planning.volume_candidates import volume_candidates
+
+        m = 2000 if args.random is None else args.random
+        if m < args.poses:
+            raise OptionError(f"--random {m} candidates are fewer than the {args.poses} poses to "
+                              "choose: ask for more candidates or fewer poses")
+        vc = volume_candidates(robot, spec, m, seed=args.seed)
+        q, lines = np.array(vc.joint_values), None
+        source = vc.summary()
     if args.candidates is not None:
         q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit,
                                    joint_columns=_joint_columns(args))
         source = f"{len(q)} candidates from {args.candidates}"
-    else:
+    elif spec is None:
         q, lines = random_candidates(robot, args.random, args.seed), None
         source = f"{len(q)} random candidates within the joint limits (seed {args.seed})"
     measured = np.zeros((0, q.shape[1]))
@@ -455,17 +497,37 @@ def cmd_plan(args) -> int:
                                       kind="measured poses", joint_columns=_joint_columns(args))
         source += f", plus the {len(measured)} poses already measured in {args.measured}"
     k = len(measured)
-    tool = _tool_offset(args)
-    selection = select_poses(robot, np.vstack([measured, q]), k + args.poses,
-                             tool=(0.0, 0.0, 0.0) if tool is None else tool,
-                             fix=tuple(args.fix), keep=tuple(range(k)))
+    if args.target_cube is not None:
+        import dataclasses
+
+        from kincal.planning.volume_candidates import Volume, volume_candidates
+
+        c = args.target_cube
+        base_spec = spec if spec is not None else volume_spec(
+            argparse.Namespace(**{**vars(args), "in_cube": c}), robot, unit,
+            (0.0, 0.0, 0.0) if tool is None else tool)
+        tspec = dataclasses.replace(base_spec, volume=Volume.cube([v * unit for v in c[:3]],
+                                                                  c[3] * unit),
+                                    home=None if spec is None else tuple(vc.home))
+        targets = np.array(volume_candidates(robot, tspec, args.target_poses,
+                                             seed=args.seed + 1).joint_values)
+        source += (f"\n  {len(targets)} target poses in the {tspec.volume.describe()} (same tilt "
+                   "range and branch)")
+    from kincal.identification.blas_threads import limited
+
+    with limited(1):  # small batched matrices: BLAS threads would only wait for each other
+        selection = select_poses(robot, np.vstack([measured, q]), k + args.poses,
+                                 tool=(0.0, 0.0, 0.0) if tool is None else tool,
+                                 fix=tuple(args.fix), keep=tuple(range(k)), method=criterion,
+                                 targets=targets)
     new = [i - k for i in selection.indices if i >= k]
     protect = [robot.source] + [f for f in (args.candidates, args.measured) if f is not None]
     written = write_all([(args.out, candidates_csv_text(
         selection.joint_names, q[new], None if lines is None else lines[new]))],
         overwrite=args.overwrite, protect=protect)
     print(f"{source}:")
-    print(selection.summary(args.noise_mm))
+    print(selection.summary(args.noise_mm, checked=None if spec is None else
+                            "candidates checked as above; line of sight is not checked"))
     if k:
         print(f"  (the selection includes the {k} poses already measured; {len(new)} new)")
     for path in written:
@@ -652,6 +714,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth-seed", type=int, default=0,
                    help="seed of the planted errors: equal seeds, equal robot")
     p.add_argument("--truth-out", help="JSON with the planted parameters")
+    from kincal.cli.volume_options import add_volume_options
+
+    add_volume_options(p, "metres")
+    p.add_argument("--poses-file", metavar="CHOSEN.csv",
+                   help="simulate at these poses (chain joint columns in rad and m, e.g. from "
+                        "'kincal plan') instead of drawing them")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_simulate)
 
@@ -664,7 +732,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("candidates", nargs="?", metavar="CANDIDATES.csv",
                    help="CSV with the chain joint columns (no positions needed); or use --random")
     p.add_argument("--random", type=int, metavar="M",
-                   help="instead of a CSV: M random candidates uniform within the joint limits")
+                   help="instead of a CSV: M random candidates uniform within the joint limits; "
+                        "with --in-cube/--in-sphere: M candidates in the volume (default 2000)")
     p.add_argument("--seed", type=int, default=0, help="seed of --random")
     p.add_argument("--poses", type=int, required=True, metavar="N", help="poses to choose")
     p.add_argument("--measured", metavar="DATA.csv",
@@ -684,6 +753,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="noise per axis [mm] for the predicted standard errors (default 0.05)")
     _add_joint_columns(p, "CANDIDATES and --measured")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    add_volume_options(p, "in --length-unit")
+    p.add_argument("--home", nargs="+", type=float, metavar="J",
+                   help="with a volume: a configuration on the arm branch to keep (in "
+                        "--angle-unit/--length-unit); default: found automatically")
+    p.add_argument("--criterion", choices=("d", "i"), default="d",
+                   help="d: D-optimal (default); i: I-optimal over --target-cube")
+    p.add_argument("--target-cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
+                   help="with --criterion i: the working volume whose mean predicted position "
+                        "variance is minimised (in --length-unit)")
+    p.add_argument("--target-poses", type=int, default=200, metavar="T",
+                   help="poses drawn in the target cube (default 200)")
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("compensate", help="joint values with which the calibrated robot "

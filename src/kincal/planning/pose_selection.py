@@ -60,11 +60,12 @@ from kincal.identification.selection import RANK_TOL, analyze
 from kincal.measurements.point import MeasurementModel
 from kincal import models as error_models
 from kincal.models.mdh import TOOL_AXIS_WARNING
+from kincal.planning import i_optimal
 
 if TYPE_CHECKING:
     from kincal.robot import Robot
 
-METHODS = ("D",)
+METHODS = ("D", "I")
 RIDGE = 1e-6  # start of the greedy search, in units of the average pose's information
 EXCHANGE_TOL = 1e-9  # a swap must raise log det by more than this to be made
 SINGULAR = 1e-12  # reciprocal condition below which an information matrix counts as singular
@@ -102,6 +103,9 @@ class PoseSelection:
     random_log_det, random_condition, random_variances: the same figures for random
         subsets of the same size (median over ``random_subsets`` seeded draws; ``keep``
         is in every draw).
+    criterion: "D" or "I" (:mod:`kincal.planning.i_optimal`). With target poses
+        (n_targets of them): mean_variance, the mean predicted variance of the measured
+        point over the targets per axis [mm^2 per mm^2 of noise], and its random median.
     """
 
     chain: str
@@ -126,6 +130,10 @@ class PoseSelection:
     random_variances: np.ndarray
     random_subsets: int
     ridge: float = RIDGE
+    criterion: str = "D"
+    mean_variance: float = math.nan
+    random_mean_variance: float = math.nan
+    n_targets: int = 0
 
     def std_errors(self, sigma_mm: float) -> np.ndarray:
         """(p,) predicted standard errors [mm or deg, see ``units``] of ``parameters`` for a
@@ -136,10 +144,13 @@ class PoseSelection:
         """(p,) the same for random subsets (median variance over the draws)."""
         return np.sqrt(self.random_variances) * float(sigma_mm)
 
-    def summary(self, sigma_mm: float = 0.05, largest: int = 4) -> str:
-        """Human report: criterion and condition vs random, largest predicted std errors."""
+    def summary(self, sigma_mm: float = 0.05, largest: int = 4, checked: str | None = None) -> str:
+        """Human report: criterion and condition vs random, largest predicted std errors.
+
+        checked: what the candidates were checked for, when kincal made them (e.g. by
+        :func:`kincal.planning.volume_candidates.volume_candidates`)."""
         n, p = len(self.indices), len(self.parameters)
-        lines = [f"D-optimal selection of {n} of {self.n_candidates} candidate poses, "
+        lines = [f"{self.criterion}-optimal selection of {n} of {self.n_candidates} candidate poses, "
                  f"{self.chain}",
                  f"  optimised over the {p} parameters the candidates identify"]
         if self.not_identifiable:
@@ -156,6 +167,11 @@ class PoseSelection:
                          f"std errors x{math.exp(-gain / (2 * p)):.3g} (geometric means)")
         lines.append(f"  condition number (information, unit diagonal): {self.condition:.3g} "
                      f"chosen, {self.random_condition:.3g} random median")
+        if self.n_targets:
+            lines.append(f"  predicted position std over the {self.n_targets} target poses (RMS "
+                         f"per axis, at {sigma_mm:g} mm noise): "
+                         f"{math.sqrt(self.mean_variance) * sigma_mm:.4g} mm chosen, "
+                         f"{math.sqrt(self.random_mean_variance) * sigma_mm:.4g} mm random median")
         how = "converged" if self.exchange_converged else "stopped at max_swaps"
         lines.append(f"  greedy log det {self.greedy_log_det:.2f}, then {self.swaps} exchanges "
                      f"({how})")
@@ -166,8 +182,9 @@ class PoseSelection:
             idx = [i for i in range(p) if self.units[i] == unit]
             for i in sorted(idx, key=lambda i: -se[i])[:largest]:
                 lines.append(f"    {self.parameters[i]:<22} {se[i]:>10.4g} {se_r[i]:>10.4g}  {unit}")
-        lines.append("  (linearised at the nominal robot and tool guess; the candidates must be "
-                     "safe and measurable, kincal does not check)")
+        lines.append("  (linearised at the nominal robot and tool guess; "
+                     + (checked or "the candidates must be safe and measurable, kincal does not "
+                        "check") + ")")
         return "\n".join(lines)
 
 
@@ -317,7 +334,7 @@ def _check_indices(keep, m: int) -> list[int]:
     return out
 
 
-def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(), keep=(),
+def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(), keep=(), targets=None,
                  method: str = "D", max_swaps: int = 1000, seed: int = 0,
                  random_subsets: int = RANDOM_SUBSETS,
                  model: str = error_models.DEFAULT) -> PoseSelection:
@@ -332,6 +349,10 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     method: "D" (maximise log det of the information matrix).
     model: the error model whose parameters the poses should determine (kincal.models).
     max_swaps: bound on the exchange stage. seed, random_subsets: the random baseline.
+    method "I": minimise the mean predicted position variance over ``targets``
+        (:mod:`kincal.planning.i_optimal`).
+    targets: (T, n_joints) poses where the calibrated robot will work (method "I"; with
+        "D" they only add the predicted position std to the report).
     """
     if method not in METHODS:
         raise OptionError(f"unknown selection method {method!r}; expected one of {', '.join(METHODS)}")
@@ -361,6 +382,15 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
         raise OptionError(f"max_swaps must be an integer >= 0, got {max_swaps!r}")
     if not (isinstance(random_subsets, (int, np.integer)) and random_subsets >= 1):
         raise OptionError(f"random_subsets must be an integer >= 1, got {random_subsets!r}")
+    if method == "I" and targets is None:
+        raise OptionError("I-optimal selection needs target poses (the volume where the robot "
+                          "will work), e.g. --target-cube")
+    if targets is not None:
+        targets = np.asarray(targets, dtype=float)
+        if targets.ndim != 2 or targets.shape[1] != g.n or len(targets) == 0 \
+                or not np.all(np.isfinite(targets)):
+            raise DataError(f"targets must be a non-empty (T, {g.n}) array of finite joint "
+                            f"values; got shape {targets.shape}")
 
     model = error_models.build(model, g)
     _warn_tool_on_axis(model, t)
@@ -386,12 +416,23 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     scale = np.sqrt(np.einsum("kic,kic->c", Jk, Jk) / M)  # RMS per pose [mm per mm or deg]
     Jn = np.ascontiguousarray(Jk / scale)
 
-    chosen, Minv, log_det, ridge = _greedy(Jn, n, keep)
-    greedy_log_det = log_det if not ridge else -np.inf
-    chosen, Minv, log_det, swaps, converged = _exchange(Jn, chosen, len(keep), Minv, log_det,
-                                                        int(max_swaps))
+    A = None
+    if targets is not None:
+        Jt = MeasurementModel(model, targets).jacobian(x)[1] * (space.reporting_scale() / MM)
+        A = i_optimal.target_moment(Jt[:, :, cols] / scale)
+    if method == "I":
+        chosen, Minv, ridge = i_optimal.greedy(Jn, n, keep, A)
+        greedy_log_det = float(_set_figures(Jn, scale, np.array([chosen]))[0][0])
+        chosen, Minv, swaps, converged = i_optimal.exchange(Jn, chosen, len(keep), Minv, A,
+                                                            int(max_swaps))
+        log_det = -np.inf
+    else:
+        chosen, Minv, log_det, ridge = _greedy(Jn, n, keep)
+        greedy_log_det = log_det if not ridge else -np.inf
+        chosen, Minv, log_det, swaps, converged = _exchange(Jn, chosen, len(keep), Minv, log_det,
+                                                            int(max_swaps))
     ld, cond, var = _set_figures(Jn, scale, np.array([chosen]))
-    if ridge:  # the criterion carried the ridge throughout: report the set's own figures
+    if ridge or method == "I":  # report the set's own figures, without the ridge
         log_det = float(ld[0])
 
     rng = np.random.default_rng(seed)
@@ -403,10 +444,17 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     mine = analyze(J[chosen].reshape(-1, space.size), space.names, space.n_kinematic, free,
                    RANK_TOL)
     lost = tuple(name for name in ident.kept if name not in mine.kept)
+    mean_var = r_mean_var = math.nan
+    if A is not None:
+        mean_var, r_mean_var = (float(np.median(i_optimal.mean_variances(Jn, A, np.array(s))))
+                                for s in ([chosen], draws))
     units = tuple("mm" if space.is_length[c] else "deg" for c in cols)
     return PoseSelection(f"{robot.name} ({robot.base} -> {robot.tip})", tuple(g.joint_names), M, tuple(chosen), _readonly(q[chosen]),
                          tuple(ident.kept), units, tuple(ident.dropped), tuple(ident.fixed), lost,
                          _readonly(scale), float(log_det), float(greedy_log_det),
                          float(cond[0]), _readonly(var[0]), swaps, converged,
                          float(np.median(r_ld)), float(np.median(r_cond)),
-                         _readonly(np.median(r_var, axis=0)), int(random_subsets))
+                         _readonly(np.median(r_var, axis=0)), int(random_subsets),
+                         criterion=method, mean_variance=mean_var,
+                         random_mean_variance=r_mean_var,
+                         n_targets=0 if targets is None else len(targets))

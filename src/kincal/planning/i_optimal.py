@@ -1,0 +1,131 @@
+"""I-optimal pose selection: the smallest mean predicted position variance over a volume.
+
+Plain numpy, beside :mod:`kincal.planning.pose_selection` (which builds the normalised
+Jacobians and reports). With the information matrix M = J_S^T J_S of the chosen poses
+and A = mean over the target poses t of J_t^T J_t (the same columns), the mean predicted
+variance of the measured point over the targets, per unit noise variance, is
+
+    V(S) = trace(M^-1 A) / 3        [mm^2 per mm^2 of noise, per axis]
+
+I-optimality minimises V: it cares about how well the calibrated model predicts where
+the robot will work (the target volume), not about the parameters as such, so it does
+not spend poses on parameter combinations that barely move the point there.
+
+Search, as for D: greedy forward selection from the ridge RIDGE * I, each step scoring
+every candidate k at once by the rank-3 update
+
+    trace(M^-1 A) - trace((M + J_k^T J_k)^-1 A) = trace((I + B_k J_k^T)^-1 B_k A B_k^T),
+    B_k = J_k M^-1,
+
+then exchanges: each chosen pose in turn is taken out (rank-3 downdate) and the best
+candidate put in its place if that lowers V by more than a relative EXCHANGE_RTOL; sweeps
+repeat until one makes no swap or ``max_swaps`` is reached. Deterministic (ties go to the
+lower index). A local optimum for single swaps, not in general the global one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+RIDGE = 1e-6  # as in pose_selection: the first greedy picks see a finite objective
+EXCHANGE_RTOL = 1e-9  # a swap must lower V by more than this fraction
+SINGULAR = 1e-12
+
+
+def target_moment(Jt: np.ndarray) -> np.ndarray:
+    """(p, p) A = mean over the targets of J_t^T J_t, for target Jacobians (T, 3, p)."""
+    return np.einsum("kip,kiq->pq", Jt, Jt) / len(Jt)
+
+
+def mean_variance(Minv: np.ndarray, A: np.ndarray) -> float:
+    """V = trace(M^-1 A) / 3 (see the module notes)."""
+    return float(np.einsum("pq,qp->", Minv, A)) / 3.0
+
+
+def mean_variances(Jn: np.ndarray, A: np.ndarray, subsets: np.ndarray) -> np.ndarray:
+    """(K,) V of each subset (K, n) of candidate rows; inf where its M is singular."""
+    X = Jn[subsets].reshape(len(subsets), -1, Jn.shape[2])
+    out = np.full(len(subsets), np.inf)
+    for k, Xk in enumerate(X):
+        Minv = _exact_inverse(Xk.T @ Xk)
+        if Minv is not None:
+            out[k] = mean_variance(Minv, A)
+    return out
+
+
+def _gains(Jn: np.ndarray, Minv: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """(M,) decrease of 3 V when each candidate is added to the set of M^-1."""
+    B = Jn @ Minv                                                   # (M, 3, p)
+    C = np.eye(3) + B @ Jn.transpose(0, 2, 1)                       # (M, 3, 3)
+    Q = (B @ A) @ B.transpose(0, 2, 1)                              # (M, 3, 3)
+    return np.trace(np.linalg.solve(C, Q), axis1=1, axis2=2)
+
+
+def _add(Minv: np.ndarray, Jk: np.ndarray, sign: float = 1.0) -> np.ndarray:
+    """M^-1 after M += sign J_k^T J_k (Woodbury, rank 3)."""
+    W = Jk @ Minv
+    out = Minv - W.T @ np.linalg.solve(sign * np.eye(3) + W @ Jk.T, W)
+    return 0.5 * (out + out.T)
+
+
+def _exact_inverse(G: np.ndarray) -> np.ndarray | None:
+    w = np.linalg.eigvalsh(G)
+    if w[0] <= SINGULAR * w[-1]:
+        return None
+    return np.linalg.inv(G)
+
+
+def greedy(Jn: np.ndarray, n: int, keep: list[int], A: np.ndarray):
+    """Forward selection; returns (chosen, M^-1, ridge still on)."""
+    M, _, p = Jn.shape
+    chosen = list(keep)
+    G = RIDGE * np.eye(p) + np.einsum("kip,kiq->pq", Jn[chosen], Jn[chosen])
+    Minv, ridge = np.linalg.inv(G), True
+    available = np.ones(M, dtype=bool)
+    available[chosen] = False
+    while True:
+        if ridge and 3 * len(chosen) >= p:
+            S = Jn[chosen].reshape(-1, p)
+            exact = _exact_inverse(S.T @ S)
+            if exact is not None:
+                Minv, ridge = exact, False
+        if len(chosen) == n:
+            return chosen, Minv, ridge
+        gain = _gains(Jn, Minv, A)
+        gain[~available] = -np.inf
+        k = int(np.argmax(gain))
+        Minv = _add(Minv, Jn[k])
+        chosen.append(k)
+        available[k] = False
+
+
+def exchange(Jn: np.ndarray, chosen: list[int], n_keep: int, Minv: np.ndarray, A: np.ndarray,
+             max_swaps: int):
+    """Swap sweeps (see the module notes); returns (chosen, M^-1, swaps, converged)."""
+    chosen = list(chosen)
+    swaps = 0
+    while True:
+        swapped = False
+        for i in range(n_keep, len(chosen)):
+            V = mean_variance(Minv, A)
+            out = chosen[i]
+            try:
+                Mi = _add(Minv, Jn[out], sign=-1.0)
+            except np.linalg.LinAlgError:
+                continue  # the set without this pose is singular: it cannot leave
+            if not np.all(np.isfinite(Mi)) or np.min(np.linalg.eigvalsh(Mi)) <= 0:
+                continue
+            gain = _gains(Jn, Mi, A)
+            gain[chosen] = -np.inf
+            gain[out] = -np.inf
+            k = int(np.argmax(gain))
+            V_new = mean_variance(Mi, A) - gain[k] / 3.0
+            if V_new < V * (1 - EXCHANGE_RTOL):
+                if swaps == max_swaps:
+                    return chosen, Minv, swaps, False
+                Minv = _add(Mi, Jn[k])
+                chosen[i] = k
+                swaps += 1
+                swapped = True
+        if not swapped:
+            return chosen, Minv, swaps, True

@@ -1,0 +1,390 @@
+"""Candidate poses inside a measurement volume: where an R-test or a small tracker sees the tool.
+
+The instrument fixes where the measured point may be and how the tool may be tilted;
+:func:`volume_candidates` makes joint configurations that respect that, for
+:func:`kincal.planning.pose_selection.select_poses` to choose among. A candidate
+
+- puts the tool point (tip frame plus ``tool``) inside the :class:`Volume` (an
+  axis-aligned cube or a sphere of the base frame);
+- has the tip frame's z axis within ``max_tilt`` of ``tilt_direction`` (base frame;
+  default -z, the tool pointing down into a nest); the spin about that axis is free;
+- is inside the joint limits;
+- is on the arm branch of ``home`` (see below);
+- is free of self-collision and of the floor (z = ``floor_z`` of the base frame) where
+  the URDF has collision geometry (:class:`kincal.robot.CollisionChecker`). Without
+  collision geometry only the tool point and the tip frame origin are kept above the
+  floor, and :attr:`VolumeCandidates.collision_note` says so.
+
+Generation. Targets are drawn at random: a point uniform in the volume, a z direction
+uniform on the spherical cap of half-angle ``max_tilt``, and a start that is ``home``
+with its last joint turned at random (that spreads the spin, which the 5-dimensional
+task leaves free). Damped Gauss-Newton on the residual (point - target, (z - u) * L),
+vectorised over all targets, with the analytic Jacobian of the MD-H forward kinematics
+(exact for the URDF; L is the arm's reach); joints are clipped to their limits at every
+step. Batches are drawn until ``m`` candidates pass every check, or a bound on the
+attempts is met, in which case the error says which constraint rejected most.
+
+Branches. A 6-axis arm reaches most poses in several ways (shoulder left/right, elbow
+up/down, wrist flipped or not); they are separated by singular configurations, where the
+6 x n Jacobian of the tip (linear part divided by the arm's reach) loses rank. A
+candidate is on the branch of ``home`` when the straight joint-space path from ``home``
+to it (the last joint held: the Jacobian's rank does not depend on it, as every joint
+screw is set by the joints before it) keeps the smallest singular value of that Jacobian
+above ``BRANCH_MARGIN`` times its value at ``home``, checked at steps of at most
+``BRANCH_STEP`` rad. So no configuration sign (elbow, wrist, shoulder) can flip without
+the path coming near a singularity, whatever the arm. The default home is found once,
+deterministically: the solution at the volume's centre, pointing along
+``tilt_direction``, from a fixed set of starts, that is farthest from singularity
+(largest smallest singular value) among those inside the limits and free of collision.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from kincal.errors import OptionError
+from kincal.identification import blas_threads
+from kincal.planning.batch_ik import BatchKinematics
+
+if TYPE_CHECKING:
+    from kincal.robot import Robot
+
+BRANCH_MARGIN = 0.1  # smallest singular value on the path, relative to home's
+BRANCH_STEP = 0.05  # [rad or m] largest joint change between checks on the path
+HOME_STARTS = 64  # starts of the home search (fixed seed 0)
+MAX_ATTEMPTS = 20  # draws per candidate asked for, at most, before giving up
+
+
+# ------------------------------------------------------------------ values
+@dataclass(frozen=True)
+class Volume:
+    """Where the tool point may be: an axis-aligned cube or a sphere of the base frame.
+
+    shape: "cube" or "sphere"; center: (3,) [m]; size: the cube's edge or the sphere's
+    radius [m].
+    """
+
+    shape: str
+    center: tuple[float, float, float]
+    size: float
+
+    def __post_init__(self):
+        if self.shape not in ("cube", "sphere"):
+            raise OptionError(f"unknown volume shape {self.shape!r}; expected cube or sphere")
+        c = np.asarray(self.center, float)
+        if c.shape != (3,) or not np.all(np.isfinite(c)):
+            raise OptionError(f"the {self.shape} centre needs 3 finite numbers [m], "
+                              f"got {self.center!r}")
+        if not (math.isfinite(self.size) and self.size > 0):
+            what = "edge" if self.shape == "cube" else "radius"
+            raise OptionError(f"the {self.shape} {what} must be a positive number [m], "
+                              f"got {self.size!r}")
+        object.__setattr__(self, "center", tuple(float(v) for v in c))
+
+    @classmethod
+    def cube(cls, center, edge: float) -> "Volume":
+        return cls("cube", tuple(center), float(edge))
+
+    @classmethod
+    def sphere(cls, center, radius: float) -> "Volume":
+        return cls("sphere", tuple(center), float(radius))
+
+    def sample(self, m: int, rng: np.random.Generator) -> np.ndarray:
+        """(m, 3) points uniform in the volume [m]."""
+        c = np.asarray(self.center)
+        if self.shape == "cube":
+            return c + (rng.random((m, 3)) - 0.5) * self.size
+        v = rng.normal(size=(m, 3))
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        return c + v * self.size * rng.random((m, 1)) ** (1 / 3)
+
+    def contains(self, points, tol: float = 1e-9) -> np.ndarray:
+        """(N,) True for points (N, 3) [m] inside, up to ``tol`` [m]."""
+        d = np.atleast_2d(points) - np.asarray(self.center)
+        if self.shape == "cube":
+            return np.all(np.abs(d) <= self.size / 2 + tol, axis=1)
+        return np.linalg.norm(d, axis=1) <= self.size + tol
+
+    def describe(self) -> str:
+        c = ", ".join(f"{v:g}" for v in self.center)
+        if self.shape == "cube":
+            return f"{self.size * 1e3:g} mm cube at ({c}) m"
+        return f"sphere of radius {self.size * 1e3:g} mm at ({c}) m"
+
+
+@dataclass(frozen=True)
+class VolumeSpec:
+    """What a candidate must satisfy (see the module notes). SI units, base frame.
+
+    volume: where the tool point may be. tool: (3,) tool point in the tip frame [m].
+    max_tilt: largest angle [rad] between the tip z axis and ``tilt_direction`` (3,).
+    home: (n,) joint values [rad or m] giving the arm branch, or None to find one.
+    floor_z: height of the floor [m] in the base frame, or None for no floor.
+    """
+
+    volume: Volume
+    tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    max_tilt: float = math.radians(30.0)
+    tilt_direction: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    home: tuple[float, ...] | None = None
+    floor_z: float | None = 0.0
+
+    def __post_init__(self):
+        t = np.asarray(self.tool, float)
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            raise OptionError(f"tool needs 3 finite numbers (tip frame) [m], got {self.tool!r}")
+        if not (math.isfinite(self.max_tilt) and 0 <= self.max_tilt <= math.pi):
+            raise OptionError(f"the largest tilt must be between 0 and 180 deg, got "
+                              f"{math.degrees(self.max_tilt):g} deg")
+        u = np.asarray(self.tilt_direction, float)
+        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) < 1e-9:
+            raise OptionError(f"the tilt direction needs 3 finite numbers, not all zero, got "
+                              f"{self.tilt_direction!r}")
+        object.__setattr__(self, "tool", tuple(float(v) for v in t))
+        object.__setattr__(self, "tilt_direction", tuple(float(v) for v in u / np.linalg.norm(u)))
+        if self.home is not None:
+            object.__setattr__(self, "home", tuple(float(v) for v in self.home))
+
+
+@dataclass(frozen=True)
+class Rejections:
+    """How many drawn targets each check turned down (in this order: the first failed)."""
+
+    not_reached: int = 0  # the IK found no configuration inside the limits
+    branch: int = 0       # reached, but on another branch than home
+    collision: int = 0    # self-collision or the floor
+
+    def total(self) -> int:
+        return self.not_reached + self.branch + self.collision
+
+
+@dataclass(frozen=True)
+class VolumeCandidates:
+    """The outcome of :func:`volume_candidates`.
+
+    joint_values: (m, n) candidates [rad or m], chain order, read-only.
+    points: (m, 3) their tool points in the base frame [m]; tilts: (m,) angles [rad]
+        between the tip z axis and the tilt direction.
+    home: (n,) the branch's home configuration; home_found: True if kincal found it.
+    attempts: targets drawn; rejections: why the others were turned down.
+    collision_note: what the collision check covered.
+    """
+
+    spec: VolumeSpec
+    joint_values: np.ndarray
+    points: np.ndarray
+    tilts: np.ndarray
+    home: np.ndarray
+    home_found: bool
+    attempts: int
+    rejections: Rejections
+    collision_note: str
+    joint_names: tuple[str, ...] = field(default=())
+
+    def summary(self) -> str:
+        s, r = self.spec, self.rejections
+        lines = [f"{len(self.joint_values)} candidates in the {s.volume.describe()}, tilt <= "
+                 f"{math.degrees(s.max_tilt):g} deg from {np.round(s.tilt_direction, 3).tolist()}"
+                 f" ({self.attempts} targets drawn: {r.not_reached} not reached within the "
+                 f"limits, {r.branch} on another branch, {r.collision} colliding)",
+                 f"  home ({'found' if self.home_found else 'given'}): "
+                 + " ".join(f"{v:.4g}" for v in self.home) + " rad/m",
+                 f"  {self.collision_note}"]
+        return "\n".join(lines)
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def _cap_directions(u, max_tilt: float, m: int, rng) -> np.ndarray:
+    """(m, 3) unit vectors uniform on the cap of half-angle max_tilt around u."""
+    u = np.asarray(u, float)
+    cos_t = 1.0 - rng.random(m) * (1.0 - math.cos(max_tilt))
+    phi = rng.random(m) * 2 * math.pi
+    a = np.array([1.0, 0, 0]) if abs(u[0]) < 0.9 else np.array([0, 1.0, 0])
+    e1 = np.cross(u, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    sin_t = np.sqrt(1 - cos_t ** 2)
+    return (cos_t[:, None] * u + sin_t[:, None] * (np.cos(phi)[:, None] * e1
+                                                   + np.sin(phi)[:, None] * e2))
+
+
+def _on_branch(kin: BatchKinematics, home, sigma_home: float, Q) -> np.ndarray:
+    """(N,) True where the joint path from home to Q stays clear of singularities."""
+    if len(Q) == 0:
+        return np.zeros(0, dtype=bool)
+    D = Q - home
+    D[:, -1] = 0.0  # the last joint turns the whole Jacobian rigidly: no rank change
+    steps = max(2, int(np.ceil(np.max(np.abs(D)) / BRANCH_STEP)))
+    t = np.linspace(0.0, 1.0, steps + 1)[1:]
+    path = home + t[None, :, None] * D[:, None, :]                      # (N, s, n)
+    s = kin.sigma_min(path.reshape(-1, kin.n)).reshape(len(Q), -1)
+    return s.min(axis=1) > BRANCH_MARGIN * sigma_home
+
+
+class _Collisions:
+    """Collision geometry when the URDF has it; tool point and tip above the floor always."""
+
+    def __init__(self, robot, floor_z, tool):
+        self.checker = robot.collision_checker(floor_z)
+        self.floor_z = floor_z
+        self.tool = np.asarray(tool, float)
+        if self.checker.has_geometry:
+            what = f"{len(self.checker.pairs)} collision pairs checked (self"
+            what += f" and a floor at z = {floor_z:g} m)" if floor_z is not None else ")"
+            if self.checker.excluded:
+                what += (f"; {len(self.checker.excluded)} pairs in contact at zero joint values "
+                         "left out")
+            self.note = what
+        else:
+            self.note = ("the URDF has no collision geometry: self-collision NOT checked"
+                         + (f"; only the tool point and tip kept above the floor at z = "
+                            f"{floor_z:g} m" if floor_z is not None else ""))
+
+    def free(self, Q, R, P) -> np.ndarray:
+        ok = np.ones(len(Q), dtype=bool)
+        if self.floor_z is not None:
+            tip = P - R @ self.tool
+            ok &= (P[:, 2] > self.floor_z) & (tip[:, 2] > self.floor_z)
+        if self.checker.has_geometry and ok.any():
+            ok[ok] = ~self.checker.colliding(Q[ok])
+        return ok
+
+
+# ------------------------------------------------------------------ generation
+def find_home(robot: "Robot", spec: VolumeSpec, kin: BatchKinematics | None = None,
+              collisions: _Collisions | None = None) -> np.ndarray:
+    """(n,) a home configuration for ``spec`` (see the module notes); raises OptionError."""
+    kin = kin or BatchKinematics(robot, spec.tool)
+    collisions = collisions or _Collisions(robot, spec.floor_z, spec.tool)
+    rng = np.random.default_rng(0)
+    c = np.asarray(spec.volume.center)[None]
+    u = np.asarray(spec.tilt_direction)[None]
+    starts = rng.uniform(kin.lo, kin.hi, size=(HOME_STARTS, kin.n))
+    Q, ok = kin.solve(np.repeat(c, HOME_STARTS, 0), np.repeat(u, HOME_STARTS, 0), starts)
+    if not ok.any():
+        _explain_unreachable(kin, spec, starts)
+    Q = Q[ok]
+    R, P = kin.poses(Q)
+    Q = Q[collisions.free(Q, R, P)]
+    if len(Q) == 0:
+        raise OptionError(f"every configuration that reaches the centre of the "
+                          f"{spec.volume.describe()} pointing along "
+                          f"{np.round(spec.tilt_direction, 3).tolist()} collides "
+                          f"({collisions.note}): "
+                          "move the volume or change --tilt-direction")
+    home = Q[int(np.argmax(kin.sigma_min(Q)))].copy()
+    # a revolute joint turned by a full turn gives the same pose: take the turn nearest zero
+    for i, kind in enumerate(robot.geometry.kinds):
+        if kind == "revolute":
+            turns = home[i] + 2 * np.pi * np.arange(-3, 4)
+            turns = turns[(turns >= kin.lo[i]) & (turns <= kin.hi[i])]
+            home[i] = turns[np.argmin(np.abs(turns))]
+    return home
+
+
+def _explain_unreachable(kin, spec, starts):
+    n = len(starts)
+    c = np.repeat(np.asarray(spec.volume.center)[None], n, 0)
+    free_dirs = _cap_directions(spec.tilt_direction, math.pi, n, np.random.default_rng(1))
+    _, ok = kin.solve(c, free_dirs, starts)
+    where = f"the centre {np.round(spec.volume.center, 4).tolist()} m of the {spec.volume.shape}"
+    if ok.any():
+        raise OptionError(f"the arm reaches {where}, but not with the tip z axis along "
+                          f"{np.round(spec.tilt_direction, 3).tolist()}: change --tilt-direction "
+                          "(or --home)")
+    raise OptionError(f"the arm cannot reach {where} (within its joint limits, tool point "
+                      f"{np.round(spec.tool, 4).tolist()} m in the tip frame): move the volume "
+                      "(--in-cube/--in-sphere centre) nearer the arm")
+
+
+def volume_candidates(robot: "Robot", spec: VolumeSpec, m: int, seed: int = 0,
+                      batch: int = 512) -> VolumeCandidates:
+    """``m`` candidate configurations satisfying ``spec`` (see the module notes).
+
+    Deterministic for a given seed. Raises OptionError naming the constraint to relax
+    when the arm cannot reach the volume, the tilt range has no solution, or fewer than
+    ``m`` candidates are found within MAX_ATTEMPTS * m draws.
+    """
+    if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
+        raise OptionError(f"the number of candidates must be an integer >= 1, got {m!r}")
+    # small batched matrices: BLAS threads only wait for each other (see blas_threads)
+    with blas_threads.limited(1):
+        return _generate(robot, spec, int(m), seed, batch)
+
+
+def _generate(robot, spec, m, seed, batch) -> VolumeCandidates:
+    kin = BatchKinematics(robot, spec.tool)
+    collisions = _Collisions(robot, spec.floor_z, spec.tool)
+    if spec.home is None:
+        home, found = find_home(robot, spec, kin, collisions), True
+    else:
+        home, found = np.asarray(spec.home, float), False
+        if home.shape != (kin.n,):
+            raise OptionError(f"home needs {kin.n} joint values ({', '.join(robot.joint_names)}), "
+                              f"got {home.size}")
+        if np.any(home < kin.lo - 1e-12) or np.any(home > kin.hi + 1e-12):
+            raise OptionError("home is outside the joint limits: give values within "
+                              + ", ".join(f"{n} [{a:.4g}, {b:.4g}]" for n, a, b in
+                                          zip(robot.joint_names, kin.lo, kin.hi)))
+    sigma_home = float(kin.sigma_min(home[None])[0])
+    if sigma_home < 1e-6:
+        raise OptionError("home is a singular configuration: its branch is undefined; give "
+                          "another --home")
+    rng = np.random.default_rng(seed)
+    u = np.asarray(spec.tilt_direction)
+    found_q, found_p, found_t = [], [], []
+    counts = dict(not_reached=0, branch=0, collision=0)
+    attempts, have = 0, 0
+    while have < m and attempts < MAX_ATTEMPTS * m:
+        k = min(batch, MAX_ATTEMPTS * m - attempts)
+        attempts += k
+        pts = spec.volume.sample(k, rng)
+        dirs = _cap_directions(u, spec.max_tilt, k, rng)
+        start = np.repeat(home[None], k, 0)
+        start[:, -1] = rng.uniform(kin.lo[-1], kin.hi[-1], size=k)
+        Q, ok = kin.solve(pts, dirs, start)
+        counts["not_reached"] += int((~ok).sum())
+        Q = Q[ok]
+        on = _on_branch(kin, home, sigma_home, Q)
+        counts["branch"] += int((~on).sum())
+        Q = Q[on]
+        R, P = kin.poses(Q)
+        free = collisions.free(Q, R, P)
+        counts["collision"] += int((~free).sum())
+        Q, R, P = Q[free], R[free], P[free]
+        found_q.append(Q)
+        found_p.append(P)
+        found_t.append(np.arccos(np.clip(R[:, :, 2] @ u, -1, 1)))
+        have += len(Q)
+    rej = Rejections(**counts)
+    if have < m:
+        _too_few(spec, m, have, attempts, rej, collisions.note)
+    Qa = np.concatenate(found_q)[:m]
+    return VolumeCandidates(spec, _readonly(Qa), _readonly(np.concatenate(found_p)[:m]),
+                            _readonly(np.concatenate(found_t)[:m]), _readonly(home), found,
+                            attempts, rej, collisions.note, tuple(robot.joint_names))
+
+
+def _too_few(spec, m, have, attempts, rej, note):
+    worst = max(("not_reached", rej.not_reached), ("branch", rej.branch),
+                ("collision", rej.collision), key=lambda kv: kv[1])[0]
+    advice = {"not_reached": "most targets are out of reach: shrink the volume or move it "
+                             "nearer the arm, or lower --max-tilt",
+              "branch": "most solutions lie on another arm branch: lower --max-tilt, shrink the "
+                        "volume, or give a --home farther from singular configurations",
+              "collision": f"most solutions collide ({note}): move the volume away from the "
+                           "floor and the robot, or lower --max-tilt"}[worst]
+    raise OptionError(f"only {have} of the {m} candidates asked for satisfy the constraints "
+                      f"after {attempts} targets drawn in the {spec.volume.describe()} with tilt "
+                      f"<= {math.degrees(spec.max_tilt):g} deg ({rej.not_reached} not reached, "
+                      f"{rej.branch} on another branch, {rej.collision} colliding): {advice}; "
+                      "or ask for fewer candidates")
