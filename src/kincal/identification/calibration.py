@@ -279,7 +279,8 @@ class CalibrationProblem:
         grid = lambda_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
         free = self.free_mask()
 
-        fold_options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol))
+        fold_options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol),
+                               cost_rtol=max(o.solver.cost_rtol, o.cv_cost_rtol), progress=None)
         cache = {}  # per fold: the training residual and the validation model
 
         def fit(train, lam, start):

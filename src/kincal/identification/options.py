@@ -45,6 +45,9 @@ class CalibrationOptions:
     warm_start: CV path solved from large to small lambda, each from the previous one.
     cv_step_tol: [mm or deg] step tolerance of the fold fits; a validation error needs
         far less precision than the final fit (which uses solver.step_tol).
+    cv_cost_rtol: [1] likewise for the relative rule's no-progress test (solver.cost_rtol):
+        small-lambda fold fits on small-volume data crawl like plain LS, and the
+        validation error does not need them to reach the end of the crawl.
     solver: stopping rules (paper: 1e-5 mm^2 over 5 iterations, 100 iterations).
     blas_threads: BLAS threads while solving (1: faster on a busy machine, see
         kincal.blas_threads); None leaves BLAS as it is.
@@ -70,6 +73,7 @@ class CalibrationOptions:
     robust_scale_mm: float | None = None
     warm_start: bool = True
     cv_step_tol: float = 1e-6
+    cv_cost_rtol: float = 1e-5
     solver: SolverOptions = SolverOptions()
     blas_threads: int | None = 1
     progress: Callable | None = field(default=None, compare=False, repr=False)
