@@ -44,6 +44,9 @@ from kincal.models.mdh import TOOL_AXIS_WARNING
 from kincal.robot import Robot
 from kincal.rotations import base_angles, base_rotation
 
+# samples evaluated together in a residual with Jacobian: more are done block by block
+BLOCK_SAMPLES = 2048
+
 
 class CalibrationProblem:
     """The identification of one robot chain from one set of measurements."""
@@ -94,13 +97,23 @@ class CalibrationProblem:
         w = (self.weights if rows is None else self.weights[rows])[:, None]
         s = self.scale
 
+        blocks = model.blocks(BLOCK_SAMPLES) if model.N > BLOCK_SAMPLES else None
+
         def residual(u, with_jacobian):
             x = u * s
             if not with_jacobian:
                 return ((P - model.predict(x)) * w).ravel() / MM, None
-            pred, J = model.jacobian(x, kinematic)
-            r = ((P - pred) * w).ravel() / MM
-            Jr = -(J * w[:, :, None]).reshape(-1, s.size) * (s / MM)
+            if blocks is None:
+                pred, J = model.jacobian(x, kinematic)
+                r = ((P - pred) * w).ravel() / MM
+                return r, -(J * w[:, :, None]).reshape(-1, s.size) * (s / MM)
+            # many samples: block by block into one (3N, p) array (see MeasurementModel.blocks)
+            r, Jr = np.empty(3 * model.N), np.empty((3 * model.N, s.size))
+            for sl, block in blocks:
+                pred, J = block.jacobian(x, kinematic)
+                rows = slice(3 * sl.start, 3 * sl.stop)
+                r[rows] = ((P[sl] - pred) * w[sl]).ravel() / MM
+                np.multiply((J * w[sl, :, None]).reshape(-1, s.size), -s / MM, out=Jr[rows])
             return r, Jr
 
         return residual
