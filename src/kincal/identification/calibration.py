@@ -292,11 +292,19 @@ class CalibrationProblem:
         grid = lambda_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
         free = self.free_mask()
 
+        # many poses: choose lambda on a seeded subsample of them (see cv_max_poses)
+        samples, subsample = np.arange(len(self.data)), None
+        if o.cv_max_poses is not None and self.n_poses > o.cv_max_poses:
+            poses = np.unique(self.data.poses)
+            keep = np.random.default_rng(o.seed).choice(poses, o.cv_max_poses, replace=False)
+            samples = np.flatnonzero(np.isin(self.data.poses, keep))
+            subsample = (int(o.cv_max_poses), self.n_poses)
         fold_options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol),
                                cost_rtol=max(o.solver.cost_rtol, o.cv_cost_rtol), progress=None)
         cache = {}  # per fold: the training residual and the validation model
 
         def fit(train, lam, start):
+            train = samples[train]
             key = train.tobytes()
             if key not in cache:
                 cache.clear()
@@ -307,6 +315,7 @@ class CalibrationProblem:
         val_models = {}
 
         def error(sol, val):
+            val = samples[val]
             key = val.tobytes()
             if key not in val_models:
                 val_models.clear()
@@ -315,8 +324,11 @@ class CalibrationProblem:
             e = P - model.predict(sol.u * self.scale)
             return float(np.mean(np.linalg.norm(e, axis=1)) / MM)
 
-        return cross_validate(fit, error, len(self.data), grid, o.folds, o.seed,
-                              o.warm_start, o.progress, groups=self.data.poses)
+        cv = cross_validate(fit, error, len(samples), grid, o.folds, o.seed,
+                            o.warm_start, o.progress, groups=self.data.poses[samples])
+        if subsample is None:
+            return cv
+        return replace(cv, folds=tuple(samples[f] for f in cv.folds), subsample=subsample)
 
     # ------------------------------------------------------------------ solve
     def solve(self) -> "CalibrationResult":

@@ -243,7 +243,9 @@ class CalibrationResult:
     def summary(self) -> str:
         lines = [f"kincal calibration of {self.robot.name} ({self.robot.base} -> {self.robot.tip}), "
                  f"method {self.options.method}, lambda = {self.lam:.4g}"
-                 + (" (chosen by cross-validation)" if self.cv is not None else ""),
+                 + (" (chosen by cross-validation)" if self.cv is not None else "")
+                 + (" on a random {} of the {} poses".format(*self.cv.subsample)
+                    if self.cv is not None and self.cv.subsample else ""),
                  f"  {self.identifiability.summary().splitlines()[0]}",
                  *([f"  {self.space.n_points} measured points per pose: statistics are over "
                     "every point"] if self.space.n_points > 1 else []),

@@ -1,0 +1,90 @@
+"""Many samples: block-wise evaluation, vectorised approach directions, CV on a subsample."""
+
+import numpy as np
+import pytest
+from conftest import random_joint_values
+
+from kincal.errors import OptionError
+from kincal.identification import calibration
+from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.models import mdh
+from kincal.models.backlash import approach_directions
+from kincal.planning.simulation import Truth, measure, planted_table
+from kincal.robot import Robot
+
+ROBOT = Robot.load("ec66")
+MODEL = mdh.extract(ROBOT.geometry)
+TOOLS = np.array([[0.03, 0.02, 0.12], [-0.04, 0.01, 0.1]])
+
+
+def _data(n, seed=0, tools=TOOLS):
+    rng = np.random.default_rng(seed)
+    truth = Truth(planted_table(MODEL, rng), np.array([0.8, 0.3, -0.2, 0.02, -0.03, 1.2]),
+                  tools)
+    return measure(MODEL, truth, random_joint_values(ROBOT.geometry, rng, n), 5e-5, rng)
+
+
+@pytest.mark.parametrize("kinematic", [True, False])
+def test_blockwise_residual_equals_the_whole(monkeypatch, kinematic):
+    # two points per pose and backlash terms: every sliced array takes part
+    data = _data(50)
+    opts = CalibrationOptions(method="ls", backlash=("joint_2", "joint_5"))
+    p = CalibrationProblem(ROBOT, data, opts)
+    u = p.start() / p.scale + np.random.default_rng(1).normal(size=p.scale.size) * 1e-2
+    whole = p.residual_function(kinematic=kinematic)(u, True)
+    monkeypatch.setattr(calibration, "BLOCK_SAMPLES", 7)  # 100 samples: 15 blocks
+    rows = np.arange(3, 97)
+    blocked = p.residual_function(kinematic=kinematic)(u, True)
+    assert np.array_equal(whole[0], blocked[0]) and np.array_equal(whole[1], blocked[1])
+    sub_blocked = p.residual_function(rows, kinematic)(u, True)
+    monkeypatch.setattr(calibration, "BLOCK_SAMPLES", 10**9)
+    sub_whole = p.residual_function(rows, kinematic)(u, True)
+    assert np.array_equal(sub_whole[1], sub_blocked[1])
+    assert np.array_equal(sub_whole[0], sub_blocked[0])
+
+
+def _directions_one_by_one(q, order=None, tol=1e-3):
+    """The definition, sample after sample (the reference for the vectorised version)."""
+    seq = np.arange(len(q)) if order is None else np.argsort(order, kind="stable")
+    out = np.zeros_like(q)
+    for k in range(1, len(q)):
+        step = q[seq[k]] - q[seq[k - 1]]
+        out[seq[k]] = np.where(np.abs(step) > tol, np.sign(step), out[seq[k - 1]])
+    return out
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 200])
+def test_vectorised_approach_directions_follow_the_definition(n):
+    rng = np.random.default_rng(n)
+    # many repeated values and sub-tolerance steps, so the forward fill is exercised
+    q = np.round(rng.normal(size=(n, 4)), 1) * (rng.random((n, 4)) < 0.5)
+    q[rng.random((n, 4)) < 0.2] += 4e-4
+    order = rng.permutation(n).astype(float)
+    assert np.array_equal(approach_directions(q), _directions_one_by_one(q))
+    assert np.array_equal(approach_directions(q, order), _directions_one_by_one(q, order))
+
+
+def test_cv_on_a_subsample_of_many_poses_says_so():
+    data = _data(80, seed=2)
+    res = CalibrationProblem(ROBOT, data, CalibrationOptions(cv_max_poses=30,
+                                                             n_lambdas=8)).solve()
+    cv = res.cv
+    assert cv.subsample == (30, 80)
+    used = np.concatenate(cv.folds)
+    assert len(used) == 60 and len(np.unique(used)) == 60  # 30 poses, both points of each
+    assert len(np.unique(data.poses[used])) == 30
+    for f in cv.folds:  # the points of a pose stay in one fold, indices are the data's
+        assert all(np.sum(data.poses[f] == q) == 2 for q in np.unique(data.poses[f]))
+    assert "on a random 30 of the 80 poses" in res.summary()
+    assert res.lam == cv.best_lambda and len(res.residuals) == 160  # final fit on all
+    assert cv.as_dict()["subsample_poses"] == [30, 80]
+    full = CalibrationProblem(ROBOT, data, CalibrationOptions(cv_max_poses=None,
+                                                              n_lambdas=8)).solve()
+    assert full.cv.subsample is None and "random" not in full.summary()
+    assert len(np.concatenate(full.cv.folds)) == 160
+
+
+@pytest.mark.parametrize("bad", [1, 3, 2.5, True, "all"])
+def test_bad_cv_max_poses_is_an_option_error(bad):
+    with pytest.raises(OptionError, match="cv_max_poses"):
+        CalibrationOptions(cv_max_poses=bad, folds=5).validated()
