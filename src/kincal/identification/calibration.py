@@ -300,7 +300,7 @@ class CalibrationProblem:
             samples = np.flatnonzero(np.isin(self.data.poses, keep))
             subsample = (int(o.cv_max_poses), self.n_poses)
         fold_options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol),
-                               cost_rtol=max(o.solver.cost_rtol, o.cv_cost_rtol), progress=None)
+                               progress=None)
         cache = {}  # per fold: the training residual and the validation model
 
         def fit(train, lam, start):

@@ -45,9 +45,6 @@ class CalibrationOptions:
     warm_start: CV path solved from large to small lambda, each from the previous one.
     cv_step_tol: [mm or deg] step tolerance of the fold fits; a validation error needs
         far less precision than the final fit (which uses solver.step_tol).
-    cv_cost_rtol: [1] likewise for the relative rule's no-progress test (solver.cost_rtol):
-        small-lambda fold fits on small-volume data crawl like plain LS, and the
-        validation error does not need them to reach the end of the crawl.
     cv_max_poses: the CV runs on a seeded random subsample of at most this many poses
         (None: all). Its 250 fold fits would otherwise cost 250 fits of the whole data
         (minutes at 200,000 poses), while lambda, the ratio of the noise variance to the
@@ -78,7 +75,6 @@ class CalibrationOptions:
     robust_scale_mm: float | None = None
     warm_start: bool = True
     cv_step_tol: float = 1e-6
-    cv_cost_rtol: float = 1e-5
     cv_max_poses: int | None = 2000
     solver: SolverOptions = SolverOptions()
     blas_threads: int | None = 1
