@@ -88,3 +88,92 @@ def test_cv_on_a_subsample_of_many_poses_says_so():
 def test_bad_cv_max_poses_is_an_option_error(bad):
     with pytest.raises(OptionError, match="cv_max_poses"):
         CalibrationOptions(cv_max_poses=bad, folds=5).validated()
+
+
+# ------------------------------------------------------------------ command line
+def _ec66_csv(tmp_path, n=40):
+    path = tmp_path / "d.csv"
+    path.write_text(_data(n, tools=TOOLS[0]).to_csv_text())
+    return path
+
+
+def test_every_long_command_ends_with_a_timing_line(tmp_path, capsys):
+    from kincal.cli.main import main
+
+    csv = _ec66_csv(tmp_path)
+    runs = {"calibrate": ["calibrate", "ec66", str(csv), "--method", "ls",
+                          "--out", str(tmp_path / "c.urdf"), "--quiet"],
+            "evaluate": ["evaluate", "ec66", str(csv), "--fit-frames"],
+            "analyze": ["analyze", "ec66", str(csv)],
+            "plan": ["plan", "ec66", "--random", "100", "--poses", "30",
+                     "--out", str(tmp_path / "p.csv")],
+            "simulate": ["simulate", "ec66", "--poses", "10", "--out", str(tmp_path / "s.csv")]}
+    for name, argv in runs.items():
+        assert main(argv) == 0, name
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err and err[-1].startswith("kincal: done in ") and err[-1].endswith(" s"), name
+    # an error stays one line, with no timing after it
+    assert main(["analyze", "ec66", str(tmp_path / "missing.csv")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("kincal: error:")
+
+
+class _Terminal:
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+
+def test_fit_status_speaks_only_for_long_fits_and_ends_its_line():
+    from kincal.cli.main import _FitStatus
+
+    assert _FitStatus.on_terminal(_Terminal()) is not None
+    assert _FitStatus.on_terminal(open(__file__)) is None  # not a terminal: no status
+
+    quick = _FitStatus(_Terminal(), after=3600.0)
+    quick(1, 100)
+    quick.close()
+    assert quick.stream.text == ""
+
+    slow = _FitStatus(_Terminal(), after=0.0)
+    data = _data(30, tools=TOOLS[0])
+    from kincal.identification.solver import SolverOptions
+
+    CalibrationProblem(ROBOT, data, CalibrationOptions(
+        method="ls", solver=SolverOptions(progress=slow))).solve()
+    slow.close()
+    assert "\rsolving: iteration 1 (at most 100)" in slow.stream.text.replace("  solving",
+                                                                              "solving")
+    assert slow.stream.text.endswith("\n") and slow.stream.text.count("\n") == 1
+
+
+def test_simulate_reports_progress_to_the_last_pose():
+    from kincal.planning.simulation import cube_poses
+
+    seen = []
+    q = cube_poses(ROBOT, 250, [0.4, 0.0, 0.25], 0.4, [0, 0, 0.12],
+                   np.random.default_rng(0), progress=lambda done, total: seen.append(done))
+    assert len(q) == 250 and seen[0] == 0 and seen[-1] == 250
+    assert seen == sorted(seen) and len(seen) > 100
+
+
+def test_nearest_solved_pose_is_the_one_a_full_scan_finds():
+    from kincal.planning.simulation import _Solved
+
+    rng = np.random.default_rng(4)
+    pts = rng.random((3000, 3))
+    solved = _Solved(pts[0], np.array([0.0]), len(pts))
+    for k in range(1, len(pts)):  # the k-d tree is rebuilt at 257, 515, 1031 and 2063 points
+        p = rng.random(3)
+        expected = int(np.argmin(np.linalg.norm(pts[:k] - p, axis=1)))
+        assert solved.nearest(p)[0] == expected
+        solved.add(pts[k], np.array([float(k)]))
+    assert solved.tree is not None and solved.in_tree == 2063
