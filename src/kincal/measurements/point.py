@@ -116,26 +116,6 @@ class MeasurementModel:
                                 None if self.approach is None else self.approach[rows],
                                 self.space.backlash, self.points[rows], self.space.n_points)
 
-    def blocks(self, size: int) -> list[tuple[slice, "MeasurementModel"]]:
-        """The samples in consecutive blocks of at most ``size``: (slice, model of those).
-
-        The block models share this model's joint motions (views, nothing recomputed).
-        Evaluating many poses block by block keeps every temporary small (a few MB, in
-        cache) instead of a dozen (N, 3, p) arrays: for 200,000 poses it is several times
-        faster and its memory does not grow with N beyond the result.
-        """
-        out = []
-        for start in range(0, self.N, size):
-            sl = slice(start, min(start + size, self.N))
-            block = object.__new__(MeasurementModel)
-            block.__dict__.update(self.__dict__)
-            block.q, block.points = self.q[sl], self.points[sl]
-            block.approach = None if self.approach is None else self.approach[sl]
-            block.N = sl.stop - sl.start
-            block._motion = [m[sl] for m in self._motion]
-            out.append((sl, block))
-        return out
-
     def _measured_points(self, x: np.ndarray, R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
         """(N, 3) each sample's measured point in the base frame."""
         tools = self.space.tools(x)
