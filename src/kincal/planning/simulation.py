@@ -132,38 +132,6 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     return out
 
 
-class _Solved:
-    """The points solved so far and their joint values; the nearest one to a new point.
-
-    A k-d tree over the older points, rebuilt as they double, plus a plain scan of the
-    newer ones: the same nearest point (first of equals) as a scan of all, without its
-    n^2 cost (200,000 poses: hours before, seconds now).
-    """
-
-    def __init__(self, point, q, capacity: int):
-        self.pts = np.empty((capacity, 3))
-        self.q = np.empty((capacity, np.size(q)))
-        self.count, self.tree, self.in_tree = 0, None, 0
-        self.add(point, q)
-
-    def add(self, point, q):
-        self.pts[self.count], self.q[self.count] = point, q
-        self.count += 1
-        if self.count - self.in_tree > max(256, self.in_tree):
-            from scipy.spatial import cKDTree
-
-            self.tree, self.in_tree = cKDTree(self.pts[:self.count]), self.count
-
-    def nearest(self, p) -> np.ndarray:
-        d = np.linalg.norm(self.pts[self.in_tree:self.count] - p, axis=1)
-        k, best = (self.in_tree + int(np.argmin(d)), d.min()) if d.size else (-1, np.inf)
-        if self.tree is not None:
-            dt, kt = self.tree.query(p)
-            if dt <= best:  # ties go to the older point, as a scan from the first would
-                k = int(kt)
-        return self.q[k]
-
-
 def true_positions(mdh: MdhModel, truth: Truth, q: np.ndarray, points=0) -> np.ndarray:
     """(N, 3) exact positions of measured points in the measurement frame [m].
 
@@ -198,3 +166,34 @@ def measure(mdh: MdhModel, truth: Truth, q: np.ndarray, noise_sd: float,
                         true + rng.normal(size=(n * K, 3)) * noise_sd, source=source,
                         approach=g, points=points, poses=np.repeat(np.arange(n), K))
 
+
+class _Solved:
+    """The points solved so far and their joint values; the nearest one to a new point.
+
+    A k-d tree over the older points, rebuilt as they double, plus a plain scan of the
+    newer ones: the same nearest point (first of equals) as a scan of all, without its
+    n^2 cost (200,000 poses: hours before, seconds now).
+    """
+
+    def __init__(self, point, q, capacity: int):
+        self.pts = np.empty((capacity, 3))
+        self.q = np.empty((capacity, np.size(q)))
+        self.count, self.tree, self.in_tree = 0, None, 0
+        self.add(point, q)
+
+    def add(self, point, q):
+        self.pts[self.count], self.q[self.count] = point, q
+        self.count += 1
+        if self.count - self.in_tree > max(256, self.in_tree):
+            from scipy.spatial import cKDTree
+
+            self.tree, self.in_tree = cKDTree(self.pts[:self.count]), self.count
+
+    def nearest(self, p) -> np.ndarray:
+        d = np.linalg.norm(self.pts[self.in_tree:self.count] - p, axis=1)
+        k, best = (self.in_tree + int(np.argmin(d)), d.min()) if d.size else (-1, np.inf)
+        if self.tree is not None:
+            dt, kt = self.tree.query(p)
+            if dt <= best:  # ties go to the older point, as a scan from the first would
+                k = int(kt)
+        return self.q[k]
