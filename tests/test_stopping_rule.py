@@ -78,7 +78,8 @@ def test_relative_rule_stops_before_a_useless_step():
 
 
 @pytest.mark.parametrize("bad", [dict(rule="absolute"), dict(rel_tol=-1.0),
-                                 dict(cost_rtol=float("nan")), dict(step_tol=float("inf"))])
+                                 dict(cost_rtol=float("nan")), dict(step_tol=float("inf")),
+                                 dict(rel_tol=True)])
 def test_bad_solver_options_are_option_errors(bad):
     with pytest.raises(OptionError, match=next(iter(bad))):
         SolverOptions(**bad)

@@ -22,6 +22,7 @@ stays available (``SolverOptions(rule="paper")``) for the reproduction of its ta
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -77,7 +78,8 @@ class SolverOptions:
                               f"{', '.join(RULES)}")
         for name in ("rel_tol", "cost_rtol", "cost_tol", "step_tol"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            if not (isinstance(value, numbers.Real) and not isinstance(value, bool)
+                    and math.isfinite(value) and value >= 0):
                 raise OptionError(f"{name} must be a finite number >= 0, got {value!r}")
 
 
