@@ -111,9 +111,9 @@ class CalibrationProblem:
             r, Jr = np.empty(3 * model.N), np.empty((3 * model.N, s.size))
             for sl, block in blocks:
                 pred, J = block.jacobian(x, kinematic)
-                rows = slice(3 * sl.start, 3 * sl.stop)
-                r[rows] = ((P[sl] - pred) * w[sl]).ravel() / MM
-                np.multiply((J * w[sl, :, None]).reshape(-1, s.size), -s / MM, out=Jr[rows])
+                span = slice(3 * sl.start, 3 * sl.stop)  # its rows of r and J
+                r[span] = ((P[sl] - pred) * w[sl]).ravel() / MM
+                np.multiply((J * w[sl, :, None]).reshape(-1, s.size), -s / MM, out=Jr[span])
             return r, Jr
 
         return residual
