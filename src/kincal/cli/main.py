@@ -23,7 +23,7 @@ DEMO_DIR = "kincal-demo"
 
 
 # ----------------------------------------------------------------- helpers
-def _progress_bar(stream=sys.stderr):
+def _progress_bar(stream=sys.stderr, label="cross-validation", unit="fits"):
     """A progress callback drawing a bar on a terminal, and None elsewhere."""
     if not getattr(stream, "isatty", lambda: False)():
         return None
@@ -31,13 +31,45 @@ def _progress_bar(stream=sys.stderr):
     def progress(done, total):
         width = 30
         filled = int(width * done / total)
-        stream.write(f"\r  cross-validation [{'#' * filled}{'.' * (width - filled)}] "
-                     f"{done}/{total} fits")
+        stream.write(f"\r  {label} [{'#' * filled}{'.' * (width - filled)}] "
+                     f"{done}/{total} {unit}")
         if done == total:
             stream.write("\n")
         stream.flush()
 
     return progress
+
+
+class _FitStatus:
+    """A solver callback showing the iterations of a long fit on a terminal.
+
+    Quiet for fits that end within ``after`` seconds (most do); a fit of many poses takes
+    seconds per iteration, and then says where it is. ``close()`` ends the status line.
+    """
+
+    def __init__(self, stream=sys.stderr, after: float = 2.0):
+        import time
+
+        self.stream, self.after, self.clock = stream, after, time.perf_counter
+        self.t0, self.drawn = self.clock(), False
+
+    @classmethod
+    def on_terminal(cls, stream=sys.stderr) -> "_FitStatus | None":
+        return cls(stream) if getattr(stream, "isatty", lambda: False)() else None
+
+    def __call__(self, iteration, max_iterations):
+        elapsed = self.clock() - self.t0
+        if elapsed >= self.after:
+            self.stream.write(f"\r  solving: iteration {iteration} (at most {max_iterations}), "
+                              f"{elapsed:.1f} s\033[K")
+            self.stream.flush()
+            self.drawn = True
+
+    def close(self):
+        if self.drawn:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.drawn = False
 
 
 def _robot(args):
@@ -140,13 +172,17 @@ def _options(args, method):
         except ValueError:
             raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
                               f"{lam!r}") from None
+    from kincal.identification.solver import SolverOptions
+
     return CalibrationOptions(model=args.model, method=method, lam=lam, folds=args.folds, seed=args.seed,
                               prior_mm=args.prior_mm, prior_deg=args.prior_deg,
                               noise_mm=args.noise_mm,
                               fix=tuple(args.fix), free=tuple(args.free),
                               backlash=tuple(args.backlash),
                               tool_guess=_tool_offset(args), robust=args.robust,
-                              robust_scale_mm=args.robust_scale_mm, progress=_progress_bar())
+                              robust_scale_mm=args.robust_scale_mm, progress=_progress_bar(),
+                              cv_max_poses=args.cv_max_poses or None,
+                              solver=SolverOptions(progress=_FitStatus.on_terminal()))
 
 
 def _render_plots(result, out_dir: Path):
@@ -218,10 +254,15 @@ def cmd_calibrate(args) -> int:
 
     robot = _robot(args)
     data = _measurements(args, robot)
+    options = _options(args, args.method)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
         warnings.simplefilter("always", KincalWarning)
         targets = _accuracy_targets(args, robot)  # bad values fail here, before solving
-        result = CalibrationProblem(robot, data, _options(args, args.method)).solve()
+        try:
+            result = CalibrationProblem(robot, data, options).solve()
+        finally:
+            if options.solver.progress is not None:
+                options.solver.progress.close()
     for w in caught:  # and passed on to be printed as usual
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     amap = None
@@ -421,7 +462,9 @@ def cmd_simulate(args) -> int:
                  f"{math.degrees(spec.max_tilt):g} deg, random poses on one branch")
     else:
         q = simulation.cube_poses(robot, args.poses, center, size, tool, rng,
-                                  max_tilt=math.radians(tilt))
+                                  max_tilt=math.radians(tilt),
+                                  progress=_progress_bar(label="inverse kinematics", unit="poses")
+                                  if args.poses >= 1000 else None)
         where = f"{args.design}: {size * 1e3:g} mm cube at {np.round(center, 3).tolist()} m"
     # the robot's errors have their own seed, so data sets with different pose seeds
     # (calibration, validation) come from one and the same simulated robot
@@ -645,6 +688,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="robust loss on the per-pose error; down-weighted samples are listed")
     p.add_argument("--robust-scale-mm", type=float, help="scale of the robust loss [mm] "
                    "(default 2.5 x the median pose error)")
+    p.add_argument("--cv-max-poses", type=int, default=2000, metavar="N",
+                   help="choose lambda by CV on a random N of the poses when there are more "
+                        "(default 2000; 0: all poses); the final fit uses every pose")
     p.add_argument("--out", required=True, help="corrected URDF to write")
     p.add_argument("--frames-out", help="FRAMES.json: measurement frame and tool point (SI)")
     p.add_argument("--add-frames", action="store_true",
@@ -804,7 +850,13 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+TIMED = ("calibrate", "evaluate", "analyze", "plan", "simulate")
+
+
 def main(argv=None) -> int:
+    import time
+
+    t0 = time.perf_counter()
     parser = build_parser()
     args = parser.parse_args(argv)
     with warnings.catch_warnings(record=True) as caught:
@@ -825,6 +877,8 @@ def main(argv=None) -> int:
                 if issubclass(w.category, KincalWarning):
                     kind = "note" if issubclass(w.category, KincalNote) else "warning"
                     print(f"kincal: {kind}: {w.message}", file=sys.stderr)
+    if code == 0 and args.command in TIMED:  # an error stays the one line it is
+        print(f"kincal: done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return code
 
 

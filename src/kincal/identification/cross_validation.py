@@ -24,6 +24,8 @@ class CrossValidation:
     lambdas: (M,) candidates, ascending. fold_errors: (M, k) mean validation position
     error per candidate and fold [mm]. mean_error: (M,) their mean [mm].
     best_index, best_lambda: the minimiser. folds: sample indices of each fold.
+    subsample: (poses used, poses in the data) when the CV ran on a random subsample of
+        the poses (CalibrationOptions.cv_max_poses), else None.
     """
 
     lambdas: np.ndarray
@@ -33,12 +35,14 @@ class CrossValidation:
     best_lambda: float
     folds: tuple[np.ndarray, ...]
     seed: int
+    subsample: tuple[int, int] | None = None
 
     def as_dict(self) -> dict:
         return {"lambdas": self.lambdas.tolist(), "mean_error_mm": self.mean_error.tolist(),
                 "fold_errors_mm": self.fold_errors.tolist(), "best_lambda": self.best_lambda,
                 "best_index": self.best_index, "seed": self.seed,
-                "folds": [f.tolist() for f in self.folds]}
+                "folds": [f.tolist() for f in self.folds],
+                "subsample_poses": None if self.subsample is None else list(self.subsample)}
 
 
 def lambda_grid(lo: float = 1e-6, hi: float = 1e3, count: int = 50) -> np.ndarray:

@@ -289,7 +289,9 @@ class CalibrationResult:
                  + (f"lambda = {self.lam:.4g}" if ev is None else "priors toward nominal per "
                     "class, " + ("given" if ev.given.all() and ev.noise_given
                                  else "chosen by maximum evidence"))
-                 + (" (chosen by cross-validation)" if self.cv is not None else ""),
+                 + (" (chosen by cross-validation)" if self.cv is not None else "")
+                 + (" on a random {} of the {} poses".format(*self.cv.subsample)
+                    if self.cv is not None and self.cv.subsample else ""),
                  *([f"  penalty: {self.penalty_choice}"] if self.penalty_choice else []),
                  *([f"  {ev.line()}"
                     + ("" if ev.converged else f" [NOT SETTLED in {ev.iterations} rounds]")]

@@ -53,8 +53,15 @@ def approach_directions(joint_values: np.ndarray, order: np.ndarray | None = Non
                      else f"samples {a + 1} and {b + 1}")
             raise DataError(f"{source}: {where} have the same order value {order[a]!r}; the "
                             "approach directions need a strict acquisition order")
+    # each sample (in acquisition order) takes the sign of the last step larger than tol
+    # at or before it: a forward fill over the order, vectorised (200,000 samples: ms)
     out = np.zeros_like(q)
-    for k in range(1, N):
-        step = q[seq[k]] - q[seq[k - 1]]
-        out[seq[k]] = np.where(np.abs(step) > tol, np.sign(step), out[seq[k - 1]])
+    if N < 2:
+        return out
+    step = np.diff(q[seq], axis=0)                                     # (N-1, n)
+    moved = np.abs(step) > tol
+    last = np.where(moved, np.arange(1, N)[:, None], 0)                # 1-based, 0: none
+    last = np.maximum.accumulate(last, axis=0)
+    signs = np.vstack([np.zeros((1, q.shape[1])), np.sign(step)])      # row 0: no motion
+    out[seq[1:]] = np.take_along_axis(signs, last, axis=0)
     return out

@@ -80,13 +80,14 @@ def random_rotation_near(R0: np.ndarray, max_angle: float, rng) -> np.ndarray:
 
 def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.Generator,
                orientation=None, max_tilt: float = np.radians(30), lhs: bool = True,
-               attempts: int = 40) -> np.ndarray:
+               attempts: int = 40, progress=None) -> np.ndarray:
     """(n, dof) joint values putting the tool point at points of a cube [m].
 
     center: (3,) cube centre in the base frame; size: edge length. Points are a Latin
     hypercube (or uniform) sample. orientation: (3, 3) mean tip orientation (default:
     tool z pointing down), varied by up to ``max_tilt`` per pose; None orientation with
-    max_tilt=None leaves the orientation free (position-only IK).
+    max_tilt=None leaves the orientation free (position-only IK). progress:
+    callback(done, n) about every 1 % of the poses, or None.
     """
     if n < 1:
         raise OptionError(f"need at least one pose, got {n}")
@@ -108,11 +109,14 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
                                             start=search.uniform(lo, hi))
         if ok:
             break
-    solved_pts, solved_q = [center], [home]
-    for k in np.argsort(np.linalg.norm(pts - center, axis=1)):  # from the centre outwards
+    solved = _Solved(center, home, n + 1)
+    every = max(1, n // 100)
+    for done, k in enumerate(np.argsort(np.linalg.norm(pts - center, axis=1))):  # centre out
+        if progress is not None and done % every == 0:
+            progress(done, n)
         p = pts[k]
         R = None if max_tilt is None else random_rotation_near(R0, max_tilt, rng)
-        near = solved_q[int(np.argmin(np.linalg.norm(np.array(solved_pts) - p, axis=1)))]
+        near = solved.nearest(p)
         for attempt in range(attempts):
             start = near if attempt == 0 else home if attempt == 1 else rng.uniform(lo, hi)
             if attempt >= 2 and attempt % 2 == 0 and max_tilt is not None:
@@ -120,12 +124,13 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
             q, ok = robot.inverse_kinematics(p, tool, R, start=start, max_iterations=60)
             if ok:
                 out[k] = q
-                solved_pts.append(p)
-                solved_q.append(q)
+                solved.add(p, q)
                 break
         else:
             raise OptionError(f"no joint solution reaches the point {np.round(p, 4)} m of the "
                               f"{size * 1e3:g} mm cube at {np.round(center, 4)} m; move the cube")
+    if progress is not None:
+        progress(n, n)
     return out
 
 
@@ -163,3 +168,34 @@ def measure(mdh: ErrorModel, truth: Truth, q: np.ndarray, noise_sd: float,
                         true + rng.normal(size=(n * K, 3)) * noise_sd, source=source,
                         approach=g, points=points, poses=np.repeat(np.arange(n), K))
 
+
+class _Solved:
+    """The points solved so far and their joint values; the nearest one to a new point.
+
+    A k-d tree over the older points, rebuilt as they double, plus a plain scan of the
+    newer ones: the same nearest point (first of equals) as a scan of all, without its
+    n^2 cost (200,000 poses: hours before, seconds now).
+    """
+
+    def __init__(self, point, q, capacity: int):
+        self.pts = np.empty((capacity, 3))
+        self.q = np.empty((capacity, np.size(q)))
+        self.count, self.tree, self.in_tree = 0, None, 0
+        self.add(point, q)
+
+    def add(self, point, q):
+        self.pts[self.count], self.q[self.count] = point, q
+        self.count += 1
+        if self.count - self.in_tree > max(256, self.in_tree):
+            from scipy.spatial import cKDTree
+
+            self.tree, self.in_tree = cKDTree(self.pts[:self.count]), self.count
+
+    def nearest(self, p) -> np.ndarray:
+        d = np.linalg.norm(self.pts[self.in_tree:self.count] - p, axis=1)
+        k, best = (self.in_tree + int(np.argmin(d)), d.min()) if d.size else (-1, np.inf)
+        if self.tree is not None:
+            dt, kt = self.tree.query(p)
+            if dt <= best:  # ties go to the older point, as a scan from the first would
+                k = int(kt)
+        return self.q[k]
