@@ -41,8 +41,9 @@ from kincal.robot import Robot
 
 CENTER = (0.4, 0.0, 0.25)
 TOOL = np.array([0.0, 0.0, 0.12])
-ESTIMATORS = (("LS", dict(method="ls")), ("L2 CV", dict(method="l2")),
-              ("L2 evidence", dict(method="l2", lam="evidence")))
+ESTIMATORS = (("LS", dict(method="ls")), ("L2 CV", dict(method="l2", lam="cv")),
+              ("L2 evidence", dict(method="l2", lam="evidence")),
+              ("L2 auto (default)", dict(method="l2")))
 
 
 def _estimators():
