@@ -297,7 +297,7 @@ def test_estimators_script_runs_in_a_reduced_size():
     for name in ("ls", "cv", "evidence"):
         assert row[name] < 1.15 * row["truth"], (name, row)
     table = script._table("title", [row], True)
-    assert table[1].startswith("| case | ls | cv | evidence | truth") and "x)" in table[3]
+    assert table[1].startswith("| case | ls | cv | evidence | auto | truth") and "x)" in table[3]
 
 
 def test_free_fraction_of_the_penalty():

@@ -114,6 +114,7 @@ def test_evidence_choice_is_reported_where_a_result_carries_one(result):
     # the evidence estimator's result field (EvidenceFit) as the report reads it
     class Fit:
         iterations, converged = 3, True
+        given, noise_given = np.array([False, False, False]), False
         log_evidence = np.array([-120.5, -118.25, -118.0])
 
         def line(self):

@@ -132,11 +132,9 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     wanted = required + [c for c in optional if c in header and c not in required]
     cols = [header.index(c) for c in wanted]
     values = _fast_values(table[1:], cols, len(header))
-    if values is not None:
-        return Columns(path, {c: values[:, k] for k, c in enumerate(wanted)},
-                       np.array([line for line, _ in table[1:]]), tuple(header), separator)
-    values = np.empty((len(table) - 1, len(cols)))  # cell by cell, to name the bad one
-    for r, (line, row) in enumerate(table[1:]):
+    for r, (line, row) in enumerate(table[1:] if values is None else ()):
+        if r == 0:
+            values = np.empty((len(table) - 1, len(cols)))  # cell by cell, to name the bad one
         if len(row) != len(header):
             hint = (f" (decimal commas? {_DECIMAL_COMMA_HINT})"
                     if separator == "," and len(row) > len(header) else "")
