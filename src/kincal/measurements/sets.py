@@ -1,0 +1,80 @@
+"""Measurement sets of any kind: the model of each, and reading a file of the right kind.
+
+:func:`kind_model` gives the :class:`kincal.measurements.kind.KindModel` of a set's
+samples; :func:`read_set_file` reads a CSV file and tells its kind from its columns:
+
+- ``qx qy qz qw`` (or ``orientation_columns``) beside the positions: ``pose``;
+- ``distance`` and no positions: ``distance`` (both: ambiguous, refused);
+- joint columns only, with ``on_plane``: ``plane``;
+- positions otherwise: ``point`` (:class:`kincal.measurements.data.Measurements`).
+"""
+
+from __future__ import annotations
+
+from kincal.errors import DataError
+from kincal.measurements.data import Measurements
+from kincal.measurements.distance import DistanceData, DistanceKind
+from kincal.measurements.kind import SampleSet
+from kincal.measurements.plane import PlaneData, PlaneKind
+from kincal.measurements.point import PointKind
+from kincal.measurements.pose import QUATERNION_COLUMNS, PoseData, PoseKind
+
+KINDS = ("point", "pose", "distance", "plane")
+
+
+def kind_of(data) -> str:
+    if isinstance(data, Measurements):
+        return "point"
+    if isinstance(data, SampleSet):
+        return data.kind
+    raise DataError(f"a measurement set must be Measurements, PoseData, DistanceData or "
+                    f"PlaneData, got {type(data).__name__}")
+
+
+def kind_model(error_model, data, backlash=()):
+    """The kind model of one set (backlash: chain indices of the joints with a term)."""
+    kind = kind_of(data)
+    cls = {"point": PointKind, "pose": PoseKind, "distance": DistanceKind,
+           "plane": PlaneKind}[kind]
+    return cls(error_model, data, backlash)
+
+
+def header_of(path) -> list[str]:
+    from kincal.measurements.csv_table import read_columns
+
+    return list(read_columns(path, []).header)
+
+
+def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",
+                  position_columns=None, orientation_columns=None, on_plane=False,
+                  orientation_sigma_deg=None, joint_columns=None, order_column=None):
+    """One measurement set from a CSV file, its kind told by its columns (module notes)."""
+    header = header_of(path)
+    pos = tuple(position_columns) if position_columns else ("x", "y", "z")
+    has_pos = all(c in header for c in pos)
+    quat = tuple(orientation_columns) if orientation_columns else QUATERNION_COLUMNS
+    if on_plane:
+        if has_pos or "distance" in header:
+            raise DataError(f"{path}: --on-plane reads joint columns only (each row touches "
+                            "the plane), but the file has "
+                            + ("position columns" if has_pos else "a distance column")
+                            + ": which kind is it? Drop --on-plane, or the extra columns")
+        return PlaneData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
+                                  joint_columns=joint_columns)
+    if "distance" in header:
+        if has_pos:
+            raise DataError(f"{path}: the file has both a 'distance' column and position "
+                            f"columns ({', '.join(pos)}): is it distances to a pivot or "
+                            "measured points? Keep only the columns of one kind (or rename "
+                            "'distance')")
+        return DistanceData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
+                                     joint_columns=joint_columns)
+    if has_pos and (orientation_columns or all(c in header for c in quat)):
+        from kincal.measurements.pose import DEFAULT_ORIENTATION_SIGMA_DEG
+
+        return PoseData.from_csv(path, joint_names, prismatic, length_unit, angle_unit, pos,
+                                 quat, orientation_sigma_deg or DEFAULT_ORIENTATION_SIGMA_DEG,
+                                 joint_columns)
+    return Measurements.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
+                                 position_columns or ("x", "y", "z"),
+                                 order_column=order_column, joint_columns=joint_columns)
