@@ -5,7 +5,7 @@ samples; :func:`read_set_file` reads a CSV file and tells its kind from its colu
 
 - ``qx qy qz qw`` (or ``orientation_columns``) beside the positions: ``pose``;
 - ``distance`` and no positions: ``distance`` (both: ambiguous, refused);
-- joint columns only, with ``on_plane``: ``plane``;
+- joint columns only (no positions, no distance), with ``on_plane``: ``plane``;
 - positions otherwise: ``point`` (:class:`kincal.measurements.data.Measurements`).
 """
 
@@ -53,12 +53,7 @@ def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="
     pos = tuple(position_columns) if position_columns else ("x", "y", "z")
     has_pos = all(c in header for c in pos)
     quat = tuple(orientation_columns) if orientation_columns else QUATERNION_COLUMNS
-    if on_plane:
-        if has_pos or "distance" in header:
-            raise DataError(f"{path}: --on-plane reads joint columns only (each row touches "
-                            "the plane), but the file has "
-                            + ("position columns" if has_pos else "a distance column")
-                            + ": which kind is it? Drop --on-plane, or the extra columns")
+    if on_plane and not has_pos and "distance" not in header:
         return PlaneData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
                                   joint_columns=joint_columns)
     if "distance" in header:
@@ -78,3 +73,32 @@ def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="
     return Measurements.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
                                  position_columns or ("x", "y", "z"),
                                  order_column=order_column, joint_columns=joint_columns)
+
+
+def to_csv_text(data) -> str:
+    """A set in the CSV layout :func:`read_set_file` reads (SI units, full precision)."""
+    import numpy as np
+
+    from kincal.rotations import matrix_to_quaternion
+
+    kind = kind_of(data)
+    if kind == "point":
+        return data.to_csv_text()
+    cols = list(data.joint_names)
+    extra = []
+    if kind == "pose":
+        cols += ["x", "y", "z", "qx", "qy", "qz", "qw"]
+        extra = np.hstack([data.positions, np.array([matrix_to_quaternion(R)
+                                                     for R in data.rotations])])
+    elif kind == "distance":
+        cols += ["distance"]
+        extra = data.distances[:, None]
+    elif data.labels != ("",):
+        cols += ["plane"]
+        extra = np.array([[float(data.labels[k])] for k in data.planes])
+    table = data.joint_values if len(extra) == 0 else np.hstack([data.joint_values, extra])
+    if data.sigma is not None:
+        cols.append("sigma")
+        table = np.hstack([table, data.sigma[:, None]])
+    lines = [",".join(cols)] + [",".join(repr(float(v)) for v in row) for row in table]
+    return "\n".join(lines) + "\n"
