@@ -128,3 +128,22 @@ def test_bad_input_one_clear_error_each(tmp_path, rng):
     assert data.kind == "plane"
     with pytest.raises(IdentifiabilityError, match="cannot fix the plane: 6 contacts spread"):
         MultiSetProblem(robot, [data], CalibrationOptions(method="ls")).start()
+
+
+def test_plan_for_every_kind_beats_random_subsets(rng):
+    from kincal.errors import OptionError
+    from kincal.planning.pose_selection import select_poses
+
+    robot = Robot.load("ec66", tip="flange")
+    em = models.build("complete", robot.geometry)
+    q = random_joint_values(robot.geometry, rng, 300)
+    for kind, kw, n in (("pose", {}, 12), ("distance", {"pivot": PIVOT}, 40)):
+        sel = select_poses(robot, q, n, tool=TOOL, kind=kind, random_subsets=5, **kw)
+        assert sel.log_det > sel.random_log_det, kind
+        assert "joint_1.theta" not in sel.parameters
+    with pytest.raises(OptionError, match="pivot"):
+        select_poses(robot, q, 40, tool=TOOL, kind="distance")
+    contacts = ks.simulate_contacts(em, em.nominal, TOOL, PLANES, q, 20, 0.0, rng)
+    sel = select_poses(robot, contacts.joint_values, 40, tool=TOOL, kind="plane",
+                       planes=contacts.planes, random_subsets=5)
+    assert sel.log_det > sel.random_log_det and "plane3.d" in sel.parameters

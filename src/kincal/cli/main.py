@@ -392,6 +392,18 @@ def cmd_plan(args) -> int:
     if not (math.isfinite(args.noise_mm) and args.noise_mm > 0):
         raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
     robot = _robot(args)
+    planes = None
+    if args.kind == "plane" and args.candidates is not None:  # contacts: a plane column
+        from kincal.measurements.plane import PlaneData
+
+        contacts = PlaneData.from_csv(args.candidates, robot.joint_names,
+                                      [n for n, k in zip(robot.joint_names, robot.geometry.kinds)
+                                       if k == "prismatic"], args.length_unit, args.angle_unit,
+                                      joint_columns=_joint_columns(args))
+        planes = contacts.planes if contacts.labels != ("",) else None
+    if args.kind == "plane" and (args.candidates is None or args.measured is not None):
+        raise OptionError("--kind plane plans among contact poses: give CANDIDATES.csv (joint "
+                          "columns and a 'plane' column), without --random or --measured")
     if args.candidates is not None:
         q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit,
                                    joint_columns=_joint_columns(args))
@@ -408,7 +420,9 @@ def cmd_plan(args) -> int:
     tool = _tool_offset(args)
     selection = select_poses(robot, np.vstack([measured, q]), k + args.poses,
                              tool=(0.0, 0.0, 0.0) if tool is None else tool,
-                             fix=tuple(args.fix), keep=tuple(range(k)))
+                             fix=tuple(args.fix), keep=tuple(range(k)), kind=args.kind,
+                             pivot=None if args.pivot is None else np.array(args.pivot) * (
+                                 1e-3 if args.length_unit == "mm" else 1.0), planes=planes)
     new = [i - k for i in selection.indices if i >= k]
     protect = [robot.source] + [f for f in (args.candidates, args.measured) if f is not None]
     written = write_all([(args.out, candidates_csv_text(
@@ -620,6 +634,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="noise per axis [mm] for the predicted standard errors (default 0.05)")
     _add_joint_columns(p, "CANDIDATES and --measured")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    p.add_argument("--kind", choices=("point", "pose", "distance", "plane"), default="point",
+                   help="the measurement kind the poses are for (D-optimal over its Jacobian)")
+    p.add_argument("--pivot", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="--kind distance: guess of the pivot in the base frame, length unit")
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("compensate", help="joint values with which the calibrated robot "

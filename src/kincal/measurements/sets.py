@@ -102,3 +102,89 @@ def to_csv_text(data) -> str:
         table = np.hstack([table, data.sigma[:, None]])
     lines = [",".join(cols)] + [",".join(repr(float(v)) for v in row) for row in table]
     return "\n".join(lines) + "\n"
+
+
+class KindSpace:
+    """Names and units of a kind's parameters for planning (kinematic, then frames): the
+    part of :class:`kincal.identification.parameters.ParameterSpace` that
+    :func:`kincal.planning.pose_selection.select_poses` uses."""
+
+    def __init__(self, names, is_length, n_kinematic: int):
+        import numpy as np
+
+        self.names = tuple(names)
+        self.is_length = np.asarray(is_length, dtype=bool)
+        self.n_kinematic = int(n_kinematic)
+        self.size = len(self.names)
+
+    def reporting_scale(self):
+        import numpy as np
+
+        return np.where(self.is_length, 1e-3, np.pi / 180.0)
+
+    def indices(self, patterns):
+        import fnmatch
+
+        import numpy as np
+
+        from kincal.errors import ParameterError, listing
+
+        out = set()
+        for p in (patterns,) if isinstance(patterns, str) else patterns:
+            hits = [k for k, n in enumerate(self.names) if fnmatch.fnmatchcase(n, p)]
+            if not hits:
+                raise ParameterError(f"unknown parameter or pattern {p!r}. Valid names: "
+                                     f"{listing(self.names, 60)}", valid=self.names)
+            out.update(hits)
+        return np.array(sorted(out), dtype=int)
+
+
+def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
+    """(J (M, rows, p) in mm per mm or deg, :class:`KindSpace`) of a kind at candidate
+    poses q (M, n), nominal kinematics: what D-optimal planning maximises over.
+
+    pose: measurement frame at the identity, tool frame ``tool`` with no turn; distance:
+    ``pivot`` (3,) [m] in the base frame (required: where the distances point decides what
+    they see); plane: ``planes`` (M,) plane index of each candidate (default one plane),
+    each plane fitted through the candidates' nominal tool points (they touch it)."""
+    import numpy as np
+
+    from kincal.errors import OptionError
+    from kincal.measurements.plane import fit_plane
+    from kincal.models.chain import Chain
+
+    q = np.asarray(q, float)
+    t = np.asarray(tool, float)
+    names = tuple(error_model.joint_names)
+    s = Chain(error_model, q).state(error_model.nominal, None, keep=False)
+    P = s.p_tip + s.R_tip @ t
+    if kind == "pose":
+        data = PoseData(joint_names=names, joint_values=q, positions=P, rotations=s.R_tip)
+        frames = np.r_[np.zeros(6), t, np.zeros(3)]
+    elif kind == "distance":
+        if pivot is None:
+            raise OptionError("planning distances needs a guess of the pivot (--pivot X Y Z, "
+                              "base frame): where the distances point decides what they see")
+        c = np.asarray(pivot, float)
+        data = DistanceData(joint_names=names, joint_values=q,
+                            distances=np.linalg.norm(P - c, axis=1))
+        frames = np.r_[c, t]
+    elif kind == "plane":
+        k = np.zeros(len(q), int) if planes is None else np.asarray(planes, int)
+        labels = tuple(str(j + 1) for j in range(int(k.max()) + 1)) if planes is not None \
+            else ("",)
+        data = PlaneData(joint_names=names, joint_values=q, planes=k, labels=labels)
+        fitted = []
+        for j in range(len(labels)):
+            n, d, _ = fit_plane(P[k == j])
+            fitted += [float(np.arctan2(-n[1], n[2])), float(np.arcsin(np.clip(n[0], -1, 1))), d]
+        frames = np.r_[t, fitted]
+    else:
+        raise OptionError(f"unknown measurement kind {kind!r}; expected one of {', '.join(KINDS)}")
+    km = kind_model(error_model, data)
+    km.check_fixable(error_model.nominal, t) if kind == "plane" else None
+    _, Jk, Jf, _ = km.residuals(error_model.nominal, frames, np.zeros(0), jacobian=True)
+    space = KindSpace(error_model.names + tuple(km.frame_names),
+                      tuple(error_model.is_length) + tuple(km.frame_is_length), error_model.size)
+    J = np.concatenate([Jk, Jf], axis=2) * (space.reporting_scale() / 1e-3)
+    return J, space
