@@ -22,6 +22,10 @@ def add_kind_options(p) -> None:
     p.add_argument("--orientation-sigma-deg", type=float,
                    help="orientation noise of pose files [deg] (default 0.01, against the "
                         "position sigma, 0.05 mm unless a sigma column says otherwise)")
+    p.add_argument("--set-sigma-mm", nargs="+", type=float, metavar="S",
+                   help="noise of each data file [mm] (position or distance), one per file in "
+                        "order: weighs the files against each other (default: a 'sigma' "
+                        "column, else 0.05 mm)")
     p.add_argument("--on-plane", action="store_true",
                    help="files with joint columns only are plane contacts (a 'plane' column "
                         "names each row's plane)")
@@ -38,10 +42,19 @@ def read_sets(args, robot) -> list:
 
     prismatic = [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
     pos = tuple(args.position_columns) if tuple(args.position_columns) != ("x", "y", "z") else None
-    return [read_set_file(path, robot.joint_names, prismatic, args.length_unit,
+    sets = [read_set_file(path, robot.joint_names, prismatic, args.length_unit,
                           args.angle_unit, pos, args.orientation_columns, args.on_plane,
                           args.orientation_sigma_deg, _joint_columns(args), args.order_column)
             for path in files_of(args)]
+    if args.set_sigma_mm:
+        from dataclasses import replace
+
+        if len(args.set_sigma_mm) != len(sets) or min(args.set_sigma_mm) <= 0:
+            raise OptionError(f"--set-sigma-mm takes one positive value per data file: "
+                              f"{len(sets)} files, got {args.set_sigma_mm}")
+        sets = [replace(d, sigma=np.full(len(d), s * 1e-3))
+                for d, s in zip(sets, args.set_sigma_mm)]
+    return sets
 
 
 def wants_sets(args) -> bool:
@@ -50,7 +63,8 @@ def wants_sets(args) -> bool:
     from kincal.measurements.sets import header_of
     from kincal.measurements.pose import QUATERNION_COLUMNS
 
-    if getattr(args, "more_data", None) or args.on_plane or args.orientation_columns:
+    if (getattr(args, "more_data", None) or args.on_plane or args.orientation_columns
+            or args.set_sigma_mm):
         return True
     header = header_of(args.data)
     return "distance" in header or all(c in header for c in QUATERNION_COLUMNS)

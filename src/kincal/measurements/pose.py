@@ -232,5 +232,7 @@ class PoseKind(KindModel):
         return np.linalg.norm(r[:, 3:], axis=1) / self.data.ratio()
 
     def notes(self):
-        return ()
+        return (f"{self.data.source}: poses see the tool frame's orientation too; what a "
+                "rigid change of the measurement frame or of the tool frame (tool.rx .ry .rz) "
+                "absorbs, such as the last joint's offset, is not identified",)
 
