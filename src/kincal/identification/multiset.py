@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from kincal import models as error_models
-from kincal.errors import DataError
+from kincal.errors import DataError, OptionError
 from kincal.identification import blas_threads
 from kincal.identification.cross_validation import CrossValidation, cross_validate, lambda_grid
 from kincal.identification.options import CalibrationOptions
@@ -265,7 +265,10 @@ class MultiSetProblem:
             ident = self.analyze()
             cv = None
             if o.method == "l2":
-                if o.lam == "cv":
+                if o.lam == "evidence":
+                    raise OptionError("lambda 'evidence' is not available with several "
+                                      "measurement sets or other kinds yet: use 'cv' or a value")
+                if isinstance(o.lam, str):  # "cv", and "auto" (CV: no evidence here yet)
                     cv = self.cross_validate()
                     lam = cv.best_lambda
                 else:

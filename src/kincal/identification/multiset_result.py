@@ -67,6 +67,8 @@ class MultiSetResult:
         x = sol.u * problem.scale
         free = problem.free_mask()
         se = _std_errors(sol, free, ~problem.is_frame, lam, problem.scale)
+        if isinstance(se, tuple):  # newer result.py also returns the covariance
+            se = se[0]
         x_start = problem.start()
         x_nom = problem.x_nominal
         x_nom[problem.is_frame] = x_start[problem.is_frame]
