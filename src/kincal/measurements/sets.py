@@ -40,9 +40,15 @@ def kind_model(error_model, data, backlash=()):
 
 
 def header_of(path) -> list[str]:
+    """The column names of a CSV file (the reader that follows gives the notes)."""
+    import warnings
+
+    from kincal.errors import KincalNote
     from kincal.measurements.csv_table import read_columns
 
-    return list(read_columns(path, []).header)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalNote)
+        return list(read_columns(path, []).header)
 
 
 def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",
