@@ -147,3 +147,20 @@ def test_plan_for_every_kind_beats_random_subsets(rng):
     sel = select_poses(robot, contacts.joint_values, 40, tool=TOOL, kind="plane",
                        planes=contacts.planes, random_subsets=5)
     assert sel.log_det > sel.random_log_det and "plane3.d" in sel.parameters
+
+
+def test_measurement_kinds_script_runs_reduced():
+    """scripts/measurement_kinds.py's scenarios at a coarse lambda grid (they cannot rot)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "measurement_kinds.py"
+    spec = importlib.util.spec_from_file_location("measurement_kinds", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    robot = Robot.load("ec66", tip="flange")
+    em = models.build("complete", robot.geometry)
+    options = CalibrationOptions(n_lambdas=4)
+    for name in ("pose", "distance", "plane", "rtest+tracker"):
+        mean, ratio, result = script.scenario(name, robot, em, 0, options)
+        assert result.converged and 0.9 < ratio < 3.0, (name, mean, ratio)
