@@ -169,7 +169,7 @@ class MultiSetResult:
         lines.append(f"  {'parameter':24s}{'nominal':>12s}{'deviation':>14s}{'std.err':>11s}"
                      "  unit")
         for p in self.parameters:
-            if p.status != "identified" or p.name in self.names[:0]:
+            if p.status != "identified":
                 continue
             nom, dev, se, unit = p.reported()
             lines.append(f"  {p.name:24s}{nom:12.4f}{dev:+14.5f}{se:11.5f}  {unit}")
