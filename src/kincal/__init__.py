@@ -27,11 +27,18 @@ _LAZY = {
     "PoseSelection": "kincal.planning.pose_selection",
     "select_poses": "kincal.planning.pose_selection",
     "Robot": "kincal.robot",
+    "MultiSetProblem": "kincal.identification.multiset",
+    "calibrate_sets": "kincal.identification.multiset",
+    "PoseData": "kincal.measurements.pose",
+    "DistanceData": "kincal.measurements.distance",
+    "PlaneData": "kincal.measurements.plane",
+    "read_set_file": "kincal.measurements.sets",
 }
 
 __all__ = ["Robot", "Measurements", "calibrate", "CalibrationOptions", "CalibrationProblem",
            "CalibrationResult", "SolverOptions", "select_poses", "PoseSelection",
-           "random_candidates", "read_candidates", "KincalError", "KincalWarning", "__version__"]
+           "random_candidates", "read_candidates", "MultiSetProblem", "calibrate_sets",
+           "PoseData", "DistanceData", "PlaneData", "read_set_file", "KincalError", "KincalWarning", "__version__"]
 
 
 def __getattr__(name: str):

@@ -153,6 +153,17 @@ def _add_common(p, data=True):
                    help="initial guess of the tool point in the tip frame, in the length unit")
 
 
+def _add_kinds(p, several: bool = True):
+    """Measurement kinds (poses, distances, plane contacts) and further data files."""
+    from kincal.cli.kinds import add_kind_options
+
+    if several:
+        p.add_argument("more_data", nargs="*", metavar="MORE.csv",
+                       help="further data files, each of its own kind, sharing the robot's "
+                            "parameters (set 2, 3, ...: frame parameters set2.base.x, ...)")
+    add_kind_options(p)
+
+
 def _add_model(p, allow_all: bool = False, default: str | None = None, help: str | None = None):
     from kincal.models import DEFAULT, MODELS, SUITS
 
@@ -252,6 +263,10 @@ def cmd_calibrate(args) -> int:
     from kincal.export.safe_write import write_all
     from kincal.identification.calibration import CalibrationProblem
 
+    from kincal.cli import kinds
+
+    if kinds.wants_sets(args):  # several files, or poses, distances, plane contacts
+        return kinds.calibrate(args)
     robot = _robot(args)
     data = _measurements(args, robot)
     options = _options(args, args.method)
@@ -323,6 +338,10 @@ def cmd_evaluate(args) -> int:
     from kincal.identification.statistics import ErrorStats
     from kincal.measurements.point import MeasurementModel
 
+    from kincal.cli import kinds
+
+    if kinds.wants_sets(args):
+        return kinds.evaluate(args)
     if bool(args.frames) == bool(args.fit_frames):
         raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
     robot = _robot(args)
@@ -366,7 +385,10 @@ def cmd_analyze(args) -> int:
     from kincal.export import report
     from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
     from kincal.models import MODELS
+    from kincal.cli import kinds
 
+    if kinds.wants_sets(args):
+        return kinds.analyze(args)
     robot = _robot(args)
     data = _measurements(args, robot)
     names = MODELS if args.model == "all" else (args.model,)
@@ -473,6 +495,17 @@ def cmd_simulate(args) -> int:
                                      math.radians(args.angle_error_deg))
     base = np.array(args.base_frame)
     base[3:] = np.radians(base[3:])
+    if args.kind != "point":
+        from kincal.cli import kinds
+
+        if args.truth_out:
+            raise OptionError("--truth-out is written for --kind point only")
+        written = write_all(kinds.simulate(args, robot, model, q, table, tool, base, rng),
+                            overwrite=args.overwrite, protect=[robot.source])
+        print(f"simulated {args.kind} measurements of {robot.name} at {len(q)} poses "
+              f"({args.design} design), noise {args.noise_mm} mm: "
+              + ", ".join(str(p) for p in written))
+        return 0
     truth = simulation.Truth(table, base, tool)
     data = simulation.measure(model, truth, q, args.noise_mm * 1e-3, rng, source="simulated")
     files = [(args.out, data.to_csv_text())]
@@ -527,6 +560,18 @@ def cmd_plan(args) -> int:
         vc = volume_candidates(robot, spec, m, seed=args.seed)
         q, lines = np.array(vc.joint_values), None
         source = vc.summary()
+    planes = None
+    if args.kind == "plane" and args.candidates is not None:  # contacts: a plane column
+        from kincal.measurements.plane import PlaneData
+
+        contacts = PlaneData.from_csv(args.candidates, robot.joint_names,
+                                      [n for n, k in zip(robot.joint_names, robot.geometry.kinds)
+                                       if k == "prismatic"], args.length_unit, args.angle_unit,
+                                      joint_columns=_joint_columns(args))
+        planes = contacts.planes if contacts.labels != ("",) else None
+    if args.kind == "plane" and (args.candidates is None or args.measured is not None):
+        raise OptionError("--kind plane plans among contact poses: give CANDIDATES.csv (joint "
+                          "columns and a 'plane' column), without --random or --measured")
     if args.candidates is not None:
         q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit,
                                    joint_columns=_joint_columns(args))
@@ -562,7 +607,9 @@ def cmd_plan(args) -> int:
         selection = select_poses(robot, np.vstack([measured, q]), k + args.poses,
                                  tool=(0.0, 0.0, 0.0) if tool is None else tool,
                                  fix=tuple(args.fix), keep=tuple(range(k)), method=criterion,
-                                 targets=targets)
+                                 targets=targets, kind=args.kind,
+                                 pivot=None if args.pivot is None else np.array(args.pivot) * (
+                                     1e-3 if args.length_unit == "mm" else 1.0), planes=planes)
     new = [i - k for i in selection.indices if i >= k]
     protect = [robot.source] + [f for f in (args.candidates, args.measured) if f is not None]
     written = write_all([(args.out, candidates_csv_text(
@@ -658,6 +705,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("calibrate", help="identify the kinematics and write a corrected URDF")
     _add_common(p)
+    _add_kinds(p)
     _add_model(p)
     p.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
     p.add_argument("--lambda", dest="lam", default="auto",
@@ -712,6 +760,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("evaluate", help="position errors of a model on a data set")
     _add_common(p)
+    _add_kinds(p, several=False)
     p.add_argument("--frames", help="FRAMES.json from 'kincal calibrate --frames-out'")
     p.add_argument("--fit-frames", action="store_true",
                    help="fit the measurement frame and tool point on these data first")
@@ -721,6 +770,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("analyze", help="what the data can identify, without solving")
     _add_common(p)
+    _add_kinds(p)
     _add_model(p, allow_all=True)
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME")
     p.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
@@ -742,6 +792,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="CSV to write (SI units)")
     p.add_argument("--design", choices=("tracker", "rtest"), default="tracker",
                    help="tracker: 400 mm cube; rtest: 20 mm cube, varied orientation")
+    p.add_argument("--kind", choices=("point", "pose", "distance", "plane"), default="point",
+                   help="what is measured: points (default), 6-DoF tool poses, distances to "
+                        "a pivot 0.3 m below the poses, contacts with 3 planes through them")
+    p.add_argument("--orientation-noise-deg", type=float, default=0.01,
+                   help="sd of orientation noise per axis (--kind pose)")
     p.add_argument("--poses", type=int, default=60)
     p.add_argument("--center-m", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="cube centre in the base frame [m]")
@@ -810,6 +865,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "variance is minimised (in --length-unit)")
     p.add_argument("--target-poses", type=int, default=200, metavar="T",
                    help="poses drawn in the target cube (default 200)")
+    p.add_argument("--kind", choices=("point", "pose", "distance", "plane"), default="point",
+                   help="the measurement kind the poses are for (D-optimal over its Jacobian)")
+    p.add_argument("--pivot", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="--kind distance: guess of the pivot in the base frame, length unit")
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("compensate", help="joint values with which the calibrated robot "

@@ -445,7 +445,15 @@ class CalibrationProblem:
 
 def calibrate(robot: Robot, data: Measurements, options: CalibrationOptions | None = None,
               **overrides) -> CalibrationResult:
-    """Build, analyse and solve in one call; keyword arguments override ``options`` fields."""
+    """Build, analyse and solve in one call; keyword arguments override ``options`` fields.
+
+    ``data`` may also be a list of measurement sets, or one set of another kind (poses,
+    distances, plane contacts): those go to :mod:`kincal.identification.multiset`."""
+    if not isinstance(data, Measurements):
+        from kincal.identification.multiset import calibrate_sets
+
+        return calibrate_sets(robot, data if isinstance(data, (list, tuple)) else [data],
+                              options, **overrides)
     if options is None:
         options = CalibrationOptions(**overrides)
     elif overrides:

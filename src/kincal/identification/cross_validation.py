@@ -54,12 +54,23 @@ def lambda_grid(lo: float = 1e-6, hi: float = 1e3, count: int = 50) -> np.ndarra
     return np.logspace(np.log10(lo), np.log10(hi), int(count))
 
 
-def make_folds(n_samples: int, k: int, seed: int, groups=None) -> tuple[np.ndarray, ...]:
+def make_folds(n_samples: int, k: int, seed: int, groups=None,
+               strata=None) -> tuple[np.ndarray, ...]:
     """k folds of a seeded permutation of range(n_samples) (sorted within each fold).
 
     groups: (n_samples,) pose of each sample; the poses are permuted and split, so a pose's
     samples share a fold. None: every sample its own pose.
+    strata: (n_samples,) measurement set of each sample: each set's poses are split into
+    the k folds on their own, so every fold holds a share of every set. None: one set.
     """
+    if strata is not None:
+        strata = np.asarray(strata)
+        groups = np.arange(n_samples) if groups is None else np.asarray(groups)
+        parts = []
+        for j, s in enumerate(np.unique(strata)):
+            idx = np.flatnonzero(strata == s)
+            parts.append([idx[f] for f in make_folds(len(idx), k, seed + j, groups[idx])])
+        return tuple(np.sort(np.concatenate([p[f] for p in parts])) for f in range(k))
     groups = np.arange(n_samples) if groups is None else np.asarray(groups)
     poses, inverse = np.unique(groups, return_inverse=True)
     if not 2 <= k <= len(poses):
@@ -71,7 +82,8 @@ def make_folds(n_samples: int, k: int, seed: int, groups=None) -> tuple[np.ndarr
 
 def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.ndarray,
                    k: int = 5, seed: int = 0, warm_start: bool = True,
-                   progress: Callable | None = None, groups=None) -> CrossValidation:
+                   progress: Callable | None = None, groups=None,
+                   strata=None) -> CrossValidation:
     """Run the CV sweep.
 
     fit(train_index, lam, start) -> solution: fit on the training samples, from ``start``
@@ -80,10 +92,10 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
     warm_start: solve each fold's lambdas from the largest down, each starting from the
         previous solution (same minimiser, far fewer iterations); False starts every fit
         from the nominal parameters, as the paper writes it.
-    groups: (n_samples,) pose of each sample (see make_folds).
+    groups: (n_samples,) pose of each sample; strata: set of each sample (see make_folds).
     """
     lambdas = np.asarray(lambdas, dtype=float)
-    folds = make_folds(n_samples, k, seed, groups)
+    folds = make_folds(n_samples, k, seed, groups, strata)
     errors = np.empty((lambdas.size, k))
     order = np.argsort(-lambdas)
     total, done = lambdas.size * k, 0

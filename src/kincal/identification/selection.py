@@ -23,7 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-_FRAME = re.compile(r"(base|tool\d*)\.")  # measurement frame and tool point names
+# measurement frame and tool point names; pivot and planes of other measurement kinds, and
+# those of further measurement sets (set2.base.x, ...)
+_FRAME = re.compile(r"(set\d+\.)?(base|tool\d*|pivot|plane\w*)\.")
 RANK_TOL = 1e-7  # relative size of the new part of a column below which it is redundant
 WEAK_INDEPENDENCE = 0.02  # kept, but 98 % of its effect reproducible by the others
 WEAK_SENSITIVITY = 0.005  # kept, but moves the point less than this [mm RMS per mm or deg]

@@ -1,1 +1,6 @@
-"""Measurement kinds: the data a calibration reads and what each kind predicts."""
+"""Measurement kinds: the data a calibration reads and what each kind predicts.
+
+One module per kind, sharing the interface of :mod:`.kind`: :mod:`.point` (3-D points
+on the tool; :mod:`.data` reads them), :mod:`.pose` (6-DoF tool poses), :mod:`.distance`
+(distances to a fixed pivot), :mod:`.plane` (contacts with planes). :mod:`.sets` builds a
+set's model and tells a file's kind from its columns."""

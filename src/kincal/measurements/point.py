@@ -119,3 +119,70 @@ class MeasurementModel:
         for c in range(3):
             J[rows, :, first + c] = np.matmul(Rb, R_tip[:, :, c, None])[:, :, 0]
         return Pm, J
+
+
+class PointKind:
+    """The point kind behind the :class:`kincal.measurements.kind.KindModel` interface, for
+    calibrations over several measurement sets: residuals P_measured - P_predicted [m].
+
+    Frames: ``base.x .y .z .rx .ry .rz`` (measurement frame) and ``tool.*`` (``tool<k>.*``
+    for further points). data: :class:`kincal.measurements.data.Measurements`.
+    """
+
+    kind = "point"
+    dim = 3
+
+    def __init__(self, error_model: ErrorModel, data, backlash=()):
+        from kincal.identification.parameters import BASE, TOOL
+
+        self.error_model = error_model
+        self.data = data.for_chain(error_model.joint_names)
+        names = tuple(error_model.joint_names[i] for i in backlash)
+        self.model = MeasurementModel(error_model, self.data.joint_values, self.data.approach,
+                                      names, self.data.points, self.data.n_points)
+        K = self.data.n_points
+        self.frame_names = BASE + TOOL + tuple(f"tool{k}.{c}" for k in range(2, K + 1)
+                                               for c in "xyz")
+        self.frame_is_length = (True,) * 3 + (False,) * 3 + (True,) * 3 * K
+        self.N = len(self.data)
+        self.chain = self.model.chain
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frame_names)
+
+    def subset(self, rows) -> "PointKind":
+        other = object.__new__(PointKind)
+        other.__dict__.update(self.__dict__)
+        other.data = self.data.subset(rows)
+        other.model = self.model.subset(rows)
+        other.chain = other.model.chain
+        other.N = len(other.data)
+        return other
+
+    def residuals(self, kin, frames, backlash, jacobian=False, kinematic=True):
+        x = np.concatenate([kin, frames, backlash])
+        P = self.data.positions
+        if not jacobian:
+            return P - self.model.predict(x)
+        pred, J = self.model.jacobian(x, kinematic)
+        k, f = len(kin), len(frames)
+        return P - pred, -J[:, :, :k], -J[:, :, k:k + f], -J[:, :, k + f:]
+
+    def start(self, kin, tool_guess=None) -> np.ndarray:
+        from kincal.identification.frames_init import initial_frames, point_in_tip
+        from kincal.rotations import base_angles
+
+        R_tip, p_tip = self.model.tip_poses(kin)
+        P, pts = self.data.positions, self.data.points
+        first = pts == 0
+        Rb, tb, tool, _, _ = initial_frames(R_tip[first], p_tip[first], P[first], tool_guess)
+        tools = [tool] + [point_in_tip(R_tip[m], p_tip[m], P[m], Rb, tb)
+                          for m in (pts == k for k in range(1, self.data.n_points))]
+        return np.concatenate([tb, base_angles(Rb), np.ravel(tools)])
+
+    def sample_errors(self, r):
+        return np.linalg.norm(r, axis=1)
+
+    def notes(self) -> tuple[str, ...]:
+        return ()

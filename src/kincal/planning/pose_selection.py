@@ -190,7 +190,10 @@ class PoseSelection:
 
 # ------------------------------------------------------------ linear algebra
 def _det3(A: np.ndarray) -> np.ndarray:
-    """Determinants of (..., 3, 3) arrays, closed form."""
+    """Determinants of (..., d, d) arrays: closed form for d = 3 (points), else LAPACK
+    (poses give 6 rows per sample, distances and plane contacts 1)."""
+    if A.shape[-1] != 3:
+        return np.linalg.det(A)
     return (A[..., 0, 0] * (A[..., 1, 1] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 1])
             - A[..., 0, 1] * (A[..., 1, 0] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 0])
             + A[..., 0, 2] * (A[..., 1, 0] * A[..., 2, 1] - A[..., 1, 1] * A[..., 2, 0]))
@@ -219,7 +222,7 @@ def _exact_inverse(G: np.ndarray) -> tuple[np.ndarray, float] | None:
 
 def _greedy(Jn: np.ndarray, n: int, keep: list[int]):
     """Forward selection from RIDGE * I; returns (chosen, M^-1, log det, ridge still on)."""
-    M, _, p = Jn.shape
+    M, d, p = Jn.shape
     chosen = list(keep)
     G = RIDGE * np.eye(p) + np.einsum("kip,kiq->pq", Jn[chosen], Jn[chosen])
     Minv, log_det = np.linalg.inv(G), float(np.linalg.slogdet(G)[1])
@@ -227,19 +230,19 @@ def _greedy(Jn: np.ndarray, n: int, keep: list[int]):
     available = np.ones(M, dtype=bool)
     available[chosen] = False
     while True:
-        if ridge and 3 * len(chosen) >= p:
+        if ridge and d * len(chosen) >= p:
             S = Jn[chosen].reshape(-1, p)
             exact = _exact_inverse(S.T @ S)
             if exact is not None:
                 (Minv, log_det), ridge = exact, False
         if len(chosen) == n:
             return chosen, Minv, log_det, ridge
-        gain = _log(_det3(np.eye(3) + _quad(Jn, Minv)))  # all candidates: one batched product
+        gain = _log(_det3(np.eye(d) + _quad(Jn, Minv)))  # all candidates: one batched product
         gain[~available] = -np.inf
         k = int(np.argmax(gain))
         Jk = Jn[k]
         W = Jk @ Minv                                                   # (3, p)
-        Minv = Minv - W.T @ np.linalg.solve(np.eye(3) + W @ Jk.T, W)    # Woodbury
+        Minv = Minv - W.T @ np.linalg.solve(np.eye(d) + W @ Jk.T, W)    # Woodbury
         Minv = 0.5 * (Minv + Minv.T)
         log_det += float(gain[k])
         chosen.append(k)
@@ -248,7 +251,7 @@ def _greedy(Jn: np.ndarray, n: int, keep: list[int]):
 
 def _best_swap(Jn, chosen, removable, Minv):
     """(log-det gain, position in chosen, candidate) of the best single swap."""
-    M, _, p = Jn.shape
+    M, d, p = Jn.shape
     JS = Jn[chosen]
     WS = JS @ Minv
     A_ii = WS @ JS.transpose(0, 2, 1)                                  # (n, 3, 3)
@@ -257,11 +260,11 @@ def _best_swap(Jn, chosen, removable, Minv):
     for start in range(0, free_rows.size, CHUNK):
         rows = free_rows[start:start + CHUNK]
         JU = Jn[rows]
-        I_A = np.eye(3) + _quad(JU, Minv)                               # (c, 3, 3)
+        I_A = np.eye(d) + _quad(JU, Minv)                               # (c, 3, 3)
         A_ij = (WS.reshape(-1, p) @ JU.reshape(-1, p).T).reshape(
-            len(chosen), 3, len(rows), 3).transpose(0, 2, 1, 3)         # (n, c, 3, 3)
+            len(chosen), d, len(rows), d).transpose(0, 2, 1, 3)         # (n, c, 3, 3)
         # det(M - J_i'J_i + J_j'J_j) / det M = det(I + A_jj) det(I - A_ii + A_ij (I + A_jj)^-1 A_ji)
-        D = np.eye(3) - A_ii[:, None] + A_ij @ np.linalg.inv(I_A)[None] @ A_ij.transpose(0, 1, 3, 2)
+        D = np.eye(d) - A_ii[:, None] + A_ij @ np.linalg.inv(I_A)[None] @ A_ij.transpose(0, 1, 3, 2)
         gain = _log(_det3(I_A))[None, :] + _log(_det3(D))
         gain[~removable] = -np.inf
         i, j = np.unravel_index(int(np.argmax(gain)), gain.shape)
@@ -284,7 +287,8 @@ def _exchange(Jn, chosen, n_keep, Minv, log_det, max_swaps):
             return chosen, Minv, log_det, swaps, False
         U = np.concatenate([Jn[j], Jn[chosen[i]]])                     # (6, p)
         W = U @ Minv
-        K = W @ U.T + np.diag([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])       # C^-1 + U M^-1 U'
+        d = Jn.shape[1]
+        K = W @ U.T + np.diag(np.r_[np.ones(d), -np.ones(d)])          # C^-1 + U M^-1 U'
         Minv = Minv - W.T @ np.linalg.solve(K, W)                      # Woodbury, rank 6
         Minv = 0.5 * (Minv + Minv.T)
         log_det += gain
@@ -337,7 +341,8 @@ def _check_indices(keep, m: int) -> list[int]:
 def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(), keep=(), targets=None,
                  method: str = "D", max_swaps: int = 1000, seed: int = 0,
                  random_subsets: int = RANDOM_SUBSETS,
-                 model: str = error_models.DEFAULT) -> PoseSelection:
+                 model: str = error_models.DEFAULT, kind: str = "point", pivot=None,
+                 planes=None) -> PoseSelection:
     """Choose ``n`` of the ``candidates`` to measure (see the module notes).
 
     candidates: (M, n_joints) joint values in the chain order of ``robot`` [rad or m];
@@ -353,6 +358,10 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
         (:mod:`kincal.planning.i_optimal`).
     targets: (T, n_joints) poses where the calibrated robot will work (method "I"; with
         "D" they only add the predicted position std to the report).
+    kind: the measurement kind the poses are for ("point", "pose", "distance", "plane":
+        :mod:`kincal.measurements.sets`); pivot: (3,) guess of the pivot in the base frame
+        [m] (distance); planes: (M,) plane index of each candidate (plane contacts: the
+        candidates touch the planes, which are fitted through them).
     """
     if method not in METHODS:
         raise OptionError(f"unknown selection method {method!r}; expected one of {', '.join(METHODS)}")
@@ -394,23 +403,30 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
 
     model = error_models.build(model, g)
     _warn_tool_on_axis(model, t)
-    space = ParameterSpace.of_model(model)
+    if kind == "point":
+        space = ParameterSpace.of_model(model)
+        x = space.join(model.nominal, np.zeros(6), t)
+        # J^T J does not depend on where the measurement frame is: base at the identity
+        J = MeasurementModel(model, q).jacobian(x)[1] * (space.reporting_scale() / MM)
+    else:
+        from kincal.measurements.sets import planning_jacobian
+
+        J, space = planning_jacobian(model, kind, q, t, pivot, planes)
     free = np.ones(space.size, dtype=bool)
     free[space.indices(fix)] = False  # unknown names raise ParameterError with the list
-    x = space.join(model.nominal, np.zeros(6), t)
-    # J^T J does not depend on where the measurement frame is: base at the identity
-    J = MeasurementModel(model, q).jacobian(x)[1] * (space.reporting_scale() / MM)
     ident = analyze(J.reshape(-1, space.size), space.names, space.n_kinematic, free, RANK_TOL)
     cols = space.indices(ident.kept)
     p = cols.size
     if p == 0:
         raise DataError(f"the {M} candidates identify no parameter at all ({len(ident.free)} "
                         "free): give candidates that move every joint")
-    need = math.ceil(p / 3)
+    rows_per = J.shape[1]  # equations per pose: 3 (point), 6 (pose), 1 (distance, plane)
+    need = math.ceil(p / rows_per)
     if n < need:
-        raise OptionError(f"{n} poses give {3 * n} equations, but the candidates identify {p} "
-                          f"parameters ({len(ident.free)} free, {len(ident.dropped)} redundant): "
-                          f"at least {need} poses are needed (3 equations per pose), and many "
+        raise OptionError(f"{n} poses give {rows_per * n} equations, but the candidates identify "
+                          f"{p} parameters ({len(ident.free)} free, {len(ident.dropped)} "
+                          f"redundant): at least {need} poses are needed ({rows_per} equation(s) "
+                          "per pose), and many "
                           "more for a good calibration")
     Jk = J[:, :, cols]
     scale = np.sqrt(np.einsum("kic,kic->c", Jk, Jk) / M)  # RMS per pose [mm per mm or deg]

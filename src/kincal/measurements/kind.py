@@ -1,0 +1,210 @@
+"""What every measurement kind provides: the shared interface of the kinds.
+
+A measurement kind says what an instrument reports about the robot's chain at each sample
+and which frame parameters (where the instrument is, what it touches on the tool) it
+needs besides the robot's kinematic ones. The kinds:
+
+- ``point`` (:mod:`.point`): 3-D positions of points on the tool (laser tracker, R-test,
+  motion capture); frames ``base.*`` (measurement frame) and ``tool.*``;
+- ``pose`` (:mod:`.pose`): position and orientation of a tool frame (6-DoF tracker probe,
+  optical CMM); frames ``base.*`` and ``tool.x .y .z .rx .ry .rz``;
+- ``distance`` (:mod:`.distance`): the distance from the tool point to a fixed pivot
+  (drawstring encoder, ballbar); frames ``pivot.*`` (base frame) and ``tool.*``;
+- ``plane`` (:mod:`.plane`): the tool point touches a plane (touch probe on a surface
+  plate); frames ``plane.rx .ry .d`` per plane and ``tool.*``.
+
+A kind's model (:class:`KindModel`) is built from an error model and the samples; for a
+kinematic vector, its frame vector and the backlash values it returns the weighted
+residuals, measured minus predicted, ``(N, dim)`` in metres (orientation rows are turned
+into metres by the set's position-to-orientation sigma ratio), and their analytic
+derivatives through :class:`kincal.models.chain.ChainState`. Plain numpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from kincal.errors import DataError
+from kincal.models.backlash import approach_directions
+from kincal.models.base import ErrorModel
+from kincal.models.chain import Chain
+
+DEFAULT_SIGMA = 0.05e-3  # [m] position / distance noise assumed when a set states none
+
+
+def readonly(a, dtype=float) -> np.ndarray:
+    a = np.array(a, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, kw_only=True)
+class SampleSet:
+    """Fields every kind's samples share (the kind's own values are in its subclass).
+
+    joint_names: the chain joints, in chain order. joint_values: (N, n) [rad or m].
+    sigma: (N,) standard deviation of each sample's length reading (position, distance)
+        [m], or None (then :data:`DEFAULT_SIGMA` when sets are weighed against each other).
+    rows: (N,) line numbers in the source file (1 = header). source: for messages.
+    approach: (N, n) approach directions (+1/-1/0) for backlash terms; None: from the
+        order of the samples. poses: (N,) pose of each sample (cross-validation keeps a
+        pose in one fold); None: every sample its own pose.
+    """
+
+    joint_names: tuple[str, ...]
+    joint_values: np.ndarray
+    sigma: np.ndarray | None = None
+    rows: np.ndarray | None = None
+    source: str = "<memory>"
+    approach: np.ndarray | None = None
+    poses: np.ndarray | None = None
+    ignored_columns: tuple[str, ...] = field(default=())
+
+    kind = "abstract"
+
+    def __post_init__(self):
+        q = readonly(self.joint_values)
+        if q.ndim != 2 or q.shape[1] != len(self.joint_names):
+            raise DataError(f"{self.source}: joint values must be (N, {len(self.joint_names)}),"
+                            f" got {q.shape}")
+        if not np.all(np.isfinite(q)):
+            k = int(np.argwhere(~np.isfinite(q))[0][0])
+            raise DataError(f"{self.source}: sample {k + 1} has a non-finite joint value")
+        object.__setattr__(self, "joint_values", q)
+        n = len(q)
+        if self.sigma is not None:
+            s = readonly(self.sigma)
+            if s.shape != (n,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
+                raise DataError(f"{self.source}: sigma must be {n} positive finite values")
+            object.__setattr__(self, "sigma", s)
+        object.__setattr__(self, "rows", readonly(
+            np.arange(2, n + 2) if self.rows is None else self.rows, int))
+        g = approach_directions(q) if self.approach is None else np.asarray(self.approach, float)
+        if g.shape != q.shape:
+            raise DataError(f"{self.source}: approach directions must be {q.shape}")
+        object.__setattr__(self, "approach", readonly(g))
+        object.__setattr__(self, "poses", readonly(
+            np.arange(n) if self.poses is None else self.poses, int))
+
+    def __len__(self) -> int:
+        return len(self.joint_values)
+
+    def per_sample_fields(self) -> tuple[str, ...]:
+        """Names of the (N, ...) fields a subset must cut (the kind adds its own)."""
+        return ("joint_values", "sigma", "rows", "approach", "poses")
+
+    def subset(self, index) -> "SampleSet":
+        index = np.asarray(index)
+        cut = {}
+        for name in self.per_sample_fields():
+            value = getattr(self, name)
+            cut[name] = None if value is None else value[index]
+        return replace(self, **cut)
+
+    def for_chain(self, joint_names) -> "SampleSet":
+        """The same samples with joint columns in the order of ``joint_names``."""
+        joint_names = tuple(joint_names)
+        if joint_names == self.joint_names:
+            return self
+        missing = [j for j in joint_names if j not in self.joint_names]
+        if missing:
+            raise DataError(f"{self.source}: no values for chain joints {', '.join(missing)}")
+        idx = [self.joint_names.index(j) for j in joint_names]
+        return replace(self, joint_names=joint_names, joint_values=self.joint_values[:, idx],
+                       approach=self.approach[:, idx])
+
+
+class KindModel:
+    """Residuals and Jacobian of one measurement set (the interface; see the module notes).
+
+    Subclasses set ``kind``, ``dim`` (residual rows per sample), ``frame_names`` and
+    ``frame_is_length`` and implement :meth:`residuals`, :meth:`start` and
+    :meth:`sample_errors`. error_model: the chain's model; data: the kind's samples;
+    backlash: chain indices of the joints with a backlash term.
+    """
+
+    kind = "abstract"
+    dim = 1
+    frame_names: tuple[str, ...] = ()
+    frame_is_length: tuple[bool, ...] = ()
+
+    def __init__(self, error_model: ErrorModel, data: SampleSet, backlash=()):
+        self.error_model = error_model
+        self.data = data.for_chain(error_model.joint_names)
+        self.backlash = tuple(int(i) for i in backlash)
+        self.chain = Chain(error_model, self.data.joint_values, self.data.approach,
+                           self.backlash)
+        self.N = len(self.data)
+
+    def subset(self, rows) -> "KindModel":
+        other = object.__new__(type(self))
+        other.__dict__.update(self.__dict__)
+        other.data = self.data.subset(rows)
+        other.chain = self.chain.subset(rows)
+        other.N = len(other.data)
+        return other
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frame_names)
+
+    def residuals(self, kin: np.ndarray, frames: np.ndarray, backlash: np.ndarray,
+                  jacobian: bool = False, kinematic: bool = True):
+        """(r (N, dim) [m], and if ``jacobian``: (dr/dkin (N, dim, p_k), dr/dframes
+        (N, dim, f), dr/dbacklash (N, dim, nb))). kinematic=False: kinematic and backlash
+        columns zero (frame-only fits)."""
+        raise NotImplementedError  # pragma: no cover - interface
+
+    def start(self, kin: np.ndarray, tool_guess=None) -> np.ndarray:
+        """(f,) first guess of the frame parameters with kinematics ``kin`` (closed form;
+        the caller refines it by Gauss-Newton on the frames)."""
+        raise NotImplementedError  # pragma: no cover - interface
+
+    def sample_errors(self, r: np.ndarray) -> np.ndarray:
+        """(N,) size of each sample's error [m] from its residual rows (for statistics)."""
+        return np.linalg.norm(r, axis=1)
+
+    def notes(self) -> tuple[str, ...]:
+        """What this kind cannot see, for the identifiability report."""
+        return ()
+
+    def _zero_chain_columns(self, dim: int):
+        return (np.zeros((self.N, dim, self.error_model.size)),
+                np.zeros((self.N, dim, len(self.backlash))))
+
+
+@dataclass(frozen=True)
+class SetColumns:
+    """What :func:`read_set` read: joint values (N, n) [SI], the other wanted columns
+    ``values`` {name: (N,)} (unconverted), line numbers, approach directions, the file."""
+
+    joint_values: np.ndarray
+    values: dict
+    rows: np.ndarray
+    approach: np.ndarray
+    source: str
+    ignored: tuple[str, ...]
+
+
+def read_set(path, joint_names, wanted, optional=(), prismatic=(), angle_unit="rad",
+             length_unit="m", joint_columns=None, expected="") -> SetColumns:
+    """Read the chain joints and the ``wanted`` columns of a CSV file (shared by the kinds;
+    the point kind has its own reader, :meth:`kincal.measurements.data.Measurements.from_csv`)."""
+    from kincal.measurements.csv_table import read_columns
+    from kincal.measurements.data import ANGLE_UNITS, LENGTH_UNITS, joint_column_names
+
+    if length_unit not in LENGTH_UNITS:
+        raise DataError(f"unknown length unit {length_unit!r}; expected one of m, mm")
+    if angle_unit not in ANGLE_UNITS:
+        raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+    columns = joint_column_names(joint_names, joint_columns)
+    table = read_columns(path, list(columns.values()) + list(wanted), optional, kind="data",
+                         expected=expected or "the chain joints",
+                         aliases={c: j for j, c in columns.items() if c != j})
+    L, A = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
+    q = np.column_stack([table.values[columns[j]] * (L if j in set(prismatic) else A)
+                         for j in joint_names])
+    return SetColumns(q, table.values, np.asarray(table.lines), approach_directions(q),
+                      str(table.path), table.ignored())

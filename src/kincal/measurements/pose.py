@@ -1,0 +1,238 @@
+"""The pose kind: position and orientation of a tool frame (6-DoF tracker probe, optical
+CMM, a rigid body fitted to several markers).
+
+Plain numpy. With the measurement frame ``R_b = Rx(rx) Ry(ry) Rz(rz)``, ``t_b`` and the
+tool frame in the tip frame (``t_tool``, ``R_tool = Rx(tool.rx) Ry(tool.ry) Rz(tool.rz)``)
+the predicted tool pose in the measurement frame is
+
+    p = R_b (p_tip + R_tip t_tool) + t_b,      R = R_b R_tip R_tool.
+
+Residuals per sample (6 rows): the position error ``p_measured - p`` [m] and the
+orientation error ``c log(R_measured R^T)`` (a rotation vector in the measurement frame,
+[rad]) times ``c = sigma_position / sigma_orientation`` [m/rad], so that both weigh by
+their stated noise. The orientation rows' Jacobian includes the inverse right Jacobian of
+SO(3) (exact, not only at zero error).
+
+Sigmas: per sample from the ``sigma`` [length unit] and ``sigma_deg`` columns, else the
+set's ``orientation_sigma_deg`` (default :data:`DEFAULT_ORIENTATION_SIGMA_DEG`) against
+the position sigma (default :data:`kincal.measurements.kind.DEFAULT_SIGMA`, 0.05 mm): one
+degree of orientation error then weighs like 5 mm of position error.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from kincal.errors import DataError
+from kincal.measurements.kind import (
+    DEFAULT_SIGMA,
+    KindModel,
+    SampleSet,
+    read_set,
+    readonly,
+)
+from kincal.models.chain import cross_rows
+from kincal.rotations import base_angles, base_rotation, quaternion_to_matrix, rotx, roty, rotz
+
+DEFAULT_ORIENTATION_SIGMA_DEG = 0.01  # [deg], a 6-DoF laser-tracker probe's order
+QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
+UNIT_TOL = 1e-3  # |norm - 1| accepted (rounding in the file); beyond it the row is refused
+FRAMES = ("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
+          "tool.x", "tool.y", "tool.z", "tool.rx", "tool.ry", "tool.rz")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PoseData(SampleSet):
+    """Measured tool poses: positions (N, 3) [m] and rotations (N, 3, 3) in the measurement
+    frame. sigma_deg: (N,) orientation standard deviation [deg] or None (then
+    ``orientation_sigma_deg``)."""
+
+    positions: np.ndarray
+    rotations: np.ndarray
+    sigma_deg: np.ndarray | None = None
+    orientation_sigma_deg: float = DEFAULT_ORIENTATION_SIGMA_DEG
+
+    kind = "pose"
+
+    def __post_init__(self):
+        super().__post_init__()
+        n = len(self.joint_values)
+        P, R = readonly(self.positions), readonly(self.rotations)
+        if P.shape != (n, 3) or R.shape != (n, 3, 3):
+            raise DataError(f"{self.source}: pose data need positions ({n}, 3) and rotations "
+                            f"({n}, 3, 3), got {P.shape} and {R.shape}")
+        err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2)) if n else []
+        if n and (np.max(err) > 1e-6 or np.any(np.linalg.det(R) < 0)):
+            k = int(np.argmax(err))
+            raise DataError(f"{self.source}: rotation of sample {k + 1} is not orthonormal")
+        object.__setattr__(self, "positions", P)
+        object.__setattr__(self, "rotations", R)
+        if self.sigma_deg is not None:
+            s = readonly(self.sigma_deg)
+            if s.shape != (n,) or np.any(~np.isfinite(s)) or np.any(s <= 0):
+                raise DataError(f"{self.source}: sigma_deg must be {n} positive values")
+            object.__setattr__(self, "sigma_deg", s)
+        if not self.orientation_sigma_deg > 0:
+            raise DataError(f"orientation sigma must be > 0 deg, got {self.orientation_sigma_deg}")
+
+    def per_sample_fields(self):
+        return super().per_sample_fields() + ("positions", "rotations", "sigma_deg")
+
+    def ratio(self) -> np.ndarray:
+        """(N,) c = sigma_position / sigma_orientation [m/rad]."""
+        sp = np.full(len(self), DEFAULT_SIGMA) if self.sigma is None else self.sigma
+        so = (np.full(len(self), self.orientation_sigma_deg) if self.sigma_deg is None
+              else self.sigma_deg)
+        return sp / (so * math.pi / 180.0)
+
+    @classmethod
+    def from_csv(cls, path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",
+                 position_columns=("x", "y", "z"), orientation_columns=QUATERNION_COLUMNS,
+                 orientation_sigma_deg=DEFAULT_ORIENTATION_SIGMA_DEG,
+                 joint_columns=None) -> "PoseData":
+        """Joint columns, positions and a unit quaternion (qx, qy, qz, qw: scalar last, as
+        in ROS) per row; optional ``sigma`` [length unit] and ``sigma_deg`` columns."""
+        position_columns, orientation_columns = tuple(position_columns), tuple(orientation_columns)
+        if len(position_columns) != 3 or len(orientation_columns) != 4:
+            raise DataError("a pose needs 3 position columns and 4 quaternion columns "
+                            f"(qx qy qz qw), got {position_columns} and {orientation_columns}")
+        c = read_set(path, joint_names, position_columns + orientation_columns,
+                     ("sigma", "sigma_deg"), prismatic, angle_unit, length_unit, joint_columns,
+                     expected="the chain joints, positions and quaternions")
+        L = 1e-3 if length_unit == "mm" else 1.0
+        v = c.values
+        quat = np.column_stack([v[k] for k in orientation_columns])
+        norm = np.linalg.norm(quat, axis=1)
+        bad = np.flatnonzero(np.abs(norm - 1.0) > UNIT_TOL)
+        if bad.size:
+            k = bad[np.argmax(np.abs(norm[bad] - 1.0))]
+            raise DataError(
+                f"{c.source}, line {c.rows[bad[0]]}: the quaternion "
+                f"({', '.join(orientation_columns)}) has norm {norm[bad[0]]:.6g}, not 1 "
+                f"({bad.size} of {len(norm)} rows are off by more than {UNIT_TOL:g}; worst line "
+                f"{c.rows[k]}, norm {norm[k]:.6g}): give unit quaternions, scalar last (qx, qy, "
+                "qz, qw), or name the columns with --orientation-columns")
+        R = quaternion_to_matrix(quat / norm[:, None])  # renormalise the rounding only
+        P = np.column_stack([v[k] for k in position_columns]) * L
+        for name in ("sigma", "sigma_deg"):
+            if name in v and np.any(v[name] <= 0):
+                k = int(np.argmax(v[name] <= 0))
+                raise DataError(f"{c.source}, line {c.rows[k]}, column {name!r}: must be > 0")
+        return cls(joint_names=tuple(joint_names), joint_values=c.joint_values,
+                   positions=P, rotations=R,
+                   sigma=v["sigma"] * L if "sigma" in v else None,
+                   sigma_deg=v.get("sigma_deg"), orientation_sigma_deg=orientation_sigma_deg,
+                   rows=c.rows, source=c.source, approach=c.approach, ignored_columns=c.ignored)
+
+
+def log_so3(R: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors of rotations R (N, 3, 3) (angles below pi)."""
+    vee = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]],
+                   axis=1)
+    s = np.linalg.norm(vee, axis=1) / 2.0
+    c = (np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0
+    theta = np.arctan2(s, c)
+    small = s < 1e-9
+    k = np.where(small, 0.5, theta / (2.0 * np.where(small, 1.0, s)))
+    return vee * k[:, None]
+
+
+def right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) J_r^{-1}(phi): log(exp(phi) exp(e)) = phi + J_r^{-1}(phi) e + O(e^2)."""
+    theta = np.linalg.norm(phi, axis=1)
+    small = theta < 1e-6
+    t = np.where(small, 1.0, theta)
+    coef = np.where(small, 1.0 / 12.0,
+                    1.0 / t ** 2 - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
+    K = np.zeros((len(phi), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -phi[:, 2], phi[:, 1], -phi[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = phi[:, 2], -phi[:, 1], phi[:, 0]
+    return np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
+
+
+def base_columns(P_base: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Derivatives w.r.t. the measurement frame (x, y, z, rx, ry, rz) of points P_base
+    (N, 3) seen in it: (position (N, 3, 6), small rotation of the frame (3, 3): the turn
+    each angle causes, columns rx, ry, rz, in the measurement frame)."""
+    N = len(P_base)
+    Rx, Ry, Rz = rotx(base[3]), roty(base[4]), rotz(base[5])
+    ex, ey, ez = np.eye(3)
+    J = np.zeros((N, 3, 6))
+    J[:, :, :3] = np.eye(3)
+    J[:, :, 3] = cross_rows(ex, P_base @ (Rx @ Ry @ Rz).T)
+    J[:, :, 4] = cross_rows(ey, P_base @ (Ry @ Rz).T) @ Rx.T
+    J[:, :, 5] = cross_rows(ez, P_base @ Rz.T) @ (Rx @ Ry).T
+    W = np.column_stack([ex, Rx @ ey, Rx @ Ry @ ez])
+    return J, W
+
+
+class PoseKind(KindModel):
+    """Residuals and Jacobian of measured tool poses (see the module notes)."""
+
+    kind = "pose"
+    dim = 6
+    frame_names = FRAMES
+    frame_is_length = (True,) * 3 + (False,) * 3 + (True,) * 3 + (False,) * 3
+
+    def residuals(self, kin, frames, backlash, jacobian=False, kinematic=True):
+        d = self.data
+        base, t, a = frames[:6], frames[6:9], frames[9:12]
+        s = self.chain.state(kin, backlash, keep=jacobian and kinematic)
+        Rb = base_rotation(*base[3:])
+        Rt = base_rotation(*a)
+        P_base = s.p_tip + s.R_tip @ t
+        p = P_base @ Rb.T + base[:3]
+        R = Rb @ s.R_tip @ Rt
+        phi = log_so3(d.rotations @ np.transpose(R, (0, 2, 1)))
+        c = d.ratio()[:, None]
+        r = np.concatenate([d.positions - p, c * phi], axis=1)
+        if not jacobian:
+            return r
+        N = self.N
+        Ji = right_jacobian_inverse(phi) * -c[:, :, None]  # d(orientation rows)/d(turn)
+        if kinematic:
+            Kp, Bp = s.point_columns(P_base)
+            Kr, Br = s.rotation_columns()
+            Jk = np.concatenate([-(Rb @ Kp), Ji @ (Rb @ Kr)], axis=1)
+            Jb = np.concatenate([-(Rb @ Bp), Ji @ (Rb @ Br)], axis=1)
+        else:
+            Jk, Jb = self._zero_chain_columns(6)
+        Jf = np.zeros((N, 6, 12))
+        Jp, W = base_columns(P_base, base)
+        Jf[:, :3, :6] = -Jp
+        Jf[:, 3:, 3:6] = Ji @ W
+        RbRtip = Rb @ s.R_tip                                    # (N, 3, 3)
+        Jf[:, :3, 6:9] = -RbRtip
+        Rx, Ry = rotx(a[0]), roty(a[1])
+        ex, ey, ez = np.eye(3)
+        Wt = np.column_stack([ex, Rx @ ey, Rx @ Ry @ ez])        # tool turns, tip frame
+        Jf[:, 3:, 9:12] = Ji @ (RbRtip @ Wt)
+        return r, Jk, Jf, Jb
+
+    def start(self, kin, tool_guess=None):
+        from kincal.identification.frames_init import initial_frames
+
+        d = self.data
+        s = self.chain.state(kin, None, keep=False)
+        Rb, tb, t, _, _ = initial_frames(s.R_tip, s.p_tip, d.positions, tool_guess)
+        # tool orientation: the mean of (R_b R_tip)^T R_measured, projected on SO(3)
+        M = np.einsum("nji,njk->ik", Rb @ s.R_tip, d.rotations)
+        U, _, Vt = np.linalg.svd(M)
+        Rt = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0]) @ Vt
+        return np.concatenate([tb, base_angles(Rb), t, base_angles(Rt)])
+
+    def sample_errors(self, r):
+        return np.linalg.norm(r[:, :3], axis=1)
+
+    def orientation_errors(self, r) -> np.ndarray:
+        """(N,) orientation error angles [rad] from the residual rows."""
+        return np.linalg.norm(r[:, 3:], axis=1) / self.data.ratio()
+
+    def notes(self):
+        return (f"{self.data.source}: poses see the tool frame's orientation too; what a "
+                "rigid change of the measurement frame or of the tool frame (tool.rx .ry .rz) "
+                "absorbs, such as the last joint's offset, is not identified",)
+

@@ -1,0 +1,196 @@
+"""Measurement sets of any kind: the model of each, and reading a file of the right kind.
+
+:func:`kind_model` gives the :class:`kincal.measurements.kind.KindModel` of a set's
+samples; :func:`read_set_file` reads a CSV file and tells its kind from its columns:
+
+- ``qx qy qz qw`` (or ``orientation_columns``) beside the positions: ``pose``;
+- ``distance`` and no positions: ``distance`` (both: ambiguous, refused);
+- joint columns only (no positions, no distance), with ``on_plane``: ``plane``;
+- positions otherwise: ``point`` (:class:`kincal.measurements.data.Measurements`).
+"""
+
+from __future__ import annotations
+
+from kincal.errors import DataError
+from kincal.measurements.data import Measurements
+from kincal.measurements.distance import DistanceData, DistanceKind
+from kincal.measurements.kind import SampleSet
+from kincal.measurements.plane import PlaneData, PlaneKind
+from kincal.measurements.point import PointKind
+from kincal.measurements.pose import QUATERNION_COLUMNS, PoseData, PoseKind
+
+KINDS = ("point", "pose", "distance", "plane")
+
+
+def kind_of(data) -> str:
+    if isinstance(data, Measurements):
+        return "point"
+    if isinstance(data, SampleSet):
+        return data.kind
+    raise DataError(f"a measurement set must be Measurements, PoseData, DistanceData or "
+                    f"PlaneData, got {type(data).__name__}")
+
+
+def kind_model(error_model, data, backlash=()):
+    """The kind model of one set (backlash: chain indices of the joints with a term)."""
+    kind = kind_of(data)
+    cls = {"point": PointKind, "pose": PoseKind, "distance": DistanceKind,
+           "plane": PlaneKind}[kind]
+    return cls(error_model, data, backlash)
+
+
+def header_of(path) -> list[str]:
+    """The column names of a CSV file (the reader that follows gives the notes)."""
+    import warnings
+
+    from kincal.errors import KincalNote
+    from kincal.measurements.csv_table import read_columns
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalNote)
+        return list(read_columns(path, []).header)
+
+
+def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",
+                  position_columns=None, orientation_columns=None, on_plane=False,
+                  orientation_sigma_deg=None, joint_columns=None, order_column=None):
+    """One measurement set from a CSV file, its kind told by its columns (module notes)."""
+    header = header_of(path)
+    pos = tuple(position_columns) if position_columns else ("x", "y", "z")
+    has_pos = all(c in header for c in pos)
+    quat = tuple(orientation_columns) if orientation_columns else QUATERNION_COLUMNS
+    if on_plane and not has_pos and "distance" not in header:
+        return PlaneData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
+                                  joint_columns=joint_columns)
+    if "distance" in header:
+        if has_pos:
+            raise DataError(f"{path}: the file has both a 'distance' column and position "
+                            f"columns ({', '.join(pos)}): is it distances to a pivot or "
+                            "measured points? Keep only the columns of one kind (or rename "
+                            "'distance')")
+        return DistanceData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
+                                     joint_columns=joint_columns)
+    if has_pos and (orientation_columns or all(c in header for c in quat)):
+        from kincal.measurements.pose import DEFAULT_ORIENTATION_SIGMA_DEG
+
+        return PoseData.from_csv(path, joint_names, prismatic, length_unit, angle_unit, pos,
+                                 quat, orientation_sigma_deg or DEFAULT_ORIENTATION_SIGMA_DEG,
+                                 joint_columns)
+    return Measurements.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
+                                 position_columns or ("x", "y", "z"),
+                                 order_column=order_column, joint_columns=joint_columns)
+
+
+def to_csv_text(data) -> str:
+    """A set in the CSV layout :func:`read_set_file` reads (SI units, full precision)."""
+    import numpy as np
+
+    from kincal.rotations import matrix_to_quaternion
+
+    kind = kind_of(data)
+    if kind == "point":
+        return data.to_csv_text()
+    cols = list(data.joint_names)
+    extra = []
+    if kind == "pose":
+        cols += ["x", "y", "z", "qx", "qy", "qz", "qw"]
+        extra = np.hstack([data.positions, np.array([matrix_to_quaternion(R)
+                                                     for R in data.rotations])])
+    elif kind == "distance":
+        cols += ["distance"]
+        extra = data.distances[:, None]
+    elif data.labels != ("",):
+        cols += ["plane"]
+        extra = np.array([[float(data.labels[k])] for k in data.planes])
+    table = data.joint_values if len(extra) == 0 else np.hstack([data.joint_values, extra])
+    if data.sigma is not None:
+        cols.append("sigma")
+        table = np.hstack([table, data.sigma[:, None]])
+    lines = [",".join(cols)] + [",".join(repr(float(v)) for v in row) for row in table]
+    return "\n".join(lines) + "\n"
+
+
+class KindSpace:
+    """Names and units of a kind's parameters for planning (kinematic, then frames): the
+    part of :class:`kincal.identification.parameters.ParameterSpace` that
+    :func:`kincal.planning.pose_selection.select_poses` uses."""
+
+    def __init__(self, names, is_length, n_kinematic: int):
+        import numpy as np
+
+        self.names = tuple(names)
+        self.is_length = np.asarray(is_length, dtype=bool)
+        self.n_kinematic = int(n_kinematic)
+        self.size = len(self.names)
+
+    def reporting_scale(self):
+        import numpy as np
+
+        return np.where(self.is_length, 1e-3, np.pi / 180.0)
+
+    def indices(self, patterns):
+        import fnmatch
+
+        import numpy as np
+
+        from kincal.errors import ParameterError, listing
+
+        out = set()
+        for p in (patterns,) if isinstance(patterns, str) else patterns:
+            hits = [k for k, n in enumerate(self.names) if fnmatch.fnmatchcase(n, p)]
+            if not hits:
+                raise ParameterError(f"unknown parameter or pattern {p!r}. Valid names: "
+                                     f"{listing(self.names, 60)}", valid=self.names)
+            out.update(hits)
+        return np.array(sorted(out), dtype=int)
+
+
+def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
+    """(J (M, rows, p) in mm per mm or deg, :class:`KindSpace`) of a kind at candidate
+    poses q (M, n), nominal kinematics: what D-optimal planning maximises over.
+
+    pose: measurement frame at the identity, tool frame ``tool`` with no turn; distance:
+    ``pivot`` (3,) [m] in the base frame (required: where the distances point decides what
+    they see); plane: ``planes`` (M,) plane index of each candidate (default one plane),
+    each plane fitted through the candidates' nominal tool points (they touch it)."""
+    import numpy as np
+
+    from kincal.errors import OptionError
+    from kincal.measurements.plane import fit_plane
+    from kincal.models.chain import Chain
+
+    q = np.asarray(q, float)
+    t = np.asarray(tool, float)
+    names = tuple(error_model.joint_names)
+    s = Chain(error_model, q).state(error_model.nominal, None, keep=False)
+    P = s.p_tip + s.R_tip @ t
+    if kind == "pose":
+        data = PoseData(joint_names=names, joint_values=q, positions=P, rotations=s.R_tip)
+        frames = np.r_[np.zeros(6), t, np.zeros(3)]
+    elif kind == "distance":
+        if pivot is None:
+            raise OptionError("planning distances needs a guess of the pivot (--pivot X Y Z, "
+                              "base frame): where the distances point decides what they see")
+        c = np.asarray(pivot, float)
+        data = DistanceData(joint_names=names, joint_values=q,
+                            distances=np.linalg.norm(P - c, axis=1))
+        frames = np.r_[c, t]
+    elif kind == "plane":
+        k = np.zeros(len(q), int) if planes is None else np.asarray(planes, int)
+        labels = tuple(str(j + 1) for j in range(int(k.max()) + 1)) if planes is not None \
+            else ("",)
+        data = PlaneData(joint_names=names, joint_values=q, planes=k, labels=labels)
+        fitted = []
+        for j in range(len(labels)):
+            n, d, _ = fit_plane(P[k == j])
+            fitted += [float(np.arctan2(-n[1], n[2])), float(np.arcsin(np.clip(n[0], -1, 1))), d]
+        frames = np.r_[t, fitted]
+    else:
+        raise OptionError(f"unknown measurement kind {kind!r}; expected one of {', '.join(KINDS)}")
+    km = kind_model(error_model, data)
+    km.check_fixable(error_model.nominal, t) if kind == "plane" else None
+    _, Jk, Jf, _ = km.residuals(error_model.nominal, frames, np.zeros(0), jacobian=True)
+    space = KindSpace(error_model.names + tuple(km.frame_names),
+                      tuple(error_model.is_length) + tuple(km.frame_is_length), error_model.size)
+    J = np.concatenate([Jk, Jf], axis=2) * (space.reporting_scale() / 1e-3)
+    return J, space

@@ -1,0 +1,89 @@
+"""Synthetic measurements of every kind from a robot with known (planted) parameters.
+
+Plain numpy, through the error model's chain (:mod:`kincal.models.chain`), so the data
+are exactly what the kinds' models predict at the true parameters, plus Gaussian noise:
+
+- points / poses: positions with ``noise`` [m] per axis; pose orientations turned by a
+  random small rotation of ``noise_deg`` per axis;
+- distances: ``|P - pivot| + noise``;
+- plane contacts: candidate poses nearest each plane are moved onto it (minimum-norm
+  joint steps, a few Newton iterations), then off it by ``noise`` along the normal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kincal.errors import OptionError
+from kincal.measurements.data import Measurements
+from kincal.measurements.distance import DistanceData
+from kincal.measurements.plane import PlaneData, normal
+from kincal.measurements.pose import PoseData
+from kincal.models.base import ErrorModel
+from kincal.models.chain import Chain
+from kincal.rotations import base_rotation
+
+
+def tool_points(model: ErrorModel, kin, q, tool) -> np.ndarray:
+    """(N, 3) the tool point in the base frame [m] with kinematic parameters ``kin``."""
+    s = Chain(model, q).state(np.asarray(kin, float), None, keep=False)
+    return s.p_tip + s.R_tip @ np.asarray(tool, float)
+
+
+def simulate_points(model, kin, base, tool, q, noise, rng, source="<simulated points>"):
+    P = tool_points(model, kin, q, tool) @ base_rotation(*base[3:]).T + base[:3]
+    return Measurements(model.joint_names, q, P + rng.normal(size=P.shape) * noise,
+                        source=source)
+
+
+def simulate_poses(model, kin, base, tool6, q, noise, noise_deg, rng,
+                   source="<simulated poses>") -> PoseData:
+    """tool6: (x, y, z [m], rx, ry, rz [rad]) of the tool frame in the tip frame."""
+    from scipy.spatial.transform import Rotation
+
+    s = Chain(model, q).state(np.asarray(kin, float), None, keep=False)
+    Rb = base_rotation(*base[3:])
+    P = (s.p_tip + s.R_tip @ tool6[:3]) @ Rb.T + base[:3]
+    R = Rb @ s.R_tip @ base_rotation(*tool6[3:])
+    turn = Rotation.from_rotvec(rng.normal(size=(len(q), 3)) * np.radians(noise_deg)).as_matrix()
+    return PoseData(joint_names=model.joint_names, joint_values=q,
+                    positions=P + rng.normal(size=P.shape) * noise, rotations=turn @ R,
+                    orientation_sigma_deg=max(noise_deg, 1e-6),
+                    sigma=np.full(len(q), max(noise, 1e-9)), source=source)
+
+
+def simulate_distances(model, kin, pivot, tool, q, noise, rng,
+                       source="<simulated distances>") -> DistanceData:
+    d = np.linalg.norm(tool_points(model, kin, q, tool) - pivot, axis=1)
+    return DistanceData(joint_names=model.joint_names, joint_values=q,
+                        distances=d + rng.normal(size=len(d)) * noise, source=source)
+
+
+def simulate_contacts(model, kin, tool, planes, candidates, per_plane, noise, rng,
+                      source="<simulated plane contacts>") -> PlaneData:
+    """planes: (k, 3) rows (rx, ry [rad], d [m]); candidates: (M, n) joint values to start
+    from (those nearest each plane are used, ``per_plane`` of them)."""
+    planes = np.atleast_2d(np.asarray(planes, float))
+    P = tool_points(model, kin, candidates, tool)
+    qs, ks = [], []
+    for j, (rx, ry, d) in enumerate(planes):
+        n = normal(rx, ry)
+        near = np.argsort(np.abs(P @ n - d))[:per_plane]
+        q = candidates[near].copy()
+        target = d + rng.normal(size=len(q)) * noise
+        for _ in range(20):  # Newton on the signed distance, minimum-norm joint steps
+            s = tool_points(model, kin, q, tool) @ n - target
+            if np.max(np.abs(s)) < 1e-13:
+                break
+            h = 1e-7
+            G = np.column_stack([(tool_points(model, kin, q + h * e, tool) @ n - target - s) / h
+                                 for e in np.eye(q.shape[1])])
+            q = q - G * (s / np.maximum(np.sum(G * G, axis=1), 1e-12))[:, None]
+        if np.max(np.abs(s)) > 1e-9:
+            raise OptionError(f"plane {j + 1}: could not move the poses onto it; choose a plane "
+                              "the tool point can reach")
+        qs.append(q)
+        ks.append(np.full(len(q), j))
+    return PlaneData(joint_names=model.joint_names, joint_values=np.vstack(qs),
+                     planes=np.concatenate(ks), labels=tuple(str(j + 1) for j in
+                                                             range(len(planes))), source=source)

@@ -1,0 +1,52 @@
+"""The command line with measurement kinds: simulate --kind, several files, errors."""
+
+import json
+
+import numpy as np
+
+from kincal.cli.main import main
+
+
+def run(capsys, *argv):
+    code = main(list(map(str, argv)))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_simulate_every_kind_and_calibrate_them_together(tmp_path, capsys):
+    files = []
+    for k, kind in enumerate(("point", "pose", "distance", "plane")):
+        path = tmp_path / f"{kind}.csv"
+        code, out, err = run(capsys, "simulate", "ec66", "--kind", kind, "--poses", 24,
+                             "--out", path, "--seed", k)
+        assert code == 0, err
+        files.append(path)
+    header = {p.stem: p.read_text().splitlines()[0].split(",") for p in files}
+    assert {"qx", "qy", "qz", "qw"} <= set(header["pose"])
+    assert header["distance"][-1] == "distance" and header["plane"][-1] == "plane"
+    code, out, err = run(capsys, "calibrate", "ec66", *files, "--on-plane", "--lambda", 0.1,
+                         "--out", tmp_path / "cal.urdf", "--frames-out", tmp_path / "f.json")
+    assert code == 0, err
+    assert "4 measurement set(s)" in out and "set 4: plane" in out
+    sets = json.loads((tmp_path / "f.json").read_text())["sets"]
+    assert [s["kind"] for s in sets] == ["point", "pose", "distance", "plane"]
+    assert "tool.rz" in sets[1]["frames"] and "pivot.x" in sets[2]["frames"]
+    assert "plane1.d" in sets[3]["frames"] and "set4.plane1.d" in out
+    code, out, err = run(capsys, "evaluate", tmp_path / "cal.urdf", files[2], "--tip", "flange",
+                         "--frames", tmp_path / "f.json")
+    assert code == 0, err
+    mean = float(out.split("mean ")[1].split()[0])
+    assert mean < 0.1  # [mm] the calibrated model on its own distances
+    code, out, err = run(capsys, "analyze", "ec66", files[3], "--on-plane")
+    assert code == 0 and "plane contact sees only motion along the plane's normal" in out
+
+
+def test_ambiguous_and_bad_files_one_line_error(tmp_path, capsys):
+    path = tmp_path / "both.csv"
+    rows = np.random.default_rng(0).normal(size=(5, 10))
+    path.write_text("joint_1,joint_2,joint_3,joint_4,joint_5,joint_6,x,y,z,distance\n"
+                    + "\n".join(",".join(map(repr, r)) for r in rows) + "\n")
+    code, out, err = run(capsys, "calibrate", "ec66", path, "--out", tmp_path / "c.urdf")
+    assert code == 1 and err.count("\n") == 1 and "kincal: error:" in err
+    assert "is it distances to a pivot or measured points?" in err
+    assert not (tmp_path / "c.urdf").exists()
