@@ -12,6 +12,11 @@ radians for revolute and continuous joints, metres for prismatic ones.
 
 from __future__ import annotations
 
+import os
+import re
+import sys
+import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,6 +57,53 @@ class ChainGeometry:
     @property
     def n(self) -> int:
         return len(self.joint_names)
+
+
+@contextmanager
+def _stderr_captured():
+    """Collect what C++ code writes to file descriptor 2 (urdfdom's multi-line messages).
+
+    Yields a list that receives the captured text when the block ends; fd 2 is restored
+    whatever happens (an exception or a signal included).
+    """
+    sys.stderr.flush()
+    out: list[str] = []
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield out
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            out.append(tmp.read(65536).decode("utf-8", errors="replace"))
+
+
+def _build_model(text: str, path) -> pin.Model:
+    """Pinocchio's model of the URDF ``text``; urdfdom's failure becomes one UrdfError line.
+
+    urdfdom prints its reason on stderr (several lines, with a C++ source location) and
+    Pinocchio raises a generic "not a valid URDF model"; the message here gives the
+    reason, and the URDF line of the joint or link it names when that can be found.
+    """
+    try:
+        with _stderr_captured() as captured:
+            model = pin.buildModelFromXML(text)
+    except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError
+        said = " ".join(captured[0].split()) if captured else ""
+        reason = re.sub(r"^(Error|Warning):\s*", "", said)
+        reason = re.sub(r"\s*at line \d+ in \S+", "", reason)  # urdfdom's C++ source line
+        reason = reason.split(". ")[0].rstrip(".") or str(exc)
+        where = ""
+        for name in re.findall(r"\[([^\]]+)\]", reason):  # the first named element found
+            hit = re.search(r'<(?:joint|link)\s[^>]*name\s*=\s*["\']' + re.escape(name) + "[\"']",
+                            text)
+            if hit:
+                where = f":{text.count(chr(10), 0, hit.start()) + 1}"
+                break
+        raise UrdfError(f"{path}{where}: not a valid URDF model: {reason}") from None
+    return model
 
 
 def _se3(T: np.ndarray) -> pin.SE3:
@@ -95,10 +147,7 @@ class Robot:
         """
         desc = descriptions.resolve(robot)
         text = read_urdf_text(desc.urdf)
-        try:
-            model = pin.buildModelFromXML(text)
-        except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError
-            raise UrdfError(f"{desc.urdf}: Pinocchio could not build a model: {exc}") from exc
+        model = _build_model(text, desc.urdf)
         root = next((f.name for f in model.frames if f.type == pin.FrameType.BODY), None)
         if root is None:
             raise UrdfError(f"{desc.urdf}: the URDF has no link")
