@@ -33,6 +33,7 @@ _DECLARED_ENCODING = re.compile(
     rb"""^(?:\xef\xbb\xbf)?\s*<\?xml[^>]*?encoding\s*=\s*["']([A-Za-z0-9._-]+)["']"""
 )
 _UTF8_NAMES = ("utf-8", "utf8", "us-ascii", "ascii")
+_MOVING = ("revolute", "continuous", "prismatic")  # joints whose axis is used
 
 
 def read_urdf_text(path) -> str:
@@ -131,7 +132,7 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
                      f"{MAX_URDF_LINKS} links (Pinocchio's parser cannot take much deeper trees)")
         elif name == "joint" and "type" in attrs:  # <joint> inside <transmission> has no type
             joint = (attrs.get("name", "?"), attrs["type"])
-        elif name == "axis" and joint is not None:
+        elif name == "axis" and joint is not None and joint[1] in _MOVING:
             values = _floats(attrs.get("xyz", "1 0 0"))
             if values is None or len(values) != 3 or not all(map(math.isfinite, values)):
                 fail(f"joint {joint[0]!r}: axis xyz={attrs.get('xyz')!r}, expected 3 finite numbers")
