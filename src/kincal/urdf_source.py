@@ -14,6 +14,7 @@ from pathlib import Path
 from xml.parsers import expat
 
 from kincal.errors import InputFileError, UrdfError
+from kincal.input_files import check_regular_file
 
 MAX_URDF_BYTES = 20 * 1024 * 1024
 """Largest URDF accepted [bytes]; real robots are well under 1 MB."""
@@ -44,6 +45,8 @@ def read_urdf_text(path) -> str:
     UTF-8, or anything :func:`check_urdf_text` rejects. Line endings are kept.
     """
     p = Path(path)
+    if p.exists() and not p.is_dir():  # a FIFO would block open(); a device never ends
+        check_regular_file(p, "URDF", 2**62)  # the size is bounded below, while reading
     try:
         with open(p, "rb") as f:
             # read one byte past the limit: also bounds special files whose stat size lies

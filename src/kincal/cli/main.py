@@ -64,9 +64,10 @@ def _tool_offset(args):
 
 def _read_frames(path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """(base (6,), tool points (K, 3), backlash {joint: value}) in SI from FRAMES.json."""
+    from kincal.input_files import MAX_JSON_BYTES, check_regular_file
+
     path = Path(path)
-    if not path.is_file():
-        raise InputFileError(f"frames file not found: {path}")
+    check_regular_file(path, "frames", MAX_JSON_BYTES)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
         base = [float(data["base"][k]) for k in ("x", "y", "z", "rx", "ry", "rz")]

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from kincal.errors import DataError, InputFileError, listing, suggest
+from kincal.input_files import MAX_DATA_BYTES, check_regular_file
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,7 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
         raise InputFileError(f"{kind} file not found: {path}")
     if path.is_dir():
         raise InputFileError(f"expected a CSV file, got a directory: {path}")
+    check_regular_file(path, f"{kind} CSV", MAX_DATA_BYTES)  # no FIFO, /dev/zero, 10 GB file
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(fh)
