@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from kincal import __version__
-from kincal.errors import DataError, InputFileError, KincalError, KincalWarning, OptionError
+from kincal.errors import DataError, KincalError, KincalWarning, OptionError
 
 DEMO_DIR = "kincal-demo"
 
@@ -135,9 +135,119 @@ def _render_plots(result, out_dir: Path):
     with tempfile.TemporaryDirectory(prefix="kincal-plots-") as tmp:
         paths = plot_calibration(result, Path(tmp))
         pngs = [(out_dir / Path(p).name, Path(p).read_bytes()) for p in paths]
-    if not out_dir.exists():
-        out_dir.mkdir(parents=True)  # an output folder of its own; files inside are checked
-    return pngs
+    return pngs  # the folder itself is made by write_all, in the same transaction
+
+
+# ------------------------------------------------------------ option checks
+# Every option is checked here, before a file is read: a value that is not finite or out
+# of range, and a flag that would be silently ignored, is an error. Defaults of options
+# that only some settings use are None, so that "given but unused" can be told apart.
+PLOT_NAMES = ("cv_curve.png", "residuals.png", "parameters.png")  # kincal.export.plots
+MAX_POSES = 1_000_000  # simulate --poses, plan --random: beyond any real measurement campaign
+
+
+def _need(ok: bool, message: str) -> None:
+    if not ok:
+        raise OptionError(message)
+
+
+def _finite(option: str, values, low=None, high=None, low_open=False) -> None:
+    """Each number of ``option`` is finite and within [low, high] (low excluded if low_open)."""
+    if values is None:
+        return
+    for v in np.atleast_1d(values):
+        ok = math.isfinite(v) and (low is None or (v > low if low_open else v >= low)) \
+            and (high is None or v <= high)
+        if not ok:
+            bound = ("" if low is None else f" {'>' if low_open else '>='} {low:g}") + (
+                "" if high is None else f"{' and' if low is not None else ''} <= {high:g}")
+            _need(False, f"{option} must be a finite number{bound}, got {v:g}")
+
+
+def _count(option: str, value, low: int, high: int | None = None) -> None:
+    if value is not None:
+        _need(low <= value and (high is None or value <= high),
+              f"{option} must be an integer >= {low}" + ("" if high is None else f" and <= {high:,}")
+              + f", got {value}")
+
+
+def _check_calibrate(args) -> None:
+    m = args.method
+    if args.lam is not None:
+        _need(m == "l2", f"--lambda applies to method l2 only; method {m} has no penalty")
+        if args.lam != "cv":
+            try:
+                value = float(args.lam)
+            except ValueError:
+                raise OptionError(f"--lambda must be 'cv' or a number, got {args.lam!r}") from None
+            _finite("--lambda", value, 0)
+    cv = m == "l2" and args.lam in (None, "cv")
+    for option, value in (("--folds", args.folds), ("--seed", args.seed)):
+        _need(value is None or cv, f"{option} is used only when lambda is chosen by "
+              "cross-validation (method l2 with --lambda cv)")
+    _count("--folds", args.folds, 2)
+    _count("--seed", args.seed, 0)
+    _need(args.robust_scale_mm is None or args.robust is not None,
+          "--robust-scale-mm needs --robust huber or --robust cauchy")
+    _finite("--robust-scale-mm", args.robust_scale_mm, 0, low_open=True)
+    _need(not args.free or m == "l2", f"--free applies to method l2 (its penalty keeps "
+          f"redundant parameters bounded); method {m} cannot fit them")
+    _need(args.order_column is None or bool(args.backlash),
+          "--order-column gives the approach directions of backlash terms: it needs --backlash")
+    args.lam = "cv" if args.lam is None else args.lam
+    args.folds = 5 if args.folds is None else args.folds
+    args.seed = 0 if args.seed is None else args.seed
+
+
+def _check_args(args) -> None:
+    """Raise OptionError for any option value or combination the command would not use."""
+    _finite("--tool-offset", getattr(args, "tool_offset", None))
+    c = args.command
+    if c == "calibrate":
+        _check_calibrate(args)
+    elif c == "evaluate":
+        _need(args.tool_offset is None or not args.frames, "--tool-offset is a starting guess "
+              "for --fit-frames; with --frames the tool point comes from FRAMES.json")
+    elif c == "analyze":
+        _need(args.order_column is None or bool(args.backlash), "--order-column gives the "
+              "approach directions of backlash terms: it needs --backlash")
+    elif c == "simulate":
+        _need(args.tool_offset is None, "simulate does not use --tool-offset (a starting guess "
+              "for calibration); the simulated tool point is --tool-m X Y Z [m]")
+        _count("--poses", args.poses, 1, MAX_POSES)
+        _finite("--size-mm", args.size_mm, 0, low_open=True)
+        _finite("--tilt-deg", args.tilt_deg, 0, 180)
+        for option in ("center_m", "tool_m", "base_frame"):
+            _finite("--" + option.replace("_", "-"), getattr(args, option))
+        for option in ("length_error_mm", "angle_error_deg", "noise_mm"):
+            _finite("--" + option.replace("_", "-"), getattr(args, option), 0)
+        _count("--seed", args.seed, 0)
+        _count("--truth-seed", args.truth_seed, 0)
+    elif c == "plan":
+        _count("--poses", args.poses, 1)
+        _count("--random", args.random, 1, MAX_POSES)
+        _need(args.seed is None or args.random is not None,
+              "--seed is the seed of --random; it is not used with a CSV of candidates")
+        _count("--seed", args.seed, 0)
+        args.seed = 0 if args.seed is None else args.seed
+
+
+def _output_paths(args) -> tuple[list, list]:
+    """(files, folders) the command will write, for the check before the work."""
+    files = [getattr(args, k, None) for k in ("out", "frames_out", "report", "truth_out")]
+    files = [f for f in files if f]
+    if getattr(args, "plots", None):
+        return files + [Path(args.plots) / n for n in PLOT_NAMES], [args.plots]
+    return files, []
+
+
+def _check_outputs(args, robot) -> None:
+    """Refuse now, before the work, what the final write would refuse."""
+    from kincal.export.safe_write import check_outputs
+
+    files, dirs = _output_paths(args)
+    protect = [robot.source] + [getattr(args, k, None) for k in ("data", "candidates", "measured")]
+    check_outputs(files, overwrite=args.overwrite, protect=[p for p in protect if p], dirs=dirs)
 
 
 # -------------------------------------------------------------- subcommands
@@ -147,8 +257,10 @@ def cmd_calibrate(args) -> int:
     from kincal.identification.calibration import CalibrationProblem
 
     robot = _robot(args)
+    _check_outputs(args, robot)
+    options = _options(args, args.method)
     data = _measurements(args, robot)
-    result = CalibrationProblem(robot, data, _options(args, args.method)).solve()
+    result = CalibrationProblem(robot, data, options).solve()
     edits, moved = result.export_edits()
     text = result.urdf_with_frames(edits.text) if args.add_frames else edits.text
     files = [(args.out, text)]
@@ -159,7 +271,8 @@ def cmd_calibrate(args) -> int:
     if args.plots:
         files += _render_plots(result, Path(args.plots))
     protect = [robot.source, args.data]
-    written = write_all(files, overwrite=args.overwrite, protect=protect)
+    written = write_all(files, overwrite=args.overwrite, protect=protect,
+                        dirs=[args.plots] if args.plots else [])
     if not args.quiet:
         print(result.summary())
         for line in result.identifiability.summary().splitlines()[1:]:
@@ -181,6 +294,7 @@ def cmd_evaluate(args) -> int:
     if bool(args.frames) == bool(args.fit_frames):
         raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
     robot = _robot(args)
+    _check_outputs(args, robot)
     data = _measurements(args, robot)
     problem = CalibrationProblem(robot, data, CalibrationOptions(method="frames",
                                                                  tool_guess=_tool_offset(args)))
@@ -222,6 +336,7 @@ def cmd_analyze(args) -> int:
     from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
 
     robot = _robot(args)
+    _check_outputs(args, robot)
     data = _measurements(args, robot)
     problem = CalibrationProblem(robot, data, CalibrationOptions(
         fix=tuple(args.fix), backlash=tuple(args.backlash), tool_guess=_tool_offset(args)))
@@ -245,6 +360,7 @@ def cmd_simulate(args) -> int:
     from kincal.planning import simulation
 
     robot = _robot(args)
+    _check_outputs(args, robot)
     model = mdh.extract(robot.geometry)
     rng = np.random.default_rng(args.seed)
     design = {"tracker": (0.4, 30.0), "rtest": (0.02, 15.0)}[args.design]
@@ -302,6 +418,7 @@ def cmd_plan(args) -> int:
     if not (math.isfinite(args.noise_mm) and args.noise_mm > 0):
         raise OptionError(f"--noise-mm must be a positive number, got {args.noise_mm}")
     robot = _robot(args)
+    _check_outputs(args, robot)
     if args.candidates is not None:
         q, lines = read_candidates(args.candidates, robot, args.length_unit, args.angle_unit)
         source = f"{len(q)} candidates from {args.candidates}"
@@ -335,6 +452,11 @@ def cmd_plan(args) -> int:
 def cmd_demo(args) -> int:
     from kincal.experiments.paper_experiment import demo
 
+    out = Path(args.out).expanduser()
+    if out.exists() or out.is_symlink():
+        _need(out.is_dir(), f"{args.out}: exists and is not a directory; choose another --out")
+        _need(args.overwrite or not any(out.iterdir()), f"{args.out}: already exists (an earlier "
+              "demo?); choose another --out or pass --overwrite to replace its files")
     print("kincal demo: the paper's experiment on a simulated EC66 (one seed, small size)")
     s = demo(Path(args.out), progress=lambda message: print(f"  {message}", flush=True))
     print(f"validation in the 400 mm cube, mean position error [mm] (lambda = {s.lam:.3g}):")
@@ -359,9 +481,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("calibrate", help="identify the kinematics and write a corrected URDF")
     _add_common(p)
     p.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
-    p.add_argument("--lambda", dest="lam", default="cv", help="'cv' (default) or a value >= 0")
-    p.add_argument("--folds", type=int, default=5)
-    p.add_argument("--seed", type=int, default=0, help="seed of the CV fold split")
+    p.add_argument("--lambda", dest="lam", help="'cv' (default) or a value >= 0 (method l2)")
+    p.add_argument("--folds", type=int, help="k of the k-fold cross-validation (default 5)")
+    p.add_argument("--seed", type=int, help="seed of the CV fold split (default 0)")
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME", help="parameters held nominal")
     p.add_argument("--free", nargs="+", default=[], metavar="NAME",
                    help="parameters kept even if found redundant (method l2)")
@@ -437,7 +559,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="CSV with the chain joint columns (no positions needed); or use --random")
     p.add_argument("--random", type=int, metavar="M",
                    help="instead of a CSV: M random candidates uniform within the joint limits")
-    p.add_argument("--seed", type=int, default=0, help="seed of --random")
+    p.add_argument("--seed", type=int, help="seed of --random (default 0)")
     p.add_argument("--poses", type=int, required=True, metavar="N", help="poses to choose")
     p.add_argument("--measured", metavar="DATA.csv",
                    help="poses already measured (joint columns; other columns ignored): the "
@@ -459,17 +581,42 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="the paper's experiment, simulated at a small size")
     p.add_argument("--out", default=DEMO_DIR, help=f"output directory (default {DEMO_DIR})")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier demo in that directory")
     p.set_defaults(func=cmd_demo)
     return ap
 
 
+class _Terminated(BaseException):
+    """SIGTERM, raised like KeyboardInterrupt so that writes roll back on the way out."""
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated
+
+
 def main(argv=None) -> int:
+    import signal
+    import threading
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    # SIGTERM unwinds like Ctrl-C (only the main thread may set handlers: main() called
+    # from a worker thread keeps the default)
+    sigterm = None
+    if threading.current_thread() is threading.main_thread():
+        sigterm = signal.signal(signal.SIGTERM, _on_sigterm)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", KincalWarning)
         try:
+            _check_args(args)
             code = args.func(args)
+        except (KeyboardInterrupt, _Terminated) as exc:
+            name, code = (("SIGINT", 130) if isinstance(exc, KeyboardInterrupt)
+                          else ("SIGTERM", 143))
+            print(f"kincal: error: interrupted ({name}); no output was written or changed",
+                  file=sys.stderr)
+            caught.clear()  # a half-run's warnings would only confuse
         except BrokenPipeError:  # output piped into head & co: stop quietly
             import os
 
@@ -483,6 +630,8 @@ def main(argv=None) -> int:
             for w in caught:
                 if issubclass(w.category, KincalWarning):
                     print(f"kincal: warning: {w.message}", file=sys.stderr)
+            if sigterm is not None:
+                signal.signal(signal.SIGTERM, sigterm)
     return code
 
 

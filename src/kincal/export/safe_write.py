@@ -79,6 +79,8 @@ def _check_dir(path, new_dirs: set) -> Path:
 
 def _check_target(path, overwrite: bool, protect, new_dirs=frozenset()) -> Path:
     """The checks of :func:`write_all` for one file, without writing anything."""
+    if not isinstance(path, (str, os.PathLike)) or str(path) == "":
+        raise ExportError(f"an output path must be a non-empty str or Path, got {path!r}")
     given = Path(path).expanduser()
     target = given.resolve()
     for protected in protect:

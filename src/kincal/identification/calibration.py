@@ -11,12 +11,13 @@ from __future__ import annotations
 import math
 import re
 import warnings
-from dataclasses import replace
+from dataclasses import fields, replace
 from typing import Callable
 
 import numpy as np
 
-from kincal.errors import DataError, IdentifiabilityError, KincalWarning
+from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
+                           listing, suggest)
 from kincal.identification import blas_threads
 from kincal.identification.cross_validation import (
     CrossValidation,
@@ -49,6 +50,12 @@ class CalibrationProblem:
     """The identification of one robot chain from one set of measurements."""
 
     def __init__(self, robot: Robot, data: Measurements, options: CalibrationOptions | None = None):
+        for name, value, kind in (("robot", robot, Robot), ("data", data, Measurements),
+                                  ("options", options or CalibrationOptions(), CalibrationOptions)):
+            if not isinstance(value, kind):
+                raise OptionError(f"{name} must be a {kind.__name__}, got {type(value).__name__}"
+                                  + ("; for one field use calibrate(robot, data, method=...)"
+                                     if name == "options" else ""))
         self.robot = robot
         self.options = (options or CalibrationOptions()).validated()
         self.data = data.for_chain(robot.joint_names)
@@ -67,6 +74,9 @@ class CalibrationProblem:
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
         for name in o.fix + o.free:
             self.space.index(name)  # unknown names raise ParameterError listing the valid ones
+        if not self._unfixed().any():
+            raise OptionError(f"nothing to fit: every parameter method {o.method} fits is fixed; "
+                              "leave at least one free (fix fewer names)")
         pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
         self.n_poses = len(pose)
         if self.n_poses < 3:
@@ -370,6 +380,11 @@ class CalibrationProblem:
 def calibrate(robot: Robot, data: Measurements, options: CalibrationOptions | None = None,
               **overrides) -> CalibrationResult:
     """Build, analyse and solve in one call; keyword arguments override ``options`` fields."""
+    unknown = sorted(set(overrides) - {f.name for f in fields(CalibrationOptions)})
+    if unknown:
+        raise OptionError(f"unknown option(s) {', '.join(unknown)}." + suggest(unknown[0], [
+            f.name for f in fields(CalibrationOptions)]) + " Options: "
+            + listing([f.name for f in fields(CalibrationOptions)]))
     if options is None:
         options = CalibrationOptions(**overrides)
     elif overrides:

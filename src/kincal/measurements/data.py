@@ -68,8 +68,12 @@ class Measurements:
     poses: np.ndarray | None = None
 
     def __post_init__(self):
-        q = _readonly(self.joint_values)
-        P = _readonly(self.positions)
+        try:
+            q = _readonly(self.joint_values)
+            P = _readonly(self.positions)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{self.source}: joint values and positions must be (N, n) and "
+                            f"(N, 3) arrays of numbers ({exc})") from None
         if q.ndim != 2 or q.shape[1] != len(self.joint_names):
             raise DataError(f"{self.source}: joint values must be (N, {len(self.joint_names)}), "
                             f"got {q.shape}")

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from kincal.errors import DataError
 from kincal.identification.parameters import ParameterSpace
 from kincal.models.mdh import MdhModel
 from kincal.rotations import base_rotation, rotx, roty, rotz
@@ -74,20 +75,23 @@ class MeasurementModel:
     def __init__(self, mdh: MdhModel, joint_values: np.ndarray, approach: np.ndarray | None = None,
                  backlash=(), points: np.ndarray | None = None, n_points: int | None = None):
         self.mdh = mdh
-        q = np.asarray(joint_values, dtype=float)
+        try:
+            q = np.asarray(joint_values, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"joint_values must be an (N, {mdh.n}) array of numbers ({exc})") from None
         if q.ndim != 2 or q.shape[1] != mdh.n:
-            raise ValueError(f"joint_values must be (N, {mdh.n}), got {q.shape}")
+            raise DataError(f"joint_values must be (N, {mdh.n}), got {q.shape}")
         self.points = (np.zeros(len(q), dtype=int) if points is None
                        else np.asarray(points, dtype=int))
         if self.points.shape != (len(q),) or (len(q) and self.points.min() < 0):
-            raise ValueError(f"points must be ({len(q)},) indices >= 0")
+            raise DataError(f"points must be ({len(q)},) indices >= 0")
         if n_points is None:
             n_points = int(self.points.max()) + 1 if len(q) else 1
         self.space = ParameterSpace.of_chain(mdh.joint_names, mdh.kinds, backlash, n_points)
         if len(q) and self.points.max() >= n_points:
-            raise ValueError(f"a point index is >= n_points = {n_points}")
+            raise DataError(f"a point index is >= n_points = {n_points}")
         if self.space.n_backlash and (approach is None or np.shape(approach) != q.shape):
-            raise ValueError(f"backlash terms need approach directions of shape {q.shape}")
+            raise DataError(f"backlash terms need approach directions of shape {q.shape}")
         self.q = q
         self.approach = None if approach is None else np.asarray(approach, dtype=float)
         self.N = len(q)
