@@ -201,7 +201,13 @@ def _check_calibrate(args) -> None:
 
 def _check_args(args) -> None:
     """Raise OptionError for any option value or combination the command would not use."""
-    _finite("--tool-offset", getattr(args, "tool_offset", None))
+    offset = getattr(args, "tool_offset", None)
+    _finite("--tool-offset", offset)
+    if offset is not None:
+        unit = getattr(args, "length_unit", "m")
+        _need(max(map(abs, offset)) * (1e-3 if unit == "mm" else 1.0) <= 1e3,
+              f"--tool-offset {' '.join(f'{v:g}' for v in offset)} [{unit}] is over 1000 m from "
+              "the tip frame; check the unit (--length-unit)")
     c = args.command
     if c == "calibrate":
         _check_calibrate(args)
@@ -215,14 +221,18 @@ def _check_args(args) -> None:
         _need(args.tool_offset is None, "simulate does not use --tool-offset (a starting guess "
               "for calibration); the simulated tool point is --tool-m X Y Z [m]")
         _count("--poses", args.poses, 1, MAX_POSES)
-        _finite("--size-mm", args.size_mm, 0, low_open=True)
+        # upper bounds far above any real robot: beyond them the simulated robot is noise
+        _finite("--size-mm", args.size_mm, 0, 10_000, low_open=True)
         _finite("--tilt-deg", args.tilt_deg, 0, 180)
         for option in ("center_m", "tool_m", "base_frame"):
             _finite("--" + option.replace("_", "-"), getattr(args, option))
-        for option in ("length_error_mm", "angle_error_deg", "noise_mm"):
-            _finite("--" + option.replace("_", "-"), getattr(args, option), 0)
+        for option, high in (("length_error_mm", 100), ("angle_error_deg", 10), ("noise_mm", 1000)):
+            _finite("--" + option.replace("_", "-"), getattr(args, option), 0, high)
         _count("--seed", args.seed, 0)
         _count("--truth-seed", args.truth_seed, 0)
+        for option in ("size_mm", "tilt_deg", "length_error_mm", "angle_error_deg", "noise_mm"):
+            if getattr(args, option) is not None:  # -0.0 -> 0.0: numpy's checks test the sign bit
+                setattr(args, option, getattr(args, option) + 0.0)
     elif c == "plan":
         _count("--poses", args.poses, 1)
         _count("--random", args.random, 1, MAX_POSES)

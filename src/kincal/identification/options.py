@@ -130,6 +130,9 @@ class CalibrationOptions:
                 v = np.zeros(0)
             if v.shape != (n,) or not np.all(np.isfinite(v)):
                 raise OptionError(f"{name} needs {n} finite numbers, got {value!r}")
+            if np.abs(v[:3]).max() > 1e3:  # a kilometre: a unit slip, and sums would overflow
+                raise OptionError(f"{name}: {value!r} is over 1000 m from its frame; positions "
+                                  "are in metres")
             changes[name] = tuple(float(x) for x in v)
         for name, low in (("folds", 2), ("seed", 0), ("n_lambdas", 2)):
             value = getattr(self, name)

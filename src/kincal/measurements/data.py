@@ -23,6 +23,8 @@ from kincal.measurements.csv_table import read_columns
 from kincal.models.backlash import approach_directions
 
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
+MAX_ABS_VALUE = 1e6
+"""Largest magnitude of a joint value [rad or m] or position [m] accepted."""
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 
 
@@ -93,6 +95,13 @@ class Measurements:
             object.__setattr__(self, "sigma", s)
         rows = np.arange(2, len(q) + 2) if self.rows is None else np.asarray(self.rows)
         object.__setattr__(self, "rows", rows)
+        for name, arr in (("joint value", q), ("position", P)):
+            # far beyond any robot (1000 km, 1e6 rad): the sums of squares would overflow
+            big = np.argwhere(np.abs(arr) > MAX_ABS_VALUE)
+            if big.size:
+                k = big[0][0]
+                raise DataError(f"{self.source}: line {rows[k]}: {name} {arr[tuple(big[0])]:g} "
+                                f"(SI units); kincal accepts magnitudes up to {MAX_ABS_VALUE:g}")
         g = approach_directions(q) if self.approach is None else np.asarray(self.approach, float)
         if g.shape != q.shape or not np.all(np.isin(g, (-1.0, 0.0, 1.0))):
             raise DataError(f"{self.source}: approach directions must be ({len(q)}, "
