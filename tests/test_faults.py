@@ -398,3 +398,13 @@ def test_api_bad_arrays_and_paths_raise_kincal_errors(robot_and_data, tmp_path):
         result.predict([1, 2])
     with pytest.raises(KincalError, match="output path"):
         result.export_urdf(None)
+
+
+# -------------------------------------------------------------------- sweep
+def test_bad_input_sweep_runs_reduced():
+    """scripts/bad_input_sweep.py at every 25th case: the script cannot rot."""
+    script = Path(__file__).resolve().parents[1] / "scripts" / "bad_input_sweep.py"
+    run = subprocess.run([sys.executable, str(script), "--sample", "25", "--no-signals"],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "cases held the promise" in run.stdout and "FAILED" not in run.stdout
