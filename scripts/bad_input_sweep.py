@@ -200,6 +200,13 @@ def output_cases():
     def fifo(d):
         os.mkfifo(d / "out.urdf")
 
+    def sock(d):
+        import socket
+
+        s = socket.socket(socket.AF_UNIX)
+        s.bind(str(d / "out.urdf"))
+        s.close()  # the socket file stays
+
     def dangling(d):
         (d / "out.urdf").symlink_to(d / "nowhere")
 
@@ -215,7 +222,8 @@ def output_cases():
     yield "out is a directory", cal + ["--out", "{d}/out.urdf", "--overwrite"], folder
     yield "out is a FIFO", cal + ["--out", "{d}/out.urdf"], fifo
     yield "out is a FIFO with --overwrite", cal + ["--out", "{d}/out.urdf", "--overwrite"], fifo
-    yield "out is /dev/null", cal + ["--out", "/dev/null", "--overwrite"], nothing
+    # never a real /dev node as an output: a broken kincal would replace it machine-wide
+    yield "out is a socket", cal + ["--out", "{d}/out.urdf", "--overwrite"], sock
     yield "out dangling symlink", cal + ["--out", "{d}/out.urdf"], dangling
     yield "out missing folder", cal + ["--out", "{d}/no/out.urdf"], nothing
     yield "out under a file", cal + ["--out", "{d}/afile/out.urdf"], afile

@@ -6,6 +6,7 @@ outputs are all-or-none (staged, committed with link-no-replace, rolled back on 
 
 import os
 import signal
+import socket
 import stat
 import subprocess
 import sys
@@ -200,8 +201,13 @@ def test_fifo_and_device_outputs_refused_even_with_overwrite(work, capsys):
         line = refused(["calibrate", "ec66", work / "cal.csv", "--method", "ls", "--out",
                         work / "out.urdf", *extra], work, capsys)
         assert "is a FIFO; kincal writes regular files only" in line
-    line = refused(["simulate", "ec66", "--out", "/dev/null", "--overwrite"], work, capsys)
-    assert "character device" in line
+    # a socket stands for devices: a real /dev node must never be the target of a test,
+    # since a regression would replace it for the whole machine
+    with socket.socket(socket.AF_UNIX) as sock:
+        sock.bind(str(work / "sock.csv"))
+        line = refused(["simulate", "ec66", "--out", work / "sock.csv", "--overwrite"], work,
+                       capsys)
+    assert "is a socket; kincal writes regular files only" in line
     assert stat.S_ISFIFO((work / "out.urdf").lstat().st_mode)
 
 

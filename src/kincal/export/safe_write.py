@@ -224,16 +224,21 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=()) -> list[Pa
             staged.append(_stage(target, data, path))
         for (path, _), target, tmp in zip(files, targets, staged):
             current = path
-            if overwrite and target.exists():
-                if not stat.S_ISREG(target.stat().st_mode):  # swapped in meanwhile
-                    raise ExportError(f"{path}: is {_kind(target.stat().st_mode)}; kincal "
-                                      "writes regular files only")
-                backup = _backup(target)
-                done.append((target, backup))
-                os.replace(tmp, target)
-            else:
-                _place_new(tmp, target, path)
-                done.append((target, None))
+            if not (overwrite and target.exists()):
+                try:
+                    _place_new(tmp, target, path)
+                    done.append((target, None))
+                    continue
+                except ExportError:
+                    if not overwrite:
+                        raise
+                    # appeared meanwhile, and the user allows replacing it: below
+            if not stat.S_ISREG(target.stat().st_mode):  # swapped in meanwhile
+                raise ExportError(f"{path}: is {_kind(target.stat().st_mode)}; kincal "
+                                  "writes regular files only")
+            backup = _backup(target)
+            done.append((target, backup))
+            os.replace(tmp, target)
     except BaseException as exc:
         _roll_back(done, staged, made_dirs)
         if isinstance(exc, OSError):
