@@ -414,3 +414,17 @@ def test_bad_input_sweep_runs_reduced():
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "cases held the promise" in run.stdout and "FAILED" not in run.stdout
+
+
+def test_api_robot_and_planning_misuse_raise_kincal_errors(data_csv):
+    from kincal.planning.candidates import random_candidates
+
+    robot = Robot.load("ec66")
+    with pytest.raises(KincalError, match="must be a dict"):
+        Robot.load("ec66", joint_values=[1, 2])
+    with pytest.raises(KincalError, match=r"must be \(6,\)"):
+        robot.tip_poses([0.1, 0.2, 0.3])  # three values for six joints: never truncated
+    with pytest.raises(KincalError, match="seed must be an integer >= 0"):
+        random_candidates(robot, 5, -1)
+    with pytest.raises(KincalError, match="must be a path"):
+        Measurements.from_csv(None, robot.joint_names)

@@ -24,7 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from kincal import descriptions
-from kincal.errors import ChainError, FrameError, UrdfError, listing, suggest
+from kincal.errors import ChainError, DataError, FrameError, UrdfError, listing, suggest
 from kincal.rotations import inverse
 from kincal.urdf_source import read_urdf_text
 
@@ -216,6 +216,9 @@ class Robot:
     def _check_off_chain(self, values: dict) -> dict:
         """Values [rad or m] for joints off the chain; the others stay at neutral."""
         movable = [n for j, n in enumerate(self.model.names) if j > 0]
+        if not hasattr(values, "items"):
+            raise FrameError(f"joint_values must be a dict {{joint name: value}}, got "
+                             f"{type(values).__name__}", valid=tuple(movable))
         off = {}
         for name, value in values.items():
             if name not in movable:
@@ -224,7 +227,10 @@ class Robot:
             if name in self.joint_names:
                 raise FrameError(f"joint {name!r} is on the chain {self.base!r} -> {self.tip!r}; "
                                  "its values come with each sample, not as a fixed value")
-            off[name] = float(value)
+            try:
+                off[name] = float(value)
+            except (TypeError, ValueError):
+                raise FrameError(f"joint {name!r}: value {value!r} is not a number") from None
         return off
 
     # ----------------------------------------------------------------- geometry
@@ -277,8 +283,12 @@ class Robot:
         place the chain in the world (e.g. for a viewer).
         """
         q = pin.neutral(self.model)
+        values = np.asarray(joint_values, dtype=float)
+        if values.shape != (len(self._chain),):  # zip below would truncate silently
+            raise DataError(f"joint values must be ({len(self._chain)},) for "
+                            f"{', '.join(self.joint_names)}, got shape {values.shape}")
         ids = [self.model.getJointId(n) for n in self.off_chain]
-        for j, v in zip(self._chain + ids, list(np.asarray(joint_values, dtype=float))
+        for j, v in zip(self._chain + ids, list(values)
                         + list(self.off_chain.values())):
             jm = self.model.joints[j]
             if jm.nq == 2:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,6 +46,8 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     kind: what the file is, for "<kind> file not found". expected: what the required
     columns are, for the message on missing ones. rows_name: what a row is.
     """
+    if not isinstance(path, (str, os.PathLike)) or str(path) == "":
+        raise InputFileError(f"the {kind} file must be a path (str or Path), got {path!r}")
     path = Path(path)
     required, optional = list(required), list(optional)
     if not path.exists():

@@ -166,6 +166,8 @@ class Measurements:
         order_column: a column giving the acquisition order (e.g. a time stamp) for the
             approach directions; None: the rows are in acquisition order.
         """
+        if isinstance(joint_names, str):  # one joint, not its letters
+            joint_names = (joint_names,)
         position_columns = tuple(position_columns)
         if not position_columns or len(position_columns) % 3:
             raise DataError(f"position columns come in threes (x, y, z of each measured "
