@@ -428,3 +428,16 @@ def test_api_robot_and_planning_misuse_raise_kincal_errors(data_csv):
         random_candidates(robot, 5, -1)
     with pytest.raises(KincalError, match="must be a path"):
         Measurements.from_csv(None, robot.joint_names)
+
+
+def test_data_reading_stops_at_the_first_bad_row(tmp_path, data_csv):
+    """A bad cell on line 3 is reported before the rest is read: the bytes after it are not
+    even UTF-8, and their decoding error would win if the whole file were read first."""
+    lines = data_csv.read_text().splitlines()
+    cells = lines[2].split(",")
+    cells[7] = "nan"
+    text = "\n".join(lines[:2] + [",".join(cells)] + lines[3:]) + "\n"
+    (tmp_path / "d.csv").write_bytes(text.encode() + b"\xff\xfe" * 100_000)
+    robot = Robot.load("ec66")
+    with pytest.raises(KincalError, match="line 3, column 'y': 'nan'"):
+        Measurements.from_csv(tmp_path / "d.csv", robot.joint_names)

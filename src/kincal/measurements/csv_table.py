@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+from array import array
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,43 +56,50 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     if path.is_dir():
         raise InputFileError(f"expected a CSV file, got a directory: {path}")
     check_regular_file(path, f"{kind} CSV", MAX_DATA_BYTES)  # no FIFO, /dev/zero, 10 GB file
+    # Streamed: each row is converted as it is read (8 bytes per wanted cell kept), and the
+    # first bad cell stops the reading, however long the file.
+    flat, lines = array("d"), array("q")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(fh)
-            table = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
+            rows = ((reader.line_num, row) for row in reader if any(c.strip() for c in row))
+            first = next(rows, None)
+            if first is None:
+                raise DataError(f"{path}: the file is empty; expected a header with "
+                                f"{', '.join(required)}")
+            header = [h.strip() for h in first[1]]
+            dupes = sorted({h for h in header if header.count(h) > 1})
+            if dupes:
+                raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
+            missing = [c for c in required if c not in header]
+            if missing:
+                extra = [h for h in header if h not in required]
+                hints = "".join(suggest(m, extra) for m in missing)
+                raise DataError(f"{path}: missing column(s) {', '.join(missing)}.{hints} Expected "
+                                f"{expected + ': ' if expected else ''}{', '.join(required)}; the "
+                                f"header has {listing(header)}")
+            wanted = required + [c for c in optional if c in header and c not in required]
+            cols = [header.index(c) for c in wanted]
+            for line, row in rows:
+                if len(row) != len(header):
+                    raise DataError(f"{path}, line {line}: {len(row)} cells, the header has "
+                                    f"{len(header)}")
+                for c in cols:
+                    cell = row[c].strip()
+                    try:
+                        v = float(cell)
+                    except ValueError:
+                        v = math.nan
+                    if not math.isfinite(v):
+                        what = "an empty cell" if cell == "" else repr(cell)
+                        raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; "
+                                        "expected a finite number")
+                    flat.append(v)
+                lines.append(line)
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputFileError(f"cannot read {path}: {exc}") from exc
-    if not table:
-        raise DataError(f"{path}: the file is empty; expected a header with {', '.join(required)}")
-    header = [h.strip() for h in table[0][1]]
-    dupes = sorted({h for h in header if header.count(h) > 1})
-    if dupes:
-        raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
-    missing = [c for c in required if c not in header]
-    if missing:
-        extra = [h for h in header if h not in required]
-        hints = "".join(suggest(m, extra) for m in missing)
-        raise DataError(f"{path}: missing column(s) {', '.join(missing)}.{hints} Expected "
-                        f"{expected + ': ' if expected else ''}{', '.join(required)}; the header "
-                        f"has {listing(header)}")
-    if len(table) == 1:
+    if not lines:
         raise DataError(f"{path}: a header but no {rows_name}")
-    wanted = required + [c for c in optional if c in header and c not in required]
-    cols = [header.index(c) for c in wanted]
-    values = np.empty((len(table) - 1, len(cols)))
-    for r, (line, row) in enumerate(table[1:]):
-        if len(row) != len(header):
-            raise DataError(f"{path}, line {line}: {len(row)} cells, the header has {len(header)}")
-        for k, c in enumerate(cols):
-            cell = row[c].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                v = math.nan
-            if not math.isfinite(v):
-                what = "an empty cell" if cell == "" else repr(cell)
-                raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; expected a "
-                                "finite number")
-            values[r, k] = v
+    values = np.frombuffer(flat, dtype=float).reshape(len(lines), len(cols)).copy()
     return Columns(path, {c: values[:, k] for k, c in enumerate(wanted)},
-                   np.array([line for line, _ in table[1:]]), tuple(header))
+                   np.array(lines, dtype=int), tuple(header))
