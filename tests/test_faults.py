@@ -436,7 +436,8 @@ def test_data_reading_stops_at_the_first_bad_row(tmp_path, data_csv):
     lines = data_csv.read_text().splitlines()
     cells = lines[2].split(",")
     cells[7] = "nan"
-    text = "\n".join(lines[:2] + [",".join(cells)] + lines[3:]) + "\n"
+    # 2,000 good rows after it: far more than the reader's buffer
+    text = "\n".join(lines[:2] + [",".join(cells)] + lines[3:] * 70) + "\n"
     (tmp_path / "d.csv").write_bytes(text.encode() + b"\xff\xfe" * 100_000)
     robot = Robot.load("ec66")
     with pytest.raises(KincalError, match="line 3, column 'y': 'nan'"):
