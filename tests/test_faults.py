@@ -442,3 +442,27 @@ def test_data_reading_stops_at_the_first_bad_row(tmp_path, data_csv):
     robot = Robot.load("ec66")
     with pytest.raises(KincalError, match="line 3, column 'y': 'nan'"):
         Measurements.from_csv(tmp_path / "d.csv", robot.joint_names)
+
+
+def test_urdf_parser_output_on_success_becomes_one_warning(monkeypatch, capfd):
+    import kincal.robot as robot_module
+
+    real = robot_module.pin.buildModelFromXML
+
+    def chatty(text):
+        os.write(2, b"Warning: something odd in this URDF\n  at line 5 in /src/model.cpp\n")
+        return real(text)
+
+    monkeypatch.setattr(robot_module.pin, "buildModelFromXML", chatty)
+    with pytest.warns(Warning, match="the URDF parser says: Warning: something odd in this URDF$"):
+        Robot.load("ec66")
+    assert capfd.readouterr().err == ""  # nothing reached file descriptor 2
+
+
+def test_missing_limits_message_is_the_first_reason(work, capsys):
+    text = EC66.read_text().replace('<limit lower="-6.283185307179586" upper="6.283185307179586" '
+                                    'effort="150" velocity="2.618"/>', "", 1)
+    line = refused(["calibrate", _urdf(work, text), work / "cal.csv", "--tip", "flange", "--out",
+                    work / "o.urdf"], work, capsys)
+    assert line.endswith("bad.urdf:16: not a valid URDF model: Joint [joint_1] is of type "
+                         "REVOLUTE but it does not specify limits")

@@ -16,6 +16,7 @@ import os
 import re
 import sys
 import tempfile
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +25,8 @@ import numpy as np
 import pinocchio as pin
 
 from kincal import descriptions
-from kincal.errors import ChainError, DataError, FrameError, UrdfError, listing, suggest
+from kincal.errors import (ChainError, DataError, FrameError, KincalWarning, UrdfError,
+                           listing, suggest)
 from kincal.rotations import inverse
 from kincal.urdf_source import read_urdf_text
 
@@ -94,7 +96,9 @@ def _build_model(text: str, path) -> pin.Model:
         said = " ".join(captured[0].split()) if captured else ""
         reason = re.sub(r"^(Error|Warning):\s*", "", said)
         reason = re.sub(r"\s*at line \d+ in \S+", "", reason)  # urdfdom's C++ source line
-        reason = reason.split(". ")[0].rstrip(".") or str(exc)
+        # the first sentence of the first message: the later ones follow from it
+        reason = re.split(r"\s(?:Error|Warning):\s", reason)[0].split(". ")[0].rstrip(".")
+        reason = reason or str(exc)
         where = ""
         for name in re.findall(r"\[([^\]]+)\]", reason):  # the first named element found
             hit = re.search(r'<(?:joint|link)\s[^>]*name\s*=\s*["\']' + re.escape(name) + "[\"']",
@@ -103,6 +107,10 @@ def _build_model(text: str, path) -> pin.Model:
                 where = f":{text.count(chr(10), 0, hit.start()) + 1}"
                 break
         raise UrdfError(f"{path}{where}: not a valid URDF model: {reason}") from None
+    said = " ".join(captured[0].split()) if captured else ""
+    if said:  # a warning of urdfdom on a model it accepted: passed on, as one line
+        said = re.sub(r"\s*at line \d+ in \S+", "", said)
+        warnings.warn(f"{path}: the URDF parser says: {said}", KincalWarning)
     return model
 
 
