@@ -144,6 +144,7 @@ def _render_plots(result, out_dir: Path):
 # that only some settings use are None, so that "given but unused" can be told apart.
 PLOT_NAMES = ("cv_curve.png", "residuals.png", "parameters.png")  # kincal.export.plots
 MAX_POSES = 1_000_000  # simulate --poses, plan --random: beyond any real measurement campaign
+DEFAULT_LAMBDA = "cv"  # --lambda when not given (None in the parser: "given" can be told)
 
 
 def _need(ok: bool, message: str) -> None:
@@ -181,9 +182,10 @@ def _check_calibrate(args) -> None:
             except ValueError:
                 raise OptionError(f"--lambda must be 'cv' or a number, got {args.lam!r}") from None
             _finite("--lambda", value, 0)
-    cv = m == "l2" and args.lam in (None, "cv")
+    # a lambda given as a number, or no penalty at all: no cross-validation to fold or seed
+    chosen = m == "l2" and (args.lam is None or args.lam.isalpha())
     for option, value in (("--folds", args.folds), ("--seed", args.seed)):
-        _need(value is None or cv, f"{option} is used only when lambda is chosen by "
+        _need(value is None or chosen, f"{option} is used only when lambda is chosen by "
               "cross-validation (method l2 with --lambda cv)")
     _count("--folds", args.folds, 2)
     _count("--seed", args.seed, 0)
@@ -194,7 +196,7 @@ def _check_calibrate(args) -> None:
           f"redundant parameters bounded); method {m} cannot fit them")
     _need(args.order_column is None or bool(args.backlash),
           "--order-column gives the approach directions of backlash terms: it needs --backlash")
-    args.lam = "cv" if args.lam is None else args.lam
+    args.lam = DEFAULT_LAMBDA if args.lam is None else args.lam
     args.folds = 5 if args.folds is None else args.folds
     args.seed = 0 if args.seed is None else args.seed
 
@@ -256,7 +258,8 @@ def _check_outputs(args, robot) -> None:
     from kincal.export.safe_write import check_outputs
 
     files, dirs = _output_paths(args)
-    protect = [robot.source] + [getattr(args, k, None) for k in ("data", "candidates", "measured")]
+    inputs = ("data", "candidates", "measured", "frames")
+    protect = [robot.source] + [getattr(args, k, None) for k in inputs]
     check_outputs(files, overwrite=args.overwrite, protect=[p for p in protect if p], dirs=dirs)
 
 
