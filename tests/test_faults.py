@@ -466,3 +466,22 @@ def test_missing_limits_message_is_the_first_reason(work, capsys):
                     work / "o.urdf"], work, capsys)
     assert line.endswith("bad.urdf:16: not a valid URDF model: Joint [joint_1] is of type "
                          "REVOLUTE but it does not specify limits")
+
+
+def test_two_processes_racing_for_one_output(tmp_path):
+    """Two kincal runs started together for one --out: exactly one writes, the other says so."""
+    argv = [sys.executable, "-c", "import sys; from kincal.cli.main import main; "
+            "sys.exit(main(sys.argv[1:]))", "simulate", "ec66", "--poses", "5", "--out",
+            str(tmp_path / "same.csv")]
+    runs = [subprocess.Popen(argv + ["--seed", str(k)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True) for k in range(2)]
+    results = [(r.wait(timeout=120), r.stderr.read()) for r in runs]
+    assert sorted(code for code, _ in results) == [0, 1], results
+    loser = next(err for code, err in results if code == 1).strip().splitlines()
+    assert len(loser) == 1 and "same.csv: already exists" in loser[0]
+    winner = results.index(next(r for r in results if r[0] == 0))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["same.csv"]
+    text = (tmp_path / "same.csv").read_text()
+    assert main(["simulate", "ec66", "--poses", "5", "--seed", str(winner), "--out",
+                 str(tmp_path / "check.csv")]) == 0
+    assert (tmp_path / "check.csv").read_text() == text  # the winner's file, whole
