@@ -226,8 +226,8 @@ def _check_args(args) -> None:
         # upper bounds far above any real robot: beyond them the simulated robot is noise
         _finite("--size-mm", args.size_mm, 0, 10_000, low_open=True)
         _finite("--tilt-deg", args.tilt_deg, 0, 180)
-        for option in ("center_m", "tool_m", "base_frame"):
-            _finite("--" + option.replace("_", "-"), getattr(args, option))
+        for option in ("center_m", "tool_m", "base_frame"):  # [m] and [deg]: a km is absurd
+            _finite("--" + option.replace("_", "-"), getattr(args, option), -1000, 1000)
         for option, high in (("length_error_mm", 100), ("angle_error_deg", 10), ("noise_mm", 1000)):
             _finite("--" + option.replace("_", "-"), getattr(args, option), 0, high)
         _count("--seed", args.seed, 0)
