@@ -476,12 +476,19 @@ def test_failed_write_leaves_no_temporary_file(tmp_path, monkeypatch, failing):
     assert files_in(tmp_path) == {"out.urdf"} and target.read_text() == "old"
 
 
-def test_interrupted_write_leaves_no_temporary_file(tmp_path, monkeypatch):
+@pytest.mark.parametrize("step,existing", [("link", None), ("replace", "old")])
+def test_interrupted_write_leaves_no_temporary_file(tmp_path, monkeypatch, step, existing):
+    # a new file is committed by os.link, a replaced one by os.replace
+    if existing is not None:
+        (tmp_path / "out.urdf").write_text(existing)
+
     def interrupt(*args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(os, "replace", interrupt)
+    monkeypatch.setattr(os, step, interrupt)
     with pytest.raises(KeyboardInterrupt):
-        write_text_atomic(tmp_path / "out.urdf", "new")
+        write_text_atomic(tmp_path / "out.urdf", "new", overwrite=existing is not None)
     monkeypatch.undo()
-    assert files_in(tmp_path) == set()
+    assert files_in(tmp_path) == (set() if existing is None else {"out.urdf"})
+    if existing is not None:
+        assert (tmp_path / "out.urdf").read_text() == existing

@@ -84,7 +84,7 @@ def test_too_large(tmp_path):
     path = tmp_path / "huge.urdf"
     with open(path, "wb") as f:
         f.truncate(MAX_URDF_BYTES + 1)  # sparse: no real disk use
-    with pytest.raises(UrdfError, match="larger than 50 MB"):
+    with pytest.raises(UrdfError, match="larger than 20 MB"):
         read_urdf_text(path)
 
 

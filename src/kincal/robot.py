@@ -12,6 +12,12 @@ radians for revolute and continuous joints, metres for prismatic ones.
 
 from __future__ import annotations
 
+import os
+import re
+import sys
+import tempfile
+import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +25,8 @@ import numpy as np
 import pinocchio as pin
 
 from kincal import descriptions
-from kincal.errors import ChainError, FrameError, UrdfError, listing, suggest
+from kincal.errors import (ChainError, DataError, FrameError, KincalWarning, UrdfError,
+                           listing, suggest)
 from kincal.rotations import inverse
 from kincal.urdf_source import read_urdf_text
 
@@ -55,6 +62,59 @@ class ChainGeometry:
     @property
     def n(self) -> int:
         return len(self.joint_names)
+
+
+@contextmanager
+def _stderr_captured():
+    """Collect what C++ code writes to file descriptor 2 (urdfdom's multi-line messages).
+
+    Yields a list that receives the captured text when the block ends; fd 2 is restored
+    whatever happens (an exception or a signal included).
+    """
+    sys.stderr.flush()
+    out: list[str] = []
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield out
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            out.append(tmp.read(65536).decode("utf-8", errors="replace"))
+
+
+def _build_model(text: str, path) -> pin.Model:
+    """Pinocchio's model of the URDF ``text``; urdfdom's failure becomes one UrdfError line.
+
+    urdfdom prints its reason on stderr (several lines, with a C++ source location) and
+    Pinocchio raises a generic "not a valid URDF model"; the message here gives the
+    reason, and the URDF line of the joint or link it names when that can be found.
+    """
+    try:
+        with _stderr_captured() as captured:
+            model = pin.buildModelFromXML(text)
+    except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError
+        said = " ".join(captured[0].split()) if captured else ""
+        reason = re.sub(r"^(Error|Warning):\s*", "", said)
+        reason = re.sub(r"\s*at line \d+ in \S+", "", reason)  # urdfdom's C++ source line
+        # the first sentence of the first message: the later ones follow from it
+        reason = re.split(r"\s(?:Error|Warning):\s", reason)[0].split(". ")[0].rstrip(".")
+        reason = reason or str(exc)
+        where = ""
+        for name in re.findall(r"\[([^\]]+)\]", reason):  # the first named element found
+            hit = re.search(r'<(?:joint|link)\s[^>]*name\s*=\s*["\']' + re.escape(name) + "[\"']",
+                            text)
+            if hit:
+                where = f":{text.count(chr(10), 0, hit.start()) + 1}"
+                break
+        raise UrdfError(f"{path}{where}: not a valid URDF model: {reason}") from None
+    said = " ".join(captured[0].split()) if captured else ""
+    if said:  # a warning of urdfdom on a model it accepted: passed on, as one line
+        said = re.sub(r"\s*at line \d+ in \S+", "", said)
+        warnings.warn(f"{path}: the URDF parser says: {said}", KincalWarning)
+    return model
 
 
 def _se3(T: np.ndarray) -> pin.SE3:
@@ -98,10 +158,7 @@ class Robot:
         """
         desc = descriptions.resolve(robot)
         text = read_urdf_text(desc.urdf)
-        try:
-            model = pin.buildModelFromXML(text)
-        except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError
-            raise UrdfError(f"{desc.urdf}: Pinocchio could not build a model: {exc}") from exc
+        model = _build_model(text, desc.urdf)
         root = next((f.name for f in model.frames if f.type == pin.FrameType.BODY), None)
         if root is None:
             raise UrdfError(f"{desc.urdf}: the URDF has no link")
@@ -170,6 +227,9 @@ class Robot:
     def _check_off_chain(self, values: dict) -> dict:
         """Values [rad or m] for joints off the chain; the others stay at neutral."""
         movable = [n for j, n in enumerate(self.model.names) if j > 0]
+        if not hasattr(values, "items"):
+            raise FrameError(f"joint_values must be a dict {{joint name: value}}, got "
+                             f"{type(values).__name__}", valid=tuple(movable))
         off = {}
         for name, value in values.items():
             if name not in movable:
@@ -178,7 +238,10 @@ class Robot:
             if name in self.joint_names:
                 raise FrameError(f"joint {name!r} is on the chain {self.base!r} -> {self.tip!r}; "
                                  "its values come with each sample, not as a fixed value")
-            off[name] = float(value)
+            try:
+                off[name] = float(value)
+            except (TypeError, ValueError):
+                raise FrameError(f"joint {name!r}: value {value!r} is not a number") from None
         return off
 
     # ----------------------------------------------------------------- geometry
@@ -233,8 +296,12 @@ class Robot:
         place the chain in the world (e.g. for a viewer).
         """
         q = pin.neutral(self.model)
+        values = np.asarray(joint_values, dtype=float)
+        if values.shape != (len(self._chain),):  # zip below would truncate silently
+            raise DataError(f"joint values must be ({len(self._chain)},) for "
+                            f"{', '.join(self.joint_names)}, got shape {values.shape}")
         ids = [self.model.getJointId(n) for n in self.off_chain]
-        for j, v in zip(self._chain + ids, list(np.asarray(joint_values, dtype=float))
+        for j, v in zip(self._chain + ids, list(values)
                         + list(self.off_chain.values())):
             jm = self.model.joints[j]
             if jm.nq == 2:

@@ -11,14 +11,21 @@ expanded first (:mod:`kincal.xacro_source`) and the expanded text checked and re
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 from xml.parsers import expat
 
 from kincal.errors import InputFileError, UrdfError
+from kincal.input_files import check_regular_file
 
-MAX_URDF_BYTES = 50 * 1024 * 1024
+MAX_URDF_BYTES = 20 * 1024 * 1024
 """Largest URDF accepted [bytes]; real robots are well under 1 MB."""
+
+MAX_URDF_LINKS = 2000
+"""Most links accepted. Real robots have tens to a few hundred; Pinocchio's URDF parser
+recurses once per level of the tree and crashes the process (a segmentation fault, not
+an exception) on chains of a few thousand links, so kincal refuses them first."""
 
 XACRO_HINT = "run `xacro file.urdf.xacro > file.urdf` first and pass the generated URDF"
 
@@ -34,6 +41,7 @@ _DECLARED_ENCODING = re.compile(
     rb"""^(?:\xef\xbb\xbf)?\s*<\?xml[^>]*?encoding\s*=\s*["']([A-Za-z0-9._-]+)["']"""
 )
 _UTF8_NAMES = ("utf-8", "utf8", "us-ascii", "ascii")
+_MOVING = ("revolute", "continuous", "prismatic")  # joints whose axis is used
 
 
 def read_urdf_text(path) -> str:
@@ -45,6 +53,8 @@ def read_urdf_text(path) -> str:
     file comes back expanded (see the module notes).
     """
     p = Path(path)
+    if p.exists() and not p.is_dir():  # a FIFO would block open(); a device never ends
+        check_regular_file(p, "URDF", 2**62)  # the size is bounded below, while reading
     try:
         with open(p, "rb") as f:
             # read one byte past the limit: also bounds special files whose stat size lies
@@ -98,6 +108,8 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
     parser = expat.ParserCreate(encoding="UTF-8")
     xacro_prefixes = {"xacro"}
     seen_root = False
+    n_links = 0
+    joint = None  # (name, type) of the <joint> being read
 
     def fail(problem: str, error=UrdfError):
         where = f"{source}:{parser.CurrentLineNumber}:{parser.CurrentColumnNumber + 1}"
@@ -131,14 +143,53 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
             seen_root = True
             if name != "robot":
                 fail(f"root element is <{name}>, expected <robot>")
+        _check_element(name, attrs)
+
+    def _check_element(name, attrs):
+        nonlocal n_links, joint
+        if name == "link":
+            n_links += 1
+            if n_links > MAX_URDF_LINKS:
+                fail(f"more than {MAX_URDF_LINKS} links; kincal reads URDFs of at most "
+                     f"{MAX_URDF_LINKS} links (Pinocchio's parser cannot take much deeper trees)")
+        elif name == "joint" and "type" in attrs:  # <joint> inside <transmission> has no type
+            joint = (attrs.get("name", "?"), attrs["type"])
+        elif name == "axis" and joint is not None and joint[1] in _MOVING:
+            values = _floats(attrs.get("xyz", "1 0 0"))
+            if values is None or len(values) != 3 or not all(map(math.isfinite, values)):
+                fail(f"joint {joint[0]!r}: axis xyz={attrs.get('xyz')!r}, expected 3 finite numbers")
+            if math.hypot(*values) < 1e-12:
+                fail(f"joint {joint[0]!r}: axis xyz={attrs.get('xyz')!r} has zero length; a joint "
+                     "axis needs a direction")
+        elif name == "limit" and joint is not None and joint[1] in ("revolute", "prismatic"):
+            lo, hi = _floats(attrs.get("lower", "0")), _floats(attrs.get("upper", "0"))
+            if lo is None or hi is None or len(lo) != 1 or len(hi) != 1:
+                fail(f"joint {joint[0]!r}: limit lower={attrs.get('lower')!r} "
+                     f"upper={attrs.get('upper')!r}, expected numbers")
+            if lo[0] > hi[0]:
+                fail(f"joint {joint[0]!r}: limit lower={lo[0]:g} is above upper={hi[0]:g}")
+
+    def on_end(name):
+        nonlocal joint
+        if name == "joint":
+            joint = None
 
     parser.StartDoctypeDeclHandler = on_doctype
     parser.EntityDeclHandler = on_entity_decl
     parser.UnparsedEntityDeclHandler = on_entity_decl
     parser.StartElementHandler = on_start
+    parser.EndElementHandler = on_end
     try:
         parser.Parse(text.encode("utf-8", errors="surrogatepass"), True)
     except expat.ExpatError as exc:
         raise UrdfError(
             f"{source}:{exc.lineno}:{exc.offset + 1}: malformed XML: {expat.ErrorString(exc.code)}"
         ) from None
+
+
+def _floats(text: str):
+    """The numbers of a space-separated attribute, or None if one is not a number."""
+    try:
+        return [float(v) for v in text.split()]
+    except ValueError:
+        return None

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from kincal import __version__
+from kincal.cli.checks import check_args, check_outputs
 from kincal.errors import (DataError, KincalError, KincalNote, KincalWarning,
                            OptionError)
 
@@ -209,9 +210,7 @@ def _render_plots(result, out_dir: Path):
     with tempfile.TemporaryDirectory(prefix="kincal-plots-") as tmp:
         paths = plot_calibration(result, Path(tmp))
         pngs = [(out_dir / Path(p).name, Path(p).read_bytes()) for p in paths]
-    if not out_dir.exists():
-        out_dir.mkdir(parents=True)  # an output folder of its own; files inside are checked
-    return pngs
+    return pngs  # the folder itself is made by write_all, in the same transaction
 
 
 def _add_accuracy_options(p):
@@ -268,6 +267,8 @@ def cmd_calibrate(args) -> int:
     if kinds.wants_sets(args):  # several files, or poses, distances, plane contacts
         return kinds.calibrate(args)
     robot = _robot(args)
+    check_outputs(args, robot)
+    options = _options(args, args.method)
     data = _measurements(args, robot)
     options = _options(args, args.method)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
@@ -317,7 +318,8 @@ def cmd_calibrate(args) -> int:
             warnings=[str(w.message) for w in caught if issubclass(w.category, KincalWarning)],
             notes=[f"export: {m.describe()}" for m in moved])))
     protect = [robot.source, args.data]
-    written = write_all(files, overwrite=args.overwrite, protect=protect)
+    written = write_all(files, overwrite=args.overwrite, protect=protect,
+                        dirs=[args.plots] if args.plots else [])
     if not args.quiet:
         print(result.summary())
         for line in result.identifiability.summary().splitlines()[1:]:
@@ -345,6 +347,7 @@ def cmd_evaluate(args) -> int:
     if bool(args.frames) == bool(args.fit_frames):
         raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
     robot = _robot(args)
+    check_outputs(args, robot)
     data = _measurements(args, robot)
     problem = CalibrationProblem(robot, data, CalibrationOptions(method="frames",
                                                                  tool_guess=_tool_offset(args)))
@@ -390,6 +393,7 @@ def cmd_analyze(args) -> int:
     if kinds.wants_sets(args):
         return kinds.analyze(args)
     robot = _robot(args)
+    check_outputs(args, robot)
     data = _measurements(args, robot)
     names = MODELS if args.model == "all" else (args.model,)
     if args.model == "all" and args.fix:
@@ -448,6 +452,7 @@ def cmd_simulate(args) -> int:
     from kincal.planning import simulation
 
     robot = _robot(args)
+    check_outputs(args, robot)
     model = models.build(args.model, robot.geometry)
     rng = np.random.default_rng(args.seed)
     design = {"tracker": (0.4, 30.0), "rtest": (0.02, 15.0)}[args.design]
@@ -544,6 +549,7 @@ def cmd_plan(args) -> int:
         raise OptionError("--criterion i needs --target-cube CX CY CZ EDGE, and --target-cube "
                           "is for --criterion i")
     robot = _robot(args)
+    check_outputs(args, robot)
     unit = 1e-3 if args.length_unit == "mm" else 1.0
     tool = _tool_offset(args)
     from kincal.cli.volume_options import volume_spec
@@ -708,7 +714,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_kinds(p)
     _add_model(p)
     p.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
-    p.add_argument("--lambda", dest="lam", default="auto",
+    p.add_argument("--lambda", dest="lam",
                    help="'auto' (default: 'evidence' on data from a small measurement volume, "
                         "'cv' otherwise), 'evidence' (priors toward nominal per parameter "
                         "class, scales and noise by maximum evidence), 'cv' (the paper's "
@@ -722,8 +728,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-mm", type=float, metavar="MM",
                    help="with --lambda evidence: measurement noise, std per axis [mm], given "
                         "instead of estimated")
-    p.add_argument("--folds", type=int, default=5)
-    p.add_argument("--seed", type=int, default=0, help="seed of the CV fold split")
+    p.add_argument("--folds", type=int, help="k of the k-fold cross-validation (default 5)")
+    p.add_argument("--seed", type=int, help="seed of the CV fold split (default 0)")
     p.add_argument("--fix", nargs="+", default=[], metavar="NAME",
                    help="parameters held nominal: names (joint_3.a, tool.z) or quoted shell "
                         "patterns ('*.d', 'joint_[456].*')")
@@ -835,7 +841,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--random", type=int, metavar="M",
                    help="instead of a CSV: M random candidates uniform within the joint limits; "
                         "with --in-cube/--in-sphere: M candidates in the volume (default 2000)")
-    p.add_argument("--seed", type=int, default=0, help="seed of --random")
+    p.add_argument("--seed", type=int, help="seed of --random or of the volume's candidates "
+                   "(default 0)")
     p.add_argument("--poses", type=int, required=True, metavar="N", help="poses to choose")
     p.add_argument("--measured", metavar="DATA.csv",
                    help="poses already measured (joint columns; other columns ignored): the "
@@ -905,6 +912,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="the paper's experiment, simulated at a small size")
     p.add_argument("--out", default=DEMO_DIR, help=f"output directory (default {DEMO_DIR})")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier demo in that directory")
     p.set_defaults(func=cmd_demo)
     return ap
 
@@ -912,16 +921,38 @@ def build_parser() -> argparse.ArgumentParser:
 TIMED = ("calibrate", "evaluate", "analyze", "plan", "simulate")
 
 
+class _Terminated(BaseException):
+    """SIGTERM, raised like KeyboardInterrupt so that writes roll back on the way out."""
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated
+
+
 def main(argv=None) -> int:
+    import signal
+    import threading
     import time
 
     t0 = time.perf_counter()
     parser = build_parser()
     args = parser.parse_args(argv)
+    # SIGTERM unwinds like Ctrl-C (only the main thread may set handlers: main() called
+    # from a worker thread keeps the default)
+    sigterm = None
+    if threading.current_thread() is threading.main_thread():
+        sigterm = signal.signal(signal.SIGTERM, _on_sigterm)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", KincalWarning)
         try:
+            check_args(args)
             code = args.func(args)
+        except (KeyboardInterrupt, _Terminated) as exc:
+            name, code = (("SIGINT", 130) if isinstance(exc, KeyboardInterrupt)
+                          else ("SIGTERM", 143))
+            print(f"kincal: error: interrupted ({name}); no output was written or changed",
+                  file=sys.stderr)
+            caught.clear()  # a half-run's warnings would only confuse
         except BrokenPipeError:  # output piped into head & co: stop quietly
             import os
 
@@ -936,6 +967,8 @@ def main(argv=None) -> int:
                 if issubclass(w.category, KincalWarning):
                     kind = "note" if issubclass(w.category, KincalNote) else "warning"
                     print(f"kincal: {kind}: {w.message}", file=sys.stderr)
+            if sigterm is not None:
+                signal.signal(signal.SIGTERM, sigterm)
     if code == 0 and args.command in TIMED:  # an error stays the one line it is
         print(f"kincal: done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return code

@@ -92,6 +92,7 @@ from __future__ import annotations
 
 import json
 import math
+import tempfile
 import time
 import warnings
 from dataclasses import asdict, dataclass, field, replace
@@ -101,7 +102,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from kincal.errors import ExportError, KincalWarning, OptionError
-from kincal.export.safe_write import write_text_atomic
+from kincal.export.safe_write import write_all
 from kincal.identification.calibration import (
     CalibrationOptions,
     CalibrationProblem,
@@ -611,17 +612,20 @@ def write_report(results: Sequence[ExperimentResult], out_dir, summary: dict | N
     """
     results = list(results)
     out_dir = Path(out_dir).expanduser()
-    out_dir.mkdir(parents=True, exist_ok=True)
     for name in REPORT_FILES:
         _check_ours(out_dir / name)
-    files = write_plots(results[0], out_dir, overwrite=True, source=_MARK)
+    # plots rendered aside first, so that all files go in as one transaction (write_all):
+    # an interrupted or failed run leaves the folder as it was
+    with tempfile.TemporaryDirectory(prefix="kincal-demo-") as tmp:
+        paths = write_plots(results[0], Path(tmp), overwrite=True, source=_MARK)
+        files = [(out_dir / Path(p).name, Path(p).read_bytes()) for p in paths]
     md = f"<!-- {_MARK}: simulated reproduction, see the module docstring -->\n" + tables(results)
-    files.append(write_text_atomic(out_dir / "tables.md", md, overwrite=True))
     payload = {"generator": _MARK, "summary": summary or {},
                "results": [r.as_dict() for r in results]}
-    files.append(write_text_atomic(out_dir / "results.json", json.dumps(payload, indent=1) + "\n",
-                                   overwrite=True))
-    return files
+    files += [(out_dir / "tables.md", md),
+              (out_dir / "results.json", json.dumps(payload, indent=1) + "\n")]
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    return write_all(files, overwrite=True, dirs=[out_dir])
 
 
 @dataclass(frozen=True)

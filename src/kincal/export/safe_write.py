@@ -1,19 +1,37 @@
-"""Atomic file writing that never loses what the user gave.
+"""Writing files as one transaction that never loses what the user gave.
 
 Every file kincal writes (corrected URDF, frames and report JSON, CSV, plots) goes
-through :func:`write_text_atomic` or :func:`write_bytes_atomic`: a temporary file in the
-target directory, fsync, then ``os.replace``. A reader sees the old file or the new one,
-never half of one; a failure leaves nothing behind; the user's inputs are refused as
-targets unless overwriting is asked for.
+through :func:`write_all` (or its one-file forms :func:`write_text_atomic` and
+:func:`write_bytes_atomic`), in three steps:
+
+1. check every target (:func:`check_outputs`, which the CLI also calls before the work,
+   so that a run that would be refused at the end is refused at the start);
+2. stage: each file is written to a temporary file beside its target and fsync'ed;
+3. commit: each temporary file takes its target's name. A new file is put in place by
+   ``os.link(temporary, target)``, which fails if the target exists: the existence
+   check and the rename are one step, so of two runs racing for one output exactly one
+   wins and the other gets a clean error. A file replaced with ``overwrite`` keeps a
+   hard-linked backup until the whole transaction is done.
+
+If anything fails (a full disk, a lost race, Ctrl-C), every file committed so far is
+removed or restored from its backup, the temporary files are removed, and a folder the
+transaction created is removed again: all of the outputs, or none, and nothing of the
+user's changed. Only regular files are written: a FIFO, a device or a socket as a
+target is refused, with or without ``overwrite``.
 """
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 import tempfile
 from pathlib import Path
 
 from kincal.errors import ExportError
+
+_NO_HARD_LINKS = (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK,
+                  errno.ENOSYS)
 
 
 def write_text_atomic(path, text: str, *, overwrite: bool = False, protect=()) -> Path:
@@ -24,54 +42,93 @@ def write_text_atomic(path, text: str, *, overwrite: bool = False, protect=()) -
 def write_bytes_atomic(path, data: bytes, *, overwrite: bool = False, protect=()) -> Path:
     """Write ``data`` to ``path`` atomically; return the resolved path.
 
-    Temporary file in the same directory, fsync, ``os.replace``: a reader sees the old
-    file or the new one, never half of one, and a failure leaves no temporary file.
-    Raises :class:`ExportError` unless ``overwrite`` for an existing target or one of
-    the ``protect`` paths (the user's inputs, recognised through symlinks, relative
-    paths and hard links); always for a directory or a missing parent directory
-    (never created silently). A symlink is written through: the file it names changes.
+    A reader sees the old file or the new one, never half of one, and a failure leaves
+    no temporary file. Raises :class:`ExportError` unless ``overwrite`` for an existing
+    target or one of the ``protect`` paths (the user's inputs, recognised through
+    symlinks, relative paths and hard links); always for a directory, a non-regular
+    file or a missing parent directory (never created silently). A symlink is written
+    through: the file it names changes.
     """
-    target = Path(path).expanduser().resolve()
-    if not overwrite:
-        for protected in protect:
-            protected = Path(protected).expanduser()
-            if target == protected.resolve() or (
-                    target.exists() and protected.exists() and os.path.samefile(target, protected)):
-                raise ExportError(f"{path}: refusing to overwrite the input file {protected}; "
-                                  "choose another output path or pass overwrite=True")
-        if target.exists() or Path(path).expanduser().is_symlink():
-            raise ExportError(f"{path}: already exists; choose another output path or pass overwrite=True")
-    if target.is_dir():
-        raise ExportError(f"{path}: is a directory")
-    if not target.parent.is_dir():
-        raise ExportError(f"{path}: directory {target.parent} does not exist")
+    return write_all([(path, data)], overwrite=overwrite, protect=protect)[0]
 
-    try:
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    except OSError as exc:
-        raise ExportError(f"{path}: cannot write in {target.parent} ({exc.strerror or exc})") from exc
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        # mkstemp makes the file 0600; give it the mode a plain open() would
-        os.chmod(tmp, _default_mode(target))
-        os.replace(tmp, target)
-    except BaseException as exc:  # KeyboardInterrupt too: never leave the temporary file
-        Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, OSError):
-            raise ExportError(f"{path}: could not write ({exc.strerror or exc})") from exc
-        raise
-    try:  # make the rename durable too; best effort, not every platform opens directories
-        dir_fd = os.open(target.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
-    except OSError:
-        pass
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def _check_dir(path, new_dirs: set) -> Path:
+    """The resolved folder ``path``; it must be a folder or creatable in one (one level)."""
+    d = Path(path).expanduser().resolve()
+    if d.exists():
+        if not d.is_dir():
+            raise ExportError(f"{path}: exists and is not a directory")
+        return d
+    if d.parent in new_dirs or d.parent.is_dir():
+        return d
+    p = d.parent
+    while not p.exists():
+        p = p.parent
+    if not p.is_dir():
+        raise ExportError(f"{path}: {p} is a file, not a directory")
+    raise ExportError(f"{path}: directory {d.parent} does not exist")
+
+
+def _check_target(path, overwrite: bool, protect, new_dirs=frozenset()) -> Path:
+    """The checks of :func:`write_all` for one file, without writing anything."""
+    if not isinstance(path, (str, os.PathLike)) or str(path) == "":
+        raise ExportError(f"an output path must be a non-empty str or Path, got {path!r}")
+    given = Path(path).expanduser()
+    target = given.resolve()
+    for protected in protect:
+        protected = Path(protected).expanduser()
+        same = target == protected.resolve() or (
+            target.exists() and protected.exists() and os.path.samefile(target, protected))
+        if same and not overwrite:
+            raise ExportError(f"{path}: refusing to overwrite the input file {protected}; "
+                              "choose another output path or pass --overwrite")
+    if target.exists():
+        mode = target.stat().st_mode
+        if stat.S_ISDIR(mode):
+            raise ExportError(f"{path}: is a directory")
+        if not stat.S_ISREG(mode):
+            raise ExportError(f"{path}: is {_kind(mode)}; kincal writes regular files only")
+        if not overwrite:
+            raise ExportError(f"{path}: already exists; choose another output path or pass "
+                              "--overwrite")
+    elif given.is_symlink() and not overwrite:
+        raise ExportError(f"{path}: already exists (a dangling symlink); choose another output "
+                          "path or pass --overwrite")
+    if target.parent not in new_dirs and not target.parent.is_dir():
+        p = target.parent
+        while not p.exists() and p != p.parent:
+            p = p.parent
+        if p.exists() and not p.is_dir():
+            raise ExportError(f"{path}: {p} is a file, not a directory")
+        raise ExportError(f"{path}: directory {target.parent} does not exist")
     return target
+
+
+def check_outputs(paths, *, overwrite: bool = False, protect=(), dirs=()) -> list[Path]:
+    """Check, before any work, that :func:`write_all` could write ``paths``; return them resolved.
+
+    dirs: folders the transaction may create (one level below an existing folder),
+    e.g. a plots folder; files may name them as parents. Raises :class:`ExportError`
+    naming the first target that would be refused, and the same for two paths naming
+    one file.
+    """
+    new_dirs = set()
+    for d in dirs:
+        r = _check_dir(d, new_dirs)
+        if not r.exists():
+            new_dirs.add(r)
+    targets = [_check_target(p, overwrite, protect, new_dirs) for p in paths]
+    if len(set(targets)) != len(targets):
+        raise ExportError("two outputs name the same file: " + ", ".join(str(p) for p in paths))
+    return targets
 
 
 def _default_mode(target: Path) -> int:
@@ -83,46 +140,148 @@ def _default_mode(target: Path) -> int:
     return 0o666 & ~umask
 
 
-def _check_target(path, overwrite: bool, protect) -> Path:
-    """The checks of :func:`write_bytes_atomic`, without writing anything."""
-    target = Path(path).expanduser().resolve()
-    for protected in protect:
-        protected = Path(protected).expanduser()
-        same = target == protected.resolve() or (
-            target.exists() and protected.exists() and os.path.samefile(target, protected))
-        if same and not overwrite:
-            raise ExportError(f"{path}: refusing to overwrite the input file {protected}; "
-                              "choose another output path or pass --overwrite")
-    if target.is_dir():
-        raise ExportError(f"{path}: is a directory")
-    if target.exists() and not overwrite:
-        raise ExportError(f"{path}: already exists; choose another output path or pass --overwrite")
-    if not target.parent.is_dir():
-        raise ExportError(f"{path}: directory {target.parent} does not exist")
-    return target
+def _stage(target: Path, data: bytes, path) -> str:
+    """A temporary file beside ``target`` holding ``data``, fsync'ed; returns its path."""
+    try:
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise ExportError(f"{path}: cannot write in {target.parent} ({exc.strerror or exc})") from exc
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        # mkstemp makes the file 0600; give it the mode a plain open() would
+        os.chmod(tmp, _default_mode(target))
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return tmp
 
 
-def write_all(files, *, overwrite: bool = False, protect=()) -> list[Path]:
-    """Write several files as one transaction: all of them, or none.
+def _place_new(tmp: str, target: Path, path) -> None:
+    """Give ``tmp`` the name ``target``, failing if the name is taken (no lost race)."""
+    try:
+        os.link(tmp, target)
+    except FileExistsError:
+        raise ExportError(f"{path}: already exists (created while kincal was running); "
+                          "choose another output path or pass --overwrite") from None
+    except OSError as exc:
+        if exc.errno not in _NO_HARD_LINKS:
+            raise
+        # no hard links here (some network and FUSE file systems): claim the name with
+        # an exclusive create, then move the content over the placeholder
+        try:
+            os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        except FileExistsError:
+            raise ExportError(f"{path}: already exists (created while kincal was running); "
+                              "choose another output path or pass --overwrite") from None
+        try:
+            os.replace(tmp, target)
+        except BaseException:
+            target.unlink(missing_ok=True)  # our placeholder
+            raise
+        return
+    os.unlink(tmp)
 
-    files: (path, bytes or str) pairs. Every target is checked before the first byte is
-    written; if a later write fails, the files this call created are removed again and
-    the ones it replaced... cannot be brought back, so replacing needs ``overwrite``.
+
+def _backup(target: Path) -> str:
+    """A hard link to the file about to be replaced (a copy if links are not possible)."""
+    name = tempfile.mktemp(dir=target.parent, prefix=f".{target.name}.", suffix=".bak")
+    try:
+        os.link(target, name)
+    except OSError as exc:
+        if exc.errno not in _NO_HARD_LINKS:
+            raise
+        import shutil
+
+        shutil.copy2(target, name)
+    return name
+
+
+def write_all(files, *, overwrite: bool = False, protect=(), dirs=()) -> list[Path]:
+    """Write several files as one transaction: all of them, or none; return the resolved paths.
+
+    files: (path, bytes or str) pairs. dirs: folders that may be created for them (see
+    :func:`check_outputs`). Every target is checked before the first byte is written,
+    all contents are staged next to their targets, then committed; a failure at any
+    point (KeyboardInterrupt included) restores every target and removes what was made.
     """
     files = [(p, d.encode("utf-8") if isinstance(d, str) else d) for p, d in files]
-    targets = [_check_target(p, overwrite, protect) for p, _ in files]
-    if len(set(targets)) != len(targets):
-        raise ExportError("two outputs name the same file: "
-                          + ", ".join(str(p) for p, _ in files))
-    created, written = [], []
+    targets = check_outputs([p for p, _ in files], overwrite=overwrite, protect=protect, dirs=dirs)
+    made_dirs: list[Path] = []
+    staged: list[str] = []
+    done: list[tuple[Path, str | None]] = []  # (target, backup or None for a new file)
+    current = "the outputs"
     try:
+        for d in dirs:
+            d = Path(d).expanduser().resolve()
+            if not d.exists():
+                d.mkdir()
+                made_dirs.append(d)
         for (path, data), target in zip(files, targets):
-            existed = target.exists()
-            written.append(write_bytes_atomic(path, data, overwrite=overwrite, protect=protect))
-            if not existed:
-                created.append(target)
-    except BaseException:
-        for target in created:
-            target.unlink(missing_ok=True)
+            current = path
+            staged.append(_stage(target, data, path))
+        for (path, _), target, tmp in zip(files, targets, staged):
+            current = path
+            if not (overwrite and target.exists()):
+                try:
+                    _place_new(tmp, target, path)
+                    done.append((target, None))
+                    continue
+                except ExportError:
+                    if not overwrite:
+                        raise
+                    # appeared meanwhile, and the user allows replacing it: below
+            if not stat.S_ISREG(target.stat().st_mode):  # swapped in meanwhile
+                raise ExportError(f"{path}: is {_kind(target.stat().st_mode)}; kincal "
+                                  "writes regular files only")
+            backup = _backup(target)
+            done.append((target, backup))
+            os.replace(tmp, target)
+    except BaseException as exc:
+        _roll_back(done, staged, made_dirs)
+        if isinstance(exc, OSError):
+            raise ExportError(f"{current}: could not write ({exc.strerror or exc}); no output "
+                              "was written or changed") from exc
         raise
-    return written
+    for _, backup in done:
+        if backup is not None:
+            Path(backup).unlink(missing_ok=True)
+    for parent in {t.parent for t in targets}:
+        _fsync_dir(parent)
+    return targets
+
+
+def _roll_back(done, staged, made_dirs) -> None:
+    """Undo a partial commit: restore replaced files, remove new ones, temps and new folders."""
+    for target, backup in reversed(done):
+        try:
+            if backup is None:
+                target.unlink(missing_ok=True)
+            elif not (target.exists() and os.path.samefile(target, backup)):
+                os.replace(backup, target)  # else the replace never happened
+        except OSError:
+            pass  # best effort: keep undoing the others
+    for tmp in staged:
+        Path(tmp).unlink(missing_ok=True)
+    for target, backup in done:
+        if backup is not None:
+            Path(backup).unlink(missing_ok=True)
+    for d in reversed(made_dirs):
+        try:
+            d.rmdir()
+        except OSError:
+            pass
+
+
+def _fsync_dir(directory: Path) -> None:
+    """Make the renames durable too; best effort, not every platform opens directories."""
+    try:
+        dir_fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+    except OSError:
+        pass

@@ -12,12 +12,13 @@ from __future__ import annotations
 import math
 import re
 import warnings
-from dataclasses import replace
+from dataclasses import fields, replace
 from typing import Callable
 
 import numpy as np
 
-from kincal.errors import DataError, IdentifiabilityError, KincalWarning, ParameterError
+from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
+                           ParameterError, listing, suggest)
 from kincal.identification import blas_threads
 from kincal.identification import penalty_choice
 from kincal.identification.cross_validation import (
@@ -54,6 +55,12 @@ class CalibrationProblem:
     """The identification of one robot chain from one set of measurements."""
 
     def __init__(self, robot: Robot, data: Measurements, options: CalibrationOptions | None = None):
+        for name, value, kind in (("robot", robot, Robot), ("data", data, Measurements),
+                                  ("options", options or CalibrationOptions(), CalibrationOptions)):
+            if not isinstance(value, kind):
+                raise OptionError(f"{name} must be a {kind.__name__}, got {type(value).__name__}"
+                                  + ("; for one field use calibrate(robot, data, method=...)"
+                                     if name == "options" else ""))
         self.robot = robot
         self.options = (options or CalibrationOptions()).validated()
         self.data = data.for_chain(robot.joint_names)
@@ -75,6 +82,9 @@ class CalibrationProblem:
                 self._check_name(name)  # a name of another model says which model has it
         # unknown names, and patterns matching nothing, raise ParameterError with the list
         self.space.expand(o.fix), self.space.expand(o.free)
+        if not self._unfixed().any():
+            raise OptionError(f"nothing to fit: every parameter method {o.method} fits is fixed; "
+                              "leave at least one free (fix fewer names)")
         pose = np.unique(self.data.poses, return_index=True)[1]  # one sample per pose
         self.n_poses = len(pose)
         if self.n_poses < 3:
@@ -449,6 +459,11 @@ def calibrate(robot: Robot, data: Measurements, options: CalibrationOptions | No
 
     ``data`` may also be a list of measurement sets, or one set of another kind (poses,
     distances, plane contacts): those go to :mod:`kincal.identification.multiset`."""
+    unknown = sorted(set(overrides) - {f.name for f in fields(CalibrationOptions)})
+    if unknown:
+        raise OptionError(f"unknown option(s) {', '.join(unknown)}." + suggest(unknown[0], [
+            f.name for f in fields(CalibrationOptions)]) + " Options: "
+            + listing([f.name for f in fields(CalibrationOptions)]))
     if not isinstance(data, Measurements):
         from kincal.identification.multiset import calibrate_sets
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -99,54 +99,105 @@ class CalibrationOptions:
     progress: Callable | None = field(default=None, compare=False, repr=False)
 
     def validated(self) -> "CalibrationOptions":
+        """These options checked, with sequences made tuples (``fix=[...]`` works as well as
+        ``fix=(...)``) and numbers made plain; raises :class:`OptionError` naming the field."""
+        o = self._normalised()
         from kincal.models import MODELS, SUITS
 
-        if self.model not in MODELS:
-            raise OptionError(f"unknown error model {self.model!r}; expected one of "
+        if o.model not in MODELS:
+            raise OptionError(f"unknown error model {o.model!r}; expected one of "
                               f"{', '.join(MODELS)} (" + "; ".join(f"{k}: {v}" for k, v in
                                                                  SUITS.items()) + ")")
-        if self.method not in METHODS:
-            raise OptionError(f"unknown method {self.method!r}; expected one of {', '.join(METHODS)}")
-        if isinstance(self.lam, str):
-            if self.lam not in ("auto", "cv", "evidence"):
+        if o.method not in METHODS:
+            raise OptionError(f"unknown method {o.method!r}; expected one of {', '.join(METHODS)}")
+        if isinstance(o.lam, str):
+            if o.lam not in ("auto", "cv", "evidence"):
                 raise OptionError(f"lambda must be 'auto', 'cv', 'evidence' or a number >= 0, got "
-                                  f"{self.lam!r}")
-        elif not (math.isfinite(float(self.lam)) and float(self.lam) >= 0):
+                                  f"{o.lam!r}")
+        elif not (math.isfinite(float(o.lam)) and float(o.lam) >= 0):
             raise OptionError(f"lambda must be 'auto', 'cv', 'evidence' or a finite number >= 0, got "
-                              f"{self.lam!r}")
+                              f"{o.lam!r}")
         for key in ("prior_mm", "prior_deg", "noise_mm"):
-            value = getattr(self, key)
+            value = getattr(o, key)
             if value is None:
                 continue
-            if self.lam not in ("evidence", "auto") or self.method != "l2":
+            if o.lam not in ("evidence", "auto") or o.method != "l2":
                 flag = "--" + key.replace("_", "-")
                 raise OptionError(f"{key} ({flag}) is a setting of the evidence estimator: use "
                                   f"it with method l2 and lambda 'evidence' (got method "
-                                  f"{self.method}, lambda {self.lam!r})")
+                                  f"{o.method}, lambda {o.lam!r})")
             if not (math.isfinite(float(value)) and float(value) > 0):
                 raise OptionError(f"{key} must be a finite number > 0, got {value!r}")
-        if not (self.length_scale > 0 and self.angle_scale > 0):
+        if not (o.length_scale > 0 and o.angle_scale > 0):
             raise OptionError("length_scale and angle_scale must be > 0")
-        if self.tool_guess is not None and np.shape(self.tool_guess) != (3,):
+        if o.tool_guess is not None and np.shape(o.tool_guess) != (3,):
             raise OptionError("tool_guess needs 3 numbers (x, y, z in the tip frame) [m]")
-        if self.base_guess is not None and np.shape(self.base_guess) != (6,):
+        if o.base_guess is not None and np.shape(o.base_guess) != (6,):
             raise OptionError("base_guess needs 6 numbers (x, y, z [m], rx, ry, rz [rad])")
-        lambda_grid(self.lambda_min, self.lambda_max, self.n_lambdas)
-        if self.cv_max_poses is not None and not (
-                isinstance(self.cv_max_poses, (int, np.integer)) and not isinstance(
-                    self.cv_max_poses, bool) and self.cv_max_poses >= max(2, self.folds)):
+        lambda_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
+        if o.cv_max_poses is not None and not (
+                isinstance(o.cv_max_poses, (int, np.integer)) and not isinstance(
+                    o.cv_max_poses, bool) and o.cv_max_poses >= max(2, o.folds)):
             raise OptionError(f"cv_max_poses must be an integer >= the number of folds "
-                              f"({self.folds}) or None, got {self.cv_max_poses!r}")
-        if self.robust is not None and self.robust not in LOSSES:
-            raise OptionError(f"unknown robust loss {self.robust!r}; expected one of "
+                              f"({o.folds}) or None, got {o.cv_max_poses!r}")
+        if o.robust is not None and o.robust not in LOSSES:
+            raise OptionError(f"unknown robust loss {o.robust!r}; expected one of "
                               f"{', '.join(LOSSES)} (or none)")
-        if self.robust_scale_mm is not None and not self.robust_scale_mm > 0:
-            raise OptionError(f"robust_scale_mm must be > 0, got {self.robust_scale_mm}")
-        if self.blas_threads is not None and not (isinstance(self.blas_threads, int)
-                                                  and self.blas_threads >= 1):
+        if o.robust_scale_mm is not None and not o.robust_scale_mm > 0:
+            raise OptionError(f"robust_scale_mm must be > 0, got {o.robust_scale_mm}")
+        if o.blas_threads is not None and not (isinstance(o.blas_threads, int)
+                                               and o.blas_threads >= 1):
             raise OptionError(f"blas_threads must be an integer >= 1 or None, got "
-                              f"{self.blas_threads!r}")
-        if self.backlash and self.method == "frames":
+                              f"{o.blas_threads!r}")
+        if o.backlash and o.method == "frames":
             raise OptionError("backlash terms need method l2 or ls; method frames fits only "
                               "the measurement frame and tool point")
-        return self
+        return o
+
+    def _normalised(self) -> "CalibrationOptions":
+        """A copy with names as tuples of str, guesses as tuples of finite floats, and the
+        counts as ints; OptionError for what cannot be made so."""
+        changes = {}
+        for name in ("fix", "free", "backlash"):
+            value = getattr(self, name)
+            items = (value,) if isinstance(value, str) else value
+            try:
+                items = tuple(items)
+            except TypeError:
+                raise OptionError(f"{name} must be a sequence of names, got {value!r}") from None
+            if not all(isinstance(v, str) for v in items):
+                raise OptionError(f"{name} must hold names (str), got {value!r}")
+            changes[name] = items
+        for name, n in (("tool_guess", 3), ("base_guess", 6)):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            try:
+                v = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                v = np.zeros(0)
+            if v.shape != (n,) or not np.all(np.isfinite(v)):
+                raise OptionError(f"{name} needs {n} finite numbers, got {value!r}")
+            if np.abs(v[:3]).max() > 1e3:  # a kilometre: a unit slip, and sums would overflow
+                raise OptionError(f"{name}: {value!r} is over 1000 m from its frame; positions "
+                                  "are in metres")
+            changes[name] = tuple(float(x) for x in v)
+        for name, low in (("folds", 2), ("seed", 0), ("n_lambdas", 2)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                raise OptionError(f"{name} must be an integer >= {low}, got {value!r}")
+            changes[name] = int(value)
+        if not isinstance(self.method, str):
+            raise OptionError(f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+        for name in ("lam", "lambda_min", "lambda_max", "length_scale", "angle_scale",
+                     "robust_scale_mm", "cv_step_tol"):
+            value = getattr(self, name)
+            if value is None or (name == "lam" and isinstance(value, str)):
+                continue
+            try:
+                changes[name] = float(value)
+            except (TypeError, ValueError):
+                raise OptionError(f"{name} must be a number, got {value!r}") from None
+        if not isinstance(self.solver, SolverOptions):
+            raise OptionError(f"solver must be a SolverOptions, got {self.solver!r}")
+        return replace(self, **changes)

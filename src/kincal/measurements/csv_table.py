@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import re
 import warnings
 from dataclasses import dataclass
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from kincal.errors import DataError, InputFileError, KincalNote, listing, suggest
+from kincal.input_files import MAX_DATA_BYTES, check_regular_file
 
 SEPARATORS = {",": "a comma", ";": "a semicolon", "\t": "a tab"}
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+(?:[eE][+-]?\d+)?$")
@@ -94,6 +96,8 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     {column: what it stands for} (e.g. the URDF joint a renamed column holds), for
     messages. Warns a :class:`KincalNote` when the separator is not a comma.
     """
+    if not isinstance(path, (str, os.PathLike)) or str(path) == "":
+        raise InputFileError(f"the {kind} file must be a path (str or Path), got {path!r}")
     path = Path(path)
     required, optional = list(required), list(optional)
     aliases = dict(aliases or {})
@@ -101,6 +105,9 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
         raise InputFileError(f"{kind} file not found: {path}")
     if path.is_dir():
         raise InputFileError(f"expected a CSV file, got a directory: {path}")
+    check_regular_file(path, f"{kind} CSV", MAX_DATA_BYTES)  # no FIFO, /dev/zero, 10 GB file
+    # the size is bounded above, so the file is read whole: dialect sniffing and the
+    # one-call conversion of a well-formed body need all of it
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             lines = list(_content_lines(fh))

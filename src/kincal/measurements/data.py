@@ -24,6 +24,8 @@ from kincal.measurements.csv_table import read_columns
 from kincal.models.backlash import approach_directions
 
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
+MAX_ABS_VALUE = 1e6
+"""Largest magnitude of a joint value [rad or m] or position [m] accepted."""
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 
 
@@ -100,8 +102,12 @@ class Measurements:
     poses: np.ndarray | None = None
 
     def __post_init__(self):
-        q = _readonly(self.joint_values)
-        P = _readonly(self.positions)
+        try:
+            q = _readonly(self.joint_values)
+            P = _readonly(self.positions)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{self.source}: joint values and positions must be (N, n) and "
+                            f"(N, 3) arrays of numbers ({exc})") from None
         if q.ndim != 2 or q.shape[1] != len(self.joint_names):
             raise DataError(f"{self.source}: joint values must be (N, {len(self.joint_names)}), "
                             f"got {q.shape}")
@@ -121,6 +127,13 @@ class Measurements:
             object.__setattr__(self, "sigma", s)
         rows = np.arange(2, len(q) + 2) if self.rows is None else np.asarray(self.rows)
         object.__setattr__(self, "rows", rows)
+        for name, arr in (("joint value", q), ("position", P)):
+            # far beyond any robot (1000 km, 1e6 rad): the sums of squares would overflow
+            big = np.argwhere(np.abs(arr) > MAX_ABS_VALUE)
+            if big.size:
+                k = big[0][0]
+                raise DataError(f"{self.source}: line {rows[k]}: {name} {arr[tuple(big[0])]:g} "
+                                f"(SI units); kincal accepts magnitudes up to {MAX_ABS_VALUE:g}")
         g = approach_directions(q) if self.approach is None else np.asarray(self.approach, float)
         if g.shape != q.shape or not np.all(np.isin(g, (-1.0, 0.0, 1.0))):
             raise DataError(f"{self.source}: approach directions must be ({len(q)}, "
@@ -188,6 +201,8 @@ class Measurements:
         order_column: a column giving the acquisition order (e.g. a time stamp) for the
             approach directions; None: the rows are in acquisition order.
         """
+        if isinstance(joint_names, str):  # one joint, not its letters
+            joint_names = (joint_names,)
         position_columns = tuple(position_columns)
         if not position_columns or len(position_columns) % 3:
             raise DataError(f"position columns come in threes (x, y, z of each measured "

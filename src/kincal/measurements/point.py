@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from kincal.errors import DataError
 from kincal.identification.parameters import ParameterSpace
 from kincal.models.base import ErrorModel
 from kincal.models.chain import Chain, cross_rows
@@ -40,18 +41,22 @@ class MeasurementModel:
                  approach: np.ndarray | None = None, backlash=(),
                  points: np.ndarray | None = None, n_points: int | None = None):
         self.error_model = model
-        q = np.asarray(joint_values, dtype=float)
+        try:
+            q = np.asarray(joint_values, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"joint_values must be an (N, {model.n}) array of numbers "
+                            f"({exc})") from None
         if q.ndim != 2 or q.shape[1] != model.n:
-            raise ValueError(f"joint_values must be (N, {model.n}), got {q.shape}")
+            raise DataError(f"joint_values must be (N, {model.n}), got {q.shape}")
         self.points = (np.zeros(len(q), dtype=int) if points is None
                        else np.asarray(points, dtype=int))
         if self.points.shape != (len(q),) or (len(q) and self.points.min() < 0):
-            raise ValueError(f"points must be ({len(q)},) indices >= 0")
+            raise DataError(f"points must be ({len(q)},) indices >= 0")
         if n_points is None:
             n_points = int(self.points.max()) + 1 if len(q) else 1
         self.space = ParameterSpace.of_model(model, backlash, n_points)
         if len(q) and self.points.max() >= n_points:
-            raise ValueError(f"a point index is >= n_points = {n_points}")
+            raise DataError(f"a point index is >= n_points = {n_points}")
         self.chain = Chain(model, q, approach, self.space.backlash_joint_index)
         self.q, self.approach, self.N = q, self.chain.approach, len(q)
 

@@ -30,10 +30,16 @@ def random_candidates(robot: "Robot", m: int, rng) -> np.ndarray:
     """
     if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
         raise OptionError(f"the number of random candidates must be an integer >= 1, got {m!r}")
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
+        raise OptionError(f"the seed must be an integer >= 0, got {rng}")
     g = robot.geometry
     lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
     hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
-    return np.random.default_rng(rng).uniform(lo, hi, size=(int(m), g.n))
+    try:
+        generator = np.random.default_rng(rng)
+    except (TypeError, ValueError):
+        raise OptionError(f"rng must be a numpy Generator or a seed >= 0, got {rng!r}") from None
+    return generator.uniform(lo, hi, size=(int(m), g.n))
 
 
 def read_candidates(path, robot: "Robot", length_unit: str = "m", angle_unit: str = "rad",

@@ -1,0 +1,150 @@
+"""Checks of the command line's options and outputs, before any file is read or work done.
+
+Every option is checked here: a value that is not finite or out of range, and a flag that
+would be silently ignored, is an :class:`OptionError` (one line, exit code 1). Defaults of
+options that only some settings use are None in the parser, so that "given but unused"
+can be told apart. :func:`check_outputs` refuses, before the work, what the final write
+would refuse (so a refused run creates no plots folder).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from kincal.errors import OptionError
+
+# Every option is checked here, before a file is read: a value that is not finite or out
+# of range, and a flag that would be silently ignored, is an error. Defaults of options
+# that only some settings use are None, so that "given but unused" can be told apart.
+PLOT_NAMES = ("cv_curve.png", "residuals.png", "parameters.png")  # kincal.export.plots
+MAX_POSES = 1_000_000  # simulate --poses, plan --random: beyond any real measurement campaign
+DEFAULT_LAMBDA = "auto"  # --lambda when not given (None in the parser: "given" can be told)
+
+
+def _need(ok: bool, message: str) -> None:
+    if not ok:
+        raise OptionError(message)
+
+
+def _finite(option: str, values, low=None, high=None, low_open=False) -> None:
+    """Each number of ``option`` is finite and within [low, high] (low excluded if low_open)."""
+    if values is None:
+        return
+    for v in np.atleast_1d(values):
+        ok = math.isfinite(v) and (low is None or (v > low if low_open else v >= low)) \
+            and (high is None or v <= high)
+        if not ok:
+            bound = ("" if low is None else f" {'>' if low_open else '>='} {low:g}") + (
+                "" if high is None else f"{' and' if low is not None else ''} <= {high:g}")
+            _need(False, f"{option} must be a finite number{bound}, got {v:g}")
+
+
+def _count(option: str, value, low: int, high: int | None = None) -> None:
+    if value is not None:
+        _need(low <= value and (high is None or value <= high),
+              f"{option} must be an integer >= {low}" + ("" if high is None else f" and <= {high:,}")
+              + f", got {value}")
+
+
+def _check_calibrate(args) -> None:
+    m = args.method
+    if args.lam is not None:
+        _need(m == "l2", f"--lambda applies to method l2 only; method {m} has no penalty")
+        if args.lam not in ("auto", "cv", "evidence"):
+            try:
+                value = float(args.lam)
+            except ValueError:
+                raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
+                                  f"{args.lam!r}") from None
+            _finite("--lambda", value, 0)
+    # a lambda given as a number, or no penalty at all: no cross-validation to fold or seed
+    chosen = m == "l2" and (args.lam is None or args.lam in ("auto", "cv"))
+    for option, value in (("--folds", args.folds), ("--seed", args.seed)):
+        _need(value is None or chosen, f"{option} is used only when lambda may be chosen by "
+              "cross-validation (method l2 with --lambda cv or auto)")
+    _count("--folds", args.folds, 2)
+    _count("--seed", args.seed, 0)
+    _need(args.robust_scale_mm is None or args.robust is not None,
+          "--robust-scale-mm needs --robust huber or --robust cauchy")
+    _finite("--robust-scale-mm", args.robust_scale_mm, 0, low_open=True)
+    _need(not args.free or m == "l2", f"--free applies to method l2 (its penalty keeps "
+          f"redundant parameters bounded); method {m} cannot fit them")
+    _need(args.order_column is None or bool(args.backlash),
+          "--order-column gives the approach directions of backlash terms: it needs --backlash")
+    args.lam = DEFAULT_LAMBDA if args.lam is None else args.lam
+    args.folds = 5 if args.folds is None else args.folds
+    args.seed = 0 if args.seed is None else args.seed
+
+
+def check_args(args) -> None:
+    """Raise OptionError for any option value or combination the command would not use."""
+    offset = getattr(args, "tool_offset", None)
+    _finite("--tool-offset", offset)
+    if offset is not None:
+        unit = getattr(args, "length_unit", "m")
+        _need(max(map(abs, offset)) * (1e-3 if unit == "mm" else 1.0) <= 1e3,
+              f"--tool-offset {' '.join(f'{v:g}' for v in offset)} [{unit}] is over 1000 m from "
+              "the tip frame; check the unit (--length-unit)")
+    c = args.command
+    if c == "calibrate":
+        _check_calibrate(args)
+    elif c == "evaluate":
+        _need(args.tool_offset is None or not args.frames, "--tool-offset is a starting guess "
+              "for --fit-frames; with --frames the tool point comes from FRAMES.json")
+    elif c == "analyze":
+        _need(args.order_column is None or bool(args.backlash), "--order-column gives the "
+              "approach directions of backlash terms: it needs --backlash")
+    elif c == "simulate":
+        _need(args.tool_offset is None, "simulate does not use --tool-offset (a starting guess "
+              "for calibration); the simulated tool point is --tool-m X Y Z [m]")
+        _count("--poses", args.poses, 1, MAX_POSES)
+        # upper bounds far above any real robot: beyond them the simulated robot is noise
+        _finite("--size-mm", args.size_mm, 0, 10_000, low_open=True)
+        _finite("--tilt-deg", args.tilt_deg, 0, 180)
+        for option in ("center_m", "tool_m", "base_frame"):  # [m] and [deg]: a km is absurd
+            _finite("--" + option.replace("_", "-"), getattr(args, option), -1000, 1000)
+        for option, high in (("length_error_mm", 100), ("angle_error_deg", 10), ("noise_mm", 1000)):
+            _finite("--" + option.replace("_", "-"), getattr(args, option), 0, high)
+        _count("--seed", args.seed, 0)
+        _count("--truth-seed", args.truth_seed, 0)
+        for option in ("size_mm", "tilt_deg", "length_error_mm", "angle_error_deg", "noise_mm"):
+            if getattr(args, option) is not None:  # -0.0 -> 0.0: numpy's checks test the sign bit
+                setattr(args, option, getattr(args, option) + 0.0)
+    elif c == "plan":
+        _count("--poses", args.poses, 1)
+        _count("--random", args.random, 1, MAX_POSES)
+        volume = getattr(args, "in_cube", None) is not None or \
+            getattr(args, "in_sphere", None) is not None
+        _need(args.seed is None or args.random is not None or volume,
+              "--seed is the seed of --random or of a volume's candidates; it is not used "
+              "with a CSV of candidates")
+        _count("--seed", args.seed, 0)
+        args.seed = 0 if args.seed is None else args.seed
+    elif c == "demo":
+        out = Path(args.out).expanduser()
+        if out.exists() or out.is_symlink():
+            _need(out.is_dir(), f"{args.out}: exists and is not a directory; choose another --out")
+            _need(args.overwrite or not any(out.iterdir()), f"{args.out}: already exists (an "
+                  "earlier demo?); choose another --out or pass --overwrite to replace its files")
+
+
+def _output_paths(args) -> tuple[list, list]:
+    """(files, folders) the command will write, for the check before the work."""
+    files = [getattr(args, k, None) for k in ("out", "frames_out", "report", "truth_out")]
+    files = [f for f in files if f]
+    if getattr(args, "plots", None):
+        return files + [Path(args.plots) / n for n in PLOT_NAMES], [args.plots]
+    return files, []
+
+
+def check_outputs(args, robot) -> None:
+    """Refuse now, before the work, what the final write would refuse."""
+    from kincal.export.safe_write import check_outputs as check_targets
+
+    files, dirs = _output_paths(args)
+    inputs = ("data", "candidates", "measured", "frames")
+    protect = [robot.source] + [getattr(args, k, None) for k in inputs]
+    check_targets(files, overwrite=args.overwrite, protect=[p for p in protect if p], dirs=dirs)

@@ -1,0 +1,45 @@
+"""Checks on a file the user gives as input, before a byte of it is read.
+
+A path to a FIFO, a device (``/dev/zero``, ``/dev/stdin``) or a socket would block or
+never end; a file far larger than any real input would fill the memory. Both are
+refused here with a message that says what was expected, so that readers can trust
+that what they open is a regular file of bounded size.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+from kincal.errors import InputFileError
+
+MAX_DATA_BYTES = 256 * 2**20
+"""Largest data or candidates CSV accepted [bytes]: about 1.5 million rows of 9 columns."""
+
+MAX_JSON_BYTES = 16 * 2**20
+"""Largest FRAMES.json accepted [bytes]; a real one is under 10 kB."""
+
+
+def check_regular_file(path, kind: str, max_bytes: int) -> int:
+    """The size [bytes] of ``path``; raise :class:`InputFileError` unless it is a regular file
+    of at most ``max_bytes``. kind: what the file is, for the message ("data", "URDF")."""
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise InputFileError(f"{kind} file not found: {p}") from None
+    except OSError as exc:
+        raise InputFileError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InputFileError(f"expected a {kind} file, got a directory: {p}")
+    if not stat.S_ISREG(st.st_mode):
+        what = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else
+                "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else
+                "a socket" if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+        raise InputFileError(f"{p}: is {what}; expected a regular {kind} file (save the "
+                             "stream to a file first)")
+    if st.st_size > max_bytes:
+        raise InputFileError(f"{p}: {st.st_size / 2**20:.0f} MB; kincal reads {kind} files of "
+                             f"at most {max_bytes // 2**20} MB")
+    return st.st_size
