@@ -381,7 +381,7 @@ def test_api_accepts_sequences_where_tuples_are_documented(robot_and_data):
     ({"fix": None}, "fix must be a sequence"),
     ({"fix": [1, 2]}, "fix must hold names"),
     ({"lamda": 1}, "unknown option(s) lamda"),
-    ({"method": "ls", "fix": ["base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
+    ({"model": "mdh", "method": "ls", "fix": ["base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
                               "tool.x", "tool.y", "tool.z", *(f"joint_{i}.{p}" for i in range(1, 7)
                                                               for p in ("a", "alpha", "d", "theta"))]},
      "nothing to fit"),

@@ -62,9 +62,12 @@ class CellFrames:
     @classmethod
     def read(cls, path) -> "CellFrames":
         """From a FRAMES.json file."""
+        from kincal.input_files import MAX_JSON_BYTES, check_regular_file
+
         path = Path(path)
-        if not path.is_file():
+        if not path.exists():
             raise InputFileError(f"frames file not found: {path}")
+        check_regular_file(path, "frames", MAX_JSON_BYTES)  # no FIFO, device or huge file
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, ValueError) as exc:

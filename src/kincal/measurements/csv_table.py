@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import csv
 import math
+import itertools
 import os
 import re
 import warnings
+from array import array
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -106,76 +108,72 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     if path.is_dir():
         raise InputFileError(f"expected a CSV file, got a directory: {path}")
     check_regular_file(path, f"{kind} CSV", MAX_DATA_BYTES)  # no FIFO, /dev/zero, 10 GB file
-    # the size is bounded above, so the file is read whole: dialect sniffing and the
-    # one-call conversion of a well-formed body need all of it
+    # Streamed: each row is converted as it is read (8 bytes per wanted cell kept), and the
+    # first bad cell stops the reading, however long the file; the separator is sniffed
+    # from the header line.
+    flat, lines = array("d"), array("q")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            lines = list(_content_lines(fh))
-        header_line = next((ln for ln in lines if ln.strip()), "")
-        separator = sniff_separator(header_line)
-        reader = csv.reader(lines, delimiter=separator)
-        table = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
+            content = _content_lines(fh)
+            pending = []
+            for ln in content:  # blank and comment lines before the header
+                pending.append(ln)
+                if ln.strip():
+                    break
+            separator = sniff_separator(pending[-1] if pending else "")
+            reader = csv.reader(itertools.chain(pending, content), delimiter=separator)
+            rows = ((reader.line_num, row) for row in reader if any(c.strip() for c in row))
+            first = next(rows, None)
+            if first is None:
+                raise DataError(f"{path}: the file is empty; expected a header with "
+                                f"{', '.join(required)}")
+            header = [h.strip() for h in first[1]]
+            dupes = sorted({h for h in header if header.count(h) > 1})
+            if dupes:
+                raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
+            missing = [c for c in required if c not in header]
+            if missing:
+                extra = [h for h in header if h not in required]
+                hints = "".join(_column_hint(m, extra) for m in missing)
+                named = [f"{m} (for {aliases[m]})" if m in aliases else m for m in missing]
+                if all(_is_number(h) for h in header):  # e.g. numpy.savetxt writes "# a,b,c"
+                    hints += (f" Line {first[0]} holds numbers, not column names: the header "
+                              "is missing (or commented out with '#').")
+                raise DataError(f"{path}: missing column(s) {', '.join(named)}.{hints} Expected "
+                                f"{expected + ': ' if expected else ''}{', '.join(required)}; "
+                                f"the header has {listing(header)}")
+            wanted = required + [c for c in optional if c in header and c not in required]
+            cols = [header.index(c) for c in wanted]
+            for line, row in rows:
+                if len(row) != len(header):
+                    hint = (f" (decimal commas? {_DECIMAL_COMMA_HINT})"
+                            if separator == "," and len(row) > len(header) else "")
+                    raise DataError(f"{path}, line {line}: {len(row)} cells, the header has "
+                                    f"{len(header)}{hint}")
+                for c in cols:
+                    cell = row[c].strip()
+                    try:
+                        v = float(cell)
+                    except ValueError:
+                        v = math.nan
+                    if not math.isfinite(v):
+                        what = "an empty cell" if cell == "" else repr(cell)
+                        if _DECIMAL_COMMA.match(cell):
+                            raise DataError(f"{path}, line {line}, column {header[c]!r}: {what} "
+                                            f"has a decimal comma; {_DECIMAL_COMMA_HINT}")
+                        raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; "
+                                        "expected a finite number")
+                    flat.append(v)
+                lines.append(line)
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputFileError(f"cannot read {path}: {exc}") from exc
-    if not table:
-        raise DataError(f"{path}: the file is empty; expected a header with {', '.join(required)}")
-    header = [h.strip() for h in table[0][1]]
-    dupes = sorted({h for h in header if header.count(h) > 1})
-    if dupes:
-        raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
-    missing = [c for c in required if c not in header]
-    if missing:
-        extra = [h for h in header if h not in required]
-        hints = "".join(_column_hint(m, extra) for m in missing)
-        named = [f"{m} (for {aliases[m]})" if m in aliases else m for m in missing]
-        if all(_is_number(h) for h in header):  # e.g. numpy.savetxt writes "# a,b,c"
-            hints += (f" Line {table[0][0]} holds numbers, not column names: the header is "
-                      "missing (or commented out with '#').")
-        raise DataError(f"{path}: missing column(s) {', '.join(named)}.{hints} Expected "
-                        f"{expected + ': ' if expected else ''}{', '.join(required)}; the header "
-                        f"has {listing(header)}")
-    if len(table) == 1:
+    if not lines:
         raise DataError(f"{path}: a header but no {rows_name}")
-    wanted = required + [c for c in optional if c in header and c not in required]
-    cols = [header.index(c) for c in wanted]
-    values = _fast_values(table[1:], cols, len(header))
-    for r, (line, row) in enumerate(table[1:] if values is None else ()):
-        if r == 0:
-            values = np.empty((len(table) - 1, len(cols)))  # cell by cell, to name the bad one
-        if len(row) != len(header):
-            hint = (f" (decimal commas? {_DECIMAL_COMMA_HINT})"
-                    if separator == "," and len(row) > len(header) else "")
-            raise DataError(f"{path}, line {line}: {len(row)} cells, the header has "
-                            f"{len(header)}{hint}")
-        for k, c in enumerate(cols):
-            cell = row[c].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                v = math.nan
-            if not math.isfinite(v):
-                what = "an empty cell" if cell == "" else repr(cell)
-                if _DECIMAL_COMMA.match(cell):
-                    raise DataError(f"{path}, line {line}, column {header[c]!r}: {what} has a "
-                                    f"decimal comma; {_DECIMAL_COMMA_HINT}")
-                raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; expected a "
-                                "finite number")
-            values[r, k] = v
     if separator != ",":
         warnings.warn(f"{path}: columns separated by {SEPARATORS[separator]} (read from the "
                       "header line)", KincalNote)
+    values = np.frombuffer(flat, dtype=float).reshape(len(lines), len(cols)).copy()
     return Columns(path, {c: values[:, k] for k, c in enumerate(wanted)},
-                   np.array([line for line, _ in table[1:]]), tuple(header), separator)
+                   np.array(lines, dtype=int), tuple(header), separator)
 
 
-def _fast_values(body, cols, width) -> np.ndarray | None:
-    """(R, len(cols)) floats of a well-formed body in one conversion, or None if any row or
-    cell is bad (then the caller's cell-by-cell loop finds and names it). numpy parses
-    strings as float() does; 200,000 rows: 4x faster than the loop."""
-    if any(len(row) != width for _, row in body):
-        return None
-    try:
-        values = np.array([[row[c] for c in cols] for _, row in body], dtype=float)
-    except ValueError:
-        return None
-    return values if np.isfinite(values).all() else None
