@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from kincal.errors import KincalWarning
 from kincal.identification.cross_validation import (
     CrossValidation,
 )
 from kincal.identification.options import CalibrationOptions
+from kincal.identification.plausibility import Plausibility, gather, judge
 from kincal.identification.parameters import ParameterSpace
 from kincal.identification.robust import Downweighted
 from kincal.identification.selection import Identifiability
@@ -110,6 +113,7 @@ class CalibrationResult:
     residuals_before: np.ndarray | None = None  # (N, 3) with the start parameters [m]
     order_source: str = ""  # how the samples' acquisition order was known (backlash terms)
     points: np.ndarray | None = None  # (N,) the measured point of each sample (0 = point 1)
+    plausibility: Plausibility | None = None  # the gate's verdict (identification.plausibility)
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident):
@@ -131,11 +135,12 @@ class CalibrationResult:
         corrected = problem.robot.with_joint_frames(problem.mdh.joint_frames(table))
         res_before = problem.position_errors(x_start)
         res = problem.position_errors(x)
-        return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
-                   x, float(lam), cv, ErrorStats.from_errors(res_before),
-                   ErrorStats.from_errors(res), res, sol, ident, problem.mdh,
-                   np.asarray(problem.data.rows), residuals_before=res_before,
-                   order_source=problem.data.order_source, points=problem.data.points)
+        result = cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
+                     x, float(lam), cv, ErrorStats.from_errors(res_before),
+                     ErrorStats.from_errors(res), res, sol, ident, problem.mdh,
+                     np.asarray(problem.data.rows), residuals_before=res_before,
+                     order_source=problem.data.order_source, points=problem.data.points)
+        return replace(result, plausibility=judge(gather(problem, result)))
 
     # ------------------------------------------------------------ accessors
     @property
@@ -232,10 +237,17 @@ class CalibrationResult:
             text = add_fixed_frame(text, tip_link, name, name + "_joint", T_tl @ transform(None, t))
         return text
 
-    def export_urdf(self, path, overwrite: bool = False):
-        """Write the corrected URDF (only chain joint origins differ from the input)."""
+    def export_urdf(self, path, overwrite: bool = False, accept_implausible: bool = False,
+                    accept_unconverged: bool = False):
+        """Write the corrected URDF (only chain joint origins differ from the input).
+
+        An implausible result (see ``plausibility``) raises ImplausibleResultError, an
+        unconverged one NotConvergedError, and nothing is written, unless accepted."""
         from kincal.export.safe_write import write_text_atomic
 
+        if self.plausibility is not None:
+            for message in self.plausibility.check(accept_implausible, accept_unconverged):
+                warnings.warn(message, KincalWarning)
         protect = (self.robot.source,) if self.robot.source is not None else ()
         return write_text_atomic(path, self.corrected_urdf_text(), overwrite=overwrite,
                                  protect=protect)
