@@ -84,6 +84,34 @@ def _read_frames(path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     return np.array(base), np.array(tools), backlash
 
 
+def _chain_from_frames(args) -> None:
+    """Take base and tip from FRAMES.json when not given; refuse a mismatch.
+
+    Frames identified for one chain mean nothing for another: the tool point lives in
+    the recorded tip frame, the measurement frame is placed against the recorded base."""
+    path = Path(args.frames)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return  # _read_frames reports an unreadable file with the expected layout
+    if not isinstance(data, dict):
+        return
+    for role in ("base", "tip"):
+        recorded, given = data.get(f"{role}_frame"), getattr(args, role)
+        if not isinstance(recorded, str):
+            continue  # an older frames file without the chain: nothing to check
+        if given is None:
+            setattr(args, role, recorded)
+        elif given != recorded:
+            from kincal.errors import FrameError
+
+            raise FrameError(f"--{role} {given!r} does not match the {role} frame {recorded!r} "
+                             f"recorded in {path} (its measurement frame and tool point were "
+                             f"identified for {data.get('base_frame')} -> "
+                             f"{data.get('tip_frame')}); use --{role} {recorded} or frames "
+                             "identified for this chain", valid=(recorded,))
+
+
 def _add_common(p, data=True):
     p.add_argument("robot", help="URDF path, 'ec66', or an example-robot-data name (ur10, panda, ...)")
     if data:
@@ -148,6 +176,15 @@ def cmd_calibrate(args) -> int:
     robot = _robot(args)
     data = _measurements(args, robot)
     result = CalibrationProblem(robot, data, _options(args, args.method)).solve()
+    try:  # the plausibility gate: nothing is written for an implausible or unconverged result
+        accepted = result.plausibility.check(args.accept_implausible, args.accept_unconverged,
+                                             refused="nothing is written")
+    except KincalError:
+        if not args.quiet:
+            print(result.summary())
+        raise
+    for message in accepted:
+        warnings.warn(message, KincalWarning)
     edits, moved = result.export_edits()
     text = result.urdf_with_frames(edits.text) if args.add_frames else edits.text
     files = [(args.out, text)]
@@ -179,6 +216,8 @@ def cmd_evaluate(args) -> int:
 
     if bool(args.frames) == bool(args.fit_frames):
         raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
+    if args.frames:
+        _chain_from_frames(args)
     robot = _robot(args)
     data = _measurements(args, robot)
     problem = CalibrationProblem(robot, data, CalibrationOptions(method="frames",
@@ -379,6 +418,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", help="REPORT.json: the whole result")
     p.add_argument("--plots", help="directory for PNG plots")
     p.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    p.add_argument("--accept-implausible", action="store_true",
+                   help="write the outputs even if the plausibility gate finds the result "
+                        "implausible (wrong units, rows, tip or data are the usual causes)")
+    p.add_argument("--accept-unconverged", action="store_true",
+                   help="write the outputs even if the solver did not converge (best iterate)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_calibrate)
 

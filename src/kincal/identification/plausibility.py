@@ -170,31 +170,42 @@ class Plausibility:
     def converged(self) -> bool:
         return self.evidence.converged
 
-    def describe(self) -> str:
-        """The findings as one line (for an error message or a warning)."""
-        parts = [f.line() for f in self.findings if f.kind != "not_converged"]
-        return "; ".join(parts)
+    @property
+    def causes(self) -> tuple[str, ...]:
+        """The likely causes over all findings, most likely first, each once."""
+        out: list[str] = []
+        for f in self.findings:
+            out += [c for c in f.causes if c not in out]
+        return tuple(out)
+
+    def describe(self, n_causes: int = 3) -> str:
+        """The implausibility findings and the likely causes, as one line."""
+        text = "; ".join(f.message for f in self.findings if f.kind != "not_converged")
+        causes = [c for f in self.findings if f.kind != "not_converged" for c in f.causes]
+        causes = list(dict.fromkeys(causes))[:n_causes]
+        return text + (". Likely cause: " + "; or ".join(causes) if causes else "")
 
     def check(self, accept_implausible: bool = False, accept_unconverged: bool = False,
-              what: str = "the corrected URDF") -> list[str]:
-        """Raise unless acceptable; return the warnings for what was accepted knowingly.
+              refused: str = "the corrected URDF is not written") -> list[str]:
+        """Raise unless acceptable; return warnings for what was accepted knowingly.
 
-        Raises ImplausibleResultError (findings first) or NotConvergedError."""
+        Raises ImplausibleResultError (checked first) or NotConvergedError, each carrying
+        this Plausibility; ``refused`` says what the refusal means for the caller.
+        """
         accepted = []
         if not self.plausible:
             if not accept_implausible:
                 raise ImplausibleResultError(
-                    f"implausible calibration, {what} is not written: {self.describe()}. "
-                    "If you are sure, pass --accept-implausible (Python: "
-                    "accept_implausible=True)", self)
-            accepted.append(f"writing an implausible calibration as asked: {self.describe()}")
+                    f"implausible calibration, {refused}: {self.describe()}. If you are sure, "
+                    "pass --accept-implausible (Python: accept_implausible=True)", self)
+            accepted.append(f"accepted an implausible calibration as asked: {self.describe()}")
         if not self.converged:
             nc = next(f for f in self.findings if f.kind == "not_converged")
             if not accept_unconverged:
                 raise NotConvergedError(
-                    f"{nc.line()}; {what} is not written. Pass --accept-unconverged "
-                    "(Python: accept_unconverged=True) to write the best iterate", self)
-            accepted.append(f"writing an unconverged calibration as asked: {nc.message}")
+                    f"{nc.line()}; {refused}. Pass --accept-unconverged (Python: "
+                    "accept_unconverged=True) to keep the best iterate", self)
+            accepted.append(f"accepted an unconverged calibration as asked: {nc.message}")
         return accepted
 
 

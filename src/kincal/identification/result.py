@@ -263,6 +263,10 @@ class CalibrationResult:
                  f"  after:  {self.after.line()}",
                  f"  solver: {self.solve.iterations} iterations, {self.solve.reason}"
                  + ("" if self.converged else "  [NOT CONVERGED]"),
+                 *(["  plausibility gate: IMPLAUSIBLE (" + ", ".join(
+                     f.kind for f in self.plausibility.findings if f.kind != "not_converged")
+                    + "); result.plausibility has the evidence"]
+                   if self.plausibility is not None and not self.plausibility.plausible else []),
                  *([f"  robust loss {self.options.robust}: {len(self.downweighted)} samples "
                     "down-weighted below 0.5: " + ", ".join(
                         f"line {d.row} ({d.error_mm:.3g} mm, weight {d.weight:.2f})"
