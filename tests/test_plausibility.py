@@ -123,9 +123,12 @@ def test_accept_implausible_writes_with_a_warning(ur10_csv, tmp_path, capsys):
     _rewrite(ur10_csv, data, _shuffled)
     out = tmp_path / "c.urdf"
     assert main(["calibrate", "ur10", str(data), "--out", str(out), "--lambda", "1",
-                 "--accept-implausible"]) == 0
+                 "--accept-implausible", "--report", str(tmp_path / "r.json")]) == 0
     captured = capsys.readouterr()
     assert out.is_file()
+    gate = json.loads((tmp_path / "r.json").read_text())["plausibility"]
+    assert gate["plausible"] is False and gate["findings"][0]["kind"] == "residual"
+    assert gate["evidence"]["residual_median_mm"] > 20 * gate["evidence"]["reach_m"]
     assert "plausibility gate: IMPLAUSIBLE (residual" in captured.out
     assert "kincal: warning: accepted an implausible calibration as asked" in captured.err
 
