@@ -25,6 +25,7 @@ from kincal.identification.cross_validation import (
 )
 from kincal.identification.frames_init import initial_frames, point_in_tip
 from kincal.identification.options import CalibrationOptions
+from kincal.identification.plausibility import gather, judge
 from kincal.identification.parameters import MM, ParameterSpace
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import ROBUST_SCALE, Downweighted
@@ -339,7 +340,8 @@ class CalibrationProblem:
             warnings.warn(f"the solver did not converge in {sol.iterations} iterations; the "
                           "result is the best iterate and is flagged not converged", KincalWarning)
         result = CalibrationResult._build(self, sol, lam, cv, ident)
-        return replace(result, downweighted=downweighted)
+        return replace(result, downweighted=downweighted,
+                       plausibility=judge(gather(self, result)))  # the gate's verdict
 
     def _irls(self, sol: SolveSummary, lam: float, rounds: int = 20):
         """Reweight poses by the robust loss until the weights settle (see kincal.robust)."""

@@ -62,13 +62,13 @@ import numpy as np
 
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.measurements.checks import UNIT_RATIO, spread
-from kincal.measurements.point import MeasurementModel
 
 if TYPE_CHECKING:
     from kincal.identification.calibration import CalibrationProblem
     from kincal.identification.result import CalibrationResult
 
 N_CONFIGURATIONS = 300  # joint configurations for the workspace comparison (seeded)
+MAX_UNIT_POSES = 500  # poses for the unit clue (forward kinematics through the robot)
 
 
 @dataclass(frozen=True)
@@ -329,36 +329,35 @@ def reach(chain_m: float, tool_m: float) -> float:
 
 
 def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
-    """The evidence of ``result``, calibrated by ``problem``."""
+    """The evidence of ``result``, calibrated by ``problem``.
+
+    The kinematics are read through the robots themselves (nominal and corrected, the
+    latter being what a URDF export writes), whatever error model was identified."""
     g = problem.robot.geometry
     sp, data = result.space, problem.data
-    L = reach(chain_length(g.joint_frames, g.T_base_tip),
-              float(np.linalg.norm(sp.tools(result.x_start)[0])))
+    tool_start, tool = sp.tools(result.x_start)[0], sp.tools(result.x)[0]
+    L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
     # workspace: seeded configurations over the joint limits (unbounded revolute: a turn)
     span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
     lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
     hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
     q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
-    model = MeasurementModel(problem.mdh, q, np.zeros(q.shape), sp.backlash, None, sp.n_points)
-
-    def tool_points(x):  # in the robot's base frame, backlash in the middle of its play
-        table, _, _ = sp.split(x)
-        return model.predict(sp.join(table, np.zeros(6), sp.tools(x), np.zeros(sp.n_backlash)))
-
-    d = _aligned_distances(tool_points(result.x_start), tool_points(result.x)) * 1e3
+    d = _aligned_distances(_tool_points(problem.robot, q, tool_start),
+                           _tool_points(result.corrected, q, tool)) * 1e3
     corrections = []
     for p in result.parameters:
-        if p.status == "identified" and p.name.rsplit(".", 1)[-1] in ("a", "d", "alpha", "theta"):
+        if p.status == "identified" and sp.is_kinematic[sp.index(p.name)]:
             k, unit = (1e3, "mm") if p.is_length else (180.0 / math.pi, "deg")
             corrections.append((p.name, p.deviation * k, unit))
     # largest first, lengths against the reach and angles in degrees on one footing
     corrections.sort(key=lambda c: -abs(c[1]) / (L * 1e3 if c[2] == "mm" else 180.0))
-    # unit clues, from the first measured point and the nominal tip with the tool guess
-    first = data.points == 0
-    R_tip, p_tip = problem.model.tip_poses(problem.mdh.table)
+    # unit clue: the measured spread against the nominal tip's with the tool guess, on at
+    # most MAX_UNIT_POSES poses spread through the file (a reference forward kinematics)
+    first = np.flatnonzero(data.points == 0)
+    first = first[np.linspace(0, len(first) - 1, min(len(first), MAX_UNIT_POSES)).astype(int)]
     guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
         problem.options.tool_guess, float)
-    s_pred = spread((p_tip + R_tip @ guess)[first])
+    s_pred = spread(_tool_points(problem.robot, data.joint_values[first], guess))
     ratio = spread(data.positions[first]) / s_pred if s_pred >= 1e-3 else float("nan")
     rev = [j for j, k in enumerate(g.kinds) if k == "revolute"]
     angle_max, outside = 0.0, False
@@ -380,3 +379,9 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         angle_unit=data.angle_unit, off_chain_columns=off_chain,
         converged=bool(result.converged), iterations=int(result.solve.iterations),
         method=problem.options.method)
+
+
+def _tool_points(robot, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
+    """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q."""
+    T = robot.tip_poses(q)
+    return T[:, :3, 3] + T[:, :3, :3] @ tool

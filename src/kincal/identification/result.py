@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -14,7 +14,7 @@ from kincal.identification.cross_validation import (
     CrossValidation,
 )
 from kincal.identification.options import CalibrationOptions
-from kincal.identification.plausibility import Plausibility, gather, judge
+from kincal.identification.plausibility import Plausibility
 from kincal.identification.parameters import ParameterSpace
 from kincal.identification.robust import Downweighted
 from kincal.identification.selection import Identifiability
@@ -135,12 +135,11 @@ class CalibrationResult:
         corrected = problem.robot.with_joint_frames(problem.mdh.joint_frames(table))
         res_before = problem.position_errors(x_start)
         res = problem.position_errors(x)
-        result = cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
-                     x, float(lam), cv, ErrorStats.from_errors(res_before),
-                     ErrorStats.from_errors(res), res, sol, ident, problem.mdh,
-                     np.asarray(problem.data.rows), residuals_before=res_before,
-                     order_source=problem.data.order_source, points=problem.data.points)
-        return replace(result, plausibility=judge(gather(problem, result)))
+        return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
+                   x, float(lam), cv, ErrorStats.from_errors(res_before),
+                   ErrorStats.from_errors(res), res, sol, ident, problem.mdh,
+                   np.asarray(problem.data.rows), residuals_before=res_before,
+                   order_source=problem.data.order_source, points=problem.data.points)
 
     # ------------------------------------------------------------ accessors
     @property
