@@ -25,8 +25,8 @@ from kincal.identification.cross_validation import (
 )
 from kincal.identification.frames_init import initial_frames, point_in_tip
 from kincal.identification.options import CalibrationOptions
-from kincal.identification.plausibility import gather, judge
 from kincal.identification.parameters import MM, ParameterSpace
+from kincal.identification.plausibility import gather, judge
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import ROBUST_SCALE, Downweighted
 from kincal.identification.robust import weights as robust_weights

@@ -14,8 +14,8 @@ from kincal.identification.cross_validation import (
     CrossValidation,
 )
 from kincal.identification.options import CalibrationOptions
-from kincal.identification.plausibility import Plausibility
 from kincal.identification.parameters import ParameterSpace
+from kincal.identification.plausibility import Plausibility
 from kincal.identification.robust import Downweighted
 from kincal.identification.selection import Identifiability
 from kincal.identification.solver import SolveSummary
