@@ -89,6 +89,8 @@ def _chain_from_frames(args) -> None:
 
     Frames identified for one chain mean nothing for another: the tool point lives in
     the recorded tip frame, the measurement frame is placed against the recorded base."""
+    import json
+
     path = Path(args.frames)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
