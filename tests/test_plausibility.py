@@ -108,6 +108,8 @@ def test_calibrate_refuses_and_writes_nothing(ur10_csv, tmp_path, capsys, change
     line = _error_line(capsys)
     assert "implausible calibration, nothing is written" in line
     assert cause in line, line
+    if "read as" in cause:  # a sure unit clue is named alone, once
+        assert line.count("Likely cause") == 1 and line.count(cause) == 1
     assert "--accept-implausible" in line
     assert _snapshot(tmp_path) == before
 

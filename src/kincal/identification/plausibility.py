@@ -190,7 +190,10 @@ class Plausibility:
     def describe(self, n_causes: int = 3) -> str:
         """The implausibility findings and the likely causes, as one line."""
         text = "; ".join(f.message for f in self.findings if f.kind != "not_converged")
-        causes = [c for f in self.findings if f.kind != "not_converged" for c in f.causes]
+        # a confident unit clue explains everything else: name it alone
+        units = [f for f in self.findings if f.kind in ("length_unit", "angle_unit")]
+        causes = [c for f in (units or self.findings) if f.kind != "not_converged"
+                  for c in f.causes]
         causes = list(dict.fromkeys(causes))[:n_causes]
         return text + (". Likely cause: " + "; or ".join(causes) if causes else "")
 
@@ -272,7 +275,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
         out.append(Finding("angle_unit", f"revolute joint values reach {ev.angle_max:.4g} rad"
                            + (", outside the URDF limits" if ev.angle_outside else ""),
                            ev.angle_max, 4 * math.pi, "rad",
-                           causes=("joint values in degrees read as radians (--angle-unit deg)",)))
+                           causes=tuple(c for c in _unit_causes(ev) if "degrees" in c)))
     if ev.residual_median_mm > th.residual * L_mm:
         out.append(Finding(
             "residual", f"the position error after calibration is {ev.residual_median_mm:.4g} mm "
