@@ -339,3 +339,16 @@ def test_reach_and_alignment_helpers():
     R = rotz(0.4) @ rotx(-1.1)
     assert np.max(_aligned_distances(A, A @ R.T + [1.0, 2.0, 3.0])) < 1e-12
     assert np.max(_aligned_distances(A, A * 1.1)) > 0.01
+
+
+def test_joint_columns_off_the_chain_are_pointed_out(ur10_csv, tmp_path, capsys):
+    # UR10 data (tool on the last axis) with the tip one link short fit well: turning the
+    # last joint does not move the point. Written, with a warning naming the columns.
+    out = tmp_path / "c.urdf"
+    assert main(["calibrate", "ur10", str(ur10_csv), "--tip", "wrist_2_link", "--out",
+                 str(out), "--lambda", "1"]) == 0
+    assert out.is_file()
+    assert "URDF joints off the chain (wrist_3_joint)" in capsys.readouterr().err
+    assert not judge(_evidence(off_chain_columns=("j7",))).findings
+    assert judge(_evidence(off_chain_columns=("j7",))).notes
+    assert not judge(_evidence(off_chain_columns=("j7",), residual_median_mm=50)).notes

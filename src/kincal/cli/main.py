@@ -185,7 +185,7 @@ def cmd_calibrate(args) -> int:
         if not args.quiet:
             print(result.summary())
         raise
-    for message in accepted:
+    for message in accepted + list(result.plausibility.notes):
         warnings.warn(message, KincalWarning)
     edits, moved = result.export_edits()
     text = result.urdf_with_frames(edits.text) if args.add_frames else edits.text

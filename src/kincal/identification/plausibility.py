@@ -162,6 +162,7 @@ class Plausibility:
     evidence: Evidence
     findings: tuple[Finding, ...]
     thresholds: Thresholds = Thresholds()
+    notes: tuple[str, ...] = ()  # observations that do not refuse (printed as warnings)
 
     @property
     def plausible(self) -> bool:
@@ -308,7 +309,15 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                      "(use --method l2)") if ev.method == "ls" else
                     "data that do not fit the model (see the residual), or a very "
                     "ill-conditioned problem",)))
-    return Plausibility(ev, tuple(out), th)
+    notes = ()
+    if ev.off_chain_columns and not any(f.kind == "residual" for f in out):
+        # the data fit, yet name joints the chain leaves out: a tip short of the data's,
+        # harmless only if those joints cannot move the measured point (e.g. a tool on
+        # the last axis), so say it without refusing
+        notes = (f"the data file has columns for URDF joints off the chain "
+                 f"({', '.join(ev.off_chain_columns[:6])}), ignored: if they move the "
+                 "measured point, the tip frame does not match the data (check --tip)",)
+    return Plausibility(ev, tuple(out), th, notes)
 
 
 # ------------------------------------------------------------------ gather
