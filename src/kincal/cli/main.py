@@ -92,6 +92,8 @@ def _chain_from_frames(args) -> None:
     import json
 
     path = Path(args.frames)
+    if not path.is_file():
+        return  # missing, a folder or a device: the frames reader says what is wrong
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
