@@ -59,6 +59,24 @@ class ExportError(KincalError):
     """The corrected URDF or frames file could not be written."""
 
 
+class ImplausibleResultError(KincalError):
+    """A calibration whose corrections or residuals are implausible (wrong units, rows,
+    tip or data); nothing is written. ``plausibility`` holds the findings and evidence."""
+
+    def __init__(self, message: str, plausibility=None):
+        super().__init__(message)
+        self.plausibility = plausibility
+
+
+class NotConvergedError(KincalError):
+    """A calibration whose solver did not converge; nothing is written unless accepted.
+    ``plausibility`` holds the evidence."""
+
+    def __init__(self, message: str, plausibility=None):
+        super().__init__(message)
+        self.plausibility = plausibility
+
+
 def suggest(name: str, valid, n: int = 3) -> str:
     """A ' Did you mean ...?' hint for a misspelled ``name`` among ``valid``."""
     import difflib

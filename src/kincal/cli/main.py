@@ -132,6 +132,38 @@ def _read_frames(path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     return frames.base, frames.tools, frames.backlash
 
 
+def _chain_from_frames(args) -> None:
+    """Take base and tip from FRAMES.json when not given; refuse a mismatch.
+
+    Frames identified for one chain mean nothing for another: the tool point lives in
+    the recorded tip frame, the measurement frame is placed against the recorded base."""
+    import json
+
+    path = Path(args.frames)
+    if not path.is_file():
+        return  # missing, a folder or a device: the frames reader says what is wrong
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return  # _read_frames reports an unreadable file with the expected layout
+    if not isinstance(data, dict):
+        return
+    for role in ("base", "tip"):
+        recorded, given = data.get(f"{role}_frame"), getattr(args, role)
+        if not isinstance(recorded, str):
+            continue  # an older frames file without the chain: nothing to check
+        if given is None:
+            setattr(args, role, recorded)
+        elif given != recorded:
+            from kincal.errors import FrameError
+
+            raise FrameError(f"--{role} {given!r} does not match the {role} frame {recorded!r} "
+                             f"recorded in {path} (its measurement frame and tool point were "
+                             f"identified for {data.get('base_frame')} -> "
+                             f"{data.get('tip_frame')}); use --{role} {recorded} or frames "
+                             "identified for this chain", valid=(recorded,))
+
+
 def _add_common(p, data=True):
     p.add_argument("robot", help="URDF path, 'ec66', or an example-robot-data name (ur10, panda, ...)")
     if data:
@@ -281,6 +313,15 @@ def cmd_calibrate(args) -> int:
                 options.solver.progress.close()
     for w in caught:  # and passed on to be printed as usual
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    try:  # the plausibility gate: nothing is written for an implausible or unconverged result
+        accepted = result.plausibility.check(args.accept_implausible, args.accept_unconverged,
+                                             refused="nothing is written")
+    except KincalError:
+        if not args.quiet:
+            print(result.summary())
+        raise
+    for message in accepted + list(result.plausibility.notes):
+        warnings.warn(message, KincalWarning)
     amap = None
     if targets or args.html:
         from kincal.planning.accuracy_map import result_accuracy_map
@@ -346,6 +387,8 @@ def cmd_evaluate(args) -> int:
         return kinds.evaluate(args)
     if bool(args.frames) == bool(args.fit_frames):
         raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
+    if args.frames:
+        _chain_from_frames(args)
     robot = _robot(args)
     check_outputs(args, robot)
     data = _measurements(args, robot)
@@ -761,6 +804,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="one self-contained HTML report (plots embedded, opens offline)")
     _add_accuracy_options(p)
     p.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    p.add_argument("--accept-implausible", action="store_true",
+                   help="write the outputs even if the plausibility gate finds the result "
+                        "implausible (wrong units, rows, tip or data are the usual causes)")
+    p.add_argument("--accept-unconverged", action="store_true",
+                   help="write the outputs even if the solver did not converge (best iterate)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_calibrate)
 

@@ -115,6 +115,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                                     for d in result.downweighted]},
         "residuals": {"row": result.rows, "point": result.points, "error_mm": errors_mm,
                       "dx_dy_dz_mm": result.residuals * 1e3},
+        "plausibility": None if result.plausibility is None else result.plausibility.as_dict(),
     }
     return _clean(out)
 

@@ -29,6 +29,7 @@ from kincal.identification.cross_validation import (
 from kincal.identification.frames_init import initial_frames, point_in_tip
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.parameters import MM, ParameterSpace
+from kincal.identification.plausibility import gather, judge
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import ROBUST_SCALE, Downweighted
 from kincal.identification.robust import weights as robust_weights
@@ -425,7 +426,8 @@ class CalibrationProblem:
                           "result is the best iterate and is flagged not converged", KincalWarning)
         result = CalibrationResult._build(self, sol, lam, cv, ident, evidence)
         return replace(result, downweighted=downweighted,
-                       penalty_choice=f"{how}, chosen automatically: {why}" if why else "")
+                       penalty_choice=f"{how}, chosen automatically: {why}" if why else "",
+                       plausibility=judge(gather(self, result)))  # the gate's verdict
 
     def _irls(self, sol: SolveSummary, lam: float, rounds: int = 20):
         """Reweight poses by the robust loss until the weights settle (see kincal.robust)."""

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from kincal.errors import KincalWarning
 from kincal.identification.cross_validation import (
     CrossValidation,
 )
 from kincal.identification.evidence import EvidenceFit
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.parameters import ParameterSpace
+from kincal.identification.plausibility import Plausibility
 from kincal.identification.robust import Downweighted
 from kincal.identification.selection import Identifiability
 from kincal.identification.solver import SolveSummary
@@ -147,6 +150,7 @@ class CalibrationResult:
     approach: np.ndarray | None = None  # (N, n) approach directions of the samples (+1/-1/0)
     evidence: EvidenceFit | None = None
     penalty_choice: str = ""  # with lambda "auto": which estimator ran, and why
+    plausibility: Plausibility | None = None  # the gate's verdict (identification.plausibility)
 
     @classmethod
     def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
@@ -274,10 +278,17 @@ class CalibrationResult:
             text = add_fixed_frame(text, tip_link, name, name + "_joint", T_tl @ transform(None, t))
         return text
 
-    def export_urdf(self, path, overwrite: bool = False):
-        """Write the corrected URDF (only chain joint origins differ from the input)."""
+    def export_urdf(self, path, overwrite: bool = False, accept_implausible: bool = False,
+                    accept_unconverged: bool = False):
+        """Write the corrected URDF (only chain joint origins differ from the input).
+
+        An implausible result (see ``plausibility``) raises ImplausibleResultError, an
+        unconverged one NotConvergedError, and nothing is written, unless accepted."""
         from kincal.export.safe_write import write_text_atomic
 
+        if self.plausibility is not None:
+            for message in self.plausibility.check(accept_implausible, accept_unconverged):
+                warnings.warn(message, KincalWarning)
         protect = (self.robot.source,) if self.robot.source is not None else ()
         return write_text_atomic(path, self.corrected_urdf_text(), overwrite=overwrite,
                                  protect=protect)
@@ -303,6 +314,10 @@ class CalibrationResult:
                  f"  after:  {self.after.line()}",
                  f"  solver: {self.solve.iterations} iterations, {self.solve.reason}"
                  + ("" if self.converged else "  [NOT CONVERGED]"),
+                 *(["  plausibility gate: IMPLAUSIBLE (" + ", ".join(
+                     f.kind for f in self.plausibility.findings if f.kind != "not_converged")
+                    + "); result.plausibility has the evidence"]
+                   if self.plausibility is not None and not self.plausibility.plausible else []),
                  *([f"  robust loss {self.options.robust}: {len(self.downweighted)} samples "
                     "down-weighted below 0.5: " + ", ".join(
                         f"line {d.row} ({d.error_mm:.3g} mm, weight {d.weight:.2f})"

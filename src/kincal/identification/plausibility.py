@@ -1,0 +1,399 @@
+"""The plausibility gate: is a finished calibration one a URDF should be written from?
+
+Plain numpy. :func:`gather` collects the evidence of a calibration (sizes, residuals, how
+far the corrections move the tool, unit clues) into an :class:`Evidence`; :func:`judge`
+turns it into a frozen :class:`Plausibility` whose findings say what broke which
+threshold, by how much, and the likely causes. ``kincal calibrate`` and
+``CalibrationResult.export_urdf`` refuse an implausible or unconverged result unless the
+user accepts it knowingly.
+
+The yardstick is the arm's **reach** L: the length of the chain at zero joint values
+(first joint origin -> ... -> tip frame origin, summed) plus the distance of the measured
+point from the tip frame, the latter at most max(chain, 1 m) so that a tool point fitted
+from positions in the wrong unit cannot inflate the yardstick.
+
+Criteria (defaults in :class:`Thresholds`), and why:
+
+- **Residual**: the median position error after calibration above 2 % of L. A geometric
+  calibration leaves what the model cannot express plus the instrument's noise: about
+  0.08 mm (6e-5 L) on every simulated arm and design (``kincal simulate``, ec66, ur10,
+  panda, ur3, seeds 0-2, l2 and ls), 1.4 mm median (1.8 mm RMS) on the TIAGo with motion
+  capture and 1.6-2 deg of gear play (0.12 % of L). The broken cases measured leave
+  2.4 % of L or more: UR10 data with a tip two or three links short (2.4 %, 3.6 %), 100 mm
+  noise (7.7-9.4 %), rows shuffled against the positions (8.7-13 %), degrees read as
+  radians (9.3-13 %), millimetres read as metres (over 1000 %). The median, not the RMS,
+  so that a few gross outliers do not refuse a run (they are for ``--robust``).
+- **Corrections**: the tool point of the corrected model, compared with the nominal one
+  over 300 seeded configurations spread over the joint limits (each set rigidly aligned
+  to the other, as the measurement frame is free), moves by more than 10 % of L (RMS).
+  Single parameter deviations are not a usable criterion: plain least squares on good
+  data drifts along weakly determined combinations to 123 mm and 34 deg per parameter
+  while its predictions move by about 1 mm, and the worst good run (ls on 20 mm R-test
+  data, the paper's over-fit) moves the tool by 20 mm RMS = 1.9 % of L over the joint
+  range (TIAGo: 1.0-1.3 %). A UR5 URDF fitted to UR10 data moves it by 21 % (with a
+  0.06 mm residual: only this criterion sees it), degrees read as radians by 45-51 %,
+  shuffled rows by 38-56 % (``python scripts/plausibility_cases.py``). One
+  parameter check remains: an identified length correction above half of L, which no
+  drift measured comes near (9.5 %).
+- **Units** (from :mod:`kincal.measurements.checks`, confident cases only): the measured
+  positions spread 300 times more (or less) than the nominal tip motion (millimetres read
+  as metres gives about 1000; the warning level stays at 30); revolute joint values read
+  as radians beyond 4 pi, or beyond 2 pi + 0.5 and outside the joint's URDF limits
+  (degrees read as radians: the usual 90-180 "rad").
+- **Convergence**: a solver that stopped at its iteration limit. It is reported apart
+  (``accept_unconverged``), because the iterate may fit well (plain LS drifting along a
+  weak direction) or not at all.
+
+Likely causes are inferred, not certain, and messages say so: unit clues first (even
+below the confident level); columns in the data file named after URDF joints off the
+chain (a tip frame that does not match the data); then how much of the measured motion
+the model explains (1 - e_rms^2 / spread^2): below 0.4 the positions barely follow the
+joint values (rows shuffled, or another data file), above it they do but with errors far
+above a calibration's (noise, a wrong tip, a URDF of another robot).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from kincal.errors import ImplausibleResultError, NotConvergedError
+from kincal.measurements.checks import UNIT_RATIO, spread
+
+if TYPE_CHECKING:
+    from kincal.identification.calibration import CalibrationProblem
+    from kincal.identification.result import CalibrationResult
+
+N_CONFIGURATIONS = 300  # joint configurations for the workspace comparison (seeded)
+MAX_UNIT_POSES = 500  # poses for the unit clue (forward kinematics through the robot)
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """Where the gate refuses; see the module notes for the measurements behind each.
+
+    residual: median error after calibration, as a fraction of the reach.
+    change: RMS movement of the tool point by the corrections over the joint range, as a
+        fraction of the reach.
+    length_correction: one identified length correction, as a fraction of the reach.
+    length_ratio: measured / nominal spread of positions beyond which (or below whose
+        inverse) the length unit is surely wrong.
+    explained: fraction of the measured motion the model explains below which the
+        positions are said not to follow the joint values.
+    """
+
+    residual: float = 0.02
+    change: float = 0.10
+    length_correction: float = 0.5
+    length_ratio: float = 10 * UNIT_RATIO
+    explained: float = 0.4
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """The numbers the gate judges (lengths in mm unless named _m, angles in rad).
+
+    corrections: the identified kinematic corrections, largest first (in reach fraction
+        for lengths, in degrees for angles): (name, value in mm or deg, unit).
+    length_ratio: spread of the measured positions / spread of the nominal tool point over
+        the same poses (NaN when the poses barely move it).
+    angle_max: largest |value| of a revolute joint [rad, as read]; angle_outside: whether
+        that value lies outside its joint's URDF limits.
+    off_chain_columns: columns of the data file named after URDF joints not on the chain.
+    """
+
+    reach_m: float
+    residual_median_mm: float
+    residual_rms_mm: float
+    before_rms_mm: float
+    spread_mm: float
+    change_rms_mm: float
+    change_max_mm: float
+    corrections: tuple[tuple[str, float, str], ...] = ()
+    length_ratio: float = float("nan")
+    length_unit: str = "m"
+    angle_max: float = 0.0
+    angle_outside: bool = False
+    angle_unit: str = "rad"
+    off_chain_columns: tuple[str, ...] = ()
+    converged: bool = True
+    iterations: int = 0
+    method: str = "l2"
+
+    @property
+    def explained(self) -> float:
+        """Fraction of the measured motion (variance about the centroid) the model explains."""
+        if self.spread_mm <= 0:
+            return float("nan")
+        return 1.0 - (self.residual_rms_mm / self.spread_mm) ** 2
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One broken criterion: what, how large, against which threshold, and why (likely).
+
+    kind: "residual", "corrections", "length_correction", "length_unit", "angle_unit" or
+    "not_converged". value and threshold share ``unit``. parameters: the parameters the
+    finding is about (largest first). causes: likely causes, most likely first.
+    """
+
+    kind: str
+    message: str
+    value: float
+    threshold: float
+    unit: str
+    parameters: tuple[str, ...] = ()
+    causes: tuple[str, ...] = ()
+
+    def line(self) -> str:
+        text = self.message
+        if self.causes:
+            text += "; likely cause: " + "; or ".join(self.causes)
+        return text
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """The gate's verdict on one calibration, with its evidence."""
+
+    evidence: Evidence
+    findings: tuple[Finding, ...]
+    thresholds: Thresholds = Thresholds()
+    notes: tuple[str, ...] = ()  # observations that do not refuse (printed as warnings)
+
+    @property
+    def plausible(self) -> bool:
+        """No finding other than non-convergence."""
+        return not any(f.kind != "not_converged" for f in self.findings)
+
+    @property
+    def converged(self) -> bool:
+        return self.evidence.converged
+
+    def as_dict(self) -> dict:
+        """For REPORT.json: verdict, findings, evidence and thresholds."""
+        return {"plausible": self.plausible, "converged": self.converged,
+                "findings": [asdict(f) for f in self.findings],
+                "evidence": {**asdict(self.evidence), "explained": self.evidence.explained},
+                "thresholds": asdict(self.thresholds)}
+
+    @property
+    def causes(self) -> tuple[str, ...]:
+        """The likely causes over all findings, most likely first, each once."""
+        out: list[str] = []
+        for f in self.findings:
+            out += [c for c in f.causes if c not in out]
+        return tuple(out)
+
+    def describe(self, n_causes: int = 3) -> str:
+        """The implausibility findings and the likely causes, as one line."""
+        text = "; ".join(f.message for f in self.findings if f.kind != "not_converged")
+        # a confident unit clue explains everything else: name it alone
+        units = [f for f in self.findings if f.kind in ("length_unit", "angle_unit")]
+        causes = [c for f in (units or self.findings) if f.kind != "not_converged"
+                  for c in f.causes]
+        causes = list(dict.fromkeys(causes))[:n_causes]
+        return text + (". Likely cause: " + "; or ".join(causes) if causes else "")
+
+    def check(self, accept_implausible: bool = False, accept_unconverged: bool = False,
+              refused: str = "the corrected URDF is not written") -> list[str]:
+        """Raise unless acceptable; return warnings for what was accepted knowingly.
+
+        Raises ImplausibleResultError (checked first) or NotConvergedError, each carrying
+        this Plausibility; ``refused`` says what the refusal means for the caller.
+        """
+        accepted = []
+        if not self.plausible:
+            if not accept_implausible:
+                raise ImplausibleResultError(
+                    f"implausible calibration, {refused}: {self.describe()}. If you are sure, "
+                    "pass --accept-implausible (Python: accept_implausible=True)", self)
+            accepted.append(f"accepted an implausible calibration as asked: {self.describe()}")
+        if not self.converged:
+            nc = next(f for f in self.findings if f.kind == "not_converged")
+            if not accept_unconverged:
+                raise NotConvergedError(
+                    f"{nc.line()}; {refused}. Pass --accept-unconverged (Python: "
+                    "accept_unconverged=True) to keep the best iterate", self)
+            accepted.append(f"accepted an unconverged calibration as asked: {nc.message}")
+        return accepted
+
+
+# ------------------------------------------------------------------- judge
+def _unit_causes(ev: Evidence) -> list[str]:
+    out = []
+    r = ev.length_ratio
+    if math.isfinite(r) and r > UNIT_RATIO:
+        out.append(f"positions in millimetres read as metres (they spread {r:.0f}x more than "
+                   "the robot's tip moves; --length-unit mm)")
+    elif math.isfinite(r) and r < 1.0 / (10 * UNIT_RATIO):
+        out.append(f"positions in metres read as millimetres (they spread {1 / r:.0f}x less "
+                   "than the robot's tip moves)" if ev.length_unit == "mm" else
+                   f"positions in the wrong unit (they spread {1 / r:.0f}x less than the "
+                   "robot's tip moves)")
+    if ev.angle_unit == "rad" and ev.angle_max > 2 * math.pi + 0.5:
+        out.append(f"joint values in degrees read as radians (a revolute joint reaches "
+                   f"{ev.angle_max:.4g} rad; --angle-unit deg)")
+    return out
+
+
+def _fit_causes(ev: Evidence, th: Thresholds) -> list[str]:
+    out = _unit_causes(ev)
+    if ev.off_chain_columns:
+        out.append("a tip (or base) frame that does not match the data: the file has columns "
+                   f"for URDF joints off the chain ({', '.join(ev.off_chain_columns[:6])}); "
+                   "check --tip")
+    e = ev.explained
+    if math.isfinite(e) and e < th.explained:
+        out.append(f"positions that do not match the joint rows (rows shuffled or a different "
+                   f"data file): the model explains only {max(e, 0.0):.0%} of their motion")
+        out.append("noise as large as the motion itself")
+    else:
+        out.append("measurement noise far above a calibration's (the model explains "
+                   f"{e:.0%} of the motion, the rest is error)" if math.isfinite(e) else
+                   "measurement noise far above a calibration's")
+        if not ev.off_chain_columns:
+            out.append("a tip frame that does not match the data (check --tip and "
+                       "--tool-offset)")
+        out.append("a URDF of another robot, or positions not matching the joint rows")
+    return out
+
+
+def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
+    """The findings of the gate on ``ev`` (see the module notes for the criteria)."""
+    L_mm = ev.reach_m * 1e3
+    out = []
+    r = ev.length_ratio
+    if math.isfinite(r) and (r > th.length_ratio or r < 1.0 / th.length_ratio):
+        out.append(Finding("length_unit", f"the measured positions spread {r:.4g}x as much as "
+                           "the robot's tip moves", r, th.length_ratio, "ratio",
+                           causes=tuple(_unit_causes(ev)[:1])))
+    if ev.angle_unit == "rad" and (ev.angle_max > 4 * math.pi or (
+            ev.angle_max > 2 * math.pi + 0.5 and ev.angle_outside)):
+        out.append(Finding("angle_unit", f"revolute joint values reach {ev.angle_max:.4g} rad"
+                           + (", outside the URDF limits" if ev.angle_outside else ""),
+                           ev.angle_max, 4 * math.pi, "rad",
+                           causes=tuple(c for c in _unit_causes(ev) if "degrees" in c)))
+    if ev.residual_median_mm > th.residual * L_mm:
+        out.append(Finding(
+            "residual", f"the position error after calibration is {ev.residual_median_mm:.4g} mm "
+            f"(median; RMS {ev.residual_rms_mm:.4g} mm), above {th.residual:.0%} of the arm's "
+            f"reach ({th.residual * L_mm:.3g} mm of {L_mm:.0f} mm): a geometric calibration "
+            "leaves a fraction of a millimetre to a few", ev.residual_median_mm,
+            th.residual * L_mm, "mm", causes=tuple(_fit_causes(ev, th))))
+    big = ", ".join(f"{n} {v:+.4g} {u}" for n, v, u in ev.corrections[:4])
+    names = tuple(n for n, _, _ in ev.corrections[:4])
+    if ev.change_rms_mm > th.change * L_mm:
+        out.append(Finding(
+            "corrections", f"the corrections move the tool point by {ev.change_rms_mm:.4g} mm "
+            f"RMS (max {ev.change_max_mm:.4g} mm) over the joint range, above {th.change:.0%} of "
+            f"the reach ({th.change * L_mm:.3g} mm); largest: {big}", ev.change_rms_mm,
+            th.change * L_mm, "mm", names,
+            causes=tuple(_unit_causes(ev)) + ("a URDF that does not describe the measured robot "
+                                              "or a tip frame that does not match the data",)))
+    lengths = [(n, v) for n, v, u in ev.corrections if u == "mm"]
+    if lengths and abs(lengths[0][1]) > th.length_correction * L_mm:
+        n, v = lengths[0]
+        out.append(Finding(
+            "length_correction", f"{n} is corrected by {v:+.4g} mm, more than "
+            f"{th.length_correction:.0%} of the reach ({L_mm:.0f} mm)", abs(v),
+            th.length_correction * L_mm, "mm", (n,), causes=tuple(_fit_causes(ev, th))))
+    if not ev.converged:
+        out.append(Finding(
+            "not_converged", f"the solver did not converge in {ev.iterations} iterations",
+            float(ev.iterations), float(ev.iterations), "iterations",
+            causes=(("plain least squares on data that determine some parameters weakly "
+                     "(use --method l2)") if ev.method == "ls" else
+                    "data that do not fit the model (see the residual), or a very "
+                    "ill-conditioned problem",)))
+    notes = ()
+    if ev.off_chain_columns and not any(f.kind == "residual" for f in out):
+        # the data fit, yet name joints the chain leaves out: a tip short of the data's,
+        # harmless only if those joints cannot move the measured point (e.g. a tool on
+        # the last axis), so say it without refusing
+        notes = (f"the data file has columns for URDF joints off the chain "
+                 f"({', '.join(ev.off_chain_columns[:6])}), ignored: if they move the "
+                 "measured point, the tip frame does not match the data (check --tip)",)
+    return Plausibility(ev, tuple(out), th, notes)
+
+
+# ------------------------------------------------------------------ gather
+def _aligned_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """(M,) distances between point sets A and B after the best rigid motion of B onto A."""
+    a, b = A - A.mean(axis=0), B - B.mean(axis=0)
+    U, _, Vt = np.linalg.svd(b.T @ a)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return np.linalg.norm(a - b @ (U @ D @ Vt), axis=1)
+
+
+def chain_length(joint_frames: np.ndarray, T_base_tip: np.ndarray) -> float:
+    """[m] summed distances first joint -> ... -> last joint -> tip frame, at zero values."""
+    pts = np.vstack([joint_frames[:, :3, 3], T_base_tip[:3, 3]])
+    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+
+
+def reach(chain_m: float, tool_m: float) -> float:
+    """[m] the gate's yardstick (module notes): the chain plus the capped tool distance."""
+    return chain_m + min(tool_m, max(chain_m, 1.0))
+
+
+def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
+    """The evidence of ``result``, calibrated by ``problem``.
+
+    The kinematics are read through the robots themselves (nominal and corrected, the
+    latter being what a URDF export writes), whatever error model was identified."""
+    g = problem.robot.geometry
+    sp, data = result.space, problem.data
+    tool_start, tool = sp.tools(result.x_start)[0], sp.tools(result.x)[0]
+    L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
+    # workspace: seeded configurations over the joint limits (unbounded revolute: a turn)
+    span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
+    lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
+    hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
+    q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
+    d = _aligned_distances(_tool_points(problem.robot, q, tool_start),
+                           _tool_points(result.corrected, q, tool)) * 1e3
+    corrections = []
+    for p in result.parameters:
+        if p.status == "identified" and sp.is_kinematic[sp.index(p.name)]:
+            k, unit = (1e3, "mm") if p.is_length else (180.0 / math.pi, "deg")
+            corrections.append((p.name, p.deviation * k, unit))
+    # largest first, lengths against the reach and angles in degrees on one footing
+    corrections.sort(key=lambda c: -abs(c[1]) / (L * 1e3 if c[2] == "mm" else 180.0))
+    # unit clue: the measured spread against the nominal tip's with the tool guess, on at
+    # most MAX_UNIT_POSES poses spread through the file (a reference forward kinematics)
+    first = np.flatnonzero(data.points == 0)
+    first = first[np.linspace(0, len(first) - 1, min(len(first), MAX_UNIT_POSES)).astype(int)]
+    guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
+        problem.options.tool_guess, float)
+    s_pred = spread(_tool_points(problem.robot, data.joint_values[first], guess))
+    ratio = spread(data.positions[first]) / s_pred if s_pred >= 1e-3 else float("nan")
+    rev = [j for j, k in enumerate(g.kinds) if k == "revolute"]
+    angle_max, outside = 0.0, False
+    if rev:
+        qa = np.abs(data.joint_values[:, rev])
+        i, j = np.unravel_index(int(np.argmax(qa)), qa.shape)
+        angle_max = float(qa[i, j])
+        v = data.joint_values[i, rev[j]]
+        outside = bool(v < g.lower[rev[j]] - 1e-6 or v > g.upper[rev[j]] + 1e-6)
+    frames = set(problem.robot.frame_names())
+    off_chain = tuple(c for c in data.ignored_columns if c in frames and c not in g.joint_names)
+    errors = np.linalg.norm(result.residuals, axis=1) * 1e3
+    return Evidence(
+        reach_m=L, residual_median_mm=float(np.median(errors)), residual_rms_mm=result.after.rms,
+        before_rms_mm=result.before.rms, spread_mm=spread(data.positions) * 1e3,
+        change_rms_mm=float(np.sqrt(np.mean(d ** 2))), change_max_mm=float(d.max()),
+        corrections=tuple(corrections), length_ratio=float(ratio),
+        length_unit=data.length_unit, angle_max=angle_max, angle_outside=outside,
+        angle_unit=data.angle_unit, off_chain_columns=off_chain,
+        converged=bool(result.converged), iterations=int(result.solve.iterations),
+        method=problem.options.method)
+
+
+def _tool_points(robot, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
+    """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q."""
+    T = robot.tip_poses(q)
+    return T[:, :3, 3] + T[:, :3, :3] @ tool

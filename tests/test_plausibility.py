@@ -1,0 +1,354 @@
+"""The plausibility gate: silently wrong calibrations are refused, good ones pass.
+
+CLI cases assert exit 1, one error line naming the likely cause, and that no file in the
+working folder was written or changed (names, bytes and mtimes before and after).
+"""
+
+import csv
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from kincal import Measurements, Robot, calibrate
+from kincal.cli.main import main
+from kincal.errors import ImplausibleResultError, NotConvergedError
+from kincal.identification.plausibility import (
+    Evidence,
+    Thresholds,
+    _aligned_distances,
+    chain_length,
+    judge,
+    reach,
+)
+from kincal.rotations import rotx, rotz
+
+
+# ------------------------------------------------------------------ helpers
+def _snapshot(folder):
+    return {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in sorted(folder.iterdir())}
+
+
+def _error_line(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    errors = [line for line in err if line.startswith("kincal: error:")]
+    assert len(errors) == 1, err
+    assert not any("Traceback" in line for line in err)
+    return errors[0]
+
+
+def _rewrite(src, dst, change):
+    """Copy the CSV ``src`` to ``dst`` with ``change(header, rows)`` applied to its numbers."""
+    with open(src, newline="") as f:
+        rows = list(csv.reader(f))
+    header, values = rows[0], np.array(rows[1:], dtype=float)
+    change(header, values)
+    with open(dst, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        w.writerows([[repr(float(v)) for v in row] for row in values])
+
+
+UR10_JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
+               "wrist_2_joint", "wrist_3_joint")
+
+
+@pytest.fixture(scope="module")
+def ur10_csv(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ur10")
+    assert main(["simulate", "ur10", "--out", str(d / "d.csv"), "--seed", "0"]) == 0
+    return d / "d.csv"
+
+
+def _positions(header):
+    return [header.index(c) for c in "xyz"]
+
+
+def _mm_as_m(header, v):
+    v[:, _positions(header)] *= 1000.0
+
+
+def _deg_as_rad(header, v):
+    v[:, [header.index(j) for j in UR10_JOINTS]] *= 180.0 / math.pi
+
+
+def _shuffled(header, v):
+    p = _positions(header)
+    v[:, p] = v[np.random.default_rng(1).permutation(len(v))][:, p]
+
+
+def _noise_100mm(header, v):
+    v[:, _positions(header)] += np.random.default_rng(2).normal(0.0, 0.1, (len(v), 3))
+
+
+def _unchanged(header, v):
+    pass
+
+
+# -------------------------------------------------------- the silently wrong
+@pytest.mark.parametrize("change, extra, cause", [
+    (_mm_as_m, [], "millimetres read as metres"),
+    (_deg_as_rad, [], "degrees read as radians"),
+    (_shuffled, [], "rows shuffled"),
+    (_unchanged, ["--tip", "forearm_link"], "tip"),
+    (_noise_100mm, [], "noise far above"),
+], ids=["mm-as-m", "deg-as-rad", "shuffled", "wrong-tip", "noise-100mm"])
+def test_calibrate_refuses_and_writes_nothing(ur10_csv, tmp_path, capsys, change, extra, cause):
+    data = tmp_path / "data.csv"
+    _rewrite(ur10_csv, data, change)
+    (tmp_path / "frames.json").write_text("earlier run\n")  # an earlier output, untouched
+    before = _snapshot(tmp_path)
+    code = main(["calibrate", "ur10", str(data), "--out", str(tmp_path / "c.urdf"),
+                 "--frames-out", str(tmp_path / "frames.json"), "--overwrite",
+                 "--report", str(tmp_path / "r.json"), "--plots", str(tmp_path / "plots"),
+                 "--lambda", "1", *extra])
+    assert code == 1
+    line = _error_line(capsys)
+    assert "implausible calibration, nothing is written" in line
+    assert cause in line, line
+    if "read as" in cause:  # a sure unit clue is named alone, once
+        assert line.count("Likely cause") == 1 and line.count(cause) == 1
+    assert "--accept-implausible" in line
+    assert _snapshot(tmp_path) == before
+
+
+def test_good_data_pass_the_gate(ur10_csv, tmp_path, capsys):
+    out = tmp_path / "c.urdf"
+    assert main(["calibrate", "ur10", str(ur10_csv), "--out", str(out), "--lambda", "1"]) == 0
+    assert out.is_file() and "IMPLAUSIBLE" not in capsys.readouterr().out
+
+
+def test_accept_implausible_writes_with_a_warning(ur10_csv, tmp_path, capsys):
+    data = tmp_path / "data.csv"
+    _rewrite(ur10_csv, data, _shuffled)
+    out = tmp_path / "c.urdf"
+    assert main(["calibrate", "ur10", str(data), "--out", str(out), "--lambda", "1",
+                 "--accept-implausible", "--report", str(tmp_path / "r.json")]) == 0
+    captured = capsys.readouterr()
+    assert out.is_file()
+    gate = json.loads((tmp_path / "r.json").read_text())["plausibility"]
+    assert gate["plausible"] is False and gate["findings"][0]["kind"] == "residual"
+    assert gate["evidence"]["residual_median_mm"] > 20 * gate["evidence"]["reach_m"]
+    assert "plausibility gate: IMPLAUSIBLE (residual" in captured.out
+    assert "kincal: warning: accepted an implausible calibration as asked" in captured.err
+
+
+def test_unconverged_is_refused_unless_accepted(ur10_csv, tmp_path, capsys):
+    out = tmp_path / "c.urdf"
+    # an iteration limit of 1 cannot converge: the gate refuses, then accepts on request
+    args = ["calibrate", "ur10", str(ur10_csv), "--out", str(out), "--lambda", "1"]
+    from dataclasses import replace
+
+    import importlib
+
+    cli = importlib.import_module("kincal.cli.main")
+    from kincal.identification.solver import SolverOptions
+
+    options = cli._options
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(cli, "_options", lambda args, method: replace(
+            options(args, method), solver=SolverOptions(max_iterations=1)))
+        before = _snapshot(tmp_path)
+        assert main(args) == 1
+        line = _error_line(capsys)
+        assert "did not converge" in line and "--accept-unconverged" in line
+        assert _snapshot(tmp_path) == before
+        assert main(args + ["--accept-unconverged"]) == 0
+        assert "accepted an unconverged calibration" in capsys.readouterr().err
+    assert out.is_file()
+
+
+# ---------------------------------------------------------------- evaluate
+def test_evaluate_refuses_a_tip_other_than_the_frames(ur10_csv, tmp_path, capsys):
+    frames = tmp_path / "frames.json"
+    assert main(["calibrate", "ur10", str(ur10_csv), "--out", str(tmp_path / "c.urdf"),
+                 "--lambda", "1", "--frames-out", str(frames)]) == 0
+    assert json.loads(frames.read_text())["tip_frame"] == "tool0"
+    capsys.readouterr()
+    before = _snapshot(tmp_path)
+    code = main(["evaluate", str(tmp_path / "c.urdf"), str(ur10_csv), "--frames", str(frames),
+                 "--tip", "wrist_2_link", "--report", str(tmp_path / "e.json")])
+    assert code == 1
+    line = _error_line(capsys)
+    assert "--tip 'wrist_2_link' does not match the tip frame 'tool0' recorded in" in line
+    assert _snapshot(tmp_path) == before
+    # without --tip, the recorded chain is used
+    assert main(["evaluate", str(tmp_path / "c.urdf"), str(ur10_csv), "--frames",
+                 str(frames)]) == 0
+    out = capsys.readouterr().out
+    assert "-> tool0)" in out
+
+
+def test_evaluate_refuses_a_base_other_than_the_frames(ur10_csv, tmp_path, capsys):
+    frames = tmp_path / "frames.json"
+    assert main(["calibrate", "ur10", str(ur10_csv), "--out", str(tmp_path / "c.urdf"),
+                 "--lambda", "1", "--frames-out", str(frames)]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", "ur10", str(ur10_csv), "--frames", str(frames),
+                 "--base", "base_link"]) == 1
+    assert "--base 'base_link' does not match the base frame" in _error_line(capsys)
+
+
+# --------------------------------------------------------------------- API
+def test_export_urdf_refuses_an_implausible_result(ur10_csv, tmp_path):
+    data_path = tmp_path / "data.csv"
+    _rewrite(ur10_csv, data_path, _mm_as_m)
+    robot = Robot.load("ur10")
+    data = Measurements.from_csv(data_path, robot.joint_names)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = calibrate(robot, data, method="l2", lam=1.0)
+    p = result.plausibility
+    assert not p.plausible
+    assert {"length_unit", "residual", "corrections"} <= {f.kind for f in p.findings}
+    assert "millimetres read as metres" in p.causes[0]
+    out = tmp_path / "c.urdf"
+    with pytest.raises(ImplausibleResultError) as exc:
+        result.export_urdf(out)
+    assert exc.value.plausibility is p
+    assert not out.exists()
+    with pytest.warns(UserWarning, match="accepted an implausible"):
+        result.export_urdf(out, accept_implausible=True, accept_unconverged=True)
+    assert out.is_file()
+
+
+def test_gather_on_good_data(ur10_csv):
+    robot = Robot.load("ur10")
+    data = Measurements.from_csv(ur10_csv, robot.joint_names)
+    result = calibrate(robot, data, method="l2", lam=1.0, fix=("elbow_joint.a",))
+    p = result.plausibility
+    assert p.plausible and p.converged and p.findings == ()
+    ev = p.evidence
+    # only identified kinematic parameters are corrections
+    status = {q.name: q.status for q in result.parameters}
+    assert ev.corrections and all(status[n] == "identified" for n, _, _ in ev.corrections)
+    assert "elbow_joint.a" not in [n for n, _, _ in ev.corrections]
+    # UR10 at zero: 1.18 m of chain from the shoulder to tool0, plus the 120 mm tool
+    assert 1.7 < ev.reach_m < 2.0
+    assert ev.residual_median_mm < 0.2 and ev.change_rms_mm < 5.0
+    assert 0.8 < ev.length_ratio < 1.2 and ev.explained > 0.999
+
+
+def test_noise_free_nominal_data_move_nothing():
+    from kincal.planning.simulation import Truth, measure
+    from kincal.models import mdh
+
+    robot = Robot.load("ur10")
+    model = mdh.extract(robot.geometry)
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-2, 2, (40, 6))
+    truth = Truth(model.table, np.array([0.5, 0.2, -0.1, 0.1, 0.2, 0.3]),
+                  np.array([0.03, 0.02, 0.12]))
+    data = measure(model, truth, q, 0.0, rng)
+    result = calibrate(robot, data, method="ls")
+    ev = result.plausibility.evidence
+    assert ev.change_rms_mm < 1e-6 and ev.residual_median_mm < 1e-6
+
+
+# ------------------------------------------------------- criteria, in isolation
+def _evidence(**kw):
+    base = dict(reach_m=1.0, residual_median_mm=0.1, residual_rms_mm=0.12, before_rms_mm=0.5,
+                spread_mm=200.0, change_rms_mm=1.0, change_max_mm=2.0,
+                corrections=(("j2.a", 0.5, "mm"), ("j3.alpha", 0.05, "deg")),
+                length_ratio=1.0)
+    base.update(kw)
+    return Evidence(**base)
+
+
+def test_good_evidence_has_no_finding():
+    assert judge(_evidence()).findings == ()
+
+
+@pytest.mark.parametrize("field, below, above, kind", [
+    ("residual_median_mm", 19.9, 20.1, "residual"),       # 2 % of 1000 mm
+    ("change_rms_mm", 99.0, 101.0, "corrections"),        # 10 % of 1000 mm
+    ("length_ratio", 299.0, 301.0, "length_unit"),
+    ("length_ratio", 1 / 299.0, 1 / 301.0, "length_unit"),
+    ("angle_max", 4 * math.pi - 0.01, 4 * math.pi + 0.01, "angle_unit"),
+])
+def test_each_threshold(field, below, above, kind):
+    assert kind not in {f.kind for f in judge(_evidence(**{field: below})).findings}
+    found = [f for f in judge(_evidence(**{field: above})).findings if f.kind == kind]
+    assert len(found) == 1
+    f = found[0]
+    assert f.value == pytest.approx(above) and f.causes
+    assert not judge(_evidence(**{field: above})).plausible
+
+
+def test_angle_beyond_a_turn_counts_only_outside_the_limits():
+    assert not judge(_evidence(angle_max=7.0, angle_outside=False)).findings
+    found = judge(_evidence(angle_max=7.0, angle_outside=True)).findings
+    assert [f.kind for f in found] == ["angle_unit"]
+    assert "degrees read as radians" in found[0].causes[0]
+    # read as degrees on purpose: no angle clue at all
+    assert not judge(_evidence(angle_max=90.0, angle_unit="deg")).findings
+
+
+def test_one_huge_length_correction():
+    ev = _evidence(corrections=(("j2.a", 600.0, "mm"),))
+    found = judge(ev).findings
+    assert [f.kind for f in found] == ["length_correction"] and found[0].parameters == ("j2.a",)
+
+
+def test_causes_follow_the_evidence():
+    # the model explains little of the motion: rows not matching the positions
+    shuffled = judge(_evidence(residual_median_mm=180, residual_rms_mm=185, spread_mm=200))
+    assert "rows shuffled" in shuffled.causes[0]
+    # the model follows the motion, with large errors: noise first
+    noisy = judge(_evidence(residual_median_mm=140, residual_rms_mm=160, spread_mm=240))
+    assert "noise far above" in noisy.causes[0]
+    # joint columns off the chain in the file: the tip first
+    tip = judge(_evidence(residual_median_mm=50, residual_rms_mm=70,
+                          off_chain_columns=("wrist_1_joint",)))
+    assert "tip" in tip.causes[0] and "wrist_1_joint" in tip.causes[0]
+    # a unit clue below the confident level still leads
+    units = judge(_evidence(residual_median_mm=50, residual_rms_mm=70, length_ratio=40.0))
+    assert [f.kind for f in units.findings] == ["residual"]
+    assert "millimetres read as metres" in units.causes[0]
+
+
+def test_not_converged_is_apart_from_plausible():
+    p = judge(_evidence(converged=False, iterations=100, method="ls"))
+    assert p.plausible and not p.converged
+    with pytest.raises(NotConvergedError, match="--method l2"):
+        p.check()
+    assert p.check(accept_unconverged=True) == [
+        "accepted an unconverged calibration as asked: the solver did not converge in 100 "
+        "iterations"]
+    with pytest.raises(ImplausibleResultError):  # implausible is checked first
+        judge(_evidence(converged=False, residual_median_mm=50)).check(accept_unconverged=True)
+
+
+def test_thresholds_are_options():
+    strict = Thresholds(residual=0.00005)  # 0.05 mm of 1 m
+    assert [f.kind for f in judge(_evidence(), strict).findings] == ["residual"]
+
+
+def test_reach_and_alignment_helpers():
+    frames = np.tile(np.eye(4), (3, 1, 1))
+    frames[1, :3, 3] = [0.0, 0.0, 0.3]
+    frames[2, :3, 3] = [0.4, 0.0, 0.3]
+    tip = np.eye(4)
+    tip[:3, 3] = [0.4, 0.0, 0.0]
+    assert chain_length(frames, tip) == pytest.approx(1.0)
+    assert reach(1.0, 0.2) == pytest.approx(1.2)
+    assert reach(1.0, 500.0) == pytest.approx(2.0)  # a tool from wrong units is capped
+    A = np.random.default_rng(0).normal(size=(50, 3))
+    R = rotz(0.4) @ rotx(-1.1)
+    assert np.max(_aligned_distances(A, A @ R.T + [1.0, 2.0, 3.0])) < 1e-12
+    assert np.max(_aligned_distances(A, A * 1.1)) > 0.01
+
+
+def test_joint_columns_off_the_chain_are_pointed_out(ur10_csv, tmp_path, capsys):
+    # UR10 data (tool on the last axis) with the tip one link short fit well: turning the
+    # last joint does not move the point. Written, with a warning naming the columns.
+    out = tmp_path / "c.urdf"
+    assert main(["calibrate", "ur10", str(ur10_csv), "--tip", "wrist_2_link", "--out",
+                 str(out), "--lambda", "1"]) == 0
+    assert out.is_file()
+    assert "URDF joints off the chain (wrist_3_joint)" in capsys.readouterr().err
+    assert not judge(_evidence(off_chain_columns=("j7",))).findings
+    assert judge(_evidence(off_chain_columns=("j7",))).notes
+    assert not judge(_evidence(off_chain_columns=("j7",), residual_median_mm=50)).notes
