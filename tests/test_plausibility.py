@@ -352,3 +352,25 @@ def test_joint_columns_off_the_chain_are_pointed_out(ur10_csv, tmp_path, capsys)
     assert not judge(_evidence(off_chain_columns=("j7",))).findings
     assert judge(_evidence(off_chain_columns=("j7",))).notes
     assert not judge(_evidence(off_chain_columns=("j7",), residual_median_mm=50)).notes
+
+
+def test_several_data_sets_go_through_the_gate(tmp_path, capsys):
+    """A calibration from several files writes nothing when one of them is in mm read as m."""
+    from kincal.cli.main import main as kmain
+
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert kmain(["simulate", "ec66", "--out", str(a), "--seed", "1", "--poses", "40"]) == 0
+    assert kmain(["simulate", "ec66", "--out", str(b), "--seed", "2", "--poses", "40"]) == 0
+    out = tmp_path / "c.urdf"
+    assert kmain(["calibrate", "ec66", str(a), str(b), "--out", str(out)]) == 0  # both good
+    out.unlink()
+    lines = b.read_text().splitlines()
+    head, rows = lines[0], [r.split(",") for r in lines[1:]]
+    b.write_text("\n".join([head] + [",".join(r[:6] + [repr(float(v) * 1e3) for v in r[6:9]])
+                                     for r in rows]) + "\n")
+    capsys.readouterr()
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert kmain(["calibrate", "ec66", str(a), str(b), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "implausible" in err and "nothing is written" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -86,7 +86,23 @@ def calibrate(args) -> int:
     _refuse(args, ("plots", "yaml_out", "mdh_out", "add_frames", "report", "robust"))
     robot = _robot(args)
     sets = read_sets(args, robot)
-    result = MultiSetProblem(robot, sets, _options(args, args.method)).solve()
+    problem = MultiSetProblem(robot, sets, _options(args, args.method))
+    result = problem.solve()
+    from kincal.errors import KincalError, KincalWarning
+    from kincal.identification.plausibility import gather_sets, judge
+
+    verdict = judge(gather_sets(problem, result))  # the gate: nothing written if implausible
+    try:
+        accepted = verdict.check(args.accept_implausible, args.accept_unconverged,
+                                 refused="nothing is written")
+    except KincalError:
+        if not args.quiet:
+            print(result.summary())
+        raise
+    import warnings
+
+    for message in accepted + list(verdict.notes):
+        warnings.warn(message, KincalWarning)
     files = [(args.out, result.corrected_urdf_text())]
     if args.frames_out:
         files.append((args.frames_out, report.dumps({"format": "kincal-frames-sets-1",

@@ -393,6 +393,61 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         method=problem.options.method)
 
 
+def gather_sets(problem, result) -> Evidence:
+    """The evidence of a calibration from several measurement sets or other kinds
+    (:class:`kincal.identification.multiset.MultiSetProblem` and its result): the same
+    yardsticks, with the residual and spread of the set that fits worst, and the unit clue
+    from the sets that measure positions."""
+    g = problem.robot.geometry
+    names = list(result.names)
+    tools = [np.asarray(result.x_start[names.index("tool.x"):names.index("tool.x") + 3]),
+             np.asarray(result.x[names.index("tool.x"):names.index("tool.x") + 3])] \
+        if "tool.x" in names else [np.zeros(3), np.zeros(3)]
+    L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tools[0])))
+    span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
+    lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
+    hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
+    q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
+    d = _aligned_distances(_tool_points(problem.robot, q, tools[0]),
+                           _tool_points(result.corrected, q, tools[1])) * 1e3
+    kinematic = set(result.error_model.names)
+    corrections = []
+    for p in result.parameters:
+        if p.status == "identified" and p.name in kinematic:
+            k, unit = (1e3, "mm") if p.is_length else (180.0 / math.pi, "deg")
+            corrections.append((p.name, p.deviation * k, unit))
+    corrections.sort(key=lambda c: -abs(c[1]) / (L * 1e3 if c[2] == "mm" else 180.0))
+    worst = max(result.sets, key=lambda s: s.after.mean)
+    datas = [km.data for km in problem.kinds]
+    positioned = [dt for dt in datas if getattr(dt, "positions", None) is not None]
+    ratio, spread_mm = float("nan"), float("nan")
+    if positioned:
+        dt = positioned[0]
+        first = np.arange(len(dt.joint_values))[:MAX_UNIT_POSES]
+        s_pred = spread(_tool_points(problem.robot, dt.joint_values[first], np.zeros(3)))
+        ratio = spread(dt.positions[first]) / s_pred if s_pred >= 1e-3 else float("nan")
+        spread_mm = spread(dt.positions) * 1e3
+    rev = [j for j, k in enumerate(g.kinds) if k == "revolute"]
+    angle_max, outside = 0.0, False
+    if rev:
+        qa_all = np.vstack([dt.joint_values for dt in datas])
+        qa = np.abs(qa_all[:, rev])
+        i, j = np.unravel_index(int(np.argmax(qa)), qa.shape)
+        angle_max = float(qa[i, j])
+        v = qa_all[i, rev[j]]
+        outside = bool(v < g.lower[rev[j]] - 1e-6 or v > g.upper[rev[j]] + 1e-6)
+    return Evidence(
+        reach_m=L, residual_median_mm=float(worst.after.mean), residual_rms_mm=worst.after.rms,
+        before_rms_mm=worst.before.rms,
+        spread_mm=spread_mm if np.isfinite(spread_mm) else 1e9,
+        change_rms_mm=float(np.sqrt(np.mean(d ** 2))), change_max_mm=float(d.max()),
+        corrections=tuple(corrections), length_ratio=float(ratio),
+        length_unit=getattr(datas[0], "length_unit", "m"), angle_max=angle_max,
+        angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
+        converged=bool(result.converged), iterations=int(result.solve.iterations),
+        method=problem.options.method)
+
+
 def _tool_points(robot, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
     """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q."""
     T = robot.tip_poses(q)
