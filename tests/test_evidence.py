@@ -309,3 +309,25 @@ def test_free_fraction_of_the_penalty():
     # hat diagonal s^2 / (s^2 + lam) per penalised column: 1/2 and 4/5
     assert free_fraction(J, pen, 1.0) == pytest.approx((0.5 + 0.8) / 2)
     assert free_fraction(J, pen, 1e12) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_evidence_with_several_measurement_sets(tmp_path):
+    """Two data files in one calibration: the evidence priors are fitted over both sets."""
+    from kincal import Measurements, Robot, calibrate
+    from kincal.cli.main import main as kmain
+
+    files = []
+    for seed in (1, 2):
+        path = tmp_path / f"s{seed}.csv"
+        assert kmain(["simulate", "ec66", "--out", str(path), "--seed", str(seed),
+                      "--poses", "40", "--truth-seed", "5"]) == 0
+        files.append(path)
+    robot = Robot.load("ec66")
+    sets = [Measurements.from_csv(f, robot.joint_names) for f in files]
+    ev = calibrate(robot, sets, lam="evidence")
+    cv = calibrate(robot, sets, lam="cv")
+    assert ev.evidence is not None and math.isnan(ev.lam) and "evidence" in ev.summary()
+    assert cv.evidence is None and cv.cv is not None
+    # both fit each set to about the simulated noise (0.05 mm per axis)
+    for res in (ev, cv):
+        assert all(s.after.mean < 0.12 for s in res.sets), res.summary()

@@ -264,19 +264,44 @@ class MultiSetProblem:
             o = self.options
             ident = self.analyze()
             cv = None
+            sol = ev = None
             if o.method == "l2":
-                if o.lam == "evidence":
-                    raise OptionError("lambda 'evidence' is not available with several "
-                                      "measurement sets or other kinds yet: use 'cv' or a value")
-                if isinstance(o.lam, str):  # "cv", and "auto" (CV: no evidence here yet)
+                if o.lam == "evidence" or (o.lam == "auto" and any(
+                        v is not None for v in (o.prior_mm, o.prior_deg, o.noise_mm))):
+                    sol, ev = self._fit_evidence()
+                    lam = ev.weights(self._prior_classes())
+                elif isinstance(o.lam, str):  # "cv", and "auto": CV (no data extent to judge)
                     cv = self.cross_validate()
                     lam = cv.best_lambda
                 else:
                     lam = float(o.lam)
             else:
                 lam = 0.0
-            sol = self.fit(lam)
-            return MultiSetResult._build(self, sol, lam, cv, ident)
+            if sol is None:
+                sol = self.fit(lam)
+            return MultiSetResult._build(self, sol, lam, cv, ident, ev)
+
+    def _prior_classes(self) -> tuple[str | None, ...]:
+        """(p,) evidence prior class of every parameter (None: the sets' frames, flat)."""
+        from kincal.identification import evidence
+
+        return tuple(evidence.prior_class(n, not f) for n, f in zip(self.names, self.is_frame))
+
+    def _fit_evidence(self):
+        """Per-class priors and the noise by maximum evidence over every set's residuals
+        (each set weighted by its stated noise), iterated with the fit."""
+        from kincal.identification import evidence
+
+        o = self.options
+        free, residual = self.free_mask(), self.residual_function()
+        u_prior = self.start() / self.scale
+        given = {} if o.prior_mm is None else {"length": o.prior_mm}
+        if o.prior_deg is not None:
+            given.update(twist=o.prior_deg, offset=o.prior_deg)
+        return evidence.estimate(
+            lambda w, u: self.fit(w, start=u * self.scale, free=free, residual=residual),
+            lambda u: residual(u, True), u_prior, u_prior, free, self._prior_classes(), given,
+            o.noise_mm)
 
 
 def calibrate_sets(robot: Robot, sets, options: CalibrationOptions | None = None,

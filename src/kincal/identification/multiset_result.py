@@ -61,9 +61,10 @@ class MultiSetResult:
     identifiability: Identifiability
     error_model: ErrorModel
     backlash_joints: tuple[str, ...]
+    evidence: object | None = None  # the evidence fit (lambda "evidence"), or None
 
     @classmethod
-    def _build(cls, problem: "MultiSetProblem", sol, lam, cv, ident):
+    def _build(cls, problem: "MultiSetProblem", sol, lam, cv, ident, evidence=None):
         x = sol.u * problem.scale
         free = problem.free_mask()
         se = _std_errors(sol, free, ~problem.is_frame, lam, problem.scale)
@@ -93,8 +94,9 @@ class MultiSetResult:
                                      ErrorStats.from_errors(before[i]),
                                      ErrorStats.from_errors(after[i]), ori))
         return cls(problem.robot, corrected, problem.options, problem.names, rows, x_nom,
-                   x_start, x, float(lam), cv, tuple(reports), sol, ident,
-                   problem.error_model, problem.backlash)
+                   x_start, x, float(lam) if evidence is None else math.nan, cv,
+                   tuple(reports), sol, ident, problem.error_model, problem.backlash,
+                   evidence)
 
     @property
     def converged(self) -> bool:
@@ -151,8 +153,11 @@ class MultiSetResult:
 
     def summary(self) -> str:
         o = self.options
-        lam = (f", lambda = {self.lam:.4g}" + (" (chosen by cross-validation)" if self.cv
-                                                else "")) if o.method == "l2" else ""
+        if self.evidence is not None:
+            lam = f", priors toward nominal per class by maximum evidence: {self.evidence.line()}"
+        else:
+            lam = (f", lambda = {self.lam:.4g}" + (" (chosen by cross-validation)" if self.cv
+                                                    else "")) if o.method == "l2" else ""
         lines = [f"kincal calibration of {self.robot.name} ({self.robot.base} -> "
                  f"{self.robot.tip}), {len(self.sets)} measurement set(s), method "
                  f"{o.method}{lam}", "  " + self.identifiability.summary().replace("\n", "\n  ")]
