@@ -10,7 +10,7 @@ from conftest import TIAGO_URDF, random_joint_values
 from kincal.cli.main import main
 from kincal.compensation import CellFrames, IkOptions, Targets, compensate, filter_program
 from kincal.compensation.ik import rotation_log
-from kincal.compensation.kinematics import ChainKinematics
+from kincal.models.kinematics import ChainKinematics
 from kincal.descriptions import default_center
 from kincal.errors import DataError
 from kincal.identification.calibration import CalibrationOptions, CalibrationProblem

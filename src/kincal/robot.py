@@ -329,7 +329,7 @@ class Robot:
         """(6, n) Pinocchio frame Jacobian of the tip for chain joint values (n,): rows 0-2
         the velocity of the tip origin, rows 3-5 the angular velocity, both in base-frame
         axes, per chain joint velocity. The reference for the vectorised numpy kinematics
-        of :mod:`kincal.compensation.kinematics`."""
+        of :mod:`kincal.models.kinematics`."""
         m, d = self.model, self._data
         qp = self.configuration(joint_values)
         pin.framesForwardKinematics(m, d, qp)

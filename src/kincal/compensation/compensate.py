@@ -27,7 +27,7 @@ import numpy as np
 
 from kincal.compensation.frames import CellFrames
 from kincal.compensation.ik import IkOptions, IkSolution, solve
-from kincal.compensation.kinematics import ChainKinematics
+from kincal.models.kinematics import ChainKinematics
 from kincal.compensation.targets import Targets, joint_scales
 from kincal.errors import DataError, FrameError
 from kincal.measurements.checks import UNIT_RATIO, spread

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.compensation.kinematics import ChainKinematics
+from kincal.models.kinematics import ChainKinematics
 from kincal.errors import OptionError
 
 

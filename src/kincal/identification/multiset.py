@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from kincal import models as error_models
-from kincal.errors import DataError, OptionError
+from kincal.errors import DataError
 from kincal.identification import blas_threads
 from kincal.identification.cross_validation import CrossValidation, cross_validate, lambda_grid
 from kincal.identification.options import CalibrationOptions

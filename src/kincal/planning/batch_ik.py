@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from kincal.rotations import inverse
+from kincal.models.kinematics import ChainKinematics
 
 if TYPE_CHECKING:
     from kincal.robot import Robot
@@ -27,12 +27,6 @@ IK_ITERATIONS = 60
 IK_TOL = 1e-9  # [m] on the point and [-] on the z axis: converged
 MAX_STEP = 0.3  # [rad or m] largest joint step per iteration (keeps the branch)
 
-
-def _rotations(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotations about the unit ``axis`` (3,) by ``angles`` (N,) [rad]."""
-    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    s, c = np.sin(angles)[:, None, None], np.cos(angles)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
 
 class BatchKinematics:
     """Forward kinematics and Jacobians of the chain for N configurations at once.
@@ -50,10 +44,7 @@ class BatchKinematics:
         self.hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
         self.tool = np.asarray(tool, float)
         J = np.asarray(g.joint_frames, float)
-        self._placements = inverse(np.concatenate([np.eye(4)[None], J[:-1]])) @ J
-        self._axes = np.asarray(g.axes, float)
-        self._prismatic = np.array([k == "prismatic" for k in g.kinds])
-        self._last_tip = inverse(J[-1]) @ np.asarray(g.T_base_tip, float)
+        self._chain = ChainKinematics.of(g)  # kincal's one vectorised chain (models.chain)
         origins = np.concatenate([J[:, :3, 3], g.T_base_tip[None, :3, 3]])
         # the arm's reach: it makes the linear part of the Jacobian comparable to the angular
         self.reach = max(float(np.linalg.norm(np.diff(origins, axis=0), axis=1).sum()), 1e-3)
@@ -62,28 +53,7 @@ class BatchKinematics:
         """(R (N, 3, 3), P (N, 3), Jp (N, 3, n), Jw (N, 3, n)): tip rotation, tool point,
         and the joint Jacobians of the tool point [m per rad or m] and of the tip rotation
         [rad per rad or m], all in the base frame (analytic)."""
-        Q = np.atleast_2d(np.asarray(Q, float))
-        N = len(Q)
-        R = np.broadcast_to(np.eye(3), (N, 3, 3))
-        p = np.zeros((N, 3))
-        w = np.empty((N, self.n, 3))  # joint axes in B
-        c = np.empty((N, self.n, 3))  # a point of each axis in B
-        for i in range(self.n):
-            P = self._placements[i]
-            p = p + R @ P[:3, 3]
-            R = R @ P[:3, :3]
-            w[:, i], c[:, i] = R @ self._axes[i], p
-            if self._prismatic[i]:
-                p = p + w[:, i] * Q[:, i, None]
-            else:
-                R = R @ _rotations(self._axes[i], Q[:, i])
-        p = p + R @ self._last_tip[:3, 3]
-        R = R @ self._last_tip[:3, :3]
-        P = p + R @ self.tool
-        rev = ~self._prismatic[None, :, None]
-        Jp = np.where(rev, np.cross(w, P[:, None, :] - c), w)
-        Jw = np.where(rev, w, 0.0)
-        return R, P, Jp.transpose(0, 2, 1), Jw.transpose(0, 2, 1)
+        return self._chain.evaluate(np.atleast_2d(np.asarray(Q, float)), self.tool)
 
     def poses(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(tip rotation (N, 3, 3), tool point (N, 3)) in the base frame."""
