@@ -290,18 +290,9 @@ class MultiSetProblem:
     def _fit_evidence(self):
         """Per-class priors and the noise by maximum evidence over every set's residuals
         (each set weighted by its stated noise), iterated with the fit."""
-        from kincal.identification import evidence
+        from kincal.identification.penalty_choice import fit_evidence
 
-        o = self.options
-        free, residual = self.free_mask(), self.residual_function()
-        u_prior = self.start() / self.scale
-        given = {} if o.prior_mm is None else {"length": o.prior_mm}
-        if o.prior_deg is not None:
-            given.update(twist=o.prior_deg, offset=o.prior_deg)
-        return evidence.estimate(
-            lambda w, u: self.fit(w, start=u * self.scale, free=free, residual=residual),
-            lambda u: residual(u, True), u_prior, u_prior, free, self._prior_classes(), given,
-            o.noise_mm)
+        return fit_evidence(self, self._prior_classes())
 
 
 def calibrate_sets(robot: Robot, sets, options: CalibrationOptions | None = None,

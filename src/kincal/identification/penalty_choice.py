@@ -30,9 +30,12 @@ def prior_classes(problem: CalibrationProblem) -> tuple[str | None, ...]:
     return tuple(evidence.prior_class(n, bool(pen)) for n, pen in zip(sp.names, sp.is_penalised))
 
 
-def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.EvidenceFit]:
+def fit_evidence(problem: CalibrationProblem, classes=None
+                 ) -> tuple[SolveSummary, evidence.EvidenceFit]:
     """Per-class priors and the noise by maximum evidence, iterated with the fit; the
-    options' prior_mm / prior_deg / noise_mm are kept where given."""
+    options' prior_mm / prior_deg / noise_mm are kept where given. ``problem``: a
+    CalibrationProblem, or any problem with the same fit interface (several measurement
+    sets) given with its ``classes``."""
     o = problem.options
     free = problem.free_mask()
     residual = problem.residual_function()
@@ -42,8 +45,8 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
         given.update(twist=o.prior_deg, offset=o.prior_deg)
     return evidence.estimate(
         lambda w, u: problem.fit(w, start=u * problem.scale, free=free, residual=residual),
-        lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,
-        o.noise_mm)
+        lambda u: residual(u, True), u_prior, u_prior, free,
+        prior_classes(problem) if classes is None else classes, given, o.noise_mm)
 
 
 def reach(problem: CalibrationProblem, samples: int = 500) -> float:
