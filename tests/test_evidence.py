@@ -331,3 +331,21 @@ def test_evidence_with_several_measurement_sets(tmp_path):
     # both fit each set to about the simulated noise (0.05 mm per axis)
     for res in (ev, cv):
         assert all(s.after.mean < 0.12 for s in res.sets), res.summary()
+
+
+def test_auto_with_several_sets_judges_the_measured_volume(tmp_path):
+    """lambda 'auto' on two sets from a 20 mm cube takes the evidence; on wide sets, CV."""
+    from kincal import Measurements, Robot, calibrate
+    from kincal.cli.main import main as kmain
+
+    robot = Robot.load("ec66")
+    for design, expected in (("rtest", "evidence"), ("tracker", "cv")):
+        sets = []
+        for seed in (1, 2):
+            path = tmp_path / f"{design}{seed}.csv"
+            assert kmain(["simulate", "ec66", "--out", str(path), "--seed", str(seed),
+                          "--poses", "30", "--design", design, "--truth-seed", "5"]) == 0
+            sets.append(Measurements.from_csv(path, robot.joint_names))
+        res = calibrate(robot, sets)
+        assert res.penalty_choice.startswith(f"{expected}, chosen automatically"), res.summary()
+        assert (res.evidence is not None) == (expected == "evidence")

@@ -265,12 +265,17 @@ class MultiSetProblem:
             ident = self.analyze()
             cv = None
             sol = ev = None
+            how, self.penalty_choice = o.lam, ""
+            if o.method == "l2" and o.lam == "auto":
+                from kincal.identification.penalty_choice import automatic_sets
+
+                how, why = automatic_sets(self)
+                self.penalty_choice = f"{how}, chosen automatically: {why}"
             if o.method == "l2":
-                if o.lam == "evidence" or (o.lam == "auto" and any(
-                        v is not None for v in (o.prior_mm, o.prior_deg, o.noise_mm))):
+                if how == "evidence":
                     sol, ev = self._fit_evidence()
                     lam = ev.weights(self._prior_classes())
-                elif isinstance(o.lam, str):  # "cv", and "auto": CV (no data extent to judge)
+                elif isinstance(how, str):  # "cv"
                     cv = self.cross_validate()
                     lam = cv.best_lambda
                 else:

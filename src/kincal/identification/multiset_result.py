@@ -62,6 +62,7 @@ class MultiSetResult:
     error_model: ErrorModel
     backlash_joints: tuple[str, ...]
     evidence: object | None = None  # the evidence fit (lambda "evidence"), or None
+    penalty_choice: str = ""  # with lambda "auto": which estimator ran, and why
 
     @classmethod
     def _build(cls, problem: "MultiSetProblem", sol, lam, cv, ident, evidence=None):
@@ -96,7 +97,7 @@ class MultiSetResult:
         return cls(problem.robot, corrected, problem.options, problem.names, rows, x_nom,
                    x_start, x, float(lam) if evidence is None else math.nan, cv,
                    tuple(reports), sol, ident, problem.error_model, problem.backlash,
-                   evidence)
+                   evidence, getattr(problem, "penalty_choice", ""))
 
     @property
     def converged(self) -> bool:
@@ -160,7 +161,9 @@ class MultiSetResult:
                                                     else "")) if o.method == "l2" else ""
         lines = [f"kincal calibration of {self.robot.name} ({self.robot.base} -> "
                  f"{self.robot.tip}), {len(self.sets)} measurement set(s), method "
-                 f"{o.method}{lam}", "  " + self.identifiability.summary().replace("\n", "\n  ")]
+                 f"{o.method}{lam}",
+                 *([f"  penalty: {self.penalty_choice}"] if self.penalty_choice else []),
+                 "  " + self.identifiability.summary().replace("\n", "\n  ")]
         for k, s in enumerate(self.sets, start=1):
             what = {"point": "position", "pose": "position", "distance": "distance",
                     "plane": "distance to the plane"}[s.kind]

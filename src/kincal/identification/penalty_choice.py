@@ -64,6 +64,34 @@ def reach(problem: CalibrationProblem, samples: int = 500) -> float:
     return float(np.max(np.linalg.norm(model.predict(x), axis=1)))
 
 
+def automatic_sets(problem) -> tuple[str, str]:
+    """("evidence" or "cv", why) for lambda "auto" with several measurement sets or other
+    kinds: the rule of :func:`automatic` on the positions of the sets that measure
+    positions (points, poses) together; CV when no set does (distances, plane contacts)."""
+    from kincal.models.kinematics import ChainKinematics
+
+    o = problem.options
+    if any(v is not None for v in (o.prior_mm, o.prior_deg, o.noise_mm)):
+        return "evidence", "tolerances or noise given"
+    P = [km.data.positions for km in problem.kinds
+         if getattr(km.data, "positions", None) is not None]
+    if not P:
+        return "cv", "no set measures positions, so no measurement volume to judge"
+    P = np.vstack(P)
+    extent = float(np.max(np.linalg.norm(P - P.mean(axis=0), axis=1)))
+    g = problem.robot.geometry
+    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+    q = np.random.default_rng(0).uniform(lo, hi, size=(500, g.n))
+    r = float(np.max(np.linalg.norm(ChainKinematics.of(g).evaluate(q)[1], axis=1)))
+    ratio = extent / r if r > 0 else 0.0
+    where = (f"the measured positions span {extent * 1e3:.0f} mm from their centre, "
+             f"{100 * ratio:.1f} % of the arm's reach")
+    if ratio < SMALL_VOLUME:
+        return "evidence", where + f" (< {100 * SMALL_VOLUME:.0f} %: a small measurement volume)"
+    return "cv", where
+
+
 def extent_ratio(problem: CalibrationProblem) -> tuple[float, float, float]:
     """(extent [m], reach [m], extent / reach) of the measured positions: the largest
     distance of a measured point from their centroid, against the arm's reach."""
