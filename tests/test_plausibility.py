@@ -374,3 +374,19 @@ def test_several_data_sets_go_through_the_gate(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "implausible" in err and "nothing is written" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_options_several_sets_cannot_serve_are_refused_not_ignored(tmp_path, capsys):
+    from kincal.cli.main import main as kmain
+
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert kmain(["simulate", "ec66", "--out", str(a), "--seed", "1", "--poses", "20"]) == 0
+    assert kmain(["simulate", "ec66", "--out", str(b), "--seed", "2", "--poses", "20"]) == 0
+    capsys.readouterr()
+    for extra in (["--html", str(tmp_path / "r.html")], ["--plots", str(tmp_path / "p")],
+                  ["--accuracy-map", "0.4", "0", "0.3", "0.2"]):
+        before = sorted(p.name for p in tmp_path.iterdir())
+        assert kmain(["calibrate", "ec66", str(a), str(b), "--out", str(tmp_path / "c.urdf"),
+                      *extra]) == 1
+        assert "not available with several data files" in capsys.readouterr().err
+        assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -83,7 +83,8 @@ def calibrate(args) -> int:
     from kincal.export.safe_write import write_all
     from kincal.identification.multiset import MultiSetProblem
 
-    _refuse(args, ("plots", "yaml_out", "mdh_out", "add_frames", "report", "robust"))
+    _refuse(args, ("plots", "add_frames", "report", "robust", "html", "accuracy_map",
+                   "accuracy_poses"))
     robot = _robot(args)
     sets = read_sets(args, robot)
     problem = MultiSetProblem(robot, sets, _options(args, args.method))
@@ -104,6 +105,13 @@ def calibrate(args) -> int:
     for message in accepted + list(verdict.notes):
         warnings.warn(message, KincalWarning)
     files = [(args.out, result.corrected_urdf_text())]
+    if args.yaml_out or args.mdh_out:  # the corrected robot, whatever measured it
+        from kincal.export.cell_exports import kinematics_yaml, mdh_table_csv
+
+        if args.yaml_out:
+            files.append((args.yaml_out, kinematics_yaml(robot, result.corrected)))
+        if args.mdh_out:
+            files.append((args.mdh_out, mdh_table_csv(result.corrected)))
     if args.frames_out:
         files.append((args.frames_out, report.dumps({"format": "kincal-frames-sets-1",
                                                      "tip": robot.tip, "base": robot.base,
@@ -121,7 +129,7 @@ def analyze(args) -> int:
     from kincal.identification.multiset import MultiSetProblem
     from kincal.identification.options import CalibrationOptions
 
-    _refuse(args, ("report",))
+    _refuse(args, ("report", "accuracy_map", "accuracy_poses", "accuracy_plot"))
     robot = _robot(args)
     models = [args.model] if args.model != "all" else None
     if models is None:
@@ -142,7 +150,7 @@ def evaluate(args) -> int:
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.statistics import ErrorStats
 
-    _refuse(args, ("report",))
+    _refuse(args, ("report", "accuracy_map", "accuracy_poses", "accuracy_plot"))
     if bool(args.frames) == bool(args.fit_frames):
         raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
     robot = _robot(args)
