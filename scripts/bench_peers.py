@@ -271,7 +271,7 @@ def synthetic_seed(robot, model, seed, quick, skip_pyb, pyb_timeout, t_start, tm
         res = []
         for method in ("l2", "ls"):
             variant = method.upper() + (" (CV)" if method == "l2" else "")
-            res.append(run_kincal(robot, d, CalibrationOptions(method=method, lam="cv"), variant,
+            res.append(run_kincal(robot, d, CalibrationOptions(model="mdh", method=method, lam="cv"), variant,
                                   q_test, p_test))
             print(f"[{time.perf_counter() - t_start:6.1f} s] {tag} kincal {method}: "
                   f"{res[-1]['rms']:.4f} mm, {res[-1]['wall']:.2f} s", file=sys.stderr)
@@ -412,11 +412,11 @@ def tiago(args, cmd_line):
     # joint offsets + frames: everything kinematic fixed but theta (revolute) / d (prismatic)
     offsets_fix = tuple(f"{j}.{f}" for j, k in kinds for f in ("a", "alpha", "d", "theta")
                         if f != ("d" if k == "prismatic" else "theta"))
-    fits = (("L2 (CV), full MD-H", CalibrationOptions(method="l2", lam="cv")),
-            ("LS, full MD-H", CalibrationOptions(method="ls")),
-            ("LS, joint offsets + frames", CalibrationOptions(method="ls", fix=offsets_fix)),
+    fits = (("L2 (CV), full MD-H", CalibrationOptions(model="mdh", method="l2", lam="cv")),
+            ("LS, full MD-H", CalibrationOptions(model="mdh", method="ls")),
+            ("LS, joint offsets + frames", CalibrationOptions(model="mdh", method="ls", fix=offsets_fix)),
             ("L2 (CV), full MD-H + backlash arm_6",
-             CalibrationOptions(method="l2", lam="cv", backlash=("arm_6_joint",))))
+             CalibrationOptions(model="mdh", method="l2", lam="cv", backlash=("arm_6_joint",))))
     res = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", KincalWarning)

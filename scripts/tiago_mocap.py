@@ -241,7 +241,7 @@ class ExtendedProblem:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", KincalWarning)  # reported once, at load
             self.base = CalibrationProblem(robot, session.markers[0],
-                                           CalibrationOptions(method="frames"))
+                                           CalibrationOptions(model="mdh", method="frames"))
         self.mdh, self.space = self.base.mdh, self.base.space
         self.n_kin, self.n_x = self.space.n_kinematic, self.space.size
         self.n_rot = 3 if model.markers else 0
@@ -597,7 +597,7 @@ def api_fit(study: Study, model: Model):
     method, fix, joints = plain_options(study, model)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalWarning)  # reported once, at load
-        return CalibrationProblem(study.robot, study.train.markers[0], CalibrationOptions(
+        return CalibrationProblem(study.robot, study.train.markers[0], CalibrationOptions(model="mdh",
             method=method, lam="cv", fix=fix, backlash=joints)).solve()
 
 
