@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 # the figure and save helpers are shared with the other plots on purpose: one look
-from kincal.export.plots import _COLORS, _figure, _save
+from kincal.export.plots import _COLORS, _figure, _save, equal_axes_mm
 
 
 def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
@@ -100,15 +100,6 @@ def plot_accuracy_map(amap, path=None, *, overwrite: bool = False, source: str =
                    label=f"not reachable ({len(amap.skipped)})")
         ax.legend(fontsize=8, loc="upper left")
     both = np.vstack([P, np.asarray(amap.skipped) * 1e3]) if len(amap.skipped) else P
-    if len(both):
-        mid = (both.max(0) + both.min(0)) / 2
-        half = max((both.max(0) - both.min(0)).max() / 2 * 1.05, 1.0)
-        ax.set_xlim(mid[0] - half, mid[0] + half)
-        ax.set_ylim(mid[1] - half, mid[1] + half)
-        ax.set_zlim(mid[2] - half, mid[2] + half)
-    ax.set_box_aspect((1, 1, 1))
-    ax.set_xlabel("x (mm)")
-    ax.set_ylabel("y (mm)")
-    ax.set_zlabel("z (mm)")
+    equal_axes_mm(ax, both, min_half=1.0)
     ax.set_title(f"Predicted accuracy, {len(P)} targets (base frame)", fontsize=10)
     return _save(fig, path, overwrite, source)

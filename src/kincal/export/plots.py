@@ -35,6 +35,21 @@ def _figure(width: float, height: float):
     return fig
 
 
+def equal_axes_mm(ax, points: np.ndarray, min_half: float = 0.0) -> None:
+    """A 3-D axis with equal scales around ``points`` (M, 3) [mm] (5 % margin, at least
+    ``min_half`` either side), labelled in mm."""
+    if len(points):
+        mid = (points.max(0) + points.min(0)) / 2
+        half = max((points.max(0) - points.min(0)).max() / 2 * 1.05, min_half)
+        ax.set_xlim(mid[0] - half, mid[0] + half)
+        ax.set_ylim(mid[1] - half, mid[1] + half)
+        ax.set_zlim(mid[2] - half, mid[2] + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_zlabel("z (mm)")
+
+
 def _save(fig, path, overwrite: bool, source: str) -> Path | bytes:
     """Write the PNG to ``path``; with path None return its bytes (to embed, e.g. in HTML)."""
     buf = io.BytesIO()
@@ -92,16 +107,7 @@ def plot_point_sets(calibration_mm, validation_mm, path, *, highlight_index=None
         H = V[np.asarray(highlight_index, int)]
         ax.scatter(*H.T, s=10, color=_COLORS[2], label=f"  of which used for LS ({len(H)})")
     ax.scatter(*C.T, s=14, color=_COLORS[1], depthshade=False, label=f"{labels[0]} ({len(C)})")
-    both = np.vstack([C, V])
-    mid = (both.max(0) + both.min(0)) / 2
-    half = (both.max(0) - both.min(0)).max() / 2 * 1.05
-    ax.set_xlim(mid[0] - half, mid[0] + half)
-    ax.set_ylim(mid[1] - half, mid[1] + half)
-    ax.set_zlim(mid[2] - half, mid[2] + half)
-    ax.set_box_aspect((1, 1, 1))
-    ax.set_xlabel("x (mm)")
-    ax.set_ylabel("y (mm)")
-    ax.set_zlabel("z (mm)")
+    equal_axes_mm(ax, np.vstack([C, V]))
     ax.set_title("Calibration and validation points (robot base frame)", fontsize=10)
     ax.legend(fontsize=8, loc="upper left")
     return _save(fig, path, overwrite, source)

@@ -17,13 +17,21 @@ from typing import Callable
 
 import numpy as np
 
-from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
-                           ParameterError, listing, suggest)
-from kincal.identification import blas_threads
-from kincal.identification import penalty_choice
+from kincal import models as error_models
+from kincal.errors import (
+    DataError,
+    IdentifiabilityError,
+    KincalWarning,
+    OptionError,
+    ParameterError,
+    listing,
+    suggest,
+)
+from kincal.identification import blas_threads, penalty_choice
 from kincal.identification.cross_validation import (
     CrossValidation,
     cross_validate,
+    fold_fitter,
     lambda_grid,
 )
 from kincal.identification.frames_init import initial_frames, point_in_tip
@@ -43,7 +51,6 @@ from kincal.measurements.checks import (
 )
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
-from kincal import models as error_models
 from kincal.models.mdh import TOOL_AXIS_WARNING
 from kincal.robot import Robot
 from kincal.rotations import base_angles, base_rotation
@@ -348,19 +355,7 @@ class CalibrationProblem:
             keep = np.random.default_rng(o.seed).choice(poses, o.cv_max_poses, replace=False)
             samples = np.flatnonzero(np.isin(self.data.poses, keep))
             subsample = (int(o.cv_max_poses), self.n_poses)
-        fold_options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol),
-                               progress=None)
-        cache = {}  # per fold: the training residual and the validation model
-
-        def fit(train, lam, start):
-            train = samples[train]
-            key = train.tobytes()
-            if key not in cache:
-                cache.clear()
-                cache[key] = self.residual_function(train)
-            return self.fit(lam, train, None if start is None else start.u * self.scale, free,
-                            residual=cache[key], options=fold_options)
-
+        fit = fold_fitter(self, free, samples)
         val_models = {}
 
         def error(sol, val):

@@ -9,7 +9,7 @@ mean over folds wins.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -78,6 +78,28 @@ def make_folds(n_samples: int, k: int, seed: int, groups=None,
                           f"({len(poses)}), got folds={k}")
     perm = np.random.default_rng(seed).permutation(len(poses))
     return tuple(np.flatnonzero(np.isin(inverse, f)) for f in np.array_split(perm, k))
+
+
+def fold_fitter(problem, free: np.ndarray, samples: np.ndarray | None = None) -> Callable:
+    """``fit(train, lam, start)`` for :func:`cross_validate` on a calibration ``problem``
+    (anything with ``options``, ``scale``, ``residual_function(rows)`` and ``fit``): each
+    fold's training residual is built once and reused along the lambda path; fold fits
+    use the looser ``cv_step_tol`` and show no progress. samples: the problem's rows the
+    fold indices refer to (a subsample), or None for all."""
+    o = problem.options
+    options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol), progress=None)
+    cache = {}
+
+    def fit(train, lam, start):
+        train = train if samples is None else samples[train]
+        key = train.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = problem.residual_function(train)
+        return problem.fit(lam, train, None if start is None else start.u * problem.scale,
+                           free, residual=cache[key], options=options)
+
+    return fit
 
 
 def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.ndarray,

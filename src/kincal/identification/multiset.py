@@ -27,7 +27,8 @@ import numpy as np
 from kincal import models as error_models
 from kincal.errors import DataError
 from kincal.identification import blas_threads
-from kincal.identification.cross_validation import CrossValidation, cross_validate, lambda_grid
+from kincal.identification.cross_validation import (CrossValidation, cross_validate, fold_fitter,
+                                                    lambda_grid)
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.parameters import DEG, MM
 from kincal.identification.selection import Identifiability, analyze
@@ -234,16 +235,7 @@ class MultiSetProblem:
         o = self.options
         grid = lambda_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
         free = self.free_mask()
-        fold_options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol))
-        cache = {}
-
-        def fit(train, lam, start):
-            key = train.tobytes()
-            if key not in cache:
-                cache.clear()
-                cache[key] = self.residual_function(train)
-            return self.fit(lam, train, None if start is None else start.u * self.scale, free,
-                            residual=cache[key], options=fold_options)
+        fit = fold_fitter(self, free)
 
         def error(sol, val):
             e = np.concatenate([e for _, e in self.sample_errors(sol.u * self.scale, val,
@@ -265,12 +257,12 @@ class MultiSetProblem:
             ident = self.analyze()
             cv = None
             sol = ev = None
-            how, self.penalty_choice = o.lam, ""
+            how, choice = o.lam, ""
             if o.method == "l2" and o.lam == "auto":
                 from kincal.identification.penalty_choice import automatic_sets
 
                 how, why = automatic_sets(self)
-                self.penalty_choice = f"{how}, chosen automatically: {why}"
+                choice = f"{how}, chosen automatically: {why}"
             if o.method == "l2":
                 if how == "evidence":
                     sol, ev = self._fit_evidence()
@@ -284,7 +276,7 @@ class MultiSetProblem:
                 lam = 0.0
             if sol is None:
                 sol = self.fit(lam)
-            return MultiSetResult._build(self, sol, lam, cv, ident, ev)
+            return MultiSetResult._build(self, sol, lam, cv, ident, ev, choice)
 
     def _prior_classes(self) -> tuple[str | None, ...]:
         """(p,) evidence prior class of every parameter (None: the sets' frames, flat)."""

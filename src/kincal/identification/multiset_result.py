@@ -65,7 +65,8 @@ class MultiSetResult:
     penalty_choice: str = ""  # with lambda "auto": which estimator ran, and why
 
     @classmethod
-    def _build(cls, problem: "MultiSetProblem", sol, lam, cv, ident, evidence=None):
+    def _build(cls, problem: "MultiSetProblem", sol, lam, cv, ident, evidence=None,
+               penalty_choice: str = ""):
         x = sol.u * problem.scale
         free = problem.free_mask()
         se = _std_errors(sol, free, ~problem.is_frame, lam, problem.scale)
@@ -97,7 +98,7 @@ class MultiSetResult:
         return cls(problem.robot, corrected, problem.options, problem.names, rows, x_nom,
                    x_start, x, float(lam) if evidence is None else math.nan, cv,
                    tuple(reports), sol, ident, problem.error_model, problem.backlash,
-                   evidence, getattr(problem, "penalty_choice", ""))
+                   evidence, penalty_choice)
 
     @property
     def converged(self) -> bool:

@@ -104,7 +104,7 @@ class MeasurementModel:
         return self._frame_columns(J, P, s.R_tip, base, rotate_kinematic=True)
 
     def _frame_columns(self, J, P, R_tip, base, rotate_kinematic=False):
-        """Fill the base and tool columns (and turn the MD-H ones into the measurement frame)."""
+        """Fill the base and tool columns (and turn the kinematic ones into the measurement frame)."""
         N, k, f = self.N, self.space.n_kinematic, self.space.n_frames
         rx, ry, rz = base[3:]
         Rx, Ry, Rz = rotx(rx), roty(ry), rotz(rz)

@@ -58,6 +58,7 @@ from functools import cached_property
 import numpy as np
 
 from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
+from kincal.models.chain import cross_rows
 from kincal.rotations import inverse, transform
 
 PARALLEL_TOL = 1e-6  # |sin| of the angle between axes below which they count as parallel
@@ -245,9 +246,9 @@ class MdhModel(ErrorModel):
         ia, ial, ib, idd, ith = self._field_index
         K = np.empty((len(P), 3, self.size))
         K[:, :, ia] = xg.transpose(1, 2, 0)
-        K[:, :, ial] = _cross3(xg, rg).transpose(1, 2, 0)
+        K[:, :, ial] = cross_rows(xg, rg).transpose(1, 2, 0)
         K[:, :, idd] = zh.transpose(1, 2, 0)
-        K[:, :, ith] = _cross3(zh, rh).transpose(1, 2, 0)
+        K[:, :, ith] = cross_rows(zh, rh).transpose(1, 2, 0)
         if ib.size:
             hb = self.has_beta
             table, _ = self.unpack(x)
@@ -256,7 +257,7 @@ class MdhModel(ErrorModel):
             y1 = (np.cos(alpha)[:, None, None] * Gb[:, :, :3, 1]
                   + np.sin(alpha)[:, None, None] * Gb[:, :, :3, 2])
             c = Gb[:, :, :3, 3] + a[:, None, None] * Gb[:, :, :3, 0]
-            K[:, :, ib] = _cross3(y1, P - c).transpose(1, 2, 0)
+            K[:, :, ib] = cross_rows(y1, P - c).transpose(1, 2, 0)
         return K
 
     @cached_property
@@ -274,15 +275,6 @@ class MdhModel(ErrorModel):
             F = F @ P[i]
             out[i] = F
         return out
-
-
-def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis of equally shaped arrays (np.cross is slow here)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
