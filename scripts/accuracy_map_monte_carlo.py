@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh
 from kincal.planning.accuracy_map import design_accuracy_map, result_accuracy_map
 from kincal.planning.simulation import Truth, measure, planted_table

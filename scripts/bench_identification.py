@@ -33,7 +33,7 @@ import warnings
 
 import numpy as np
 
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import DEFAULT, MODELS, mdh
 from kincal.planning.simulation import Truth, cube_poses, measure, planted_table
 from kincal.robot import Robot

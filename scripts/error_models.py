@@ -23,7 +23,7 @@ import numpy as np
 
 from kincal import models
 from kincal.descriptions import default_center, max_cube
-from kincal.identification.calibration import calibrate
+from kincal.identification.problem import calibrate
 from kincal.measurements.data import Measurements
 from kincal.planning.simulation import cube_poses
 from kincal.robot import Robot

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from kincal.experiments.paper_experiment import ExperimentConfig, run
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.measurements.data import Measurements
 from kincal.models import mdh as mdh_layer
 from kincal.planning.simulation import Truth, cube_poses, measure, planted_table

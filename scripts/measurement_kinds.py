@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from kincal import models
-from kincal.identification.multiset import calibrate_sets
+from kincal.identification.problem import calibrate as calibrate
 from kincal.identification.options import CalibrationOptions
 from kincal.measurements.sets import kind_model
 from kincal.planning import kind_simulation as ks
@@ -82,9 +82,9 @@ def scenario(name, robot, em, seed, options):
         held = ks.simulate_points(em, truth, BASE[::-1] * 0.5, TOOL, wide(robot, rng, 200), 5e-5,
                                   rng)
         frames = np.r_[BASE[::-1] * 0.5, TOOL]
-        result = calibrate_sets(robot, sets, options)
+        result = calibrate(robot, sets, options)
         return floor_and_score(result, em, truth, held, frames, set_index=1) + (result,)
-    result = calibrate_sets(robot, sets, options)
+    result = calibrate(robot, sets, options)
     # plane frames: the identified normal may be the opposite one; compare by the data
     if name == "plane":
         frames = _matched_planes(result.sets[0].frames, frames)

@@ -31,7 +31,7 @@ import warnings
 
 import numpy as np
 
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh as mdh_layer
 from kincal.planning.pose_selection import select_poses
 from kincal.planning.simulation import Truth, cube_poses, measure, planted_table

@@ -63,7 +63,7 @@ from tiago_files import DEFAULT_SHARED, HELD_OUT, ORDER_COLUMN, SUBDIR, TIP, TRA
 
 from kincal import CalibrationOptions, CalibrationProblem, KincalWarning, Measurements, Robot  # noqa: E402
 from kincal.identification.cross_validation import cross_validate, lambda_grid, make_folds  # noqa: E402
-from kincal.identification.parameters import DEG, MM  # noqa: E402
+from kincal.measurements.point_space import DEG, MM  # noqa: E402
 from kincal.identification.selection import RANK_TOL, analyze  # noqa: E402
 from kincal.identification.solver import SolverOptions, solve  # noqa: E402
 from kincal.identification.statistics import ErrorStats  # noqa: E402

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kincal.errors import OptionError
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh
 from kincal.planning.accuracy_map import (
     cube_grid,

@@ -4,12 +4,14 @@ import json
 import warnings
 
 import numpy as np
+
+from kincal.export.outputs import corrected_urdf_text
 import pytest
 from conftest import random_joint_values, tiago_urdf
 
 from kincal.cli.main import main
 from kincal.errors import DataError, KincalWarning, OptionError, ParameterError
-from kincal.identification.calibration import calibrate
+from kincal.identification.problem import calibrate
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
 from kincal.models import mdh
@@ -106,7 +108,7 @@ def test_planted_backlash_is_recovered_and_the_result_carries_it(tmp_path):
     assert "backlash" in res.summary() and "the order of the samples" in res.summary()
     # the exported URDF carries the kinematics only: the robot in the middle of its play
     path = tmp_path / "c.urdf"
-    path.write_text(res.corrected_urdf_text())
+    path.write_text(corrected_urdf_text(res))
     T = Robot.load(path, tip="tool0").tip_poses(q)
     P = (T[:, :3, 3] + T[:, :3, :3] @ res.tool) @ base_rotation(*res.base[3:]).T + res.base[:3]
     assert np.abs(P - res.predict(q)).max() < 1e-10

@@ -9,7 +9,7 @@ from conftest import EC66, random_joint_values
 
 from kincal.cli.main import main
 from kincal.errors import IdentifiabilityError, KincalWarning
-from kincal.identification.calibration import calibrate
+from kincal.identification.problem import calibrate
 from kincal.measurements.data import Measurements
 from kincal.models import mdh
 from kincal.planning.simulation import Truth, measure, planted_table

@@ -6,7 +6,7 @@ from conftest import random_joint_values
 
 from kincal.errors import OptionError
 from kincal.experiments.paper_experiment import rtest_scenario
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem, calibrate
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem, calibrate
 from kincal.measurements.data import Measurements
 from kincal.models import mdh
 from kincal.planning.simulation import Truth, cube_poses, measure, planted_table, true_positions
@@ -83,8 +83,11 @@ def test_result_carries_everything():
     se = res.parameter("joint_4.a").std_error
     assert 0 < se < 1e-4
     frames = res.frames_dict()
-    assert set(frames["base"]) == {"x", "y", "z", "rx", "ry", "rz"} and set(frames["tool"]) == {"x", "y", "z"}
-    assert abs(frames["tool"]["z"] - truth.tool[2]) < 1e-4
+    assert frames["format"] == "kincal-frames" and frames["version"] == 2
+    named = frames["sets"][0]["frames"]
+    assert set(named) == {f"base.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")} | {
+        "tool.x", "tool.y", "tool.z"}
+    assert abs(named["tool.z"] - truth.tool[2]) < 1e-4
     assert res.solve.cost.size == res.solve.iterations + 1
     assert "joint_4.a" in res.summary()
 

@@ -118,7 +118,7 @@ def test_mdh_table_states_its_convention():
 
 
 def test_frames_matrices_and_quaternions_reproduce_the_predictions(tmp_path):
-    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
     from kincal.planning import simulation
 
     robot = Robot.load("ec66", tip="flange")

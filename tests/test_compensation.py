@@ -3,6 +3,8 @@
 import json
 
 import numpy as np
+
+from kincal.export.outputs import corrected_urdf_text
 import pytest
 from chains import random_chain
 from conftest import TIAGO_URDF, random_joint_values
@@ -13,7 +15,7 @@ from kincal.compensation.ik import rotation_log
 from kincal.models.kinematics import ChainKinematics
 from kincal.descriptions import default_center
 from kincal.errors import DataError
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh
 from kincal.planning import simulation
 from kincal.robot import Robot
@@ -233,7 +235,7 @@ def _write_targets(path, names, q, P, scale=1.0):
 def cli_cell(cell, tmp_path):
     robot, result, frames, q = cell
     urdf = tmp_path / "cal.urdf"
-    urdf.write_text(result.corrected_urdf_text())
+    urdf.write_text(corrected_urdf_text(result))
     fj = tmp_path / "frames.json"
     fj.write_text(json.dumps(result.frames_dict()))
     P, _ = _targets_from(result, q)

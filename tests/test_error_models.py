@@ -11,7 +11,7 @@ from test_export_roundtrip import _check_roundtrip
 
 from kincal import models
 from kincal.errors import OptionError, ParameterError
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem, calibrate
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem, calibrate
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
 from kincal.robot import Robot

@@ -9,7 +9,7 @@ import scipy.optimize
 from conftest import random_joint_values
 
 from kincal.errors import OptionError
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.identification.cross_validation import CrossValidation, small_volume_warning
 from kincal.identification.evidence import LinearEvidence, maximise, prior_class
 from kincal.identification.solver import SolverOptions, solve

@@ -14,6 +14,8 @@ import threading
 from pathlib import Path
 
 import numpy as np
+
+from kincal.export.outputs import Outputs, write_calibration
 import pytest
 from conftest import EC66
 
@@ -21,7 +23,7 @@ from kincal.cli.main import main
 from kincal.errors import ExportError, KincalError, OptionError
 from kincal.export import safe_write
 from kincal.export.safe_write import check_outputs, write_all, write_text_atomic
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem, calibrate
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem, calibrate
 from kincal.measurements.data import Measurements
 from kincal.robot import Robot
 
@@ -403,7 +405,7 @@ def test_api_bad_arrays_and_paths_raise_kincal_errors(robot_and_data, tmp_path):
     with pytest.raises(KincalError, match=r"\(N, 6\)"):
         result.predict([1, 2])
     with pytest.raises(KincalError, match="output path"):
-        result.export_urdf(None)
+        write_calibration(result, Outputs(urdf=Path("")))
 
 
 # -------------------------------------------------------------------- sweep

@@ -17,7 +17,7 @@ from conftest import TIAGO_DIR, tiago_urdf
 from kincal.cli.main import main
 from kincal.errors import ExportError
 from kincal.export.html_report import html_report, section_ids, write_html_report
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh
 from kincal.planning.accuracy_map import result_accuracy_map
 from kincal.planning.simulation import Truth, measure, planted_table

@@ -9,7 +9,7 @@ from kincal import models
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.identification.cross_validation import make_folds
 from kincal.identification.options import CalibrationOptions
-from kincal.identification.multiset import MultiSetProblem, calibrate_sets
+from kincal.identification.problem import CalibrationProblem, calibrate
 from kincal.measurements.plane import normal
 from kincal.measurements.sets import read_set_file
 from kincal.planning import kind_simulation as ks
@@ -40,7 +40,7 @@ def test_planted_errors_recovered_for_every_kind(kind, robot_name, tip, rng):
     cand = random_joint_values(robot.geometry, rng, 1500)
     options = CalibrationOptions(method="ls")
     # which kinematic parameters this kind identifies (at the nominal robot)
-    ident = MultiSetProblem(robot, [simulate(kind, em, em.nominal, q, rng, cand)],
+    ident = CalibrationProblem(robot, [simulate(kind, em, em.nominal, q, rng, cand)],
                             options).analyze()
     kept = [em.names.index(n) for n in ident.kept if n in em.names]
     truth = em.nominal.copy()
@@ -50,7 +50,7 @@ def test_planted_errors_recovered_for_every_kind(kind, robot_name, tip, rng):
     # what is redundant at nominal stays fixed: planted errors break exact redundancies
     # slightly, and a nearly redundant parameter kept would make the answer non-unique
     dropped = tuple(n for n in ident.dropped if n in em.names)
-    result = calibrate_sets(robot, [data], options, fix=dropped)
+    result = calibrate(robot, [data], options, fix=dropped)
     assert result.converged
     assert np.abs(result.kinematic[kept] - truth[kept]).max() < 1e-9
     frames = result.sets[0].frames
@@ -73,7 +73,7 @@ def test_two_point_sets_share_kinematics_with_their_own_frames(rng):
     q1 = random_joint_values(robot.geometry, rng, 40)
     q2 = random_joint_values(robot.geometry, rng, 15)
     base2 = np.array([-0.5, 1.0, 0.0, 0.0, 0.1, 2.0])
-    ident = MultiSetProblem(robot, [ks.simulate_points(em, em.nominal, BASE, TOOL, q1, 0.0, rng)],
+    ident = CalibrationProblem(robot, [ks.simulate_points(em, em.nominal, BASE, TOOL, q1, 0.0, rng)],
                             CalibrationOptions(method="ls")).analyze()
     truth = em.nominal.copy()
     for n in ident.kept:
@@ -82,9 +82,9 @@ def test_two_point_sets_share_kinematics_with_their_own_frames(rng):
     a = ks.simulate_points(em, truth, BASE, TOOL, q1, 0.0, rng)
     b = ks.simulate_points(em, truth, base2, TOOL + 0.01, q2, 0.0, rng)
     fix = tuple(n for n in ident.dropped if n in em.names)
-    problem = MultiSetProblem(robot, [a, b], CalibrationOptions(method="ls", fix=fix))
-    assert "base.x" in problem.names and "set2.base.x" in problem.names
-    assert "set2.tool.z" in problem.names
+    problem = CalibrationProblem(robot, [a, b], CalibrationOptions(method="ls", fix=fix))
+    assert "base.x" in problem.layout.names and "set2.base.x" in problem.layout.names
+    assert "set2.tool.z" in problem.layout.names
     result = problem.solve()
     assert np.abs(result.sets[1].frames - np.r_[base2, TOOL + 0.01]).max() < 1e-9
     assert max(s.after.max for s in result.sets) < 1e-6
@@ -92,7 +92,7 @@ def test_two_point_sets_share_kinematics_with_their_own_frames(rng):
     folds = make_folds(55, 5, 0, np.arange(55), np.repeat([0, 1], [40, 15]))
     assert all(np.sum(f < 40) == 8 and np.sum(f >= 40) == 3 for f in folds)
     assert sorted(np.concatenate(folds)) == list(range(55))
-    cv = calibrate_sets(robot, [a, b], method="l2", n_lambdas=4, folds=3, fix=fix)
+    cv = calibrate(robot, [a, b], method="l2", n_lambdas=4, folds=3, fix=fix)
     assert cv.cv is not None and cv.lam > 0
 
 
@@ -127,7 +127,7 @@ def test_bad_input_one_clear_error_each(tmp_path, rng):
     data = read_set_file(p, j, on_plane=True)
     assert data.kind == "plane"
     with pytest.raises(IdentifiabilityError, match="cannot fix the plane: 6 contacts spread"):
-        MultiSetProblem(robot, [data], CalibrationOptions(method="ls")).start()
+        CalibrationProblem(robot, [data], CalibrationOptions(method="ls")).start()
 
 
 def test_plan_for_every_kind_beats_random_subsets(rng):

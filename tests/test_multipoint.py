@@ -4,12 +4,14 @@ import json
 import warnings
 
 import numpy as np
+
+from kincal.export.outputs import corrected_urdf
 import pytest
 from conftest import random_joint_values, tiago_urdf
 
 from kincal.cli.main import main
 from kincal.errors import DataError, KincalWarning
-from kincal.identification.calibration import calibrate
+from kincal.identification.problem import calibrate
 from kincal.identification.cross_validation import make_folds
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
@@ -86,10 +88,11 @@ def test_planted_errors_and_three_points_are_recovered():
     for k in range(3):
         assert np.abs(res.predict(q_val, points=k) - true_positions(model, truth, q_val, k)).max() < 1e-9
     assert np.abs(res.predict_data(data) - data.positions).max() < 1e-9
-    frames = res.frames_dict()
-    assert len(frames["tool_points"]) == 3 and frames["tool"] == frames["tool_points"][0]
+    named = res.frames_dict()["sets"][0]["frames"]
+    assert {"tool.x", "tool2.x", "tool3.z"} <= set(named) and "tool4.x" not in named
+    assert named["tool.x"] == res.tools[0][0] and len(res.tools) == 3
     assert "3 measured points per pose" in res.summary() and "tool3.z" in res.summary()
-    text = res.urdf_with_frames(res.corrected_urdf_text())
+    text = corrected_urdf(res, add_frames=True)[0]
     assert "kincal_tool_point_3" in text and 'name="kincal_tool_point"' in text
 
 

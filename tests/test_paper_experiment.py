@@ -107,7 +107,7 @@ def test_weak_and_dropped_parameters_are_known_to_the_deviation_plot(result):
 
 
 def test_plot_calibration_of_one_result(tmp_path):
-    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
     from kincal.models import mdh
     from kincal.planning.simulation import Truth, measure, planted_table
     from kincal.robot import Robot

@@ -10,6 +10,8 @@ import math
 import warnings
 
 import numpy as np
+
+from kincal.export.outputs import Outputs, write_calibration
 import pytest
 
 from kincal import Measurements, Robot, calibrate
@@ -206,11 +208,12 @@ def test_export_urdf_refuses_an_implausible_result(ur10_csv, tmp_path):
     assert "millimetres read as metres" in p.causes[0]
     out = tmp_path / "c.urdf"
     with pytest.raises(ImplausibleResultError) as exc:
-        result.export_urdf(out)
+        write_calibration(result, Outputs(urdf=out))
     assert exc.value.plausibility is p
     assert not out.exists()
     with pytest.warns(UserWarning, match="accepted an implausible"):
-        result.export_urdf(out, accept_implausible=True, accept_unconverged=True)
+        write_calibration(result, Outputs(urdf=out), accept_implausible=True,
+                          accept_unconverged=True)
     assert out.is_file()
 
 

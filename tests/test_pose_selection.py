@@ -10,8 +10,8 @@ from conftest import ur10_path
 
 from kincal.cli.main import main
 from kincal.errors import DataError, InputFileError, OptionError, ParameterError
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem, calibrate
-from kincal.identification.parameters import MM, ParameterSpace
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem, calibrate
+from kincal.measurements.point_space import MM, ParameterSpace
 from kincal.identification.selection import analyze
 from kincal.measurements.point import MeasurementModel
 from kincal import models

@@ -180,7 +180,7 @@ def test_cli_joint_columns_and_note(plain, tmp_path, capsys):
 
 def test_parameter_patterns(ec66):
     from kincal.errors import ParameterError
-    from kincal.identification.parameters import ParameterSpace
+    from kincal.measurements.point_space import ParameterSpace
 
     from kincal import models
 
@@ -199,7 +199,7 @@ def test_parameter_patterns(ec66):
 
 
 def test_fix_patterns_in_a_calibration(ec66, plain, tmp_path, capsys):
-    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 
     data = Measurements.from_csv(plain[0], JOINTS)
     by_name = CalibrationProblem(ec66, data, CalibrationOptions(

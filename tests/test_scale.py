@@ -6,7 +6,7 @@ from conftest import random_joint_values
 
 from kincal.errors import OptionError
 from kincal.identification import calibration
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh
 from kincal.models.backlash import approach_directions
 from kincal.planning.simulation import Truth, measure, planted_table

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from conftest import random_joint_values
 
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.identification.solver import SolverOptions, solve
 from kincal.models import mdh
 from kincal.planning.simulation import Truth, measure, planted_table

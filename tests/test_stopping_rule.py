@@ -5,7 +5,7 @@ import pytest
 from conftest import random_joint_values
 
 from kincal.errors import OptionError
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.identification.solver import SolverOptions, solve
 from kincal.models import mdh
 from kincal.planning.simulation import Truth, measure, planted_table

@@ -1,12 +1,11 @@
 """kincal: kinematic calibration of serial robots from URDF.
 
-    from kincal import Robot
-    from kincal import Measurements
-    from kincal import calibrate
+    from kincal import Robot, Measurements, calibrate, write_calibration, Outputs
     robot = Robot.load("ec66", tip="flange")
     data = Measurements.from_csv("poses.csv", robot.joint_names)
-    result = calibrate(robot, data, method="l2", lam="cv")
-    print(result.summary()); result.export_urdf("ec66_calibrated.urdf")
+    result = calibrate(robot, data)            # one set, or a list of sets of any kind
+    print(result.summary())
+    write_calibration(result, Outputs(urdf="ec66_calibrated.urdf"))   # the gate, then files
 """
 
 __version__ = "0.1.0"
@@ -16,10 +15,14 @@ from kincal.errors import KincalError, KincalWarning  # noqa: E402
 # The public names are imported on first use (PEP 562), so that `import kincal` and
 # `kincal --help` do not pay for Pinocchio, scipy and matplotlib (about 0.5 s).
 _LAZY = {
-    "CalibrationOptions": "kincal.identification.calibration",
-    "CalibrationProblem": "kincal.identification.calibration",
-    "CalibrationResult": "kincal.identification.calibration",
-    "calibrate": "kincal.identification.calibration",
+    "CalibrationOptions": "kincal.identification.options",
+    "CalibrationProblem": "kincal.identification.problem",
+    "CalibrationResult": "kincal.identification.result",
+    "SetResult": "kincal.identification.result",
+    "calibrate": "kincal.identification.problem",
+    "write_calibration": "kincal.export.outputs",
+    "Outputs": "kincal.export.outputs",
+    "CellFrames": "kincal.frames_file",
     "SolverOptions": "kincal.identification.solver",
     "Measurements": "kincal.measurements.data",
     "random_candidates": "kincal.planning.candidates",
@@ -27,8 +30,6 @@ _LAZY = {
     "PoseSelection": "kincal.planning.pose_selection",
     "select_poses": "kincal.planning.pose_selection",
     "Robot": "kincal.robot",
-    "MultiSetProblem": "kincal.identification.multiset",
-    "calibrate_sets": "kincal.identification.multiset",
     "PoseData": "kincal.measurements.pose",
     "DistanceData": "kincal.measurements.distance",
     "PlaneData": "kincal.measurements.plane",
@@ -37,7 +38,8 @@ _LAZY = {
 
 __all__ = ["Robot", "Measurements", "calibrate", "CalibrationOptions", "CalibrationProblem",
            "CalibrationResult", "SolverOptions", "select_poses", "PoseSelection",
-           "random_candidates", "read_candidates", "MultiSetProblem", "calibrate_sets",
+           "random_candidates", "read_candidates", "SetResult", "write_calibration", "Outputs",
+           "CellFrames",
            "PoseData", "DistanceData", "PlaneData", "read_set_file", "KincalError", "KincalWarning", "__version__"]
 
 

@@ -207,7 +207,7 @@ def _add_model(p, allow_all: bool = False, default: str | None = None, help: str
 
 
 def _options(args, method):
-    from kincal.identification.calibration import CalibrationOptions
+    from kincal.identification.problem import CalibrationOptions
 
     lam = args.lam
     if lam not in ("auto", "cv", "evidence"):
@@ -292,7 +292,7 @@ def _design_accuracy(args, robot, problem):
 def cmd_calibrate(args) -> int:
     from kincal.export import report
     from kincal.export.safe_write import write_all
-    from kincal.identification.calibration import CalibrationProblem
+    from kincal.identification.problem import CalibrationProblem
 
     from kincal.cli import kinds
 
@@ -377,7 +377,7 @@ def cmd_calibrate(args) -> int:
 
 def cmd_evaluate(args) -> int:
     from kincal.export import report
-    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
     from kincal.identification.statistics import ErrorStats
     from kincal.measurements.point import MeasurementModel
 
@@ -429,7 +429,7 @@ def cmd_evaluate(args) -> int:
 
 def cmd_analyze(args) -> int:
     from kincal.export import report
-    from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
     from kincal.models import MODELS
     from kincal.cli import kinds
 
@@ -559,7 +559,7 @@ def cmd_simulate(args) -> int:
     files = [(args.out, data.to_csv_text())]
     if args.truth_out:
         from kincal.export import report
-        from kincal.identification.parameters import ParameterSpace
+        from kincal.measurements.point_space import ParameterSpace
 
         sp = ParameterSpace.of_model(model)
         x, x0 = truth.x(sp), sp.join(model.nominal, np.zeros(6), np.zeros(3))

@@ -8,7 +8,7 @@ public forms (:func:`compensate`, :func:`filter_program`).
 """
 
 from kincal.compensation.compensate import Compensation, compensate, filter_program
-from kincal.compensation.frames import CellFrames
+from kincal.frames_file import CellFrames
 from kincal.compensation.ik import IkOptions
 from kincal.compensation.targets import Targets, read_targets
 

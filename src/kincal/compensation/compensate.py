@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.compensation.frames import CellFrames
+from kincal.frames_file import CellFrames
 from kincal.compensation.ik import IkOptions, IkSolution, solve
 from kincal.models.kinematics import ChainKinematics
 from kincal.compensation.targets import Targets, joint_scales

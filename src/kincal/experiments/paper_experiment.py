@@ -103,13 +103,13 @@ import numpy as np
 
 from kincal.errors import ExportError, KincalWarning, OptionError
 from kincal.export.safe_write import write_all
-from kincal.identification.calibration import (
+from kincal.identification.problem import (
     CalibrationOptions,
     CalibrationProblem,
     CalibrationResult,
 )
 from kincal.identification.cross_validation import CrossValidation
-from kincal.identification.parameters import DEG, MM, ParameterSpace
+from kincal.measurements.point_space import DEG, MM, ParameterSpace
 from kincal.identification.solver import SolverOptions
 from kincal.identification.statistics import ErrorStats
 from kincal.models import mdh as mdh_layer

@@ -20,8 +20,8 @@ def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
                             source: str = "kincal"):
     """Position error [mm] of every sample before (frames fitted) and after calibration,
     in file order, x = the sample's line in the data file."""
-    before = np.linalg.norm(result.residuals_before, axis=1) * 1e3
-    after = np.linalg.norm(result.residuals, axis=1) * 1e3
+    before = result.sets[0].errors_before * 1e3
+    after = result.sets[0].errors_after * 1e3
     k = np.arange(len(after))
     fig = _figure(8.4, 3.6)
     ax = fig.add_subplot()
@@ -45,9 +45,9 @@ def plot_residuals_by_joint(result, path=None, *, overwrite: bool = False,
     the direction the joint last moved in (its approach), which separates the two flanks
     of the play."""
     q = np.asarray(result.joint_values)
-    err = np.linalg.norm(result.residuals, axis=1) * 1e3
+    err = result.sets[0].errors_after * 1e3
     names, kinds = result.robot.joint_names, result.robot.geometry.kinds
-    by_approach = result.space.n_backlash > 0 and result.approach is not None
+    by_approach = result.layout.n_backlash > 0 and result.approach is not None
     n = len(names)
     ncol = min(4, n)
     nrow = math.ceil(n / ncol)

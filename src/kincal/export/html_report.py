@@ -61,7 +61,13 @@ def _summary(result, data_source) -> str:
     r, o = result.robot, result.options
     rows = [("robot", f"{r.name} ({r.base} -> {r.tip})"), ("URDF", r.source),
             ("data", data_source or "(not given)"),
-            ("samples", f"{len(result.residuals)} ({result.space.n_points} point(s) per pose)"),
+            *[(f"set {k}" if len(result.sets) > 1 else "samples",
+               (f"{s.kind}, {s.source}: " if len(result.sets) > 1 else "")
+               + f"{len(s.errors_after)} samples"
+               + (f" ({s.data.n_points} point(s) per pose)" if s.kind == "point" else "")
+               + (f"; before {s.before.line()}; after {s.after.line()}"
+                  if len(result.sets) > 1 else ""))
+              for k, s in enumerate(result.sets, start=1)],
             ("method", o.method + (f", lambda = {result.lam:.4g}" if o.method == "l2"
                                    and math.isfinite(result.lam) else "")
              + (" (chosen by cross-validation)" if result.cv is not None else "")),
@@ -113,7 +119,7 @@ def _parameters(result, png) -> str:
             "<th>deviation</th><th>estimate</th><th>std. error</th><th class=\"name\">unit</th>"
             "</tr>")
     rows = []
-    for p, is_frame in zip(result.parameters, result.space.is_frame):
+    for p, is_frame in zip(result.parameters, result.layout.is_frame):
         nom, dev, se, unit = p.reported()
         status = p.status + (" (weak)" if p.name in weak else "")
         cls = p.status if p.status != "identified" else ("weak" if p.name in weak else "")
@@ -183,7 +189,7 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
     from kincal.export import diagnostic_plots as dp
     from kincal.export import plots
 
-    kin = list(result.parameters[:result.space.n_kinematic])
+    kin = list(result.parameters[:result.layout.n_kinematic])
     weak = {w.name for w in result.identifiability.weak}
     how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam and
                                    math.isfinite(result.lam) else "")

@@ -242,16 +242,17 @@ def plot_calibration(result, out_dir, overwrite: bool = False,
         paths.append(plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda,
                                    out_dir / "cv_curve.png", fold_errors_mm=cv.fold_errors,
                                    overwrite=overwrite, source=source))
-    after = np.linalg.norm(np.asarray(result.residuals), axis=1) * 1e3
-    series = []
-    series.append(("before (frames fitted)",
-                   np.linalg.norm(result.residuals_before, axis=1) * 1e3))
-    series.append((f"after ({result.options.method})", after))
-    title = (f"Calibration residuals, {len(after)} poses; before: mean {result.before.mean:.3f},"
-             f" max {result.before.max:.3f} mm")
-    paths.append(plot_error_distributions(series, out_dir / "residuals.png", title=title,
-                                          overwrite=overwrite, source=source))
-    kin = list(result.parameters[:result.space.n_kinematic])
+    for i, s in enumerate(result.sets):  # one residual figure per measurement set
+        after = s.errors_after * 1e3
+        series = [("before (frames fitted)", s.errors_before * 1e3),
+                  (f"after ({result.options.method})", after)]
+        what = "" if len(result.sets) == 1 else f" of set {i + 1} ({s.kind}, {s.source})"
+        title = (f"Calibration residuals{what}, {len(after)} samples; before: mean "
+                 f"{s.before.mean:.3f}, max {s.before.max:.3f} mm")
+        name = "residuals.png" if i == 0 else f"residuals_set{i + 1}.png"
+        paths.append(plot_error_distributions(series, out_dir / name, title=title,
+                                              overwrite=overwrite, source=source))
+    kin = list(result.parameters[:result.layout.n_kinematic])
     if any(p.status == "identified" for p in kin):
         how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")
         if result.evidence is not None:  # one weight per class, no single lambda

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from kincal.identification.calibration import CalibrationResult
+from kincal.identification.result import CalibrationResult
 from kincal.identification.selection import Identifiability
 from kincal.identification.statistics import ErrorStats
 
@@ -59,6 +59,16 @@ def identifiability_dict(ident: Identifiability) -> dict:
     }
 
 
+def set_dict(s) -> dict:
+    """One measurement set of a result: kind, source, frames, errors and residuals."""
+    return {"kind": s.kind, "source": s.source, "samples": int(len(s.errors_after)),
+            "frames": dict(zip(s.frame_names, map(float, s.frames))),
+            "errors": {"before": stats_dict(s.before), "after": stats_dict(s.after)},
+            "orientation_after_mean_deg": s.orientation_after_deg,
+            "residuals": {"row": s.rows, "error_mm": s.errors_after * 1e3,
+                          "residual_rows_m": s.residuals}}
+
+
 def result_dict(result: CalibrationResult, data_source: str | None = None) -> dict:
     """The whole result (REPORT.json)."""
     from kincal import __version__
@@ -73,7 +83,8 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                        f"deviation_{si}": p.deviation, f"std_error_{si}": p.std_error,
                        f"nominal_{unit}": nom, f"deviation_{unit}": dev,
                        f"std_error_{unit}": se})
-    errors_mm = np.linalg.norm(result.residuals, axis=1) * 1e3
+    first = result.sets[0]
+    errors_mm = first.errors_after * 1e3
     out = {
         "format": FORMAT,
         "kincal_version": __version__,
@@ -82,9 +93,11 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                   "joints": list(result.robot.joint_names),
                   "error_model": result.error_model.name,
                   "model_notes": [n for n in result.error_model.notes]},
-        "data": {"source": data_source, "samples": int(len(result.residuals)),
-                 "points_per_pose": int(result.space.n_points),
+        "data": {"source": data_source if data_source is not None else first.source,
+                 "samples": int(sum(len(s.errors_after) for s in result.sets)),
+                 "points_per_pose": int(getattr(first.data, "n_points", 1)),
                  "acquisition_order": result.order_source},
+        "sets": [set_dict(s) for s in result.sets],
         "options": {"method": o.method, "lambda": o.lam, "folds": o.folds, "seed": o.seed,
                     "prior_mm": o.prior_mm, "prior_deg": o.prior_deg, "noise_mm": o.noise_mm,
                     "lambda_grid": [o.lambda_min, o.lambda_max, o.n_lambdas],
@@ -113,8 +126,9 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "robust": {"loss": o.robust, "scale_mm": o.robust_scale_mm,
                    "downweighted": [{"row": d.row, "error_mm": d.error_mm, "weight": d.weight}
                                     for d in result.downweighted]},
-        "residuals": {"row": result.rows, "point": result.points, "error_mm": errors_mm,
-                      "dx_dy_dz_mm": result.residuals * 1e3},
+        "residuals": {"row": first.rows, "point": result.points, "error_mm": errors_mm,
+                      **({"dx_dy_dz_mm": first.residuals * 1e3} if first.kind == "point"
+                         else {})},
         "plausibility": None if result.plausibility is None else result.plausibility.as_dict(),
     }
     return _clean(out)

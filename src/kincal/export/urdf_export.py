@@ -339,3 +339,31 @@ def _line_indent(data: bytes, pos: int) -> bytes:
     """Whitespace from the start of the line to ``pos`` (empty if other text precedes)."""
     prefix = data[data.rfind(b"\n", 0, pos) + 1:pos]
     return b"" if prefix.strip() else prefix
+
+
+def add_frames_of(result, text: str) -> str:
+    """``text`` plus fixed frames for each measurement set of ``result`` that has them:
+    ``kincal_measurement_frame`` (child of the base link, the pose of the measurement frame
+    M in the base frame) and ``kincal_tool_point`` (child of the tip link, at the tool point;
+    ``kincal_tool_point_<k>`` for point k >= 2); sets k >= 2 add ``_set<k>`` to the names."""
+    from kincal.rotations import base_rotation, inverse, transform
+
+    robot = result.robot
+    base_link, T_bl = robot.link_of(robot.base)
+    tip_link, T_tl = robot.link_of(robot.tip)
+    for i, s in enumerate(result.sets):
+        suffix = "" if i == 0 else f"_set{i + 1}"
+        names = s.frame_names
+        if all(f"base.{c}" in names for c in ("x", "y", "z", "rx", "ry", "rz")):
+            b = [s.frame(f"base.{c}") for c in ("x", "y", "z", "rx", "ry", "rz")]
+            T_MB = transform(base_rotation(*b[3:]), b[:3])  # base frame expressed in M
+            name = "kincal_measurement_frame" + suffix
+            text = add_fixed_frame(text, base_link, name, name + "_joint", T_bl @ inverse(T_MB))
+        k = 1
+        while all(("tool." if k == 1 else f"tool{k}.") + c in names for c in "xyz"):
+            t = [s.frame(("tool." if k == 1 else f"tool{k}.") + c) for c in "xyz"]
+            name = "kincal_tool_point" + ("" if k == 1 else f"_{k}") + suffix
+            text = add_fixed_frame(text, tip_link, name, name + "_joint",
+                                   T_tl @ transform(None, t))
+            k += 1
+    return text

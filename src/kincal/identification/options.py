@@ -10,7 +10,7 @@ import numpy as np
 
 from kincal.errors import OptionError
 from kincal.identification.cross_validation import lambda_grid
-from kincal.identification.parameters import DEG, MM
+from kincal.measurements.point_space import DEG, MM
 from kincal.identification.robust import LOSSES
 from kincal.identification.selection import RANK_TOL
 from kincal.identification.solver import SolverOptions

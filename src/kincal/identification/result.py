@@ -1,35 +1,33 @@
-"""The outcome of a calibration: parameter table, frames, statistics, predictions, export."""
+"""The outcome of a calibration: parameters, per-set frames and errors, covariance, history,
+the penalty's choice and the plausibility verdict. It writes no files (:mod:`kincal.export`
+does, through its one writer)."""
 
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from kincal.errors import KincalWarning
-from kincal.identification.cross_validation import (
-    CrossValidation,
-)
+from kincal.frames_file import CellFrames, SetFrames, chain_hash
+from kincal.identification.cross_validation import CrossValidation
 from kincal.identification.evidence import EvidenceFit
+from kincal.identification.layout import ParameterLayout
 from kincal.identification.options import CalibrationOptions
-from kincal.identification.parameters import ParameterSpace
 from kincal.identification.plausibility import Plausibility
 from kincal.identification.robust import Downweighted
 from kincal.identification.selection import Identifiability
 from kincal.identification.solver import SolveSummary
 from kincal.identification.statistics import ErrorStats
-from kincal.measurements.data import Measurements
-from kincal.measurements.point import MeasurementModel
 from kincal.models.base import ErrorModel
-from kincal.models.backlash import CONVENTION as BACKLASH_CONVENTION
 from kincal.robot import Robot
-from kincal.rotations import base_rotation
 
 if TYPE_CHECKING:
-    from kincal.identification.calibration import CalibrationProblem
+    from kincal.identification.problem import CalibrationProblem
+
+WHAT = {"point": "position", "pose": "position", "distance": "distance",
+        "plane": "distance to the plane", "flush": "height above the plane"}
 
 
 @dataclass(frozen=True)
@@ -37,8 +35,7 @@ class ParameterEstimate:
     """One row of the parameter table (SI units; ``deviation = estimate - nominal``).
 
     status: "identified", "dropped" (redundant on these data), "fixed" (by the user).
-    is_length: True for lengths [m], False for angles [rad].
-    std_error: NaN unless identified.
+    is_length: True for lengths [m], False for angles [rad]. std_error: NaN unless identified.
     """
 
     name: str
@@ -58,14 +55,46 @@ class ParameterEstimate:
         return self.nominal * k, self.deviation * k, self.std_error * k, unit
 
 
+@dataclass(frozen=True)
+class SetResult:
+    """One measurement set in a result.
+
+    kind / source: the set's kind and file. data: the set (joint columns in chain order).
+    frame_names: the kind's frame names (unprefixed); frames: their identified values [SI].
+    residuals / residuals_before: (N, dim) measured minus predicted [m] after calibration and
+    at the start (orientation rows of poses in metres through their sigma ratio).
+    errors_before / errors_after: (N,) each sample's error [m] (position, distance, distance
+    to the plane; poses: position and orientation together); before / after: their
+    statistics [mm]. orientation_after_deg: mean orientation error of a pose set [deg].
+    """
+
+    kind: str
+    source: str
+    data: object
+    frame_names: tuple[str, ...]
+    frames: np.ndarray
+    residuals: np.ndarray
+    residuals_before: np.ndarray
+    errors_before: np.ndarray
+    errors_after: np.ndarray
+    before: ErrorStats
+    after: ErrorStats
+    orientation_after_deg: float | None = None
+
+    @property
+    def rows(self) -> np.ndarray:
+        """(N,) line numbers of the samples in their file."""
+        return np.asarray(self.data.rows)
+
+    def frame(self, name: str) -> float:
+        return float(self.frames[self.frame_names.index(name)])
+
 
 def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam,
                 scale: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """Sandwich standard errors [SI] of the free parameters (NaN for the others), and their
     (p, p) covariance [SI] (zero rows and columns for the parameters held fixed), or None
-    when it cannot be estimated.
-
-    lam: one weight, or (p,) weights per parameter (evidence priors)."""
+    when it cannot be estimated. lam: one weight, or (p,) weights per parameter."""
     J = sol.jacobian[:, free]
     H = J.T @ J + np.diag((np.broadcast_to(lam, penalised.shape) * penalised)[free])
     out = np.full(scale.size, np.nan)
@@ -88,258 +117,239 @@ def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam,
     return out, full
 
 
-def frame_transforms(base: np.ndarray, tools: np.ndarray) -> dict:
-    """The frames as 4x4 matrices and quaternions, for cells that take those.
-
-    ``T_measurement_base``: pose of the base frame B in the measurement frame M (P_M =
-    T P_B); ``T_tip_tool``, ``T_tip_tool_<k>``: the tool points as translations in the tip
-    frame; ``pose_measurement_base``: the same as x, y, z [m] and a unit quaternion qx, qy,
-    qz, qw (scalar last)."""
-    from kincal.rotations import matrix_to_quaternion, transform
-
-    T = transform(base_rotation(*base[3:]), base[:3])
-    out = {"T_measurement_base": T.tolist(),
-           "pose_measurement_base": dict(zip(("x", "y", "z", "qx", "qy", "qz", "qw"),
-                                             [*map(float, base[:3]),
-                                              *map(float, matrix_to_quaternion(T[:3, :3]))]))}
-    for k, t in enumerate(np.atleast_2d(tools), start=1):
-        out["T_tip_tool" + ("" if k == 1 else f"_{k}")] = transform(None, t).tolist()
-    return out
-
-
 @dataclass(frozen=True)
 class CalibrationResult:
     """Everything a calibration produced. Values in SI; reports in mm and degrees.
 
     robot: the nominal robot; corrected: the robot with identified joint placements.
-    parameters: one ParameterEstimate per parameter (kinematic, base, tool).
-    x_nominal / x_start / x: parameter vectors (nominal; nominal kinematics with fitted
-    frames; identified). lam: the penalty weight used (0 for LS; NaN with evidence
-    priors, whose weights differ per class). cv: the CV curve or None. evidence: the
-    prior scales and noise chosen by evidence (lam "evidence"), or None. before / after: position errors on the calibration data [mm] with the start
-    and the identified parameters. residuals: (N, 3) after calibration [m].
-    solve: the final solve's summary (cost history, convergence).
+    layout: the parameter layout (names, units, slices; also ``space``). parameters: one
+    ParameterEstimate per parameter. x_nominal / x_start / x: parameter vectors (nominal,
+    with the frames at their start; start: nominal kinematics with fitted frames;
+    identified). lam: the penalty weight (0 for LS; NaN with evidence priors, whose weights
+    differ per class). cv: the CV curve or None. evidence: the evidence fit or None.
+    sets: one :class:`SetResult` per measurement set. solve: the final solve's summary.
+    covariance: (p, p) read-only sandwich covariance [SI] (zero rows for parameters not
+    identified), or None. plausibility: the gate's verdict (solve() always sets it).
     """
 
     robot: Robot
     corrected: Robot
     options: CalibrationOptions
-    space: ParameterSpace
+    layout: ParameterLayout
     parameters: tuple[ParameterEstimate, ...]
     x_nominal: np.ndarray
     x_start: np.ndarray
     x: np.ndarray
     lam: float
     cv: CrossValidation | None
-    before: ErrorStats
-    after: ErrorStats
-    residuals: np.ndarray
+    sets: tuple[SetResult, ...]
     solve: SolveSummary
     identifiability: Identifiability
     error_model: ErrorModel
-    rows: np.ndarray  # (N,) line numbers of the samples in their source file
-    downweighted: tuple[Downweighted, ...] = ()  # samples a robust loss trusted less
-    residuals_before: np.ndarray | None = None  # (N, 3) with the start parameters [m]
-    order_source: str = ""  # how the samples' acquisition order was known (backlash terms)
-    points: np.ndarray | None = None  # (N,) the measured point of each sample (0 = point 1)
-    # (p, p) read-only sandwich covariance of the parameters [SI, in the order of
-    # space.names]; rows and columns of the parameters not identified are zero (held at
-    # their values). None when the data leave no degrees of freedom to estimate it.
+    downweighted: tuple[Downweighted, ...] = ()
     covariance: np.ndarray | None = None
-    joint_values: np.ndarray | None = None  # (N, n) chain joint values of the samples [rad, m]
-    approach: np.ndarray | None = None  # (N, n) approach directions of the samples (+1/-1/0)
     evidence: EvidenceFit | None = None
-    penalty_choice: str = ""  # with lambda "auto": which estimator ran, and why
-    plausibility: Plausibility | None = None  # the gate's verdict (identification.plausibility)
+    penalty_choice: str = ""
+    plausibility: Plausibility | None = None
 
     @classmethod
-    def _build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
-               evidence: EvidenceFit | None = None):
-        sp = problem.space
+    def build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
+              evidence: EvidenceFit | None = None, penalty_choice: str = "",
+              downweighted=()) -> "CalibrationResult":
+        lay = problem.layout
         x = sol.u * problem.scale
         free = problem.free_mask()
-        se, covariance = _std_errors(sol, free, sp.is_penalised, lam, problem.scale)
+        se, covariance = _std_errors(sol, free, lay.is_penalised, lam, problem.scale)
         fixed = set(ident.fixed)
-        x_nom = problem.x_nominal.copy()
         x_start = problem.start()
-        # base and tool have no nominal: their "nominal" is the fitted starting value
-        x_nom[sp.is_frame] = x_start[sp.is_frame]
-        rows = []
-        for i, name in enumerate(sp.names):
-            status = "identified" if free[i] else ("fixed" if name in fixed else "dropped")
-            rows.append(ParameterEstimate(name, bool(sp.is_length[i]), float(x_nom[i]),
-                                          float(x[i]), float(se[i]), status))
-        kin, _, _ = sp.split(x)
-        corrected = problem.robot.with_joint_frames(problem.error_model.joint_frames(kin))
-        res_before = problem.position_errors(x_start)
-        res = problem.position_errors(x)
-        return cls(problem.robot, corrected, problem.options, sp, tuple(rows), x_nom, x_start,
-                   x, float(lam) if evidence is None else math.nan, cv, ErrorStats.from_errors(res_before),
-                   ErrorStats.from_errors(res), res, sol, ident, problem.error_model,
-                   np.asarray(problem.data.rows), residuals_before=res_before,
-                   order_source=problem.data.order_source, points=problem.data.points,
-                   covariance=covariance, joint_values=problem.data.joint_values,
-                   approach=problem.data.approach, evidence=evidence)
+        x_nom = problem.x_nominal
+        x_nom[lay.is_frame] = x_start[lay.is_frame]  # frames have no nominal: their start
+        rows = tuple(ParameterEstimate(n, bool(lay.is_length[i]), float(x_nom[i]), float(x[i]),
+                                       float(se[i]), "identified" if free[i] else
+                                       ("fixed" if n in fixed else "dropped"))
+                     for i, n in enumerate(lay.names))
+        corrected = problem.robot.with_joint_frames(
+            problem.error_model.joint_frames(lay.kinematic(x)))
+        sets = []
+        for i, km in enumerate(problem.kinds):
+            r0, r = problem.residuals(x_start, i), problem.residuals(x, i)
+            ori = None
+            if km.kind == "pose":
+                ori = float(np.mean(km.orientation_errors(r)) * 180.0 / math.pi)
+            e0, e = km.sample_errors(r0), km.sample_errors(r)
+            sets.append(SetResult(km.kind, km.data.source, km.data, tuple(km.frame_names),
+                                  np.array(lay.frames(x, i)), r, r0, e0, e,
+                                  ErrorStats.from_errors(r0 if km.kind == "point" else e0),
+                                  ErrorStats.from_errors(r if km.kind == "point" else e), ori))
+        return cls(problem.robot, corrected, problem.options, lay, rows, x_nom, x_start, x,
+                   float(lam) if evidence is None else math.nan, cv, tuple(sets), sol, ident,
+                   problem.error_model, tuple(downweighted), covariance, evidence,
+                   penalty_choice)
 
     # ------------------------------------------------------------ accessors
+    @property
+    def space(self) -> ParameterLayout:
+        return self.layout
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.layout.names
+
     @property
     def converged(self) -> bool:
         return self.solve.converged
 
     def parameter(self, name: str) -> ParameterEstimate:
-        return self.parameters[self.space.index(name)]
+        return self.parameters[self.layout.index(name)]
 
     @property
-    def base(self) -> np.ndarray:
-        """(6,) measurement frame: x, y, z [m], rx, ry, rz [rad]."""
-        return self.space.split(self.x)[1].copy()
+    def kinematic(self) -> np.ndarray:
+        """The identified error-model vector [SI]."""
+        return self.layout.kinematic(self.x).copy()
 
     @property
-    def tool(self) -> np.ndarray:
-        """(3,) tool point (point 1) in the tip frame [m]."""
-        return self.space.split(self.x)[2].copy()
-
-    @property
-    def tools(self) -> np.ndarray:
-        """(K, 3) every measured point in the tip frame [m]."""
-        return self.space.tools(self.x).copy()
+    def backlash_joints(self) -> tuple[str, ...]:
+        return self.layout.backlash
 
     @property
     def backlash(self) -> dict[str, float]:
         """Half the play of each joint with a backlash term [rad, or m if prismatic]."""
-        return dict(zip(self.space.backlash, map(float, self.space.backlash_values(self.x))))
+        return dict(zip(self.layout.backlash, map(float, self.layout.backlash_values(self.x))))
+
+    @property
+    def before(self) -> ErrorStats:
+        """Sample errors [mm] of every set at the start (one set: that set's)."""
+        if len(self.sets) == 1:
+            return self.sets[0].before
+        return ErrorStats.from_errors(np.concatenate([s.errors_before for s in self.sets]))
+
+    @property
+    def after(self) -> ErrorStats:
+        """Sample errors [mm] of every set after calibration (one set: that set's)."""
+        if len(self.sets) == 1:
+            return self.sets[0].after
+        return ErrorStats.from_errors(np.concatenate([s.errors_after for s in self.sets]))
+
+    def _backlash_index(self) -> tuple[int, ...]:
+        joints = tuple(self.error_model.joint_names)
+        return tuple(joints.index(j) for j in self.layout.backlash)
+
+    # ----------------------------------- the first set (what one-set callers read)
+    @property
+    def residuals(self) -> np.ndarray:
+        """(N, dim) the first set's residuals after calibration [m]."""
+        return self.sets[0].residuals
+
+    @property
+    def residuals_before(self) -> np.ndarray:
+        return self.sets[0].residuals_before
+
+    @property
+    def rows(self) -> np.ndarray:
+        return self.sets[0].rows
+
+    @property
+    def points(self) -> np.ndarray | None:
+        return getattr(self.sets[0].data, "points", None)
+
+    @property
+    def joint_values(self) -> np.ndarray:
+        return self.sets[0].data.joint_values
+
+    @property
+    def approach(self) -> np.ndarray:
+        return self.sets[0].data.approach
+
+    @property
+    def order_source(self) -> str:
+        return getattr(self.sets[0].data, "order_source", "the order of the rows")
+
+    def _located(self) -> int:
+        """Index of the first set with a measurement frame and tool point (points, poses)."""
+        for i, s in enumerate(self.sets):
+            if "base.x" in s.frame_names and "tool.x" in s.frame_names:
+                return i
+        raise AttributeError("no measurement set of this calibration has a measurement frame "
+                             "and tool point (points or poses)")
+
+    @property
+    def base(self) -> np.ndarray:
+        """(6,) measurement frame of the first point or pose set: x, y, z [m], rx, ry, rz
+        [rad]."""
+        s = self.sets[self._located()]
+        k = s.frame_names.index("base.x")
+        return s.frames[k:k + 6].copy()
+
+    @property
+    def tool(self) -> np.ndarray:
+        """(3,) tool point (point 1) of the first point or pose set in the tip frame [m]."""
+        return self.tools[0]
+
+    @property
+    def tools(self) -> np.ndarray:
+        """(K, 3) every measured point of the first point or pose set in the tip frame [m]."""
+        s = self.sets[self._located()]
+        k = s.frame_names.index("tool.x")
+        K = getattr(s.data, "n_points", 1) if s.kind == "point" else 1
+        return s.frames[k:k + 3 * K].reshape(K, 3).copy()
+
+    # ------------------------------------------------------------- frames
+    def frames(self) -> CellFrames:
+        """The cell's frames (what FRAMES.json holds, :mod:`kincal.frames_file`)."""
+        return CellFrames(
+            robot=self.robot.name, chain_hash=chain_hash(self.robot), base_frame=self.robot.base,
+            tip_frame=self.robot.tip, joints=tuple(self.robot.joint_names),
+            sets=tuple(SetFrames(s.kind, s.source, s.frame_names,
+                                 tuple(float(v) for v in s.frames)) for s in self.sets),
+            backlash=self.backlash)
 
     def frames_dict(self) -> dict:
-        """The FRAMES.json content: measurement frame and tool point (and backlash) in SI.
+        """The FRAMES.json content (:meth:`kincal.frames_file.CellFrames.as_dict`)."""
+        return self.frames().as_dict()
 
-        Backlash is not a property of a URDF, so it travels with the frames: ``kincal
-        evaluate --frames`` applies it."""
-        b, t = self.base, self.tool
-        out = {"base": dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, b))),
-               "tool": dict(zip(("x", "y", "z"), map(float, t))),
-               "convention": "P_measured = R_base (p_tip + R_tip t_tool) + t_base, "
-                             "R_base = rotx(rx) roty(ry) rotz(rz); metres and radians",
-               "base_frame": self.robot.base, "tip_frame": self.robot.tip,
-               "joints": list(self.robot.joint_names)}
-        out.update(frame_transforms(b, self.tools))
-        if self.space.n_points > 1:
-            out["tool_points"] = [dict(zip(("x", "y", "z"), map(float, t))) for t in self.tools]
-        if self.space.n_backlash:
-            out["backlash"] = self.backlash
-            out["backlash_convention"] = BACKLASH_CONVENTION
-        return out
-
+    # ------------------------------------------------------------ prediction
     def predict(self, joint_values: np.ndarray, approach: np.ndarray | None = None,
                 points=0) -> np.ndarray:
-        """(N, 3) predicted positions in the measurement frame [m] of measured points.
+        """(N, 3) predicted positions in the measurement frame [m] of the first point or pose
+        set's measured points. approach: (N, n) approach directions for the backlash terms
+        (None: every joint in the middle of its play); points: which measured point
+        (0 = point 1), one for all or (N,) per row."""
+        from kincal.measurements.point import MeasurementModel
 
-        approach: (N, n) approach directions for the backlash terms (e.g. the
-        ``approach`` of a Measurements); None: every joint in the middle of its play.
-        points: which measured point (0 = point 1), one for all or (N,) per row.
-        """
         q = np.atleast_2d(joint_values)
         g = np.zeros(q.shape) if approach is None else np.atleast_2d(approach)
         idx = np.broadcast_to(np.asarray(points, dtype=int), (len(q),))
-        return MeasurementModel(self.error_model, q, g, self.space.backlash, idx,
-                                self.space.n_points).predict(self.x)
+        tools = self.tools
+        x = np.concatenate([self.kinematic, self.base, tools.ravel(),
+                            self.layout.backlash_values(self.x)])
+        return MeasurementModel(self.error_model, q, g, self.layout.backlash, idx,
+                                len(tools)).predict(x)
 
-    def predict_data(self, data: Measurements) -> np.ndarray:
-        """(N, 3) predictions for the samples of ``data``: its poses, approach directions
-        and measured points [m]."""
+    def predict_data(self, data) -> np.ndarray:
+        """(N, 3) predictions for the samples of point data ``data`` (its poses, approach
+        directions and measured points) [m]."""
         data = data.for_chain(self.robot.joint_names)
         return self.predict(data.joint_values, data.approach, data.points)
 
-    def corrected_urdf_text(self, readable: bool = True) -> str:
-        """The corrected URDF; see :mod:`kincal.readable_export` for ``readable``."""
-        return self.export_edits(readable)[0].text
+    def errors(self, data, set_index: int = 0, kinematic: np.ndarray | None = None):
+        """(N,) sample errors [m] of other data of set ``set_index``'s kind, with the
+        identified kinematics (or ``kinematic``, then without backlash) and that set's
+        identified frames."""
+        from kincal.measurements.sets import kind_model
 
-    def export_edits(self, readable: bool = True):
-        """(EditResult, joint offsets moved to child origins) of the corrected URDF."""
-        from kincal.export.readable_export import corrected_text
+        s = self.sets[set_index]
+        km = kind_model(self.error_model, data, self._backlash_index())
+        if km.kind != s.kind or tuple(km.frame_names) != s.frame_names:
+            raise ValueError(f"set {set_index + 1} is a {s.kind} set with frames "
+                             f"{', '.join(s.frame_names)}; the data are {km.kind} with "
+                             f"{', '.join(km.frame_names)}")
+        kin = self.kinematic if kinematic is None else kinematic
+        b = (self.layout.backlash_values(self.x) if kinematic is None
+             else np.zeros(self.layout.n_backlash))
+        return km.sample_errors(km.residuals(kin, s.frames, b))
 
-        return corrected_text(self.robot, self.corrected, readable, source=str(self.robot.source))
-
-    def urdf_with_frames(self, text: str) -> str:
-        """``text`` plus fixed frames: ``kincal_measurement_frame`` (child of the base link,
-        the pose of the measurement frame M in the base frame) and ``kincal_tool_point``
-        (child of the tip link, at the tool point; ``kincal_tool_point_<k>`` for point k >= 2
-        when several are measured)."""
-        from kincal.export.urdf_export import add_fixed_frame
-        from kincal.rotations import inverse, transform
-
-        base_link, T_bl = self.robot.link_of(self.robot.base)
-        tip_link, T_tl = self.robot.link_of(self.robot.tip)
-        b = self.base
-        T_MB = transform(base_rotation(*b[3:]), b[:3])  # base frame expressed in M
-        text = add_fixed_frame(text, base_link, "kincal_measurement_frame",
-                               "kincal_measurement_frame_joint", T_bl @ inverse(T_MB))
-        for k, t in enumerate(self.tools, start=1):
-            name = "kincal_tool_point" + ("" if k == 1 else f"_{k}")
-            text = add_fixed_frame(text, tip_link, name, name + "_joint", T_tl @ transform(None, t))
-        return text
-
-    def export_urdf(self, path, overwrite: bool = False, accept_implausible: bool = False,
-                    accept_unconverged: bool = False):
-        """Write the corrected URDF (only chain joint origins differ from the input).
-
-        An implausible result (see ``plausibility``) raises ImplausibleResultError, an
-        unconverged one NotConvergedError, and nothing is written, unless accepted."""
-        from kincal.export.safe_write import write_text_atomic
-
-        if self.plausibility is not None:
-            for message in self.plausibility.check(accept_implausible, accept_unconverged):
-                warnings.warn(message, KincalWarning)
-        protect = (self.robot.source,) if self.robot.source is not None else ()
-        return write_text_atomic(path, self.corrected_urdf_text(), overwrite=overwrite,
-                                 protect=protect)
-
+    # --------------------------------------------------------------- summary
     def summary(self) -> str:
-        ev = self.evidence
-        lines = [f"kincal calibration of {self.robot.name} ({self.robot.base} -> {self.robot.tip}), "
-                 f"method {self.options.method}, "
-                 + (f"lambda = {self.lam:.4g}" if ev is None else "priors toward nominal per "
-                    "class, " + ("given" if ev.given.all() and ev.noise_given
-                                 else "chosen by maximum evidence"))
-                 + (" (chosen by cross-validation)" if self.cv is not None else "")
-                 + (" on a random {} of the {} poses".format(*self.cv.subsample)
-                    if self.cv is not None and self.cv.subsample else ""),
-                 *([f"  penalty: {self.penalty_choice}"] if self.penalty_choice else []),
-                 *([f"  {ev.line()}"
-                    + ("" if ev.converged else f" [NOT SETTLED in {ev.iterations} rounds]")]
-                   if ev is not None else []),
-                 f"  {self.identifiability.summary().splitlines()[0]}",
-                 *([f"  {self.space.n_points} measured points per pose: statistics are over "
-                    "every point"] if self.space.n_points > 1 else []),
-                 f"  before: {self.before.line()}",
-                 f"  after:  {self.after.line()}",
-                 f"  solver: {self.solve.iterations} iterations, {self.solve.reason}"
-                 + ("" if self.converged else "  [NOT CONVERGED]"),
-                 *(["  plausibility gate: IMPLAUSIBLE (" + ", ".join(
-                     f.kind for f in self.plausibility.findings if f.kind != "not_converged")
-                    + "); result.plausibility has the evidence"]
-                   if self.plausibility is not None and not self.plausibility.plausible else []),
-                 *([f"  robust loss {self.options.robust}: {len(self.downweighted)} samples "
-                    "down-weighted below 0.5: " + ", ".join(
-                        f"line {d.row} ({d.error_mm:.3g} mm, weight {d.weight:.2f})"
-                        for d in self.downweighted[:10])
-                    + (" ..." if len(self.downweighted) > 10 else "")]
-                   if self.options.robust else []),
-                 *([f"  backlash terms ({', '.join(self.space.backlash)}): approach directions "
-                    f"from {self.order_source}; the URDF models the middle of the play"]
-                   if self.space.n_backlash else []),
-                 "  parameter                 nominal      deviation    std.err  unit"]
+        from kincal.identification.result_text import summary
 
-        def z(v):  # no "-0.0000" for values that are zero to the digits shown
-            return 0.0 if abs(v) < 5e-6 else v
-
-        frames = []
-        for p, is_frame in zip(self.parameters, self.space.is_frame):
-            nom, dev, se, unit = p.reported()
-            flag = "" if p.status == "identified" else f"  ({p.status})"
-            if is_frame:
-                frames.append(f"  {p.name:<24} {z(nom + dev):>14.4f} {z(se):>10.5f}  {unit}{flag}")
-            elif p.status != "dropped":
-                lines.append(f"  {p.name:<24} {z(nom):>10.4f} {z(dev):>+13.5f} {z(se):>10.5f}  "
-                             f"{unit}{flag}")
-        lines.append("  measurement frame and tool point   estimate    std.err  unit")
-        return "\n".join(lines + frames)
+        return summary(self)

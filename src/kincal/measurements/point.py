@@ -2,7 +2,7 @@
 analytic identification Jacobian, vectorised over poses.
 
 Plain numpy. For N samples with chain joint values q (N, n), and the parameter vector x of
-:mod:`kincal.identification.parameters`, the predicted tool point in the measurement frame is
+:mod:`kincal.measurements.point_space`, the predicted tool point in the measurement frame is
 
     P_k = R_base (p_tip(q_k; x) + R_tip(q_k; x) t_tool) + t_base       [m]
 
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from kincal.errors import DataError
-from kincal.identification.parameters import ParameterSpace
+from kincal.measurements.point_space import BASE, TOOL, ParameterSpace
 from kincal.models.base import ErrorModel
 from kincal.models.chain import Chain, cross_rows
 from kincal.rotations import base_rotation, rotx, roty, rotz
@@ -127,8 +127,9 @@ class MeasurementModel:
 
 
 class PointKind:
-    """The point kind behind the :class:`kincal.measurements.kind.KindModel` interface, for
-    calibrations over several measurement sets: residuals P_measured - P_predicted [m].
+    """The point kind (the :class:`kincal.measurements.kind.KindModel` interface):
+    residuals P_measured - P_predicted [m], through the one point engine
+    :class:`MeasurementModel`.
 
     Frames: ``base.x .y .z .rx .ry .rz`` (measurement frame) and ``tool.*`` (``tool<k>.*``
     for further points). data: :class:`kincal.measurements.data.Measurements`.
@@ -138,8 +139,6 @@ class PointKind:
     dim = 3
 
     def __init__(self, error_model: ErrorModel, data, backlash=()):
-        from kincal.identification.parameters import BASE, TOOL
-
         self.error_model = error_model
         self.data = data.for_chain(error_model.joint_names)
         names = tuple(error_model.joint_names[i] for i in backlash)
@@ -174,17 +173,26 @@ class PointKind:
         k, f = len(kin), len(frames)
         return P - pred, -J[:, :, :k], -J[:, :, k:k + f], -J[:, :, k + f:]
 
-    def start(self, kin, tool_guess=None) -> np.ndarray:
-        from kincal.identification.frames_init import initial_frames, point_in_tip
-        from kincal.rotations import base_angles
+    def start(self, kin, tool_guess=None, base_guess=None) -> np.ndarray:
+        """Closed-form first guess of the measurement frame and tool points; base_guess
+        (6,) replaces the measurement frame (the tool point then is tool_guess if given),
+        and further points follow from that frame."""
+        from kincal.measurements.frames_init import initial_frames, point_in_tip
+        from kincal.rotations import base_angles, base_rotation
 
         R_tip, p_tip = self.model.tip_poses(kin)
         P, pts = self.data.positions, self.data.points
         first = pts == 0
         Rb, tb, tool, _, _ = initial_frames(R_tip[first], p_tip[first], P[first], tool_guess)
+        base = np.concatenate([tb, base_angles(Rb)])
+        if base_guess is not None:
+            base = np.asarray(base_guess, dtype=float)
+            Rb, tb = base_rotation(*base[3:]), base[:3]
+            if tool_guess is not None:
+                tool = np.asarray(tool_guess, dtype=float)
         tools = [tool] + [point_in_tip(R_tip[m], p_tip[m], P[m], Rb, tb)
                           for m in (pts == k for k in range(1, self.data.n_points))]
-        return np.concatenate([tb, base_angles(Rb), np.ravel(tools)])
+        return np.concatenate([base, np.ravel(tools)])
 
     def sample_errors(self, r):
         return np.linalg.norm(r, axis=1)

@@ -213,7 +213,7 @@ class PoseKind(KindModel):
         return r, Jk, Jf, Jb
 
     def start(self, kin, tool_guess=None):
-        from kincal.identification.frames_init import initial_frames
+        from kincal.measurements.frames_init import initial_frames
 
         d = self.data
         s = self.chain.state(kin, None, keep=False)

@@ -112,7 +112,7 @@ def to_csv_text(data) -> str:
 
 class KindSpace:
     """Names and units of a kind's parameters for planning (kinematic, then frames): the
-    part of :class:`kincal.identification.parameters.ParameterSpace` that
+    part of :class:`kincal.measurements.point_space.ParameterSpace` that
     :func:`kincal.planning.pose_selection.select_poses` uses."""
 
     def __init__(self, names, is_length, n_kinematic: int):

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.errors import OptionError
-from kincal.identification.parameters import BASE, MM, ParameterSpace
+from kincal.measurements.point_space import BASE, MM, ParameterSpace
 from kincal.measurements.point import MeasurementModel
 from kincal.robot import Robot
 
@@ -200,6 +200,31 @@ def accuracy_map(robot: Robot, chain, space: ParameterSpace, x: np.ndarray,
                        _ro(skipped), targets, covariance_source)
 
 
+def point_view(layout, error_model, i: int, n_points: int):
+    """(ParameterSpace of one point set, (q,) indices into ``layout``) for set i, which has
+    a measurement frame and tool point(s): the layout's kinematic parameters, that set's
+    base.* and tool points, and the backlash terms, in the point engine's order."""
+    names = list(layout.frame_names(i))
+    sl = layout.frame_slices[i]
+    local = [names.index(layout.set_prefix(i) + n) for n in BASE]
+    for k in range(1, n_points + 1):
+        local += [names.index(layout.set_prefix(i) + ("tool." if k == 1 else f"tool{k}.") + c)
+                  for c in "xyz"]
+    idx = np.r_[np.arange(layout.n_kinematic), sl.start + np.array(local, dtype=int),
+                np.arange(layout.backlash_slice.start, layout.size)].astype(int)
+    return ParameterSpace.of_model(error_model, layout.backlash, n_points), idx
+
+
+def _located(sets) -> int:
+    """Index of the first set (kind models or set results) with base.* and tool.*."""
+    for i, s in enumerate(sets):
+        names = tuple(s.frame_names)
+        if "base.x" in names and "tool.x" in names:
+            return i
+    raise OptionError("an accuracy map needs a point or pose set (a measurement frame and "
+                      "tool point to predict positions of); these data have none")
+
+
 def result_accuracy_map(result, *, cube=None, grid: int = 5, joint_values=None,
                         targets: str = "") -> AccuracyMap:
     """The map of a :class:`~kincal.identification.result.CalibrationResult`, from its
@@ -207,12 +232,16 @@ def result_accuracy_map(result, *, cube=None, grid: int = 5, joint_values=None,
     if result.covariance is None:
         raise OptionError("this calibration has no parameter covariance (no degrees of "
                           "freedom left to estimate the noise): no accuracy map")
-    seeds = np.unique(np.asarray(result.joint_values), axis=0)
+    i = _located(result.sets)
+    s = result.sets[i]
+    space, idx = point_view(result.layout, result.error_model, i,
+                            getattr(s.data, "n_points", 1) if s.kind == "point" else 1)
+    seeds = np.unique(np.asarray(s.data.joint_values), axis=0)
     if cube is None and joint_values is None:
         joint_values = seeds
         targets = targets or f"the {len(seeds)} calibration poses"
-    return accuracy_map(result.corrected, _chain_model(result), result.space, result.x,
-                        result.covariance, seeds, cube=cube, grid=grid,
+    return accuracy_map(result.corrected, _chain_model(result), space, result.x[idx],
+                        result.covariance[np.ix_(idx, idx)], seeds, cube=cube, grid=grid,
                         joint_values=joint_values, targets=targets,
                         covariance_source=f"from the calibration ({result.options.method}, "
                                           + (f"lambda {result.lam:.3g}" if np.isfinite(result.lam)
@@ -233,7 +262,7 @@ def design_covariance(problem, noise: float, lam: float = 0.0) -> np.ndarray:
     _, J = problem.residual_function()(problem.start() / problem.scale, True)
     J = J[:, free]
     JtJ = J.T @ J
-    Hi = np.linalg.pinv(JtJ + lam * np.diag(problem.space.is_penalised[free].astype(float)))
+    Hi = np.linalg.pinv(JtJ + lam * np.diag(problem.layout.is_penalised[free].astype(float)))
     cov = (noise / MM) ** 2 * Hi @ JtJ @ Hi  # residuals in mm
     s = problem.scale[free]
     full = np.zeros((free.size, free.size))
@@ -245,13 +274,17 @@ def design_accuracy_map(problem, noise: float, *, cube=None, grid: int = 5,
                         joint_values=None, lam: float = 0.0, targets: str = "") -> AccuracyMap:
     """The map a calibration from ``problem``'s poses is predicted to give, at noise
     ``noise`` [m] per axis (see :func:`design_covariance`); default targets: the poses."""
-    x = problem.start()
-    seeds = np.unique(problem.data.joint_values, axis=0)
+    i = _located(problem.kinds)
+    km = problem.kinds[i]
+    space, idx = point_view(problem.layout, problem.error_model, i,
+                            getattr(km.data, "n_points", 1) if km.kind == "point" else 1)
+    x = problem.start()[idx]
+    seeds = np.unique(km.data.joint_values, axis=0)
     if cube is None and joint_values is None:
         joint_values, targets = seeds, f"the {len(seeds)} measured poses"
     how = "least squares" if lam == 0 else f"L2, lambda {lam:g}"
-    return accuracy_map(problem.robot, _chain_model(problem), problem.space, x,
-                        design_covariance(problem, noise, lam), seeds, cube=cube, grid=grid,
+    return accuracy_map(problem.robot, _chain_model(problem), space, x,
+                        design_covariance(problem, noise, lam)[np.ix_(idx, idx)], seeds, cube=cube, grid=grid,
                         joint_values=joint_values, targets=targets,
                         covariance_source=f"predicted before solving: {how}, noise "
                                           f"{noise / MM:g} mm per axis")

@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kincal.errors import DataError, KincalWarning, OptionError
-from kincal.identification.parameters import MM, ParameterSpace
+from kincal.measurements.point_space import MM, ParameterSpace
 from kincal.identification.selection import RANK_TOL, analyze
 from kincal.measurements.point import MeasurementModel
 from kincal import models as error_models

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kincal.errors import OptionError
-from kincal.identification.parameters import ParameterSpace
+from kincal.measurements.point_space import ParameterSpace
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
 from kincal.models.backlash import approach_directions

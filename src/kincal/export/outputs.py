@@ -1,0 +1,151 @@
+"""The one writer of a calibration's files, with the plausibility gate in front of it.
+
+``write_calibration(result, Outputs(urdf=..., frames=..., report=..., html=..., yaml=...,
+mdh=..., plots=...))`` is the only way the API and ``kincal calibrate`` write what a
+calibration produced. It refuses an implausible or unconverged result (one KincalError line
+naming the evidence) unless accepted, then composes every output and writes them as one
+transaction: all of them, or none (:func:`kincal.export.safe_write.write_all`).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+from kincal.errors import ExportError, KincalWarning
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """What to write (None: not written). urdf: the corrected URDF; frames: FRAMES.json
+    (:mod:`kincal.frames_file`); report: REPORT.json; html: the self-contained report;
+    yaml / mdh: the cell formats of :mod:`kincal.export.cell_exports`; plots: a folder of
+    PNG plots. add_frames: also put the measurement frame and tool point(s) into the URDF
+    as fixed frames. overwrite: replace existing files. protect: input files that must
+    never be replaced (the URDF and data are added from the result)."""
+
+    urdf: Path | str | None = None
+    frames: Path | str | None = None
+    report: Path | str | None = None
+    html: Path | str | None = None
+    yaml: Path | str | None = None
+    mdh: Path | str | None = None
+    plots: Path | str | None = None
+    add_frames: bool = False
+    overwrite: bool = False
+    protect: tuple = ()
+
+    def paths(self) -> list[Path]:
+        """The files and folders asked for, in writing order."""
+        return [Path(p) for p in (self.urdf, self.frames, self.report, self.yaml, self.mdh,
+                                  self.html, self.plots) if p is not None]
+
+
+@dataclass(frozen=True)
+class Written:
+    """What :func:`write_calibration` wrote: the files, and the export's notes (joint
+    offsets moved into child origins, rpy near gimbal lock), one line each."""
+
+    paths: tuple[Path, ...]
+    notes: tuple[str, ...]
+
+
+def gate(result, accept_implausible: bool = False, accept_unconverged: bool = False) -> list[str]:
+    """The gate's check: raises ImplausibleResultError / NotConvergedError (nothing is
+    written) unless accepted; returns the warnings of what was accepted and the gate's
+    notes."""
+    if result.plausibility is None:
+        raise ExportError("this result carries no plausibility verdict (it was not made by "
+                          "CalibrationProblem.solve()); nothing is written")
+    accepted = result.plausibility.check(accept_implausible, accept_unconverged,
+                                         refused="nothing is written")
+    return list(accepted) + list(result.plausibility.notes)
+
+
+def corrected_urdf(result, readable: bool = True, add_frames: bool = False):
+    """(text, export notes) of the corrected URDF: the original file with only the chain's
+    joint origins changed (plus fixed frames for the measurement frame and tool points
+    with ``add_frames``)."""
+    from kincal.export.readable_export import corrected_text
+
+    edits, moved = corrected_text(result.robot, result.corrected, readable,
+                                  source=str(result.robot.source))
+    text = edits.text
+    if add_frames:
+        from kincal.export.urdf_export import add_frames_of
+
+        text = add_frames_of(result, text)
+    return text, tuple(m.describe() for m in moved)
+
+
+def corrected_urdf_text(result, readable: bool = True) -> str:
+    """The corrected URDF text (no gate: for looking at; writing goes through
+    :func:`write_calibration`)."""
+    return corrected_urdf(result, readable)[0]
+
+
+def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = False,
+                      accept_unconverged: bool = False, accuracy=None,
+                      warnings_seen=(), data_source: str | None = None) -> Written:
+    """Check the gate, then write every output of ``outputs`` all-or-none.
+
+    accuracy: a predicted accuracy map to add to the report, the HTML and the plots.
+    warnings_seen: the run's warnings, for the HTML report. Returns :class:`Written`.
+    """
+    from kincal.export import report
+    from kincal.export.safe_write import write_all
+
+    for message in gate(result, accept_implausible, accept_unconverged):
+        warnings.warn(message, KincalWarning)
+    o = outputs
+    sources = [s.source for s in result.sets]
+    files: list = []
+    notes: tuple[str, ...] = ()
+    if o.urdf is not None:
+        text, notes = corrected_urdf(result, add_frames=o.add_frames)
+        files.append((o.urdf, text))
+    if o.frames is not None:
+        files.append((o.frames, result.frames().dumps()))
+    if o.report is not None:
+        content = report.result_dict(result, data_source or ", ".join(sources))
+        if accuracy is not None:
+            content["accuracy_map"] = accuracy.as_dict()
+        files.append((o.report, report.dumps(content)))
+    if o.yaml is not None or o.mdh is not None:
+        from kincal.export.cell_exports import kinematics_yaml, mdh_table_csv
+
+        if o.yaml is not None:
+            files.append((o.yaml, kinematics_yaml(result.robot, result.corrected)))
+        if o.mdh is not None:
+            files.append((o.mdh, mdh_table_csv(result.corrected)))
+    if o.plots is not None:
+        files += _plots(result, Path(o.plots), accuracy)
+    if o.html is not None:
+        from kincal.export.html_report import html_report
+
+        files.append((o.html, html_report(
+            result, accuracy=accuracy, data_source=data_source or ", ".join(sources),
+            warnings=list(warnings_seen), notes=[f"export: {n}" for n in notes])))
+    if not files:
+        return Written((), notes)
+    protect = [p for p in (result.robot.source, *sources) if p and not str(p).startswith("<")]
+    written = write_all(files, overwrite=o.overwrite, protect=[*protect, *o.protect],
+                        dirs=[o.plots] if o.plots is not None else [])
+    return Written(tuple(written), notes)
+
+
+def _plots(result, out_dir: Path, accuracy=None) -> list:
+    """(path, png bytes) pairs of the calibration plots, rendered away from ``out_dir``, so
+    the PNGs go to ``out_dir`` in the same transaction as the other files."""
+    from kincal.export.plots import plot_calibration
+
+    with tempfile.TemporaryDirectory(prefix="kincal-plots-") as tmp:
+        paths = plot_calibration(result, Path(tmp))
+        files = [(out_dir / Path(p).name, Path(p).read_bytes()) for p in paths]
+    if accuracy is not None and len(accuracy.std):
+        from kincal.export.diagnostic_plots import plot_accuracy_map
+
+        files.append((out_dir / "accuracy_map.png", plot_accuracy_map(accuracy)))
+    return files

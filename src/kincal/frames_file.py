@@ -1,0 +1,351 @@
+"""FRAMES.json: the frames of a calibrated cell, one versioned schema read everywhere.
+
+What ``kincal calibrate --frames-out`` writes and ``kincal evaluate``, ``kincal
+compensate`` and the API read. Version 2 (``"format": "kincal-frames", "version": 2``)::
+
+    {"format": "kincal-frames", "version": 2,
+     "robot": "ec66", "chain_hash": "sha256:...", "base_frame": "base_link",
+     "tip_frame": "flange", "joints": ["joint_1", ...],
+     "sets": [{"kind": "point", "source": "points.csv",
+               "frames": {"base.x": ..., "base.rz": ..., "tool.x": ...},
+               "T_measurement_base": [[...]], "pose_measurement_base": {...},
+               "T_tip_tool": [[...]]}, ...],
+     "backlash": {"joint_6": ...}, "convention": "...", "backlash_convention": "..."}
+
+Frames are in metres and radians, named as the kinds name them (``base.*`` the pose of the
+robot's base frame B in the measurement frame M, ``R_base = rotx(rx) roty(ry) rotz(rz)``;
+``tool.*`` the tool point (or frame) in the tip frame; ``pivot.*``, ``plane.*``, ...). The
+4x4 matrices are derived, for cells that take those; on reading they must agree with the
+named values. ``chain_hash`` identifies the robot model and chain (robot name, base, tip,
+joint names, kinds and axes; not the joint origins, which a calibration changes), so frames
+are never applied to another robot or chain.
+
+Earlier files are still read: version 1 (top-level ``base``/``tool``/``tool_points``) and
+the several-set ``kincal-frames-sets-1``. Values are checked: finite, translations within
+1 km, angles within 100 rad, JSON nesting at most 32 deep.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kincal.errors import DataError, InputFileError
+from kincal.rotations import base_rotation, inverse, matrix_to_quaternion, transform
+
+FORMAT = "kincal-frames"
+VERSION = 2
+CONVENTION = ("P_measured = R_base (p_tip + R_tip t_tool) + t_base, R_base = rotx(rx) "
+              "roty(ry) rotz(rz); metres and radians")
+MAX_LENGTH = 1e3  # [m] largest translation accepted in a frames file
+MAX_ANGLE = 100.0  # [rad]
+MAX_DEPTH = 32
+ANGLE_NAMES = ("rx", "ry", "rz")
+
+
+def chain_hash(robot) -> str:
+    """A hash of the robot model and chain that a calibration does not change: robot name,
+    base and tip frames, chain joint names, kinds and axes."""
+    g = robot.geometry
+    text = json.dumps([robot.name, robot.base, robot.tip, list(g.joint_names), list(g.kinds),
+                       [[round(float(v), 6) + 0.0 for v in a] for a in g.axes]])
+    return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
+
+
+@dataclass(frozen=True)
+class SetFrames:
+    """One measurement set's frames: its kind, source, and named values [m, rad]."""
+
+    kind: str
+    source: str
+    names: tuple[str, ...]
+    values: tuple[float, ...]
+
+    def value(self, name: str) -> float:
+        return self.values[self.names.index(name)]
+
+    def has(self, *names: str) -> bool:
+        return all(n in self.names for n in names)
+
+    @property
+    def base(self) -> np.ndarray:
+        """(6,) the measurement frame (base.x ... base.rz)."""
+        return np.array([self.value("base." + c) for c in ("x", "y", "z", "rx", "ry", "rz")])
+
+    @property
+    def tools(self) -> np.ndarray:
+        """(K, 3) the tool points in the tip frame: tool.*, then tool2.*, ..."""
+        out = [[self.value("tool." + c) for c in "xyz"]]
+        k = 2
+        while self.has(f"tool{k}.x", f"tool{k}.y", f"tool{k}.z"):
+            out.append([self.value(f"tool{k}.{c}") for c in "xyz"])
+            k += 1
+        return np.array(out)
+
+    def derived(self) -> dict:
+        """The 4x4 matrices and quaternion of the measurement frame and tool points."""
+        out: dict = {}
+        if self.has(*("base." + c for c in ("x", "y", "z", "rx", "ry", "rz"))):
+            b = self.base
+            T = transform(base_rotation(*b[3:]), b[:3])
+            out["T_measurement_base"] = T.tolist()
+            out["pose_measurement_base"] = dict(zip(
+                ("x", "y", "z", "qx", "qy", "qz", "qw"),
+                [*map(float, b[:3]), *map(float, matrix_to_quaternion(T[:3, :3]))]))
+        if self.has("tool.x", "tool.y", "tool.z"):
+            rot = None
+            if self.has("tool.rx", "tool.ry", "tool.rz"):
+                rot = base_rotation(*(self.value("tool." + c) for c in ANGLE_NAMES))
+            for k, t in enumerate(self.tools, start=1):
+                out["T_tip_tool" + ("" if k == 1 else f"_{k}")] = transform(
+                    rot if k == 1 else None, t).tolist()
+        return out
+
+
+@dataclass(frozen=True)
+class CellFrames:
+    """The frames of a calibration: the chain they belong to and each set's frames.
+
+    robot / chain_hash: the robot model (see :func:`chain_hash`; "" when an old file does
+    not say). base_frame, tip_frame, joints: the chain. sets: one :class:`SetFrames` per
+    measurement set. backlash: {joint: half the play [rad or m]}. source: for messages.
+    """
+
+    robot: str
+    chain_hash: str
+    base_frame: str
+    tip_frame: str
+    joints: tuple[str, ...]
+    sets: tuple[SetFrames, ...]
+    backlash: dict = field(default_factory=dict)
+    source: str = "<frames>"
+
+    # ------------------------------------------------------------ writing
+    def as_dict(self) -> dict:
+        from kincal.models.backlash import CONVENTION as BACKLASH_CONVENTION
+
+        out = {"format": FORMAT, "version": VERSION, "robot": self.robot,
+               "chain_hash": self.chain_hash, "base_frame": self.base_frame,
+               "tip_frame": self.tip_frame, "joints": list(self.joints),
+               "convention": CONVENTION,
+               "sets": [{"kind": s.kind, "source": s.source,
+                         "frames": dict(zip(s.names, map(float, s.values))), **s.derived()}
+                        for s in self.sets]}
+        if self.backlash:
+            out["backlash"] = {j: float(v) for j, v in self.backlash.items()}
+            out["backlash_convention"] = BACKLASH_CONVENTION
+        return out
+
+    def dumps(self) -> str:
+        return json.dumps(self.as_dict(), indent=2) + "\n"
+
+    # ------------------------------------------------------------ reading
+    @classmethod
+    def read(cls, path) -> "CellFrames":
+        """From a FRAMES.json file (any version); DataError naming what is wrong."""
+        from kincal.input_files import MAX_JSON_BYTES, check_regular_file
+
+        path = Path(path)
+        if not path.exists():
+            raise InputFileError(f"frames file not found: {path}")
+        check_regular_file(path, "frames", MAX_JSON_BYTES)  # no FIFO, device or huge file
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise DataError(f"{path}: not a kincal frames file ({exc})") from None
+        if not text.strip():
+            raise DataError(f"{path}: the frames file is empty; expected the FRAMES.json that "
+                            "kincal calibrate --frames-out wrote")
+        try:
+            data = json.loads(text)
+        except RecursionError:
+            raise DataError(f"{path}: not a kincal frames file (JSON nested too deeply)") from None
+        except ValueError as exc:
+            raise DataError(f"{path}: not a kincal frames file (invalid JSON: {exc})") from None
+        return cls.from_dict(data, str(path))
+
+    @classmethod
+    def from_dict(cls, data, source: str = "<frames>") -> "CellFrames":
+        """From the content of a FRAMES.json of any version."""
+        if not isinstance(data, dict):
+            raise DataError(f"{source}: not a kincal frames file (a JSON object was expected)")
+        if _depth(data) > MAX_DEPTH:
+            raise DataError(f"{source}: not a kincal frames file (JSON nested more than "
+                            f"{MAX_DEPTH} deep)")
+        try:
+            if data.get("format") == FORMAT:
+                if data.get("version") != VERSION:
+                    raise DataError(f"{source}: frames file version {data.get('version')!r}; "
+                                    f"this kincal reads versions 1 and {VERSION}")
+                frames = cls._from_v2(data, source)
+            elif data.get("format") == "kincal-frames-sets-1":
+                frames = cls._from_sets1(data, source)
+            elif "base" in data and "tool" in data:
+                frames = cls._from_v1(data, source)
+            else:
+                raise DataError(f"{source}: not a kincal frames file: expected \"format\": "
+                                f"\"{FORMAT}\" (or an older file's \"base\" and \"tool\")")
+        except (ValueError, KeyError, TypeError, AttributeError, IndexError) as exc:
+            raise DataError(f"{source}: not a kincal frames file ({exc.__class__.__name__}: "
+                            f"{exc})") from None
+        frames._check_values(data)
+        return frames
+
+    @classmethod
+    def _from_v2(cls, data: dict, source: str) -> "CellFrames":
+        sets = []
+        for s in data["sets"]:
+            f = s["frames"]
+            if not isinstance(f, dict):
+                raise TypeError("a set's frames must be an object of named values")
+            sets.append(SetFrames(str(s["kind"]), str(s.get("source", "")),
+                                  tuple(str(k) for k in f), tuple(float(v) for v in f.values())))
+        if not sets:
+            raise DataError(f"{source}: the frames file holds no measurement set")
+        return cls(str(data.get("robot", "")), str(data.get("chain_hash", "")),
+                   str(data.get("base_frame", "")), str(data.get("tip_frame", "")),
+                   tuple(str(j) for j in data.get("joints", ())), tuple(sets),
+                   _backlash(data), source)
+
+    @classmethod
+    def _from_v1(cls, data: dict, source: str) -> "CellFrames":
+        names, values = [], []
+        for c in ("x", "y", "z", "rx", "ry", "rz"):
+            names.append("base." + c)
+            values.append(float(data["base"][c]))
+        tools = data.get("tool_points", [data["tool"]])
+        for k, t in enumerate(tools, start=1):
+            for c in "xyz":
+                names.append(("tool." if k == 1 else f"tool{k}.") + c)
+                values.append(float(t[c]))
+        return cls("", "", str(data.get("base_frame", "")), str(data.get("tip_frame", "")),
+                   tuple(str(j) for j in data.get("joints", ())),
+                   (SetFrames("point", "", tuple(names), tuple(values)),),
+                   _backlash(data), source)
+
+    @classmethod
+    def _from_sets1(cls, data: dict, source: str) -> "CellFrames":
+        sets = tuple(SetFrames(str(s["kind"]), str(s.get("source", "")),
+                               tuple(str(k) for k in s["frames"]),
+                               tuple(float(v) for v in s["frames"].values()))
+                     for s in data["sets"])
+        if not sets:
+            raise DataError(f"{source}: the frames file holds no measurement set")
+        return cls("", "", str(data.get("base", "")), str(data.get("tip", "")), (), sets,
+                   _backlash(data), source)
+
+    def _check_values(self, data: dict) -> None:
+        """Finite, not absurd, and the 4x4 matrices (where given) agree with the values."""
+        for k, s in enumerate(self.sets, start=1):
+            for name, v in zip(s.names, s.values):
+                angle = name.rsplit(".", 1)[-1] in ANGLE_NAMES
+                limit = MAX_ANGLE if angle else MAX_LENGTH
+                if not math.isfinite(v) or abs(v) > limit:
+                    raise DataError(
+                        f"{self.source}: set {k} frame {name} = {v!r} is "
+                        + ("not finite" if not math.isfinite(v) else
+                           f"beyond {limit:g} {'rad' if angle else 'm'}")
+                        + "; frames are in metres and radians (a corrupted or hand-edited file?)")
+        for j, v in self.backlash.items():
+            if not math.isfinite(v) or abs(v) > MAX_ANGLE:
+                raise DataError(f"{self.source}: backlash of {j} = {v!r} is not a plausible "
+                                "half play [rad or m]")
+        given = [s.get("T_measurement_base") for s in data.get("sets", [])] \
+            if isinstance(data.get("sets"), list) else [data.get("T_measurement_base")]
+        for k, (s, T) in enumerate(zip(self.sets, given), start=1):
+            if T is None or not s.has("base.x", "base.rz"):
+                continue
+            T = np.asarray(T, dtype=float)
+            want = np.asarray(s.derived()["T_measurement_base"])
+            if T.shape != (4, 4) or not np.allclose(T, want, atol=1e-6):
+                raise DataError(f"{self.source}: set {k}'s T_measurement_base contradicts its "
+                                "base.* values (differs by "
+                                + (f"{np.abs(T - want).max():.3g}" if T.shape == (4, 4)
+                                   else f"shape {T.shape}")
+                                + "); fix one of them or write the file anew")
+
+    # ------------------------------------------------------------ checks
+    def check_chain(self, robot) -> None:
+        """Refuse frames identified on another robot or chain than ``robot``'s."""
+        if self.robot and self.robot != robot.name:
+            raise DataError(f"{self.source} belongs to the robot {self.robot!r}, not "
+                            f"{robot.name!r}: frames of another robot would give wrong numbers")
+        theirs = {"base frame": self.base_frame, "tip frame": self.tip_frame}
+        mine = {"base frame": robot.base, "tip frame": robot.tip}
+        for what in theirs:
+            if theirs[what] and theirs[what] != mine[what]:
+                raise DataError(f"{self.source} belongs to the {what} {theirs[what]!r}, this "
+                                f"robot's chain has {mine[what]!r} ({robot.base} -> {robot.tip}): "
+                                "frames from another robot or tip would give wrong joint "
+                                "values; use the frames written with this calibration, or "
+                                f"--tip/--base {theirs[what]} if that is the chain you meant")
+        if self.joints and tuple(self.joints) != tuple(robot.joint_names):
+            raise DataError(f"{self.source} was identified on the chain joints "
+                            f"{', '.join(self.joints)}, this robot's chain has "
+                            f"{', '.join(robot.joint_names)}: frames from another robot")
+        if self.chain_hash and self.chain_hash != chain_hash(robot):
+            raise DataError(f"{self.source} was identified on another robot model or chain "
+                            f"than {robot.name} ({robot.base} -> {robot.tip}): its chain hash "
+                            "differs (joint kinds or axes)")
+        unknown = [j for j in self.backlash if j not in robot.joint_names]
+        if unknown:
+            raise DataError(f"{self.source}: backlash of {', '.join(unknown)}, which are not "
+                            f"chain joints of {robot.name} ({', '.join(robot.joint_names)})")
+
+    def located(self) -> SetFrames:
+        """The first set with a measurement frame and tool point (points, poses)."""
+        for s in self.sets:
+            if s.has("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
+                     "tool.x", "tool.y", "tool.z"):
+                return s
+        raise DataError(f"{self.source}: no measurement set in it has a measurement frame "
+                        "and tool point (kinds " + ", ".join(s.kind for s in self.sets)
+                        + "); targets in a measurement frame need a point or pose calibration")
+
+    @property
+    def base(self) -> np.ndarray:
+        """(6,) measurement frame of the first point or pose set."""
+        return self.located().base
+
+    @property
+    def tools(self) -> np.ndarray:
+        """(K, 3) its tool points in the tip frame [m]."""
+        return self.located().tools
+
+    @property
+    def T_measurement_base(self) -> np.ndarray:
+        """(4, 4) pose of the base frame B in the measurement frame M [m]."""
+        b = self.base
+        return transform(base_rotation(*b[3:]), b[:3])
+
+    @property
+    def T_base_measurement(self) -> np.ndarray:
+        return inverse(self.T_measurement_base)
+
+
+def _backlash(data: dict) -> dict:
+    b = data.get("backlash", {})
+    if not isinstance(b, dict):
+        raise TypeError("backlash must be an object {joint: value}")
+    return {str(j): float(v) for j, v in b.items()}
+
+
+def _depth(value, limit: int = MAX_DEPTH + 1) -> int:
+    """Nesting depth of a JSON value, counted up to ``limit`` (iteratively)."""
+    depth, level = 0, [value]
+    while level and depth <= limit:
+        nxt = []
+        for v in level:
+            if isinstance(v, dict):
+                nxt.extend(v.values())
+            elif isinstance(v, list):
+                nxt.extend(v)
+        if nxt:
+            depth += 1
+        level = nxt
+    return depth

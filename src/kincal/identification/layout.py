@@ -1,0 +1,237 @@
+"""The parameter vector of a calibration: stable names, units and slices.
+
+One layout for every calibration, whatever its measurement sets::
+
+    [ kinematic (the error model) | set 1 frames | set 2 frames | ... | backlash ]
+
+The kinematic block is the error model's (``joint_3.a``, ``joint_2.beta``, ...). Each
+measurement set adds the frame parameters of its kind (:mod:`kincal.measurements`): set 1
+keeps the kind's names (``base.x``, ``tool.z``, ``pivot.y``, ``plane.d``), set k >= 2
+prefixes them ``set<k>.``. The backlash terms (``<joint>.backlash``), half the play of a
+joint [rad, or m for a prismatic joint], come last.
+
+For one point set the names and order are those of
+:class:`kincal.measurements.point_space.ParameterSpace` (kinematic, base, tool points,
+backlash), so a vector of one means the same in both. Lengths are in metres, angles in
+radians; reports convert to mm and degrees. Frames have no nominal value and are not
+penalised; the kinematic and backlash parameters are pulled toward nominal by L2.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from kincal.errors import ParameterError, listing, suggest
+
+MM = 1e-3  # [m]
+DEG = math.pi / 180.0  # [rad]
+
+
+@dataclass(frozen=True)
+class ParameterLayout:
+    """Names, units and slices of the parameter vector (see the module notes).
+
+    kinematic_names / kinematic_is_length / kinematic_classes: the error model's
+    parameters ("length" / "twist" / "offset" classes). set_frames: per set, its kind's
+    frame names (unprefixed) and length flags. backlash: chain joints with a backlash
+    term, in chain order; backlash_is_length: True for prismatic joints.
+    """
+
+    kinematic_names: tuple[str, ...]
+    kinematic_is_length: tuple[bool, ...]
+    kinematic_classes: tuple[str, ...]
+    set_frames: tuple[tuple[tuple[str, ...], tuple[bool, ...]], ...]
+    backlash: tuple[str, ...] = ()
+    backlash_is_length: tuple[bool, ...] = ()
+
+    @classmethod
+    def of(cls, error_model, kinds, backlash=()) -> "ParameterLayout":
+        """The layout of an error model's chain measured by ``kinds`` (KindModels);
+        ``backlash`` are chain joints (any order: kept in chain order)."""
+        joints = tuple(error_model.joint_names)
+        unknown = [j for j in backlash if j not in joints]
+        if unknown:
+            raise ParameterError(f"no chain joint {unknown[0]!r} for a backlash term."
+                                 + suggest(unknown[0], joints)
+                                 + f" Chain joints: {listing(joints, 60)}", valid=joints)
+        if len(set(backlash)) != len(tuple(backlash)):
+            raise ParameterError(f"backlash joints given twice: {', '.join(backlash)}")
+        chosen = tuple(j for j in joints if j in set(backlash))
+        return cls(tuple(error_model.names), tuple(bool(b) for b in error_model.is_length),
+                   tuple(error_model.classes),
+                   tuple((tuple(k.frame_names), tuple(bool(b) for b in k.frame_is_length))
+                         for k in kinds),
+                   chosen,
+                   tuple(error_model.kinds[joints.index(j)] == "prismatic" for j in chosen))
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_kinematic(self) -> int:
+        return len(self.kinematic_names)
+
+    @property
+    def n_sets(self) -> int:
+        return len(self.set_frames)
+
+    @property
+    def n_frames(self) -> int:
+        """Frame parameters of all sets together."""
+        return sum(len(names) for names, _ in self.set_frames)
+
+    @property
+    def n_backlash(self) -> int:
+        return len(self.backlash)
+
+    @property
+    def size(self) -> int:
+        return self.n_kinematic + self.n_frames + self.n_backlash
+
+    @property
+    def frame_slices(self) -> tuple[slice, ...]:
+        """Per set, the slice of its frame parameters in the vector."""
+        out, start = [], self.n_kinematic
+        for names, _ in self.set_frames:
+            out.append(slice(start, start + len(names)))
+            start += len(names)
+        return tuple(out)
+
+    @property
+    def backlash_slice(self) -> slice:
+        return slice(self.n_kinematic + self.n_frames, self.size)
+
+    # ------------------------------------------------------------------ names
+    def set_prefix(self, i: int) -> str:
+        return "" if i == 0 else f"set{i + 1}."
+
+    def frame_names(self, i: int) -> tuple[str, ...]:
+        """Set i's frame parameter names as they appear in the layout (prefixed)."""
+        return tuple(self.set_prefix(i) + n for n in self.set_frames[i][0])
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return (self.kinematic_names
+                + tuple(n for i in range(self.n_sets) for n in self.frame_names(i))
+                + tuple(f"{j}.backlash" for j in self.backlash))
+
+    @property
+    def is_length(self) -> np.ndarray:
+        """(p,) True for lengths [m], False for angles [rad]."""
+        return np.array(list(self.kinematic_is_length)
+                        + [b for _, flags in self.set_frames for b in flags]
+                        + list(self.backlash_is_length), dtype=bool)
+
+    def _mask(self, sl: slice) -> np.ndarray:
+        mask = np.zeros(self.size, dtype=bool)
+        mask[sl] = True
+        return mask
+
+    @property
+    def is_kinematic(self) -> np.ndarray:
+        """(p,) the error model's parameters (what the corrected URDF carries)."""
+        return self._mask(slice(0, self.n_kinematic))
+
+    @property
+    def is_frame(self) -> np.ndarray:
+        """(p,) the sets' frame parameters (measurement frames, tool points, planes, ...)."""
+        return self._mask(slice(self.n_kinematic, self.n_kinematic + self.n_frames))
+
+    @property
+    def is_backlash(self) -> np.ndarray:
+        return self._mask(self.backlash_slice)
+
+    @property
+    def is_penalised(self) -> np.ndarray:
+        """(p,) the parameters with a nominal value that L2 pulls toward: all but frames."""
+        return ~self.is_frame
+
+    @property
+    def classes(self) -> tuple[str, ...]:
+        """(p,) class of every parameter: the error model's "length" / "twist" / "offset",
+        "frame", "backlash"."""
+        return (self.kinematic_classes + ("frame",) * self.n_frames
+                + ("backlash",) * self.n_backlash)
+
+    def reporting_scale(self) -> np.ndarray:
+        """(p,) size of one reporting unit per parameter: 1 mm or 1 deg, in SI."""
+        return np.where(self.is_length, MM, DEG)
+
+    # ----------------------------------------------------------- look-ups
+    def index(self, name: str) -> int:
+        names = self.names
+        try:
+            return names.index(name)
+        except ValueError:
+            raise ParameterError(f"unknown parameter {name!r}." + suggest(name, names)
+                                 + f" Valid names: {listing(names, 60)}", valid=names) from None
+
+    def expand(self, patterns) -> tuple[str, ...]:
+        """The names that ``patterns`` select, in parameter order, each once.
+
+        A pattern is a name (``"joint_3.a"``) or a shell-style pattern (``"*.d"``,
+        ``"joint_[456].*"``, ``"tool*"``; :func:`fnmatch.fnmatchcase`); a single string is
+        one pattern. An unknown name, or a pattern matching nothing, raises
+        :class:`ParameterError` listing the valid names."""
+        if isinstance(patterns, str):
+            patterns = (patterns,)
+        names = self.names
+        chosen: set[int] = set()
+        for pattern in patterns:
+            if not isinstance(pattern, str):
+                raise ParameterError(f"a parameter name or pattern must be a string, got "
+                                     f"{pattern!r}", valid=names)
+            if not any(c in pattern for c in "*?["):
+                chosen.add(self.index(pattern))
+                continue
+            hits = [k for k, n in enumerate(names) if fnmatch.fnmatchcase(n, pattern)]
+            if not hits:
+                raise ParameterError(f"pattern {pattern!r} matches no parameter. Valid names: "
+                                     f"{listing(names, 60)}", valid=names)
+            chosen.update(hits)
+        return tuple(names[k] for k in sorted(chosen))
+
+    def indices(self, patterns) -> np.ndarray:
+        """(k,) indices of the parameters that ``patterns`` select (see :meth:`expand`)."""
+        return np.array([self.index(n) for n in self.expand(patterns)], dtype=int)
+
+    # ----------------------------------------------------------- vectors
+    def kinematic(self, x: np.ndarray) -> np.ndarray:
+        return x[:self.n_kinematic]
+
+    def frames(self, x: np.ndarray, i: int) -> np.ndarray:
+        """Set i's frame parameters (a view)."""
+        return x[self.frame_slices[i]]
+
+    def backlash_values(self, x: np.ndarray) -> np.ndarray:
+        return x[self.backlash_slice]
+
+    def split(self, x: np.ndarray, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kinematic, set i's frames, backlash) views of a parameter vector."""
+        return self.kinematic(x), self.frames(x, i), self.backlash_values(x)
+
+    # ------------------------------------------- one set of points (the common case)
+    @property
+    def n_points(self) -> int:
+        """Measured points per pose of the first set (tool.*, tool2.*, ...; 0 if none)."""
+        names = self.set_frames[0][0] if self.set_frames else ()
+        k = 0
+        while all(("tool." if k == 0 else f"tool{k + 1}.") + c in names for c in "xyz"):
+            k += 1
+        return k
+
+    def join(self, kinematic, base, tools, backlash=None) -> np.ndarray:
+        """The vector of a layout of one point set: kinematic, base (6,), tool points
+        (K, 3) or (3,), backlash (None: zero) [SI]."""
+        if self.n_sets != 1 or self.set_frames[0][0][:6] != tuple(
+                f"base.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")):
+            raise ParameterError("join() builds the vector of one point set; with other sets, "
+                                 "fill the frames through frame_slices")
+        b = np.zeros(self.n_backlash) if backlash is None else np.asarray(backlash, float)
+        x = np.concatenate([np.asarray(kinematic, float).ravel(), np.asarray(base, float),
+                            np.asarray(tools, float).ravel(), b])
+        if x.size != self.size:
+            raise ParameterError(f"{self.size} values expected, got {x.size}")
+        return x

@@ -1,0 +1,572 @@
+"""The calibration problem: one robot chain, one or many measurement sets of any kind.
+
+``CalibrationProblem(robot, sets, options)`` builds; ``.analyze()`` says what the data
+identify; ``.solve()`` identifies (plain least squares, or L2 toward nominal with per-class
+priors chosen by maximum evidence, lambda chosen by k-fold CV, or lambda given) and returns
+a :class:`~kincal.identification.result.CalibrationResult` carrying the plausibility
+gate's verdict. ``calibrate(...)`` does all three. One data set is a list of one: there is
+no other path.
+
+The sets share the kinematic and backlash parameters; each adds its kind's frames
+(:mod:`kincal.identification.layout`). Weights: each sample's residual rows are divided by
+its stated sigma (a set's ``sigma``, or
+:data:`kincal.measurements.kind.DEFAULT_SIGMA` where a set states none), normalised to RMS 1
+over all samples; sets without sigmas weigh alike (all weights 1). Residuals are in mm, the
+solver's variables are the parameters over their penalty scale (1 mm, 1 deg).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import warnings
+from dataclasses import fields, replace
+from typing import Callable
+
+import numpy as np
+
+from kincal import models as error_models
+from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
+                           ParameterError, listing, suggest)
+from kincal.identification import blas_threads, penalty_choice
+from kincal.identification.cross_validation import (CrossValidation, cross_validate,
+                                                    fold_fitter, lambda_grid)
+from kincal.identification.layout import MM, ParameterLayout
+from kincal.identification.options import CalibrationOptions
+from kincal.identification.plausibility import gather, judge
+from kincal.identification.result import CalibrationResult
+from kincal.identification.robust import ROBUST_SCALE, Downweighted
+from kincal.identification.robust import weights as robust_weights
+from kincal.identification.selection import Identifiability, analyze
+from kincal.identification.solver import SolverOptions, SolveSummary, solve
+from kincal.measurements.checks import (angle_unit_warnings, distinct_poses,
+                                        length_unit_warnings, limit_warnings)
+from kincal.measurements.kind import DEFAULT_SIGMA
+from kincal.measurements.sets import kind_model, kind_of
+from kincal.models.mdh import TOOL_AXIS_WARNING
+from kincal.robot import Robot
+
+# samples evaluated together in a residual with Jacobian: more are done block by block
+BLOCK_SAMPLES = 2048
+
+
+def as_sets(data) -> list:
+    """A list of measurement sets from one set or a sequence of them (DataError if empty)."""
+    sets = list(data) if isinstance(data, (list, tuple)) else [data]
+    if not sets:
+        raise DataError("no measurement set given: give one set or a non-empty list of sets")
+    for d in sets:
+        kind_of(d)  # raises for anything that is not a measurement set
+    return sets
+
+
+class CalibrationProblem:
+    """The identification of one robot chain from a list of measurement sets."""
+
+    def __init__(self, robot: Robot, sets, options: CalibrationOptions | None = None):
+        for name, value, kind in (("robot", robot, Robot),
+                                  ("options", options or CalibrationOptions(), CalibrationOptions)):
+            if not isinstance(value, kind):
+                raise OptionError(f"{name} must be a {kind.__name__}, got {type(value).__name__}"
+                                  + ("; for one field use calibrate(robot, data, method=...)"
+                                     if name == "options" else ""))
+        self.robot = robot
+        self.options = o = (options or CalibrationOptions()).validated()
+        self.error_model = em = error_models.build(o.model, robot.geometry)
+        chain = tuple(em.joint_names)
+        unknown = [j for j in o.backlash if j not in chain]
+        if unknown:
+            raise ParameterError(f"no chain joint {unknown[0]!r} for a backlash term."
+                                 + suggest(unknown[0], chain)
+                                 + f" Chain joints: {listing(chain, 60)}", valid=chain)
+        backlash = tuple(j for j in chain if j in set(o.backlash))
+        bidx = tuple(chain.index(j) for j in backlash)
+        self.kinds = [kind_model(em, d, bidx) for d in as_sets(sets)]
+        self.layout = ParameterLayout.of(em, self.kinds, o.backlash)
+        self.scale = np.where(self.layout.is_length, o.length_scale, o.angle_scale)
+        self.offsets = np.cumsum([0] + [km.N for km in self.kinds])
+        stated = [km.data.sigma is not None for km in self.kinds]
+        if not any(stated):
+            self.weights = np.ones(self.n_samples)
+        else:
+            sig = np.concatenate([km.data.sigma if km.data.sigma is not None
+                                  else np.full(km.N, DEFAULT_SIGMA) for km in self.kinds])
+            inv = 1.0 / sig
+            self.weights = inv / np.sqrt(np.mean(inv ** 2))
+        for name in o.fix + o.free:
+            if not any(c in name for c in "*?["):
+                self._check_name(name)  # a name of another model says which model has it
+        self.layout.expand(o.fix), self.layout.expand(o.free)  # unknown names raise, listed
+        if not self._unfixed().any():
+            raise OptionError(f"nothing to fit: every parameter method {o.method} fits is fixed; "
+                              "leave at least one free (fix fewer names)")
+        self.n_poses = 0
+        for km in self.kinds:
+            n = len(np.unique(km.data.poses))
+            self.n_poses += n
+            if n < 3:
+                raise DataError(f"{km.data.source}: {n} poses; the frames of a measurement set "
+                                "alone need at least 3 (a calibration needs many more)")
+        self._warn_inputs()
+        self._x_start = self._ident = self._structural = None
+        self._all_blocks: dict = {}
+
+    # ----------------------------------------------------------------- layout
+    @property
+    def space(self) -> ParameterLayout:
+        """The parameter layout (also named ``layout``)."""
+        return self.layout
+
+    @property
+    def sets(self) -> tuple:
+        """The measurement sets, joint columns in chain order."""
+        return tuple(km.data for km in self.kinds)
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.offsets[-1])
+
+    def _check_name(self, name: str) -> None:
+        """A --fix/--free name of this model; one of another model says which model has it,
+        anything else lists the valid names (ParameterError)."""
+        if name in self.layout.names:
+            return
+        for other in error_models.MODELS:
+            if other != self.options.model and \
+                    name in error_models.build(other, self.robot.geometry).names:
+                raise ParameterError(
+                    f"{name!r} is a parameter of error model {other}, not of {self.options.model}"
+                    f" (choose --model {other}, or a name of {self.options.model}: "
+                    f"{', '.join(self.layout.kinematic_names[:8])}, ...)",
+                    valid=self.layout.names)
+        self.layout.index(name)  # raises, listing the valid names
+
+    def _warn_inputs(self) -> None:
+        """Joint values outside the URDF limits or in the wrong angle unit, and backlash
+        joints seen from one direction only: warnings, per set."""
+        g = self.robot.geometry
+        for km in self.kinds:
+            d = km.data
+            pose = np.unique(d.poses, return_index=True)[1]
+            q = d.joint_values[pose]
+            messages = (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, d.rows[pose])
+                        + angle_unit_warnings(g.joint_names, g.kinds, q,
+                                              getattr(d, "angle_unit", "rad"))
+                        + self._approach_warnings(km))
+            for message in messages:
+                warnings.warn(f"{d.source}: {message}", KincalWarning)
+
+    def _approach_warnings(self, km) -> list[str]:
+        """Backlash joints whose samples do not come from both directions, and a time-like
+        column left unused while the directions come from the row order."""
+        out, d, lay = [], km.data, self.layout
+        order = getattr(d, "order_source", "the order of the rows")
+        timelike = [c for c in d.ignored_columns
+                    if re.search(r"time|stamp|(^|_)t($|_)", c, re.IGNORECASE)]
+        if lay.n_backlash and not getattr(d, "has_order_column", False) and timelike:
+            out.append(f"backlash: the approach directions come from {order}; "
+                       f"the file has a column {timelike[0]!r} that looks like a time stamp: if "
+                       f"the rows are not in acquisition order, give it as the order column "
+                       f"(--order-column {timelike[0]})")
+        chain = tuple(self.error_model.joint_names)
+        for j in lay.backlash:
+            g = d.approach[:, chain.index(j)]
+            up, down = int(np.sum(g > 0)), int(np.sum(g < 0))
+            if min(up, down) < 3:
+                out.append(f"{j}.backlash: {up} samples approached {j} from below and {down} "
+                           f"from above (acquisition order: {order}); "
+                           "backlash is identifiable only from both directions, a few of "
+                           "each at least")
+        return out
+
+    # -------------------------------------------------------------- residuals
+    def _parts(self, rows):
+        """[(set index, kind model on those rows, global positions of the rows)]."""
+        if rows is None:
+            return [(i, km, np.arange(self.offsets[i], self.offsets[i + 1]))
+                    for i, km in enumerate(self.kinds)]
+        rows = np.asarray(rows)
+        out = []
+        for i, km in enumerate(self.kinds):
+            mine = rows[(rows >= self.offsets[i]) & (rows < self.offsets[i + 1])]
+            if mine.size:
+                out.append((i, km.subset(mine - self.offsets[i]), mine))
+        return out
+
+    def _blocks(self, i: int, km, g: np.ndarray, cache: bool):
+        """[(local slice, kind model of those samples)] in blocks of BLOCK_SAMPLES.
+
+        Evaluating many samples block by block keeps every temporary of the Jacobian small
+        (a few MB, in cache) instead of a dozen (N, dim, p) arrays: at 200,000 poses it is
+        several times faster. The blocks of a whole set are built once (cache=True)."""
+        if km.N <= BLOCK_SAMPLES:
+            return [(slice(0, km.N), km)]
+        if cache and i in self._all_blocks:
+            return self._all_blocks[i]
+        blocks = [(sl, km.subset(np.arange(sl.start, sl.stop))) for sl in
+                  (slice(a, min(a + BLOCK_SAMPLES, km.N)) for a in range(0, km.N, BLOCK_SAMPLES))]
+        if cache:
+            self._all_blocks[i] = blocks
+        return blocks
+
+    def residual_function(self, rows=None, kinematic: bool = True) -> Callable:
+        """residual(u, with_jacobian) -> (r [mm], J) over the samples ``rows`` (global
+        indices over the sets in order; default all); u = x / scale.
+
+        kinematic=False: kinematic and backlash columns left at zero (frame-only fits)."""
+        parts = [(i, km, g, self._blocks(i, km, g, rows is None))
+                 for i, km, g in self._parts(rows)]
+        lay, s = self.layout, self.scale
+        weights = self.weights
+        m = sum(km.N * km.dim for _, km, _, _ in parts)
+        k, bl = lay.n_kinematic, lay.backlash_slice
+
+        def residual(u, with_jacobian):
+            x = u * s
+            r = np.empty(m)
+            J = np.zeros((m, lay.size)) if with_jacobian else None
+            at = 0
+            for i, km, g, blocks in parts:
+                kin, fr, b = lay.split(x, i)
+                fs = lay.frame_slices[i]
+                for sl, block in blocks:
+                    w = weights[g[sl]][:, None]
+                    span = slice(at + km.dim * sl.start, at + km.dim * sl.stop)
+                    if not with_jacobian:
+                        r[span] = (block.residuals(kin, fr, b) * w).ravel()
+                        continue
+                    rr, Jk, Jf, Jb = block.residuals(kin, fr, b, jacobian=True,
+                                                     kinematic=kinematic)
+                    r[span] = (rr * w).ravel()
+                    n = block.N * km.dim
+                    w3 = w[:, :, None]
+                    J[span, :k] = (Jk * w3).reshape(n, -1)
+                    J[span, fs] = (Jf * w3).reshape(n, -1)
+                    if Jb.shape[2]:
+                        J[span, bl] = (Jb * w3).reshape(n, -1)
+                at += km.N * km.dim
+            r /= MM
+            if not with_jacobian:
+                return r, None
+            J *= s / MM
+            return r, J
+
+        return residual
+
+    def sample_errors(self, x: np.ndarray, rows=None, weighted: bool = False) -> list:
+        """Per set with samples in ``rows``: (set index, (n,) sample errors [m]) at x."""
+        out = []
+        for i, km, g in self._parts(rows):
+            e = km.sample_errors(km.residuals(*self.layout.split(x, i)))
+            out.append((i, e * self.weights[g] if weighted else e))
+        return out
+
+    def residuals(self, x: np.ndarray, i: int) -> np.ndarray:
+        """(N_i, dim) set i's residuals, measured minus predicted [m] (orientation rows of
+        poses scaled to metres by their sigma ratio)."""
+        return self.kinds[i].residuals(*self.layout.split(x, i))
+
+    # ------------------------------------------------------------------ start
+    @property
+    def x_nominal(self) -> np.ndarray:
+        """Nominal kinematics, zero frames and backlash."""
+        x = np.zeros(self.layout.size)
+        x[:self.layout.n_kinematic] = self.error_model.nominal
+        return x
+
+    def start(self) -> np.ndarray:
+        """Nominal kinematics with every set's frames fitted to its data (closed form, then
+        Gauss-Newton on the free frames). Fixed frame parameters stay at their start: the
+        tool point at ``tool_guess`` (``--tool-offset``) when given."""
+        if self._x_start is not None:
+            return self._x_start
+        o, lay = self.options, self.layout
+        x = self.x_nominal
+        nominal = self.error_model.nominal
+        for i, km in enumerate(self.kinds):
+            self._unit_warnings(km)
+            if km.kind == "point":
+                x[lay.frame_slices[i]] = km.start(nominal, o.tool_guess,
+                                                  o.base_guess if i == 0 else None)
+            else:
+                x[lay.frame_slices[i]] = km.start(nominal, o.tool_guess)
+        free = lay.is_frame & self._unfixed()
+        if o.tool_guess is not None:  # a fixed tool point is held where the user put it
+            for i in range(lay.n_sets):
+                for c, v in zip("xyz", o.tool_guess):
+                    name = lay.set_prefix(i) + "tool." + c
+                    if name in lay.names and not free[lay.index(name)]:
+                        x[lay.index(name)] = v
+        if free.any():
+            sol = solve(self.residual_function(kinematic=False), x / self.scale, free,
+                        options=o.solver)
+            x = sol.u * self.scale
+        self._x_start = x
+        return x
+
+    def _unit_warnings(self, km) -> None:
+        """Positions about 1000x larger or smaller than the nominal motion (mm read as m)."""
+        d = km.data
+        if getattr(d, "positions", None) is None:
+            return
+        first = np.ones(len(d), bool) if getattr(d, "points", None) is None else d.points == 0
+        s = km.chain.state(self.error_model.nominal, None, keep=False)
+        guess = np.zeros(3) if self.options.tool_guess is None else np.asarray(
+            self.options.tool_guess, float)
+        for message in length_unit_warnings(d.positions[first],
+                                            s.p_tip[first] + s.R_tip[first] @ guess,
+                                            getattr(d, "length_unit", "m")):
+            warnings.warn(f"{d.source}: {message}", KincalWarning)
+
+    # ---------------------------------------------------------------- analyse
+    def _unfixed(self) -> np.ndarray:
+        """(p,) the parameters the method fits and the user did not fix."""
+        lay = self.layout
+        free = (np.ones(lay.size, dtype=bool) if self.options.method != "frames"
+                else lay.is_frame.copy())
+        if self.options.fix:
+            free[lay.indices(self.options.fix)] = False
+        return free
+
+    def analyze(self) -> Identifiability:
+        """Which parameters these data identify, at the start, with each kind's notes."""
+        if self._ident is not None:
+            return self._ident
+        lay = self.layout
+        _, J = self.residual_function()(self.start() / self.scale, True)
+        J = J * (lay.reporting_scale() / self.scale)  # mm per mm or per degree
+        ident = analyze(J, lay.names, lay.n_kinematic, self._unfixed(), self.options.rank_tol)
+        notes = [n for km in self.kinds for n in km.notes()]
+        lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
+        for i, km in enumerate(self.kinds):
+            mine = [n for n in lost if n in lay.frame_names(i)]
+            if mine and km.kind == "point":  # a point set must locate its own frames
+                why = "; ".join(d.describe() for d in ident.duplicates if d.name in mine)
+                raise IdentifiabilityError(
+                    f"{km.data.source}: the poses cannot even locate the measurement frame and "
+                    f"tool point: {', '.join(mine)} cannot be identified ({why}). There are "
+                    f"{distinct_poses(km.data.joint_values)} distinct poses of "
+                    f"{len(np.unique(km.data.poses))}; add poses that differ in every "
+                    "joint, or fix what the data cannot give (e.g. --fix tool.x tool.y tool.z "
+                    "with --tool-offset). Identifiable now: " + ", ".join(ident.kept))
+        if lost:
+            notes.append("frame parameters these data cannot fix, held at their start: "
+                         + ", ".join(lost))
+        general = self.structural()
+        gone = [n for n in general.kept if n not in ident.kept] if general else []
+        if gone:
+            d = self.kinds[0].data
+            need = math.ceil(len(general.kept) / (3 * d.n_points))
+            notes.append(f"{len(gone)} parameters this chain can identify are not identifiable "
+                         f"from these {self.n_poses} poses ({distinct_poses(d.joint_values)} "
+                         f"distinct): {', '.join(gone)}; the {len(general.kept)} identifiable "
+                         f"parameters need at least {need} poses, and many more spread over the "
+                         "workspace for a good result")
+        note = self._tool_axis_note()
+        if note:
+            notes.append(note)
+            warnings.warn(note, KincalWarning)
+        self._ident = replace(ident, notes=ident.notes + tuple(notes))
+        return self._ident
+
+    def structural(self) -> Identifiability | None:
+        """What this chain can identify from generic poses (seeded random joint values), for
+        one set of points (None otherwise). Compared with :meth:`analyze`, it tells which
+        parameters are lost to the data (too few or too similar poses) rather than to the
+        geometry of the chain."""
+        if self._structural is not None or len(self.kinds) != 1 or self.kinds[0].kind != "point":
+            return self._structural
+        from kincal.measurements.point import MeasurementModel
+
+        g, lay = self.robot.geometry, self.layout
+        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        rng = np.random.default_rng(0)
+        K = self.kinds[0].data.n_points
+        q = np.repeat(rng.uniform(lo, hi, size=(2 * lay.size, g.n)), K, axis=0)
+        approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * lay.size, g.n)), K, axis=0)
+        points = np.tile(np.arange(K), 2 * lay.size)
+        _, J = MeasurementModel(self.error_model, q, approach, lay.backlash, points,
+                                K).jacobian(self.start())
+        J = J.reshape(-1, lay.size) * lay.reporting_scale() / MM
+        self._structural = analyze(J, lay.names, lay.n_kinematic, self._unfixed(),
+                                   self.options.rank_tol)
+        return self._structural
+
+    def _tool_axis_note(self) -> str:
+        """A warning when every tool point of a point set sits near the last (revolute) axis."""
+        lay, x = self.layout, self.start()
+        dists = []
+        for i, km in enumerate(self.kinds):
+            if km.kind == "point":
+                f = lay.frames(x, i)
+                dists += [self.error_model.last_axis_distance(t) for t in f[6:].reshape(-1, 3)]
+        if not dists or dists[0] is None or max(dists) >= TOOL_AXIS_WARNING:
+            return ""
+        dist, last = max(dists), self.error_model.joint_names[-1]
+        which = "tool point is" if len(dists) == 1 else f"{len(dists)} measured points are all"
+        return (f"the {which} {dist * 1e3:.2f} mm from the axis of {last}: turning about "
+                f"that axis barely moves it, so {last}.theta and the tilt of that axis "
+                f"({last}.alpha) are weak or redundant; an offset tool point (>= 20 mm off the "
+                "axis) makes them identifiable")
+
+    def free_mask(self) -> np.ndarray:
+        """(p,) the parameters the fit moves: identifiable ones, and ``free`` names."""
+        lay = self.layout
+        mask = np.zeros(lay.size, dtype=bool)
+        kept = self.analyze().kept
+        if kept:
+            mask[lay.indices(kept)] = True
+        if self.options.free:
+            mask[lay.indices(self.options.free)] = True
+        return mask
+
+    # ------------------------------------------------------------------- fits
+    def fit(self, lam, rows=None, start: np.ndarray | None = None,
+            free: np.ndarray | None = None, residual: Callable | None = None,
+            options: SolverOptions | None = None) -> SolveSummary:
+        """One solve with penalty weight ``lam`` (one, or per parameter) on the samples
+        ``rows`` (default all); residual: a prebuilt :meth:`residual_function` for rows."""
+        x0 = self.start() if start is None else start
+        free = self.free_mask() if free is None else free
+        residual = self.residual_function(rows) if residual is None else residual
+        return solve(residual, x0 / self.scale, free, lam=lam,
+                     penalised=self.layout.is_penalised, prior=self.start() / self.scale,
+                     options=options or self.options.solver)
+
+    def cross_validate(self) -> CrossValidation:
+        """The CV curve over the lambda grid: folds of poses, each set split on its own;
+        error: the mean sample error [mm] (weighted by the sets' sigmas with several)."""
+        o = self.options
+        grid = lambda_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
+        free = self.free_mask()
+        groups = np.concatenate([km.data.poses + 10 ** 9 * i for i, km in enumerate(self.kinds)])
+        strata = np.repeat(np.arange(len(self.kinds)), [km.N for km in self.kinds])
+        samples, subsample = np.arange(self.n_samples), None
+        if o.cv_max_poses is not None and self.n_poses > o.cv_max_poses:
+            # many poses: choose lambda on a seeded subsample of them
+            poses = np.unique(groups)
+            keep = np.random.default_rng(o.seed).choice(poses, o.cv_max_poses, replace=False)
+            samples = np.flatnonzero(np.isin(groups, keep))
+            subsample = (int(o.cv_max_poses), self.n_poses)
+        fit = fold_fitter(self, free, samples)
+        weighted = len(self.kinds) > 1
+
+        def error(sol, val):
+            e = self.sample_errors(sol.u * self.scale, samples[val], weighted)
+            return float(np.mean(np.concatenate([v for _, v in e])) / MM)
+
+        cv = cross_validate(fit, error, len(samples), grid, o.folds, o.seed, o.warm_start,
+                            o.progress, groups=groups[samples], strata=strata[samples])
+        if subsample is None:
+            return cv
+        return replace(cv, folds=tuple(samples[f] for f in cv.folds), subsample=subsample)
+
+    # ------------------------------------------------------------------ solve
+    def solve(self):
+        """Identify; the result carries the plausibility gate's verdict."""
+        with blas_threads.limited(self.options.blas_threads):
+            return self._solve()
+
+    def _solve(self):
+        o = self.options
+        ident = self.analyze()
+        lay = self.layout
+        if o.method != "frames" and not any(lay.is_penalised[lay.index(n)] for n in ident.kept):
+            raise IdentifiabilityError(
+                f"these data identify none of the {int(lay.is_penalised.sum())} kinematic "
+                f"parameters (identifiable: {len(ident.kept)} of {int(self._unfixed().sum())}"
+                "): nothing would be calibrated. Check the sets' sigmas (a weight of 1e-300 "
+                "silences a set), and measure poses that move every joint")
+        general = self.structural()
+        if general is not None:
+            m = 3 * self.n_samples
+            per_pose = 3 * self.kinds[0].data.n_points
+            if o.method != "l2" and m <= len(general.kept) and len(ident.kept) < len(general.kept):
+                raise IdentifiabilityError(
+                    f"{self.n_poses} poses give {m} equations for the {len(general.kept)} "
+                    f"parameters this chain can identify; method {o.method} needs at least "
+                    f"{math.ceil((len(general.kept) + 1) / per_pose)} poses (and many more "
+                    "spread over the workspace); with these poses it would only interpolate. "
+                    "Method l2 can work with fewer, pulling what the data cannot fix toward "
+                    "nominal")
+        cv = evidence = sol = None
+        how, why = o.lam, ""
+        if o.method == "l2" and o.lam == "auto":
+            how, why = penalty_choice.automatic(self)
+        if o.method == "l2":
+            if how == "cv":
+                cv = self.cross_validate()
+                lam = cv.best_lambda
+            elif how == "evidence":
+                sol, evidence = penalty_choice.fit_evidence(self)
+                lam = evidence.weights(penalty_choice.prior_classes(self))
+            else:
+                lam = float(o.lam)
+        else:
+            lam = 0.0
+        if sol is None:
+            sol = self.fit(lam)
+        if cv is not None:
+            note = penalty_choice.cv_warning(self, cv, sol, lam)
+            if note:
+                warnings.warn(f"{self.kinds[0].data.source}: {note}", KincalWarning)
+        downweighted = ()
+        if o.robust is not None:
+            sol, downweighted = self._irls(sol, lam)
+        if not sol.converged:
+            warnings.warn(f"the solver did not converge in {sol.iterations} iterations; the "
+                          "result is the best iterate and is flagged not converged", KincalWarning)
+        result = CalibrationResult.build(self, sol, lam, cv, ident, evidence,
+                                         f"{how}, chosen automatically: {why}" if why else "",
+                                         downweighted)
+        return replace(result, plausibility=judge(gather(self, result)))  # the gate's verdict
+
+    def _irls(self, sol: SolveSummary, lam, rounds: int = 20):
+        """Reweight samples by the robust loss until the weights settle (see
+        :mod:`kincal.identification.robust`); errors are each sample's size [mm]."""
+        o = self.options
+        base_weights = self.weights
+
+        def errors(sol):
+            e = self.sample_errors(sol.u * self.scale)
+            return np.concatenate([v for _, v in e]) / MM
+
+        try:
+            w = np.ones(self.n_samples)
+            for _ in range(rounds):
+                e = errors(sol)
+                c = o.robust_scale_mm or ROBUST_SCALE * float(np.median(e))
+                w_new = robust_weights(e, o.robust, max(c, 1e-9))
+                self.weights = base_weights * np.sqrt(w_new)  # residuals carry sqrt(weight)
+                self._all_blocks = {}
+                sol = self.fit(lam, start=sol.u * self.scale)
+                done = np.max(np.abs(w_new - w)) < 1e-4
+                w = w_new
+                if done:
+                    break
+        finally:
+            self.weights = base_weights
+        e = errors(sol)
+        rows = np.concatenate([km.data.rows for km in self.kinds])
+        low = np.flatnonzero(w < 0.5)
+        out = tuple(Downweighted(int(rows[k]), float(e[k]), float(w[k]))
+                    for k in low[np.argsort(w[low])])
+        return sol, out
+
+
+def calibrate(robot: Robot, data, options: CalibrationOptions | None = None,
+              **overrides):
+    """Build, analyse and solve in one call: ``data`` is one measurement set (points,
+    poses, distances, plane contacts) or a list of them; keyword arguments override
+    ``options`` fields."""
+    names = [f.name for f in fields(CalibrationOptions)]
+    unknown = sorted(set(overrides) - set(names))
+    if unknown:
+        raise OptionError(f"unknown option(s) {', '.join(unknown)}." + suggest(unknown[0], names)
+                          + " Options: " + listing(names))
+    if options is None:
+        options = CalibrationOptions(**overrides)
+    elif overrides:
+        options = replace(options, **overrides)
+    return CalibrationProblem(robot, data, options).solve()

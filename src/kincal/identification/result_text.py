@@ -1,0 +1,106 @@
+"""The human summary of a calibration result (mm and degrees, labelled)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from kincal.identification.result import CalibrationResult
+
+WHAT = {"point": "position", "pose": "position and orientation", "distance": "distance",
+        "plane": "distance to the plane", "flush": "height and tilt against the plane"}
+
+
+def _z(v: float) -> float:
+    """No "-0.0000" for values that are zero to the digits shown."""
+    return 0.0 if abs(v) < 5e-6 else v
+
+
+def header(result: CalibrationResult) -> list[str]:
+    r, ev, n = result, result.evidence, len(result.sets)
+    how = (f"lambda = {r.lam:.4g}" if ev is None else "priors toward nominal per class, "
+           + ("given" if ev.given.all() and ev.noise_given else "chosen by maximum evidence"))
+    if r.options.method != "l2" and ev is None:
+        how = f"lambda = {r.lam:.4g}"
+    cv = ""
+    if r.cv is not None:
+        cv = " (chosen by cross-validation)"
+        if r.cv.subsample:
+            cv += " on a random {} of the {} poses".format(*r.cv.subsample)
+    sets = f"{n} measurement set(s), " if n > 1 else ""
+    return [f"kincal calibration of {r.robot.name} ({r.robot.base} -> {r.robot.tip}), {sets}"
+            f"method {r.options.method}, {how}{cv}",
+            *([f"  penalty: {r.penalty_choice}"] if r.penalty_choice else []),
+            *([f"  {ev.line()}" + ("" if ev.converged
+                                    else f" [NOT SETTLED in {ev.iterations} rounds]")]
+              if ev is not None else [])]
+
+
+def errors(result: CalibrationResult) -> list[str]:
+    r = result
+    if len(r.sets) == 1:
+        s = r.sets[0]
+        K = getattr(s.data, "n_points", 1) if s.kind == "point" else 1
+        out = ([f"  {K} measured points per pose: statistics are over every point"]
+               if K > 1 else [])
+        if s.kind != "point":
+            out.append(f"  set 1: {s.kind} ({s.source}), {WHAT.get(s.kind, s.kind)} errors")
+        out += [f"  before: {s.before.line()}", f"  after:  {s.after.line()}"]
+        if s.orientation_after_deg is not None:
+            out.append(f"  orientation after: mean {s.orientation_after_deg:.4f} deg")
+        return out
+    out = []
+    for k, s in enumerate(r.sets, start=1):
+        out.append(f"  set {k}: {s.kind} ({s.source}), {WHAT.get(s.kind, s.kind)} errors")
+        out.append(f"    before: {s.before.line()}")
+        out.append(f"    after:  {s.after.line()}")
+        if s.orientation_after_deg is not None:
+            out.append(f"    orientation after: mean {s.orientation_after_deg:.4f} deg")
+    return out
+
+
+def status(result: CalibrationResult) -> list[str]:
+    r = result
+    out = [f"  solver: {r.solve.iterations} iterations, {r.solve.reason}"
+           + ("" if r.converged else "  [NOT CONVERGED]")]
+    p = r.plausibility
+    if p is not None and not p.plausible:
+        out.append("  plausibility gate: IMPLAUSIBLE (" + ", ".join(
+            f.kind for f in p.findings if f.kind != "not_converged")
+            + "); result.plausibility has the evidence")
+    if r.options.robust:
+        d = r.downweighted
+        out.append(f"  robust loss {r.options.robust}: {len(d)} samples down-weighted below "
+                   "0.5: " + ", ".join(f"line {w.row} ({w.error_mm:.3g} mm, weight "
+                                       f"{w.weight:.2f})" for w in d[:10])
+                   + (" ..." if len(d) > 10 else ""))
+    if r.layout.n_backlash:
+        out.append(f"  backlash terms ({', '.join(r.layout.backlash)}): approach directions "
+                   f"from {r.order_source}; the URDF models the middle of the play")
+    return out
+
+
+def table(result: CalibrationResult) -> list[str]:
+    r = result
+    lines = ["  parameter                 nominal      deviation    std.err  unit"]
+    frames = []
+    for p, is_frame in zip(r.parameters, r.layout.is_frame):
+        nom, dev, se, unit = p.reported()
+        flag = "" if p.status == "identified" else f"  ({p.status})"
+        if is_frame:
+            frames.append(f"  {p.name:<24} {_z(nom + dev):>14.4f} {_z(se):>10.5f}  {unit}{flag}")
+        elif p.status != "dropped":
+            lines.append(f"  {p.name:<24} {_z(nom):>10.4f} {_z(dev):>+13.5f} {_z(se):>10.5f}  "
+                         f"{unit}{flag}")
+    one_point = len(r.sets) == 1 and r.sets[0].kind == "point"
+    lines.append("  measurement frame and tool point   estimate    std.err  unit" if one_point
+                 else "  frames of the measurement sets     estimate    std.err  unit")
+    return lines + frames
+
+
+def summary(result: CalibrationResult) -> str:
+    """Header, penalty, identifiability, errors per set, solver and gate, parameter table."""
+    ident = result.identifiability.summary().splitlines()
+    notes = [f"  {line}" for line in ident[1:]] if len(result.sets) > 1 else []
+    return "\n".join(header(result) + [f"  {ident[0]}"] + notes + errors(result)
+                     + status(result) + table(result))
