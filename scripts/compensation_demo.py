@@ -85,7 +85,7 @@ def main(argv=None) -> int:
     # speed: 1,000 targets on the calibrated model of the last seed's kind
     rng = np.random.default_rng(0)
     q = cube_poses(robot, 1000, default_center("ec66"), 0.4, TOOL, rng)
-    frames = CellFrames(BASE, TOOL[None], base_frame=robot.base, tip_frame=robot.tip)
+    frames = CellFrames.of_points(BASE, TOOL[None], base_frame=robot.base, tip_frame=robot.tip)
     R = np.array(frames.T_measurement_base)
     T = robot.tip_poses(q)
     P = (R @ T @ np.vstack([np.eye(4)[:, :3].T, [*TOOL, 1]]).T)[:, :3, 3]

@@ -5,7 +5,7 @@ import pytest
 from conftest import random_joint_values
 
 from kincal.errors import OptionError
-from kincal.identification import calibration
+from kincal.identification import problem as calibration
 from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh
 from kincal.models.backlash import approach_directions

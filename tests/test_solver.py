@@ -28,8 +28,8 @@ def test_first_step_is_the_tikhonov_closed_form(lam):
     x0 = p.start()
     free = p.free_mask()
     # independent closed form in SI: residual in mm, penalty lam * ||dx / s||^2
-    pred, J = p.model.jacobian(x0)
-    r = (p.data.positions - pred).ravel() / 1e-3
+    pred, J = p.kinds[0].model.jacobian(x0)  # the point engine, not the problem's stacking
+    r = (p.kinds[0].data.positions - pred).ravel() / 1e-3
     Jm = J.reshape(-1, x0.size)[:, free] / 1e-3
     S2inv = np.diag(np.where(p.space.is_kinematic[free], 1.0 / p.scale[free] ** 2, 0.0))
     dx = np.linalg.solve(Jm.T @ Jm + lam * S2inv, Jm.T @ r)

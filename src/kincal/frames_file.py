@@ -125,6 +125,19 @@ class CellFrames:
     backlash: dict = field(default_factory=dict)
     source: str = "<frames>"
 
+    @classmethod
+    def of_points(cls, base, tools, *, robot: str = "", base_frame: str = "",
+                  tip_frame: str = "", joints=(), backlash=None,
+                  source: str = "<frames>") -> "CellFrames":
+        """The frames of one point set: base (6,) [m, rad] and tool points (K, 3) [m]."""
+        t = np.atleast_2d(np.asarray(tools, float))
+        names = [f"base.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")]
+        for k in range(1, len(t) + 1):
+            names += [("tool." if k == 1 else f"tool{k}.") + c for c in "xyz"]
+        values = tuple(float(v) for v in np.r_[np.asarray(base, float), t.ravel()])
+        return cls(robot, "", base_frame, tip_frame, tuple(joints),
+                   (SetFrames("point", "", tuple(names), values),), dict(backlash or {}), source)
+
     # ------------------------------------------------------------ writing
     def as_dict(self) -> dict:
         from kincal.models.backlash import CONVENTION as BACKLASH_CONVENTION

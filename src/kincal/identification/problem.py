@@ -18,7 +18,6 @@ solver's variables are the parameters over their penalty scale (1 mm, 1 deg).
 from __future__ import annotations
 
 import math
-import re
 import warnings
 from dataclasses import fields, replace
 from typing import Callable
@@ -35,12 +34,10 @@ from kincal.identification.layout import MM, ParameterLayout
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.plausibility import gather, judge
 from kincal.identification.result import CalibrationResult
-from kincal.identification.robust import ROBUST_SCALE, Downweighted
-from kincal.identification.robust import weights as robust_weights
+from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze
 from kincal.identification.solver import SolverOptions, SolveSummary, solve
-from kincal.measurements.checks import (angle_unit_warnings, distinct_poses,
-                                        length_unit_warnings, limit_warnings)
+from kincal.measurements.checks import distinct_poses, length_unit_warnings, set_warnings
 from kincal.measurements.kind import DEFAULT_SIGMA
 from kincal.measurements.sets import kind_model, kind_of
 from kincal.models.mdh import TOOL_AXIS_WARNING
@@ -109,18 +106,13 @@ class CalibrationProblem:
                                 "alone need at least 3 (a calibration needs many more)")
         self._warn_inputs()
         self._x_start = self._ident = self._structural = None
-        self._all_blocks: dict = {}
+        self._all_blocks: dict = {}  # (set, block size): blocks of a whole set
 
     # ----------------------------------------------------------------- layout
     @property
     def space(self) -> ParameterLayout:
         """The parameter layout (also named ``layout``)."""
         return self.layout
-
-    @property
-    def sets(self) -> tuple:
-        """The measurement sets, joint columns in chain order."""
-        return tuple(km.data for km in self.kinds)
 
     @property
     def n_samples(self) -> int:
@@ -144,40 +136,9 @@ class CalibrationProblem:
     def _warn_inputs(self) -> None:
         """Joint values outside the URDF limits or in the wrong angle unit, and backlash
         joints seen from one direction only: warnings, per set."""
-        g = self.robot.geometry
         for km in self.kinds:
-            d = km.data
-            pose = np.unique(d.poses, return_index=True)[1]
-            q = d.joint_values[pose]
-            messages = (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, d.rows[pose])
-                        + angle_unit_warnings(g.joint_names, g.kinds, q,
-                                              getattr(d, "angle_unit", "rad"))
-                        + self._approach_warnings(km))
-            for message in messages:
-                warnings.warn(f"{d.source}: {message}", KincalWarning)
-
-    def _approach_warnings(self, km) -> list[str]:
-        """Backlash joints whose samples do not come from both directions, and a time-like
-        column left unused while the directions come from the row order."""
-        out, d, lay = [], km.data, self.layout
-        order = getattr(d, "order_source", "the order of the rows")
-        timelike = [c for c in d.ignored_columns
-                    if re.search(r"time|stamp|(^|_)t($|_)", c, re.IGNORECASE)]
-        if lay.n_backlash and not getattr(d, "has_order_column", False) and timelike:
-            out.append(f"backlash: the approach directions come from {order}; "
-                       f"the file has a column {timelike[0]!r} that looks like a time stamp: if "
-                       f"the rows are not in acquisition order, give it as the order column "
-                       f"(--order-column {timelike[0]})")
-        chain = tuple(self.error_model.joint_names)
-        for j in lay.backlash:
-            g = d.approach[:, chain.index(j)]
-            up, down = int(np.sum(g > 0)), int(np.sum(g < 0))
-            if min(up, down) < 3:
-                out.append(f"{j}.backlash: {up} samples approached {j} from below and {down} "
-                           f"from above (acquisition order: {order}); "
-                           "backlash is identifiable only from both directions, a few of "
-                           "each at least")
-        return out
+            for message in set_warnings(km.data, self.robot.geometry, self.layout.backlash):
+                warnings.warn(f"{km.data.source}: {message}", KincalWarning)
 
     # -------------------------------------------------------------- residuals
     def _parts(self, rows):
@@ -201,12 +162,12 @@ class CalibrationProblem:
         several times faster. The blocks of a whole set are built once (cache=True)."""
         if km.N <= BLOCK_SAMPLES:
             return [(slice(0, km.N), km)]
-        if cache and i in self._all_blocks:
-            return self._all_blocks[i]
+        if cache and (i, BLOCK_SAMPLES) in self._all_blocks:
+            return self._all_blocks[i, BLOCK_SAMPLES]
         blocks = [(sl, km.subset(np.arange(sl.start, sl.stop))) for sl in
                   (slice(a, min(a + BLOCK_SAMPLES, km.N)) for a in range(0, km.N, BLOCK_SAMPLES))]
         if cache:
-            self._all_blocks[i] = blocks
+            self._all_blocks[i, BLOCK_SAMPLES] = blocks
         return blocks
 
     def residual_function(self, rows=None, kinematic: bool = True) -> Callable:
@@ -513,7 +474,7 @@ class CalibrationProblem:
                 warnings.warn(f"{self.kinds[0].data.source}: {note}", KincalWarning)
         downweighted = ()
         if o.robust is not None:
-            sol, downweighted = self._irls(sol, lam)
+            sol, downweighted = irls(self, sol, lam)
         if not sol.converged:
             warnings.warn(f"the solver did not converge in {sol.iterations} iterations; the "
                           "result is the best iterate and is flagged not converged", KincalWarning)
@@ -521,39 +482,6 @@ class CalibrationProblem:
                                          f"{how}, chosen automatically: {why}" if why else "",
                                          downweighted)
         return replace(result, plausibility=judge(gather(self, result)))  # the gate's verdict
-
-    def _irls(self, sol: SolveSummary, lam, rounds: int = 20):
-        """Reweight samples by the robust loss until the weights settle (see
-        :mod:`kincal.identification.robust`); errors are each sample's size [mm]."""
-        o = self.options
-        base_weights = self.weights
-
-        def errors(sol):
-            e = self.sample_errors(sol.u * self.scale)
-            return np.concatenate([v for _, v in e]) / MM
-
-        try:
-            w = np.ones(self.n_samples)
-            for _ in range(rounds):
-                e = errors(sol)
-                c = o.robust_scale_mm or ROBUST_SCALE * float(np.median(e))
-                w_new = robust_weights(e, o.robust, max(c, 1e-9))
-                self.weights = base_weights * np.sqrt(w_new)  # residuals carry sqrt(weight)
-                self._all_blocks = {}
-                sol = self.fit(lam, start=sol.u * self.scale)
-                done = np.max(np.abs(w_new - w)) < 1e-4
-                w = w_new
-                if done:
-                    break
-        finally:
-            self.weights = base_weights
-        e = errors(sol)
-        rows = np.concatenate([km.data.rows for km in self.kinds])
-        low = np.flatnonzero(w < 0.5)
-        out = tuple(Downweighted(int(rows[k]), float(e[k]), float(w[k]))
-                    for k in low[np.argsort(w[low])])
-        return sol, out
-
 
 def calibrate(robot: Robot, data, options: CalibrationOptions | None = None,
               **overrides):

@@ -33,3 +33,35 @@ class Downweighted:
     row: int
     error_mm: float
     weight: float
+
+
+def irls(problem, sol, lam, rounds: int = 20):
+    """Reweight a calibration problem's samples by its robust loss until the weights settle
+    (iteratively reweighted least squares); each sample's error is its size [mm]. Returns
+    (solution, the samples trusted less than 0.5 as :class:`Downweighted`, worst first)."""
+    o = problem.options
+    base_weights = problem.weights
+
+    def errors(sol):
+        e = problem.sample_errors(sol.u * problem.scale)
+        return np.concatenate([v for _, v in e]) / 1e-3
+
+    try:
+        w = np.ones(problem.n_samples)
+        for _ in range(rounds):
+            e = errors(sol)
+            c = o.robust_scale_mm or ROBUST_SCALE * float(np.median(e))
+            w_new = weights(e, o.robust, max(c, 1e-9))
+            problem.weights = base_weights * np.sqrt(w_new)  # residuals carry sqrt(weight)
+            sol = problem.fit(lam, start=sol.u * problem.scale)
+            done = np.max(np.abs(w_new - w)) < 1e-4
+            w = w_new
+            if done:
+                break
+    finally:
+        problem.weights = base_weights
+    e = errors(sol)
+    rows = np.concatenate([km.data.rows for km in problem.kinds])
+    low = np.flatnonzero(w < 0.5)
+    return sol, tuple(Downweighted(int(rows[k]), float(e[k]), float(w[k]))
+                      for k in low[np.argsort(w[low])])

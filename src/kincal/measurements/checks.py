@@ -69,3 +69,33 @@ def length_unit_warnings(measured: np.ndarray, predicted: np.ndarray, length_uni
 def distinct_poses(q: np.ndarray) -> int:
     """Number of distinct joint configurations (to 1e-9)."""
     return int(np.unique(np.round(q, 9), axis=0).shape[0])
+
+
+def set_warnings(data, geometry, backlash=()) -> list[str]:
+    """The warnings of one measurement set against the chain: joint values outside the URDF
+    limits or in the wrong angle unit (one sample per pose), and backlash joints whose
+    samples do not come from both directions, or whose order ignores a time-like column."""
+    import re
+
+    pose = np.unique(data.poses, return_index=True)[1]
+    q = data.joint_values[pose]
+    g = geometry
+    out = (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, data.rows[pose])
+           + angle_unit_warnings(g.joint_names, g.kinds, q, getattr(data, "angle_unit", "rad")))
+    order = getattr(data, "order_source", "the order of the rows")
+    timelike = [c for c in data.ignored_columns
+                if re.search(r"time|stamp|(^|_)t($|_)", c, re.IGNORECASE)]
+    if backlash and not getattr(data, "has_order_column", False) and timelike:
+        out.append(f"backlash: the approach directions come from {order}; "
+                   f"the file has a column {timelike[0]!r} that looks like a time stamp: if "
+                   f"the rows are not in acquisition order, give it as the order column "
+                   f"(--order-column {timelike[0]})")
+    for j in backlash:
+        a = data.approach[:, list(g.joint_names).index(j)]
+        up, down = int(np.sum(a > 0)), int(np.sum(a < 0))
+        if min(up, down) < 3:
+            out.append(f"{j}.backlash: {up} samples approached {j} from below and {down} "
+                       f"from above (acquisition order: {order}); "
+                       "backlash is identifiable only from both directions, a few of "
+                       "each at least")
+    return out
