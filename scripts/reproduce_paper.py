@@ -20,7 +20,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from kincal.experiments.paper_experiment import ExperimentConfig, run, tables, write_report
+from kincal.experiments.paper_experiment import ExperimentConfig, run  # noqa: E402
+from kincal.experiments.paper_report import tables, write_report
 
 
 def main(argv=None) -> int:

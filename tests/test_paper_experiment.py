@@ -12,16 +12,9 @@ import numpy as np
 import pytest
 
 from kincal.errors import ExportError
-from kincal.experiments.paper_experiment import (
-    PLOT_FILES,
-    REPORT_FILES,
-    ExperimentConfig,
-    demo,
-    run,
-    tables,
-    write_plots,
-    write_report,
-)
+from kincal.experiments.paper_experiment import ExperimentConfig, run
+from kincal.experiments.paper_report import (PLOT_FILES, REPORT_FILES, demo, tables, write_plots,
+                                             write_report)
 from kincal.export import plots
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -728,7 +728,7 @@ def cmd_compensate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from kincal.experiments.paper_experiment import demo
+    from kincal.experiments.paper_report import demo
 
     print("kincal demo: the paper's experiment on a simulated EC66 (one seed, small size)")
     s = demo(Path(args.out), progress=lambda message: print(f"  {message}", flush=True))

@@ -2,5 +2,8 @@
 
 from kincal.lazy import lazy_names
 
-__all__ = ["ExperimentConfig", "ExperimentResult", "run", "run_many"]
-__getattr__, __dir__ = lazy_names(__name__, {n: "paper_experiment" for n in __all__})
+__all__ = ["ExperimentConfig", "ExperimentResult", "run", "run_many", "tables", "demo",
+           "write_report"]
+__getattr__, __dir__ = lazy_names(__name__, {
+    **{n: "paper_experiment" for n in ("ExperimentConfig", "ExperimentResult", "run", "run_many")},
+    **{n: "paper_report" for n in ("tables", "demo", "write_report")}})
