@@ -88,7 +88,7 @@ def paper(seed: int) -> dict:
 
 
 def tiago(shared: Path, backlash: tuple[str, ...] = ()) -> dict:
-    """Training day -> held-out day, frames from the training day (README protocol);
+    """Training day -> held-out day, frames from the training day (docs/results.md protocol);
     backlash: joints given a backlash term (approach directions from the time stamps)."""
     folder = shared / "data" / "tiago_mocap"
     robot = Robot.load(folder / "tiago_48_schunk.urdf", tip="wrist_ft_tool_link")

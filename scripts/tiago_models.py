@@ -1,4 +1,4 @@
-"""Every kincal error model on the real TIAGo motion-capture data (README table).
+"""Every kincal error model on the real TIAGo motion-capture data (docs/results.md table).
 
     python scripts/tiago_models.py
 

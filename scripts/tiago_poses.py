@@ -1,5 +1,5 @@
 """TIAGo: the four hand markers turned into 6-DoF hand poses, calibrated with the pose kind,
-beside the point kind on the same markers (README "Measurement kinds").
+beside the point kind on the same markers (docs/kinds.md).
 
     python scripts/tiago_poses.py
 

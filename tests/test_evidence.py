@@ -283,7 +283,7 @@ def test_fewer_residuals_than_parameters():
 
 
 def test_estimators_script_runs_in_a_reduced_size():
-    """scripts/estimators.py (the README's estimator table) cannot rot: one tracker-like
+    """scripts/estimators.py (the estimator table of docs/results.md) cannot rot: one tracker-like
     seed through each estimator, and its table."""
     import importlib.util
     from pathlib import Path

@@ -1,7 +1,8 @@
-"""The README tells the truth: its commands run as written, its CLI table is the parser's.
+"""The README and the docs tell the truth: their commands run as written, the CLI table is
+the parser's, their links lead somewhere, and the README stays a front door.
 
-README.md is parsed when the tests run, so sections and options added later are checked
-too. What is run:
+README.md and every docs/*.md page are parsed when the tests run, so sections, pages and
+options added later are checked too. What is run, page by page:
 
 - every ```bash block, line by line in one scratch folder (tmp_path), each command
   through the rule of :data:`RUNNERS` for its first word(s); a command no rule knows
@@ -11,13 +12,15 @@ too. What is run:
 - every plain ``` block that starts with ``$ ``: a transcript. Its ``$`` lines are run
   the same way and every other line it shows (but ``...``) must be printed by them.
 
-- every ```python block, all in one namespace in the order of the README (later blocks
-  use the ``robot`` and ``data`` of earlier ones), in a scratch folder holding the
-  ``poses.csv`` the examples read: a simulated EC66 with an acquisition-time column ``t``.
+- every ```python block: the README's all in one namespace in their order, in a scratch
+  folder holding the ``poses.csv`` the examples read (a simulated EC66 with an
+  acquisition-time column ``t``); then each docs page's blocks, in their order, in a copy
+  of that namespace (the pages go on from the README's example: its ``robot``, ``data``
+  and ``result``), in the same folder.
 
 Paths ``../shared/`` (the project's shared data beside the repository) are pointed at
 the real folder (``KINCAL_SHARED`` overrides it); a block that needs it is skipped when
-it is not there.
+it is not there. The option tables live on docs/cli.md.
 """
 
 from __future__ import annotations
@@ -38,19 +41,31 @@ from conftest import REPO, SHARED
 from kincal.cli.main import build_parser, main
 
 README = REPO / "README.md"
+DOCS = REPO / "docs"
+CLI_PAGE = DOCS / "cli.md"  # the command and option tables
+README_MAX_LINES = 300  # a front door: what it does, the two commands, an example, links
 SHARED_DIR = Path(os.environ.get("KINCAL_SHARED", SHARED))
 
 
-# ------------------------------------------------------------------ the README
+def pages() -> list[Path]:
+    """The README, then the docs pages in name order."""
+    return [README] + sorted(DOCS.glob("*.md"))
+
+
+def _name(page: Path) -> str:
+    return page.relative_to(REPO).as_posix()
+
+
+# ------------------------------------------------------------------ the pages
 @dataclass(frozen=True)
 class Step:
-    line: int  # line of README.md
+    line: int  # line of the page
     command: str
-    expected: tuple[str, ...]  # output lines the README shows for it
+    expected: tuple[str, ...]  # output lines the page shows for it
 
 
 def _blocks(text: str):
-    """(language, first line number, lines) of every fenced block of the README."""
+    """(language, first line number, lines) of every fenced block of a page."""
     lines = text.splitlines()
     k = 0
     while k < len(lines):
@@ -89,13 +104,14 @@ def _steps(language: str, first: int, lines: list[str]) -> list[Step]:
     return steps
 
 
-def readme_examples() -> list[tuple[int, list[Step]]]:
-    """(first line, steps) of every block that is run."""
+def examples() -> list[tuple[str, int, list[Step]]]:
+    """(page, first line, steps) of every block that is run, README first."""
     out = []
-    for language, first, lines in _blocks(README.read_text(encoding="utf-8")):
-        steps = _steps(language, first, lines)
-        if steps:
-            out.append((first, steps))
+    for page in pages():
+        for language, first, lines in _blocks(page.read_text(encoding="utf-8")):
+            steps = _steps(language, first, lines)
+            if steps:
+                out.append((_name(page), first, steps))
     return out
 
 
@@ -143,51 +159,137 @@ def _normalise(text: str) -> str:
     return " ".join(text.split())
 
 
-@pytest.mark.parametrize("first, steps", readme_examples(),
-                         ids=[f"line{first}" for first, _ in readme_examples()])
-def test_readme_commands_run(first, steps, tmp_path, monkeypatch):
+@pytest.mark.parametrize("page, first, steps", examples(),
+                         ids=[f"{page}:line{first}" for page, first, _ in examples()])
+def test_page_commands_run(page, first, steps, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     printed = ""
     skipped = []
     for step in steps:
+        where = f"{page} line {step.line}"
         command = step.command
         if "../shared/" in command:
             if not SHARED_DIR.is_dir():
-                pytest.skip(f"README line {step.line} needs ../shared, not present")
+                pytest.skip(f"{where} needs ../shared, not present")
             command = command.replace("../shared/", f"{SHARED_DIR}/")
         argv = shlex.split(command)
         run = _runner(argv)
-        assert run is not None, (f"README line {step.line}: no rule to run {step.command!r}; "
+        assert run is not None, (f"{where}: no rule to run {step.command!r}; "
                                  "add one to RUNNERS in tests/test_readme.py")
         code, output = run(argv)
         if code is None:
-            skipped.append(f"line {step.line}: {output}")
+            skipped.append(f"{where}: {output}")
             continue
-        assert code == 0, f"README line {step.line}: {step.command!r} exited {code}:\n{output}"
+        assert code == 0, f"{where}: {step.command!r} exited {code}:\n{output}"
         printed += output
         lines = {_normalise(line) for line in printed.splitlines()}
         for shown in step.expected:
             assert _normalise(shown) in lines, (
-                f"README line {step.line}: {step.command!r} did not print {shown!r}; it "
-                f"printed:\n{printed}")
+                f"{where}: {step.command!r} did not print {shown!r}; it printed:\n{printed}")
     if skipped and len(skipped) == len(steps):
         pytest.skip("; ".join(skipped))
 
 
-def test_every_readme_command_has_a_rule():
-    for _, steps in readme_examples():
+def test_every_page_command_has_a_rule():
+    for page, _, steps in examples():
         for step in steps:
             argv = shlex.split(step.command)
             assert _runner(argv) is not None, (
-                f"README line {step.line}: no rule to run {step.command!r}; add one to "
+                f"{page} line {step.line}: no rule to run {step.command!r}; add one to "
                 "RUNNERS in tests/test_readme.py")
 
 
-def test_the_parser_finds_the_readme_blocks():
-    # guards the parsing above: the blocks this README is known to have are found
-    commands = [s.command for _, steps in readme_examples() for s in steps]
-    assert "kincal demo" in commands and "pip install ." in commands
-    assert any(c.startswith("kincal plan ec66 --random") for c in commands)
+def test_the_parser_finds_the_blocks():
+    # guards the parsing above: the blocks these pages are known to have are found
+    by_page: dict[str, list[str]] = {}
+    for page, _, steps in examples():
+        by_page.setdefault(page, []).extend(s.command for s in steps)
+    assert "kincal demo" in by_page["README.md"] and "pip install ." in by_page["README.md"]
+    assert any(c.startswith("kincal plan ec66 --random") for c in by_page["docs/planning.md"])
+    assert any(c.startswith("kincal compensate cal.urdf") for c in by_page["docs/cell.md"])
+    assert any("tiago_mocap" in c for c in by_page["docs/results.md"])
+
+
+# ------------------------------------------------------------------ the front door
+def test_readme_is_a_front_door():
+    text = README.read_text(encoding="utf-8")
+    lines = text.splitlines()
+    assert len(lines) <= README_MAX_LINES, (
+        f"README.md has {len(lines)} lines (at most {README_MAX_LINES}): move reference, "
+        "method and results to a docs/ page and link it")
+    # the quick start's two commands, as written; CI (.ci/run) runs the second one
+    quick = next(b for language, _, b in _blocks(text) if language == "bash")
+    assert quick == ["pip install . && kincal demo",
+                     'pip install ".[test]" && python -m pytest -q']
+    assert quick[1] in (REPO / ".ci" / "run").read_text(encoding="utf-8").splitlines()
+    for heading in ("## Quick start", "## Python API", "## Limitations", "## Documentation"):
+        assert heading in lines, f"README.md has no section {heading!r}"
+    linked = {target.split("#")[0] for target in _links(text)}
+    unlinked = [_name(p) for p in sorted(DOCS.glob("*.md")) if _name(p) not in linked]
+    assert not unlinked, f"docs pages the README does not link to: {unlinked}"
+
+
+def _anchor(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
+    text = heading.strip().lower().replace("`", "")
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+def _without_code(text: str) -> str:
+    """The page's prose: fenced blocks and inline code spans blanked out."""
+    kept, fenced = [], False
+    for line in text.splitlines():
+        if line.startswith("```"):
+            fenced = not fenced
+            continue
+        kept.append("" if fenced else line)
+    return re.sub(r"`[^`]+`", "", "\n".join(kept))  # a code span may go over a line end
+
+
+def _anchors(page: Path) -> set[str]:
+    seen: dict[str, int] = {}
+    out = set()
+    fenced = False
+    for line in page.read_text(encoding="utf-8").splitlines():
+        if line.startswith("```"):
+            fenced = not fenced
+        elif not fenced and re.match(r"^#{1,6} ", line):
+            base = _anchor(line.lstrip("#"))
+            n = seen.get(base, 0)
+            seen[base] = n + 1
+            out.add(base if n == 0 else f"{base}-{n}")
+    return out
+
+
+def _links(text: str) -> list[str]:
+    """Targets of the page's relative links (web addresses left out)."""
+    targets = re.findall(r"\]\(([^()\s]+)\)", _without_code(text))
+    return [t for t in targets if not re.match(r"^[a-z]+:", t)]
+
+
+@pytest.mark.parametrize("page", pages(), ids=_name)
+def test_links_lead_to_pages_and_anchors_that_exist(page):
+    problems = []
+    for target in _links(page.read_text(encoding="utf-8")):
+        path, _, anchor = target.partition("#")
+        file = (page.parent / path).resolve() if path else page
+        if not file.is_file():
+            problems.append(f"{target}: no file {file}")
+        elif anchor and file.suffix == ".md" and anchor not in _anchors(file):
+            problems.append(f"{target}: no heading with anchor #{anchor} in {file.name} "
+                            f"(anchors: {', '.join(sorted(_anchors(file)))})")
+    assert not problems, f"{_name(page)}:\n" + "\n".join(problems)
+
+
+def test_anchor_rules():
+    assert _anchor(" Choosing the penalty: cross-validation, evidence, or automatic") == (
+        "choosing-the-penalty-cross-validation-evidence-or-automatic")
+    assert _anchor(" Inside a measurement volume (plan --in-cube)") == (
+        "inside-a-measurement-volume-plan---in-cube")
+    assert _anchor(" Error models on an arm with 6-D placement errors") == (
+        "error-models-on-an-arm-with-6-d-placement-errors")
+    assert _links("see [a](docs/a.md#x), [web](https://x.org) and `[b](c.md)`") == [
+        "docs/a.md#x"]
 
 
 # ------------------------------------------------------------------ the CLI table
@@ -206,18 +308,17 @@ def _cells(row: str) -> list[str]:
 
 
 def documented_options(text: str, commands) -> tuple[dict[str, set[str]], list[str]]:
-    """({command: options the 'Command line' section documents for it}, problems).
+    """({command: options the command and option tables of a page document}, problems).
 
     A row of the command table whose first cell starts with ``kincal COMMAND`` documents
     the options in that cell for COMMAND; a row of the options table (header ``option |
     commands``) documents the options of its first cell for every command named in its
     second cell.
     """
-    section = text.split("\n## Command line", 1)[1].split("\n## ", 1)[0]
     documented = {c: set() for c in commands}
     problems = []
     table_kind = None
-    for line in section.splitlines():
+    for line in text.splitlines():
         if not line.startswith("|"):
             table_kind = None
             continue
@@ -248,31 +349,32 @@ def documented_options(text: str, commands) -> tuple[dict[str, set[str]], list[s
 def test_cli_table_matches_the_parser():
     parser = build_parser()
     commands = _subparsers(parser)
-    text = README.read_text(encoding="utf-8")
+    text = CLI_PAGE.read_text(encoding="utf-8")
     documented, problems = documented_options(text, commands)
     for name, sub in commands.items():
         if not documented[name] and f"`kincal {name}" not in text:
             problems.append(f"kincal {name} has no row in the command table")
         missing = sorted(_options(sub) - documented[name])
         if missing:
-            problems.append(f"kincal {name}: options missing from the README's command or "
-                            f"option table: {', '.join(missing)}")
+            problems.append(f"kincal {name}: options missing from the command or option "
+                            f"table of docs/cli.md: {', '.join(missing)}")
         unknown = sorted(documented[name] - _options(sub))
         if unknown:
-            problems.append(f"kincal {name}: the README documents options the parser does "
+            problems.append(f"kincal {name}: docs/cli.md documents options the parser does "
                             f"not have: {', '.join(unknown)}")
     for option in sorted(_options(parser)):  # kincal --version
         if f"kincal {option}" not in text:
-            problems.append(f"the README does not mention `kincal {option}`")
+            problems.append(f"docs/cli.md does not mention `kincal {option}`")
     assert not problems, "\n".join(problems)
 
 
-def test_inline_commands_name_real_options():
-    """Every `kincal COMMAND ... --option` span in the README's text uses options the
-    parser has for that command (complete ones must parse)."""
+@pytest.mark.parametrize("page", pages(), ids=_name)
+def test_inline_commands_name_real_options(page):
+    """Every `kincal COMMAND ... --option` span in a page's text uses options the parser
+    has for that command (complete ones must parse)."""
     parser = build_parser()
     commands = _subparsers(parser)
-    text = README.read_text(encoding="utf-8")
+    text = page.read_text(encoding="utf-8")
     problems = []
     for span in re.findall(r"`(kincal [^`\n]+)`", text):
         words = span.split()
@@ -293,7 +395,7 @@ def test_inline_commands_name_real_options():
                     parser.parse_args(shlex.split(span)[1:])
             except SystemExit:
                 problems.append(f"`{span}` does not parse")
-    assert not problems, "\n".join(problems)
+    assert not problems, f"{_name(page)}:\n" + "\n".join(problems)
 
 
 def test_block_parsing_rules():
@@ -331,16 +433,46 @@ def _poses_csv(path: Path) -> None:
                                                     enumerate(lines[1:])]) + "\n")
 
 
-def test_readme_python_examples_run(tmp_path, monkeypatch):
-    blocks = [(first, lines) for language, first, lines in
-              _blocks(README.read_text(encoding="utf-8")) if language == "python"]
-    assert blocks, "the README has no Python example"
-    monkeypatch.chdir(tmp_path)
-    _poses_csv(tmp_path / "poses.csv")
-    namespace: dict = {}
+def _python_blocks(page: Path) -> list[tuple[int, list[str]]]:
+    return [(first, lines) for language, first, lines in
+            _blocks(page.read_text(encoding="utf-8")) if language == "python"]
+
+
+def _exec_blocks(page: Path, namespace: dict) -> None:
     with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the examples' own warnings are not the point here
-        for first, lines in blocks:
-            code = compile("\n".join(lines), f"README.md, block at line {first}", "exec")
-            exec(code, namespace)  # noqa: S102 - the README's own example code
-    assert (tmp_path / "ec66_calibrated.urdf").exists()
+        for first, lines in _python_blocks(page):
+            code = compile("\n".join(lines), f"{_name(page)}, block at line {first}", "exec")
+            exec(code, namespace)  # noqa: S102 - the page's own example code
+
+
+@pytest.fixture(scope="module")
+def readme_namespace(tmp_path_factory):
+    """(folder, namespace) after the README's Python examples ran in folder."""
+    folder = tmp_path_factory.mktemp("examples")
+    _poses_csv(folder / "poses.csv")
+    namespace: dict = {}
+    here = Path.cwd()
+    os.chdir(folder)
+    try:
+        _exec_blocks(README, namespace)
+    finally:
+        os.chdir(here)
+    return folder, namespace
+
+
+def test_readme_python_examples_run(readme_namespace):
+    assert _python_blocks(README), "the README has no Python example"
+    folder, namespace = readme_namespace
+    assert (folder / "ec66_calibrated.urdf").exists()
+    assert {"robot", "data", "result"} <= set(namespace)
+
+
+DOCS_WITH_PYTHON = [p for p in pages()[1:] if _python_blocks(p)]
+
+
+@pytest.mark.parametrize("page", DOCS_WITH_PYTHON, ids=_name)
+def test_docs_python_examples_run(page, readme_namespace, monkeypatch):
+    folder, namespace = readme_namespace
+    monkeypatch.chdir(folder)
+    _exec_blocks(page, dict(namespace))  # a copy: one page's names do not reach another
