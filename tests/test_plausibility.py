@@ -379,17 +379,42 @@ def test_several_data_sets_go_through_the_gate(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
-def test_options_several_sets_cannot_serve_are_refused_not_ignored(tmp_path, capsys):
+def test_every_output_for_several_sets_of_other_kinds_and_the_frames_serve_the_cell(tmp_path,
+                                                                                   capsys):
+    """Issue 17's acceptance: points and poses in one calibration with a robust loss write
+    the URDF, frames, report, HTML and plots; evaluate takes the chain from the frames and
+    refuses another tip; compensate works with those frames."""
     from kincal.cli.main import main as kmain
 
-    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    assert kmain(["simulate", "ec66", "--out", str(a), "--seed", "1", "--poses", "20"]) == 0
-    assert kmain(["simulate", "ec66", "--out", str(b), "--seed", "2", "--poses", "20"]) == 0
+    pts, poses = tmp_path / "points.csv", tmp_path / "poses.csv"
+    assert kmain(["simulate", "ec66", "--out", str(pts), "--seed", "1", "--poses", "30"]) == 0
+    assert kmain(["simulate", "ec66", "--kind", "pose", "--out", str(poses), "--seed", "2",
+                  "--poses", "30"]) == 0
     capsys.readouterr()
-    for extra in (["--html", str(tmp_path / "r.html")], ["--plots", str(tmp_path / "p")],
-                  ["--accuracy-map", "0.4", "0", "0.3", "0.2"]):
-        before = sorted(p.name for p in tmp_path.iterdir())
-        assert kmain(["calibrate", "ec66", str(a), str(b), "--out", str(tmp_path / "c.urdf"),
-                      *extra]) == 1
-        assert "not available with several data files" in capsys.readouterr().err
-        assert sorted(p.name for p in tmp_path.iterdir()) == before
+    c, f, r, h, p = (tmp_path / n for n in ("C.urdf", "F.json", "R.json", "R.html", "P"))
+    assert kmain(["calibrate", "ec66", str(pts), str(poses), "--robust", "huber", "--out", str(c),
+                  "--frames-out", str(f), "--report", str(r), "--html", str(h), "--plots",
+                  str(p)]) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "2 measurement set(s)" in out and "robust loss huber" in out
+    for path in (c, f, r, h):
+        assert path.is_file() and path.stat().st_size > 0, path
+    assert {"residuals.png", "residuals_set2.png"} <= {q.name for q in p.iterdir()}
+    saved = json.loads(f.read_text())
+    assert saved["format"] == "kincal-frames" and [s["kind"] for s in saved["sets"]] == [
+        "point", "pose"]
+    report = json.loads(r.read_text())
+    assert [s["kind"] for s in report["sets"]] == ["point", "pose"]
+    assert kmain(["evaluate", str(c), str(pts), "--frames", str(f)]) == 0
+    assert "mean" in capsys.readouterr().out
+    before = sorted(q.name for q in tmp_path.iterdir())
+    assert kmain(["evaluate", str(c), str(pts), "--frames", str(f), "--tip", "joint_5"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("kincal: error:") and err.count("\n") == 1 and "flange" in err
+    assert sorted(q.name for q in tmp_path.iterdir()) == before
+    joints = tmp_path / "joints.csv"
+    assert kmain(["compensate", str(c), str(pts), "--frames", str(f), "--tip", "flange",
+                  "--out", str(joints)]) == 0, capsys.readouterr().err
+    assert joints.is_file()
+
+

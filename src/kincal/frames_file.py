@@ -20,7 +20,9 @@ named values. ``chain_hash`` identifies the robot model and chain (robot name, b
 joint names, kinds and axes; not the joint origins, which a calibration changes), so frames
 are never applied to another robot or chain.
 
-Earlier files are still read: version 1 (top-level ``base``/``tool``/``tool_points``) and
+The file also carries version 1's top-level keys (``base``, ``tool``, ``tool_points``,
+``T_measurement_base``, ``T_tip_tool``) for the first point or pose set, so readers of
+version 1 keep working. Earlier files are still read: version 1 (top-level ``base``/``tool``/``tool_points``) and
 the several-set ``kincal-frames-sets-1``. Values are checked: finite, translations within
 1 km, angles within 100 rad, JSON nesting at most 32 deep.
 """
@@ -52,7 +54,7 @@ def chain_hash(robot) -> str:
     """A hash of the robot model and chain that a calibration does not change: robot name,
     base and tip frames, chain joint names, kinds and axes."""
     g = robot.geometry
-    text = json.dumps([robot.name, robot.base, robot.tip, list(g.joint_names), list(g.kinds),
+    text = json.dumps([robot.model_name, robot.base, robot.tip, list(g.joint_names), list(g.kinds),
                        [[round(float(v), 6) + 0.0 for v in a] for a in g.axes]])
     return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
 
@@ -152,6 +154,16 @@ class CellFrames:
         if self.backlash:
             out["backlash"] = {j: float(v) for j, v in self.backlash.items()}
             out["backlash_convention"] = BACKLASH_CONVENTION
+        try:  # version 1's keys, of the first point or pose set, for readers of version 1
+            s = self.located()
+        except DataError:
+            return out
+        tools = s.tools
+        out["base"] = dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, s.base)))
+        out["tool"] = dict(zip("xyz", map(float, tools[0])))
+        if len(tools) > 1:
+            out["tool_points"] = [dict(zip("xyz", map(float, t))) for t in tools]
+        out.update({k: v for k, v in s.derived().items()})
         return out
 
     def dumps(self) -> str:
@@ -232,6 +244,8 @@ class CellFrames:
             names.append("base." + c)
             values.append(float(data["base"][c]))
         tools = data.get("tool_points", [data["tool"]])
+        if not tools:
+            raise DataError(f"{source}: the frames contain no tool point")
         for k, t in enumerate(tools, start=1):
             for c in "xyz":
                 names.append(("tool." if k == 1 else f"tool{k}.") + c)
@@ -285,9 +299,10 @@ class CellFrames:
     # ------------------------------------------------------------ checks
     def check_chain(self, robot) -> None:
         """Refuse frames identified on another robot or chain than ``robot``'s."""
-        if self.robot and self.robot != robot.name:
+        if self.robot and self.robot != robot.model_name:
             raise DataError(f"{self.source} belongs to the robot {self.robot!r}, not "
-                            f"{robot.name!r}: frames of another robot would give wrong numbers")
+                            f"{robot.model_name!r} (the robot names of the URDFs): frames from "
+                            "another robot would give wrong numbers")
         theirs = {"base frame": self.base_frame, "tip frame": self.tip_frame}
         mine = {"base frame": robot.base, "tip frame": robot.tip}
         for what in theirs:
@@ -307,8 +322,8 @@ class CellFrames:
                             "differs (joint kinds or axes)")
         unknown = [j for j in self.backlash if j not in robot.joint_names]
         if unknown:
-            raise DataError(f"{self.source}: backlash of {', '.join(unknown)}, which are not "
-                            f"chain joints of {robot.name} ({', '.join(robot.joint_names)})")
+            raise DataError(f"{self.source}: no chain joint {unknown[0]!r} for a backlash term "
+                            f"(chain joints of {robot.name}: {', '.join(robot.joint_names)})")
 
     def located(self) -> SetFrames:
         """The first set with a measurement frame and tool point (points, poses)."""

@@ -147,6 +147,11 @@ class Robot:
         self.geometry = self._compute_geometry()
         self.off_chain = self._check_off_chain(joint_values or {})
 
+    @property
+    def model_name(self) -> str:
+        """The robot's name in its URDF (``<robot name=...>``), whatever the file is called."""
+        return str(self.model.name)
+
     # ------------------------------------------------------------------ loading
     @classmethod
     def load(cls, robot: str | Path, tip: str | None = None, base: str | None = None,

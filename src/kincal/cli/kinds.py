@@ -1,18 +1,13 @@
-"""The command line for measurement kinds other than points and for several data files:
-``calibrate``, ``analyze`` and ``evaluate`` over a list of sets, ``simulate --kind``.
-
-Thin shells over :mod:`kincal.identification.multiset`; :mod:`kincal.cli.main` hands a
-command here when it is given several files, ``--on-plane``, or a file of another kind.
-"""
+"""The command line's measurement files: the kinds' options, reading every data file of a
+command as its kind (points, poses, distances, plane contacts), ``simulate --kind``."""
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 
-from kincal.errors import DataError, OptionError
+from kincal.errors import OptionError
 
 
 def add_kind_options(p) -> None:
@@ -35,16 +30,16 @@ def files_of(args) -> list:
     return [args.data] + list(getattr(args, "more_data", None) or [])
 
 
-def read_sets(args, robot) -> list:
-    """Every data file of the command, each read as its kind."""
-    from kincal.cli.main import _joint_columns
+def read_sets(args, robot, joint_columns=None) -> list:
+    """Every data file of the command, each read as its kind (joint_columns: the
+    --joint-columns mapping)."""
     from kincal.measurements.sets import read_set_file
 
     prismatic = [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
     pos = tuple(args.position_columns) if tuple(args.position_columns) != ("x", "y", "z") else None
     sets = [read_set_file(path, robot.joint_names, prismatic, args.length_unit,
                           args.angle_unit, pos, args.orientation_columns, args.on_plane,
-                          args.orientation_sigma_deg, _joint_columns(args), args.order_column)
+                          args.orientation_sigma_deg, joint_columns, args.order_column)
             for path in files_of(args)]
     if args.set_sigma_mm:
         from dataclasses import replace
@@ -55,131 +50,6 @@ def read_sets(args, robot) -> list:
         sets = [replace(d, sigma=np.full(len(d), s * 1e-3))
                 for d, s in zip(sets, args.set_sigma_mm)]
     return sets
-
-
-def wants_sets(args) -> bool:
-    """True when the command must go through the several-sets path: more than one file,
-    --on-plane, or a file that is not points."""
-    from kincal.measurements.sets import header_of
-    from kincal.measurements.pose import QUATERNION_COLUMNS
-
-    if (getattr(args, "more_data", None) or args.on_plane or args.orientation_columns
-            or args.set_sigma_mm):
-        return True
-    header = header_of(args.data)
-    return "distance" in header or all(c in header for c in QUATERNION_COLUMNS)
-
-
-def _refuse(args, options: tuple[str, ...]) -> None:
-    for name in options:
-        if getattr(args, name, None):
-            raise OptionError(f"--{name.replace('_', '-')} is not available with several data "
-                              "files or with pose, distance or plane files yet")
-
-
-def calibrate(args) -> int:
-    from kincal.cli.main import _options, _robot
-    from kincal.export import report
-    from kincal.export.safe_write import write_all
-    from kincal.identification.multiset import MultiSetProblem
-
-    _refuse(args, ("plots", "add_frames", "report", "robust", "html", "accuracy_map",
-                   "accuracy_poses"))
-    robot = _robot(args)
-    sets = read_sets(args, robot)
-    problem = MultiSetProblem(robot, sets, _options(args, args.method))
-    result = problem.solve()
-    from kincal.errors import KincalError, KincalWarning
-    from kincal.identification.plausibility import gather_sets, judge
-
-    verdict = judge(gather_sets(problem, result))  # the gate: nothing written if implausible
-    try:
-        accepted = verdict.check(args.accept_implausible, args.accept_unconverged,
-                                 refused="nothing is written")
-    except KincalError:
-        if not args.quiet:
-            print(result.summary())
-        raise
-    import warnings
-
-    for message in accepted + list(verdict.notes):
-        warnings.warn(message, KincalWarning)
-    files = [(args.out, result.corrected_urdf_text())]
-    if args.yaml_out or args.mdh_out:  # the corrected robot, whatever measured it
-        from kincal.export.cell_exports import kinematics_yaml, mdh_table_csv
-
-        if args.yaml_out:
-            files.append((args.yaml_out, kinematics_yaml(robot, result.corrected)))
-        if args.mdh_out:
-            files.append((args.mdh_out, mdh_table_csv(result.corrected)))
-    if args.frames_out:
-        files.append((args.frames_out, report.dumps({"format": "kincal-frames-sets-1",
-                                                     "tip": robot.tip, "base": robot.base,
-                                                     **result.frames_dict()})))
-    written = write_all(files, overwrite=args.overwrite, protect=[robot.source, *files_of(args)])
-    if not args.quiet:
-        print(result.summary())
-        for path in written:
-            print(f"  wrote {path}")
-    return 0
-
-
-def analyze(args) -> int:
-    from kincal.cli.main import _robot, _tool_offset
-    from kincal.identification.multiset import MultiSetProblem
-    from kincal.identification.options import CalibrationOptions
-
-    _refuse(args, ("report", "accuracy_map", "accuracy_poses", "accuracy_plot"))
-    robot = _robot(args)
-    models = [args.model] if args.model != "all" else None
-    if models is None:
-        raise OptionError("--model all is not available with pose, distance or plane files yet")
-    problem = MultiSetProblem(robot, read_sets(args, robot), CalibrationOptions(
-        model=args.model, fix=tuple(args.fix), backlash=tuple(args.backlash),
-        tool_guess=_tool_offset(args)))
-    kinds = ", ".join(f"{km.kind} ({km.data.source}, {km.N} samples)" for km in problem.kinds)
-    print(f"kincal analysis of {robot.name} ({robot.base} -> {robot.tip}), error model "
-          f"{args.model}: {kinds}")
-    print("  " + problem.analyze().summary().replace("\n", "\n  "))
-    return 0
-
-
-def evaluate(args) -> int:
-    from kincal.cli.main import _robot, _tool_offset
-    from kincal.identification.multiset import MultiSetProblem
-    from kincal.identification.options import CalibrationOptions
-    from kincal.identification.statistics import ErrorStats
-
-    _refuse(args, ("report", "accuracy_map", "accuracy_poses", "accuracy_plot"))
-    if bool(args.frames) == bool(args.fit_frames):
-        raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
-    robot = _robot(args)
-    sets = read_sets(args, robot)
-    problem = MultiSetProblem(robot, sets, CalibrationOptions(method="frames",
-                                                              tool_guess=_tool_offset(args)))
-    if args.fit_frames:
-        x = problem.solve().x
-        how = "frames fitted on these data"
-    else:
-        x = problem.x_nominal
-        try:
-            saved = json.loads(open(args.frames, encoding="utf-8").read())["sets"]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise DataError(f"{args.frames}: not a FRAMES.json of a calibration from several "
-                            f"sets or of pose, distance or plane files ({exc})") from None
-        for i, km in enumerate(problem.kinds):
-            match = [s for s in saved if s.get("kind") == km.kind
-                     and tuple(s.get("frames", {})) == tuple(km.frame_names)]
-            if not match:
-                raise DataError(f"{args.frames} has no {km.kind} set with frames "
-                                f"{', '.join(km.frame_names)} for {km.data.source}")
-            x[problem.frame_slices[i]] = [match[0]["frames"][n] for n in km.frame_names]
-        how = f"frames from {args.frames}"
-    print(f"{robot.name} ({robot.base} -> {robot.tip}), {how}:")
-    for i, e in problem.sample_errors(x):
-        km = problem.kinds[i]
-        print(f"  {km.kind} {km.data.source}: {ErrorStats.from_errors(e).line()}")
-    return 0
 
 
 def simulate(args, robot, model, q, table, tool, base, rng) -> list:

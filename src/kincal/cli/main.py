@@ -79,17 +79,6 @@ def _robot(args):
     return Robot.load(args.robot, tip=args.tip, base=args.base)
 
 
-def _measurements(args, robot):
-    from kincal.measurements.data import Measurements
-
-    prismatic = [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
-    return Measurements.from_csv(args.data, robot.joint_names, prismatic=prismatic,
-                                 length_unit=args.length_unit, angle_unit=args.angle_unit,
-                                 position_columns=tuple(args.position_columns),
-                                 order_column=args.order_column,
-                                 joint_columns=_joint_columns(args))
-
-
 def _joint_column_pair(text: str) -> tuple[str, str]:
     """argparse type of --joint-columns: URDF_NAME=CSV_NAME."""
     urdf, eq, column = text.partition("=")
@@ -124,33 +113,14 @@ def _tool_offset(args):
     return tuple(v * (1e-3 if args.length_unit == "mm" else 1.0) for v in args.tool_offset)
 
 
-def _read_frames(path) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
-    """(base (6,), tool points (K, 3), backlash {joint: value}) in SI from FRAMES.json."""
-    from kincal.compensation.frames import CellFrames
-
-    frames = CellFrames.read(path)
-    return frames.base, frames.tools, frames.backlash
-
-
-def _chain_from_frames(args) -> None:
+def _chain_from_frames(args, frames) -> None:
     """Take base and tip from FRAMES.json when not given; refuse a mismatch.
 
     Frames identified for one chain mean nothing for another: the tool point lives in
     the recorded tip frame, the measurement frame is placed against the recorded base."""
-    import json
-
-    path = Path(args.frames)
-    if not path.is_file():
-        return  # missing, a folder or a device: the frames reader says what is wrong
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return  # _read_frames reports an unreadable file with the expected layout
-    if not isinstance(data, dict):
-        return
     for role in ("base", "tip"):
-        recorded, given = data.get(f"{role}_frame"), getattr(args, role)
-        if not isinstance(recorded, str):
+        recorded, given = getattr(frames, f"{role}_frame"), getattr(args, role)
+        if not recorded:
             continue  # an older frames file without the chain: nothing to check
         if given is None:
             setattr(args, role, recorded)
@@ -158,10 +128,10 @@ def _chain_from_frames(args) -> None:
             from kincal.errors import FrameError
 
             raise FrameError(f"--{role} {given!r} does not match the {role} frame {recorded!r} "
-                             f"recorded in {path} (its measurement frame and tool point were "
-                             f"identified for {data.get('base_frame')} -> "
-                             f"{data.get('tip_frame')}); use --{role} {recorded} or frames "
-                             "identified for this chain", valid=(recorded,))
+                             f"recorded in {args.frames} (its frames were identified for "
+                             f"{frames.base_frame} -> {frames.tip_frame}); use --{role} "
+                             f"{recorded} or frames identified for this chain",
+                             valid=(recorded,))
 
 
 def _add_common(p, data=True):
@@ -290,141 +260,140 @@ def _design_accuracy(args, robot, problem):
 
 # -------------------------------------------------------------- subcommands
 def cmd_calibrate(args) -> int:
-    from kincal.export import report
-    from kincal.export.safe_write import write_all
+    from kincal.export.outputs import Outputs, gate, write_calibration
     from kincal.identification.problem import CalibrationProblem
 
     from kincal.cli import kinds
 
-    if kinds.wants_sets(args):  # several files, or poses, distances, plane contacts
-        return kinds.calibrate(args)
     robot = _robot(args)
     check_outputs(args, robot)
     options = _options(args, args.method)
-    data = _measurements(args, robot)
-    options = _options(args, args.method)
+    sets = kinds.read_sets(args, robot, _joint_columns(args))  # every file, each read as its kind (points too)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
         warnings.simplefilter("always", KincalWarning)
         targets = _accuracy_targets(args, robot)  # bad values fail here, before solving
         try:
-            result = CalibrationProblem(robot, data, options).solve()
+            result = CalibrationProblem(robot, sets, options).solve()
         finally:
             if options.solver.progress is not None:
                 options.solver.progress.close()
     for w in caught:  # and passed on to be printed as usual
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    try:  # the plausibility gate: nothing is written for an implausible or unconverged result
-        accepted = result.plausibility.check(args.accept_implausible, args.accept_unconverged,
-                                             refused="nothing is written")
+    try:  # the plausibility gate, before any further work (write_calibration checks it too)
+        gate(result, args.accept_implausible, args.accept_unconverged)
     except KincalError:
         if not args.quiet:
             print(result.summary())
         raise
-    for message in accepted + list(result.plausibility.notes):
-        warnings.warn(message, KincalWarning)
     amap = None
     if targets or args.html:
         from kincal.planning.accuracy_map import result_accuracy_map
 
         if result.covariance is not None or targets:
             amap = result_accuracy_map(result, **targets)
-    edits, moved = result.export_edits()
-    text = result.urdf_with_frames(edits.text) if args.add_frames else edits.text
-    files = [(args.out, text)]
-    if args.frames_out:
-        files.append((args.frames_out, report.dumps(result.frames_dict())))
-    if args.report:
-        content = report.result_dict(result, str(args.data))
-        if amap is not None:
-            content["accuracy_map"] = amap.as_dict()
-        files.append((args.report, report.dumps(content)))
-    if args.yaml_out or args.mdh_out:
-        from kincal.export.cell_exports import kinematics_yaml, mdh_table_csv
-
-        if args.yaml_out:
-            files.append((args.yaml_out, kinematics_yaml(robot, result.corrected)))
-        if args.mdh_out:
-            files.append((args.mdh_out, mdh_table_csv(result.corrected)))
-    if args.plots:
-        files += _render_plots(result, Path(args.plots))
-        if amap is not None and len(amap.std):
-            from kincal.export.diagnostic_plots import plot_accuracy_map
-
-            files.append((Path(args.plots) / "accuracy_map.png", plot_accuracy_map(amap)))
-    if args.html:
-        from kincal.export.html_report import html_report
-
-        files.append((args.html, html_report(
-            result, accuracy=amap, data_source=str(args.data),
-            warnings=[str(w.message) for w in caught if issubclass(w.category, KincalWarning)],
-            notes=[f"export: {m.describe()}" for m in moved])))
-    protect = [robot.source, args.data]
-    written = write_all(files, overwrite=args.overwrite, protect=protect,
-                        dirs=[args.plots] if args.plots else [])
+    outputs = Outputs(urdf=args.out, frames=args.frames_out, report=args.report, html=args.html,
+                      yaml=args.yaml_out, mdh=args.mdh_out, plots=args.plots,
+                      add_frames=args.add_frames, overwrite=args.overwrite,
+                      protect=tuple(kinds.files_of(args)))
+    written = write_calibration(
+        result, outputs, accept_implausible=args.accept_implausible,
+        accept_unconverged=args.accept_unconverged, accuracy=amap,
+        warnings_seen=[str(w.message) for w in caught if issubclass(w.category, KincalWarning)],
+        data_source=", ".join(str(f) for f in kinds.files_of(args)))
     if not args.quiet:
         print(result.summary())
         for line in result.identifiability.summary().splitlines()[1:]:
             if line.startswith(("weak", "  the poses")):
                 print(f"  {line}")
-        for m in moved:
-            print(f"  export: {m.describe()}")
+        for note in written.notes:
+            print(f"  export: {note}")
         if amap is not None:
             print("  " + amap.summary().replace("\n", "\n  "))
-        for path in written:
+        for path in written.paths:
             print(f"  wrote {path}")
     return 0
 
 
 def cmd_evaluate(args) -> int:
     from kincal.export import report
+    from kincal.frames_file import CellFrames
     from kincal.identification.problem import CalibrationOptions, CalibrationProblem
     from kincal.identification.statistics import ErrorStats
-    from kincal.measurements.point import MeasurementModel
 
     from kincal.cli import kinds
 
-    if kinds.wants_sets(args):
-        return kinds.evaluate(args)
     if bool(args.frames) == bool(args.fit_frames):
         raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
+    frames = None
     if args.frames:
-        _chain_from_frames(args)
+        frames = CellFrames.read(args.frames)
+        _chain_from_frames(args, frames)
     robot = _robot(args)
     check_outputs(args, robot)
-    data = _measurements(args, robot)
-    problem = CalibrationProblem(robot, data, CalibrationOptions(method="frames",
-                                                                 tool_guess=_tool_offset(args)))
-    if args.frames:
-        base, tools, backlash = _read_frames(args.frames)
-        data = data.for_chain(robot.joint_names)
-        if data.n_points > len(tools):
-            raise DataError(f"{args.data} has {data.n_points} measured points per pose, "
-                            f"{args.frames} has {len(tools)} tool point(s)")
-        try:
-            model = MeasurementModel(problem.error_model, data.joint_values, data.approach, backlash,
-                                     data.points, len(tools))
-        except KincalError as exc:
-            raise DataError(f"{args.frames}: {exc}") from None
-        x = model.space.join(problem.error_model.nominal, base, tools,
-                             [backlash[j] for j in model.space.backlash])
-        stats = ErrorStats.from_errors(data.positions - model.predict(x))
+    if frames is not None:
+        frames.check_chain(robot)
+    sets = kinds.read_sets(args, robot, _joint_columns(args))
+    backlash = tuple(frames.backlash) if frames is not None else ()
+    # with frames given nothing is fitted: the problem only lays out the parameters
+    problem = CalibrationProblem(robot, sets, CalibrationOptions(
+        method="frames" if frames is None else "ls", tool_guess=_tool_offset(args),
+        backlash=backlash))
+    lay = problem.layout
+    if frames is None:
+        x = problem.solve().x
+        how = "measurement frame and tool point fitted on these data"
+    else:
+        x = problem.x_nominal
+        used: set[int] = set()
+        for i, km in enumerate(problem.kinds):
+            x[lay.frame_slices[i]] = _saved_frames(frames, km, used, args)
+        if backlash:
+            x[lay.backlash_slice] = [frames.backlash[j] for j in lay.backlash]
         how = f"frames from {args.frames}"
         if backlash:
-            how += (f" with backlash of {', '.join(model.space.backlash)} (approach directions "
-                    f"from {data.order_source})")
+            how += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
+                    f"{getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
+    errors = problem.sample_errors(x)
+    stats = [ErrorStats.from_errors(e) for _, e in errors]
+    if len(stats) == 1:
+        print(f"{robot.name} ({robot.base} -> {robot.tip}) on {args.data}, {how}:")
+        print(f"  {stats[0].line()}")
     else:
-        stats = problem.solve().after
-        how = "measurement frame and tool point fitted on these data"
-    print(f"{robot.name} ({robot.base} -> {robot.tip}) on {args.data}, {how}:")
-    print(f"  {stats.line()}")
+        print(f"{robot.name} ({robot.base} -> {robot.tip}), {how}:")
+        for km, st in zip(problem.kinds, stats):
+            print(f"  {km.kind} {km.data.source}: {st.line()}")
     if args.report:
         from kincal.export.safe_write import write_all
 
-        write_all([(args.report, report.dumps({"format": "kincal-evaluation-1",
-                                               "robot": str(robot.source), "data": str(args.data),
-                                               "frames": how, "errors": report.stats_dict(stats)}))],
-                  overwrite=args.overwrite, protect=[robot.source, args.data])
+        content = {"format": "kincal-evaluation-1", "robot": str(robot.source),
+                   "data": str(args.data), "frames": how,
+                   "errors": report.stats_dict(stats[0]),
+                   "sets": [{"kind": km.kind, "source": km.data.source,
+                             "errors": report.stats_dict(st)}
+                            for km, st in zip(problem.kinds, stats)]}
+        write_all([(args.report, report.dumps(content))], overwrite=args.overwrite,
+                  protect=[robot.source, *kinds.files_of(args)])
     return 0
+
+
+def _saved_frames(frames, km, used: set, args) -> list[float]:
+    """The frame values a FRAMES.json holds for a set of ``km``'s kind (the first of that
+    kind not used yet); a point set may read fewer tool points than the file has."""
+    names = tuple(km.frame_names)
+    for j, s in enumerate(frames.sets):
+        if j in used or s.kind != km.kind or not all(n in s.names for n in names):
+            continue
+        used.add(j)
+        return [s.value(n) for n in names]
+    if km.kind == "point":
+        K = km.data.n_points
+        for s in frames.sets:
+            if s.kind == "point" and s.has("tool.x") and len(s.tools) < K:
+                raise DataError(f"{km.data.source} has {K} measured points per pose, "
+                                f"{args.frames} has {len(s.tools)} tool point(s)")
+    have = "; ".join(f"{s.kind} ({', '.join(s.names[:9])})" for s in frames.sets)
+    raise DataError(f"{args.frames} holds no {km.kind} set with frames {', '.join(names)} for "
+                    f"{km.data.source} (it holds: {have})")
 
 
 def cmd_analyze(args) -> int:
@@ -433,19 +402,22 @@ def cmd_analyze(args) -> int:
     from kincal.models import MODELS
     from kincal.cli import kinds
 
-    if kinds.wants_sets(args):
-        return kinds.analyze(args)
     robot = _robot(args)
     check_outputs(args, robot)
-    data = _measurements(args, robot)
+    sets = kinds.read_sets(args, robot, _joint_columns(args))
     names = MODELS if args.model == "all" else (args.model,)
     if args.model == "all" and args.fix:
         raise OptionError("--model all compares the models as they are: give --fix with one "
                           "model (the parameter names differ between models)")
-    problems = {m: CalibrationProblem(robot, data, CalibrationOptions(
+    problems = {m: CalibrationProblem(robot, sets, CalibrationOptions(
         model=m, fix=tuple(args.fix), backlash=tuple(args.backlash),
         tool_guess=_tool_offset(args))) for m in names}
-    print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(data)} poses from {args.data}")
+    if len(sets) == 1 and problems[names[0]].kinds[0].kind == "point":
+        print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(sets[0])} poses from {args.data}")
+    else:
+        print(f"{robot.name} ({robot.base} -> {robot.tip}), error model {args.model}: "
+              + ", ".join(f"{km.kind} ({km.data.source}, {km.N} samples)"
+                          for km in problems[names[0]].kinds))
     idents = {}
     for m, problem in problems.items():
         ident = idents[m] = problem.analyze()
@@ -453,18 +425,22 @@ def cmd_analyze(args) -> int:
             print(f"\n== model {m}: {problem.error_model.describe()}")
         print(ident.summary())
     problem = problems[names[0]]
-    for k, tool in enumerate(problem.space.tools(problem.start()), start=1):
-        which = "tool point" if problem.space.n_points == 1 else f"measured point {k}"
-        print(f"  {which} (first estimate, tip frame): {np.round(tool * 1e3, 3).tolist()} mm")
+    lay = problem.layout
+    if problem.kinds[0].kind == "point":
+        tools = lay.frames(problem.start(), 0)[6:].reshape(-1, 3)
+        for k, tool in enumerate(tools, start=1):
+            which = "tool point" if len(tools) == 1 else f"measured point {k}"
+            print(f"  {which} (first estimate, tip frame): {np.round(tool * 1e3, 3).tolist()} mm")
     if len(names) > 1:
         print("\ncomparison (identified kinematic parameters; '+' what a model identifies that "
               "mdh cannot express):")
         mdh_kept = set(idents["mdh"].kept)
         for m in names:
             p = problems[m]
-            kin = [n for n in idents[m].kept if n in set(p.space.kinematic_names)]
+            kin = [n for n in idents[m].kept if n in set(p.layout.kinematic_names)]
             extra = [n for n in kin if n not in mdh_kept and m == "complete"]
-            line = f"  {m:<10} {len(kin):3d} of {p.space.n_kinematic:3d} kinematic parameters identified"
+            line = (f"  {m:<10} {len(kin):3d} of {p.layout.n_kinematic:3d} kinematic parameters "
+                    "identified")
             if extra:
                 line += f"  (+ {', '.join(extra)})"
             print(line)
@@ -485,7 +461,7 @@ def cmd_analyze(args) -> int:
     if files:
         from kincal.export.safe_write import write_all
 
-        write_all(files, overwrite=args.overwrite, protect=[robot.source, args.data])
+        write_all(files, overwrite=args.overwrite, protect=[robot.source, *kinds.files_of(args)])
     return 0
 
 

@@ -297,7 +297,7 @@ class CalibrationResult:
     def frames(self) -> CellFrames:
         """The cell's frames (what FRAMES.json holds, :mod:`kincal.frames_file`)."""
         return CellFrames(
-            robot=self.robot.name, chain_hash=chain_hash(self.robot), base_frame=self.robot.base,
+            robot=self.robot.model_name, chain_hash=chain_hash(self.robot), base_frame=self.robot.base,
             tip_frame=self.robot.tip, joints=tuple(self.robot.joint_names),
             sets=tuple(SetFrames(s.kind, s.source, s.frame_names,
                                  tuple(float(v) for v in s.frames)) for s in self.sets),
