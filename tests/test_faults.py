@@ -405,7 +405,7 @@ def test_api_bad_arrays_and_paths_raise_kincal_errors(robot_and_data, tmp_path):
     with pytest.raises(KincalError, match=r"\(N, 6\)"):
         result.predict([1, 2])
     with pytest.raises(KincalError, match="output path"):
-        write_calibration(result, Outputs(urdf=Path("")))
+        write_calibration(result, Outputs(urdf=""))
 
 
 # -------------------------------------------------------------------- sweep

@@ -97,9 +97,17 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     from kincal.export import report
     from kincal.export.safe_write import write_all
 
+    o = outputs
+    if not isinstance(o, Outputs):
+        raise ExportError(f"outputs must be an Outputs(urdf=..., frames=..., ...), got "
+                          f"{type(o).__name__}")
+    for name in ("urdf", "frames", "report", "html", "yaml", "mdh", "plots"):
+        value = getattr(o, name)
+        if value is not None and (not isinstance(value, (str, Path)) or not str(value).strip()):
+            raise ExportError(f"the {name} output path {value!r} is empty or not a path; "
+                              "expected a file name (a folder for plots)")
     for message in gate(result, accept_implausible, accept_unconverged):
         warnings.warn(message, KincalWarning)
-    o = outputs
     sources = [s.source for s in result.sets]
     files: list = []
     notes: tuple[str, ...] = ()
