@@ -248,3 +248,19 @@ def test_held_out_height_and_tilts_drop_to_the_noise(rng):
     h, a = rms(truth, np.r_[planes.ravel(), CONTACT[3:], CONTACT[:3]])  # the noise itself
     assert h0 > 10 * h and a0 > 5 * a  # the planted errors show before
     assert h1 < 1.5 * h and a1 < 1.5 * a  # and after, only the noise is left
+
+
+def test_poses_selected_for_flush_touches(rng):
+    """D-optimal selection among flush touches on two planes beats random subsets."""
+    from kincal.planning.pose_selection import select_poses
+
+    robot = Robot.load("ec66", tip="flange")
+    em = models.build("complete", robot.geometry)
+    planes = np.array([TABLE[0], [1.3, 0.2, 0.3]])
+    touches = simulate_flush(em, em.nominal, CONTACT, planes, random_joint_values(
+        robot.geometry, rng, 3000), 40, 0.0, 0.0, rng)
+    sel = select_poses(robot, touches.joint_values, 20, tool=CONTACT[:3], kind="flush",
+                       planes=touches.planes, random_subsets=5)
+    assert sel.log_det > sel.random_log_det
+    assert {"plane2.d", "tool.rx", "tool.ry"} <= set(sel.parameters)
+    assert not {"tool.x", "tool.y", "tool.z"} & set(sel.parameters)

@@ -312,3 +312,15 @@ def cross_matrices(v: np.ndarray) -> np.ndarray:
     K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
     K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
     return K
+
+
+def planning_set(error_model, q, tool, planes=None) -> tuple[FlushData, np.ndarray]:
+    """(touches, frames) for planning flush touches at candidate poses q (M, n): planes
+    (M,) plane index of each candidate (default one plane); the frames from the closed-form
+    start at the nominal kinematics (each plane fitted through the candidates' contact
+    points at ``tool`` [m, tip frame], which touch it flush)."""
+    k = np.zeros(len(q), int) if planes is None else np.asarray(planes, int)
+    labels = ("",) if planes is None else tuple(str(j + 1) for j in range(int(k.max()) + 1))
+    data = FlushData(joint_names=tuple(error_model.joint_names), joint_values=q, planes=k,
+                     labels=labels, source="<candidate flush touches>")
+    return data, FlushKind(error_model, data).start(error_model.nominal, tool)

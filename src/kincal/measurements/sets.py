@@ -14,7 +14,7 @@ from __future__ import annotations
 from kincal.errors import DataError
 from kincal.measurements.data import Measurements
 from kincal.measurements.distance import DistanceData, DistanceKind
-from kincal.measurements.flush import FlushData, FlushKind
+from kincal.measurements.flush import FlushData, FlushKind, planning_set
 from kincal.measurements.kind import SampleSet
 from kincal.measurements.plane import PlaneData, PlaneKind
 from kincal.measurements.point import PointKind
@@ -191,6 +191,8 @@ def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
             n, d, _ = fit_plane(P[k == j])
             fitted += [float(np.arctan2(-n[1], n[2])), float(np.arcsin(np.clip(n[0], -1, 1))), d]
         frames = np.r_[t, fitted]
+    elif kind == "flush":
+        data, frames = planning_set(error_model, q, t, planes)
     else:
         raise OptionError(f"unknown measurement kind {kind!r}; expected one of {', '.join(KINDS)}")
     km = kind_model(error_model, data)
