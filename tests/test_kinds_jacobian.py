@@ -8,6 +8,7 @@ from conftest import random_joint_values
 from kincal import models
 from kincal.measurements.data import Measurements
 from kincal.measurements.distance import DistanceData, DistanceKind
+from kincal.measurements.flush import FlushData, FlushKind
 from kincal.measurements.plane import PlaneData, PlaneKind
 from kincal.measurements.point import PointKind
 from kincal.measurements.pose import PoseData, PoseKind, log_so3, right_jacobian_inverse
@@ -28,6 +29,11 @@ def make_kind(kind, model, q, rng, names):
     if kind == "distance":
         data = DistanceData(joint_names=names, joint_values=q, distances=rng.uniform(0.5, 1, n))
         return DistanceKind(model, data, backlash=(1, model.n - 1))
+    if kind == "flush":
+        data = FlushData(joint_names=names, joint_values=q, planes=np.arange(n) % 2,
+                         labels=("1", "2"), sigma=rng.uniform(0.01, 0.1, n) * 1e-3,
+                         sigma_deg=rng.uniform(0.01, 0.1, n))
+        return FlushKind(model, data, backlash=(1, model.n - 1))
     data = PlaneData(joint_names=names, joint_values=q, planes=np.arange(n) % 3,
                      labels=("1", "2", "3"))
     return PlaneKind(model, data, backlash=(1, model.n - 1))
@@ -35,7 +41,7 @@ def make_kind(kind, model, q, rng, names):
 
 @pytest.mark.parametrize("robot_name,tip", [("ec66", "flange"), ("ur10", "tool0")])
 @pytest.mark.parametrize("model_name", models.MODELS)
-@pytest.mark.parametrize("kind", ["point", "pose", "distance", "plane"])
+@pytest.mark.parametrize("kind", ["point", "pose", "distance", "plane", "flush"])
 def test_kind_jacobian_matches_central_differences(kind, model_name, robot_name, tip, rng):
     robot = Robot.load(robot_name, tip=tip)
     model = models.build(model_name, robot.geometry)

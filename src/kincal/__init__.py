@@ -33,14 +33,15 @@ _LAZY = {
     "PoseData": "kincal.measurements.pose",
     "DistanceData": "kincal.measurements.distance",
     "PlaneData": "kincal.measurements.plane",
+    "FlushData": "kincal.measurements.flush",
     "read_set_file": "kincal.measurements.sets",
 }
 
 __all__ = ["Robot", "Measurements", "calibrate", "CalibrationOptions", "CalibrationProblem",
            "CalibrationResult", "SolverOptions", "select_poses", "PoseSelection",
            "random_candidates", "read_candidates", "SetResult", "write_calibration", "Outputs",
-           "CellFrames",
-           "PoseData", "DistanceData", "PlaneData", "read_set_file", "KincalError", "KincalWarning", "__version__"]
+           "CellFrames", "PoseData", "DistanceData", "PlaneData", "FlushData", "read_set_file",
+           "KincalError", "KincalWarning", "__version__"]
 
 
 def __getattr__(name: str):

@@ -11,7 +11,9 @@ needs besides the robot's kinematic ones. The kinds:
 - ``distance`` (:mod:`.distance`): the distance from the tool point to a fixed pivot
   (drawstring encoder, ballbar); frames ``pivot.*`` (base frame) and ``tool.*``;
 - ``plane`` (:mod:`.plane`): the tool point touches a plane (touch probe on a surface
-  plate); frames ``plane.rx .ry .d`` per plane and ``tool.*``.
+  plate); frames ``plane.rx .ry .d`` per plane and ``tool.*``;
+- ``flush`` (:mod:`.flush`): a flat face of the tool pressed flat on a plane (its height
+  and two tilts); frames ``plane.rx .ry .d`` per plane and ``tool.rx .ry .x .y .z``.
 
 A kind's model (:class:`KindModel`) is built from an error model and the samples; for a
 kinematic vector, its frame vector and the backlash values it returns the weighted

@@ -57,22 +57,24 @@ class PlaneData(SampleSet):
                      length_unit, joint_columns, expected="the chain joints")
         v = c.values
         L = 1e-3 if length_unit == "mm" else 1.0
-        if plane_column in v:
-            raw = v[plane_column]
-            if np.any(raw != np.round(raw)):
-                k = int(np.argmax(raw != np.round(raw)))
-                raise DataError(f"{c.source}, line {c.rows[k]}, column {plane_column!r}: a "
-                                f"plane is named by a whole number, got {raw[k]!r}")
-            values, planes = np.unique(raw.astype(int), return_inverse=True)
-            labels = tuple(str(x) for x in values)
-        else:
-            planes, labels = None, ("",)
+        planes, labels = (plane_labels(v[plane_column], c.source, c.rows, plane_column)
+                          if plane_column in v else (None, ("",)))
         if "sigma" in v and np.any(v["sigma"] <= 0):
             k = int(np.argmax(v["sigma"] <= 0))
             raise DataError(f"{c.source}, line {c.rows[k]}, column 'sigma': must be > 0")
         return cls(joint_names=tuple(joint_names), joint_values=c.joint_values, planes=planes,
                    labels=labels, sigma=v["sigma"] * L if "sigma" in v else None,
                    rows=c.rows, source=c.source, approach=c.approach, ignored_columns=c.ignored)
+
+
+def plane_labels(raw: np.ndarray, source: str, rows, column: str = "plane"):
+    """((N,) plane index of each row, labels) from a column of whole numbers naming planes."""
+    if np.any(raw != np.round(raw)):
+        k = int(np.argmax(raw != np.round(raw)))
+        raise DataError(f"{source}, line {rows[k]}, column {column!r}: a plane is named by a "
+                        f"whole number, got {raw[k]!r}")
+    values, planes = np.unique(raw.astype(int), return_inverse=True)
+    return planes, tuple(str(x) for x in values)
 
 
 def normal(rx: float, ry: float) -> np.ndarray:

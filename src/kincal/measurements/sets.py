@@ -14,12 +14,13 @@ from __future__ import annotations
 from kincal.errors import DataError
 from kincal.measurements.data import Measurements
 from kincal.measurements.distance import DistanceData, DistanceKind
+from kincal.measurements.flush import FlushData, FlushKind, planning_set
 from kincal.measurements.kind import SampleSet
 from kincal.measurements.plane import PlaneData, PlaneKind
 from kincal.measurements.point import PointKind
 from kincal.measurements.pose import QUATERNION_COLUMNS, PoseData, PoseKind
 
-KINDS = ("point", "pose", "distance", "plane")
+KINDS = ("point", "pose", "distance", "plane", "flush")
 
 
 def kind_of(data) -> str:
@@ -35,7 +36,7 @@ def kind_model(error_model, data, backlash=()):
     """The kind model of one set (backlash: chain indices of the joints with a term)."""
     kind = kind_of(data)
     cls = {"point": PointKind, "pose": PoseKind, "distance": DistanceKind,
-           "plane": PlaneKind}[kind]
+           "plane": PlaneKind, "flush": FlushKind}[kind]
     return cls(error_model, data, backlash)
 
 
@@ -53,12 +54,17 @@ def header_of(path) -> list[str]:
 
 def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",
                   position_columns=None, orientation_columns=None, on_plane=False,
-                  orientation_sigma_deg=None, joint_columns=None, order_column=None):
+                  orientation_sigma_deg=None, joint_columns=None, order_column=None,
+                  flush=False):
     """One measurement set from a CSV file, its kind told by its columns (module notes)."""
     header = header_of(path)
     pos = tuple(position_columns) if position_columns else ("x", "y", "z")
     has_pos = all(c in header for c in pos)
     quat = tuple(orientation_columns) if orientation_columns else QUATERNION_COLUMNS
+    if on_plane and flush and not has_pos and "distance" not in header:
+        return FlushData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
+                                  joint_columns=joint_columns,
+                                  orientation_sigma_deg=orientation_sigma_deg)
     if on_plane and not has_pos and "distance" not in header:
         return PlaneData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
                                   joint_columns=joint_columns)
@@ -88,7 +94,7 @@ def to_csv_text(data) -> str:
     from kincal.rotations import matrix_to_quaternion
 
     kind = kind_of(data)
-    if kind == "point":
+    if kind in ("point", "flush"):
         return data.to_csv_text()
     cols = list(data.joint_names)
     extra = []
@@ -185,6 +191,8 @@ def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
             n, d, _ = fit_plane(P[k == j])
             fitted += [float(np.arctan2(-n[1], n[2])), float(np.arcsin(np.clip(n[0], -1, 1))), d]
         frames = np.r_[t, fitted]
+    elif kind == "flush":
+        data, frames = planning_set(error_model, q, t, planes)
     else:
         raise OptionError(f"unknown measurement kind {kind!r}; expected one of {', '.join(KINDS)}")
     km = kind_model(error_model, data)

@@ -7,7 +7,9 @@ are exactly what the kinds' models predict at the true parameters, plus Gaussian
   random small rotation of ``noise_deg`` per axis;
 - distances: ``|P - pivot| + noise``;
 - plane contacts: candidate poses nearest each plane are moved onto it (minimum-norm
-  joint steps, a few Newton iterations), then off it by ``noise`` along the normal.
+  joint steps, a few Newton iterations), then off it by ``noise`` along the normal;
+- flush touches: likewise, the candidates whose contact frame is nearest flush with each
+  plane moved flush, then off by ``noise`` in height and ``noise_deg`` in each tilt.
 """
 
 from __future__ import annotations
@@ -17,11 +19,12 @@ import numpy as np
 from kincal.errors import OptionError
 from kincal.measurements.data import Measurements
 from kincal.measurements.distance import DistanceData
+from kincal.measurements.flush import FlushData, tilt_angles
 from kincal.measurements.plane import PlaneData, normal
 from kincal.measurements.pose import PoseData
 from kincal.models.base import ErrorModel
 from kincal.models.chain import Chain
-from kincal.rotations import base_rotation
+from kincal.rotations import base_rotation, rotx, roty
 
 
 def tool_points(model: ErrorModel, kin, q, tool) -> np.ndarray:
@@ -87,3 +90,47 @@ def simulate_contacts(model, kin, tool, planes, candidates, per_plane, noise, rn
     return PlaneData(joint_names=model.joint_names, joint_values=np.vstack(qs),
                      planes=np.concatenate(ks), labels=tuple(str(j + 1) for j in
                                                              range(len(planes))), source=source)
+
+
+def flush_offsets(model, kin, q, contact, n, d) -> np.ndarray:
+    """(N, 3) height [m] and roll, pitch [rad] of the contact frame ``contact`` (x, y, z,
+    rx, ry in the tip frame) against the plane (n, d), at joint values q."""
+    s = Chain(model, q).state(np.asarray(kin, float), None, keep=False)
+    P = s.p_tip + s.R_tip @ np.asarray(contact[:3], float)
+    A = s.R_tip @ (rotx(contact[3]) @ roty(contact[4]))
+    alpha, beta = tilt_angles(np.einsum("nji,j->ni", A, n))
+    return np.column_stack([P @ n - d, alpha, beta])
+
+
+def simulate_flush(model, kin, contact, planes, candidates, per_plane, noise, noise_deg, rng,
+                   source="<simulated flush touches>") -> FlushData:
+    """contact: (5,) the contact frame on the tip (x, y, z [m], rx, ry [rad]); planes:
+    (k, 3) rows (rx, ry [rad], d [m]); candidates: (M, n) joint values to start from (those
+    whose contact frame is nearest flush with each plane are used, ``per_plane`` of them)."""
+    planes = np.atleast_2d(np.asarray(planes, float))
+    qs, ks = [], []
+    for j, (rx, ry, d) in enumerate(planes):
+        n = normal(rx, ry)
+        off = flush_offsets(model, kin, candidates, contact, n, d)
+        near = np.argsort(np.abs(off[:, 0]) / 0.1 + np.hypot(off[:, 1], off[:, 2]))[:per_plane]
+        q = candidates[near].copy()
+        target = np.column_stack([rng.normal(size=len(q)) * noise,
+                                  rng.normal(size=(len(q), 2)) * np.radians(noise_deg)])
+        for _ in range(50):  # Newton on (height, roll, pitch), minimum-norm joint steps
+            g = flush_offsets(model, kin, q, contact, n, d) - target
+            if np.max(np.abs(g)) < 1e-13:
+                break
+            h = 1e-7
+            G = np.stack([(flush_offsets(model, kin, q + h * e, contact, n, d) - target - g) / h
+                          for e in np.eye(q.shape[1])], axis=2)          # (N, 3, n)
+            dq = np.stack([np.linalg.pinv(G[i]) @ g[i] for i in range(len(q))])
+            scale = np.minimum(1.0, 0.3 / np.maximum(np.abs(dq).max(axis=1), 1e-12))
+            q = q - dq * scale[:, None]
+        if np.max(np.abs(g)) > 1e-9:
+            raise OptionError(f"plane {j + 1}: could not bring the contact frame flush with it; "
+                              "choose a plane the contact frame can lie flush on")
+        qs.append(q)
+        ks.append(np.full(len(q), j))
+    return FlushData(joint_names=model.joint_names, joint_values=np.vstack(qs),
+                     planes=np.concatenate(ks), source=source,
+                     labels=tuple(str(j + 1) for j in range(len(planes))))
