@@ -24,6 +24,10 @@ def add_kind_options(p) -> None:
     p.add_argument("--on-plane", action="store_true",
                    help="files with joint columns only are plane contacts (a 'plane' column "
                         "names each row's plane)")
+    p.add_argument("--flush", action="store_true",
+                   help="with --on-plane: each contact is a flat face pressed flush on the "
+                        "plane (its height and two tilts; optional 'sigma' [length] and "
+                        "'sigma_deg' columns, tilt noise --orientation-sigma-deg)")
 
 
 def files_of(args) -> list:
@@ -37,9 +41,12 @@ def read_sets(args, robot, joint_columns=None) -> list:
 
     prismatic = [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
     pos = tuple(args.position_columns) if tuple(args.position_columns) != ("x", "y", "z") else None
+    if args.flush and not args.on_plane:
+        raise OptionError("--flush describes plane contacts: give it with --on-plane")
     sets = [read_set_file(path, robot.joint_names, prismatic, args.length_unit,
                           args.angle_unit, pos, args.orientation_columns, args.on_plane,
-                          args.orientation_sigma_deg, joint_columns, args.order_column)
+                          args.orientation_sigma_deg, joint_columns, args.order_column,
+                          flush=args.flush)
             for path in files_of(args)]
     if args.set_sigma_mm:
         from dataclasses import replace

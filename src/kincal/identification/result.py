@@ -26,10 +26,6 @@ from kincal.robot import Robot
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
 
-WHAT = {"point": "position", "pose": "position", "distance": "distance",
-        "plane": "distance to the plane", "flush": "height above the plane"}
-
-
 @dataclass(frozen=True)
 class ParameterEstimate:
     """One row of the parameter table (SI units; ``deviation = estimate - nominal``).
@@ -176,6 +172,8 @@ class CalibrationResult:
             ori = None
             if km.kind == "pose":
                 ori = float(np.mean(km.orientation_errors(r)) * 180.0 / math.pi)
+            elif km.kind == "flush":  # the tilts against the plane, roll and pitch together
+                ori = float(np.mean(np.linalg.norm(km.tilt_errors(r), axis=1)) * 180 / math.pi)
             e0, e = km.sample_errors(r0), km.sample_errors(r)
             sets.append(SetResult(km.kind, km.data.source, km.data, tuple(km.frame_names),
                                   np.array(lay.frames(x, i)), r, r0, e0, e,

@@ -8,7 +8,7 @@ if TYPE_CHECKING:
     from kincal.identification.result import CalibrationResult
 
 WHAT = {"point": "position", "pose": "position and orientation", "distance": "distance",
-        "plane": "distance to the plane", "flush": "height and tilt against the plane"}
+        "plane": "distance to the plane", "flush": "height above the plane"}
 
 
 def _z(v: float) -> float:
@@ -47,7 +47,7 @@ def errors(result: CalibrationResult) -> list[str]:
             out.append(f"  set 1: {s.kind} ({s.source}), {WHAT.get(s.kind, s.kind)} errors")
         out += [f"  before: {s.before.line()}", f"  after:  {s.after.line()}"]
         if s.orientation_after_deg is not None:
-            out.append(f"  orientation after: mean {s.orientation_after_deg:.4f} deg")
+            out.append(f"  {_angle_label(s)} after: mean {s.orientation_after_deg:.4f} deg")
         return out
     out = []
     for k, s in enumerate(r.sets, start=1):
@@ -55,8 +55,12 @@ def errors(result: CalibrationResult) -> list[str]:
         out.append(f"    before: {s.before.line()}")
         out.append(f"    after:  {s.after.line()}")
         if s.orientation_after_deg is not None:
-            out.append(f"    orientation after: mean {s.orientation_after_deg:.4f} deg")
+            out.append(f"    {_angle_label(s)} after: mean {s.orientation_after_deg:.4f} deg")
     return out
+
+
+def _angle_label(s) -> str:
+    return "tilt against the plane" if s.kind == "flush" else "orientation"
 
 
 def status(result: CalibrationResult) -> list[str]:

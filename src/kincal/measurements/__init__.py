@@ -7,9 +7,9 @@ set's model and tells a file's kind from its columns."""
 
 from kincal.lazy import lazy_names
 
-__all__ = ["Measurements", "PoseData", "DistanceData", "PlaneData", "SampleSet", "KindModel",
+__all__ = ["Measurements", "PoseData", "DistanceData", "PlaneData", "FlushData", "SampleSet", "KindModel",
            "read_set_file", "kind_model", "kind_of", "KINDS"]
 __getattr__, __dir__ = lazy_names(__name__, {
     "Measurements": "data", "PoseData": "pose", "DistanceData": "distance",
-    "PlaneData": "plane", "SampleSet": "kind", "KindModel": "kind", "read_set_file": "sets",
+    "PlaneData": "plane", "FlushData": "flush", "SampleSet": "kind", "KindModel": "kind", "read_set_file": "sets",
     "kind_model": "sets", "kind_of": "sets", "KINDS": "sets"})

@@ -1,0 +1,129 @@
+"""One problem, one result, one writer (issue 17): a set and a list of one are the same
+calibration; the gate guards every writer; the one FRAMES.json schema is validated."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from kincal import Measurements, Robot, calibrate
+from kincal.cli.main import main
+from kincal.errors import DataError, IdentifiabilityError, ImplausibleResultError
+from kincal.export.outputs import Outputs, write_calibration
+from kincal.frames_file import CellFrames
+
+
+@pytest.fixture(scope="module")
+def rtest(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("one")
+    path = folder / "rt.csv"
+    assert main(["simulate", "ec66", "--design", "rtest", "--out", str(path), "--seed", "1"]) == 0
+    robot = Robot.load("ec66")
+    return robot, Measurements.from_csv(path, robot.joint_names), folder
+
+
+def _quiet(fn, *args, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*args, **kw)
+
+
+def test_a_set_and_a_list_of_one_are_the_same_calibration(rtest):
+    robot, data, _ = rtest
+    a = _quiet(calibrate, robot, data, lam="cv", n_lambdas=8)
+    b = _quiet(calibrate, robot, [data], lam="cv", n_lambdas=8)
+    assert type(a) is type(b) and len(a.sets) == len(b.sets) == 1
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.covariance, b.covariance)
+    assert a.lam == b.lam and a.summary() == b.summary()
+    assert a.layout.names == b.layout.names and a.plausibility.plausible
+
+
+def test_shuffled_rows_in_a_small_cube_are_refused_in_the_api_and_the_cli(rtest, capsys):
+    robot, data, folder = rtest
+    shuffled = replace(data, positions=data.positions[np.random.default_rng(0).permutation(
+        len(data))])
+    for given in (shuffled, [shuffled]):
+        result = _quiet(calibrate, robot, given)
+        assert not result.plausibility.plausible
+        assert "unexplained" in {f.kind for f in result.plausibility.findings}
+        out = folder / "c.urdf"
+        with pytest.raises(ImplausibleResultError, match="explains only"):
+            write_calibration(result, Outputs(urdf=out, frames=folder / "f.json"))
+        assert not out.exists() and not (folder / "f.json").exists()
+    path = folder / "shuffled.csv"
+    path.write_text(shuffled.to_csv_text())
+    capsys.readouterr()
+    before = sorted(p.name for p in folder.iterdir())
+    assert main(["calibrate", "ec66", str(path), "--out", str(folder / "c.urdf")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("kincal: error: implausible calibration") and err.count("\n") == 1
+    assert sorted(p.name for p in folder.iterdir()) == before
+
+
+def test_a_calibration_that_identifies_nothing_is_an_error(rtest):
+    robot, data, _ = rtest
+    # the one kinematic parameter left free, joint_1.theta, is the measurement frame's turn
+    fix = ("joint_[2-6].*", "joint_1.a", "joint_1.alpha", "joint_1.d")
+    with pytest.raises(IdentifiabilityError, match="identify none of the"):
+        _quiet(calibrate, robot, data, fix=fix)
+    assert _quiet(calibrate, robot, data, method="frames").converged  # frames alone: fine
+
+
+def test_fixed_tool_point_is_held_at_the_offset_the_start_fit_included(rtest):
+    robot, data, _ = rtest
+    result = _quiet(calibrate, robot, data, fix=("tool.x", "tool.y", "tool.z"),
+                    tool_guess=(0.0, 0.0, 0.01))
+    assert np.array_equal(result.tool, [0.0, 0.0, 0.01])
+    assert {result.parameter(f"tool.{c}").status for c in "xyz"} == {"fixed"}
+
+
+def test_frames_file_round_trip_and_older_versions(rtest, tmp_path):
+    robot, data, _ = rtest
+    result = _quiet(calibrate, robot, data, method="ls")
+    path = tmp_path / "f.json"
+    path.write_text(result.frames().dumps())
+    frames = CellFrames.read(path)
+    frames.check_chain(robot)
+    assert np.allclose(frames.base, result.base) and np.allclose(frames.tools, result.tools)
+    v1 = {"base": dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, result.base))),
+          "tool": dict(zip("xyz", map(float, result.tool))), "base_frame": "base_link",
+          "tip_frame": "flange"}
+    assert np.allclose(CellFrames.from_dict(v1).base, result.base)
+    sets1 = {"format": "kincal-frames-sets-1", "tip": "flange", "base": "base_link",
+             "sets": [{"kind": "point", "source": "x",
+                       "frames": result.frames_dict()["sets"][0]["frames"]}]}
+    assert np.allclose(CellFrames.from_dict(sets1).tools, result.tools)
+
+
+@pytest.mark.parametrize("case,message", [
+    ("huge", "beyond 1000 m"), ("nan", "not a kincal frames file"),
+    ("contradiction", "contradicts its base"), ("deep", "nested"), ("empty", "is empty"),
+    ("other_robot", "another robot"), ("version", "version 7")])
+def test_frames_file_values_are_validated(rtest, tmp_path, case, message):
+    robot, data, _ = rtest
+    result = _quiet(calibrate, robot, data, method="ls")
+    content = result.frames_dict()
+    path = tmp_path / "f.json"
+    if case == "huge":
+        content["sets"][0]["frames"]["base.x"] = 1e308
+        del content["sets"][0]["T_measurement_base"]
+    elif case == "nan":
+        content["sets"][0]["frames"]["base.x"] = "NaN-ish"
+    elif case == "contradiction":
+        content["sets"][0]["T_measurement_base"][0][3] += 0.5
+    elif case == "version":
+        content["version"] = 7
+    elif case == "other_robot":
+        content["robot"] = "ur10"
+    if case == "deep":
+        path.write_text("[" * 10000 + "]" * 10000)
+    elif case == "empty":
+        path.write_text("")
+    else:
+        path.write_text(json.dumps(content))
+    with pytest.raises(DataError, match=message):
+        CellFrames.read(path).check_chain(robot)
