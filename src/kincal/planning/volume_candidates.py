@@ -147,7 +147,11 @@ class VolumeSpec:
         object.__setattr__(self, "tool", tuple(float(v) for v in t))
         object.__setattr__(self, "tilt_direction", tuple(float(v) for v in u / np.linalg.norm(u)))
         if self.home is not None:
-            object.__setattr__(self, "home", tuple(float(v) for v in self.home))
+            h = np.asarray(self.home, float)
+            if h.ndim != 1 or not np.all(np.isfinite(h)):
+                raise OptionError("home needs finite joint values [rad or m] (--home), got "
+                                  + " ".join(f"{v:g}" for v in h.ravel()))
+            object.__setattr__(self, "home", tuple(float(v) for v in h))
 
 
 @dataclass(frozen=True)
