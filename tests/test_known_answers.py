@@ -262,6 +262,24 @@ def test_evidence_fit_uses_the_weights_of_its_own_hyperparameters():
     assert np.abs(sol.u - mean).max() < 1e-8
 
 
+def test_evidence_posterior_is_the_closed_form_on_a_linear_case():
+    """The posterior of y = J d + e, e ~ N(0, sigma^2), d_i ~ N(0, s_c(i)^2), flat priors on
+    two columns: mean beta H^-1 J^T y and covariance H^-1, H = beta J^T J + diag(alpha_i)
+    (alpha 0 where flat); the variances feed MacKay's gamma and the noise update."""
+    J, y, groups = _linear(7, m=25)
+    rng = np.random.default_rng(1)
+    J = np.column_stack([J, rng.normal(size=(25, 2))])
+    groups = np.concatenate([groups, [-1, -1]])
+    alpha, beta = np.array([4.0, 300.0, 0.5]), 90.0
+    a = np.where(groups >= 0, alpha[np.maximum(groups, 0)], 0.0)
+    H = beta * J.T @ J + np.diag(a)
+    cov = np.linalg.inv(H)
+    mean = beta * cov @ J.T @ y
+    w, var, *_ = LinearEvidence.of(J, y, groups).posterior(alpha, beta)
+    assert np.abs(w - mean).max() < 1e-10 * np.abs(mean).max()
+    assert var == pytest.approx(np.diag(cov), rel=1e-9), "posterior variances"
+
+
 def test_evidence_standard_errors_against_the_closed_form():
     """A calibration with evidence priors: each identified parameter's standard error is
     the sandwich s^2 H^-1 J^T J H^-1 of the linearised problem, H = J^T J + diag(w),
