@@ -22,6 +22,7 @@ degree of orientation error then weighs like 5 mm of position error.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,7 +78,8 @@ class PoseData(SampleSet):
                 self.sigma_deg, n, self.source, "sigma_deg", "deg", self.rows))
         lo, hi = SIGMA_RANGE_DEG
         o = self.orientation_sigma_deg
-        if not (isinstance(o, (int, float, np.floating)) and math.isfinite(o) and lo <= o <= hi):
+        if not (isinstance(o, numbers.Real) and not isinstance(o, bool) and math.isfinite(o)
+                and lo <= o <= hi):
             raise DataError(f"the orientation sigma must be between {lo:g} and {hi:g} deg, "
                             f"got {o!r}")
 

@@ -402,10 +402,15 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                             f"values; got shape {targets.shape}")
 
     if pivot is not None:
-        pv = np.asarray(pivot, dtype=float)
+        try:
+            pv = np.asarray(pivot, dtype=float)
+        except (TypeError, ValueError):
+            pv = np.full(1, np.nan)
         if pv.shape != (3,) or not np.all(np.isfinite(pv)):
             raise OptionError(f"the pivot needs 3 finite numbers (x, y, z in the base frame) "
-                              f"[m] (--pivot), got {' '.join(f'{v:g}' for v in pv.ravel())}")
+                              f"[m] (--pivot), got {pivot!r}" if pv.shape != (3,) else
+                              "the pivot needs 3 finite numbers (x, y, z in the base frame) "
+                              f"[m] (--pivot), got {' '.join(f'{v:g}' for v in pv)}")
     model = error_models.build(model, g)
     _warn_tool_on_axis(model, t)
     if kind == "point":
