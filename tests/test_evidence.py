@@ -187,7 +187,7 @@ def test_evidence_settings_need_the_evidence_estimator():
         CalibrationOptions(lam="cv", prior_mm=0.1).validated()
     with pytest.raises(OptionError, match=r"noise_mm \(--noise-mm\).*got method ls"):
         CalibrationOptions(method="ls", noise_mm=0.1).validated()
-    with pytest.raises(OptionError, match="noise_mm must be a finite number > 0"):
+    with pytest.raises(OptionError, match=r"noise_mm \(--noise-mm\) must be between"):
         CalibrationOptions(lam="evidence", noise_mm=-1.0).validated()
     with pytest.raises(OptionError, match="'cv', 'evidence' or a number"):
         CalibrationOptions(lam="bayes").validated()

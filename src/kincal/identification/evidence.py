@@ -130,7 +130,11 @@ class LinearEvidence:
     def posterior(self, alpha: np.ndarray, beta: float):
         """(mean (p,), diag of covariance (p,), ||R (R_H^-1)||_F^2, log|H|, E_D) with prior
         precision alpha per class (index by groups) and noise precision beta."""
-        a = np.where(self.groups >= 0, alpha[np.maximum(self.groups, 0)], 0.0)
+        # (p,) prior precisions, 0 where flat (indexing only the penalised: with no
+        # penalised parameter free, alpha is empty)
+        a = np.zeros(self.groups.size)
+        pen = self.groups >= 0
+        a[pen] = np.asarray(alpha, float)[self.groups[pen]]
         sb = math.sqrt(beta)
         # H = beta R^T R + diag(a) = R_H^T R_H, from one QR of the stacked square roots
         RH = np.linalg.qr(np.vstack([sb * self.R, np.diag(np.sqrt(a))]), mode="r")
@@ -243,7 +247,8 @@ def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.
                     abs(math.log(new_beta / beta)))
         alpha, beta = new_alpha, new_beta
         weights = np.zeros(u.size)
-        weights[idx] = np.where(groups >= 0, alpha[np.maximum(groups, 0)] / beta, 0.0)
+        pen = groups >= 0
+        weights[idx[pen]] = alpha[groups[pen]] / beta
         sol = fit(weights, u)
         step = float(np.max(np.abs(sol.u - u)))
         u = sol.u

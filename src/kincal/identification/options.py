@@ -16,6 +16,9 @@ from kincal.identification.selection import RANK_TOL
 from kincal.identification.solver import SolverOptions
 
 METHODS = ("l2", "ls", "frames")
+# accepted given prior scales [mm or deg] and noise [mm] of the evidence estimator: beyond,
+# 1 / value^2 under- or overflows; the estimator's own scales stay within a decade inside
+EVIDENCE_RANGE = (1e-6, 1e4)
 
 
 @dataclass(frozen=True)
@@ -37,7 +40,8 @@ class CalibrationOptions:
     prior_mm, prior_deg: with lam "evidence", the prior standard deviation [mm] of the
         length class and [deg] of the twist and joint-offset classes (tolerances), kept
         instead of estimated; None: estimated. noise_mm: likewise the measurement noise,
-        standard deviation per axis of a unit-weight sample [mm].
+        standard deviation per axis of a unit-weight sample [mm]. Each within
+        EVIDENCE_RANGE (1e-6 to 1e4).
     folds, seed: k and the seed of the fold split.
     lambda_min, lambda_max, n_lambdas: the CV grid (log-spaced; paper: 1e-6, 1e3, 50).
     length_scale [m], angle_scale [rad]: the unit s of the penalty
@@ -126,8 +130,11 @@ class CalibrationOptions:
                 raise OptionError(f"{key} ({flag}) is a setting of the evidence estimator: use "
                                   f"it with method l2 and lambda 'evidence' (got method "
                                   f"{o.method}, lambda {o.lam!r})")
-            if not (math.isfinite(float(value)) and float(value) > 0):
-                raise OptionError(f"{key} must be a finite number > 0, got {value!r}")
+            lo, hi = EVIDENCE_RANGE
+            if not (math.isfinite(float(value)) and lo <= float(value) <= hi):
+                unit = "deg" if key == "prior_deg" else "mm"
+                raise OptionError(f"{key} (--{key.replace('_', '-')}) must be between {lo:g} "
+                                  f"and {hi:g} {unit}, got {value!r}")
         if not (o.length_scale > 0 and o.angle_scale > 0):
             raise OptionError("length_scale and angle_scale must be > 0")
         if o.tool_guess is not None and np.shape(o.tool_guess) != (3,):

@@ -7,7 +7,8 @@ and CRLF or CR line ends are accepted. The separator is a comma, or a semicolon 
 when the header has one of those and no comma (sniffed from the header, and said in a
 :class:`KincalNote`). Every cell of a wanted column must be a finite number with a
 decimal point: a decimal comma ("0,5") is refused with a message saying so, never read as
-two cells or as 5.
+two cells or as 5. The columns of stated standard deviations (``sigma``, ``sigma_deg``)
+must lie in :data:`COLUMN_RANGES`; a value outside is refused with its line.
 """
 
 from __future__ import annotations
@@ -32,6 +33,13 @@ _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+(?:[eE][+-]?\d+)?$")
 _DECIMAL_COMMA_HINT = ("kincal reads numbers with a decimal point only; if the file uses decimal "
                        "commas, export it with decimal points (e.g. LC_NUMERIC=C, or a spreadsheet "
                        "set to English)")
+
+# accepted values of the columns of stated standard deviations (both ends included):
+# (low, high, unit for the message). ``sigma`` is in the file's length unit, m or mm, so
+# the range spans both (1 nm to 1 km in metres, 1 pm to 1 m in millimetres); the set's
+# own check (kincal.measurements.kind.check_sigmas) narrows it in SI.
+COLUMN_RANGES = {"sigma": (1e-9, 1e3, "in the file's length unit"),
+                 "sigma_deg": (1e-6, 90.0, "deg")}
 
 
 @dataclass(frozen=True)
@@ -90,14 +98,16 @@ def sniff_separator(header_line: str) -> str:
 
 
 def read_columns(path, required, optional=(), kind: str = "data", expected: str = "",
-                 rows_name: str = "samples", aliases=None) -> Columns:
+                 rows_name: str = "samples", aliases=None, ranges=None) -> Columns:
     """Read the ``required`` (and any ``optional``) columns of the CSV file ``path``.
 
     kind: what the file is, for "<kind> file not found". expected: what the required
     columns are, for the message on missing ones. rows_name: what a row is. aliases:
     {column: what it stands for} (e.g. the URDF joint a renamed column holds), for
-    messages. Warns a :class:`KincalNote` when the separator is not a comma.
+    messages. ranges: {column: (low, high, unit)} of accepted values (default
+    COLUMN_RANGES). Warns a :class:`KincalNote` when the separator is not a comma.
     """
+    ranges = COLUMN_RANGES if ranges is None else ranges
     if not isinstance(path, (str, os.PathLike)) or str(path) == "":
         raise InputFileError(f"the {kind} file must be a path (str or Path), got {path!r}")
     path = Path(path)
@@ -144,6 +154,7 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                                 f"the header has {listing(header)}")
             wanted = required + [c for c in optional if c in header and c not in required]
             cols = [header.index(c) for c in wanted]
+            limits = [(c, ranges[header[c]]) for c in cols if header[c] in ranges]
             for line, row in rows:
                 if len(row) != len(header):
                     hint = (f" (decimal commas? {_DECIMAL_COMMA_HINT})"
@@ -164,6 +175,12 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                         raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; "
                                         "expected a finite number")
                     flat.append(v)
+                for c, (lo, hi, unit) in limits:
+                    v = flat[len(flat) - len(cols) + cols.index(c)]
+                    if not lo <= v <= hi:
+                        raise DataError(f"{path}, line {line}, column {header[c]!r}: {v:g} is "
+                                        f"outside the accepted range {lo:g} to {hi:g} ({unit}) "
+                                        "of a standard deviation")
                 lines.append(line)
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputFileError(f"cannot read {path}: {exc}") from exc

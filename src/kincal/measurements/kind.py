@@ -34,6 +34,35 @@ from kincal.models.base import ErrorModel
 from kincal.models.chain import Chain
 
 DEFAULT_SIGMA = 0.05e-3  # [m] position / distance noise assumed when a set states none
+# [m] the stated standard deviations kincal accepts, 1 nm to 1 m: outside, a unit slip or a
+# placeholder, and weights 1 / sigma^2 that under- or overflow (or drown whole sets)
+SIGMA_RANGE_M = (1e-9, 1.0)
+# [deg] likewise for orientation sigmas: below, orientation rows would drown the positions
+SIGMA_RANGE_DEG = (1e-6, 90.0)
+
+
+def check_sigmas(values, n: int, source: str, what: str = "sigma", unit: str = "m",
+                 rows=None) -> np.ndarray:
+    """(n,) stated standard deviations as a read-only array; DataError naming the first
+    value outside SIGMA_RANGE_M (unit "m") or SIGMA_RANGE_DEG (unit "deg"), and the range.
+    rows: (n,) file line numbers for the message, or None."""
+    lo, hi = SIGMA_RANGE_M if unit == "m" else SIGMA_RANGE_DEG
+    try:
+        s = readonly(values)
+    except (TypeError, ValueError):
+        raise DataError(f"{source}: {what} must be {n} numbers, got {values!r}") from None
+    if s.shape != (n,):
+        raise DataError(f"{source}: {what} must be {n} values, got shape {s.shape}")
+    bad = np.flatnonzero(~(np.isfinite(s) & (s >= lo) & (s <= hi)))
+    if bad.size:
+        k = int(bad[0])
+        where = f"line {rows[k]}" if rows is not None else f"sample {k + 1}"
+        shown = (f"{s[k] * 1e3:g} mm" if unit == "m" else f"{s[k]:g} deg")
+        limits = (f"{lo * 1e3:g} mm to {hi * 1e3:g} mm" if unit == "m" else
+                  f"{lo:g} deg to {hi:g} deg")
+        raise DataError(f"{source}: {where}: {what} {shown} is outside the accepted range "
+                        f"{limits} (a standard deviation of the measurement)")
+    return s
 
 
 def readonly(a, dtype=float) -> np.ndarray:
@@ -76,13 +105,11 @@ class SampleSet:
             raise DataError(f"{self.source}: sample {k + 1} has a non-finite joint value")
         object.__setattr__(self, "joint_values", q)
         n = len(q)
-        if self.sigma is not None:
-            s = readonly(self.sigma)
-            if s.shape != (n,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
-                raise DataError(f"{self.source}: sigma must be {n} positive finite values")
-            object.__setattr__(self, "sigma", s)
         object.__setattr__(self, "rows", readonly(
             np.arange(2, n + 2) if self.rows is None else self.rows, int))
+        if self.sigma is not None:
+            object.__setattr__(self, "sigma", check_sigmas(self.sigma, n, self.source,
+                                                           rows=self.rows))
         g = approach_directions(q) if self.approach is None else np.asarray(self.approach, float)
         if g.shape != q.shape:
             raise DataError(f"{self.source}: approach directions must be {q.shape}")

@@ -22,6 +22,7 @@ degree of orientation error then weighs like 5 mm of position error.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,8 +30,10 @@ import numpy as np
 from kincal.errors import DataError
 from kincal.measurements.kind import (
     DEFAULT_SIGMA,
+    SIGMA_RANGE_DEG,
     KindModel,
     SampleSet,
+    check_sigmas,
     read_set,
     readonly,
 )
@@ -71,12 +74,14 @@ class PoseData(SampleSet):
         object.__setattr__(self, "positions", P)
         object.__setattr__(self, "rotations", R)
         if self.sigma_deg is not None:
-            s = readonly(self.sigma_deg)
-            if s.shape != (n,) or np.any(~np.isfinite(s)) or np.any(s <= 0):
-                raise DataError(f"{self.source}: sigma_deg must be {n} positive values")
-            object.__setattr__(self, "sigma_deg", s)
-        if not self.orientation_sigma_deg > 0:
-            raise DataError(f"orientation sigma must be > 0 deg, got {self.orientation_sigma_deg}")
+            object.__setattr__(self, "sigma_deg", check_sigmas(
+                self.sigma_deg, n, self.source, "sigma_deg", "deg", self.rows))
+        lo, hi = SIGMA_RANGE_DEG
+        o = self.orientation_sigma_deg
+        if not (isinstance(o, numbers.Real) and not isinstance(o, bool) and math.isfinite(o)
+                and lo <= o <= hi):
+            raise DataError(f"the orientation sigma must be between {lo:g} and {hi:g} deg, "
+                            f"got {o!r}")
 
     def per_sample_fields(self):
         return super().per_sample_fields() + ("positions", "rotations", "sigma_deg")

@@ -401,6 +401,16 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
             raise DataError(f"targets must be a non-empty (T, {g.n}) array of finite joint "
                             f"values; got shape {targets.shape}")
 
+    if pivot is not None:
+        try:
+            pv = np.asarray(pivot, dtype=float)
+        except (TypeError, ValueError):
+            pv = np.full(1, np.nan)
+        if pv.shape != (3,) or not np.all(np.isfinite(pv)):
+            raise OptionError(f"the pivot needs 3 finite numbers (x, y, z in the base frame) "
+                              f"[m] (--pivot), got {pivot!r}" if pv.shape != (3,) else
+                              "the pivot needs 3 finite numbers (x, y, z in the base frame) "
+                              f"[m] (--pivot), got {' '.join(f'{v:g}' for v in pv)}")
     model = error_models.build(model, g)
     _warn_tool_on_axis(model, t)
     if kind == "point":

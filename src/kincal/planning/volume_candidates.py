@@ -147,7 +147,16 @@ class VolumeSpec:
         object.__setattr__(self, "tool", tuple(float(v) for v in t))
         object.__setattr__(self, "tilt_direction", tuple(float(v) for v in u / np.linalg.norm(u)))
         if self.home is not None:
-            object.__setattr__(self, "home", tuple(float(v) for v in self.home))
+            try:
+                h = np.asarray(self.home, float)
+            except (TypeError, ValueError):
+                h = np.full((1, 1), np.nan)
+            if h.ndim != 1 or not np.all(np.isfinite(h)):
+                shown = (" ".join(f"{v:g}" for v in h) if h.ndim == 1 and h.size
+                         and not np.isnan(h).all() else repr(self.home))
+                raise OptionError(f"home needs finite joint values [rad or m] (--home), got "
+                                  f"{shown}")
+            object.__setattr__(self, "home", tuple(float(v) for v in h))
 
 
 @dataclass(frozen=True)
