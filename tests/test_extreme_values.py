@@ -14,7 +14,6 @@ from kincal.identification.options import CalibrationOptions
 from kincal.identification.solver import SolverOptions, solve
 from kincal.measurements.kind import check_sigmas
 
-LEAD = "the fix belongs to files another engineer is rewriting (see the trust report)"
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +99,6 @@ def test_set_sigma_far_out_of_range_is_refused_for_pose_files(value, made, tmp_p
     assert "sigma" in line and "accepted range 1e-06 mm to 1000 mm" in line
 
 
-@pytest.mark.xfail(strict=True, reason="--set-sigma-mm on a point file: " + LEAD)
 @pytest.mark.parametrize("value", ["1e300", "1e-300"])
 def test_set_sigma_far_out_of_range_is_refused_for_point_files(value, made, tmp_path, capsys):
     path = _data(made, tmp_path)
@@ -124,8 +122,6 @@ def test_sigma_range_ends():
 
 
 # ------------------------------------------------------------- degenerate files
-@pytest.mark.xfail(strict=True, reason="positions all exactly 0 (ZeroDivisionError in the "
-                   "gate's unit clue): " + LEAD)
 def test_positions_all_zero_are_refused(made, tmp_path, capsys):
     def edit(header, row):
         return header, (",".join(row.split(",")[:6] + ["0", "0", "0"]) if row else None)
@@ -142,8 +138,6 @@ def _three_poses(made, tmp_path):
     return path
 
 
-@pytest.mark.xfail(strict=True, reason="3 poses identify no kinematic parameter, yet the run "
-                   "succeeds (issue 24 class 2, in the problem): " + LEAD)
 def test_three_poses_from_a_small_volume_are_refused(made, tmp_path, capsys):
     path = _three_poses(made, tmp_path)
     _refused(_calibrate(path, tmp_path), tmp_path, capsys)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import random_joint_values
 
-from kincal.identification.calibration import CalibrationOptions, CalibrationProblem
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.identification.cross_validation import cross_validate, make_folds
 from kincal.identification.evidence import (SCALE_MIN, EvidenceFit, LinearEvidence, estimate,
                                             maximise)
@@ -116,7 +116,7 @@ def test_l2_penalty_is_in_mm_and_degrees():
     u, u0 = x / unit, problem.start() / unit
 
     def r_mm(u):
-        return (problem.position_errors(u * unit) / MM).ravel()
+        return (problem.residuals(u * unit, 0) / MM).ravel()  # set 1: positions [m]
 
     r = r_mm(u)
     h = 1e-5  # [mm or deg]

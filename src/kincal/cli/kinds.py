@@ -54,6 +54,14 @@ def read_sets(args, robot, joint_columns=None) -> list:
         if len(args.set_sigma_mm) != len(sets) or min(args.set_sigma_mm) <= 0:
             raise OptionError(f"--set-sigma-mm takes one positive value per data file: "
                               f"{len(sets)} files, got {args.set_sigma_mm}")
+        from kincal.measurements.kind import SIGMA_RANGE_M
+
+        lo, hi = SIGMA_RANGE_M
+        for s in args.set_sigma_mm:
+            if not (math.isfinite(s) and lo <= s * 1e-3 <= hi):
+                raise OptionError(f"--set-sigma-mm {s:g} is outside the accepted range "
+                                  f"{lo * 1e3:g} mm to {hi * 1e3:g} mm (a file's measurement "
+                                  "noise)")
         sets = [replace(d, sigma=np.full(len(d), s * 1e-3))
                 for d, s in zip(sets, args.set_sigma_mm)]
     return sets

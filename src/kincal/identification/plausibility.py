@@ -239,7 +239,7 @@ def _unit_causes(ev: Evidence) -> list[str]:
     if math.isfinite(r) and r > UNIT_RATIO:
         out.append(f"positions in millimetres read as metres (they spread {r:.0f}x more than "
                    "the robot's tip moves; --length-unit mm)")
-    elif math.isfinite(r) and r < 1.0 / (10 * UNIT_RATIO):
+    elif math.isfinite(r) and 0 < r < 1.0 / (10 * UNIT_RATIO):
         out.append(f"positions in metres read as millimetres (they spread {1 / r:.0f}x less "
                    "than the robot's tip moves)" if ev.length_unit == "mm" else
                    f"positions in the wrong unit (they spread {1 / r:.0f}x less than the "

@@ -88,7 +88,7 @@ class CalibrationProblem:
         else:
             sig = np.concatenate([km.data.sigma if km.data.sigma is not None
                                   else np.full(km.N, DEFAULT_SIGMA) for km in self.kinds])
-            inv = 1.0 / sig
+            inv = sig.min() / sig  # in (0, 1]: no overflow whatever the unit of the sigmas
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
         for name in o.fix + o.free:
             if not any(c in name for c in "*?["):

@@ -120,13 +120,19 @@ class Measurements:
                 raise DataError(f"{self.source}: sample {k + 1} has a non-finite {name}")
         object.__setattr__(self, "joint_values", q)
         object.__setattr__(self, "positions", P)
-        if self.sigma is not None:
-            s = _readonly(self.sigma)
-            if s.shape != (len(q),) or not np.all(np.isfinite(s)) or np.any(s <= 0):
-                raise DataError(f"{self.source}: sigma must be N positive finite values")
-            object.__setattr__(self, "sigma", s)
         rows = np.arange(2, len(q) + 2) if self.rows is None else np.asarray(self.rows)
         object.__setattr__(self, "rows", rows)
+        if self.sigma is not None:
+            from kincal.measurements.kind import check_sigmas
+
+            object.__setattr__(self, "sigma", check_sigmas(self.sigma, len(q), self.source,
+                                                           rows=rows if len(rows) == len(q)
+                                                           else None))
+        if len(P) > 1 and np.all(P == P[0]) and not np.all(q == q[0]):
+            raise DataError(f"{self.source}: every measured position is ({P[0][0]:g}, "
+                            f"{P[0][1]:g}, {P[0][2]:g}) [m]: the positions do not vary (a "
+                            "template never filled in, or the wrong columns?) while the joints "
+                            "move; expected the measured tool point of each pose")
         for name, arr in (("joint value", q), ("position", P)):
             # far beyond any robot (1000 km, 1e6 rad): the sums of squares would overflow
             big = np.argwhere(np.abs(arr) > MAX_ABS_VALUE)
