@@ -12,7 +12,7 @@ from conftest import random_joint_values
 import kincal
 from kincal import models
 from kincal.errors import DataError, IdentifiabilityError, KincalError
-from kincal.identification.multiset import MultiSetProblem
+from kincal.identification.problem import CalibrationProblem
 from kincal.identification.options import CalibrationOptions
 from kincal.measurements.flush import FlushData, FlushKind
 from kincal.measurements.plane import normal
@@ -135,9 +135,9 @@ def test_reads_and_writes_flush_files(tmp_path, rng):
 @pytest.mark.parametrize("columns,values,message", [
     (["plane"], lambda k: [1.0 if k < 4 else 2.0], "2 flush touch\\(es\\) on plane 2; at least 3"),
     (["sigma_deg"], lambda k: [0.1], "column 'sigma_deg' without a 'sigma' column"),
-    (["sigma"], lambda k: [0.05 if k else 0.0], "line 2, column 'sigma': must be > 0"),
+    (["sigma"], lambda k: [0.05 if k else 0.0], "line 2, column 'sigma': 0 is outside the accepted range"),
     (["sigma", "sigma_deg"], lambda k: [0.05, -1.0 if k == 3 else 0.1],
-     "line 5, column 'sigma_deg': must be > 0"),
+     "line 5, column 'sigma_deg': -1 is outside the accepted range"),
     (["sigma"], lambda k: [float("nan") if k == 2 else 0.05], "line 4"),
     (["plane"], lambda k: [1.5], "a plane is named by a whole number"),
 ])
@@ -172,7 +172,7 @@ def test_bad_sigmas_in_memory_refused(rng):
         replace(data, sigma_deg=np.full(len(data), 0.1))
     with pytest.raises(DataError, match="sigma_deg must be 6 positive finite"):
         replace(data, sigma=np.full(6, 1e-4), sigma_deg=np.r_[np.full(5, 0.1), np.inf])
-    with pytest.raises(DataError, match="sigma must be 6 positive finite"):
+    with pytest.raises(DataError, match="line 7: sigma nan mm is outside the accepted range"):
         replace(data, sigma=np.r_[np.full(5, 1e-4), np.nan])
     with pytest.raises(DataError, match="tilt sigma of flush touches must be a finite value"):
         replace(data, orientation_sigma_deg=0.0)
@@ -186,7 +186,7 @@ def test_planted_errors_recovered_on_a_tilted_table(robot_name, tip, rng):
     em = models.build("complete", robot.geometry)
     cand = random_joint_values(robot.geometry, rng, 3000)
     options = CalibrationOptions(method="ls", tool_guess=tuple(CONTACT[:3]))
-    ident = MultiSetProblem(robot, [simulate_flush(em, em.nominal, CONTACT, TABLE, cand, 40,
+    ident = CalibrationProblem(robot, [simulate_flush(em, em.nominal, CONTACT, TABLE, cand, 40,
                                                    0.0, 0.0, rng)], options).analyze()
     # what the touches cannot see: the contact point (its offset is the plane's offset's)
     assert {"tool.x", "tool.y", "tool.z"} <= set(ident.dropped)
