@@ -304,3 +304,18 @@ def test_talos_calibration_end_to_end(tmp_path):
     assert np.abs(again.tip_poses(q) - T_corr).max() < 1e-12
     assert len(edits.text.splitlines()) == len(robot.urdf_text.splitlines())
     assert "leg_left_1_joint" not in robot.changed_origins(result.corrected)  # see the note
+
+
+def test_talos_floor_is_carried_with_the_sole():
+    """Collision floor on a tree path: z <= floor_z of the base frame (the left sole) follows
+    the sole, whatever the leg joints do in Pinocchio's world."""
+    from kincal.collision import CollisionChecker
+
+    robot = Robot.load(_talos_path(), base="left_sole_link", tip="gripper_left_base_link")
+    checker = CollisionChecker(robot, floor_z=-0.01)
+    standing = np.zeros(robot.geometry.n)
+    assert checker.has_geometry and not checker.colliding(standing)[0]
+    crouched = standing.copy()
+    crouched[robot.joint_names.index("leg_left_4_joint")] = 2.0  # the knee folds: body falls
+    assert checker.colliding(crouched)[0]
+    assert not CollisionChecker(robot, floor_z=None).colliding(crouched)[0]
