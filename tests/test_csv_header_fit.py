@@ -58,7 +58,7 @@ def test_named_columns_over_text_say_the_shift(tmp_path):
     path = _log(tmp_path, ["a", "b", "c", "d", "joint_names"] + JOINTS[1:] + ["j1"])
     header = ["a", "b", "c", "d"] + JOINTS + ["extra"]
     path.write_text("\n".join([",".join(header)] + path.read_text().splitlines()[1:]) + "\n")
-    with pytest.raises(DataError, match=r"column 'j1' \(5\): 'joint_states'; expected a finite "
+    with pytest.raises(DataError, match=r"column 'j1': 'joint_states'; expected a finite "
                                         r"number; the named columns fit the cells 1 column to "
                                         r"their right"):
         read_columns(path, JOINTS)

@@ -219,7 +219,7 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                             raise DataError(f"{path}, line {line}, column {header[c]!r}: {what} "
                                             f"has a decimal comma; {_DECIMAL_COMMA_HINT}")
                         hint = _shift_hint(header, row, cols) if not lines else ""
-                        raise DataError(f"{path}, line {line}, column {header[c]!r} ({c + 1}): "
+                        raise DataError(f"{path}, line {line}, column {header[c]!r}: "
                                         f"{what}; expected a finite number{hint}")
                     flat.append(v)
                 lines.append(line)
