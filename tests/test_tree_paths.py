@@ -319,3 +319,13 @@ def test_talos_floor_is_carried_with_the_sole():
     crouched[robot.joint_names.index("leg_left_4_joint")] = 2.0  # the knee folds: body falls
     assert checker.colliding(crouched)[0]
     assert not CollisionChecker(robot, floor_z=None).colliding(crouched)[0]
+
+
+def test_default_model_for_a_tree_path(tmp_path):
+    from kincal.models import DEFAULT, default_for
+
+    path, _ = _tree(tmp_path, 1)
+    assert default_for(Robot.load(path, base="atip", tip="btip").geometry) == "placement"
+    assert default_for(Robot.load(path, base="base_link", tip="btip").geometry) == DEFAULT
+    build_model(default_for(Robot.load(path, base="atip", tip="btip").geometry),
+                Robot.load(path, base="atip", tip="btip").geometry)

@@ -33,6 +33,13 @@ SUITS = {
 }
 
 
+def default_for(geometry) -> str:
+    """The default model for a chain: DEFAULT, or "placement" on a tree path (a base off the
+    tip's branch), which the MD-H models cannot describe."""
+    rev = getattr(geometry, "reversed", None)
+    return "placement" if rev is not None and any(rev) else DEFAULT
+
+
 def build(name: str, geometry):
     """The error model ``name`` (one of MODELS) of a :class:`kincal.robot.ChainGeometry`."""
     if name == "complete":
@@ -51,4 +58,4 @@ def build(name: str, geometry):
                       + "; ".join(f"{k}: {v}" for k, v in SUITS.items()) + ")")
 
 
-__all__ = ["MODELS", "DEFAULT", "SUITS", "build"]
+__all__ = ["MODELS", "DEFAULT", "SUITS", "build", "default_for"]
