@@ -329,3 +329,18 @@ def test_default_model_for_a_tree_path(tmp_path):
     assert default_for(Robot.load(path, base="base_link", tip="btip").geometry) == DEFAULT
     build_model(default_for(Robot.load(path, base="atip", tip="btip").geometry),
                 Robot.load(path, base="atip", tip="btip").geometry)
+
+
+def test_inverse_kinematics_on_a_tree_path(tmp_path):
+    """Damped least squares with the relative Jacobian: the base moves too."""
+    path, _ = _tree(tmp_path, 2)
+    robot = Robot.load(path, base="atip", tip="btip")
+    rng = np.random.default_rng(2)
+    q_true = random_joint_values(robot.geometry, rng, 1)[0] * 0.5
+    T = robot.tip_poses(q_true)[0]
+    target = T[:3, 3] + T[:3, :3] @ TOOL
+    q, ok = robot.inverse_kinematics(target, tool=TOOL, rotation=T[:3, :3],
+                                     start=q_true + rng.normal(size=q_true.shape) * 0.05)
+    assert ok
+    T_q = robot.tip_poses(q)[0]
+    assert np.abs(T_q[:3, 3] + T_q[:3, :3] @ TOOL - target).max() < 1e-9

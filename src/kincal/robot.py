@@ -374,9 +374,9 @@ class Robot:
         frame is its child link, on the base side: a change of it that is a change of the
         joint's zero (a turn about its axis, a slide along it if prismatic) commutes with its
         motion and is written into the joint's own origin (an offset stays that joint's);
-        the first joint's link holds the base frame, so any other change there is refused. The transform through the common
-        ancestor link goes into the first down joint's origin (the top reversed joint's
-        keeps its nominal value, plus its own-axis part).
+        the first joint's link holds the base frame, so any other change there is refused.
+        The transform through the common ancestor link goes into the first down joint's
+        origin (the top reversed joint's keeps its nominal value, plus its own zero).
         """
         m = pin.Model(self.model)
         C = np.array(joint_frames, dtype=float)
