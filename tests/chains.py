@@ -26,22 +26,63 @@ def random_chain(rng: np.random.Generator, n: int | None = None, cases=CASES) ->
     n = int(rng.integers(3, 8)) if n is None else n
     lines = ['<?xml version="1.0"?>', "<!-- random chain made by kincal's tests -->",
              '<robot name="random_chain">', '  <link name="base_link"/>']
-    parent = "base_link"
+    parent, used = _branch(rng, lines, "base_link", "", n, cases)
+    _tip(rng, lines, parent, "")
+    lines += ["</robot>", ""]
+    return "\n".join(lines), used
+
+
+def random_tree(rng: np.random.Generator, cases=CASES) -> tuple[str, dict[str, list[str]]]:
+    """URDF text of a random tree, and the joint names of each branch.
+
+    base_link carries a trunk ``t`` (2 joints) whose last link carries two branches ``a``
+    and ``b``; base_link also carries a branch ``c``. Each branch has 2-5 joints with the
+    cases of :func:`random_chain`, joint 2 of branch ``a`` and of ``c`` always prismatic,
+    and ends in a fixed frame ``<branch>tip``. A base at ``atip`` and a tip at ``btip``
+    climb branch a (reversed revolute and prismatic joints) and go down branch b.
+    """
+    lines = ['<?xml version="1.0"?>', "<!-- random tree made by kincal's tests -->",
+             '<robot name="random_tree">', '  <link name="base_link"/>']
+    joints = {}
+    trunk, _ = _branch(rng, lines, "base_link", "t", 2, cases)
+    joints["t"] = ["tj1", "tj2"]
+    for prefix, parent in (("a", trunk), ("b", trunk), ("c", "base_link")):
+        n = int(rng.integers(2, 6))
+        last, _ = _branch(rng, lines, parent, prefix, n, cases,
+                          prismatic_at=2 if prefix in "ac" else None)
+        joints[prefix] = [f"{prefix}j{i}" for i in range(1, n + 1)]
+        _tip(rng, lines, last, prefix)
+    lines += ["</robot>", ""]
+    return "\n".join(lines), joints
+
+
+def _tip(rng, lines, parent, prefix):
+    tip_xyz = rng.uniform(-0.2, 0.2, 3)
+    lines += [f'  <joint name="{prefix}tip_joint" type="fixed">', f'    <parent link="{parent}"/>',
+              f'    <child link="{prefix}tip"/>',
+              f'    <origin xyz="{_fmt(tip_xyz)}" rpy="0.1 0.2 0.3"/>', "  </joint>",
+              f'  <link name="{prefix}tip"/>']
+
+
+def _branch(rng, lines, parent, prefix, n, cases, prismatic_at=None):
+    """Append n random joints below ``parent`` to ``lines``; (last link, cases used)."""
     prev_axis = _unit(rng.normal(size=3))
     used = []
     for i in range(1, n + 1):
         case = "general" if i == 1 else str(rng.choice(cases))
+        if i == prismatic_at:
+            case = "prismatic"
         used.append(case)
         axis = _unit(rng.normal(size=3)) if rng.random() < 0.6 else np.eye(3)[rng.integers(3)]
         xyz = rng.uniform(-0.3, 0.3, 3)
         rpy = rng.uniform(-np.pi, np.pi, 3)
         kind = "revolute" if rng.random() < 0.8 else "continuous"
         if case == "fixed":
-            lines += [f'  <joint name="fixed_{i}" type="fixed">', f'    <parent link="{parent}"/>',
-                      f'    <child link="fixed_link_{i}"/>',
+            lines += [f'  <joint name="{prefix}fixed_{i}" type="fixed">', f'    <parent link="{parent}"/>',
+                      f'    <child link="{prefix}fixed_link_{i}"/>',
                       f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>', "  </joint>",
-                      f'  <link name="fixed_link_{i}"/>']
-            parent = f"fixed_link_{i}"
+                      f'  <link name="{prefix}fixed_link_{i}"/>']
+            parent = f"{prefix}fixed_link_{i}"
             xyz = rng.uniform(-0.3, 0.3, 3)
             rpy = rng.uniform(-np.pi, np.pi, 3)
         elif case == "parallel":
@@ -56,16 +97,12 @@ def random_chain(rng: np.random.Generator, n: int | None = None, cases=CASES) ->
             rpy[1] = np.pi / 2 * rng.choice([-1.0, 1.0]) + rng.normal() * 1e-7
         limit = ('    <limit lower="-0.3" upper="0.3" effort="1" velocity="1"/>' if kind == "prismatic"
                  else '    <limit lower="-3.0" upper="3.0" effort="1" velocity="1"/>')
-        lines += [f'  <joint name="j{i}" type="{kind}">', f'    <parent link="{parent}"/>',
-                  f'    <child link="l{i}"/>', f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>',
+        lines += [f'  <joint name="{prefix}j{i}" type="{kind}">', f'    <parent link="{parent}"/>',
+                  f'    <child link="{prefix}l{i}"/>', f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>',
                   f'    <axis xyz="{_fmt(axis)}"/>']
         if kind != "continuous":
             lines.append(limit)
-        lines += ["  </joint>", f'  <link name="l{i}"/>']
-        parent = f"l{i}"
+        lines += ["  </joint>", f'  <link name="{prefix}l{i}"/>']
+        parent = f"{prefix}l{i}"
         prev_axis = axis
-    tip_xyz = rng.uniform(-0.2, 0.2, 3)
-    lines += ['  <joint name="tip_joint" type="fixed">', f'    <parent link="{parent}"/>',
-              '    <child link="tip"/>', f'    <origin xyz="{_fmt(tip_xyz)}" rpy="0.1 0.2 0.3"/>',
-              "  </joint>", '  <link name="tip"/>', "</robot>", ""]
-    return "\n".join(lines), used
+    return parent, used

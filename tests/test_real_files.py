@@ -89,7 +89,8 @@ def test_decimal_comma_is_refused_with_a_reason(plain, tmp_path):
         Measurements.from_csv(bad, JOINTS)
     # with comma separators a decimal comma splits cells: the count is wrong, and said why
     bad.write_text(text.split("\n")[0] + "\n" + "0,5," * 8 + "0,5\n")
-    with pytest.raises(DataError, match="line 2: 18 cells, the header has 9 .decimal commas"):
+    with pytest.raises(DataError, match="line 2: the header does not fit its rows: 18 cells, 9 "
+                                        r"names \(columns 10-18 have no name\) .or decimal commas"):
         Measurements.from_csv(bad, JOINTS)
 
 

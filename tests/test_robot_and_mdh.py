@@ -103,9 +103,14 @@ def test_unknown_tip_lists_valid_frames():
     assert "link_6" in exc.value.valid
 
 
-def test_tip_above_base_is_rejected():
-    with pytest.raises(FrameError, match="not below base"):
-        Robot.load("ec66", base="link_3", tip="link_1")
+def test_tip_above_base_climbs_the_chain():
+    """A tip above the base is a tree path: the joints between them, reversed."""
+    robot = Robot.load("ec66", base="link_3", tip="link_1")
+    assert robot.joint_names == ("joint_3", "joint_2")
+    assert list(robot.geometry.is_reversed) == [True, True]
+    q = np.array([[0.3, -0.7]])
+    T = Robot.load("ec66", base="link_1", tip="link_3").tip_poses(q[:, ::-1])[0]  # joint_2, joint_3
+    assert np.abs(robot.tip_poses(q)[0] - np.linalg.inv(T)).max() < 1e-12
 
 
 def test_base_and_tip_on_one_body_is_rejected():

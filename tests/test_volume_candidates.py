@@ -15,6 +15,7 @@ from kincal.planning.candidates import read_candidates
 from kincal.planning.pose_selection import select_poses
 from kincal.planning.batch_ik import BatchKinematics
 from kincal.planning.volume_candidates import Volume, VolumeSpec, _cap_directions, volume_candidates
+from kincal.collision import CollisionChecker
 from kincal.robot import Robot
 
 TOOL = (0.03, 0.02, 0.12)  # [m]
@@ -187,16 +188,16 @@ def test_cli_fewer_candidates_than_poses(tmp_path, capsys):
 def test_collision_checker_and_floor(tmp_path):
     ur10_path()
     robot = Robot.load("ur10")
-    checker = robot.collision_checker(floor_z=0.0)
+    checker = CollisionChecker(robot, floor_z=0.0)
     assert checker.has_geometry and any("kincal_floor" in p for p in checker.pairs)
     upright = np.array([0.0, -1.57, 0.0, -1.57, 0.0, 0.0])
     assert not checker.colliding(upright)[0]
     assert checker.colliding(np.zeros(6))[0]  # at zero the UR10's wrist lies on its floor
     down = np.array([0.0, 1.2, 0.0, 0.0, 0.0, 0.0])  # upper arm turned down into the floor
     assert checker.colliding(down)[0]
-    assert not robot.collision_checker(floor_z=None).colliding(down)[0]
+    assert not CollisionChecker(robot, floor_z=None).colliding(down)[0]
     folded = np.array([0.0, -1.57, 3.1, 0.0, 0.0, 0.0])  # forearm folded onto the upper arm
-    assert robot.collision_checker(None).colliding(folded)[0]
+    assert CollisionChecker(robot, None).colliding(folded)[0]
     # near the floor: candidates that collide are turned down, the others are free
     spec = VolumeSpec(Volume.cube((0.6, 0.2, 0.05), 0.1), TOOL, math.radians(60))
     c = volume_candidates(robot, spec, 100, seed=1, batch=256)
@@ -317,7 +318,8 @@ def test_simulate_in_cube_takes_the_design_tilt(tmp_path, capsys, ec66):
 
 
 def test_only_robot_py_imports_pinocchio_or_coal():
-    """The one Pinocchio boundary: planning (IK, collisions) goes through kincal.robot."""
+    """The one Pinocchio boundary: planning (IK, collisions) goes through kincal.robot and
+    its collision geometry, kincal.collision."""
     import ast
     from pathlib import Path
 
@@ -331,7 +333,7 @@ def test_only_robot_py_imports_pinocchio_or_coal():
                      else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
             if any(n.split(".")[0] in ("pinocchio", "coal", "hppfcl") for n in names):
                 offenders.append(str(path.relative_to(root)))
-    assert sorted(set(offenders)) == ["robot.py"]
+    assert sorted(set(offenders)) == ["collision.py", "robot.py"]
 
 
 def test_floor_without_collision_geometry_keeps_tool_and_tip_above(ec66):

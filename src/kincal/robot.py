@@ -2,22 +2,23 @@
 
 :class:`Robot` owns the ``pin.Model`` and answers kinematic questions by frame name.
 Everything else in kincal (MD-H layer, identification, statistics) is plain numpy and
-talks to Pinocchio only through this class.
+talks to Pinocchio only through this class (and :mod:`kincal.collision`, its collision
+geometry).
 
-Frames: the *base frame* B is a link or joint frame of the URDF (default: the root
-link); the *tip frame* E is any frame below it. Chain joints are the movable joints on
-the path from B down to E, root first. Joint values are in the joint's own unit:
-radians for revolute and continuous joints, metres for prismatic ones.
+Frames: the *base frame* B and the *tip frame* E are any two link or joint frames of the
+URDF (base default: the root link). The chain follows the tree path between them: from B
+*up* to their common ancestor link, then *down* to E. Chain joints are the movable joints
+on that path in that order; the ones on the way up are *reversed*: traversed against
+their URDF direction, each contributes inverse(origin * motion(q)) = motion(-q) *
+inverse(origin). A humanoid standing on its foot is the chain from the sole (a leaf of
+the tree) up the leg and down an arm. Joint values are always the URDF's own, in the
+joint's unit: radians for revolute and continuous joints, metres for prismatic ones.
 """
 
 from __future__ import annotations
 
-import os
 import re
-import sys
-import tempfile
 import warnings
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +29,7 @@ from kincal import descriptions
 from kincal.errors import (ChainError, DataError, FrameError, KincalWarning, UrdfError,
                            listing, suggest)
 from kincal.rotations import inverse
-from kincal.urdf_source import read_urdf_text
+from kincal.urdf_source import read_urdf_text, stderr_captured
 
 _REVOLUTE = {"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned"}
 _CONTINUOUS = {"JointModelRUBX", "JointModelRUBY", "JointModelRUBZ",
@@ -40,14 +41,20 @@ _PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismat
 class ChainGeometry:
     """The chain at zero joint values, expressed in the base frame B.
 
-    joint_names: the n movable chain joints, root first.
+    joint_names: the n movable chain joints in path order (from the base).
     kinds: "revolute" (revolute or continuous) or "prismatic", per joint.
     joint_frames: (n, 4, 4) T_B_Ji, pose of joint frame i (= its child link frame) [m].
-    axes: (n, 3) unit joint axis of joint i in its own frame.
+    axes: (n, 3) unit joint axis of joint i in its own frame, in the chain's direction:
+        the URDF axis, negated for a reversed joint. A positive joint value turns (slides)
+        the tip side about (along) it, whichever way the joint is traversed; joint values
+        keep the URDF's sign.
     T_base_tip: (4, 4) pose of the tip frame at zero joint values [m].
     lower, upper: (n,) joint limits [rad or m]; +-inf when the URDF gives none.
-    parent_frames: (n, 4, 4) pose of each joint's parent link frame (the frame its URDF
-        ``<origin>`` is written in) at zero joint values [m].
+    parent_frames: (n, 4, 4) pose of each joint's URDF parent link frame (the frame its
+        ``<origin>`` is written in) at zero joint values [m]. For a reversed joint that
+        link is on the tip side of it: origin_i = inverse(parent_frames[i]) @ joint_frames[i].
+    reversed: (n,) True for the joints traversed against their URDF direction (the path
+        from the base up to the common ancestor); None means none (a chain below its base).
     """
 
     joint_names: tuple[str, ...]
@@ -58,31 +65,17 @@ class ChainGeometry:
     lower: np.ndarray
     upper: np.ndarray
     parent_frames: np.ndarray | None = None
+    reversed: np.ndarray | None = None
 
     @property
     def n(self) -> int:
         return len(self.joint_names)
 
-
-@contextmanager
-def _stderr_captured():
-    """Collect what C++ code writes to file descriptor 2 (urdfdom's multi-line messages).
-
-    Yields a list that receives the captured text when the block ends; fd 2 is restored
-    whatever happens (an exception or a signal included).
-    """
-    sys.stderr.flush()
-    out: list[str] = []
-    saved = os.dup(2)
-    with tempfile.TemporaryFile() as tmp:
-        os.dup2(tmp.fileno(), 2)
-        try:
-            yield out
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            tmp.seek(0)
-            out.append(tmp.read(65536).decode("utf-8", errors="replace"))
+    @property
+    def is_reversed(self) -> np.ndarray:
+        """(n,) bool: which joints are traversed against their URDF direction."""
+        return (np.zeros(self.n, dtype=bool) if self.reversed is None
+                else np.asarray(self.reversed, dtype=bool))
 
 
 def _build_model(text: str, path) -> pin.Model:
@@ -93,7 +86,7 @@ def _build_model(text: str, path) -> pin.Model:
     reason, and the URDF line of the joint or link it names when that can be found.
     """
     try:
-        with _stderr_captured() as captured:
+        with stderr_captured() as captured:
             model = pin.buildModelFromXML(text)
     except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError
         said = " ".join(captured[0].split()) if captured else ""
@@ -126,7 +119,8 @@ def _mat(M: pin.SE3) -> np.ndarray:
 
 
 class Robot:
-    """A URDF robot in Pinocchio with a chosen chain from ``base`` to ``tip``.
+    """A URDF robot in Pinocchio with a chosen chain from ``base`` to ``tip`` (any two
+    frames: the chain follows the tree path between them, see the module notes).
 
     Build with :meth:`load`. A Robot is never modified: :meth:`with_joint_frames`
     returns a corrected copy that shares the original URDF text.
@@ -143,7 +137,7 @@ class Robot:
         self.tip = tip
         self._base_id = self._frame_id(base, "base")
         self._tip_id = self._frame_id(tip, "tip")
-        self._chain = self._find_chain()
+        self._chain, self._reversed = self._find_chain()
         self.geometry = self._compute_geometry()
         self.off_chain = self._check_off_chain(joint_values or {})
 
@@ -159,7 +153,9 @@ class Robot:
         """Load a URDF path, ``"ec66"``, or an example-robot-data name (``"ur10"``, ...).
 
         ``tip`` defaults to the description's usual tip frame when known; ``base`` to the
-        URDF root link. ``joint_values``: {name: value} for joints off the chain.
+        URDF root link. Any two frames of the URDF may be base and tip: the chain follows
+        the tree path between them. ``joint_values``: {name: value} for joints off the
+        chain.
         """
         desc = descriptions.resolve(robot)
         text = read_urdf_text(desc.urdf)
@@ -194,40 +190,37 @@ class Robot:
                              valid=tuple(valid))
         return self.model.getFrameId(name)
 
-    def _frames_below(self, joint: int) -> list[str]:
-        below = []
-        for f in self.model.frames:
-            j = f.parentJoint
-            while j not in (0, joint):
-                j = self.model.parents[j]
-            if j == joint and f.type in (pin.FrameType.BODY, pin.FrameType.JOINT):
-                below.append(f.name)
-        return below
+    def _ancestors(self, joint: int) -> list[int]:
+        """``joint``, its parent joint, ..., up to the universe (0) included."""
+        out = [joint]
+        while out[-1]:
+            out.append(self.model.parents[out[-1]])
+        return out
 
-    def _find_chain(self) -> list[int]:
+    def _find_chain(self) -> tuple[list[int], list[bool]]:
+        """Movable joints on the tree path from the base up to the common ancestor (reversed)
+        and down to the tip, in that order, with their reversed flags."""
         m = self.model
-        jb = m.frames[self._base_id].parentJoint
-        je = m.frames[self._tip_id].parentJoint
-        chain, j = [], je
-        while j != jb:
-            if j == 0:
-                valid = self._frames_below(jb)
-                raise FrameError(f"tip frame {self.tip!r} is not below base frame {self.base!r}; "
-                                 f"frames below the base: {listing(valid)}", valid=tuple(valid))
-            chain.append(j)
-            j = m.parents[j]
-        chain.reverse()
+        if self.base == self.tip:
+            raise FrameError(f"base and tip are the same frame {self.base!r}: a chain needs two "
+                             "frames (the tip anywhere else on the robot)")
+        up_b = self._ancestors(m.frames[self._base_id].parentJoint)
+        up_e = self._ancestors(m.frames[self._tip_id].parentJoint)
+        common = next(j for j in up_b if j in set(up_e))
+        up, down = up_b[:up_b.index(common)], up_e[:up_e.index(common)][::-1]
+        chain = up + down
         if not chain:
             raise ChainError(f"no movable joint between base {self.base!r} and tip {self.tip!r}")
-        for j in reversed(chain):
+        for j in chain:
             kind = m.joints[j].shortname()
             if kind not in _REVOLUTE | _CONTINUOUS | _PRISMATIC:
                 valid = [f.name for f in m.frames if f.parentJoint == j
                          and f.type in (pin.FrameType.BODY, pin.FrameType.JOINT)]
                 raise ChainError(f"joint {m.names[j]!r} on the chain {self.base!r} -> {self.tip!r} "
                                  f"is a {kind}; kincal models revolute, continuous and prismatic "
-                                 f"joints only: choose a base below it, e.g. {listing(valid)}")
-        return chain
+                                 "joints only: choose a base and a tip whose tree path avoids it "
+                                 f"(e.g. both below it: {listing(valid)})")
+        return chain, [True] * len(up) + [False] * len(down)
 
     def _check_off_chain(self, values: dict) -> dict:
         """Values [rad or m] for joints off the chain; the others stay at neutral."""
@@ -249,37 +242,60 @@ class Robot:
                 raise FrameError(f"joint {name!r}: value {value!r} is not a number") from None
         return off
 
+    @property
+    def base_id(self) -> int:
+        """Pinocchio frame id of the base frame."""
+        return self._base_id
+
+    def moves_between(self, a: int, b: int) -> bool:
+        """Whether chain joints lie on the tree path between Pinocchio joints a and b: the
+        chain then moves their links relative to each other."""
+        return bool((set(self._ancestors(a)) ^ set(self._ancestors(b))) & set(self._chain))
+
+    def first_moving_joint(self) -> int:
+        """Pinocchio joint whose link is the first the chain moves relative to the base."""
+        j = self._chain[0]
+        return self.model.parents[j] if self._reversed[0] else j
+
     # ----------------------------------------------------------------- geometry
     @property
     def joint_names(self) -> tuple[str, ...]:
         return tuple(self.model.names[j] for j in self._chain)
 
+    def _parent_link(self, j: int) -> np.ndarray:
+        """Pose of joint j's URDF parent link frame in its parent joint's frame."""
+        m = self.model
+        fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
+        return _mat(m.frames[m.frames[fid].parentFrame].placement)
+
     def _compute_geometry(self) -> ChainGeometry:
         m = self.model
-        T_jb_B = _mat(m.frames[self._base_id].placement)
-        T = inverse(T_jb_B)  # base joint frame expressed in B
+        T = inverse(_mat(m.frames[self._base_id].placement))  # base joint frame expressed in B
         frames, axes, kinds, parents = [], [], [], []
-        for j in self._chain:
-            fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
-            parents.append(T @ _mat(m.frames[m.frames[fid].parentFrame].placement))
-            T = T @ _mat(m.jointPlacements[j])
-            frames.append(T.copy())
+        for j, rev in zip(self._chain, self._reversed):
+            if rev:  # climbing: joint j's frame is where we stand; its parent joint is next
+                frames.append(T.copy())
+                T = T @ inverse(_mat(m.jointPlacements[j]))
+                parents.append(T @ self._parent_link(j))
+            else:
+                parents.append(T @ self._parent_link(j))
+                T = T @ _mat(m.jointPlacements[j])
+                frames.append(T.copy())
             axis, kind = self._axis(j)
-            axes.append(axis)
+            axes.append(-axis if rev else axis)
             kinds.append(kind)
         T_tip = T @ _mat(m.frames[self._tip_id].placement)
-        lower, upper = [], []
-        for j in self._chain:
-            iq = m.joints[j].idx_q
-            if m.joints[j].nq == 2:  # continuous: no limit
-                lower.append(-np.inf), upper.append(np.inf)
-            else:
-                lo, hi = float(m.lowerPositionLimit[iq]), float(m.upperPositionLimit[iq])
-                # Pinocchio stores "no limit" as +-max double
-                lower.append(lo if lo > -1e300 else -np.inf)
-                upper.append(hi if hi < 1e300 else np.inf)
+        # Pinocchio stores "no limit" as +-max double; a continuous joint (nq = 2) has none
+        iq = [m.joints[j].idx_q for j in self._chain]
+        free = np.array([m.joints[j].nq == 2 for j in self._chain])
+        lo, hi = np.array(m.lowerPositionLimit)[iq], np.array(m.upperPositionLimit)[iq]
+        lower = np.where(free | (lo <= -1e300), -np.inf, lo)
+        upper = np.where(free | (hi >= 1e300), np.inf, hi)
+        rev = np.array(self._reversed, dtype=bool)
+        rev.flags.writeable = False
         return ChainGeometry(self.joint_names, tuple(kinds), np.array(frames), np.array(axes),
-                             T_tip, np.array(lower), np.array(upper), np.array(parents))
+                             T_tip, lower, upper, np.array(parents),
+                             rev if rev.any() else None)
 
     def _axis(self, j: int) -> tuple[np.ndarray, str]:
         """Unit axis of joint j in its own frame, read from its motion subspace."""
@@ -331,41 +347,84 @@ class Robot:
         return out
 
     def tip_jacobian(self, joint_values) -> np.ndarray:
-        """(6, n) Pinocchio frame Jacobian of the tip for chain joint values (n,): rows 0-2
-        the velocity of the tip origin, rows 3-5 the angular velocity, both in base-frame
-        axes, per chain joint velocity. The reference for the vectorised numpy kinematics
-        of :mod:`kincal.models.kinematics`."""
+        """(6, n) Pinocchio Jacobian of the tip relative to the base for chain joint values
+        (n,): rows 0-2 the velocity of the tip origin, rows 3-5 the angular velocity, both
+        relative to the base frame and in its axes, per chain joint velocity. The reference
+        for the vectorised numpy kinematics of :mod:`kincal.models.kinematics`."""
+        return self._relative(self.configuration(joint_values))[1]
+
+    def _relative(self, qp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(T_B_E (4, 4), J (6, n)) at the Pinocchio configuration qp: the tip pose in the
+        base frame and its Jacobian as in :meth:`tip_jacobian`. On a path that climbs the
+        tree the base moves in Pinocchio's world too: its motion is subtracted."""
         m, d = self.model, self._data
-        qp = self.configuration(joint_values)
-        pin.framesForwardKinematics(m, d, qp)
-        J = np.asarray(pin.computeFrameJacobian(m, d, qp, self._tip_id, pin.LOCAL_WORLD_ALIGNED))
-        J = J.reshape(6, -1)[:, [m.joints[j].idx_v for j in self._chain]]
-        Rb = d.oMf[self._base_id].rotation.T
-        return np.vstack([Rb @ J[:3], Rb @ J[3:]])
+        pin.computeJointJacobians(m, d, qp)
+        pin.updateFramePlacements(m, d)
+        cols = [m.joints[j].idx_v for j in self._chain]
+        J = [np.asarray(pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED)).reshape(6, -1)[:, cols]
+             for f in (self._base_id, self._tip_id)]
+        oMb, oMe = d.oMf[self._base_id], d.oMf[self._tip_id]
+        r = oMe.translation - oMb.translation
+        v = J[1][:3] - J[0][:3] - np.cross(J[0][3:].T, r).T  # v_E - v_B - w_B x (p_E - p_B)
+        Rb = oMb.rotation.T
+        return _mat(oMb.actInv(oMe)), np.vstack([Rb @ v, Rb @ (J[1][3:] - J[0][3:])])
 
     # -------------------------------------------------------------- correction
     def with_joint_frames(self, joint_frames: np.ndarray) -> "Robot":
         """A copy whose chain joint frames at zero joint values are ``joint_frames``.
 
         joint_frames: (n, 4, 4) T_B_Ji in the base frame. Only the placements of the
-        chain joints change; every link stays rigidly attached to its joint frame.
+        chain joints change (the URDF stays the original tree, never re-rooted); every
+        link stays rigidly attached to its joint frame. On a tree path, a reversed joint's
+        frame is its child link, on the base side: a change of it that is a change of the
+        joint's zero (a turn about its axis, a slide along it if prismatic) commutes with its
+        motion and is written into the joint's own origin (an offset stays that joint's);
+        the first joint's link holds the base frame, so any other change there is refused.
+        The transform through the common ancestor link goes into the first down joint's
+        origin (the top reversed joint's keeps its nominal value, plus its own zero).
         """
         m = pin.Model(self.model)
-        T_prev = inverse(_mat(m.frames[self._base_id].placement))
-        for j, T in zip(self._chain, np.asarray(joint_frames)):
+        C = np.array(joint_frames, dtype=float)
+        N, rev = self.geometry.joint_frames, self.geometry.is_reversed
+        r = int(rev.sum())
+        G = C.copy()  # the chain links' frames after moving own-axis parts up (reversed joints)
+        for i in range(r):
+            P_nom = N[i] if i == 0 else inverse(N[i - 1]) @ N[i]
+            P_new = C[i] if i == 0 else inverse(C[i - 1]) @ C[i]
+            D = inverse(P_nom) @ P_new  # change of the base-side link, in joint i's frame
+            if self._is_offset(i, D):
+                G[i] = C[i] @ inverse(D)
+            elif i == 0:
+                raise ChainError(f"the corrected frame of {self.joint_names[0]!r} moves the base "
+                                 f"frame {self.base!r} within its link, which no URDF joint origin "
+                                 "holds; an error model must leave the link of a reversed first "
+                                 "joint in place")
+        for i in range(r - 1):
+            m.jointPlacements[self._chain[i]] = _se3(inverse(G[i + 1]) @ G[i])
+        if r:
+            top = self._chain[r - 1]
+            T_prev = C[r - 1] @ inverse(_mat(self.model.jointPlacements[top]))  # ancestor joint
+            m.jointPlacements[top] = _se3(inverse(T_prev) @ G[r - 1])
+        else:
+            T_prev = inverse(_mat(m.frames[self._base_id].placement))
+        for j, T in zip(self._chain[r:], C[r:]):
             m.jointPlacements[j] = _se3(inverse(T_prev) @ T)
             T_prev = T
         return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source, self.off_chain)
 
+    def _is_offset(self, i: int, D: np.ndarray, tol: float = 1e-10) -> bool:
+        """Whether the rigid change D (in joint i's frame) changes only joint i's zero: a
+        turn about its axis line through the joint origin (revolute) or a slide along its
+        axis (prismatic). Such a change commutes with the joint's motion."""
+        a, R, t = self.geometry.axes[i], D[:3, :3], D[:3, 3]
+        if self.geometry.kinds[i] == "prismatic":
+            return bool(np.abs(R - np.eye(3)).max() < tol and np.abs(t - (t @ a) * a).max() < tol)
+        return bool(np.abs(R @ a - a).max() < tol and np.abs(t).max() < tol)
+
     def urdf_origins(self) -> dict[str, np.ndarray]:
         """URDF ``<origin>`` (pose of the joint in its parent link) of every chain joint."""
-        m = self.model
-        out = {}
-        for j in self._chain:
-            fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
-            parent_link = m.frames[m.frames[fid].parentFrame]
-            out[m.names[j]] = inverse(_mat(parent_link.placement)) @ _mat(m.jointPlacements[j])
-        return out
+        return {self.model.names[j]: inverse(self._parent_link(j)) @ _mat(self.model.jointPlacements[j])
+                for j in self._chain}
 
     def __repr__(self) -> str:
         return (f"Robot({self.name!r}, base={self.base!r}, tip={self.tip!r}, "
@@ -380,34 +439,19 @@ class Robot:
         (3, 3) orientation of the tip frame in the base frame; start: (n,) first guess.
         Damped least squares, clipped to the joint limits. Returns (q (n,), converged).
         """
-        m, d = self.model, self._data
-        chain_v = [m.joints[j].idx_v for j in self._chain]
         g = self.geometry
         lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
         hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
         q = np.clip(np.zeros(g.n) if start is None else np.asarray(start, float), lo, hi)
         target = np.asarray(position, float)
         tool = np.asarray(tool, float)
-        oMb = None
         for _ in range(max_iterations):
-            qp = self.configuration(q)
-            pin.framesForwardKinematics(m, d, qp)
-            oMb = d.oMf[self._base_id]
-            bMe = oMb.actInv(d.oMf[self._tip_id])
-            R, p = bMe.rotation, bMe.translation
-            pt = p + R @ tool
-            err = [target - pt]
-            Jw = np.asarray(pin.computeFrameJacobian(m, d, qp, self._tip_id,
-                                                     pin.LOCAL_WORLD_ALIGNED)).reshape(6, -1)
-            Jw = Jw[:, chain_v]
-            Rb = oMb.rotation.T
-            Jv, Jo = Rb @ Jw[:3], Rb @ Jw[3:]  # in base-frame axes
-            rt = R @ tool
-            Jp = Jv - np.cross(rt, Jo.T).T  # point velocity v + w x (R t)
-            rows = [Jp]
+            T, J = self._relative(self.configuration(q))
+            R, rt = T[:3, :3], T[:3, :3] @ tool
+            err, rows = [target - T[:3, 3] - rt], [J[:3] - np.cross(rt, J[3:].T).T]  # v + w x Rt
             if rotation is not None:
                 err.append(pin.log3(np.asarray(rotation) @ R.T))
-                rows.append(Jo)
+                rows.append(J[3:])
             e = np.concatenate(err)
             if np.linalg.norm(e) < tolerance:
                 return q, True
@@ -454,109 +498,3 @@ class Robot:
         child = next(i for i, g in enumerate(m.frames)
                      if g.type == pin.FrameType.BODY and g.parentFrame == fid)
         return m.frames[child].name, np.eye(4)
-
-    # ---------------------------------------------------------------- collisions
-    def collision_checker(self, floor_z: float | None = None) -> "CollisionChecker":
-        """Self-collision (and floor) checks of chain configurations; see CollisionChecker."""
-        return CollisionChecker(self, floor_z)
-
-
-class CollisionChecker:
-    """Which chain configurations collide, from the URDF's ``<collision>`` geometry (coal).
-
-    Pairs checked: two geometries of links that the chain moves relative to each other
-    (at least one below a chain joint), except links attached to the same joint or to a
-    parent and child joint (adjacent links touch by design), and except pairs already in
-    contact at zero joint values (overlapping meshes, which an SRDF would disable). With
-    ``floor_z`` [m], also a floor: the half-space below z = floor_z of the base frame,
-    against every geometry the chain moves except the first chain link (it stands on
-    the base).
-    Meshes are checked as their convex hulls.
-    ``has_geometry`` is False when the URDF has no collision geometry; nothing is then
-    checked here and :meth:`colliding` is all False (callers say so).
-    """
-
-    def __init__(self, robot: Robot, floor_z: float | None = None):
-        try:
-            import coal
-        except ImportError:  # Pinocchio 2.x ships the same library as hppfcl
-            import hppfcl as coal
-
-        m = robot.model
-        self.robot = robot
-        dirs = [str(p) for p in robot.source.parents] if robot.source is not None else []
-        try:
-            geom = pin.buildGeomFromUrdfString(m, robot.urdf_text, pin.COLLISION,
-                                               package_dirs=dirs)
-        except (ValueError, RuntimeError) as exc:
-            raise UrdfError(f"{robot.source}: the collision geometry could not be loaded: {exc}"
-                            ) from None
-        self.has_geometry = geom.ngeoms > 0
-        for obj in geom.geometryObjects:
-            # meshes become their convex hulls: ~100x faster, and conservative (a pose the
-            # hulls find free is free; one they find colliding may be a near miss)
-            if isinstance(obj.geometry, coal.BVHModelBase):
-                obj.geometry.buildConvexRepresentation(False)
-                obj.geometry = obj.geometry.convex
-        moved = set()
-        for j in range(1, m.njoints):
-            k = j
-            while k > 0 and k not in robot._chain:
-                k = m.parents[k]
-            if k > 0:
-                moved.add(j)
-        objs = list(geom.geometryObjects)
-        pairs = []
-        for a in range(len(objs)):
-            for b in range(a + 1, len(objs)):
-                ja, jb = objs[a].parentJoint, objs[b].parentJoint
-                if ja == jb or (ja not in moved and jb not in moved):
-                    continue
-                if m.parents[ja] == jb or m.parents[jb] == ja:
-                    continue
-                pairs.append((a, b))
-        self.floor_z = floor_z
-        if floor_z is not None and self.has_geometry:
-            d = m.createData()
-            pin.framesForwardKinematics(m, d, robot.configuration(np.zeros(robot.geometry.n)))
-            oMb = d.oMf[robot._base_id]
-            n_world = oMb.rotation @ np.array([0.0, 0.0, 1.0])
-            # the solid is {x: n.x <= d}: everything below the floor plane
-            half = coal.Halfspace(n_world, float(n_world @ oMb.translation) + float(floor_z))
-            floor = geom.addGeometryObject(pin.GeometryObject("kincal_floor", 0, pin.SE3.Identity(),
-                                                              half))
-            # the first chain link stands on the base, and so on the floor
-            pairs += [(k, floor) for k, o in enumerate(objs)
-                      if o.parentJoint in moved and o.parentJoint != robot._chain[0]]
-        for a, b in pairs:
-            geom.addCollisionPair(pin.CollisionPair(a, b))
-        self._geom, self._gdata, self._data = geom, pin.GeometryData(geom), m.createData()
-        zero = self._pair_hits(np.zeros(robot.geometry.n))
-        zero &= np.array([self._geom.geometryObjects[int(cp.second)].name != "kincal_floor"
-                          for cp in geom.collisionPairs], dtype=bool)
-        self.excluded = tuple(self._pair_name(k) for k in np.flatnonzero(zero))
-        for k in sorted(np.flatnonzero(zero), reverse=True):
-            geom.removeCollisionPair(geom.collisionPairs[int(k)])
-        self._gdata = pin.GeometryData(geom)
-        self.pairs = tuple(self._pair_name(k) for k in range(len(geom.collisionPairs)))
-
-    def _pair_name(self, k: int) -> str:
-        cp = self._geom.collisionPairs[int(k)]
-        names = [self._geom.geometryObjects[i].name for i in (cp.first, cp.second)]
-        return " / ".join(names)
-
-    def _pair_hits(self, joint_values) -> np.ndarray:
-        pin.computeCollisions(self.robot.model, self._data, self._geom, self._gdata,
-                              self.robot.configuration(joint_values), False)
-        return np.array([r.isCollision() for r in self._gdata.collisionResults], dtype=bool)
-
-    def colliding(self, joint_values) -> np.ndarray:
-        """(N,) True where the configuration (N, n) [rad or m] has a checked pair in contact."""
-        Q = np.atleast_2d(np.asarray(joint_values, dtype=float))
-        out = np.zeros(len(Q), dtype=bool)
-        if not self.pairs:
-            return out
-        m, d, g, gd = self.robot.model, self._data, self._geom, self._gdata
-        for k, q in enumerate(Q):
-            out[k] = pin.computeCollisions(m, d, g, gd, self.robot.configuration(q), True)
-        return out

@@ -12,7 +12,11 @@ expanded first (:mod:`kincal.xacro_source`) and the expanded text checked and re
 from __future__ import annotations
 
 import math
+import os
 import re
+import sys
+import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 from xml.parsers import expat
 
@@ -32,6 +36,28 @@ XACRO_HINT = "run `xacro file.urdf.xacro > file.urdf` first and pass the generat
 
 class XacroLeftError(UrdfError):
     """Xacro elements or substitutions in text that should be plain URDF."""
+
+@contextmanager
+def stderr_captured():
+    """Collect what C++ code writes to file descriptor 2 (urdfdom's multi-line messages,
+    which :mod:`kincal.robot` turns into one line).
+
+    Yields a list that receives the captured text when the block ends; fd 2 is restored
+    whatever happens (an exception or a signal included).
+    """
+    sys.stderr.flush()
+    out: list[str] = []
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield out
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            out.append(tmp.read(65536).decode("utf-8", errors="replace"))
+
 
 # Namespace URIs that xacro files bind (both spellings occur in the wild).
 _XACRO_URIS = ("ros.org/wiki/xacro",)

@@ -9,6 +9,12 @@ when the header has one of those and no comma (sniffed from the header, and said
 decimal point: a decimal comma ("0,5") is refused with a message saying so, never read as
 two cells or as 5. The columns of stated standard deviations (``sigma``, ``sigma_deg``)
 must lie in :data:`COLUMN_RANGES`; a value outside is refused with its line.
+
+Robot logs often carry unnamed columns (empty names in the header). An unnamed column of
+text (metadata) or a leading unnamed column (an index, as pandas writes it) is simply not
+read; an unnamed column holding numbers elsewhere, or a row with more cells than the header
+has names, means the header does not fit its rows (shifted names read the wrong values):
+refused with the column positions (counted from 1) and the shift that would fit, if any.
 """
 
 from __future__ import annotations
@@ -59,7 +65,7 @@ class Columns:
 
     def ignored(self) -> tuple[str, ...]:
         """The columns of the file that were not read."""
-        return tuple(h for h in self.header if h not in self.values)
+        return tuple(h for h in self.header if h and h not in self.values)
 
 
 def _content_lines(fh):
@@ -85,6 +91,55 @@ def _is_number(cell: str) -> bool:
     except ValueError:
         return bool(_DECIMAL_COMMA.match(cell.strip()))
     return True
+
+
+def _positions(index) -> str:
+    """1-based column positions, runs written as ranges: "2, 34-37"."""
+    runs, out = [], []
+    for i in sorted(index):
+        if runs and i == runs[-1][1] + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    for a, b in runs:
+        out.append(f"{a + 1}" if a == b else f"{a + 1}-{b + 1}")
+    return ("column " if len(index) == 1 else "columns ") + ", ".join(out)
+
+
+def _shift_hint(header, row, cols) -> str:
+    """' the named columns fit the cells k columns to their right ...' for the smallest
+    shift k that puts every wanted column on a number and every number (after a leading
+    index) under a name, else ''."""
+    def number(i):
+        try:
+            return 0 <= i < len(row) and math.isfinite(float(row[i]))
+        except ValueError:
+            return False
+
+    numbers = [i for i in range(1, len(row)) if number(i)]
+    for k in sorted(range(-len(row), len(row) + 1), key=abs):
+        if k and cols and all(number(c + k) for c in cols) and \
+                all(0 <= i - k < len(header) and header[i - k] for i in numbers):
+            side = "right" if k > 0 else "left"
+            return (f"; the named columns fit the cells {abs(k)} column{'s' * (abs(k) > 1)} to "
+                    f"their {side} (the names look shifted)")
+    return ""
+
+
+def _check_fit(path, line: int, header, row, cols, separator: str) -> None:
+    """Refuse a header that does not fit the first row: cells without a name, or unnamed
+    columns holding numbers (other than a leading index column)."""
+    if len(row) > len(header):
+        commas = f" (or decimal commas? {_DECIMAL_COMMA_HINT})" if separator == "," else ""
+        raise DataError(f"{path}, line {line}: the header does not fit its rows: {len(row)} cells, "
+                        f"{len(header)} names ({_positions(range(len(header), len(row)))} have "
+                        f"no name){_shift_hint(header, row, cols)}{commas}")
+    unnamed = [i for i, h in enumerate(header) if not h and i < len(row) and row[i].strip()
+               and _is_number(row[i]) and i > 0]
+    if unnamed:
+        raise DataError(f"{path}, line {line}: the header does not fit its rows: "
+                        f"{_positions(unnamed)} hold numbers but have no name in the header"
+                        f"{_shift_hint(header, row, cols)}; name every data column")
 
 
 def sniff_separator(header_line: str) -> str:
@@ -138,7 +193,7 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                 raise DataError(f"{path}: the file is empty; expected a header with "
                                 f"{', '.join(required)}")
             header = [h.strip() for h in first[1]]
-            dupes = sorted({h for h in header if header.count(h) > 1})
+            dupes = sorted({h for h in header if h and header.count(h) > 1})
             if dupes:
                 raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
             missing = [c for c in required if c not in header]
@@ -156,6 +211,8 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
             cols = [header.index(c) for c in wanted]
             limits = [(c, ranges[header[c]]) for c in cols if header[c] in ranges]
             for line, row in rows:
+                if not lines:  # the first row tells whether the header fits
+                    _check_fit(path, line, header, row, cols, separator)
                 if len(row) != len(header):
                     hint = (f" (decimal commas? {_DECIMAL_COMMA_HINT})"
                             if separator == "," and len(row) > len(header) else "")
@@ -172,8 +229,9 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                         if _DECIMAL_COMMA.match(cell):
                             raise DataError(f"{path}, line {line}, column {header[c]!r}: {what} "
                                             f"has a decimal comma; {_DECIMAL_COMMA_HINT}")
-                        raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}; "
-                                        "expected a finite number")
+                        hint = _shift_hint(header, row, cols) if not lines else ""
+                        raise DataError(f"{path}, line {line}, column {header[c]!r}: "
+                                        f"{what}; expected a finite number{hint}")
                     flat.append(v)
                 for c, (lo, hi, unit) in limits:
                     v = flat[len(flat) - len(cols) + cols.index(c)]

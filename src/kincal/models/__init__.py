@@ -4,8 +4,13 @@
 |---|---|---|
 | ``complete`` (default) | MD-H ``.a .alpha .d .theta`` + ``.beta`` at nearly parallel axes | every serial arm: complete, continuous, minimal after selection |
 | ``mdh`` | ``.a .alpha .d .theta`` (Craig's modified DH) | the seed paper's reproduction; arms without parallel axes |
-| ``placement`` | ``.tx .ty .tz .rx .ry .rz`` of the URDF origin | reading corrections as URDF origin changes (FIGAROH's model) |
+| ``placement`` | ``.tx .ty .tz .rx .ry .rz`` of the URDF origin | reading corrections as URDF origin changes (FIGAROH's model); tree paths |
 | ``offsets`` | ``.theta`` (``.d`` if prismatic) | re-mastering: joint zeros only, few poses |
+
+Tree paths (a base anywhere in the URDF tree, joints on the way up reversed; see
+:mod:`kincal.robot`): ``placement`` and ``offsets`` describe them (each correction is one
+of a traversed URDF origin); ``complete`` and ``mdh`` refuse them (OptionError), their
+first row would move the first axis within the base frame's own link.
 
 All share the interface of :mod:`kincal.models.base`, the chain engine of
 :mod:`kincal.models.chain`, and everything downstream (selection, penalty, solver,
@@ -22,9 +27,17 @@ SUITS = {
     "complete": "MD-H + Hayati's beta at nearly parallel axes: complete and continuous (default)",
     "mdh": "Craig's modified DH, 4 per joint: the seed paper's model; misses tilts of parallel axes",
     "placement": "6 errors per URDF joint origin (FIGAROH's full model): complete, redundancy "
-                 "removed by the selection",
-    "offsets": "joint zeros only (re-mastering): few parameters, no link or axis corrections",
+                 "removed by the selection; suits tree paths (a base anywhere in the tree)",
+    "offsets": "joint zeros only (re-mastering): few parameters, no link or axis corrections; "
+               "suits tree paths",
 }
+
+
+def default_for(geometry) -> str:
+    """The default model for a chain: DEFAULT, or "placement" on a tree path (a base off the
+    tip's branch), which the MD-H models cannot describe."""
+    rev = getattr(geometry, "reversed", None)
+    return "placement" if rev is not None and any(rev) else DEFAULT
 
 
 def build(name: str, geometry):
@@ -45,4 +58,4 @@ def build(name: str, geometry):
                       + "; ".join(f"{k}: {v}" for k, v in SUITS.items()) + ")")
 
 
-__all__ = ["MODELS", "DEFAULT", "SUITS", "build"]
+__all__ = ["MODELS", "DEFAULT", "SUITS", "build", "default_for"]

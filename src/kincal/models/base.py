@@ -25,6 +25,14 @@ Each model gives, for a parameter vector x (absolute values, SI: metres, radians
 
 A model is plain numpy and never imports Pinocchio: it is built once from the robot's
 :class:`kincal.robot.ChainGeometry`.
+
+Tree paths (a base anywhere in the URDF tree): a joint traversed against its URDF
+direction (on the way up from the base) is a joint like the others here, with its
+placed frame at its URDF joint frame and its screw axis the geometry's chain axis (the
+URDF axis negated), so a positive joint value still turns the tip side. Its URDF origin
+lies *after* its motion, in the next placement; a model whose parameters correct URDF
+origins (``placement``) sets ``joint_of`` to that placement. ``placement`` and ``offsets``
+support tree paths; ``complete`` and ``mdh`` refuse them (see :mod:`kincal.models`).
 """
 
 from __future__ import annotations

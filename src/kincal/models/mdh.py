@@ -57,6 +57,7 @@ from functools import cached_property
 
 import numpy as np
 
+from kincal.errors import OptionError
 from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
 from kincal.models.chain import cross_rows
 from kincal.rotations import inverse, transform
@@ -304,7 +305,18 @@ def extract(geometry, beta_below: float | None = None, name: str | None = None) 
 
     beta_below: None for plain MD-H; else the sine of the angle below which a pair of
     consecutive axes counts as nearly parallel and gets Hayati's beta.
+    A tree path whose first joints are reversed (a base off the tip's branch) is refused
+    (OptionError): MD-H rows start at the base, and the first row's a and alpha would move
+    the first axis within the base frame's own link, a change no URDF origin holds.
     """
+    rev = getattr(geometry, "reversed", None)
+    if rev is not None and np.any(rev):
+        raise OptionError(
+            f"error model {name or ('mdh' if beta_below is None else 'complete')!r} cannot "
+            f"describe a tree path ({int(np.sum(rev))} joints traversed upward from the base): "
+            f"its first MD-H row would move the axis of {geometry.joint_names[0]} within the "
+            "base frame's own link, which no URDF origin holds; use the 'placement' or "
+            "'offsets' model")
     J = np.asarray(geometry.joint_frames, dtype=float)
     n = len(J)
     z = np.array([_unit(J[i, :3, :3] @ geometry.axes[i]) for i in range(n)])

@@ -9,6 +9,11 @@ always. Few parameters and well conditioned: suits a robot whose geometry is tru
 correct link lengths or axis tilts: with large geometric errors the residual stays large.
 With position-only data the last joint's offset is identifiable only with a tool point
 off its axis.
+
+Tree paths (a base anywhere in the tree): suits them. A reversed joint's offset is a turn
+about its chain axis (the URDF axis negated) before its motion; the two commute, and
+:meth:`kincal.robot.Robot.with_joint_frames` writes it into that joint's own origin, so
+the offset means the same as on a forward joint: true joint value = reading + offset.
 """
 
 from __future__ import annotations

@@ -12,8 +12,19 @@ its joint's placement) but far from minimal: each revolute joint's turn about it
 and slide along it duplicate parts of the next placement, and the measurement frame and
 tool absorb more. The rank-revealing selection (:mod:`kincal.identification.selection`)
 keeps one of every redundant group (from the tip back), so the identified set is minimal
-for the data. Suits: arms with irregular geometry, or when the corrections should be read
-directly as changes of the URDF origins.
+for the data. Suits: arms with irregular geometry, when the corrections should be read
+directly as changes of the URDF origins, and tree paths (a base anywhere in the tree,
+:mod:`kincal.robot`), which it fits naturally.
+
+Tree paths. A reversed joint i (traversed from its child link up to its parent) has its
+origin *after* its motion: the chain reads inverse(origin_i(x)) between joint i and the
+next joint, so its six errors act on the next placement (the same errors of the same
+URDF ``<origin>``, read as above). Two origins get no errors of their own, each with a
+note: the top reversed joint's when a joint down follows (the transform through the
+common ancestor link is then corrected as that first down joint's origin, which holds
+every change of it, and the corrected URDF writes it there), or when none follows (its
+origin lies between the last motion and the tip, the tool frame's part). The base frame's
+own link (before the first reversed joint moves) is never corrected: no URDF origin holds it.
 """
 
 from __future__ import annotations
@@ -30,45 +41,79 @@ FIELDS = ("tx", "ty", "tz", "rx", "ry", "rz")
 
 @dataclass(frozen=True)
 class PlacementModel(ErrorModel):
-    """Six placement errors per joint (see the module notes). Placed frames are the URDF
-    joint frames; ``parent_in_before`` (n, 4, 4) is each joint's parent link frame in the
-    frame before its placement, ``origins`` (n, 4, 4) the nominal URDF origins."""
+    """Six placement errors per joint origin (see the module notes). Placed frames are the
+    URDF joint frames; each placement is P_k = left_k mid_k right_k, with right_k =
+    origin_k(x) for a joint k traversed forward, left_k = inverse(origin_{k-1}(x)) after a
+    reversed joint k-1 whose origin carries errors, identity otherwise.
 
-    parent_in_before: np.ndarray = None
+    mid: (n, 4, 4) the fixed middle factors. origins: (n, 4, 4) nominal URDF origins.
+    reversed: (n,) joints traversed against their URDF direction.
+    has_errors: (n,) which joints' origins carry the six errors (in names order).
+    """
+
+    mid: np.ndarray = None
     origins: np.ndarray = None
+    reversed: np.ndarray = None
+    has_errors: np.ndarray = None
 
     def _origin(self, i: int, e: np.ndarray) -> np.ndarray:
         R = rotx(e[3]) @ roty(e[4]) @ rotz(e[5]) @ self.origins[i][:3, :3]
         return transform(R, self.origins[i][:3, 3] + e[:3])
 
+    def _errors(self, x) -> np.ndarray:
+        e = np.zeros((self.n, 6))
+        e[self.has_errors] = np.asarray(x, float).reshape(-1, 6)
+        return e
+
     def placements(self, x) -> np.ndarray:
-        e = np.asarray(x, float).reshape(self.n, 6)
-        return np.array([self.parent_in_before[i] @ self._origin(i, e[i]) for i in range(self.n)])
+        e = self._errors(x)
+        P = self.mid.copy()
+        for i in np.flatnonzero(self.has_errors):
+            if self.reversed[i]:
+                P[i + 1] = inverse(self._origin(i, e[i])) @ P[i + 1]
+            else:
+                P[i] = P[i] @ self._origin(i, e[i])
+        return P
 
     def twists(self, x) -> tuple[np.ndarray, np.ndarray]:
-        e = np.asarray(x, float).reshape(self.n, 6)
+        e = self._errors(x)
         w, v = np.zeros((self.size, 3)), np.zeros((self.size, 3))
-        for i in range(self.n):
-            L = self.parent_in_before[i]
-            R, o = L[:3, :3], L[:3, 3]
-            c = o + R @ (self.origins[i][:3, 3] + e[i, :3])  # the joint origin, frame before
+        for k, i in enumerate(np.flatnonzero(self.has_errors)):
             Rx, Ry = rotx(e[i, 3]), roty(e[i, 4])
-            axes = [R[:, 0], R @ Rx[:, 1], R @ Rx @ Ry[:, 2]]
-            for k in range(3):
-                v[6 * i + k] = R[:, k]
-                w[6 * i + 3 + k] = axes[k]
-                v[6 * i + 3 + k] = np.cross(c, axes[k])
+            turn = [np.eye(3)[:, 0], Rx[:, 1], Rx @ Ry[:, 2]]  # rx, ry, rz axes in the link
+            rows = slice(6 * k, 6 * k + 6)
+            if self.reversed[i]:
+                # inverse(origin) is the first factor: a change dO = d O moves a point X of
+                # the frame before by -R^T (d applied at R X + p); the turns are about the
+                # joint origin p, which is that frame's origin
+                Rt = self._origin(i, e[i])[:3, :3].T
+                v[rows][:3] = -Rt.T  # rows tx, ty, tz: -R^T e_k
+                w[rows][3:] = -(Rt @ np.column_stack(turn)).T
+            else:
+                L = self.mid[i]  # the parent link frame in the frame before
+                R, o = L[:3, :3], L[:3, 3]
+                c = o + R @ (self.origins[i][:3, 3] + e[i, :3])  # the joint origin, frame before
+                axes = [R @ t for t in turn]
+                v[rows][:3] = R.T
+                w[rows][3:] = axes
+                v[rows][3:] = [np.cross(c, a) for a in axes]
         return w, v
-
 
     def point_columns(self, x, before, placed, P) -> np.ndarray:
         """(N, 3, p) derivatives of points P (N, 3) rigidly attached to the tip: the generic
         twists of kincal.models.chain written with this model's structure (the hot path):
         t slides along the parent link's axes, r turns about them through the joint
-        origin (the origin of the placed frame)."""
+        origin (the origin of the placed frame). Chains with reversed joints take the
+        generic twists."""
+        if self.reversed.any():
+            w, v = self.twists(x)
+            G = np.stack(before)[self.joint_of]                       # (p, N, 4, 4)
+            W = (G[..., :3, :3] @ w[:, None, :, None])[..., 0]
+            U = (G[..., :3, :3] @ v[:, None, :, None])[..., 0]
+            return (np.cross(W, P[None] - G[..., :3, 3]) + U).transpose(1, 2, 0)
         e = np.asarray(x, float).reshape(self.n, 6)
         G, H = np.stack(before), np.stack(placed)                 # (n, N, 4, 4)
-        F = G[:, :, :3, :3] @ self.parent_in_before[:, None, :3, :3]  # parent link axes
+        F = G[:, :, :3, :3] @ self.mid[:, None, :3, :3]           # parent link axes
         c, s = np.cos(e[:, 3]), np.sin(e[:, 3])
         cy, sy = np.cos(e[:, 4]), np.sin(e[:, 4])
         u_y = np.stack([np.zeros(self.n), c, s], axis=1)           # Rx(rx) e_y
@@ -86,16 +131,35 @@ def build(geometry) -> PlacementModel:
     """The placement model of a :class:`kincal.robot.ChainGeometry`."""
     J = np.asarray(geometry.joint_frames, float)
     n = len(J)
+    rev = geometry.is_reversed
+    names = geometry.joint_names
     parents = np.asarray(geometry.parent_frames, float)
-    before = np.concatenate([np.eye(4)[None], J[:-1]])       # frame before each placement
-    parent_in_before = inverse(before) @ parents
     origins = inverse(parents) @ J
-    names = tuple(f"{j}.{f}" for j in geometry.joint_names for f in FIELDS)
-    return PlacementModel("placement", tuple(geometry.joint_names), tuple(geometry.kinds), names,
-                        np.zeros(6 * n), np.array([f.startswith("t") for f in FIELDS] * n),
-                        tuple((LENGTH if f.startswith("t") else TWIST) for _ in range(n)
-                              for f in FIELDS),
-                        np.repeat(np.arange(n), 6), np.eye(4), np.asarray(geometry.axes, float),
-                        np.zeros((n, 3)), np.broadcast_to(np.eye(4), (n, 4, 4)).copy(),
-                        inverse(J[-1]) @ geometry.T_base_tip, ("",) * n,
-                        parent_in_before, origins)
+    top = int(rev.sum()) - 1  # the last reversed joint, -1 if none
+    has = ~rev
+    has[:max(top, 0)] = True
+    # nominal P_k = inverse(frame before) . J_k, split around the origins with errors: the
+    # frame before is reached through the previous joint's parent link when that joint's
+    # inverse origin leads the placement, J_k through its parent link when k is forward
+    before = np.concatenate([np.eye(4)[None], J[:-1]])
+    led = np.concatenate([[False], (rev & has)[:-1]])
+    left = inverse(np.where(led[:, None, None], np.concatenate([np.eye(4)[None], parents[:-1]]),
+                            before))
+    mid = left @ np.where(rev[:, None, None], J, parents)
+    notes = [""] * n
+    if top >= 0:
+        notes[top] = (f"reversed, its origin lies between {names[top]} and the tip: the tool "
+                      "frame's part, no errors of its own" if top == n - 1 else
+                      f"reversed at the common ancestor: its origin and {names[top + 1]}'s hold "
+                      f"one transform, corrected as {names[top + 1]}'s origin")
+    p = 6 * int(has.sum())
+    joint_of = np.repeat(np.where(rev, np.arange(n) + 1, np.arange(n))[has], 6)
+    return PlacementModel("placement", tuple(names), tuple(geometry.kinds),
+                          tuple(f"{j}.{f}" for j, h in zip(names, has) if h for f in FIELDS),
+                          np.zeros(p), np.array([f.startswith("t") for f in FIELDS] * (p // 6)),
+                          tuple((LENGTH if f.startswith("t") else TWIST) for _ in range(p // 6)
+                                for f in FIELDS),
+                          joint_of, np.eye(4), np.asarray(geometry.axes, float),
+                          np.zeros((n, 3)), np.broadcast_to(np.eye(4), (n, 4, 4)).copy(),
+                          inverse(J[-1]) @ geometry.T_base_tip, tuple(notes),
+                          mid, origins, rev, has)

@@ -11,7 +11,7 @@ The instrument fixes where the measured point may be and how the tool may be til
 - is inside the joint limits;
 - is on the arm branch of ``home`` (see below);
 - is free of self-collision and of the floor (z = ``floor_z`` of the base frame) where
-  the URDF has collision geometry (:class:`kincal.robot.CollisionChecker`). Without
+  the URDF has collision geometry (:class:`kincal.collision.CollisionChecker`). Without
   collision geometry only the tool point and the tip frame origin are kept above the
   floor, and :attr:`VolumeCandidates.collision_note` says so.
 
@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from kincal.collision import CollisionChecker
 from kincal.errors import OptionError
 from kincal.identification import blas_threads
 from kincal.planning.batch_ik import BatchKinematics
@@ -243,7 +244,7 @@ class _Collisions:
     """Collision geometry when the URDF has it; tool point and tip above the floor always."""
 
     def __init__(self, robot, floor_z, tool):
-        self.checker = robot.collision_checker(floor_z)
+        self.checker = CollisionChecker(robot, floor_z)
         self.floor_z = floor_z
         self.tool = np.asarray(tool, float)
         if self.checker.has_geometry:

@@ -1,0 +1,346 @@
+"""Chains along any tree path: a base anywhere in the URDF tree (a leaf, a sibling branch),
+joints on the way up reversed. Forward kinematics against Pinocchio's own frames, analytic
+Jacobians against central differences, the corrected URDF as the original tree."""
+
+import io
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import yourdfpy
+from chains import random_tree
+from conftest import random_joint_values
+
+from kincal.descriptions import erd_robots_dir
+from kincal.errors import ChainError, FrameError, OptionError
+from kincal.export.readable_export import corrected_text
+from kincal.export.urdf_export import edit_joint_origins
+from kincal.models import build as build_model
+from kincal.models import mdh, offsets, placement
+from kincal.models.chain import Chain, rodrigues
+from kincal.models.kinematics import ChainKinematics
+from kincal.robot import Robot
+
+TOOL = np.array([0.03, -0.02, 0.05])
+STEP = 1e-6  # central differences: errors O(STEP^2) ~ 1e-12 plus roundoff / STEP ~ 1e-10
+TOL = 1e-7
+
+
+def _tree(tmp_path, seed):
+    text, joints = random_tree(np.random.default_rng(seed))
+    path = tmp_path / f"tree_{seed}.urdf"
+    path.write_text(text)
+    return path, joints
+
+
+def _talos_path():
+    root = erd_robots_dir()
+    path = None if root is None else root / "talos_data" / "robots" / "talos_full_v2.urdf"
+    if path is None or not path.exists():
+        pytest.skip("example-robot-data's TALOS is not installed")
+    return path
+
+
+# (base, tip, joints up, joints down) of the random tree's paths
+def _paths(joints):
+    a, b, c, t = joints["a"], joints["b"], joints["c"], joints["t"]
+    return [("atip", "btip", a[::-1], b),                 # leaf -> sibling branch's leaf
+            ("atip", "base_link", a[::-1] + t[::-1], []),  # leaf -> root: all reversed
+            ("ctip", "atip", c[::-1], t + a),              # branch off the root -> leaf
+            ("al1", "btip", a[:1][::-1], b),               # a link inside a branch
+            ("base_link", "btip", [], t + b)]              # the classic chain below its base
+
+
+def _pinocchio_relative(robot, q):
+    """T_B_E from Pinocchio's own frames (oMf), independent of kincal's chain code."""
+    m = robot.model
+    d = m.createData()
+    b, e = m.getFrameId(robot.base), m.getFrameId(robot.tip)
+    out = np.empty((len(q), 4, 4))
+    for k, qk in enumerate(q):
+        pin.framesForwardKinematics(m, d, robot.configuration(qk))
+        out[k] = (d.oMf[b].inverse() * d.oMf[e]).homogeneous
+    return out
+
+
+def _rotation_difference(Rp, Rm):
+    dR = Rp @ np.swapaxes(Rm, 1, 2)
+    return np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0],
+                     dR[:, 1, 0] - dR[:, 0, 1]], axis=1) / 2
+
+
+def _check_columns(model, q, x, backlash):
+    """Point, orientation and backlash columns of the chain against central differences."""
+    approach = np.sign(np.random.default_rng(1).normal(size=q.shape))
+    chain = Chain(model, q, approach, backlash)
+    b0 = np.full(len(backlash), 2e-3)
+    st = chain.state(x, b0)
+    P = st.p_tip + st.R_tip @ TOOL
+    K, B = st.point_columns(P)
+    Kg, _ = st.point_columns(P, generic=True)
+    KR, BR = st.rotation_columns()
+
+    def moved(xv, bv):
+        s = chain.state(xv, bv, keep=False)
+        return s.p_tip + s.R_tip @ TOOL, s.R_tip
+
+    for k in range(model.size):
+        dx = np.zeros(model.size)
+        dx[k] = STEP
+        (pp, Rp), (pm, Rm) = moved(x + dx, b0), moved(x - dx, b0)
+        assert np.abs(K[:, :, k] - (pp - pm) / (2 * STEP)).max() < TOL, model.names[k]
+        assert np.abs(KR[:, :, k] - _rotation_difference(Rp, Rm) / (2 * STEP)).max() < TOL
+    assert np.abs(Kg - K).max() < 1e-12
+    for k in range(len(backlash)):
+        db = np.zeros(len(backlash))
+        db[k] = STEP
+        (pp, Rp), (pm, Rm) = moved(x, b0 + db), moved(x, b0 - db)
+        assert np.abs(B[:, :, k] - (pp - pm) / (2 * STEP)).max() < TOL
+        assert np.abs(BR[:, :, k] - _rotation_difference(Rp, Rm) / (2 * STEP)).max() < TOL
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_tree_paths_kinematics_and_jacobians(seed, tmp_path):
+    path, joints = _tree(tmp_path, seed)
+    rng = np.random.default_rng(seed)
+    for base, tip, up, down in _paths(joints):
+        robot = Robot.load(path, base=base, tip=tip)
+        g = robot.geometry
+        assert robot.joint_names == tuple(up + down)
+        assert list(g.is_reversed) == [True] * len(up) + [False] * len(down)
+        if base == "atip":  # branch a has a prismatic joint 2, climbed against its direction
+            assert g.kinds[robot.joint_names.index("aj2")] == "prismatic"
+        q = random_joint_values(g, rng, 12)
+        q[0] = 0.0
+        T_pin = _pinocchio_relative(robot, q)
+        assert np.abs(robot.tip_poses(q) - T_pin).max() < 1e-12
+        # the numpy chain (offsets model at zero) and its joint Jacobians
+        R, p, Jp, Jr = ChainKinematics.of(g).evaluate(q)
+        assert np.abs(p - T_pin[:, :3, 3]).max() < 1e-12
+        assert np.abs(R - T_pin[:, :3, :3]).max() < 1e-12
+        for k in range(3):
+            J = robot.tip_jacobian(q[k])
+            assert np.abs(Jp[k] - J[:3]).max() < 1e-12 and np.abs(Jr[k] - J[3:]).max() < 1e-12
+            for i in range(g.n):  # Pinocchio's relative Jacobian against central differences
+                dq = np.zeros(g.n)
+                dq[i] = STEP
+                Tp, Tm = robot.tip_poses(q[k] + dq)[0], robot.tip_poses(q[k] - dq)[0]
+                assert np.abs(J[:3, i] - (Tp[:3, 3] - Tm[:3, 3]) / (2 * STEP)).max() < TOL
+                w = _rotation_difference(Tp[None, :3, :3], Tm[None, :3, :3])[0] / (2 * STEP)
+                assert np.abs(J[3:, i] - w).max() < TOL
+        for build in (offsets.build, placement.build):
+            model = build(g)
+            assert np.abs(model.joint_frames() - g.joint_frames).max() < 1e-13
+            x = model.nominal + rng.normal(size=model.size) * 1e-2
+            backlash = tuple(range(0, g.n, 2))
+            _check_columns(model, q, x, backlash)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_tree_paths_corrected_urdf_is_the_original_tree(seed, tmp_path):
+    """Random corrections written into the ORIGINAL file; reloaded by Pinocchio and by
+    yourdfpy, the base -> tip transforms are the model's prediction to 1e-12 m."""
+    path, joints = _tree(tmp_path, seed)
+    rng = np.random.default_rng(50 + seed)
+    original = pin.buildModelFromUrdf(str(path))
+    for base, tip, _, _ in _paths(joints):
+        robot = Robot.load(path, base=base, tip=tip)
+        q = random_joint_values(robot.geometry, rng, 50)
+        for build in (offsets.build, placement.build):
+            model = build(robot.geometry)
+            x = model.nominal + rng.normal(size=model.size) * np.where(model.is_length, 2e-3, 5e-3)
+            st = Chain(model, q).state(x, keep=False)
+            corrected = robot.with_joint_frames(model.joint_frames(x))
+            T = corrected.tip_poses(q)
+            assert np.abs(T[:, :3, 3] - st.p_tip).max() < 1e-12
+            assert np.abs(T[:, :3, :3] - st.R_tip).max() < 1e-12
+            text = edit_joint_origins(robot.urdf_text, robot.changed_origins(corrected)).text
+            out = tmp_path / "corrected.urdf"
+            out.write_text(text)
+            reloaded = Robot.load(out, base=base, tip=tip)
+            assert reloaded.model.names.tolist() == original.names.tolist()  # the same tree
+            assert list(reloaded.model.parents) == list(original.parents)
+            assert np.abs(reloaded.tip_poses(q)[:, :3, 3] - st.p_tip).max() < 1e-12
+            assert np.abs(reloaded.tip_poses(q)[:, :3, :3] - st.R_tip).max() < 1e-12
+            u = yourdfpy.URDF.load(io.BytesIO(text.encode()), load_meshes=False,
+                                   build_collision_scene_graph=False, load_collision_meshes=False)
+            assert u.base_link == "base_link"
+            for k in range(0, len(q), 5):
+                u.update_cfg(dict(zip(robot.joint_names, q[k])))
+                Tu = u.get_transform(frame_to=tip, frame_from=base)
+                assert np.abs(Tu[:3, 3] - st.p_tip[k]).max() < 1e-12
+                assert np.abs(Tu[:3, :3] - st.R_tip[k]).max() < 1e-12
+
+
+def test_offset_of_a_reversed_joint_is_written_into_its_own_origin(tmp_path):
+    path, joints = _tree(tmp_path, 3)
+    robot = Robot.load(path, base="atip", tip="btip")
+    model = offsets.build(robot.geometry)
+    old = robot.urdf_origins()
+    for i, name in enumerate(robot.joint_names):
+        x = np.zeros(model.size)
+        x[i] = 0.01
+        new = robot.with_joint_frames(model.joint_frames(x)).urdf_origins()
+        # the others move by roundoff only (the model's frames are products over the chain)
+        changed = {k: T for k, T in new.items() if np.abs(T - old[k]).max() > 1e-12}
+        assert list(changed) == [name]
+        # the joint's frame turned (slid) in its parent link about (along) its URDF axis:
+        # the true joint value is the reading + 0.01, whichever way the chain runs
+        axis = robot.geometry.axes[i] * (-1 if robot.geometry.is_reversed[i] else 1)
+        D = np.linalg.inv(old[name]) @ changed[name]
+        if robot.geometry.kinds[i] == "prismatic":
+            assert np.abs(D[:3, 3] - 0.01 * axis).max() < 1e-13
+            assert np.abs(D[:3, :3] - np.eye(3)).max() < 1e-13
+        else:
+            assert np.abs(D[:3, 3]).max() < 1e-13
+            assert np.abs(D[:3, :3] - rodrigues(axis, np.array([0.01]))[0]).max() < 1e-13
+
+
+def test_placement_names_are_the_origins_it_writes(tmp_path):
+    path, joints = _tree(tmp_path, 4)
+    robot = Robot.load(path, base="atip", tip="btip")
+    model = placement.build(robot.geometry)
+    top = joints["a"][0]  # the last reversed joint: its origin and bj1's are one transform
+    assert not any(n.startswith(top + ".") for n in model.names)
+    assert "bj1" in model.notes[robot.joint_names.index(top)]
+    old = robot.urdf_origins()
+    for k, name in enumerate(model.names):
+        x = np.zeros(model.size)
+        x[k] = 1e-3
+        new = robot.with_joint_frames(model.joint_frames(x)).urdf_origins()
+        changed = [k for k, T in new.items() if np.abs(T - old[k]).max() > 1e-12]
+        assert changed == [name.split(".")[0]], name
+
+
+def test_mdh_models_refuse_tree_paths_in_one_line(tmp_path):
+    path, _ = _tree(tmp_path, 0)
+    robot = Robot.load(path, base="atip", tip="btip")
+    for name in ("complete", "mdh"):
+        with pytest.raises(OptionError, match="tree path") as exc:
+            build_model(name, robot.geometry)
+        assert "'placement'" in str(exc.value) and "\n" not in str(exc.value)
+    below = Robot.load(path, base="base_link", tip="btip")  # no reversed joint: MD-H as ever
+    assert mdh.extract(below.geometry).n == below.geometry.n
+
+
+def test_bad_base_and_tip_in_one_line(tmp_path):
+    path, _ = _tree(tmp_path, 0)
+    with pytest.raises(FrameError, match="unknown base frame 'nowhere'") as exc:
+        Robot.load(path, base="nowhere", tip="btip")
+    assert "atip" in str(exc.value) and "atip" in exc.value.valid
+    with pytest.raises(FrameError, match="unknown tip frame"):
+        Robot.load(path, base="atip", tip="btipp")
+    with pytest.raises(FrameError, match="same frame 'atip'"):
+        Robot.load(path, base="atip", tip="atip")
+    text = path.read_text()
+    for kind in ("floating", "planar"):
+        bad = tmp_path / f"{kind}.urdf"
+        # the trunk's first joint lies on the path ctip -> atip
+        bad.write_text(text.replace('<joint name="tj1" type="revolute">', f'<joint name="tj1" type="{kind}">')
+                       .replace('<joint name="tj1" type="continuous">', f'<joint name="tj1" type="{kind}">'))
+        with pytest.raises(ChainError, match=f"joint 'tj1' on the chain 'ctip' -> 'atip' is a") as exc:
+            Robot.load(bad, base="ctip", tip="atip")
+        assert "\n" not in str(exc.value) and "avoids it" in str(exc.value)
+        assert Robot.load(bad, base="atip", tip="btip").geometry.n > 0  # off the path: fine
+
+
+def test_talos_left_sole_to_left_gripper():
+    """TALOS standing on its left foot: 6 leg joints reversed, 2 torso, 7 arm joints."""
+    path = _talos_path()
+    robot = Robot.load(path, base="left_sole_link", tip="gripper_left_base_link")
+    g = robot.geometry
+    assert robot.joint_names == tuple([f"leg_left_{i}_joint" for i in range(6, 0, -1)]
+                                      + ["torso_1_joint", "torso_2_joint"]
+                                      + [f"arm_left_{i}_joint" for i in range(1, 8)])
+    assert list(g.is_reversed) == [True] * 6 + [False] * 9
+    rng = np.random.default_rng(7)
+    q = random_joint_values(g, rng, 200)
+    T_pin = _pinocchio_relative(robot, q)
+    for build in (offsets.build, placement.build):
+        st = Chain(build(g), q).state(build(g).nominal, keep=False)
+        assert np.abs(st.p_tip - T_pin[:, :3, 3]).max() < 1e-12
+        assert np.abs(st.R_tip - T_pin[:, :3, :3]).max() < 1e-12
+    # the foot is where the chain starts: the sole stays put while the legs move
+    assert np.abs(T_pin[:, :3, 3]).max() > 0.5
+
+
+def test_talos_calibration_end_to_end(tmp_path):
+    """Simulated points of TALOS's left gripper seen from its left sole, planted placement
+    errors: the calibration reproduces the measurements, and the corrected URDF (the original
+    tree with corrected origins) reproduces the model through Pinocchio and yourdfpy."""
+    from kincal import calibrate
+    from kincal.measurements.data import Measurements
+
+    path = _talos_path()
+    robot = Robot.load(path, base="left_sole_link", tip="gripper_left_base_link")
+    g = robot.geometry
+    rng = np.random.default_rng(3)
+    q = random_joint_values(g, rng, 150) * 0.6
+    model = placement.build(g)
+    x_true = rng.normal(size=model.size) * np.where(model.is_length, 1e-3, 2e-3)
+    st = Chain(model, q).state(x_true, keep=False)
+    tool = np.array([0.0, 0.0, -0.12])
+    T_mb = np.eye(4)
+    T_mb[:3, 3] = (1.0, -0.3, 0.05)
+    positions = (st.p_tip + st.R_tip @ tool) @ T_mb[:3, :3].T + T_mb[:3, 3]
+    data = Measurements(g.joint_names, q, positions)
+    result = calibrate(robot, data, model="placement")
+    assert result.converged
+    predicted = result.predict(q)
+    assert np.abs(predicted - positions).max() < 1e-8
+    text = result.corrected_urdf_text(readable=False)
+    out = tmp_path / "talos_corrected.urdf"
+    out.write_text(text)
+    reloaded = Robot.load(out, base="left_sole_link", tip="gripper_left_base_link")
+    T_corr = result.corrected.tip_poses(q)
+    assert np.abs(reloaded.tip_poses(q) - T_corr).max() < 1e-12
+    root_joints = [j for j in pin.buildModelFromUrdf(str(path)).names]
+    assert list(reloaded.model.names) == root_joints
+    # the readable export (offsets moved to child origins near gimbal lock) is exact too, and
+    # changes attribute values of joint origins only
+    edits, _ = corrected_text(robot, result.corrected, readable=True)
+    out.write_text(edits.text)
+    again = Robot.load(out, base="left_sole_link", tip="gripper_left_base_link")
+    assert np.abs(again.tip_poses(q) - T_corr).max() < 1e-12
+    assert len(edits.text.splitlines()) == len(robot.urdf_text.splitlines())
+    assert "leg_left_1_joint" not in robot.changed_origins(result.corrected)  # see the note
+
+
+def test_talos_floor_is_carried_with_the_sole():
+    """Collision floor on a tree path: z <= floor_z of the base frame (the left sole) follows
+    the sole, whatever the leg joints do in Pinocchio's world."""
+    from kincal.collision import CollisionChecker
+
+    robot = Robot.load(_talos_path(), base="left_sole_link", tip="gripper_left_base_link")
+    checker = CollisionChecker(robot, floor_z=-0.01)
+    standing = np.zeros(robot.geometry.n)
+    assert checker.has_geometry and not checker.colliding(standing)[0]
+    crouched = standing.copy()
+    crouched[robot.joint_names.index("leg_left_4_joint")] = 2.0  # the knee folds: body falls
+    assert checker.colliding(crouched)[0]
+    assert not CollisionChecker(robot, floor_z=None).colliding(crouched)[0]
+
+
+def test_default_model_for_a_tree_path(tmp_path):
+    from kincal.models import DEFAULT, default_for
+
+    path, _ = _tree(tmp_path, 1)
+    assert default_for(Robot.load(path, base="atip", tip="btip").geometry) == "placement"
+    assert default_for(Robot.load(path, base="base_link", tip="btip").geometry) == DEFAULT
+    build_model(default_for(Robot.load(path, base="atip", tip="btip").geometry),
+                Robot.load(path, base="atip", tip="btip").geometry)
+
+
+def test_inverse_kinematics_on_a_tree_path(tmp_path):
+    """Damped least squares with the relative Jacobian: the base moves too."""
+    path, _ = _tree(tmp_path, 2)
+    robot = Robot.load(path, base="atip", tip="btip")
+    rng = np.random.default_rng(2)
+    q_true = random_joint_values(robot.geometry, rng, 1)[0] * 0.5
+    T = robot.tip_poses(q_true)[0]
+    target = T[:3, 3] + T[:3, :3] @ TOOL
+    q, ok = robot.inverse_kinematics(target, tool=TOOL, rotation=T[:3, :3],
+                                     start=q_true + rng.normal(size=q_true.shape) * 0.05)
+    assert ok
+    T_q = robot.tip_poses(q)[0]
+    assert np.abs(T_q[:3, 3] + T_q[:3, :3] @ TOOL - target).max() < 1e-9
