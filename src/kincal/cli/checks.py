@@ -12,8 +12,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
-
 from kincal.errors import OptionError
 
 # Every option is checked here, before a file is read: a value that is not finite or out
@@ -33,7 +31,7 @@ def _finite(option: str, values, low=None, high=None, low_open=False) -> None:
     """Each number of ``option`` is finite and within [low, high] (low excluded if low_open)."""
     if values is None:
         return
-    for v in np.atleast_1d(values):
+    for v in (values if isinstance(values, (list, tuple)) else [values]):
         ok = math.isfinite(v) and (low is None or (v > low if low_open else v >= low)) \
             and (high is None or v <= high)
         if not ok:
@@ -131,20 +129,19 @@ def check_args(args) -> None:
                   "earlier demo?); choose another --out or pass --overwrite to replace its files")
 
 
-def _output_paths(args) -> tuple[list, list]:
-    """(files, folders) the command will write, for the check before the work."""
-    files = [getattr(args, k, None) for k in ("out", "frames_out", "report", "truth_out")]
-    files = [f for f in files if f]
-    if getattr(args, "plots", None):
-        return files + [Path(args.plots) / n for n in PLOT_NAMES], [args.plots]
-    return files, []
+def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=()) -> None:
+    """Refuse now, before the work, what the final write would refuse.
 
-
-def check_outputs(args, robot) -> None:
-    """Refuse now, before the work, what the final write would refuse."""
+    files: the output paths the command will write (None entries are skipped); inputs:
+    the files it reads (never overwritten without --overwrite); dirs: folders it may
+    create (a plots folder)."""
     from kincal.export.safe_write import check_outputs as check_targets
 
-    files, dirs = _output_paths(args)
-    inputs = ("data", "candidates", "measured", "frames")
-    protect = [robot.source] + [getattr(args, k, None) for k in inputs]
-    check_targets(files, overwrite=args.overwrite, protect=[p for p in protect if p], dirs=dirs)
+    protect = [robot.source] + [p for p in inputs if p]
+    check_targets([f for f in files if f], overwrite=overwrite, protect=protect,
+                  dirs=[d for d in dirs if d])
+
+
+def plot_paths(folder) -> list:
+    """The files ``kincal calibrate --plots FOLDER`` writes (for the check before the work)."""
+    return [] if not folder else [Path(folder) / n for n in PLOT_NAMES]
