@@ -10,8 +10,6 @@ from kincal.cli.options import (AccuracyRequest, Chain, Inputs, add_accuracy_opt
                                 add_common, add_kinds, add_model, add_overwrite, group, typed)
 from kincal.errors import OptionError
 
-TIMED = True
-
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("analyze", help="what the data can identify, without solving")
@@ -116,9 +114,10 @@ def _analyze_points(a: Analyze) -> int:
 
         files.append((a.accuracy_plot, plot_accuracy_map(amap)))
     if files:
-        from kincal.export.safe_write import write_all
+        from kincal.cli.console import say_and_write
 
-        write_all(files, overwrite=a.overwrite, protect=[robot.source, a.inputs.data])
+        say_and_write(files, lambda written: [], overwrite=a.overwrite,
+                      protect=[robot.source, a.inputs.data])
     return 0
 
 

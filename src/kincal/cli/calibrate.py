@@ -12,11 +12,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from kincal.cli.checks import check_outputs, plot_paths
+from kincal.cli.console import say_and_write
 from kincal.cli.options import (AccuracyRequest, Chain, Inputs, add_accuracy_options,
                                 add_common, add_kinds, add_model, add_overwrite, group, typed)
 from kincal.errors import KincalError, KincalWarning, OptionError
-
-TIMED = True  # main prints "kincal: done in N s" after a success
 
 
 def register(subparsers) -> None:
@@ -201,7 +200,6 @@ def _cell_exports(c: Calibrate, robot, corrected) -> list:
 
 def _calibrate_points(c: Calibrate) -> int:
     from kincal.export import report
-    from kincal.export.safe_write import write_all
 
     robot = c.chain.load()
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=c.inputs.files,
@@ -245,19 +243,19 @@ def _calibrate_points(c: Calibrate) -> int:
             result, accuracy=amap, data_source=str(c.inputs.data),
             warnings=[str(w.message) for w in caught if issubclass(w.category, KincalWarning)],
             notes=[f"export: {m.describe()}" for m in moved])))
-    written = write_all(files, overwrite=c.overwrite, protect=[robot.source, c.inputs.data],
-                        dirs=[c.plots] if c.plots else [])
-    if not c.quiet:
-        print(result.summary())
-        for line in result.identifiability.summary().splitlines()[1:]:
-            if line.startswith(("weak", "  the poses")):
-                print(f"  {line}")
-        for m in moved:
-            print(f"  export: {m.describe()}")
+    def lines(written):
+        if c.quiet:
+            return []
+        out = [result.summary()]
+        out += [f"  {line}" for line in result.identifiability.summary().splitlines()[1:]
+                if line.startswith(("weak", "  the poses"))]
+        out += [f"  export: {m.describe()}" for m in moved]
         if amap is not None:
-            print("  " + amap.summary().replace("\n", "\n  "))
-        for path in written:
-            print(f"  wrote {path}")
+            out.append("  " + amap.summary().replace("\n", "\n  "))
+        return out + [f"  wrote {path}" for path in written]
+
+    say_and_write(files, lines, overwrite=c.overwrite, protect=[robot.source, c.inputs.data],
+                  dirs=[c.plots] if c.plots else [])
     return 0
 
 
@@ -290,10 +288,10 @@ def _refuse_with_sets(c: Calibrate) -> None:
 
 def _calibrate_sets(c: Calibrate) -> int:
     from kincal.export import report
-    from kincal.export.safe_write import write_all
 
     _refuse_with_sets(c)
     robot = c.chain.load()
+    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=c.inputs.files)
     sets = c.inputs.read_sets(robot)
     result, verdict = _solve_sets(robot, sets, calibration_options(c))
     _gate(result, verdict, c)
@@ -303,9 +301,7 @@ def _calibrate_sets(c: Calibrate) -> int:
         files.append((c.frames_out, report.dumps({"format": "kincal-frames-sets-1",
                                                   "tip": robot.tip, "base": robot.base,
                                                   **result.frames_dict()})))
-    written = write_all(files, overwrite=c.overwrite, protect=[robot.source, *c.inputs.files])
-    if not c.quiet:
-        print(result.summary())
-        for path in written:
-            print(f"  wrote {path}")
+    say_and_write(files, lambda written: [] if c.quiet else
+                  [result.summary()] + [f"  wrote {path}" for path in written],
+                  overwrite=c.overwrite, protect=[robot.source, *c.inputs.files])
     return 0

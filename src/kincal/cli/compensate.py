@@ -6,10 +6,9 @@ import math
 from dataclasses import dataclass
 
 from kincal.cli.checks import check_outputs
-from kincal.cli.options import Chain, add_overwrite, add_units, group, typed
+from kincal.cli.console import say_and_write
+from kincal.cli.options import Chain, add_overwrite, add_units, frames_document, group, typed
 from kincal.errors import DataError, OptionError
-
-TIMED = False  # the README's "done in N s" line: see kincal.cli.main
 
 
 def register(subparsers) -> None:
@@ -83,10 +82,11 @@ def run(args) -> int:
 
 def _compensate(c: Compensate) -> int:
     from kincal.compensation import CellFrames, IkOptions, compensate, filter_program, read_targets
-    from kincal.export.safe_write import write_all
     from kincal.planning.candidates import read_candidates
 
     options = IkOptions(position_tolerance=c.tolerance_mm * 1e-3)
+    if c.frames is not None:
+        frames_document(c.frames)  # an empty or broken file: said before the robot loads
     robot = c.chain.load()
     inputs = [c.targets, c.program, c.nominal, c.frames]
     check_outputs(robot, [c.out], overwrite=c.overwrite, inputs=inputs)
@@ -114,13 +114,11 @@ def _compensate(c: Compensate) -> int:
                         + "; ".join(failures[:10]) + (" ..." if len(failures) > 10 else "")
                         + "; nothing written; pass --flag-unreachable to write them marked "
                           "reached=0")
-    written = write_all([(c.out, result.to_csv_text(c.length_unit, c.angle_unit))],
-                        overwrite=c.overwrite,
-                        protect=[robot.source, *inputs] + ([c.frames] if c.frames else []))
-    print(result.summary())
-    for line in failures:
-        print(f"  NOT reached, written with reached=0: {line}")
-    for path in written:
-        print(f"  wrote {path} (joint values in {c.angle_unit} and {c.length_unit}, "
-              "as the input)")
+    said = [result.summary()] + [f"  NOT reached, written with reached=0: {line}"
+                                 for line in failures]
+    say_and_write([(c.out, result.to_csv_text(c.length_unit, c.angle_unit))],
+                  lambda written: said + [f"  wrote {path} (joint values in {c.angle_unit} and "
+                                          f"{c.length_unit}, as the input)" for path in written],
+                  overwrite=c.overwrite,
+                  protect=[robot.source, *inputs] + ([c.frames] if c.frames else []))
     return 0

@@ -8,7 +8,6 @@ from pathlib import Path
 from kincal.cli.options import add_overwrite, group, typed
 
 DEMO_DIR = "kincal-demo"
-TIMED = False
 
 
 def register(subparsers) -> None:
@@ -29,7 +28,8 @@ def run(args) -> int:
     d = typed(Demo, args)
     from kincal.experiments.paper_experiment import demo
 
-    print("kincal demo: the paper's experiment on a simulated EC66 (one seed, small size)")
+    print("kincal demo: the paper's experiment on a simulated EC66 (one seed, small size)",
+          flush=True)  # a stdout that cannot take it fails here, before any work
     s = demo(Path(d.out), progress=lambda message: print(f"  {message}", flush=True))
     print(f"validation in the 400 mm cube, mean position error [mm] (lambda = {s.lam:.3g}):")
     for label, value in (("before calibration", s.before_validation_mean_mm),

@@ -7,10 +7,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from kincal.cli.checks import check_outputs
-from kincal.cli.options import Chain, Inputs, add_common, add_kinds, add_overwrite, group, typed
+from kincal.cli.console import say, say_and_write
+from kincal.cli.options import (Chain, Inputs, add_common, add_kinds, add_overwrite,
+                                frames_document, group, typed)
 from kincal.errors import DataError, KincalError, OptionError
-
-TIMED = True
 
 
 def register(subparsers) -> None:
@@ -55,14 +55,9 @@ def chain_from_frames(chain: Chain, frames) -> Chain:
     Frames identified for one chain mean nothing for another: the tool point lives in
     the recorded tip frame, the measurement frame is placed against the recorded base."""
     path = Path(frames)
-    if not path.is_file():
+    data = frames_document(path)
+    if data is None:
         return chain  # missing, a folder or a device: the frames reader says what is wrong
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return chain  # the frames reader reports an unreadable file with the expected layout
-    if not isinstance(data, dict):
-        return chain
     for role in ("base", "tip"):
         recorded, given = data.get(f"{role}_frame"), getattr(chain, role)
         if not isinstance(recorded, str):
@@ -114,16 +109,17 @@ def _evaluate_points(e: Evaluate) -> int:
     else:
         stats = problem.solve().after
         how = "measurement frame and tool point fitted on these data"
-    print(f"{robot.name} ({robot.base} -> {robot.tip}) on {e.inputs.data}, {how}:")
-    print(f"  {stats.line()}")
-    if e.report:
-        from kincal.export.safe_write import write_all
-
-        write_all([(e.report, report.dumps({"format": "kincal-evaluation-1",
+    lines = [f"{robot.name} ({robot.base} -> {robot.tip}) on {e.inputs.data}, {how}:",
+             f"  {stats.line()}"]
+    if not e.report:
+        say(lines)
+    else:
+        say_and_write([(e.report, report.dumps({"format": "kincal-evaluation-1",
                                             "robot": str(robot.source),
                                             "data": str(e.inputs.data), "frames": how,
-                                            "errors": report.stats_dict(stats)}))],
-                  overwrite=e.overwrite, protect=[robot.source, e.inputs.data])
+                                                "errors": report.stats_dict(stats)}))],
+                      lambda written: lines, overwrite=e.overwrite,
+                      protect=[robot.source, e.inputs.data])
     return 0
 
 

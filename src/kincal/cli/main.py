@@ -16,6 +16,7 @@ import warnings
 
 from kincal import __version__
 from kincal.cli import analyze, calibrate, compensate, demo, evaluate, plan, simulate
+from kincal.cli.console import say, stdout_to_null
 from kincal.errors import KincalError, KincalNote, KincalWarning
 
 COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo)
@@ -40,9 +41,79 @@ def _on_sigterm(signum, frame):
     raise _Terminated
 
 
-def _timed(command: str) -> bool:
-    """Whether a success of ``command`` ends with the ``kincal: done in N s`` line."""
-    return next(m for m in COMMANDS if m.__name__.rsplit(".", 1)[1] == command).TIMED
+def _standard_streams() -> None:
+    """Open a closed stdin/stdout/stderr (``2>&-``) on /dev/null: otherwise the next file
+    opened takes descriptor 2 and C libraries' messages would land in it; and make a
+    console that cannot encode a path print it escaped rather than fail."""
+    import os
+
+    for fd, name in ((0, "stdin"), (1, "stdout"), (2, "stderr")):
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDONLY if fd == 0 else os.O_WRONLY)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+            if getattr(sys, name) is None:
+                setattr(sys, name, open(fd, "r" if fd == 0 else "w", closefd=False))
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(errors="backslashreplace")
+        except (AttributeError, ValueError):
+            pass
+
+
+def _matplotlib_home() -> str | None:
+    """A scratch MPLCONFIGDIR when matplotlib's own folders cannot be written (a read-only
+    HOME): matplotlib would print "mkdir -p failed" lines on stderr. Returns the folder
+    to remove, or None."""
+    import os
+
+    if os.environ.get("MPLCONFIGDIR") or "matplotlib" in sys.modules:
+        return None
+    home = os.path.expanduser("~")
+    for base in (os.environ.get("XDG_CONFIG_HOME") or os.path.join(home, ".config"),
+                 os.environ.get("XDG_CACHE_HOME") or os.path.join(home, ".cache")):
+        folder = os.path.join(base, "matplotlib")
+        while not os.path.exists(folder) and os.path.dirname(folder) != folder:
+            folder = os.path.dirname(folder)
+        if not (os.path.isdir(folder) and os.access(folder, os.W_OK | os.X_OK)):
+            import tempfile
+
+            os.environ["MPLCONFIGDIR"] = tempfile.mkdtemp(prefix="kincal-matplotlib-")
+            return os.environ["MPLCONFIGDIR"]
+    return None
+
+
+def _drain_stdout() -> None:
+    """Flush what a refused run printed; what stdout cannot take is dropped, not retried
+    (and failed again, with a traceback) at exit."""
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):
+        stdout_to_null()
+
+
+def _os_error_line(exc: OSError) -> str:
+    """One line for an OS error no boundary turned into a KincalError."""
+    import os
+
+    try:
+        os.getcwd()
+    except OSError:
+        return ("the working folder no longer exists (deleted while kincal was running?); "
+                "no output was written or changed")
+    import errno
+
+    # files are written through safe_write, whose errors name their path: a nameless "disk
+    # full" is the console's (stdout redirected to a full disk)
+    if exc.filename is None and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO):
+        return (f"cannot write to the standard output ({exc.strerror or exc}); no output "
+                "was written or changed")
+    name = exc.filename if exc.filename is not None else ""
+    name = str(name) if len(str(name)) <= 80 else str(name)[:60] + "..."
+    return f"{name}{': ' if name else ''}{exc.strerror or exc}"
 
 
 def main(argv=None) -> int:
@@ -51,6 +122,7 @@ def main(argv=None) -> int:
     import time
 
     t0 = time.perf_counter()
+    _standard_streams()
     parser = build_parser()
     args = parser.parse_args(argv)
     # SIGTERM unwinds like Ctrl-C (only the main thread may set handlers: main() called
@@ -58,6 +130,7 @@ def main(argv=None) -> int:
     sigterm = None
     if threading.current_thread() is threading.main_thread():
         sigterm = signal.signal(signal.SIGTERM, _on_sigterm)
+    scratch = _matplotlib_home()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", KincalWarning)
         try:
@@ -65,6 +138,7 @@ def main(argv=None) -> int:
 
             check_args(args)
             code = args.run(args)
+            say([])  # flush: a full disk behind stdout fails here (one line), not at exit
         except (KeyboardInterrupt, _Terminated) as exc:
             name, code = (("SIGINT", 130) if isinstance(exc, KeyboardInterrupt)
                           else ("SIGTERM", 143))
@@ -72,14 +146,14 @@ def main(argv=None) -> int:
                   file=sys.stderr)
             caught.clear()  # a half-run's warnings would only confuse
         except BrokenPipeError:  # output piped into head & co: stop quietly
-            import os
-
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            stdout_to_null()
             code = 0
-        except KincalError as exc:
-            message = " ".join(str(exc).split())  # one line
+        except (KincalError, OSError) as exc:
+            message = " ".join((str(exc) if isinstance(exc, KincalError)
+                                else _os_error_line(exc)).split())  # one line
             print(f"kincal: error: {message}", file=sys.stderr)
             code = 1
+            _drain_stdout()
         finally:
             for w in caught:
                 if issubclass(w.category, KincalWarning):
@@ -87,7 +161,13 @@ def main(argv=None) -> int:
                     print(f"kincal: {kind}: {w.message}", file=sys.stderr)
             if sigterm is not None:
                 signal.signal(signal.SIGTERM, sigterm)
-    if code == 0 and _timed(args.command):  # an error stays the one line it is
+            if scratch is not None:
+                import os
+                import shutil
+
+                shutil.rmtree(scratch, ignore_errors=True)
+                os.environ.pop("MPLCONFIGDIR", None)
+    if code == 0:  # an error stays the one line it is
         print(f"kincal: done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return code
 

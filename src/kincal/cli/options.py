@@ -108,7 +108,7 @@ def add_accuracy_options(p):
     g.add_argument("--accuracy-map", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
                    help="predicted accuracy over a cube: centre and edge in the chain's base "
                         "frame, in the length unit; grid points reached by inverse kinematics")
-    g.add_argument("--grid", type=int, default=5,
+    g.add_argument("--grid", type=int,
                    help="grid points per edge of the --accuracy-map cube (default 5)")
     g.add_argument("--accuracy-poses", metavar="POSES.csv",
                    help="predicted accuracy at these poses instead (chain joint columns)")
@@ -195,6 +195,11 @@ class Inputs:
         """{URDF joint: CSV column} of --joint-columns, or None."""
         return joint_map(self.joint_columns)
 
+    def _orientation_sigma_used(self, has_poses: bool) -> None:
+        if self.orientation_sigma_deg is not None and not has_poses:
+            raise OptionError("--orientation-sigma-deg is the orientation noise of pose files; "
+                              "none of the data files is one (no qx qy qz qw columns)")
+
     def wants_sets(self) -> bool:
         """True when the data need the several-sets path: more than one file, --on-plane,
         or a file that is not points."""
@@ -210,6 +215,7 @@ class Inputs:
         """The one point file DATA."""
         from kincal.measurements.data import Measurements
 
+        self._orientation_sigma_used(has_poses=False)
         return Measurements.from_csv(self.data, robot.joint_names, prismatic=_prismatic(robot),
                                      length_unit=self.length_unit, angle_unit=self.angle_unit,
                                      position_columns=self.position_columns,
@@ -227,6 +233,9 @@ class Inputs:
                               self.angle_unit, pos, self.orientation_columns, self.on_plane,
                               self.orientation_sigma_deg, self.joint_map(), self.order_column)
                 for path in self.files]
+        from kincal.measurements.sets import kind_of
+
+        self._orientation_sigma_used(any(kind_of(d) == "pose" for d in sets))
         if self.set_sigma_mm:
             if len(self.set_sigma_mm) != len(sets) or min(self.set_sigma_mm) <= 0:
                 raise OptionError(f"--set-sigma-mm takes one positive value per data file: "
@@ -234,6 +243,36 @@ class Inputs:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))
                     for d, s in zip(sets, self.set_sigma_mm)]
         return sets
+
+
+def frames_document(path):
+    """The JSON object of FRAMES.json ``path``, or None when it cannot be opened (the frames
+    reader then says why). An empty file or one that is not a JSON object is refused now,
+    before the robot is loaded, so that no other message hides it."""
+    import json
+    from pathlib import Path
+
+    from kincal.errors import DataError
+
+    path = Path(path)
+    try:
+        if not path.is_file():
+            return None
+        text = path.read_text(encoding="utf-8")
+    except (OSError, ValueError):
+        return None
+    expected = "expected the FRAMES.json written by 'kincal calibrate --frames-out'"
+    if not text.strip():
+        raise DataError(f"{path}: is empty; {expected}")
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise DataError(f"{path}: not a kincal frames file (not JSON: "
+                        f"{str(exc).splitlines()[0][:80]}); {expected}") from None
+    if not isinstance(data, dict):
+        raise DataError(f"{path}: not a kincal frames file (a JSON object was expected); "
+                        f"{expected}")
+    return data
 
 
 def _prismatic(robot) -> list[str]:

@@ -6,12 +6,11 @@ import math
 from dataclasses import dataclass, replace
 
 from kincal.cli.checks import check_outputs
+from kincal.cli.console import say_and_write
 from kincal.cli.options import (Chain, add_common, add_joint_columns, add_overwrite, add_units,
                                 group, joint_map, tool_guess, typed)
 from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
 from kincal.errors import OptionError
-
-TIMED = True
 
 
 def register(subparsers) -> None:
@@ -57,7 +56,7 @@ def register(subparsers) -> None:
     c.add_argument("--target-cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
                    help="with --criterion i: the working volume whose mean predicted position "
                         "variance is minimised (in --length-unit)")
-    c.add_argument("--target-poses", type=int, default=200, metavar="T",
+    c.add_argument("--target-poses", type=int, metavar="T",
                    help="poses drawn in the target cube (default 200)")
     c.add_argument("--kind", choices=("point", "pose", "distance", "plane"), default="point",
                    help="the measurement kind the poses are for (D-optimal over its Jacobian)")
@@ -111,7 +110,6 @@ def run(args) -> int:
 def _plan(p: Plan, robot) -> int:
     import numpy as np
 
-    from kincal.export.safe_write import write_all
     from kincal.planning.candidates import candidates_csv_text, random_candidates, read_candidates
     from kincal.planning.pose_selection import select_poses
 
@@ -178,14 +176,14 @@ def _plan(p: Plan, robot) -> int:
                                  planes=planes)
     new = [i - k for i in selection.indices if i >= k]
     protect = [robot.source] + [f for f in (p.candidates, p.measured) if f is not None]
-    written = write_all([(p.out, candidates_csv_text(
-        selection.joint_names, q[new], None if lines is None else lines[new]))],
-        overwrite=p.overwrite, protect=protect)
-    print(f"{source}:")
-    print(selection.summary(p.noise_mm, checked=None if spec is None else
-                            "candidates checked as above; line of sight is not checked"))
+    said = [f"{source}:", selection.summary(
+        p.noise_mm, checked=None if spec is None else
+        "candidates checked as above; line of sight is not checked")]
     if k:
-        print(f"  (the selection includes the {k} poses already measured; {len(new)} new)")
-    for path in written:
-        print(f"  wrote {path} ({len(new)} new poses, joint values in rad and m)")
+        said.append(f"  (the selection includes the {k} poses already measured; {len(new)} new)")
+    say_and_write([(p.out, candidates_csv_text(
+        selection.joint_names, q[new], None if lines is None else lines[new]))],
+        lambda written: said + [f"  wrote {path} ({len(new)} new poses, joint values in rad "
+                                "and m)" for path in written],
+        overwrite=p.overwrite, protect=protect)
     return 0

@@ -6,11 +6,10 @@ import math
 from dataclasses import dataclass
 
 from kincal.cli.checks import check_outputs
+from kincal.cli.console import say_and_write
 from kincal.cli.options import Chain, add_common, add_model, add_overwrite, group, typed
 from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
 from kincal.errors import OptionError
-
-TIMED = True
 
 
 def register(subparsers) -> None:
@@ -27,9 +26,9 @@ def register(subparsers) -> None:
     m.add_argument("--kind", choices=("point", "pose", "distance", "plane"), default="point",
                    help="what is measured: points (default), 6-DoF tool poses, distances to "
                         "a pivot 0.3 m below the poses, contacts with 3 planes through them")
-    m.add_argument("--orientation-noise-deg", type=float, default=0.01,
-                   help="sd of orientation noise per axis (--kind pose)")
-    m.add_argument("--poses", type=int, default=60)
+    m.add_argument("--orientation-noise-deg", type=float,
+                   help="sd of orientation noise per axis [deg] (--kind pose; default 0.01)")
+    m.add_argument("--poses", type=int, help="poses to simulate (default 60)")
     m.add_argument("--center-m", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="cube centre in the base frame [m]")
     m.add_argument("--size-mm", type=float, help="cube edge [mm] (default: 400 for tracker, "
@@ -90,7 +89,6 @@ def run(args) -> int:
     import numpy as np
 
     from kincal import models
-    from kincal.export.safe_write import write_all
     from kincal.planning import simulation
 
     robot = s.chain.load()
@@ -144,20 +142,21 @@ def run(args) -> int:
     if s.kind != "point":
         if s.truth_out:
             raise OptionError("--truth-out is written for --kind point only")
-        written = write_all([(s.out, _other_kind_csv(s, robot, model, q, table, tool, base, rng))],
-                            overwrite=s.overwrite, protect=[robot.source])
-        print(f"simulated {s.kind} measurements of {robot.name} at {len(q)} poses "
-              f"({s.design} design), noise {s.noise_mm} mm: "
-              + ", ".join(str(p) for p in written))
+        say_and_write([(s.out, _other_kind_csv(s, robot, model, q, table, tool, base, rng))],
+                      lambda written: [f"simulated {s.kind} measurements of {robot.name} at "
+                                       f"{len(q)} poses ({s.design} design), noise "
+                                       f"{s.noise_mm} mm: " + ", ".join(map(str, written))],
+                      overwrite=s.overwrite, protect=[robot.source])
         return 0
     truth = simulation.Truth(table, base, tool)
     data = simulation.measure(model, truth, q, s.noise_mm * 1e-3, rng, source="simulated")
     files = [(s.out, data.to_csv_text())]
     if s.truth_out:
         files.append((s.truth_out, _truth_json(s, robot, model, truth)))
-    written = write_all(files, overwrite=s.overwrite, protect=[robot.source])
-    print(f"simulated {len(q)} poses of {robot.name} ({where}, noise "
-          f"{s.noise_mm} mm): " + ", ".join(str(p) for p in written))
+    say_and_write(files, lambda written: [f"simulated {len(q)} poses of {robot.name} ({where}, "
+                                          f"noise {s.noise_mm} mm): "
+                                          + ", ".join(map(str, written))],
+                  overwrite=s.overwrite, protect=[robot.source])
     return 0
 
 

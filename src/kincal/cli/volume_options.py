@@ -77,7 +77,7 @@ def add_volume_options(p, unit_help):
                         "simulate: as --tilt-deg)")
     p.add_argument("--tilt-direction", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="mean direction of the tip z axis in the base frame (default 0 0 -1)")
-    p.add_argument("--floor", type=float, default=0.0, metavar="Z",
+    p.add_argument("--floor", type=float, metavar="Z",
                    help=f"height of the floor in the base frame ({unit_help}; default 0): no "
                         "link may go below it")
     p.add_argument("--no-floor", action="store_true", help="no floor check")

@@ -129,6 +129,10 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                                 f"{', '.join(required)}")
             header = [h.strip() for h in first[1]]
             dupes = sorted({h for h in header if header.count(h) > 1})
+            if "" in dupes:  # one unnamed column (a trailing comma) is ignored; two clash
+                unnamed = [str(i) for i, h in enumerate(header, start=1) if not h]
+                raise DataError(f"{path}: columns {', '.join(unnamed)} of the header (line "
+                                f"{first[0]}) have no name; name them or remove them")
             if dupes:
                 raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
             missing = [c for c in required if c not in header]
