@@ -268,3 +268,12 @@ def test_a_read_only_home_gives_no_matplotlib_lines(work, readonly):
     assert run.returncode == 0, run.stderr
     check_stderr(run.stderr, errors=0)
     assert (work / "plots" / "residuals.png").is_file()
+
+
+def test_a_volume_needs_no_default_cube(work, capsys):
+    """kinova has no default cube: with --in-cube it needs none (no --center-m demanded)."""
+    assert main(["simulate", "kinova", "--out", "k.csv", "--poses", "5",
+                 "--in-cube", "0.4", "0", "0.3", "0.2"]) == 0
+    check_stderr(capsys.readouterr().err, errors=0)
+    line = refused(capsys, ["simulate", "kinova", "--out", "k2.csv", "--poses", "5"], work)
+    assert "--center-m" in line  # without a volume the cube must be given

@@ -98,17 +98,6 @@ def run(args) -> int:
     design = {"tracker": (0.4, 30.0), "rtest": (0.02, 15.0)}[s.design]
     tilt = s.tilt_deg if s.tilt_deg is not None else design[1]
     tool = np.array(s.tool_m)
-    center = s.center_m
-    if center is None:
-        from kincal.descriptions import default_center
-
-        center = default_center(robot.name)
-    if s.size_mm is not None:
-        size = s.size_mm * 1e-3
-    else:
-        from kincal.descriptions import max_cube
-
-        size = max_cube(robot.name, design[0])
     if s.tilt_deg is not None and s.volume.max_tilt is not None:
         raise OptionError("give --max-tilt or --tilt-deg, not both (the same limit)")
     spec = volume_spec(s.volume, robot, 1.0, tool, default_tilt=tilt)
@@ -125,9 +114,12 @@ def run(args) -> int:
         q = np.array(volume_candidates(robot, spec, s.poses, seed=s.seed).joint_values)
         where = (f"{s.design}: {spec.volume.describe()}, tilt <= "
                  f"{math.degrees(spec.max_tilt):g} deg, random poses on one branch")
-    else:
+    else:  # the default cube: its centre and size are needed only here
         from kincal.cli.progress import progress_bar
+        from kincal.descriptions import default_center, max_cube
 
+        center = default_center(robot.name) if s.center_m is None else s.center_m
+        size = max_cube(robot.name, design[0]) if s.size_mm is None else s.size_mm * 1e-3
         q = simulation.cube_poses(robot, s.poses, center, size, tool, rng,
                                   max_tilt=math.radians(tilt),
                                   progress=progress_bar(label="inverse kinematics", unit="poses")
