@@ -277,3 +277,12 @@ def test_a_volume_needs_no_default_cube(work, capsys):
     check_stderr(capsys.readouterr().err, errors=0)
     line = refused(capsys, ["simulate", "kinova", "--out", "k2.csv", "--poses", "5"], work)
     assert "--center-m" in line  # without a volume the cube must be given
+
+
+def test_an_unreachable_orientation_is_named_as_the_cause(work, capsys):
+    """z1 reaches the points of this cube, but not with its tip pointing down."""
+    argv = ["simulate", "z1", "--tip", "gripperMover", "--out", "z.csv", "--poses", "5",
+            "--center-m", "0.3", "0", "0.2", "--size-mm", "100"]
+    line = refused(capsys, argv, work)
+    assert "orientation is the cause" in line and "move the cube" not in line
+    assert main(argv + ["--tilt-deg", "180"]) == 0  # any orientation: reached
