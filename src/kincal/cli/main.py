@@ -4,8 +4,10 @@
 ``register(subparsers)`` and ``run(args)``) and holds the policy they share: a
 KincalError becomes one line on stderr and exit code 1 (usage errors: 2), with no
 traceback and no file written; SIGINT and SIGTERM roll the outputs back; kincal's
-warnings are printed as ``kincal: warning: ...`` lines. Every command computes
-everything first and writes its outputs last, all or none.
+warnings are printed as ``kincal: warning: ...`` lines. An OS error no boundary named
+(a path too long, the working folder deleted, stdout on a full disk) is one line too.
+Every command computes everything first, says its last words, then commits its outputs,
+all or none (:mod:`kincal.cli.console`).
 """
 
 from __future__ import annotations
