@@ -9,6 +9,10 @@ written, nothing replaced.
     python scripts/bad_input_sweep.py            # every case (~2 min alone on this machine)
     python scripts/bad_input_sweep.py --sample 20  # every k-th case, for a quick check
 
+The command line's own cases (issue 24: options that would be ignored, outputs checked
+before the work, path, OS and console failures, foreign stderr lines) are generated in
+bad_input_cli_cases.py; the console cases run in a child process.
+
 Prints how many cases held the promise and lists any that did not; exit code 1 if any.
 """
 
@@ -19,24 +23,18 @@ import contextlib
 import io
 import os
 import signal
-import stat
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from bad_input_cli_cases import (CaseSkipped, console_cases, ignored_option_cases,
+                                  message_cases, output_first_cases, run_console_case,
+                                  snapshot, undo_read_only)
+
 REPO = Path(__file__).resolve().parents[1]
 EC66 = REPO / "urdf" / "ec66.urdf"
-
-
-def snapshot(folder: Path) -> dict:
-    out = {}
-    for p in sorted(folder.rglob("*")):
-        st = p.lstat()
-        data = p.read_bytes() if stat.S_ISREG(st.st_mode) else None
-        out[str(p.relative_to(folder))] = (stat.S_IFMT(st.st_mode), data, st.st_mtime_ns)
-    return out
 
 
 # ------------------------------------------------------------------ inputs
@@ -49,6 +47,8 @@ def make_inputs(d: Path) -> dict:
                      "--tool-m", "0.03", "0.02", "0.12"]) == 0
         assert main(["calibrate", "ec66", str(d / "good.csv"), "--method", "ls", "--quiet",
                      "--out", str(d / "good.urdf"), "--frames-out", str(d / "frames.json")]) == 0
+        assert main(["simulate", "ec66", "--out", str(d / "poses.csv"), "--poses", "30",
+                     "--kind", "pose", "--seed", "1"]) == 0
     return {"csv": (d / "good.csv").read_text(), "urdf": EC66.read_text(),
             "frames": (d / "frames.json").read_text()}
 
@@ -362,14 +362,31 @@ def run_signal_case(sig, code, data: Path, folder: Path) -> str | None:
 
 def cases(inputs_dir: Path, inputs: dict):
     """Every case as (label, runner(folder) -> problem or None)."""
-    fill = {"csv": str(inputs_dir / "good.csv"), "frames": str(inputs_dir / "frames.json")}
+    fill = {"csv": str(inputs_dir / "good.csv"), "frames": str(inputs_dir / "frames.json"),
+            "poses": str(inputs_dir / "poses.csv"), "urdf": str(inputs_dir / "good.urdf")}
 
     def cli(argv, setup=None, codes=(1, 2)):
         def runner(folder):
-            if setup is not None:
-                setup(folder)
-            args = [a.format(d=folder, **fill) if "{" in a else a for a in argv]
-            return run_case(args, folder, codes)
+            try:
+                if setup is not None:
+                    setup(folder)
+                args = [a.format(d=folder, **fill) if "{" in a else a for a in argv]
+                return run_case(args, folder, codes)
+            except CaseSkipped:
+                return None
+            finally:
+                undo_read_only(folder)
+        return runner
+
+    def console(argv, how, code):
+        def runner(folder):
+            if how == "full" and not Path("/dev/full").exists():
+                return None
+            try:
+                args = [a.format(d=folder, **fill) if "{" in a else a for a in argv]
+                return run_console_case(args, how, code, folder)
+            except CaseSkipped:
+                return None
         return runner
 
     def with_file(name, content, argv_of):
@@ -399,6 +416,14 @@ def cases(inputs_dir: Path, inputs: dict):
         yield label, cli(argv, setup, codes=(1,))
     for label, argv, setup in special_file_cases():
         yield label, cli(argv, setup, codes=(1,))
+    for label, argv in ignored_option_cases():  # 2: "-inf" reads as an option to argparse
+        yield label, cli(argv, codes=(1, 2))
+    for label, argv, setup in output_first_cases():
+        yield label, cli(argv, setup, codes=(1,))
+    for label, argv, setup in message_cases():
+        yield label, cli(argv, setup, codes=(1,))
+    for label, argv, how, code in console_cases():
+        yield label, console(argv, how, code)
 
 
 def main(argv=None) -> int:

@@ -42,7 +42,7 @@ def test_an_order_column_reorders_the_sequence():
 
 def test_order_column_from_csv(tmp_path):
     f = tmp_path / "d.csv"
-    f.write_text("t,j1,x,y,z\n3,2.0,0,0,0\n1,0.0,0,0,0\n2,1.0,0,0,0\n")
+    f.write_text("t,j1,x,y,z\n3,2.0,0.3,0,0\n1,0.0,0.1,0,0\n2,1.0,0.2,0,0\n")
     d = Measurements.from_csv(f, ["j1"], order_column="t")
     assert d.approach[:, 0].tolist() == [1, 0, 1]
     assert d.order_source == "column 't'" and "t" not in d.ignored_columns

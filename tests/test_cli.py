@@ -175,7 +175,8 @@ def test_frames_can_be_added_to_the_urdf_on_request(sim, tmp_path):
 def test_demo_writes_tables_and_plots_whose_numbers_hold(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out)]) == 0
-    printed = capsys.readouterr().out
+    printed, err = capsys.readouterr()
+    assert err.strip().splitlines()[-1].startswith("kincal: done in ")  # as the README says
     results = json.loads((out / "results.json").read_text())["summary"]
     assert results["l2_rtest_validation_mean_mm"] < results["ls_rtest_validation_mean_mm"]
     assert results["ls_tracker_validation_mean_mm"] < results["l2_rtest_validation_mean_mm"]

@@ -167,11 +167,11 @@ def test_plan_home_not_finite_is_refused(tmp_path, capsys):
     line = _refused(["plan", "ec66", "--poses", "20", "--out", str(tmp_path / "plan.csv"),
                      "--in-cube", "0.4", "0", "0.25", "0.02", "--home", "0", "0", "0", "0",
                      "0", "nan"], tmp_path, capsys)
-    assert "home needs finite joint values" in line
+    assert "--home must be a finite number" in line
 
 
 def test_plan_pivot_not_finite_is_refused(tmp_path, capsys):
     line = _refused(["plan", "ec66", "--poses", "20", "--out", str(tmp_path / "plan.csv"),
                      "--random", "200", "--kind", "distance", "--pivot", "0", "0", "nan"],
                     tmp_path, capsys)
-    assert "pivot needs 3 finite numbers" in line
+    assert "--pivot must be a finite number" in line

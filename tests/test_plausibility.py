@@ -145,13 +145,13 @@ def test_unconverged_is_refused_unless_accepted(ur10_csv, tmp_path, capsys):
 
     import importlib
 
-    cli = importlib.import_module("kincal.cli.main")
+    cli = importlib.import_module("kincal.cli.calibrate")
     from kincal.identification.solver import SolverOptions
 
-    options = cli._options
+    options = cli.calibration_options
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(cli, "_options", lambda args, method: replace(
-            options(args, method), solver=SolverOptions(max_iterations=1)))
+        mp.setattr(cli, "calibration_options", lambda c: replace(
+            options(c), solver=SolverOptions(max_iterations=1)))
         before = _snapshot(tmp_path)
         assert main(args) == 1
         line = _error_line(capsys)

@@ -133,7 +133,7 @@ class _Terminal:
 
 
 def test_fit_status_speaks_only_for_long_fits_and_ends_its_line():
-    from kincal.cli.main import _FitStatus
+    from kincal.cli.progress import FitStatus as _FitStatus
 
     assert _FitStatus.on_terminal(_Terminal()) is not None
     assert _FitStatus.on_terminal(open(__file__)) is None  # not a terminal: no status

@@ -50,3 +50,13 @@ def test_unknown_attribute_is_an_attribute_error():
         assert "NoSuchThing" in str(exc)
     else:
         raise AssertionError("kincal.NoSuchThing resolved")
+
+
+def test_help_of_every_command_loads_no_numpy():
+    code = ("import sys\nfrom kincal.cli import main\n"
+            "for c in ('calibrate', 'evaluate', 'analyze', 'simulate', 'plan', 'compensate', "
+            "'demo'):\n    try:\n        main([c, '--help'])\n    except SystemExit:\n        pass\n"
+            "print('NUMPY:', 'numpy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60, check=True).stdout
+    assert out.strip().splitlines()[-1] == "NUMPY: False"

@@ -5,6 +5,8 @@ Jacobians against central differences, the corrected URDF as the original tree."
 import io
 
 import numpy as np
+
+from kincal.export.outputs import corrected_urdf_text
 import pinocchio as pin
 import pytest
 import yourdfpy
@@ -288,7 +290,7 @@ def test_talos_calibration_end_to_end(tmp_path):
     assert result.converged
     predicted = result.predict(q)
     assert np.abs(predicted - positions).max() < 1e-8
-    text = result.corrected_urdf_text(readable=False)
+    text = corrected_urdf_text(result, readable=False)
     out = tmp_path / "talos_corrected.urdf"
     out.write_text(text)
     reloaded = Robot.load(out, base="left_sole_link", tip="gripper_left_base_link")

@@ -10,9 +10,8 @@ would refuse (so a refused run creates no plots folder).
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
-
-import numpy as np
 
 from kincal.errors import OptionError
 
@@ -33,7 +32,7 @@ def _finite(option: str, values, low=None, high=None, low_open=False) -> None:
     """Each number of ``option`` is finite and within [low, high] (low excluded if low_open)."""
     if values is None:
         return
-    for v in np.atleast_1d(values):
+    for v in (values if isinstance(values, (list, tuple)) else [values]):
         ok = math.isfinite(v) and (low is None or (v > low if low_open else v >= low)) \
             and (high is None or v <= high)
         if not ok:
@@ -79,6 +78,55 @@ def _check_calibrate(args) -> None:
     args.seed = 0 if args.seed is None else args.seed
 
 
+def _check_floor(args, volume: bool) -> None:
+    _need(args.floor is None or not args.no_floor, "give --floor Z or --no-floor, not both")
+    _need(args.floor is None or volume, "--floor is checked for poses drawn in a volume: it "
+          "needs --in-cube or --in-sphere")
+    _finite("--floor", args.floor, -1e6, 1e6)
+    args.floor = 0.0 if args.floor is None else args.floor
+
+
+def _check_simulate(args) -> None:
+    """Options that the chosen way of making poses would silently ignore."""
+    volume = args.in_cube is not None or args.in_sphere is not None
+    if args.poses_file is not None:
+        for option, value in (("--poses", args.poses), ("--center-m", args.center_m),
+                              ("--size-mm", args.size_mm), ("--tilt-deg", args.tilt_deg)):
+            _need(value is None, f"{option} is not used with --poses-file (the poses are "
+                  "the file's rows)")
+    elif volume:
+        for option, value in (("--center-m", args.center_m), ("--size-mm", args.size_mm)):
+            _need(value is None, f"{option} is not used with --in-cube/--in-sphere (the volume "
+                  "gives the centre and the size)")
+    _need(args.orientation_noise_deg is None or args.kind == "pose",
+          "--orientation-noise-deg is the orientation noise of --kind pose")
+    _finite("--orientation-noise-deg", args.orientation_noise_deg, 0, 10)
+    for option in ("tilt_direction", "in_cube", "in_sphere"):
+        _finite("--" + option.replace("_", "-"), getattr(args, option))
+    _finite("--max-tilt", args.max_tilt, 0, 180)
+    _check_floor(args, volume)
+    args.poses = 60 if args.poses is None else args.poses
+    args.orientation_noise_deg = (0.01 if args.orientation_noise_deg is None
+                                  else args.orientation_noise_deg + 0.0)
+
+
+def _check_plan(args, volume: bool) -> None:
+    """Options that this plan would silently ignore."""
+    _check_floor(args, volume)
+    _need(args.pivot is None or args.kind == "distance",
+          "--pivot is the guess of the pivot of --kind distance")
+    _finite("--pivot", args.pivot)
+    _need(args.target_poses is None or args.criterion == "i",
+          "--target-poses is the number of poses drawn in --target-cube: it needs --criterion i")
+    _count("--target-poses", args.target_poses, 1, MAX_POSES)
+    args.target_poses = 200 if args.target_poses is None else args.target_poses
+    if args.home is not None:
+        _finite("--home", args.home)
+    for option in ("tilt_direction", "target_cube", "in_cube", "in_sphere"):
+        _finite("--" + option.replace("_", "-"), getattr(args, option))
+    _finite("--max-tilt", args.max_tilt, 0, 180)
+
+
 def check_args(args) -> None:
     """Raise OptionError for any option value or combination the command would not use."""
     offset = getattr(args, "tool_offset", None)
@@ -89,6 +137,13 @@ def check_args(args) -> None:
               f"--tool-offset {' '.join(f'{v:g}' for v in offset)} [{unit}] is over 1000 m from "
               "the tip frame; check the unit (--length-unit)")
     c = args.command
+    if hasattr(args, "grid"):
+        _need(args.grid is None or args.accuracy_map is not None,
+              "--grid is the number of grid points per edge of the --accuracy-map cube: it "
+              "needs --accuracy-map")
+        args.grid = 5 if args.grid is None else args.grid
+    _finite("--orientation-sigma-deg", getattr(args, "orientation_sigma_deg", None), 0,
+            low_open=True)
     if c == "calibrate":
         _check_calibrate(args)
     elif c == "evaluate":
@@ -97,6 +152,7 @@ def check_args(args) -> None:
     elif c == "analyze":
         _need(args.order_column is None or bool(args.backlash), "--order-column gives the "
               "approach directions of backlash terms: it needs --backlash")
+        _finite("--noise-mm", args.noise_mm, 0, low_open=True)
     elif c == "simulate":
         _need(args.tool_offset is None, "simulate does not use --tool-offset (a starting guess "
               "for calibration); the simulated tool point is --tool-m X Y Z [m]")
@@ -110,6 +166,7 @@ def check_args(args) -> None:
             _finite("--" + option.replace("_", "-"), getattr(args, option), 0, high)
         _count("--seed", args.seed, 0)
         _count("--truth-seed", args.truth_seed, 0)
+        _check_simulate(args)
         for option in ("size_mm", "tilt_deg", "length_error_mm", "angle_error_deg", "noise_mm"):
             if getattr(args, option) is not None:  # -0.0 -> 0.0: numpy's checks test the sign bit
                 setattr(args, option, getattr(args, option) + 0.0)
@@ -123,28 +180,36 @@ def check_args(args) -> None:
               "with a CSV of candidates")
         _count("--seed", args.seed, 0)
         args.seed = 0 if args.seed is None else args.seed
+        _check_plan(args, volume)
     elif c == "demo":
         out = Path(args.out).expanduser()
         if out.exists() or out.is_symlink():
             _need(out.is_dir(), f"{args.out}: exists and is not a directory; choose another --out")
             _need(args.overwrite or not any(out.iterdir()), f"{args.out}: already exists (an "
                   "earlier demo?); choose another --out or pass --overwrite to replace its files")
+        probe = out if out.exists() else out.parent
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        if not os.access(probe, os.W_OK | os.X_OK):
+            from kincal.errors import ExportError
+
+            raise ExportError(f"{args.out}: cannot write in {probe.resolve()} (permission "
+                              "denied or a read-only file system); choose another --out")
 
 
-def _output_paths(args) -> tuple[list, list]:
-    """(files, folders) the command will write, for the check before the work."""
-    files = [getattr(args, k, None) for k in ("out", "frames_out", "report", "truth_out")]
-    files = [f for f in files if f]
-    if getattr(args, "plots", None):
-        return files + [Path(args.plots) / n for n in PLOT_NAMES], [args.plots]
-    return files, []
+def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=()) -> None:
+    """Refuse now, before the work, what the final write would refuse.
 
-
-def check_outputs(args, robot) -> None:
-    """Refuse now, before the work, what the final write would refuse."""
+    files: the output paths the command will write (None entries are skipped); inputs:
+    the files it reads (never overwritten without --overwrite); dirs: folders it may
+    create (a plots folder)."""
     from kincal.export.safe_write import check_outputs as check_targets
 
-    files, dirs = _output_paths(args)
-    inputs = ("data", "candidates", "measured", "frames")
-    protect = [robot.source] + [getattr(args, k, None) for k in inputs]
-    check_targets(files, overwrite=args.overwrite, protect=[p for p in protect if p], dirs=dirs)
+    protect = [robot.source] + [p for p in inputs if p]
+    check_targets([f for f in files if f], overwrite=overwrite, protect=protect,
+                  dirs=[d for d in dirs if d])
+
+
+def plot_paths(folder) -> list:
+    """The files ``kincal calibrate --plots FOLDER`` writes (for the check before the work)."""
+    return [] if not folder else [Path(folder) / n for n in PLOT_NAMES]

@@ -88,11 +88,15 @@ def corrected_urdf_text(result, readable: bool = True) -> str:
 
 def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = False,
                       accept_unconverged: bool = False, accuracy=None,
-                      warnings_seen=(), data_source: str | None = None) -> Written:
+                      warnings_seen=(), data_source: str | None = None,
+                      before_commit=None) -> Written:
     """Check the gate, then write every output of ``outputs`` all-or-none.
 
     accuracy: a predicted accuracy map to add to the report, the HTML and the plots.
-    warnings_seen: the run's warnings, for the HTML report. Returns :class:`Written`.
+    warnings_seen: the run's warnings, for the HTML report. before_commit: called with
+    (written paths, export notes) once every file is staged and before any takes its name
+    (the command line prints there, so that a console that fails leaves nothing written).
+    Returns :class:`Written`.
     """
     from kincal.export import report
     from kincal.export.safe_write import write_all
@@ -137,10 +141,13 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
             result, accuracy=accuracy, data_source=data_source or ", ".join(sources),
             warnings=list(warnings_seen), notes=[f"export: {n}" for n in notes])))
     if not files:
+        if before_commit is not None:
+            before_commit([], notes)
         return Written((), notes)
     protect = [p for p in (result.robot.source, *sources) if p and not str(p).startswith("<")]
+    hook = None if before_commit is None else (lambda targets: before_commit(targets, notes))
     written = write_all(files, overwrite=o.overwrite, protect=[*protect, *o.protect],
-                        dirs=[o.plots] if o.plots is not None else [])
+                        dirs=[o.plots] if o.plots is not None else [], before_commit=hook)
     return Written(tuple(written), notes)
 
 

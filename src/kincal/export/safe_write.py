@@ -60,14 +60,47 @@ def _kind(mode: int) -> str:
     return "not a regular file"
 
 
+def _path_error(path, exc: BaseException) -> ExportError:
+    """One line for an OS error met while looking at output ``path``."""
+    try:
+        os.getcwd()
+    except OSError:
+        return ExportError(f"{path}: the working folder no longer exists (deleted while kincal "
+                           "was running?); no output was written or changed")
+    if isinstance(exc, RuntimeError) or getattr(exc, "errno", None) == errno.ELOOP:
+        return ExportError(f"{path}: is a symlink loop; choose another output path")
+    if getattr(exc, "errno", None) == errno.ENAMETOOLONG:
+        return ExportError(f"{str(path)[:60]}...: file name too long (a name is at most 255 "
+                           "bytes, a path at most 4096); choose a shorter output path")
+    return ExportError(f"{path}: {getattr(exc, 'strerror', None) or exc}")
+
+
+def _writable(folder: Path, path) -> None:
+    """Refuse now a folder in which no file can be made (permissions, read-only mount)."""
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ExportError(f"{path}: cannot write in {folder} (permission denied or a "
+                          "read-only file system); choose another output path")
+
+
 def _check_dir(path, new_dirs: set) -> Path:
     """The resolved folder ``path``; it must be a folder or creatable in one (one level)."""
+    try:
+        return _check_dir_os(path, new_dirs)
+    except (OSError, RuntimeError) as exc:
+        raise _path_error(path, exc) from None
+
+
+def _check_dir_os(path, new_dirs: set) -> Path:
     d = Path(path).expanduser().resolve()
     if d.exists():
         if not d.is_dir():
             raise ExportError(f"{path}: exists and is not a directory")
+        _writable(d, path)
         return d
-    if d.parent in new_dirs or d.parent.is_dir():
+    if d.parent in new_dirs:
+        return d
+    if d.parent.is_dir():
+        _writable(d.parent, path)
         return d
     p = d.parent
     while not p.exists():
@@ -81,6 +114,13 @@ def _check_target(path, overwrite: bool, protect, new_dirs=frozenset()) -> Path:
     """The checks of :func:`write_all` for one file, without writing anything."""
     if not isinstance(path, (str, os.PathLike)) or str(path) == "":
         raise ExportError(f"an output path must be a non-empty str or Path, got {path!r}")
+    try:
+        return _check_target_os(path, overwrite, protect, new_dirs)
+    except (OSError, RuntimeError) as exc:
+        raise _path_error(path, exc) from None
+
+
+def _check_target_os(path, overwrite: bool, protect, new_dirs) -> Path:
     given = Path(path).expanduser()
     target = given.resolve()
     for protected in protect:
@@ -109,6 +149,8 @@ def _check_target(path, overwrite: bool, protect, new_dirs=frozenset()) -> Path:
         if p.exists() and not p.is_dir():
             raise ExportError(f"{path}: {p} is a file, not a directory")
         raise ExportError(f"{path}: directory {target.parent} does not exist")
+    if target.parent not in new_dirs:
+        _writable(target.parent, path)
     return target
 
 
@@ -199,13 +241,17 @@ def _backup(target: Path) -> str:
     return name
 
 
-def write_all(files, *, overwrite: bool = False, protect=(), dirs=()) -> list[Path]:
+def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
+              before_commit=None) -> list[Path]:
     """Write several files as one transaction: all of them, or none; return the resolved paths.
 
     files: (path, bytes or str) pairs. dirs: folders that may be created for them (see
     :func:`check_outputs`). Every target is checked before the first byte is written,
     all contents are staged next to their targets, then committed; a failure at any
     point (KeyboardInterrupt included) restores every target and removes what was made.
+    before_commit: called with the resolved targets once everything is staged, before the
+    first target takes its name; if it raises, nothing is written (the CLI prints and
+    flushes its console output there, so a console that fails leaves no file behind).
     """
     files = [(p, d.encode("utf-8") if isinstance(d, str) else d) for p, d in files]
     targets = check_outputs([p for p, _ in files], overwrite=overwrite, protect=protect, dirs=dirs)
@@ -222,6 +268,8 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=()) -> list[Pa
         for (path, data), target in zip(files, targets):
             current = path
             staged.append(_stage(target, data, path))
+        if before_commit is not None:
+            before_commit(targets)
         for (path, _), target, tmp in zip(files, targets, staged):
             current = path
             if not (overwrite and target.exists()):

@@ -25,8 +25,9 @@ EVIDENCE_RANGE = (1e-6, 1e4)
 class CalibrationOptions:
     """Every choice of a calibration, with the paper's defaults.
 
-    model: the error model (kincal.models: "complete" (default), "mdh", "placement",
-        "offsets"): which geometric errors the chain may have.
+    model: the error model (kincal.models: "complete", "mdh", "placement", "offsets"):
+        which geometric errors the chain may have; None (default): the chain's default,
+        "complete", or "placement" on a tree path (a base off the tip's branch).
     method: "l2" (penalty toward nominal), "ls" (plain least squares) or "frames" (fit
         only the measurement frame and tool point; kinematics stay nominal).
     lam: "auto" (default): "evidence" when the data cover a small measurement volume
@@ -74,7 +75,7 @@ class CalibrationOptions:
     progress: callback(done, total) during the CV sweep, or None.
     """
 
-    model: str = "complete"
+    model: str | None = None
     method: str = "l2"
     lam: float | str = "auto"
     prior_mm: float | None = None
@@ -108,7 +109,7 @@ class CalibrationOptions:
         o = self._normalised()
         from kincal.models import MODELS, SUITS
 
-        if o.model not in MODELS:
+        if o.model is not None and o.model not in MODELS:
             raise OptionError(f"unknown error model {o.model!r}; expected one of "
                               f"{', '.join(MODELS)} (" + "; ".join(f"{k}: {v}" for k, v in
                                                                  SUITS.items()) + ")")

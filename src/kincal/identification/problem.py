@@ -39,22 +39,12 @@ from kincal.identification.selection import Identifiability, analyze
 from kincal.identification.solver import SolverOptions, SolveSummary, solve
 from kincal.measurements.checks import distinct_poses, length_unit_warnings, set_warnings
 from kincal.measurements.kind import DEFAULT_SIGMA
-from kincal.measurements.sets import kind_model, kind_of
+from kincal.measurements.sets import as_sets, kind_model
 from kincal.models.mdh import TOOL_AXIS_WARNING
 from kincal.robot import Robot
 
 # samples evaluated together in a residual with Jacobian: more are done block by block
 BLOCK_SAMPLES = 2048
-
-
-def as_sets(data) -> list:
-    """A list of measurement sets from one set or a sequence of them (DataError if empty)."""
-    sets = list(data) if isinstance(data, (list, tuple)) else [data]
-    if not sets:
-        raise DataError("no measurement set given: give one set or a non-empty list of sets")
-    for d in sets:
-        kind_of(d)  # raises for anything that is not a measurement set
-    return sets
 
 
 class CalibrationProblem:
@@ -69,7 +59,9 @@ class CalibrationProblem:
                                      if name == "options" else ""))
         self.robot = robot
         self.options = o = (options or CalibrationOptions()).validated()
-        self.error_model = em = error_models.build(o.model, robot.geometry)
+        # the chain's default model when none is named: complete, placement on a tree path
+        self.model_name = o.model or error_models.default_for(robot.geometry)
+        self.error_model = em = error_models.build(self.model_name, robot.geometry)
         chain = tuple(em.joint_names)
         unknown = [j for j in o.backlash if j not in chain]
         if unknown:
@@ -124,11 +116,15 @@ class CalibrationProblem:
         if name in self.layout.names:
             return
         for other in error_models.MODELS:
-            if other != self.options.model and \
-                    name in error_models.build(other, self.robot.geometry).names:
+            try:
+                names = () if other == self.model_name else error_models.build(
+                    other, self.robot.geometry).names
+            except OptionError:  # a model that cannot describe this chain (a tree path)
+                names = ()
+            if name in names:
                 raise ParameterError(
-                    f"{name!r} is a parameter of error model {other}, not of {self.options.model}"
-                    f" (choose --model {other}, or a name of {self.options.model}: "
+                    f"{name!r} is a parameter of error model {other}, not of {self.model_name}"
+                    f" (choose --model {other}, or a name of {self.model_name}: "
                     f"{', '.join(self.layout.kinematic_names[:8])}, ...)",
                     valid=self.layout.names)
         self.layout.index(name)  # raises, listing the valid names

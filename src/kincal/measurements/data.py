@@ -123,7 +123,7 @@ class Measurements:
         rows = np.arange(2, len(q) + 2) if self.rows is None else np.asarray(self.rows)
         object.__setattr__(self, "rows", rows)
         if self.sigma is not None:
-            from kincal.measurements.kind import check_sigmas
+            from kincal.measurements.checks import check_sigmas
 
             object.__setattr__(self, "sigma", check_sigmas(self.sigma, len(q), self.source,
                                                            rows=rows if len(rows) == len(q)

@@ -32,6 +32,16 @@ def kind_of(data) -> str:
                     f"PlaneData, got {type(data).__name__}")
 
 
+def as_sets(data) -> list:
+    """A list of measurement sets from one set or a sequence of them (DataError if empty)."""
+    sets = list(data) if isinstance(data, (list, tuple)) else [data]
+    if not sets:
+        raise DataError("no measurement set given: give one set or a non-empty list of sets")
+    for d in sets:
+        kind_of(d)  # raises for anything that is not a measurement set
+    return sets
+
+
 def kind_model(error_model, data, backlash=()):
     """The kind model of one set (backlash: chain indices of the joints with a term)."""
     kind = kind_of(data)

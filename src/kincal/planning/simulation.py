@@ -127,8 +127,15 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
                 solved.add(p, q)
                 break
         else:
-            raise OptionError(f"no joint solution reaches the point {np.round(p, 4)} m of the "
-                              f"{size * 1e3:g} mm cube at {np.round(center, 4)} m; move the cube")
+            where = (f"the point {np.round(p, 4)} m of the {size * 1e3:g} mm cube at "
+                     f"{np.round(center, 4)} m")
+            if max_tilt is not None and robot.inverse_kinematics(p, tool, None, start=home)[1]:
+                # the position is reachable: the asked orientation is what fails
+                raise OptionError(f"no joint solution reaches {where} with the tool within "
+                                  f"{np.degrees(max_tilt):g} deg of pointing down: the tip's "
+                                  "orientation is the cause (an arm that cannot point its tip "
+                                  "down there); allow a larger --tilt-deg or choose another --tip")
+            raise OptionError(f"no joint solution reaches {where}; move the cube")
     if progress is not None:
         progress(n, n)
     return out

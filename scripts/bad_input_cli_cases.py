@@ -1,0 +1,271 @@
+"""The bad-input sweep's cases for the command line's own promises (issue 24): options
+that would be ignored (class 3), outputs checked before the work (4), path and OS errors
+(5), console failures (6), misleading messages (8) and foreign stderr lines (9).
+
+Used by scripts/bad_input_sweep.py; argv use the placeholders {d} (the case's folder),
+{csv} (a good point file), {poses} (a good pose file) and {urdf} (a corrected URDF).
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import subprocess
+import sys
+from pathlib import Path
+
+
+def snapshot(folder: Path) -> dict:
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        st = p.lstat()
+        data = p.read_bytes() if stat.S_ISREG(st.st_mode) else None
+        out[str(p.relative_to(folder))] = (stat.S_IFMT(st.st_mode), data, st.st_mtime_ns)
+    return out
+
+
+def ignored_option_cases():
+    """(label, argv) of options the run would silently ignore, or out of their range
+    (issue 24, class 3): each refused with one line, exit code 1."""
+    sim = ["simulate", "ec66", "--out", "{d}/s.csv", "--poses", "5"]
+    plan = ["plan", "ec66", "--random", "40", "--poses", "10", "--out", "{d}/p.csv"]
+    cube = ["--in-cube", "0.4", "0", "0.3", "0.3"]
+    sphere = ["--in-sphere", "0.4", "0", "0.3", "0.2"]
+    for cmd in (["calibrate", "ec66", "{csv}", "--method", "ls", "--out", "{d}/o.urdf"],
+                ["analyze", "ec66", "{csv}"], ["evaluate", "ec66", "{csv}", "--fit-frames"]):
+        for v in ("0.001", "0.01", "1", "10"):  # points only: no pose file to weigh
+            yield f"{cmd[0]} --orientation-sigma-deg {v} on points", cmd + [
+                "--orientation-sigma-deg", v]
+        for v in ("nan", "inf", "-1", "0"):
+            yield f"{cmd[0]} --orientation-sigma-deg {v}", cmd + ["--orientation-sigma-deg", v]
+        if cmd[0] != "evaluate":
+            for v in ("2", "5", "9"):
+                yield f"{cmd[0]} --grid {v} without a map", cmd + ["--grid", v]
+    for v in ("nan", "inf", "-inf", "-1", "0"):
+        yield f"analyze --noise-mm {v}", ["analyze", "ec66", "{csv}", "--noise-mm", v]
+    for v in ("0", "0.1", "-0.5"):
+        for base, name in ((plan, "plan"), (sim, "simulate")):
+            yield f"{name} --floor {v} without a volume", base + ["--floor", v]
+            yield f"{name} --floor {v} with --no-floor", base + cube + ["--floor", v, "--no-floor"]
+    for v in ("nan", "inf"):
+        for base, name in ((plan, "plan"), (sim, "simulate")):
+            yield f"{name} --floor {v}", base + cube + ["--floor", v]
+            yield f"{name} --in-cube {v}", base + ["--in-cube", "0.4", v, "0.3", "0.3"]
+            yield f"{name} --tilt-direction {v}", base + cube + ["--tilt-direction", "0", v, "-1"]
+            yield f"{name} --max-tilt {v}", base + cube + ["--max-tilt", v]
+        yield f"plan --home {v}", plan + cube + ["--home", "0", "0", v, "0", "0", "0"]
+        yield f"plan --kind distance --pivot {v}", plan + ["--kind", "distance", "--pivot", "0",
+                                                           "0", v]
+    for kind in ("point", "pose", "plane"):
+        yield f"plan --kind {kind} --pivot", plan + ["--kind", kind, "--pivot", "0", "0", "0.2"]
+    for v in ("1", "200", "1000"):
+        yield f"plan --target-poses {v} without --criterion i", plan + ["--target-poses", v]
+    for volume, vname in ((cube, "cube"), (sphere, "sphere")):
+        yield f"simulate --size-mm with --in-{vname}", sim + volume + ["--size-mm", "400"]
+        yield f"simulate --center-m with --in-{vname}", sim + volume + ["--center-m", "0.4", "0",
+                                                                         "0.3"]
+    pf = ["simulate", "ec66", "--out", "{d}/s.csv", "--poses-file", "{csv}"]
+    for extra in (["--poses", "5"], ["--poses", "60"], ["--center-m", "0.4", "0", "0.3"],
+                  ["--size-mm", "100"], ["--tilt-deg", "10"]):
+        yield f"simulate --poses-file with {extra[0]} {extra[1]}", pf + extra
+    for kind in ("point", "distance", "plane"):
+        for v in ("0", "0.01", "1"):
+            yield f"simulate --kind {kind} --orientation-noise-deg {v}", sim + [
+                "--kind", kind, "--orientation-noise-deg", v]
+    for v in ("-1", "nan", "inf", "1e300"):
+        yield f"simulate --kind pose --orientation-noise-deg {v}", sim + [
+            "--kind", "pose", "--orientation-noise-deg", v]
+
+
+OUTPUT_OPTIONS = {  # command: (argv without outputs, {output option: file name})
+    "calibrate": (["calibrate", "ec66", "{csv}", "--method", "ls"],
+                  {"--out": "o.urdf", "--frames-out": "f.json", "--report": "r.json",
+                   "--yaml-out": "k.yaml", "--mdh-out": "m.csv", "--html": "r.html",
+                   "--plots": "plots"}),
+    "calibrate-sets": (["calibrate", "ec66", "{csv}", "{poses}", "--method", "ls"],
+                       {"--out": "o.urdf", "--frames-out": "f.json", "--yaml-out": "k.yaml",
+                        "--mdh-out": "m.csv"}),
+    "simulate": (["simulate", "ec66", "--poses", "5"], {"--out": "s.csv", "--truth-out": "t.json"}),
+    "plan": (["plan", "ec66", "--random", "40", "--poses", "5"], {"--out": "p.csv"}),
+    "analyze": (["analyze", "ec66", "{csv}"], {"--report": "a.json"}),
+    "evaluate": (["evaluate", "ec66", "{csv}", "--fit-frames"], {"--report": "e.json"}),
+    "compensate": (["compensate", "{urdf}", "--program", "{csv}", "--nominal", "ec66",
+                    "--tip", "flange"], {"--out": "j.csv"}),
+    "demo": (["demo"], {"--out": "demo"}),
+}
+REQUIRED_OUT = ("calibrate", "calibrate-sets", "simulate", "plan", "compensate")
+
+
+def _outputs_argv(command: str, option: str, path: str) -> list[str]:
+    """argv of ``command`` with ``option`` at ``path`` (and a fine --out when it needs one)."""
+    argv, _ = OUTPUT_OPTIONS[command]
+    argv = list(argv) + [option, path]
+    if option != "--out" and command in REQUIRED_OUT:
+        argv += ["--out", "{d}/fine.out"]
+    return argv
+
+
+_MOUNTS: list[Path] = []
+
+
+def _read_only(folder: Path) -> None:
+    """folder/ro: no file can be made in it (a read-only mount when running as root)."""
+    ro = folder / "ro"
+    ro.mkdir()
+    if os.geteuid() != 0:
+        ro.chmod(0o555)
+    elif subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(ro)],
+                        capture_output=True).returncode == 0:
+        _MOUNTS.append(ro)
+    else:
+        raise CaseSkipped("running as root without a way to make a read-only folder")
+
+
+def undo_read_only(folder: Path) -> None:
+    ro = folder / "ro"
+    if ro in _MOUNTS:
+        subprocess.run(["umount", str(ro)], check=True)
+        _MOUNTS.remove(ro)
+    elif ro.exists():
+        ro.chmod(0o755)
+
+
+class CaseSkipped(Exception):
+    """The case cannot be set up here (say, root without mount)."""
+
+
+def output_first_cases():
+    """(label, argv, setup) of outputs the run must refuse before any work (issue 24, class
+    4: read-only folders, existing files, two outputs on one file, several-file runs) and
+    of paths the OS refuses (class 5: names over 255 bytes, paths over PATH_MAX, symlink
+    loops)."""
+    def existing(name):
+        def setup(d):
+            if name in ("plots", "demo"):  # a folder holding a file the run would write
+                (d / name).mkdir()
+                (d / name / ("tables.md" if name == "demo" else "residuals.png")).write_text("keep")
+            else:
+                (d / name).write_text("keep")
+        return setup
+
+    def loop(name):
+        return lambda d: (d / name).symlink_to(name)
+
+    long_dir = "/".join(["d" * 250] * 18)  # 4,500 characters: over PATH_MAX
+    for command, (_, outputs) in OUTPUT_OPTIONS.items():
+        for option, name in outputs.items():
+            yield (f"{command} {option} in a read-only folder",
+                   _outputs_argv(command, option, "{d}/ro/" + name), _read_only)
+            if command == "demo":
+                yield ("demo --out below a read-only folder",
+                       _outputs_argv(command, option, "{d}/ro/a/b"), _read_only)
+            yield (f"{command} {option} exists", _outputs_argv(command, option, "{d}/" + name),
+                   existing(name))
+            for n in (256, 300, 1000):
+                yield (f"{command} {option} name of {n} bytes",
+                       _outputs_argv(command, option, "{d}/" + "n" * (n - 4) + ".out"), None)
+            yield (f"{command} {option} path over PATH_MAX",
+                   _outputs_argv(command, option, "{d}/" + long_dir + "/" + name), None)
+            yield (f"{command} {option} a symlink loop",
+                   _outputs_argv(command, option, "{d}/" + name), loop(name))
+    for other in ("--frames-out", "--yaml-out", "--mdh-out"):
+        yield (f"calibrate-sets --out equal to {other}",
+               OUTPUT_OPTIONS["calibrate-sets"][0] + ["--out", "{d}/x", other, "{d}/x"], None)
+    yield ("calibrate-sets --out is an input", OUTPUT_OPTIONS["calibrate-sets"][0]
+           + ["--out", "{poses}"], None)
+    for what, argv in (("data", ["calibrate", "ec66", "{x}", "--out", "{d}/o.urdf"]),
+                       ("urdf", ["calibrate", "{x}", "{csv}", "--out", "{d}/o.urdf"]),
+                       ("frames", ["evaluate", "ec66", "{csv}", "--frames", "{x}"]),
+                       ("candidates", ["plan", "ec66", "{x}", "--poses", "5", "--out",
+                                       "{d}/p.csv"])):
+        for label, x in (("a name of 300 bytes", "{d}/" + "n" * 300),
+                         ("a path over PATH_MAX", "{d}/" + long_dir + "/x")):
+            yield f"{what} is {label}", [a.replace("{x}", x) for a in argv], None
+        yield f"{what} is a symlink loop", [a.replace("{x}", "{d}/in") for a in argv], loop("in")
+
+
+def message_cases():
+    """(label, argv, setup) of inputs whose one line used to name another problem (class 8)."""
+    def write(name, text):
+        return lambda d: (d / name).write_text(text)
+
+    for text, what in (("", "empty"), ("  \n\n", "blank"), ("[1, 2]", "a list"),
+                       ("[" * 10_000, "10,000 deep")):
+        for argv in (["evaluate", "ec66", "{csv}", "--frames", "{d}/f.json"],
+                     ["compensate", "{urdf}", "{csv}", "--frames", "{d}/f.json", "--out",
+                      "{d}/j.csv"]):
+            yield f"{argv[0]} frames {what}", argv, write("f.json", text)
+    for header in ("joint_1,,,x", ",,", "joint_1,joint_2,,y,,z"):
+        yield (f"csv unnamed columns {header!r}",
+               ["calibrate", "ec66", "{d}/u.csv", "--out", "{d}/o.urdf"],
+               write("u.csv", header + "\n" + ",".join("1" * max(1, header.count(",") + 1))
+                     + "\n"))
+
+
+CONSOLE_CHILD = [sys.executable, "-m", "kincal"]
+
+
+def console_cases():
+    """(label, argv, how, code) run in a child process (class 6 and 9): how is "full"
+    (stdout on /dev/full), "noerr" (stderr closed), "ascii" (an ASCII stdout) or "rohome"
+    (a read-only HOME)."""
+    cal = ["calibrate", "ec66", "{csv}", "--method", "ls", "--out", "{d}/o.urdf"]
+    for argv in (cal, cal + ["--plots", "{d}/plots", "--report", "{d}/r.json"],
+                 ["simulate", "ec66", "--poses", "5", "--out", "{d}/s.csv"],
+                 ["plan", "ec66", "--random", "40", "--poses", "5", "--out", "{d}/p.csv"],
+                 ["analyze", "ec66", "{csv}"],
+                 ["evaluate", "ec66", "{csv}", "--fit-frames", "--report", "{d}/e.json"]):
+        yield f"{argv[0]} stdout on a full disk {len(argv)}", argv, "full", 1
+    yield "calibrate with stderr closed", cal, "noerr", 0
+    yield "calibrate refused with stderr closed", cal + ["--out", "{csv}"], "noerr", 1
+    yield "calibrate to a non-ASCII path on an ASCII stdout", cal[:-1] + ["{d}/\u00e9.urdf"], \
+        "ascii", 0
+    yield "calibrate --plots with a read-only HOME", cal + ["--plots", "{d}/plots"], "rohome", 0
+    yield "calibrate refused with a read-only HOME", cal + ["--plots", "{d}/plots",
+                                                            "--out", "{csv}"], "rohome", 1
+
+
+def run_console_case(argv, how: str, code: int, folder: Path) -> str | None:
+    """The promise in a child: exit code ``code``; every stderr line kincal's, one error
+    line for a refusal; after a refusal the folder as before; no traceback."""
+    import shlex
+
+    env = dict(os.environ)
+    if how == "ascii":
+        env["PYTHONIOENCODING"] = "ascii"
+    if how == "rohome":
+        _read_only(folder)
+        env["HOME"] = str(folder / "ro")
+        for k in ("MPLCONFIGDIR", "XDG_CONFIG_HOME", "XDG_CACHE_HOME"):
+            env.pop(k, None)
+    before = snapshot(folder)
+    try:
+        if how == "noerr":
+            command = " ".join(shlex.quote(a) for a in CONSOLE_CHILD + argv) + " 2>&-"
+            run = subprocess.run(["sh", "-c", command], capture_output=True, text=True,
+                                 timeout=300, env=env)
+        else:
+            out = open("/dev/full", "w") if how == "full" else subprocess.PIPE
+            try:
+                run = subprocess.run(CONSOLE_CHILD + argv, stdout=out, stderr=subprocess.PIPE,
+                                     text=True, timeout=300, env=env)
+            finally:
+                if how == "full":
+                    out.close()
+        after = snapshot(folder)  # before the read-only HOME is undone
+    finally:
+        if how == "rohome":
+            undo_read_only(folder)
+    err = [e for e in run.stderr.splitlines() if e.strip()]
+    problems = []
+    if run.returncode != code:
+        problems.append(f"exit code {run.returncode}, expected {code}")
+    if any(not e.startswith("kincal: ") for e in err) or any("Traceback" in e for e in err):
+        problems.append("a foreign line or a traceback on stderr")
+    if how != "noerr" and code == 1 and len([e for e in err if e.startswith("kincal: error:")]) != 1:
+        problems.append("not exactly one 'kincal: error:' line")
+    if code == 1 and after != before:
+        problems.append("the folder changed")
+    if problems:
+        return "; ".join(problems) + " | stderr: " + " / ".join(err[-3:])
+    return None

@@ -1,0 +1,147 @@
+"""``kincal analyze``: what the data can identify, without solving."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from kincal.cli.checks import check_outputs
+from kincal.cli.options import (AccuracyRequest, Chain, Inputs, add_accuracy_options,
+                                add_common, add_kinds, add_model, add_overwrite, group, typed)
+from kincal.errors import OptionError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("analyze", help="what the data can identify, without solving")
+    add_common(p)
+    add_kinds(p)
+    add_model(p, allow_all=True)
+    g = group(p, "model and penalty")
+    g.add_argument("--fix", nargs="+", default=[], metavar="NAME")
+    g.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
+                   help="also analyse backlash terms of these joints (see calibrate)")
+    group(p, "outputs").add_argument("--report",
+                                     help="write the identifiability report as JSON")
+    add_accuracy_options(p)
+    a = group(p, "predicted accuracy")
+    a.add_argument("--noise-mm", type=float, default=0.05,
+                   help="noise per axis [mm] for the predicted accuracy (least squares on "
+                        "these poses; default 0.05)")
+    a.add_argument("--accuracy-plot", metavar="MAP.png", help="plot of the accuracy map")
+    add_overwrite(p, help=None)
+    p.set_defaults(run=run)
+
+
+@dataclass(frozen=True)
+class Analyze:
+    """The options of ``kincal analyze``."""
+
+    chain: Chain
+    inputs: Inputs
+    accuracy: AccuracyRequest
+    model: str  # an error model, or "all" to compare them
+    fix: tuple[str, ...]
+    backlash: tuple[str, ...]
+    report: str | None
+    noise_mm: float  # [mm] per axis, for the predicted accuracy
+    accuracy_plot: str | None
+    overwrite: bool
+
+
+def run(args) -> int:
+    a = typed(Analyze, args, chain=Chain.of(args), inputs=Inputs.of(args),
+              accuracy=AccuracyRequest.of(args))
+    return _analyze(a)
+
+
+def _design_accuracy(a: Analyze, robot, problem):
+    """The accuracy map predicted before solving, or None if not asked."""
+    if not a.accuracy.asked:
+        if a.accuracy_plot:
+            raise OptionError("--accuracy-plot needs --accuracy-map or --accuracy-poses")
+        return None
+    from kincal.planning.accuracy_map import design_accuracy_map
+
+    if not (math.isfinite(a.noise_mm) and a.noise_mm > 0):
+        raise OptionError(f"--noise-mm must be a positive number, got {a.noise_mm}")
+    return design_accuracy_map(problem, a.noise_mm * 1e-3, **a.accuracy.targets(robot))
+
+
+def _analyze(a: Analyze) -> int:
+    import numpy as np
+
+    from kincal.export import report
+    from kincal.identification.options import CalibrationOptions
+    from kincal.identification.problem import CalibrationProblem
+    from kincal.models import MODELS, default_for
+
+    robot = a.chain.load()
+    check_outputs(robot, [a.report], overwrite=a.overwrite, inputs=a.inputs.files)
+    sets = a.inputs.read_sets(robot)
+    if a.model == "all":  # every model that can describe this chain
+        tree = default_for(robot.geometry) != "complete"
+        names = tuple(m for m in MODELS if not (tree and m in ("complete", "mdh")))
+    else:
+        names = (a.model,)
+    if a.model == "all" and a.fix:
+        raise OptionError("--model all compares the models as they are: give --fix with one "
+                          "model (the parameter names differ between models)")
+    problems = {m: CalibrationProblem(robot, sets, CalibrationOptions(
+        model=m, fix=a.fix, backlash=a.backlash, tool_guess=a.inputs.tool_guess))
+        for m in names}
+    problem = problems[names[0]]
+    if len(sets) == 1 and problem.kinds[0].kind == "point":
+        print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(sets[0])} poses from "
+              f"{a.inputs.data}")
+    else:
+        print(f"kincal analysis of {robot.name} ({robot.base} -> {robot.tip}), error model "
+              f"{a.model or problem.model_name}: " + ", ".join(
+                  f"{km.kind} ({km.data.source}, {km.N} samples)" for km in problem.kinds))
+    idents = {}
+    for m, p in problems.items():
+        ident = idents[m] = p.analyze()
+        if len(names) > 1:
+            print(f"\n== model {m}: {p.error_model.describe()}")
+        print(ident.summary())
+    if problem.kinds[0].kind == "point":
+        tools = problem.layout.frames(problem.start(), 0)[6:].reshape(-1, 3)
+        for k, tool in enumerate(tools, start=1):
+            which = "tool point" if len(tools) == 1 else f"measured point {k}"
+            print(f"  {which} (first estimate, tip frame): {np.round(tool * 1e3, 3).tolist()} mm")
+    if len(names) > 1:
+        _print_comparison(names, problems, idents)
+    amap = _design_accuracy(a, robot, problem)
+    if amap is not None:
+        print(amap.summary())
+    files = []
+    if a.report:
+        content = (report.identifiability_dict(idents[names[0]]) if len(names) == 1 else
+                   {m: report.identifiability_dict(i) for m, i in idents.items()})
+        if amap is not None:
+            content["accuracy_map"] = amap.as_dict()
+        files.append((a.report, report.dumps(content)))
+    if a.accuracy_plot and amap is not None and len(amap.std):
+        from kincal.export.diagnostic_plots import plot_accuracy_map
+
+        files.append((a.accuracy_plot, plot_accuracy_map(amap)))
+    if files:
+        from kincal.cli.console import say_and_write
+
+        say_and_write(files, lambda written: [], overwrite=a.overwrite,
+                      protect=[robot.source, *a.inputs.files])
+    return 0
+
+
+def _print_comparison(names, problems, idents) -> None:
+    print("\ncomparison (identified kinematic parameters; '+' what a model identifies that "
+          "mdh cannot express):")
+    mdh_kept = set(idents["mdh"].kept) if "mdh" in idents else set()
+    for m in names:
+        p = problems[m]
+        kin = [n for n in idents[m].kept if n in set(p.layout.kinematic_names)]
+        extra = [n for n in kin if n not in mdh_kept and m == "complete"]
+        line = (f"  {m:<10} {len(kin):3d} of {p.layout.n_kinematic:3d} kinematic parameters "
+                "identified")
+        if extra:
+            line += f"  (+ {', '.join(extra)})"
+        print(line)

@@ -1,0 +1,206 @@
+"""``kincal calibrate``: identify the kinematics and write a corrected URDF.
+
+Every data file, whatever its kind, is a measurement set of one calibration problem
+(:class:`kincal.identification.problem.CalibrationProblem`); every file the run writes goes
+through the one writer and its gate (:func:`kincal.export.outputs.write_calibration`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+from kincal.cli.checks import check_outputs, plot_paths
+from kincal.cli.options import (AccuracyRequest, Chain, Inputs, add_accuracy_options,
+                                add_common, add_kinds, add_model, add_overwrite, group, typed)
+from kincal.errors import KincalError, KincalWarning, OptionError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("calibrate", help="identify the kinematics and write a corrected URDF")
+    add_common(p)
+    add_kinds(p)
+    add_model(p)
+    g = group(p, "model and penalty")
+    g.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
+    g.add_argument("--lambda", dest="lam",
+                   help="'auto' (default: 'evidence' on data from a small measurement volume, "
+                        "'cv' otherwise), 'evidence' (priors toward nominal per parameter "
+                        "class, scales and noise by maximum evidence), 'cv' (the paper's "
+                        "k-fold CV) or a value >= 0")
+    g.add_argument("--prior-mm", type=float, metavar="MM",
+                   help="with --lambda evidence: tolerance (prior std) of the lengths [mm], "
+                        "given instead of estimated")
+    g.add_argument("--prior-deg", type=float, metavar="DEG",
+                   help="with --lambda evidence: tolerance of the twists and joint offsets "
+                        "[deg], given instead of estimated")
+    g.add_argument("--noise-mm", type=float, metavar="MM",
+                   help="with --lambda evidence: measurement noise, std per axis [mm], given "
+                        "instead of estimated")
+    g.add_argument("--folds", type=int, help="k of the k-fold cross-validation (default 5)")
+    g.add_argument("--seed", type=int, help="seed of the CV fold split (default 0)")
+    g.add_argument("--fix", nargs="+", default=[], metavar="NAME",
+                   help="parameters held nominal: names (joint_3.a, tool.z) or quoted shell "
+                        "patterns ('*.d', 'joint_[456].*')")
+    g.add_argument("--free", nargs="+", default=[], metavar="NAME",
+                   help="parameters kept even if found redundant (method l2); names or patterns")
+    g.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
+                   help="give these joints a backlash term (needs the acquisition order: "
+                        "rows in order, or --order-column)")
+    g.add_argument("--robust", choices=("huber", "cauchy"),
+                   help="robust loss on the per-pose error; down-weighted samples are listed")
+    g.add_argument("--robust-scale-mm", type=float, help="scale of the robust loss [mm] "
+                   "(default 2.5 x the median pose error)")
+    g.add_argument("--cv-max-poses", type=int, default=2000, metavar="N",
+                   help="choose lambda by CV on a random N of the poses when there are more "
+                        "(default 2000; 0: all poses); the final fit uses every pose")
+    o = group(p, "outputs")
+    o.add_argument("--out", required=True, help="corrected URDF to write")
+    o.add_argument("--frames-out", help="FRAMES.json: measurement frame and tool point (SI)")
+    o.add_argument("--add-frames", action="store_true",
+                   help="also add the measurement frame and tool point to the URDF as fixed "
+                        "frames (kincal_measurement_frame, kincal_tool_point)")
+    o.add_argument("--report", help="REPORT.json: the whole result")
+    o.add_argument("--yaml-out", metavar="KINEMATICS.yaml",
+                   help="corrected joint origins as YAML keyed by joint name (x y z roll pitch "
+                        "yaw, ur_description's kinematics layout)")
+    o.add_argument("--mdh-out", metavar="MDH.csv",
+                   help="corrected modified-DH (Craig) table, convention in its header")
+    o.add_argument("--plots", help="directory for PNG plots")
+    o.add_argument("--html", metavar="REPORT.html",
+                   help="one self-contained HTML report (plots embedded, opens offline)")
+    add_accuracy_options(p)
+    add_overwrite(p)
+    r = group(p, "the plausibility gate and the console")
+    r.add_argument("--accept-implausible", action="store_true",
+                   help="write the outputs even if the plausibility gate finds the result "
+                        "implausible (wrong units, rows, tip or data are the usual causes)")
+    r.add_argument("--accept-unconverged", action="store_true",
+                   help="write the outputs even if the solver did not converge (best iterate)")
+    r.add_argument("--quiet", action="store_true")
+    p.set_defaults(run=run)
+
+
+@dataclass(frozen=True)
+class Calibrate:
+    """The options of ``kincal calibrate``, typed (lengths as the user gave them)."""
+
+    chain: Chain
+    inputs: Inputs
+    accuracy: AccuracyRequest
+    model: str
+    method: str  # l2 | ls | frames
+    lam: str  # 'auto', 'cv', 'evidence' or a number as text (checked by cli.checks)
+    prior_mm: float | None
+    prior_deg: float | None
+    noise_mm: float | None
+    folds: int
+    seed: int
+    fix: tuple[str, ...]
+    free: tuple[str, ...]
+    backlash: tuple[str, ...]
+    robust: str | None
+    robust_scale_mm: float | None
+    cv_max_poses: int
+    out: str
+    frames_out: str | None
+    add_frames: bool
+    report: str | None
+    yaml_out: str | None
+    mdh_out: str | None
+    plots: str | None
+    html: str | None
+    overwrite: bool
+    accept_implausible: bool
+    accept_unconverged: bool
+    quiet: bool
+
+    def outputs(self) -> list:
+        """Every file this run writes, for the check before the work."""
+        return [self.out, self.frames_out, self.report, self.yaml_out, self.mdh_out,
+                self.html] + plot_paths(self.plots)
+
+
+def calibration_options(c: Calibrate):
+    """The CalibrationOptions of the run."""
+    from kincal.cli.progress import FitStatus, progress_bar
+    from kincal.identification.options import CalibrationOptions
+    from kincal.identification.solver import SolverOptions
+
+    lam = c.lam
+    if lam not in ("auto", "cv", "evidence"):
+        try:
+            lam = float(lam)
+        except ValueError:
+            raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
+                              f"{lam!r}") from None
+    return CalibrationOptions(model=c.model, method=c.method, lam=lam, folds=c.folds,
+                              seed=c.seed, prior_mm=c.prior_mm, prior_deg=c.prior_deg,
+                              noise_mm=c.noise_mm, fix=c.fix, free=c.free, backlash=c.backlash,
+                              tool_guess=c.inputs.tool_guess, robust=c.robust,
+                              robust_scale_mm=c.robust_scale_mm, progress=progress_bar(),
+                              cv_max_poses=c.cv_max_poses or None,
+                              solver=SolverOptions(progress=FitStatus.on_terminal()))
+
+
+def run(args) -> int:
+    from kincal.cli.console import say
+    from kincal.export.outputs import Outputs, gate, write_calibration
+    from kincal.identification.problem import CalibrationProblem
+
+    c = typed(Calibrate, args, chain=Chain.of(args), inputs=Inputs.of(args),
+              accuracy=AccuracyRequest.of(args))
+    robot = c.chain.load()
+    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=c.inputs.files,
+                  dirs=[c.plots])
+    sets = c.inputs.read_sets(robot)  # every file, each read as its kind
+    options = calibration_options(c)
+    with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
+        warnings.simplefilter("always", KincalWarning)
+        targets = c.accuracy.targets(robot)  # bad values fail here, before solving
+        try:
+            result = CalibrationProblem(robot, sets, options).solve()
+        finally:
+            if options.solver.progress is not None:
+                options.solver.progress.close()
+    for w in caught:  # and passed on to be printed as usual
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    try:  # the gate before any further work (write_calibration checks it again, quietly)
+        accepted = gate(result, c.accept_implausible, c.accept_unconverged)
+    except KincalError:
+        if not c.quiet:
+            print(result.summary())
+        raise
+    for message in accepted:
+        warnings.warn(message, KincalWarning)
+    amap = None
+    if targets or c.html:
+        from kincal.planning.accuracy_map import result_accuracy_map
+
+        if result.covariance is not None or targets:
+            amap = result_accuracy_map(result, **targets)
+
+    def lines(written, notes):
+        if c.quiet:
+            return []
+        out = [result.summary()]
+        out += [f"  {line}" for line in result.identifiability.summary().splitlines()[1:]
+                if line.startswith(("weak", "  the poses"))]
+        out += [f"  export: {n}" for n in notes]
+        if amap is not None:
+            out.append("  " + amap.summary().replace("\n", "\n  "))
+        return out + [f"  wrote {path}" for path in written]
+
+    outputs = Outputs(urdf=c.out, frames=c.frames_out, report=c.report, html=c.html,
+                      yaml=c.yaml_out, mdh=c.mdh_out, plots=c.plots, add_frames=c.add_frames,
+                      overwrite=c.overwrite, protect=tuple(c.inputs.files))
+    with warnings.catch_warnings():  # the gate's warnings were given above, by gate()
+        warnings.simplefilter("ignore", KincalWarning)
+        write_calibration(
+            result, outputs, accept_implausible=c.accept_implausible,
+            accept_unconverged=c.accept_unconverged, accuracy=amap,
+            warnings_seen=[str(w.message) for w in caught
+                           if issubclass(w.category, KincalWarning)],
+            data_source=", ".join(c.inputs.files),
+            before_commit=lambda written, notes: say(lines(written, notes)))
+    return 0

@@ -1,0 +1,125 @@
+"""``kincal compensate``: joint values with which the calibrated robot reaches given targets."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from kincal.cli.checks import check_outputs
+from kincal.cli.console import say_and_write
+from kincal.cli.options import Chain, add_overwrite, add_units, chain_from_frames, group, typed
+from kincal.errors import DataError, OptionError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "compensate", help="joint values with which the calibrated robot reaches given targets "
+        "(or a nominal program's poses)",
+        description="Solve the calibrated model's inverse kinematics from seed joint values: "
+        "TARGETS.csv has the chain joints (seeds) and x,y,z of the tool point in the "
+        "measurement frame (optionally qx,qy,qz,qw); or --program PROGRAM.csv with --nominal "
+        "NOMINAL.urdf corrects joint values planned on the nominal model.")
+    i, c = group(p, "inputs"), group(p, "chain")
+    i.add_argument("robot", help="the calibrated URDF (or any robot name, see calibrate)")
+    i.add_argument("targets", nargs="?", metavar="TARGETS.csv",
+                   help="seed joint columns and x,y,z [qx,qy,qz,qw] in the measurement frame")
+    c.add_argument("--tip", help="tip frame (as in the calibration)")
+    c.add_argument("--base", help="base frame (default: the URDF root link)")
+    c.add_argument("--frames", help="FRAMES.json from 'kincal calibrate --frames-out'")
+    i.add_argument("--program", metavar="PROGRAM.csv",
+                   help="joint values planned on the nominal model (chain joint columns)")
+    i.add_argument("--nominal", metavar="NOMINAL.urdf",
+                   help="the model the program was planned on")
+    i.add_argument("--position-columns", nargs=3, default=("x", "y", "z"), metavar="COL",
+                   help="names of the target position columns (default x y z)")
+    c.add_argument("--point", type=int, default=1,
+                   help="which measured point of FRAMES.json is targeted (default 1)")
+    add_units(p, length="positions and prismatic joints, in and out",
+              angle="revolute joints, in and out")
+    s = group(p, "inverse kinematics")
+    s.add_argument("--tolerance-mm", type=float, default=0.001,
+                   help="a target counts as reached within this distance (default 0.001 mm)")
+    s.add_argument("--flag-unreachable", action="store_true",
+                   help="write unreachable targets marked reached=0 instead of failing")
+    group(p, "outputs").add_argument("--out", required=True, help="JOINTS.csv to write")
+    add_overwrite(p, help="replace an existing output file")
+    p.set_defaults(run=run)
+
+
+@dataclass(frozen=True)
+class Compensate:
+    """The options of ``kincal compensate``."""
+
+    chain: Chain
+    targets: str | None
+    frames: str | None
+    program: str | None
+    nominal: str | None
+    position_columns: tuple[str, str, str]
+    point: int  # 1-based, as the user counts
+    length_unit: str
+    angle_unit: str
+    tolerance_mm: float
+    flag_unreachable: bool
+    out: str
+    overwrite: bool
+
+
+def run(args) -> int:
+    c = typed(Compensate, args, chain=Chain.of(args))
+    if (c.targets is None) == (c.program is None):
+        raise OptionError("give exactly one of TARGETS.csv or --program PROGRAM.csv")
+    if (c.program is None) != (c.nominal is None):
+        raise OptionError("--program and --nominal go together: the program's joint values "
+                          "were planned on the NOMINAL.urdf model")
+    if c.targets is not None and c.frames is None:
+        raise OptionError("targets in the measurement frame need --frames FRAMES.json "
+                          "(from 'kincal calibrate --frames-out')")
+    if not (math.isfinite(c.tolerance_mm) and c.tolerance_mm > 0):
+        raise OptionError(f"--tolerance-mm must be a positive number, got {c.tolerance_mm}")
+    return _compensate(c)
+
+
+def _compensate(c: Compensate) -> int:
+    from kincal.compensation import CellFrames, IkOptions, compensate, filter_program, read_targets
+    from kincal.planning.candidates import read_candidates
+
+    options = IkOptions(position_tolerance=c.tolerance_mm * 1e-3)
+    # the one FRAMES.json reader, before the robot loads (a broken file is the likelier error)
+    frames = None if c.frames is None else CellFrames.read(c.frames)
+    if frames is not None:
+        c = replace(c, chain=chain_from_frames(c.chain, frames))
+    robot = c.chain.load()
+    inputs = [c.targets, c.program, c.nominal, c.frames]
+    check_outputs(robot, [c.out], overwrite=c.overwrite, inputs=inputs)
+    if frames is not None:
+        frames.check_chain(robot)  # before reading targets: a wrong file is the likelier error
+    if c.program is not None:
+        from kincal.robot import Robot
+
+        nominal = Robot.load(c.nominal, tip=c.chain.tip, base=c.chain.base)
+        q, lines = read_candidates(c.program, nominal, c.length_unit, c.angle_unit,
+                                   kind="program")
+        result = filter_program(nominal, robot, q, frames, lines, c.point - 1, options,
+                                source=str(c.program))
+        inputs = [c.program, nominal.source]
+    else:
+        targets = read_targets(c.targets, robot, c.length_unit, c.angle_unit,
+                               c.position_columns)
+        result = compensate(robot, frames, targets, c.point - 1, options, c.length_unit)
+        inputs = [c.targets]
+    failures = result.failures()
+    if failures and not c.flag_unreachable:
+        raise DataError(f"{len(failures)} of {len(result)} targets cannot be reached by the "
+                        f"calibrated model within {c.tolerance_mm:g} mm: "
+                        + "; ".join(failures[:10]) + (" ..." if len(failures) > 10 else "")
+                        + "; nothing written; pass --flag-unreachable to write them marked "
+                          "reached=0")
+    said = [result.summary()] + [f"  NOT reached, written with reached=0: {line}"
+                                 for line in failures]
+    say_and_write([(c.out, result.to_csv_text(c.length_unit, c.angle_unit))],
+                  lambda written: said + [f"  wrote {path} (joint values in {c.angle_unit} and "
+                                          f"{c.length_unit}, as the input)" for path in written],
+                  overwrite=c.overwrite,
+                  protect=[robot.source, *inputs] + ([c.frames] if c.frames else []))
+    return 0

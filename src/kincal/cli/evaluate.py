@@ -1,0 +1,111 @@
+"""``kincal evaluate``: the position errors of a model on a data set."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from kincal.cli.checks import check_outputs
+from kincal.cli.console import say, say_and_write
+from kincal.cli.options import (Chain, Inputs, add_common, add_kinds, add_overwrite,
+                                chain_from_frames, group, typed)
+from kincal.errors import DataError, OptionError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("evaluate", help="position errors of a model on a data set")
+    add_common(p)
+    add_kinds(p, several=False)
+    g = group(p, "frames")
+    g.add_argument("--frames", help="FRAMES.json from 'kincal calibrate --frames-out'")
+    g.add_argument("--fit-frames", action="store_true",
+                   help="fit the measurement frame and tool point on these data first")
+    group(p, "outputs").add_argument("--report", help="write the statistics as JSON")
+    add_overwrite(p, help=None)
+    p.set_defaults(run=run)
+
+
+@dataclass(frozen=True)
+class Evaluate:
+    """The options of ``kincal evaluate``."""
+
+    chain: Chain
+    inputs: Inputs
+    frames: str | None  # FRAMES.json
+    fit_frames: bool
+    report: str | None
+    overwrite: bool
+
+
+def run(args) -> int:
+    from kincal.export import report
+    from kincal.frames_file import CellFrames
+    from kincal.identification.options import CalibrationOptions
+    from kincal.identification.problem import CalibrationProblem
+    from kincal.identification.statistics import ErrorStats
+
+    e = typed(Evaluate, args, chain=Chain.of(args), inputs=Inputs.of(args))
+    if bool(e.frames) == bool(e.fit_frames):
+        raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
+    frames = None
+    if e.frames:
+        frames = CellFrames.read(e.frames)  # the one schema, any version; values checked
+        e = replace(e, chain=chain_from_frames(e.chain, frames))
+    robot = e.chain.load()
+    check_outputs(robot, [e.report], overwrite=e.overwrite, inputs=(e.inputs.data, e.frames))
+    if frames is not None:
+        frames.check_chain(robot)
+    sets = e.inputs.read_sets(robot)
+    backlash = tuple(frames.backlash) if frames is not None else ()
+    # with frames given nothing is fitted: the problem only lays out the parameters
+    problem = CalibrationProblem(robot, sets, CalibrationOptions(
+        method="frames" if frames is None else "ls", tool_guess=e.inputs.tool_guess,
+        backlash=backlash))
+    lay = problem.layout
+    if frames is None:
+        x = problem.solve().x
+        how = "measurement frame and tool point fitted on these data"
+    else:
+        x = problem.x_nominal
+        used: set[int] = set()
+        for i, km in enumerate(problem.kinds):
+            x[lay.frame_slices[i]] = saved_frames(frames, km, used)
+        if backlash:
+            x[lay.backlash_slice] = [frames.backlash[j] for j in lay.backlash]
+        how = f"frames from {e.frames}"
+        if backlash:
+            how += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
+                    f"{getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
+    stats = [ErrorStats.from_errors(err) for _, err in problem.sample_errors(x)]
+    km = problem.kinds[0]
+    what = "" if km.kind == "point" else f" ({km.kind} errors)"
+    lines = [f"{robot.name} ({robot.base} -> {robot.tip}) on {e.inputs.data}, {how}{what}:",
+             f"  {stats[0].line()}"]
+    if not e.report:
+        say(lines)
+    else:
+        say_and_write([(e.report, report.dumps({
+            "format": "kincal-evaluation-1", "robot": str(robot.source),
+            "data": str(e.inputs.data), "kind": km.kind, "frames": how,
+            "errors": report.stats_dict(stats[0])}))],
+            lambda written: lines, overwrite=e.overwrite, protect=[robot.source, e.inputs.data])
+    return 0
+
+
+def saved_frames(frames, km, used: set) -> list[float]:
+    """The frame values FRAMES.json holds for a set of ``km``'s kind (the first of that kind
+    not used yet); a point set may read fewer tool points than the file has."""
+    names = tuple(km.frame_names)
+    for j, s in enumerate(frames.sets):
+        if j in used or s.kind != km.kind or not all(n in s.names for n in names):
+            continue
+        used.add(j)
+        return [s.value(n) for n in names]
+    if km.kind == "point":
+        K = km.data.n_points
+        for s in frames.sets:
+            if s.kind == "point" and s.has("tool.x") and len(s.tools) < K:
+                raise DataError(f"{km.data.source} has {K} measured points per pose, "
+                                f"{frames.source} has {len(s.tools)} tool point(s)")
+    have = "; ".join(f"{s.kind} ({', '.join(s.names[:9])})" for s in frames.sets)
+    raise DataError(f"{frames.source} holds no {km.kind} set with frames {', '.join(names)} "
+                    f"for {km.data.source} (it holds: {have})")

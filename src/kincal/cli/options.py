@@ -1,0 +1,318 @@
+"""The options the commands share: their argument groups, and the typed values they become.
+
+Each command's ``run(args)`` turns the argparse Namespace into frozen values once, at its
+top (:func:`typed`, :class:`Chain`, :class:`Inputs`, :class:`AccuracyRequest`); below that
+line only these values travel, and nothing outside ``kincal.cli`` sees a Namespace.
+No numpy at import: ``kincal --help`` builds every parser and loads nothing heavy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import dataclasses
+from dataclasses import dataclass
+
+from kincal.errors import OptionError
+
+
+# ------------------------------------------------------------------ groups
+def group(p, title: str):
+    """The argument group ``title`` of parser ``p`` (made on first use): --help by topic."""
+    groups = p.__dict__.setdefault("_kincal_groups", {})
+    if title not in groups:
+        groups[title] = p.add_argument_group(title)
+    return groups[title]
+
+
+def _joint_column_pair(text: str) -> tuple[str, str]:
+    """argparse type of --joint-columns: URDF_NAME=CSV_NAME."""
+    urdf, eq, column = text.partition("=")
+    if not eq or not urdf.strip() or not column.strip():
+        raise argparse.ArgumentTypeError(f"expected URDF_NAME=CSV_NAME, got {text!r}")
+    return urdf.strip(), column.strip()
+
+
+def add_joint_columns(p, files="DATA"):
+    # "extend": --joint-columns given twice adds to the mapping instead of replacing it
+    group(p, "inputs").add_argument(
+        "--joint-columns", nargs="+", action="extend", type=_joint_column_pair, default=[],
+        metavar="URDF_NAME=CSV_NAME",
+        help=f"read a chain joint from a column of another name in {files} "
+             "(default: the column named as the URDF joint)")
+
+
+def add_units(p, length="positions and prismatic joints in DATA",
+              angle="revolute joints in DATA"):
+    g = group(p, "inputs")
+    g.add_argument("--length-unit", choices=("m", "mm"), default="m",
+                   help=f"unit of {length} (default m)")
+    g.add_argument("--angle-unit", choices=("rad", "deg"), default="rad",
+                   help=f"unit of {angle} (default rad)")
+
+
+def add_common(p, data=True):
+    """ROBOT [DATA], the chain (--tip, --base, --tool-offset) and DATA's columns and units."""
+    inputs, chain = group(p, "inputs"), group(p, "chain")
+    inputs.add_argument("robot", help="URDF path, 'ec66', or an example-robot-data name "
+                        "(ur10, panda, ...)")
+    if data:
+        inputs.add_argument("data", help="CSV with the chain joint names and x,y,z")
+    chain.add_argument("--tip", help="tip frame (link or joint name); default: the robot's usual tip")
+    chain.add_argument("--base", help="base frame (default: the URDF root link)")
+    if data:
+        add_units(p)
+        inputs.add_argument("--position-columns", nargs="+", default=("x", "y", "z"),
+                            metavar="COL", help="names of the position columns: X Y Z, or "
+                            "X1 Y1 Z1 X2 Y2 Z2 ... for several points measured at each pose")
+        inputs.add_argument("--order-column", metavar="COL",
+                            help="column giving the acquisition order (e.g. a time stamp), for "
+                                 "the approach directions of backlash terms; default: the row order")
+        add_joint_columns(p)
+    chain.add_argument("--tool-offset", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                       help="initial guess of the tool point in the tip frame, in the length unit")
+
+
+def add_kinds(p, several: bool = True):
+    """Measurement kinds (poses, distances, plane contacts) and further data files."""
+    g = group(p, "inputs")
+    if several:
+        g.add_argument("more_data", nargs="*", metavar="MORE.csv",
+                       help="further data files, each of its own kind, sharing the robot's "
+                            "parameters (set 2, 3, ...: frame parameters set2.base.x, ...)")
+    g.add_argument("--orientation-columns", nargs=4, metavar=("QX", "QY", "QZ", "QW"),
+                   help="quaternion columns of a pose file (default qx qy qz qw, scalar last)")
+    g.add_argument("--orientation-sigma-deg", type=float,
+                   help="orientation noise of pose files [deg] (default 0.01, against the "
+                        "position sigma, 0.05 mm unless a sigma column says otherwise)")
+    g.add_argument("--set-sigma-mm", nargs="+", type=float, metavar="S",
+                   help="noise of each data file [mm] (position or distance), one per file in "
+                        "order: weighs the files against each other (default: a 'sigma' "
+                        "column, else 0.05 mm)")
+    g.add_argument("--on-plane", action="store_true",
+                   help="files with joint columns only are plane contacts (a 'plane' column "
+                        "names each row's plane)")
+    g.add_argument("--flush", action="store_true",
+                   help="with --on-plane: each contact is a flat face pressed flush on the "
+                        "plane (its height and two tilts; optional 'sigma' [length] and "
+                        "'sigma_deg' columns; tilt noise --orientation-sigma-deg, default 0.05)")
+
+
+def add_model(p, allow_all: bool = False, default: str | None = None, help: str | None = None):
+    from kincal.models import DEFAULT, MODELS, SUITS
+
+    choices = MODELS + (("all",) if allow_all else ())
+    group(p, "model and penalty").add_argument(
+        "--model", choices=choices, default=default, metavar="NAME",
+        help=help or (f"error model (default: {DEFAULT}; placement on a tree path, a base off "
+                      "the tip's branch): " + "; ".join(f"{k}: {v}" for k, v in SUITS.items())
+                      + ("; all: compare every model" if allow_all else "")))
+
+
+def add_accuracy_options(p):
+    g = group(p, "predicted accuracy")
+    g.add_argument("--accuracy-map", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
+                   help="predicted accuracy over a cube: centre and edge in the chain's base "
+                        "frame, in the length unit; grid points reached by inverse kinematics")
+    g.add_argument("--grid", type=int,
+                   help="grid points per edge of the --accuracy-map cube (default 5)")
+    g.add_argument("--accuracy-poses", metavar="POSES.csv",
+                   help="predicted accuracy at these poses instead (chain joint columns)")
+
+
+def add_overwrite(p, help="replace existing output files"):
+    group(p, "outputs").add_argument("--overwrite", action="store_true", help=help)
+
+
+# ------------------------------------------------------------ typed values
+def typed(cls, args: argparse.Namespace, **given):
+    """The frozen dataclass ``cls`` from the Namespace: each field from the attribute of its
+    name (lists become tuples; a missing attribute keeps the field's default), or from
+    ``given``."""
+    values = {}
+    for f in dataclasses.fields(cls):
+        if f.name in given:
+            values[f.name] = given[f.name]
+        elif hasattr(args, f.name):
+            v = getattr(args, f.name)
+            values[f.name] = tuple(v) if isinstance(v, list) else v
+    return cls(**values)
+
+
+def length_scale(unit: str) -> float:
+    """Metres per ``unit`` ("m" or "mm")."""
+    return 1e-3 if unit == "mm" else 1.0
+
+
+def tool_guess(offset, unit: str):
+    """--tool-offset X Y Z in ``unit`` as a tuple [m], or None."""
+    return None if offset is None else tuple(v * length_scale(unit) for v in offset)
+
+
+@dataclass(frozen=True)
+class Chain:
+    """The robot and the chain of it a command works on."""
+
+    robot: str  # URDF path, a bundled name or an example-robot-data name
+    tip: str | None = None  # tip frame; None: the robot's usual tip
+    base: str | None = None  # base frame; None: the URDF root link
+
+    @classmethod
+    def of(cls, args) -> "Chain":
+        return typed(cls, args)
+
+    def load(self):
+        from kincal.robot import Robot
+
+        return Robot.load(self.robot, tip=self.tip, base=self.base)
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """The measurement files of a command and how to read them."""
+
+    files: tuple[str, ...]  # DATA, then MORE.csv ...
+    length_unit: str = "m"  # of positions and prismatic joints in the files
+    angle_unit: str = "rad"  # of revolute joints in the files
+    position_columns: tuple[str, ...] = ("x", "y", "z")
+    order_column: str | None = None  # acquisition order, for backlash approach directions
+    joint_columns: tuple[tuple[str, str], ...] = ()  # (URDF joint, CSV column) pairs
+    orientation_columns: tuple[str, ...] | None = None  # QX QY QZ QW of pose files
+    orientation_sigma_deg: float | None = None  # [deg]
+    set_sigma_mm: tuple[float, ...] | None = None  # [mm], one per file
+    on_plane: bool = False  # joint-only files are plane contacts
+    flush: bool = False  # ... pressed flush: height and two tilts per contact
+    tool_offset: tuple[float, float, float] | None = None  # first guess, in length_unit
+
+    @classmethod
+    def of(cls, args) -> "Inputs":
+        files = (args.data,) + tuple(getattr(args, "more_data", None) or ())
+        return typed(cls, args, files=files)
+
+    @property
+    def data(self) -> str:
+        return self.files[0]
+
+    @property
+    def tool_guess(self):
+        """The tool point's first guess in the tip frame [m], or None."""
+        return tool_guess(self.tool_offset, self.length_unit)
+
+    def joint_map(self) -> dict[str, str] | None:
+        """{URDF joint: CSV column} of --joint-columns, or None."""
+        return joint_map(self.joint_columns)
+
+    def _orientation_sigma_used(self, has_poses: bool) -> None:
+        if self.orientation_sigma_deg is not None and not has_poses:
+            raise OptionError("--orientation-sigma-deg is the orientation noise of pose files "
+                              "(or the tilt noise of flush contacts); none of the data files "
+                              "is one (no qx qy qz qw columns, no --on-plane --flush)")
+
+    def read_sets(self, robot) -> list:
+        """Every data file, each read as its kind, weighted by --set-sigma-mm if given."""
+        import numpy as np
+
+        from kincal.measurements.sets import read_set_file
+
+        from kincal.measurements.kind import SIGMA_RANGE_M
+        from kincal.measurements.sets import kind_of
+
+        if self.flush and not self.on_plane:
+            raise OptionError("--flush describes plane contacts: give it with --on-plane")
+        if self.set_sigma_mm:
+            if len(self.set_sigma_mm) != len(self.files) or min(self.set_sigma_mm) <= 0:
+                raise OptionError(f"--set-sigma-mm takes one positive value per data file: "
+                                  f"{len(self.files)} files, got {list(self.set_sigma_mm)}")
+            lo, hi = SIGMA_RANGE_M
+            for s in self.set_sigma_mm:
+                if not (math.isfinite(s) and lo <= s * 1e-3 <= hi):
+                    raise OptionError(f"--set-sigma-mm {s:g} is outside the accepted range "
+                                      f"{lo * 1e3:g} mm to {hi * 1e3:g} mm (a file's "
+                                      "measurement noise)")
+        pos = self.position_columns if self.position_columns != ("x", "y", "z") else None
+        sets = [read_set_file(path, robot.joint_names, _prismatic(robot), self.length_unit,
+                              self.angle_unit, pos, self.orientation_columns, self.on_plane,
+                              self.orientation_sigma_deg, self.joint_map(), self.order_column,
+                              flush=self.flush)
+                for path in self.files]
+        self._orientation_sigma_used(any(kind_of(d) in ("pose", "flush") for d in sets))
+        if self.set_sigma_mm:
+            sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))
+                    for d, s in zip(sets, self.set_sigma_mm)]
+        return sets
+
+
+def chain_from_frames(chain: Chain, frames) -> Chain:
+    """The chain with base and tip from FRAMES.json where not given; refuse a mismatch.
+
+    Frames identified for one chain mean nothing for another: the tool point lives in
+    the recorded tip frame, the measurement frame is placed against the recorded base."""
+    for role in ("base", "tip"):
+        recorded, given = getattr(frames, f"{role}_frame"), getattr(chain, role)
+        if not recorded:
+            continue  # an older frames file without the chain: nothing to check
+        if given is None:
+            chain = dataclasses.replace(chain, **{role: recorded})
+        elif given != recorded:
+            from kincal.errors import FrameError
+
+            raise FrameError(f"--{role} {given!r} does not match the {role} frame {recorded!r} "
+                             f"recorded in {frames.source} (its frames were identified for "
+                             f"{frames.base_frame} -> {frames.tip_frame}); use --{role} "
+                             f"{recorded} or frames identified for this chain",
+                             valid=(recorded,))
+    return chain
+
+def _prismatic(robot) -> list[str]:
+    return [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
+
+
+def joint_map(pairs) -> dict[str, str] | None:
+    if not pairs:
+        return None
+    mapping: dict[str, str] = {}
+    for urdf, column in pairs:
+        if urdf in mapping:
+            raise OptionError(f"--joint-columns names joint {urdf} twice")
+        mapping[urdf] = column
+    return mapping
+
+
+@dataclass(frozen=True)
+class AccuracyRequest:
+    """Where to predict the accuracy: a cube (--accuracy-map) or poses (--accuracy-poses)."""
+
+    accuracy_map: tuple[float, float, float, float] | None = None  # CX CY CZ EDGE, length unit
+    grid: int = 5  # grid points per edge of the cube
+    accuracy_poses: str | None = None  # POSES.csv
+    length_unit: str = "m"
+    angle_unit: str = "rad"
+
+    @classmethod
+    def of(cls, args) -> "AccuracyRequest":
+        return typed(cls, args)
+
+    @property
+    def asked(self) -> bool:
+        return self.accuracy_map is not None or self.accuracy_poses is not None
+
+    def targets(self, robot) -> dict:
+        """Keyword arguments of the accuracy-map functions; raises on bad values."""
+        import numpy as np
+
+        if self.accuracy_map is not None and self.accuracy_poses is not None:
+            raise OptionError("give at most one of --accuracy-map and --accuracy-poses")
+        k = length_scale(self.length_unit)
+        if self.accuracy_map is not None:
+            from kincal.planning.accuracy_map import cube_grid
+
+            c = self.accuracy_map
+            cube_grid(np.array(c[:3]) * k, c[3] * k, self.grid)  # raises on bad values
+            return {"cube": (np.array(c[:3]) * k, c[3] * k), "grid": self.grid}
+        if self.accuracy_poses is not None:
+            from kincal.planning.candidates import read_candidates
+
+            q, _ = read_candidates(self.accuracy_poses, robot, self.length_unit, self.angle_unit,
+                                   kind="accuracy poses")
+            return {"joint_values": q, "targets": f"the {len(q)} poses of {self.accuracy_poses}"}
+        return {}

@@ -1,0 +1,189 @@
+"""``kincal plan``: choose which poses to measure (D- or I-optimal)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from kincal.cli.checks import check_outputs
+from kincal.cli.console import say_and_write
+from kincal.cli.options import (Chain, add_common, add_joint_columns, add_overwrite, add_units,
+                                group, joint_map, tool_guess, typed)
+from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
+from kincal.errors import OptionError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "plan", help="choose which poses to measure (D-optimal)",
+        description="Choose N of the candidate poses that best determine the parameters "
+        "(D-optimal: largest det of J^T J at the nominal robot). The candidates must be safe, "
+        "reachable and measurable: kincal does not check collisions or line of sight.")
+    add_common(p, data=False)
+    i = group(p, "inputs")
+    i.add_argument("candidates", nargs="?", metavar="CANDIDATES.csv",
+                   help="CSV with the chain joint columns (no positions needed); or use --random")
+    i.add_argument("--random", type=int, metavar="M",
+                   help="instead of a CSV: M random candidates uniform within the joint limits; "
+                        "with --in-cube/--in-sphere: M candidates in the volume (default 2000)")
+    i.add_argument("--seed", type=int, help="seed of --random or of the volume's candidates "
+                   "(default 0)")
+    c = group(p, "choice")
+    c.add_argument("--poses", type=int, required=True, metavar="N", help="poses to choose")
+    i.add_argument("--measured", metavar="DATA.csv",
+                   help="poses already measured (joint columns; other columns ignored): the "
+                        "N new poses are chosen to complement them")
+    group(p, "outputs").add_argument(
+        "--out", required=True,
+        help="CSV of the chosen poses: chain joint columns in SI units (rad, m) whatever the "
+             "input units, in the order chosen, and with a CSV of candidates their line "
+             "numbers there (candidate_line)")
+    add_units(p, length="prismatic joints in CANDIDATES and of --tool-offset",
+              angle="revolute joints in CANDIDATES")
+    c.add_argument("--fix", nargs="+", default=[], metavar="NAME",
+                   help="parameters held nominal (left out of the criterion)")
+    c.add_argument("--noise-mm", type=float, default=0.05,
+                   help="noise per axis [mm] for the predicted standard errors (default 0.05)")
+    add_joint_columns(p, "CANDIDATES and --measured")
+    add_overwrite(p, help="replace an existing output file")
+    add_volume_options(p, "in --length-unit")
+    group(p, "measurement volume").add_argument(
+        "--home", nargs="+", type=float, metavar="J",
+        help="with a volume: a configuration on the arm branch to keep (in "
+             "--angle-unit/--length-unit); default: found automatically")
+    c.add_argument("--criterion", choices=("d", "i"), default="d",
+                   help="d: D-optimal (default); i: I-optimal over --target-cube")
+    c.add_argument("--target-cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
+                   help="with --criterion i: the working volume whose mean predicted position "
+                        "variance is minimised (in --length-unit)")
+    c.add_argument("--target-poses", type=int, metavar="T",
+                   help="poses drawn in the target cube (default 200)")
+    c.add_argument("--kind", choices=("point", "pose", "distance", "plane"), default="point",
+                   help="the measurement kind the poses are for (D-optimal over its Jacobian)")
+    c.add_argument("--pivot", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="--kind distance: guess of the pivot in the base frame, length unit")
+    p.set_defaults(run=run)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The options of ``kincal plan`` (lengths in ``length_unit``)."""
+
+    chain: Chain
+    volume: VolumeRequest
+    candidates: str | None
+    random: int | None
+    seed: int
+    poses: int
+    measured: str | None
+    out: str
+    length_unit: str
+    angle_unit: str
+    fix: tuple[str, ...]
+    noise_mm: float
+    joint_columns: tuple[tuple[str, str], ...]
+    overwrite: bool
+    criterion: str  # d | i
+    target_cube: tuple[float, float, float, float] | None
+    target_poses: int
+    kind: str
+    pivot: tuple[float, float, float] | None
+    tool_offset: tuple[float, float, float] | None
+
+
+def run(args) -> int:
+    p = typed(Plan, args, chain=Chain.of(args), volume=VolumeRequest.of(args))
+    if p.volume.given and p.candidates is not None:
+        raise OptionError("give either CANDIDATES.csv or a volume (--in-cube/--in-sphere)")
+    if not p.volume.given and (p.candidates is None) == (p.random is None):
+        raise OptionError("give exactly one of CANDIDATES.csv, --random M or --in-cube/--in-sphere")
+    if not (math.isfinite(p.noise_mm) and p.noise_mm > 0):
+        raise OptionError(f"--noise-mm must be a positive number, got {p.noise_mm}")
+    if (p.criterion == "i") != (p.target_cube is not None):
+        raise OptionError("--criterion i needs --target-cube CX CY CZ EDGE, and --target-cube "
+                          "is for --criterion i")
+    robot = p.chain.load()
+    check_outputs(robot, [p.out], overwrite=p.overwrite, inputs=[p.candidates, p.measured])
+    return _plan(p, robot)
+
+
+def _plan(p: Plan, robot) -> int:
+    import numpy as np
+
+    from kincal.planning.candidates import candidates_csv_text, random_candidates, read_candidates
+    from kincal.planning.pose_selection import select_poses
+
+    unit = 1e-3 if p.length_unit == "mm" else 1.0
+    tool = tool_guess(p.tool_offset, p.length_unit)
+    tool = (0.0, 0.0, 0.0) if tool is None else tool
+    columns = joint_map(p.joint_columns)
+    spec = volume_spec(p.volume, robot, unit, tool)
+    targets = None
+    if spec is not None:
+        from kincal.planning.volume_candidates import volume_candidates
+
+        m = 2000 if p.random is None else p.random
+        if m < p.poses:
+            raise OptionError(f"--random {m} candidates are fewer than the {p.poses} poses to "
+                              "choose: ask for more candidates or fewer poses")
+        vc = volume_candidates(robot, spec, m, seed=p.seed)
+        q, lines = np.array(vc.joint_values), None
+        source = vc.summary()
+    planes = None
+    if p.kind == "plane" and p.candidates is not None:  # contacts: a plane column
+        from kincal.measurements.plane import PlaneData
+
+        contacts = PlaneData.from_csv(p.candidates, robot.joint_names,
+                                      [n for n, k in zip(robot.joint_names, robot.geometry.kinds)
+                                       if k == "prismatic"], p.length_unit, p.angle_unit,
+                                      joint_columns=columns)
+        planes = contacts.planes if contacts.labels != ("",) else None
+    if p.kind == "plane" and (p.candidates is None or p.measured is not None):
+        raise OptionError("--kind plane plans among contact poses: give CANDIDATES.csv (joint "
+                          "columns and a 'plane' column), without --random or --measured")
+    if p.candidates is not None:
+        q, lines = read_candidates(p.candidates, robot, p.length_unit, p.angle_unit,
+                                   joint_columns=columns)
+        source = f"{len(q)} candidates from {p.candidates}"
+    elif spec is None:
+        q, lines = random_candidates(robot, p.random, p.seed), None
+        source = f"{len(q)} random candidates within the joint limits (seed {p.seed})"
+    measured = np.zeros((0, q.shape[1]))
+    if p.measured is not None:  # poses already measured: kept, and only new ones written
+        measured, _ = read_candidates(p.measured, robot, p.length_unit, p.angle_unit,
+                                      kind="measured poses", joint_columns=columns)
+        source += f", plus the {len(measured)} poses already measured in {p.measured}"
+    k = len(measured)
+    if p.target_cube is not None:
+        from kincal.planning.volume_candidates import Volume, volume_candidates
+
+        c = p.target_cube
+        base_spec = spec if spec is not None else volume_spec(
+            replace(p.volume, in_cube=c), robot, unit, tool)
+        tspec = replace(base_spec, volume=Volume.cube([v * unit for v in c[:3]], c[3] * unit),
+                        home=None if spec is None else tuple(vc.home))
+        targets = np.array(volume_candidates(robot, tspec, p.target_poses,
+                                             seed=p.seed + 1).joint_values)
+        source += (f"\n  {len(targets)} target poses in the {tspec.volume.describe()} (same tilt "
+                   "range and branch)")
+    from kincal.identification.blas_threads import limited
+
+    with limited(1):  # small batched matrices: BLAS threads would only wait for each other
+        selection = select_poses(robot, np.vstack([measured, q]), k + p.poses, tool=tool,
+                                 fix=p.fix, keep=tuple(range(k)), method=p.criterion.upper(),
+                                 targets=targets, kind=p.kind,
+                                 pivot=None if p.pivot is None else np.array(p.pivot) * unit,
+                                 planes=planes)
+    new = [i - k for i in selection.indices if i >= k]
+    protect = [robot.source] + [f for f in (p.candidates, p.measured) if f is not None]
+    said = [f"{source}:", selection.summary(
+        p.noise_mm, checked=None if spec is None else
+        "candidates checked as above; line of sight is not checked")]
+    if k:
+        said.append(f"  (the selection includes the {k} poses already measured; {len(new)} new)")
+    say_and_write([(p.out, candidates_csv_text(
+        selection.joint_names, q[new], None if lines is None else lines[new]))],
+        lambda written: said + [f"  wrote {path} ({len(new)} new poses, joint values in rad "
+                                "and m)" for path in written],
+        overwrite=p.overwrite, protect=protect)
+    return 0

@@ -1,0 +1,286 @@
+"""Issue 24's command-line classes: options silently ignored (3), outputs checked before
+the work (4), path and OS errors (5), console failures (6), misleading messages (8) and
+foreign stderr lines (9). Every refusal is one ``kincal: error:`` line, exit code 1, no
+traceback, no stderr line that is not kincal's, and the folder unchanged (names, bytes,
+modification times)."""
+
+import os
+import shutil
+import stat
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from kincal.cli.main import main
+
+
+def snapshot(folder: Path) -> dict:
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        st = p.lstat()
+        data = p.read_bytes() if stat.S_ISREG(st.st_mode) else None
+        out[str(p.relative_to(folder))] = (stat.S_IFMT(st.st_mode), data, st.st_mtime_ns)
+    return out
+
+
+def check_stderr(err: str, errors: int = 1) -> list[str]:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert not any("Traceback" in line for line in lines), err
+    assert all(line.startswith("kincal: ") for line in lines), err  # nothing foreign
+    found = [line for line in lines if line.startswith("kincal: error:")]
+    assert len(found) == errors, err
+    return found
+
+
+def refused(capsys, argv, folder: Path, code: int = 1) -> str:
+    capsys.readouterr()
+    before = snapshot(folder)
+    assert main(argv) == code
+    line = check_stderr(capsys.readouterr().err)[0]
+    assert snapshot(folder) == before
+    return line
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("inputs")
+    assert main(["simulate", "ec66", "--out", str(d / "points.csv"), "--poses", "30",
+                 "--tool-m", "0.03", "0.02", "0.12"]) == 0
+    assert main(["simulate", "ec66", "--out", str(d / "poses.csv"), "--poses", "30",
+                 "--kind", "pose", "--seed", "1"]) == 0
+    assert main(["calibrate", "ec66", str(d / "points.csv"), "--method", "ls", "--quiet",
+                 "--out", str(d / "cal.urdf"), "--frames-out", str(d / "frames.json")]) == 0
+    return d
+
+
+@pytest.fixture
+def work(inputs, tmp_path, monkeypatch):
+    """A working folder holding copies of the inputs; the tests run in it."""
+    for name in ("points.csv", "poses.csv", "cal.urdf", "frames.json"):
+        shutil.copy2(inputs / name, tmp_path / name)
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+@pytest.fixture
+def readonly(work):
+    """A folder no file can be made in, even by root (a read-only mount then)."""
+    d = work / "ro"
+    d.mkdir()
+    if os.geteuid() != 0:
+        d.chmod(0o555)
+        yield d
+        d.chmod(0o755)
+        return
+    made = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(d)],
+                          capture_output=True)
+    if made.returncode != 0:
+        pytest.skip("running as root without a way to make a read-only folder")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], check=True)
+
+
+@pytest.fixture
+def no_solving(monkeypatch):
+    """Fail the test if a calibration is computed: the refusal must come first."""
+    def solve(*args, **kwargs):
+        raise AssertionError("the calibration ran before the refusal")
+
+    from kincal.identification.problem import CalibrationProblem
+
+    monkeypatch.setattr(CalibrationProblem, "solve", solve)
+
+
+CAL = ["calibrate", "ec66", "points.csv", "--method", "ls", "--out", "c.urdf"]
+PLAN = ["plan", "ec66", "--random", "50", "--poses", "5", "--out", "chosen.csv"]
+SIM = ["simulate", "ec66", "--out", "s.csv", "--poses", "10"]
+
+# ------------------------------------------------ 3: options silently ignored
+IGNORED = [
+    (CAL + ["--orientation-sigma-deg", "0.1"], "--orientation-sigma-deg is the orientation noise"),
+    (CAL + ["--grid", "3"], "--grid is the number of grid points"),
+    (["analyze", "ec66", "points.csv", "--noise-mm", "nan"], "--noise-mm must be a finite"),
+    (["evaluate", "ec66", "points.csv", "--fit-frames", "--orientation-sigma-deg", "1"],
+     "--orientation-sigma-deg"),
+    (PLAN + ["--in-cube", "0.4", "0", "0.3", "0.2", "--floor", "0.1", "--no-floor"],
+     "--floor Z or --no-floor, not both"),
+    (PLAN + ["--floor", "0.1"], "--floor is checked for poses drawn in a volume"),
+    (PLAN + ["--pivot", "0", "0", "0.2"], "--pivot is the guess of the pivot of --kind distance"),
+    (PLAN + ["--kind", "distance", "--pivot", "0", "0", "nan"], "--pivot must be a finite"),
+    (PLAN + ["--target-poses", "50"], "--target-poses is the number of poses"),
+    (PLAN + ["--in-cube", "0.4", "0", "0.3", "0.2", "--home", "0", "0", "0", "nan", "0", "0"],
+     "--home must be a finite"),
+    (SIM + ["--in-cube", "0.4", "0", "0.3", "0.4", "--size-mm", "400"],
+     "--size-mm is not used with --in-cube"),
+    (SIM + ["--in-sphere", "0.4", "0", "0.3", "0.2", "--center-m", "0.4", "0", "0.3"],
+     "--center-m is not used with --in-cube"),
+    (["simulate", "ec66", "--out", "s.csv", "--poses-file", "points.csv", "--poses", "5"],
+     "--poses is not used with --poses-file"),
+    (["simulate", "ec66", "--out", "s.csv", "--poses-file", "points.csv", "--center-m", "0.4",
+      "0", "0.3"], "--center-m is not used with --poses-file"),
+    (SIM + ["--orientation-noise-deg", "0.1"], "orientation noise of --kind pose"),
+    (SIM + ["--kind", "pose", "--orientation-noise-deg", "-1"],
+     "--orientation-noise-deg must be a finite number >= 0"),
+    (SIM + ["--floor", "0"], "--floor is checked for poses drawn in a volume"),
+]
+
+
+@pytest.mark.parametrize("argv, says", IGNORED, ids=[" ".join(a[3:]) for a, _ in IGNORED])
+def test_an_option_that_would_be_ignored_or_is_out_of_range_is_refused(work, capsys, argv, says):
+    assert says in refused(capsys, argv, work)
+
+
+def test_the_defaults_of_options_that_can_be_refused_still_hold(work, capsys):
+    assert main(SIM) == 0  # --poses 10 given; --orientation-noise-deg, --floor left alone
+    assert len((work / "s.csv").read_text().splitlines()) == 11
+    assert main(["simulate", "ec66", "--out", "s60.csv"]) == 0  # --poses default 60
+    assert len((work / "s60.csv").read_text().splitlines()) == 61
+
+
+# ------------------------------------------- 4: outputs checked before the work
+def test_outputs_in_a_read_only_folder_are_refused_before_the_work(work, readonly, capsys,
+                                                                  no_solving):
+    for option, path in (("--plots", "ro/plots"), ("--html", "ro/r.html"),
+                         ("--out", "ro/c.urdf"), ("--yaml-out", "ro/k.yaml"),
+                         ("--report", "ro/r.json")):
+        argv = CAL + [option, path] if option != "--out" else CAL[:-1] + [path]
+        line = refused(capsys, argv, work)
+        assert "cannot write in" in line and "read-only" in line, line
+
+
+def test_demo_in_a_read_only_folder_is_refused_at_once(work, readonly, capsys, monkeypatch):
+    import kincal.experiments.paper_report as experiment
+
+    monkeypatch.setattr(experiment, "demo", lambda *a, **k: pytest.fail("the demo ran"))
+    assert "cannot write in" in refused(capsys, ["demo", "--out", "ro/demo"], work)
+    assert "cannot write in" in refused(capsys, ["demo", "--out", "ro/a/b"], work)
+
+
+def test_existing_outputs_are_refused_before_the_work(work, capsys, no_solving):
+    (work / "k.yaml").write_text("kept\n")
+    assert "already exists" in refused(capsys, CAL + ["--yaml-out", "k.yaml"], work)
+    (work / "m.csv").write_text("kept\n")
+    assert "already exists" in refused(capsys, CAL + ["--mdh-out", "m.csv"], work)
+    several = ["calibrate", "ec66", "points.csv", "poses.csv", "--method", "ls"]
+    (work / "c.urdf").write_text("kept\n")
+    assert "already exists" in refused(capsys, several + ["--out", "c.urdf"], work)
+    assert "same file" in refused(capsys, several + ["--out", "x.urdf", "--frames-out", "x.urdf"],
+                                  work)
+    assert "input file" in refused(capsys, several + ["--out", "poses.csv"], work)
+
+
+# --------------------------------------------------------- 5: path and OS errors
+def test_a_file_name_over_255_bytes_is_one_line(work, capsys):
+    line = refused(capsys, CAL[:-1] + ["a" * 300 + ".urdf"], work)
+    assert "file name too long" in line and len(line) < 300
+
+
+def test_a_path_over_path_max_is_one_line(work, capsys):
+    deep = "/".join(["d" * 200] * 25) + "/c.urdf"  # 5,000 characters
+    assert "too long" in refused(capsys, CAL[:-1] + [deep], work)
+    assert "too long" in refused(capsys, ["calibrate", "ec66", deep, "--out", "c.urdf"], work)
+
+
+def test_an_output_that_is_a_symlink_loop_is_one_line(work, capsys):
+    (work / "loop").symlink_to("loop")
+    assert "symlink loop" in refused(capsys, CAL[:-1] + ["loop"], work)
+    assert "symlink loop" in refused(capsys, CAL + ["--plots", "loop"], work)
+
+
+def test_a_deleted_working_folder_is_one_line(work, capsys, monkeypatch):
+    gone = work / "gone"
+    gone.mkdir()
+    monkeypatch.chdir(gone)
+    gone.rmdir()
+    line = refused(capsys, ["calibrate", "ec66", str(work / "points.csv"), "--method", "ls",
+                            "--out", "c.urdf"], work)
+    assert "working folder no longer exists" in line
+
+
+# ----------------------------------------------------------- 6: console failures
+def _kincal(argv, cwd, stdout=subprocess.PIPE, env=None, shell_suffix=None):
+    if shell_suffix is not None:  # e.g. "2>&-": a redirection only a shell can make
+        import shlex
+
+        command = " ".join(shlex.quote(a) for a in [sys.executable, "-m", "kincal", *argv])
+        return subprocess.run(["sh", "-c", f"{command} {shell_suffix}"], cwd=cwd,
+                              capture_output=True, text=True, timeout=300, env=env)
+    return subprocess.run([sys.executable, "-m", "kincal", *argv], cwd=cwd, stdout=stdout,
+                          stderr=subprocess.PIPE, text=True, timeout=300, env=env)
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
+def test_stdout_on_a_full_disk_writes_nothing_and_says_one_line(work):
+    for argv in (CAL, ["evaluate", "ec66", "points.csv", "--fit-frames", "--report", "r.json"],
+                 ["analyze", "ec66", "points.csv"], SIM):
+        before = snapshot(work)
+        with open("/dev/full", "w") as full:
+            run = _kincal(argv, work, stdout=full)
+        assert run.returncode == 1, run.stderr
+        assert "standard output" in check_stderr(run.stderr)[0]
+        assert snapshot(work) == before
+
+
+def test_an_ascii_console_prints_a_non_ascii_path_escaped(work):
+    (work / "é").mkdir()
+    env = {**os.environ, "PYTHONIOENCODING": "ascii"}
+    run = _kincal(CAL[:-1] + ["é/c.urdf"], work, env=env)
+    assert run.returncode == 0, run.stderr
+    check_stderr(run.stderr, errors=0)
+    assert (work / "é" / "c.urdf").is_file() and "\\xe9" in run.stdout
+
+
+def test_a_closed_stderr_still_runs_and_the_exit_code_tells(work):
+    run = _kincal(CAL, work, shell_suffix="2>&-")
+    assert run.returncode == 0 and (work / "c.urdf").is_file()
+    before = snapshot(work)
+    run = _kincal(CAL, work, shell_suffix="2>&-")  # c.urdf exists: refused, silently
+    assert run.returncode == 1 and snapshot(work) == before
+
+
+# ------------------------------------------------------- 8: misleading messages
+def test_an_empty_frames_file_is_named_as_such(work, capsys):
+    (work / "empty.json").write_text("")
+    for argv in (["evaluate", "ec66", "points.csv", "--frames", "empty.json"],
+                 ["compensate", "cal.urdf", "points.csv", "--frames", "empty.json",
+                  "--out", "j.csv"]):
+        assert "empty.json: the frames file is empty" in refused(capsys, argv, work)
+
+
+def test_two_unnamed_columns_are_named_by_position(work, capsys):
+    (work / "unnamed.csv").write_text("joint_1,,,x\n1,2,3,4\n")
+    line = refused(capsys, ["calibrate", "ec66", "unnamed.csv", "--out", "c.urdf"], work)
+    assert "columns 2-3 hold numbers but have no name" in line and "no name" in line
+
+
+# ----------------------------------------------------- 9: foreign stderr lines
+def test_a_read_only_home_gives_no_matplotlib_lines(work, readonly):
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("MPLCONFIGDIR", "XDG_CONFIG_HOME", "XDG_CACHE_HOME")}
+    env["HOME"] = str(readonly)
+    run = _kincal(CAL + ["--plots", "plots"], work, env=env)
+    assert run.returncode == 0, run.stderr
+    check_stderr(run.stderr, errors=0)
+    assert (work / "plots" / "residuals.png").is_file()
+
+
+def test_a_volume_needs_no_default_cube(work, capsys):
+    """kinova has no default cube: with --in-cube it needs none (no --center-m demanded)."""
+    assert main(["simulate", "kinova", "--out", "k.csv", "--poses", "5",
+                 "--in-cube", "0.4", "0", "0.3", "0.2"]) == 0
+    check_stderr(capsys.readouterr().err, errors=0)
+    line = refused(capsys, ["simulate", "kinova", "--out", "k2.csv", "--poses", "5"], work)
+    assert "--center-m" in line  # without a volume the cube must be given
+
+
+def test_an_unreachable_orientation_is_named_as_the_cause(work, capsys):
+    """z1 reaches the points of this cube, but not with its tip pointing down."""
+    argv = ["simulate", "z1", "--tip", "gripperMover", "--out", "z.csv", "--poses", "5",
+            "--center-m", "0.3", "0", "0.2", "--size-mm", "100"]
+    line = refused(capsys, argv, work)
+    assert "orientation is the cause" in line and "move the cube" not in line
+    assert main(argv + ["--tilt-deg", "180"]) == 0  # any orientation: reached
