@@ -41,6 +41,7 @@ _ERD = {
     "so100": ("so_arm_description/urdf/so100.urdf", None),
     "so101": ("so_arm_description/urdf/so101.urdf", None),
     "talos_left_arm": ("talos_data/robots/talos_left_arm.urdf", None),
+    "talos": ("talos_data/robots/talos_full_v2.urdf", "gripper_left_base_link"),
 }
 
 _BUNDLED = {"ec66": ("ec66.urdf", "flange")}

@@ -100,12 +100,19 @@ class SetFrames:
                 ("x", "y", "z", "qx", "qy", "qz", "qw"),
                 [*map(float, b[:3]), *map(float, matrix_to_quaternion(T[:3, :3]))]))
         if self.has("tool.x", "tool.y", "tool.z"):
-            rot = None
-            if self.has("tool.rx", "tool.ry", "tool.rz"):
-                rot = base_rotation(*(self.value("tool." + c) for c in ANGLE_NAMES))
+            rot = None  # a tool frame (poses), or a contact face's tilt (flush: rx, ry)
+            if any(self.has("tool." + c) for c in ANGLE_NAMES):
+                rot = base_rotation(*(self.value("tool." + c) if self.has("tool." + c) else 0.0
+                                      for c in ANGLE_NAMES))
             for k, t in enumerate(self.tools, start=1):
                 out["T_tip_tool" + ("" if k == 1 else f"_{k}")] = transform(
                     rot if k == 1 else None, t).tolist()
+        planes = sorted({n.split(".")[0] for n in self.names if n.startswith("plane")
+                         and n.endswith(".d")})
+        for p in planes:  # plane{k}: normal Rx(rx) Ry(ry) e_z and offset, in the base frame
+            rx, ry, d = (self.value(f"{p}.{c}") for c in ("rx", "ry", "d"))
+            n = base_rotation(rx, ry, 0.0)[:, 2]
+            out[f"{p}_in_base"] = {"normal": [float(v) for v in n], "offset_m": float(d)}
         return out
 
 
