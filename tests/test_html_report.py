@@ -16,7 +16,8 @@ from conftest import TIAGO_DIR, tiago_urdf
 
 from kincal.cli.main import main
 from kincal.errors import ExportError
-from kincal.export.html_report import html_report, section_ids, write_html_report
+from kincal.export.html_report import html_report, section_ids
+from kincal.export.outputs import Outputs, write_calibration
 from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh
 from kincal.planning.accuracy_map import result_accuracy_map
@@ -106,7 +107,7 @@ def test_every_section_present_and_nothing_external(result, page, tmp_path):
     path = tmp_path / "r.html"
     path.write_text("a user's file")
     with pytest.raises(ExportError, match="already exists"):
-        write_html_report(result, path)
+        write_calibration(result, Outputs(html=path))
     assert path.read_text() == "a user's file"
 
 

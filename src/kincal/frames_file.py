@@ -209,6 +209,10 @@ class CellFrames:
         if _depth(data) > MAX_DEPTH:
             raise DataError(f"{source}: not a kincal frames file (JSON nested more than "
                             f"{MAX_DEPTH} deep)")
+        bad = _non_finite(data)
+        if bad:
+            raise DataError(f"{source}: {bad} is not a finite number; frames are finite "
+                            "values in metres and radians (a corrupted or hand-edited file?)")
         try:
             if data.get("format") == FORMAT:
                 if data.get("version") != VERSION:
@@ -368,6 +372,20 @@ def _backlash(data: dict) -> dict:
     if not isinstance(b, dict):
         raise TypeError("backlash must be an object {joint: value}")
     return {str(j): float(v) for j, v in b.items()}
+
+
+def _non_finite(value, where: str = "") -> str:
+    """The key path of the first NaN or infinite number in a JSON value, or ""."""
+    stack = [(where, value)]
+    while stack:
+        path, v = stack.pop()
+        if isinstance(v, float) and not math.isfinite(v):
+            return path or "a value"
+        if isinstance(v, dict):
+            stack.extend((f"{path}.{k}" if path else str(k), x) for k, x in v.items())
+        elif isinstance(v, list):
+            stack.extend((f"{path}[{i}]", x) for i, x in enumerate(v))
+    return ""
 
 
 def _depth(value, limit: int = MAX_DEPTH + 1) -> int:

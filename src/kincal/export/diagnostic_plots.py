@@ -17,11 +17,12 @@ from kincal.export.plots import _COLORS, _figure, _save, equal_axes_mm
 
 
 def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
-                            source: str = "kincal"):
-    """Position error [mm] of every sample before (frames fitted) and after calibration,
-    in file order, x = the sample's line in the data file."""
-    before = result.sets[0].errors_before * 1e3
-    after = result.sets[0].errors_after * 1e3
+                            source: str = "kincal", set_index: int = 0):
+    """Error [mm] of every sample of set ``set_index`` before (frames fitted) and after
+    calibration, in file order, x = the sample's line in the data file."""
+    s = result.sets[set_index]
+    before = s.errors_before * 1e3
+    after = s.errors_after * 1e3
     k = np.arange(len(after))
     fig = _figure(8.4, 3.6)
     ax = fig.add_subplot()
@@ -29,10 +30,13 @@ def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
     ax.plot(k, before, "o", ms=3.5, color=_COLORS[0], label=f"before (mean {before.mean():.3f} mm)")
     ax.plot(k, after, "o", ms=3.5, color=_COLORS[2], label=f"after (mean {after.mean():.3f} mm)")
     step = max(1, len(k) // 20)
-    ax.set_xticks(k[::step], [str(int(r)) for r in np.asarray(result.rows)[::step]], fontsize=7)
+    ax.set_xticks(k[::step], [str(int(r)) for r in np.asarray(s.rows)[::step]], fontsize=7)
     ax.set_xlabel("sample (line in the data file)")
-    ax.set_ylabel("position error (mm)")
-    ax.set_title("Residuals per sample, before and after calibration", fontsize=10)
+    ax.set_ylabel({"point": "position", "pose": "position and orientation",
+                   "distance": "distance", "plane": "distance to the plane",
+                   "flush": "height"}.get(s.kind, "sample") + " error (mm)")
+    what = "" if len(result.sets) == 1 else f" of set {set_index + 1} ({s.kind}, {s.source})"
+    ax.set_title(f"Residuals per sample{what}, before and after calibration", fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=8)
     return _save(fig, path, overwrite, source)

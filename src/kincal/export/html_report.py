@@ -17,10 +17,9 @@ import base64
 import html
 import math
 
-from kincal.export.safe_write import write_text_atomic
 
 SECTIONS = (("summary", "Summary"), ("identification", "What the data identify"),
-            ("parameters", "Parameters"), ("residuals", "Residuals per sample"),
+            ("parameters", "Parameters"), ("residuals", "Residuals per measurement set"),
             ("joints", "Residuals against the joints"), ("cv", "Choice of lambda"),
             ("accuracy", "Predicted accuracy"), ("warnings", "Warnings and notes"))
 
@@ -50,6 +49,12 @@ def _img(png: bytes, alt: str) -> str:
 
 def _num(v, fmt: str) -> str:
     return "" if v is None or not math.isfinite(v) else format(v, fmt)
+
+
+def _frame_value(name: str, value: float) -> str:
+    """A frame parameter in mm or degrees."""
+    angle = name.rsplit(".", 1)[-1] in ("rx", "ry", "rz")
+    return f"{math.degrees(value) if angle else value * 1e3:.4f}"
 
 
 def _section(sid: str, body: str) -> str:
@@ -203,10 +208,23 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
                                      fold_errors_mm=cv.fold_errors, source=source)
     title = f"kincal calibration of {result.robot.name} ({result.robot.base} -> {result.robot.tip})"
     nav = "".join(f'<a href="#{sid}">{_e(t)}</a>' for sid, t in SECTIONS)
-    residuals = (_img(dp.plot_residuals_per_pose(result, source=source),
-                      "residuals per sample")
-                 + "<p class=\"muted\">Before: nominal kinematics with the measurement frame "
-                   "and tool point fitted; after: the identified model. Distances in mm.</p>")
+    residuals = ""
+    for i, s in enumerate(result.sets):  # a part per measurement set
+        if len(result.sets) > 1:
+            residuals += (f"<h3>Set {i + 1}: {_e(s.kind)} ({_e(s.source)})</h3>"
+                          f"<p>before: {_e(s.before.line())}<br>after: {_e(s.after.line())}"
+                          + (f"<br>orientation after: mean {s.orientation_after_deg:.4f} deg"
+                             if s.orientation_after_deg is not None else "") + "</p>"
+                          + "<table><tr><th class=\"name\">frame parameter</th><th>value</th>"
+                          "<th>unit</th></tr>" + "".join(
+                              f'<tr><td class="name">{_e(n)}</td><td>{_frame_value(n, v)}</td>'
+                              f"<td>{'deg' if n.rsplit('.', 1)[-1] in ('rx', 'ry', 'rz') else 'mm'}"
+                              "</td></tr>" for n, v in zip(s.frame_names, s.frames))
+                          + "</table>")
+        residuals += _img(dp.plot_residuals_per_pose(result, source=source, set_index=i),
+                          f"residuals per sample of set {i + 1}")
+    residuals += ("<p class=\"muted\">Before: nominal kinematics with the sets' frames "
+                  "fitted; after: the identified model. Distances in mm.</p>")
     if result.joint_values is not None:
         joints = _img(dp.plot_residuals_by_joint(result, source=source),
                       "residuals against each joint")
@@ -228,16 +246,6 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
             f"<meta name=\"generator\" content=\"{_e(source)}\">\n<title>{_e(title)}</title>\n"
             f"<style>{_STYLE}</style>\n</head>\n<body>\n<h1>{_e(title)}</h1>\n"
             f"<nav>{nav}</nav>\n{body}</body>\n</html>\n")
-
-
-def write_html_report(result, path, *, overwrite: bool = False, **kwargs):
-    """Write :func:`html_report` to ``path`` atomically; returns the path."""
-    from kincal.export.safe_write import _check_target
-
-    protect = (result.robot.source,) if result.robot.source is not None else ()
-    _check_target(path, overwrite, protect)  # refuse before the (slow) rendering
-    return write_text_atomic(path, html_report(result, **kwargs), overwrite=overwrite,
-                             protect=protect)
 
 
 def section_ids() -> tuple[str, ...]:

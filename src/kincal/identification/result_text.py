@@ -65,8 +65,13 @@ def _angle_label(s) -> str:
 
 def status(result: CalibrationResult) -> list[str]:
     r = result
-    out = [f"  solver: {r.solve.iterations} iterations, {r.solve.reason}"
-           + ("" if r.converged else "  [NOT CONVERGED]")]
+    if r.solve.iterations == 0 and r.converged:  # the penalty's own fits reached the optimum
+        line = ("  solver: converged in the penalty's fits (the final fit started at the "
+                f"optimum: 0 further iterations), {r.solve.reason}")
+    else:
+        line = (f"  solver: {r.solve.iterations} iterations, {r.solve.reason}"
+                + ("" if r.converged else "  [NOT CONVERGED]"))
+    out = [line]
     p = r.plausibility
     if p is not None and not p.plausible:
         out.append("  plausibility gate: IMPLAUSIBLE (" + ", ".join(
