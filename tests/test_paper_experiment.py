@@ -115,10 +115,12 @@ def test_plot_calibration_of_one_result(tmp_path):
     data = measure(model, truth, q, 5e-5, rng)
     res = CalibrationProblem(robot, data, CalibrationOptions(lam="cv", n_lambdas=6,
                                                                 folds=3)).solve()
-    paths = plots.plot_calibration(res, tmp_path)
-    assert [p.name for p in paths] == ["cv_curve.png", "residuals.png", "parameters.png"]
-    for p in paths:
-        assert min(png_size(p)) >= 400 and p.stat().st_size > 10_000
+    figures = plots.calibration_figures(res)
+    assert [name for name, _ in figures] == ["cv_curve.png", "residuals.png", "parameters.png"]
+    assert not list(tmp_path.iterdir())  # nothing is written but through write_calibration
+    for name, png in figures:
+        (tmp_path / name).write_bytes(png)
+        assert min(png_size(tmp_path / name)) >= 400 and len(png) > 10_000
 
 
 def test_demo_writes_its_files_and_the_summary_matches(tmp_path):

@@ -9,7 +9,6 @@ transaction: all of them, or none (:func:`kincal.export.safe_write.write_all`).
 
 from __future__ import annotations
 
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -152,13 +151,11 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
 
 
 def _plots(result, out_dir: Path, accuracy=None) -> list:
-    """(path, png bytes) pairs of the calibration plots, rendered away from ``out_dir``, so
-    the PNGs go to ``out_dir`` in the same transaction as the other files."""
-    from kincal.export.plots import plot_calibration
+    """(path, png bytes) pairs of the calibration plots, so the PNGs go to ``out_dir`` in
+    the same transaction as the other files."""
+    from kincal.export.plots import calibration_figures
 
-    with tempfile.TemporaryDirectory(prefix="kincal-plots-") as tmp:
-        paths = plot_calibration(result, Path(tmp))
-        files = [(out_dir / Path(p).name, Path(p).read_bytes()) for p in paths]
+    files = [(out_dir / name, png) for name, png in calibration_figures(result)]
     if accuracy is not None and len(accuracy.std):
         from kincal.export.diagnostic_plots import plot_accuracy_map
 

@@ -227,21 +227,20 @@ def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
     return _save(fig, path, overwrite, source)
 
 
-def plot_calibration(result, out_dir, overwrite: bool = False,
-                     source: str = "kincal") -> list[Path]:
-    """The figures of one calibration in ``out_dir`` (which must exist); returns the paths.
+def calibration_figures(result, source: str = "kincal") -> list[tuple[str, bytes]]:
+    """(file name, PNG bytes) of the figures of one calibration; nothing is written (the
+    files go out through :func:`kincal.export.outputs.write_calibration`, behind the gate).
 
-    cv_curve.png (if lambda was chosen by cross-validation), residuals.png (position
-    errors on the calibration data before and after calibration) and parameters.png
-    (identified kinematic deviations with one standard error).
+    cv_curve.png (if lambda was chosen by cross-validation), residuals.png (errors of the
+    first set's samples before and after calibration; residuals_set<k>.png for set k >= 2)
+    and parameters.png (identified kinematic deviations with one standard error).
     """
-    out_dir = Path(out_dir)
-    paths = []
+    out = []
     if result.cv is not None:
         cv = result.cv
-        paths.append(plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda,
-                                   out_dir / "cv_curve.png", fold_errors_mm=cv.fold_errors,
-                                   overwrite=overwrite, source=source))
+        out.append(("cv_curve.png", plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda,
+                                                  None, fold_errors_mm=cv.fold_errors,
+                                                  source=source)))
     for i, s in enumerate(result.sets):  # one residual figure per measurement set
         after = s.errors_after * 1e3
         series = [("before (frames fitted)", s.errors_before * 1e3),
@@ -250,17 +249,16 @@ def plot_calibration(result, out_dir, overwrite: bool = False,
         title = (f"Calibration residuals{what}, {len(after)} samples; before: mean "
                  f"{s.before.mean:.3f}, max {s.before.max:.3f} mm")
         name = "residuals.png" if i == 0 else f"residuals_set{i + 1}.png"
-        paths.append(plot_error_distributions(series, out_dir / name, title=title,
-                                              overwrite=overwrite, source=source))
+        out.append((name, plot_error_distributions(series, None, title=title, source=source)))
     kin = list(result.parameters[:result.layout.n_kinematic])
     if any(p.status == "identified" for p in kin):
         how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")
         if result.evidence is not None:  # one weight per class, no single lambda
             how = result.options.method + ", evidence priors"
         weak = {w.name for w in result.identifiability.weak}
-        paths.append(_plot_estimates(kin, out_dir / "parameters.png", overwrite, source,
-                                     f"Identified deviations from nominal ({how})", weak))
-    return paths
+        out.append(("parameters.png", _plot_estimates(
+            kin, None, False, source, f"Identified deviations from nominal ({how})", weak)))
+    return out
 
 
 def _plot_estimates(params, path, overwrite, source, title, weak=frozenset()) -> Path:
