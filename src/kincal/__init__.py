@@ -8,7 +8,7 @@
     write_calibration(result, Outputs(urdf="ec66_calibrated.urdf"))   # the gate, then files
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 from kincal.errors import KincalError, KincalWarning  # noqa: E402
 
