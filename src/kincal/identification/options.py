@@ -48,7 +48,7 @@ class CalibrationOptions:
     length_scale [m], angle_scale [rad]: the unit s of the penalty
         lambda * sum(((x - x0) / s)^2); 1 mm and 1 deg by default, the paper's units.
     fix: parameter names held at their nominal values; shell-style patterns select
-        several (``"*.d"``, ``"joint_[456].*"``, ``"tool.*"``), see ParameterSpace.expand.
+        several (``"*.d"``, ``"joint_[456].*"``, ``"tool.*"``), see ParameterLayout.expand.
     free: parameter names (or patterns) kept in the fit even if the analysis finds them
         redundant (sensible only with method "l2", whose penalty keeps them bounded).
     backlash: chain joints given a backlash term ``<joint>.backlash`` (half the play,

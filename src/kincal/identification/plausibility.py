@@ -4,7 +4,7 @@ Plain numpy. :func:`gather` collects the evidence of a calibration (sizes, resid
 far the corrections move the tool, unit clues) into an :class:`Evidence`; :func:`judge`
 turns it into a frozen :class:`Plausibility` whose findings say what broke which
 threshold, by how much, and the likely causes. ``kincal calibrate`` and
-``CalibrationResult.export_urdf`` refuse an implausible or unconverged result unless the
+``kincal.export.write_calibration`` (the one writer) refuse an implausible or unconverged result unless the
 user accepts it knowingly.
 
 The yardstick is the arm's **reach** L: the length of the chain at zero joint values
