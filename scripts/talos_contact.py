@@ -18,7 +18,7 @@ The validation file's header lacks the 4 leading empty names of the training fil
 kincal refuses it as it is ("the names look shifted"); the script reads its rows by position
 into a file with the training header, as its README says to.
 
-Usage: python scripts/talos_contact.py [--variants]   (about 20 s; --variants: +1 min)
+Usage: python scripts/talos_contact.py [--variants]   (about 3 s; --variants: +6 s)
 """
 
 from __future__ import annotations
@@ -137,9 +137,9 @@ def main(argv=None) -> int:
         rows.append(("nominal model, plane fitted to the training touches",
                      *held_out(urdf, nominal_frames(folder, urdf), q_train, q_valid, names)))
         train = DATA / "left_train.csv"  # kincal reads the log as it is (metadata skipped)
-        variants = [("kincal defaults (placement model, lambda auto)", ())]
+        variants = [("kincal defaults (placement model, lambda auto: evidence)", ())]
         if args.variants:
-            variants += [("kincal, --lambda evidence", ("--lambda", "evidence")),
+            variants += [("kincal, --lambda cv", ("--lambda", "cv")),
                          ("kincal, --model offsets", ("--model", "offsets")),
                          ("kincal, tilt sigma 0.02 deg", ("--orientation-sigma-deg", "0.02"))]
         for k, (label, extra) in enumerate(variants):
@@ -147,10 +147,11 @@ def main(argv=None) -> int:
             rows.append((label, *held_out(cal, frames, q_train, q_valid, names)))
     print(f"TALOS left sole -> left gripper, flush table touches: {len(q_train)} training "
           f"(2022-10-28), {len(q_valid)} held-out (2022-11-07); held-out RMS")
-    print(f"| {'model':<52} | height [mm] | roll [deg] | pitch [deg] |")
-    print(f"|{'-' * 54}|-------------|------------|-------------|")
+    width = max(len(label) for label, *_ in rows)
+    print(f"| {'model':<{width}} | height [mm] | roll [deg] | pitch [deg] |")
+    print(f"|{'-' * (width + 2)}|-------------|------------|-------------|")
     for label, h, r, p in rows:
-        print(f"| {label:<52} | {h:11.2f} | {r:10.2f} | {p:11.2f} |")
+        print(f"| {label:<{width}} | {h:11.2f} | {r:10.2f} | {p:11.2f} |")
     return 0
 
 

@@ -50,3 +50,27 @@ def test_ambiguous_and_bad_files_one_line_error(tmp_path, capsys):
     assert code == 1 and err.count("\n") == 1 and "kincal: error:" in err
     assert "is it distances to a pivot or measured points?" in err
     assert not (tmp_path / "c.urdf").exists()
+
+
+def test_flush_contacts_from_simulation_to_calibration_and_plan(tmp_path, capsys):
+    """--kind flush end to end: simulated touches within the joint limits, calibrated with
+    --on-plane --flush (heights to the noise), evaluated from the frames, planned among."""
+    data, out, frames = tmp_path / "f.csv", tmp_path / "c.urdf", tmp_path / "f.json"
+    assert main(["simulate", "ec66", "--kind", "flush", "--poses", "30", "--out", str(data),
+                 "--seed", "3"]) == 0
+    assert main(["calibrate", "ec66", str(data), "--on-plane", "--flush", "--tool-offset", "0",
+                 "0", "0.1", "--out", str(out), "--frames-out", str(frames)]) == 0
+    text = capsys.readouterr().out
+    assert "flush" in text and "tilt against the plane after" in text
+    after = float(text.split("after:  mean ")[1].split()[0])
+    assert after < 0.1  # [mm] heights to the 0.05 mm noise
+    saved = json.loads(frames.read_text())
+    assert saved["sets"][0]["kind"] == "flush"
+    assert any(k.startswith("plane") and k.endswith("_in_base") for k in saved["sets"][0])
+    assert main(["evaluate", str(out), str(data), "--frames", str(frames), "--on-plane",
+                 "--flush"]) == 0
+    assert "(flush errors)" in capsys.readouterr().out
+    assert main(["plan", "ec66", str(data), "--kind", "flush", "--poses", "10",
+                 "--tool-offset", "0.02", "0", "0.1", "--out", str(tmp_path / "p.csv")]) == 0
+    assert main(["simulate", "ec66", "--kind", "point", "--orientation-noise-deg", "0.1",
+                 "--out", str(tmp_path / "x.csv")]) == 1

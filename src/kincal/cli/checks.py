@@ -98,15 +98,17 @@ def _check_simulate(args) -> None:
         for option, value in (("--center-m", args.center_m), ("--size-mm", args.size_mm)):
             _need(value is None, f"{option} is not used with --in-cube/--in-sphere (the volume "
                   "gives the centre and the size)")
-    _need(args.orientation_noise_deg is None or args.kind == "pose",
-          "--orientation-noise-deg is the orientation noise of --kind pose")
+    _need(args.orientation_noise_deg is None or args.kind in ("pose", "flush"),
+          "--orientation-noise-deg is the orientation noise of --kind pose (or the tilt "
+          "noise of --kind flush)")
     _finite("--orientation-noise-deg", args.orientation_noise_deg, 0, 10)
     for option in ("tilt_direction", "in_cube", "in_sphere"):
         _finite("--" + option.replace("_", "-"), getattr(args, option))
     _finite("--max-tilt", args.max_tilt, 0, 180)
     _check_floor(args, volume)
     args.poses = 60 if args.poses is None else args.poses
-    args.orientation_noise_deg = (0.01 if args.orientation_noise_deg is None
+    default = 0.05 if args.kind == "flush" else 0.01  # a face's tilt, a tracker's orientation
+    args.orientation_noise_deg = (default if args.orientation_noise_deg is None
                                   else args.orientation_noise_deg + 0.0)
 
 

@@ -58,7 +58,8 @@ def register(subparsers) -> None:
                         "variance is minimised (in --length-unit)")
     c.add_argument("--target-poses", type=int, metavar="T",
                    help="poses drawn in the target cube (default 200)")
-    c.add_argument("--kind", choices=("point", "pose", "distance", "plane"), default="point",
+    c.add_argument("--kind", choices=("point", "pose", "distance", "plane", "flush"),
+                   default="point",
                    help="the measurement kind the poses are for (D-optimal over its Jacobian)")
     c.add_argument("--pivot", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="--kind distance: guess of the pivot in the base frame, length unit")
@@ -130,7 +131,7 @@ def _plan(p: Plan, robot) -> int:
         q, lines = np.array(vc.joint_values), None
         source = vc.summary()
     planes = None
-    if p.kind == "plane" and p.candidates is not None:  # contacts: a plane column
+    if p.kind in ("plane", "flush") and p.candidates is not None:  # contacts: a plane column
         from kincal.measurements.plane import PlaneData
 
         contacts = PlaneData.from_csv(p.candidates, robot.joint_names,
@@ -138,9 +139,9 @@ def _plan(p: Plan, robot) -> int:
                                        if k == "prismatic"], p.length_unit, p.angle_unit,
                                       joint_columns=columns)
         planes = contacts.planes if contacts.labels != ("",) else None
-    if p.kind == "plane" and (p.candidates is None or p.measured is not None):
-        raise OptionError("--kind plane plans among contact poses: give CANDIDATES.csv (joint "
-                          "columns and a 'plane' column), without --random or --measured")
+    if p.kind in ("plane", "flush") and (p.candidates is None or p.measured is not None):
+        raise OptionError(f"--kind {p.kind} plans among contact poses: give CANDIDATES.csv "
+                          "(joint columns and a 'plane' column), without --random or --measured")
     if p.candidates is not None:
         q, lines = read_candidates(p.candidates, robot, p.length_unit, p.angle_unit,
                                    joint_columns=columns)

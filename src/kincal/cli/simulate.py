@@ -23,11 +23,13 @@ def register(subparsers) -> None:
     m = group(p, "measurement")
     m.add_argument("--design", choices=("tracker", "rtest"), default="tracker",
                    help="tracker: 400 mm cube; rtest: 20 mm cube, varied orientation")
-    m.add_argument("--kind", choices=("point", "pose", "distance", "plane"), default="point",
+    m.add_argument("--kind", choices=("point", "pose", "distance", "plane", "flush"),
+                   default="point",
                    help="what is measured: points (default), 6-DoF tool poses, distances to "
                         "a pivot 0.3 m below the poses, contacts with 3 planes through them")
     m.add_argument("--orientation-noise-deg", type=float,
-                   help="sd of orientation noise per axis [deg] (--kind pose; default 0.01)")
+                   help="sd of orientation noise per axis [deg] (--kind pose, default 0.01; "
+                        "--kind flush: of the face's two tilts, default 0.05)")
     m.add_argument("--poses", type=int, help="poses to simulate (default 60)")
     m.add_argument("--center-m", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="cube centre in the base frame [m]")
@@ -66,7 +68,7 @@ class Simulate:
     model: str
     out: str
     design: str  # tracker | rtest
-    kind: str  # point | pose | distance | plane
+    kind: str  # point | pose | distance | plane | flush
     orientation_noise_deg: float
     poses: int
     center_m: tuple[float, float, float] | None
@@ -182,6 +184,15 @@ def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str
     elif s.kind == "distance":
         pivot = np.mean(ks.tool_points(model, table, q, tool), axis=0) + [0.0, 0.0, -0.3]
         data = ks.simulate_distances(model, table, pivot, tool, q, noise, rng, source="simulated")
+    elif s.kind == "flush":  # a table through the middle of the poses' tool points
+        c = np.mean(ks.tool_points(model, table, q, tool), axis=0)
+        g = robot.geometry
+        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        cand = np.vstack([q, rng.uniform(lo, hi, size=(40 * len(q), g.n))])
+        data = ks.simulate_flush(model, table, np.r_[tool, 0.0, 0.0], [[0.0, 0.0, c[2]]],
+                                 cand, len(q), noise, s.orientation_noise_deg, rng,
+                                 source="simulated", limits=(lo, hi))
     else:  # three planes through the middle of the poses' tool points: a table, two walls
         c = np.mean(ks.tool_points(model, table, q, tool), axis=0)
         planes = np.array([[0.0, 0.0, c[2]], [0.0, math.pi / 2, c[0]],

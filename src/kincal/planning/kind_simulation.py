@@ -103,16 +103,19 @@ def flush_offsets(model, kin, q, contact, n, d) -> np.ndarray:
 
 
 def simulate_flush(model, kin, contact, planes, candidates, per_plane, noise, noise_deg, rng,
-                   source="<simulated flush touches>") -> FlushData:
+                   source="<simulated flush touches>", limits=None) -> FlushData:
     """contact: (5,) the contact frame on the tip (x, y, z [m], rx, ry [rad]); planes:
     (k, 3) rows (rx, ry [rad], d [m]); candidates: (M, n) joint values to start from (those
-    whose contact frame is nearest flush with each plane are used, ``per_plane`` of them)."""
+    whose contact frame is nearest flush with each plane are used, ``per_plane`` of them).
+    limits: (lower (n,), upper (n,)) joint limits the touches must respect, or None (then
+    three times as many starts are tried and the first within the limits kept)."""
     planes = np.atleast_2d(np.asarray(planes, float))
     qs, ks = [], []
     for j, (rx, ry, d) in enumerate(planes):
         n = normal(rx, ry)
         off = flush_offsets(model, kin, candidates, contact, n, d)
-        near = np.argsort(np.abs(off[:, 0]) / 0.1 + np.hypot(off[:, 1], off[:, 2]))[:per_plane]
+        want = per_plane if limits is None else 3 * per_plane
+        near = np.argsort(np.abs(off[:, 0]) / 0.1 + np.hypot(off[:, 1], off[:, 2]))[:want]
         q = candidates[near].copy()
         target = np.column_stack([rng.normal(size=len(q)) * noise,
                                   rng.normal(size=(len(q), 2)) * np.radians(noise_deg)])
@@ -126,9 +129,15 @@ def simulate_flush(model, kin, contact, planes, candidates, per_plane, noise, no
             dq = np.stack([np.linalg.pinv(G[i]) @ g[i] for i in range(len(q))])
             scale = np.minimum(1.0, 0.3 / np.maximum(np.abs(dq).max(axis=1), 1e-12))
             q = q - dq * scale[:, None]
-        if np.max(np.abs(g)) > 1e-9:
-            raise OptionError(f"plane {j + 1}: could not bring the contact frame flush with it; "
+        ok = np.max(np.abs(g), axis=1) <= 1e-9
+        if limits is not None:
+            lo, hi = limits
+            ok &= np.all((q >= lo - 1e-9) & (q <= hi + 1e-9), axis=1)
+        if ok.sum() < per_plane:
+            raise OptionError(f"plane {j + 1}: could not bring the contact frame flush with it "
+                              f"within the joint limits ({int(ok.sum())} of {per_plane} touches); "
                               "choose a plane the contact frame can lie flush on")
+        q = q[ok][:per_plane]
         qs.append(q)
         ks.append(np.full(len(q), j))
     return FlushData(joint_names=model.joint_names, joint_values=np.vstack(qs),
