@@ -18,7 +18,7 @@ from kincal.errors import KincalError, KincalWarning, OptionError
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("calibrate", help="identify the kinematics and write a corrected URDF")
-    add_common(p)
+    add_common(p, chains=True)
     add_kinds(p)
     add_model(p)
     g = group(p, "model and penalty")
@@ -150,16 +150,17 @@ def run(args) -> int:
 
     c = typed(Calibrate, args, chain=Chain.of(args), inputs=Inputs.of(args),
               accuracy=AccuracyRequest.of(args))
-    robot = c.chain.load()
+    robots = Chain.load_all(c.chain.per_file(len(c.inputs.files)))  # each file's chain
+    robot = robots[0]
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=c.inputs.files,
                   dirs=[c.plots])
-    sets = c.inputs.read_sets(robot)  # every file, each read as its kind
+    sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain
     options = calibration_options(c)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
         warnings.simplefilter("always", KincalWarning)
         targets = c.accuracy.targets(robot)  # bad values fail here, before solving
         try:
-            result = CalibrationProblem(robot, sets, options).solve()
+            result = CalibrationProblem(robots, sets, options).solve()
         finally:
             if options.solver.progress is not None:
                 options.solver.progress.close()
