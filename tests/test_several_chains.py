@@ -288,6 +288,8 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith(f"kincal: error: {what} takes one frame")
         assert "2 data files, 3 " in err[0]
+    assert main(["calibrate", urdf, *files, "--shared-plane", "--out", str(out)]) == 1
+    assert "--shared-plane shares the planes of plane contacts" in capsys.readouterr().err
     assert {p: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -307,3 +309,102 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
             P = (T[:, :3, 3] + T[:, :3, :3] @ s.tools[0]) @ base_rotation(*s.base[3:]).T
             errors.append(np.abs(P + s.base[:3] - truth).max())
         assert errors[1] < 0.1e-3 and errors[1] < 0.1 * errors[0], errors
+
+
+def test_talos_two_arms_one_corrected_urdf(tmp_path):
+    """TALOS standing on both soles, each arm its chain: the torso's origins once in the
+    union; the corrected URDF is the one original file with every traversed origin
+    corrected, and Pinocchio reloads each chain from it as the chain models predict
+    (< 1e-12 m, rad)."""
+    from kincal.descriptions import erd_robots_dir
+    from kincal.export.readable_export import corrected_text
+
+    root = erd_robots_dir()
+    path = None if root is None else root / "talos_data" / "robots" / "talos_full_v2.urdf"
+    if path is None or not path.exists():
+        pytest.skip("example-robot-data's TALOS is not installed")
+    arms = [Robot.load(path, base=f"{s}_sole_link", tip=f"gripper_{s}_base_link")
+            for s in ("left", "right")]
+    ch = Chains(arms, 2)
+    assert sum(n.startswith("torso_2_joint.") for n in ch.model.names) == 6
+    rng = np.random.default_rng(0)
+    kin = rng.normal(0, 5e-3, ch.model.size)  # 5 mm, 0.3 deg on every origin
+    edits, _ = corrected_text(arms[0], arms[0].with_origins(ch.origins(kin)), readable=False,
+                              joints=ch.model.joint_names)
+    assert {e.joint for e in edits.edits if e.changed} == set(ch.model.joint_names)
+    out = tmp_path / "talos_cal.urdf"
+    out.write_text(edits.text)
+    for k, arm in enumerate(arms):
+        back = Robot.load(out, base=arm.base, tip=arm.tip)
+        q = _q(arm, 20, rng)
+        s = Chain(ch.models[k], q).state(kin[ch.idx[k]], None, keep=False)
+        T = back.tip_poses(q)
+        assert np.abs(T[:, :3, 3] - s.p_tip).max() < 1e-12
+        assert np.abs(T[:, :3, :3] - s.R_tip).max() < 1e-12
+
+
+def _plane_touches(robot, true, n, rng, height, tool):
+    """Joint values (n, ...) putting ``tool`` (tip frame) of the true robot on the plane
+    z = height of the base frame (inverse kinematics from random starts)."""
+    out = []
+    while len(out) < n:
+        q0 = _q(robot, 1, rng)[0]
+        T = true.tip_poses(q0[None])[0]
+        p = T[:3, 3] + T[:3, :3] @ tool
+        q, ok = true.inverse_kinematics(np.r_[p[:2], height], tool, start=q0)
+        if ok:
+            out.append(q)
+    return np.array(out)
+
+
+def _shared_plane_sets(tmp_path, rng):
+    from kincal.measurements.plane import PlaneData
+
+    text, _ = random_tree(np.random.default_rng(3))
+    path = tmp_path / "tree.urdf"
+    path.write_text(text)
+    robots = [Robot.load(path, base="ctip", tip=t) for t in ("atip", "btip")]  # one base
+    ch, kin, true = _truth(robots, 1e-3, rng)
+    sets = [PlaneData(joint_names=robots[k].joint_names, source=f"touches{k + 1}",
+                      joint_values=_plane_touches(robots[k], true[k], 30, rng, 0.1, TOOLS[k]))
+            for k in range(2)]
+    return robots, sets
+
+
+def test_shared_plane_one_set_of_plane_parameters(tmp_path):
+    """Two chains from one base touching one plane: --shared-plane gives one plane.*, its
+    Jacobian columns right (central differences), and noise-free touches are fitted to
+    zero; chains from different bases are refused."""
+    rng = np.random.default_rng(8)
+    robots, sets = _shared_plane_sets(tmp_path, rng)
+    o = CalibrationOptions(method="ls", shared_planes=True, tool_guess=tuple(TOOLS[0]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = CalibrationProblem(robots, sets, o)
+        alone = CalibrationProblem(robots, sets, CalibrationOptions(method="ls"))
+    names = p.layout.names
+    assert "plane.d" in names and "set2.plane.d" not in names and "set2.tool.x" in names
+    assert p.layout.size == alone.layout.size - 3
+    at = [np.arange(p.layout.size)[p.layout.frame_slices[i]] for i in range(2)]
+    for name in ("plane.rx", "plane.ry", "plane.d"):  # set 2 reads set 1's plane
+        assert at[1][p.layout.frame_names(1).index(name)] == at[0][
+            p.layout.frame_names(0).index(name)]
+    u = p.start() / p.scale + rng.normal(0, 0.5, p.layout.size)
+    f = p.residual_function()
+    _, J = f(u, True)
+    D = np.empty_like(J)
+    for k in range(len(u)):
+        e = np.zeros(len(u))
+        e[k] = STEP
+        D[:, k] = (f(u + e, False)[0] - f(u - e, False)[0]) / (2 * STEP)
+    assert np.abs(J - D).max() < 1e-6 * max(1.0, np.abs(D).max())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = p.solve()
+    assert max(s.after.max for s in res.sets) < 1e-6  # [mm]
+    plane = [[s.frame(n) for n in ("plane.rx", "plane.ry", "plane.d")] for s in res.sets]
+    assert plane[0] == plane[1]
+    other = Robot.load(robots[0].source, base="atip", tip="btip")
+    with pytest.raises(OptionError, match="--shared-plane: set 2 .* base 'atip'.* one base"):
+        CalibrationProblem([robots[0], other], [sets[0], type(sets[1])(
+            joint_names=other.joint_names, joint_values=_q(other, 30, rng))], o)

@@ -196,6 +196,30 @@ class Chains:
         return MappedKind(km, self.idx[c], np.array([backlash.index(j) for j in mine], int),
                           self.model.size, len(backlash))
 
+    def shared_planes(self, kinds) -> tuple[tuple[int, ...], ...]:
+        """The layout's aliases (:class:`kincal.identification.layout.ParameterLayout`) when
+        the files touch the same physical planes: every plane or flush set's plane
+        parameters (``plane.*``, or ``plane<label>.*`` per label of a ``plane`` column) are
+        those of the first such set with that name; () when none is shared. A plane is
+        fitted in its chain's base frame: sets on chains with different bases are refused."""
+        owner: dict[str, int] = {}
+        out, shared = [], False
+        for i, km in enumerate(kinds):
+            row = []
+            for name in km.frame_names:
+                j = owner.setdefault(name, i) if (km.kind in ("plane", "flush")
+                                                  and name.startswith("plane")) else i
+                if j != i and self.robots[j].base != self.robots[i].base:
+                    raise OptionError(
+                        f"--shared-plane: set {i + 1} ({km.data.source}) is measured from base "
+                        f"{self.robots[i].base!r}, set {j + 1} from {self.robots[j].base!r}; a "
+                        "plane is fitted in its chain's base frame, so only sets of chains "
+                        "with one base can share it (give those chains one --base)")
+                row.append(-1 if j == i else j)
+                shared |= j != i
+            out.append(tuple(row))
+        return tuple(out) if shared else ()
+
     def chain_of(self, i: int):
         """(error model, (p_c,) its parameters' positions in the union) of set i's chain."""
         c = self.of_set[i]

@@ -66,7 +66,8 @@ class CalibrationProblem:
         self.model_name, self.error_model = ch.model_name, ch.model
         backlash = ch.backlash(o.backlash)
         self.kinds = [ch.kind(i, d, backlash) for i, d in enumerate(sets)]
-        self.layout = ParameterLayout.of(ch.model, self.kinds, o.backlash)
+        self.layout = ParameterLayout.of(ch.model, self.kinds, o.backlash,
+                                         ch.shared_planes(self.kinds) if o.shared_planes else ())
         self.scale = np.where(self.layout.is_length, o.length_scale, o.angle_scale)
         self.offsets = np.cumsum([0] + [km.N for km in self.kinds])
         stated = [km.data.sigma is not None for km in self.kinds]
@@ -237,11 +238,13 @@ class CalibrationProblem:
         nominal = self.error_model.nominal
         for i, km in enumerate(self.kinds):
             self._unit_warnings(km)
-            if km.kind == "point":
-                x[lay.frame_slices[i]] = km.start(nominal, o.tool_guess,
-                                                  o.base_guess if i == 0 else None)
-            else:
-                x[lay.frame_slices[i]] = km.start(nominal, o.tool_guess)
+            fs, own = lay.frame_slices[i], np.array(lay.own(i), dtype=bool)
+            v = (km.start(nominal, o.tool_guess, o.base_guess if i == 0 else None)
+                 if km.kind == "point" else km.start(nominal, o.tool_guess))
+            if not own.all():  # a shared plane keeps the first set's start
+                v = getattr(km, "adopt", lambda v, given, own: np.where(own, v, given))(
+                    v, x[fs], own)
+            x[fs] = v
         free = lay.is_frame & self._unfixed()
         if o.tool_guess is not None:  # a fixed tool point is held where the user put it
             for i in range(lay.n_sets):
