@@ -305,6 +305,20 @@ class CellFrames:
                                    else f"shape {T.shape}")
                                 + "); fix one of them or write the file anew")
 
+    def for_chain(self, base: str | None, tip: str | None) -> "CellFrames":
+        """The frames of the sets measured on the chain ``base`` -> ``tip`` (None: as
+        recorded) when that is another chain of a calibration of several (not the file's
+        top-level one); this file otherwise. The chain hash and joints recorded are the
+        top-level chain's: the selected chain is checked by its base and tip."""
+        base, tip = base or self.base_frame, tip or self.tip_frame
+        if (base, tip) == (self.base_frame, self.tip_frame):
+            return self
+        mine = tuple(s for s in self.sets if (s.base_frame, s.tip_frame) == (base, tip))
+        if not mine:
+            return self
+        return CellFrames(self.robot, "", base, tip, (), mine,
+                          {j: v for j, v in self.backlash.items()}, self.source)
+
     # ------------------------------------------------------------ checks
     def check_chain(self, robot) -> None:
         """Refuse frames identified on another robot or chain than ``robot``'s."""
