@@ -12,7 +12,7 @@ import pytest
 from chains import random_tree
 
 from kincal.cli.main import main
-from kincal.errors import ChainError, KincalError, OptionError
+from kincal.errors import ChainError, OptionError
 from kincal.export.outputs import corrected_urdf_text
 from kincal.frames_file import CellFrames
 from kincal.identification.chains import Chains
@@ -320,38 +320,6 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
     assert len(rms) == 2 and max(rms) < 0.05, said  # [mm]: noise 0.01 mm per axis
 
 
-def test_talos_two_arms_one_corrected_urdf(tmp_path):
-    """TALOS standing on both soles, each arm its chain: the torso's origins once in the
-    union; the corrected URDF is the one original file with every traversed origin
-    corrected, and Pinocchio reloads each chain from it as the chain models predict
-    (< 1e-12 m, rad)."""
-    from kincal.descriptions import erd_robots_dir
-    from kincal.export.readable_export import corrected_text
-
-    root = erd_robots_dir()
-    path = None if root is None else root / "talos_data" / "robots" / "talos_full_v2.urdf"
-    if path is None or not path.exists():
-        pytest.skip("example-robot-data's TALOS is not installed")
-    arms = [Robot.load(path, base=f"{s}_sole_link", tip=f"gripper_{s}_base_link")
-            for s in ("left", "right")]
-    ch = Chains(arms, 2)
-    assert sum(n.startswith("torso_2_joint.") for n in ch.model.names) == 6
-    rng = np.random.default_rng(0)
-    kin = rng.normal(0, 5e-3, ch.model.size)  # 5 mm, 0.3 deg on every origin
-    edits, _ = corrected_text(arms[0], arms[0].with_origins(ch.origins(kin)), readable=False,
-                              joints=ch.model.joint_names)
-    assert {e.joint for e in edits.edits if e.changed} == set(ch.model.joint_names)
-    out = tmp_path / "talos_cal.urdf"
-    out.write_text(edits.text)
-    for k, arm in enumerate(arms):
-        back = Robot.load(out, base=arm.base, tip=arm.tip)
-        q = _q(arm, 20, rng)
-        s = Chain(ch.models[k], q).state(kin[ch.idx[k]], None, keep=False)
-        T = back.tip_poses(q)
-        assert np.abs(T[:, :3, 3] - s.p_tip).max() < 1e-12
-        assert np.abs(T[:, :3, :3] - s.R_tip).max() < 1e-12
-
-
 def _plane_touches(robot, true, n, rng, height, tool):
     """Joint values (n, ...) putting ``tool`` (tip frame) of the true robot on the plane
     z = height of the base frame (inverse kinematics from random starts)."""
@@ -417,3 +385,4 @@ def test_shared_plane_one_set_of_plane_parameters(tmp_path):
     with pytest.raises(OptionError, match="--shared-plane: set 2 .* base 'atip'.* one base"):
         CalibrationProblem([robots[0], other], [sets[0], type(sets[1])(
             joint_names=other.joint_names, joint_values=_q(other, 30, rng))], o)
+

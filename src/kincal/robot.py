@@ -443,7 +443,7 @@ class Robot:
         Damped least squares, clipped to the joint limits. Returns (q (n,), converged).
         """
         g = self.geometry
-        lo, hi = np.where(np.isfinite(g.lower), g.lower, -np.pi), np.where(np.isfinite(g.upper), g.upper, np.pi)
+        lo, hi = (np.where(np.isfinite(b), b, s * np.pi) for b, s in ((g.lower, -1), (g.upper, 1)))
         q = np.clip(np.zeros(g.n) if start is None else np.asarray(start, float), lo, hi)
         target, tool = np.asarray(position, float), np.asarray(tool, float)
         for _ in range(max_iterations):
