@@ -290,6 +290,9 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
         assert "2 data files, 3 " in err[0]
     assert main(["calibrate", urdf, *files, "--shared-plane", "--out", str(out)]) == 1
     assert "--shared-plane shares the planes of plane contacts" in capsys.readouterr().err
+    assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
+                 "btip", "--accuracy-map", "0", "0", "0", "0.1", "--out", str(out)]) == 1
+    assert "describe one chain; this calibration has several" in capsys.readouterr().err
     assert {p: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

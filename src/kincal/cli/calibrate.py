@@ -163,6 +163,9 @@ def run(args) -> int:
                           "--on-plane (the files of joint columns are then plane contacts)")
     robots = Chain.load_all(c.chain.per_file(len(c.inputs.files)))  # each file's chain
     robot = robots[0]
+    if c.accuracy.asked and len({(r.base, r.tip) for r in robots}) > 1:
+        raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
+                          "calibration has several (one --base/--tip per file)")
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=c.inputs.files,
                   dirs=[c.plots])
     sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain
@@ -189,7 +192,7 @@ def run(args) -> int:
     if targets or c.html:
         from kincal.planning.accuracy_map import result_accuracy_map
 
-        if result.covariance is not None or targets:
+        if (result.covariance is not None or targets) and not result.chains.several:
             amap = result_accuracy_map(result, **targets)
 
     def lines(written, notes):
