@@ -112,8 +112,9 @@ def test_two_chain_jacobian_against_central_differences(tmp_path):
     sets.append(FlushData(joint_names=robots[1].joint_names, joint_values=_q(robots[1], 8, rng)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        p = CalibrationProblem([robots[0], robots[1], robots[1]], sets)
-    assert p.chains.several
+        p = CalibrationProblem([robots[0], robots[1], robots[1]], sets,
+                               CalibrationOptions(backlash=("aj1", "tj2", "bj1")))
+    assert p.chains.several and p.layout.backlash == ("tj2", "aj1", "bj1")  # union order
     u = p.start() / p.scale + rng.normal(0, 0.5, p.layout.size)  # off the start: mm, deg
     f = p.residual_function()
     _, J = f(u, True)

@@ -129,7 +129,9 @@ class CalibrationProblem:
         """Joint values outside the URDF limits or in the wrong angle unit, and backlash
         joints seen from one direction only: warnings, per set."""
         for i, km in enumerate(self.kinds):
-            for message in set_warnings(km.data, self.robots[i].geometry, self.layout.backlash):
+            g = self.robots[i].geometry  # the set's own chain, and its backlash joints
+            for message in set_warnings(km.data, g, [j for j in self.layout.backlash
+                                                     if j in g.joint_names]):
                 warnings.warn(f"{km.data.source}: {message}", KincalWarning)
 
     # -------------------------------------------------------------- residuals

@@ -235,10 +235,6 @@ class CalibrationResult:
             return self.sets[0].after
         return ErrorStats.from_errors(np.concatenate([s.errors_after for s in self.sets]))
 
-    def _backlash_index(self) -> tuple[int, ...]:
-        joints = tuple(self.error_model.joint_names)
-        return tuple(joints.index(j) for j in self.layout.backlash)
-
     # ----------------------------------- the first set (what one-set callers read)
     @property
     def residuals(self) -> np.ndarray:
