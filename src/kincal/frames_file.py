@@ -6,8 +6,8 @@ compensate`` and the API read. Version 2 (``"format": "kincal-frames", "version"
     {"format": "kincal-frames", "version": 2,
      "robot": "ec66", "chain_hash": "sha256:...", "base_frame": "base_link",
      "tip_frame": "flange", "joints": ["joint_1", ...],
-     "sets": [{"kind": "point", "source": "points.csv",
-               "frames": {"base.x": ..., "base.rz": ..., "tool.x": ...},
+     "sets": [{"kind": "point", "source": "points.csv", "base_frame": "base_link",
+               "tip_frame": "flange", "frames": {"base.x": ..., "base.rz": ..., "tool.x": ...},
                "T_measurement_base": [[...]], "pose_measurement_base": {...},
                "T_tip_tool": [[...]]}, ...],
      "backlash": {"joint_6": ...}, "convention": "...", "backlash_convention": "..."}
@@ -16,7 +16,9 @@ Frames are in metres and radians, named as the kinds name them (``base.*`` the p
 robot's base frame B in the measurement frame M, ``R_base = rotx(rx) roty(ry) rotz(rz)``;
 ``tool.*`` the tool point (or frame) in the tip frame; ``pivot.*``, ``plane.*``, ...). The
 4x4 matrices are derived, for cells that take those; on reading they must agree with the
-named values. ``chain_hash`` identifies the robot model and chain (robot name, base, tip,
+named values. Each set records the chain it was measured on (``base_frame``,
+``tip_frame``: several chains of one robot can be calibrated together); a set without them
+(an older file) is on the file's top-level chain. ``chain_hash`` identifies the robot model and chain (robot name, base, tip,
 joint names, kinds and axes; not the joint origins, which a calibration changes), so frames
 are never applied to another robot or chain.
 
@@ -61,12 +63,15 @@ def chain_hash(robot) -> str:
 
 @dataclass(frozen=True)
 class SetFrames:
-    """One measurement set's frames: its kind, source, and named values [m, rad]."""
+    """One measurement set's frames: its kind, source, and named values [m, rad]; the chain
+    it was measured on (base_frame, tip_frame; "" for the file's top-level chain)."""
 
     kind: str
     source: str
     names: tuple[str, ...]
     values: tuple[float, ...]
+    base_frame: str = ""
+    tip_frame: str = ""
 
     def value(self, name: str) -> float:
         return self.values[self.names.index(name)]
@@ -156,6 +161,8 @@ class CellFrames:
                "tip_frame": self.tip_frame, "joints": list(self.joints),
                "convention": CONVENTION,
                "sets": [{"kind": s.kind, "source": s.source,
+                         "base_frame": s.base_frame or self.base_frame,
+                         "tip_frame": s.tip_frame or self.tip_frame,
                          "frames": dict(zip(s.names, map(float, s.values))), **s.derived()}
                         for s in self.sets]}
         if self.backlash:
@@ -235,12 +242,14 @@ class CellFrames:
     @classmethod
     def _from_v2(cls, data: dict, source: str) -> "CellFrames":
         sets = []
+        base, tip = str(data.get("base_frame", "")), str(data.get("tip_frame", ""))
         for s in data["sets"]:
             f = s["frames"]
             if not isinstance(f, dict):
                 raise TypeError("a set's frames must be an object of named values")
             sets.append(SetFrames(str(s["kind"]), str(s.get("source", "")),
-                                  tuple(str(k) for k in f), tuple(float(v) for v in f.values())))
+                                  tuple(str(k) for k in f), tuple(float(v) for v in f.values()),
+                                  str(s.get("base_frame", base)), str(s.get("tip_frame", tip))))
         if not sets:
             raise DataError(f"{source}: the frames file holds no measurement set")
         return cls(str(data.get("robot", "")), str(data.get("chain_hash", "")),
@@ -306,6 +315,20 @@ class CellFrames:
                                 + (f"{np.abs(T - want).max():.3g}" if T.shape == (4, 4)
                                    else f"shape {T.shape}")
                                 + "); fix one of them or write the file anew")
+
+    def for_chain(self, base: str | None, tip: str | None) -> "CellFrames":
+        """The frames of the sets measured on the chain ``base`` -> ``tip`` (None: as
+        recorded) when that is another chain of a calibration of several (not the file's
+        top-level one); this file otherwise. The chain hash and joints recorded are the
+        top-level chain's: the selected chain is checked by its base and tip."""
+        base, tip = base or self.base_frame, tip or self.tip_frame
+        if (base, tip) == (self.base_frame, self.tip_frame):
+            return self
+        mine = tuple(s for s in self.sets if (s.base_frame, s.tip_frame) == (base, tip))
+        if not mine:
+            return self
+        return CellFrames(self.robot, "", base, tip, (), mine,
+                          {j: v for j, v in self.backlash.items()}, self.source)
 
     # ------------------------------------------------------------ checks
     def check_chain(self, robot) -> None:

@@ -79,12 +79,9 @@ class ChainGeometry:
 
 
 def _build_model(text: str, path) -> pin.Model:
-    """Pinocchio's model of the URDF ``text``; urdfdom's failure becomes one UrdfError line.
-
-    urdfdom prints its reason on stderr (several lines, with a C++ source location) and
-    Pinocchio raises a generic "not a valid URDF model"; the message here gives the
-    reason, and the URDF line of the joint or link it names when that can be found.
-    """
+    """Pinocchio's model of the URDF ``text``; urdfdom's failure (its reason on stderr,
+    Pinocchio's generic "not a valid URDF model") becomes one UrdfError line with the
+    reason and the URDF line of the joint or link it names when that can be found."""
     try:
         with stderr_captured() as captured:
             model = pin.buildModelFromXML(text)
@@ -310,12 +307,9 @@ class Robot:
 
     # --------------------------------------------------------------- kinematics
     def configuration(self, joint_values) -> np.ndarray:
-        """Pinocchio q for chain joint values (n,) [rad or m].
-
-        Joints off the chain take the values given at load time (``joint_values``), or
-        their neutral value. They cannot move the tip relative to the base, but they
-        place the chain in the world (e.g. for a viewer).
-        """
+        """Pinocchio q for chain joint values (n,) [rad or m]; joints off the chain take the
+        values given at load time (``joint_values``), or neutral (they place the chain in
+        the world, e.g. for a viewer, without moving the tip relative to the base)."""
         q = pin.neutral(self.model)
         values = np.asarray(joint_values, dtype=float)
         if values.shape != (len(self._chain),):  # zip below would truncate silently
@@ -332,11 +326,8 @@ class Robot:
         return q
 
     def tip_poses(self, joint_values) -> np.ndarray:
-        """(N, 4, 4) poses of the tip frame in the base frame for (N, n) joint values.
-
-        Reference implementation through Pinocchio (a loop over samples); the
-        identification uses the vectorised MD-H model, which tests check against this.
-        """
+        """(N, 4, 4) poses of the tip frame in the base frame for (N, n) joint values: the
+        Pinocchio reference (a loop) that tests check the vectorised models against."""
         Q = np.atleast_2d(np.asarray(joint_values, dtype=float))
         out = np.empty((len(Q), 4, 4))
         for k, qk in enumerate(Q):
@@ -371,17 +362,13 @@ class Robot:
 
     # -------------------------------------------------------------- correction
     def with_joint_frames(self, joint_frames: np.ndarray) -> "Robot":
-        """A copy whose chain joint frames at zero joint values are ``joint_frames``.
-
-        joint_frames: (n, 4, 4) T_B_Ji in the base frame. Only the placements of the
-        chain joints change (the URDF stays the original tree, never re-rooted); every
-        link stays rigidly attached to its joint frame. On a tree path, a reversed joint's
-        frame is its child link, on the base side: a change of it that is a change of the
-        joint's zero (a turn about its axis, a slide along it if prismatic) commutes with its
-        motion and is written into the joint's own origin (an offset stays that joint's);
-        the first joint's link holds the base frame, so any other change there is refused.
-        The transform through the common ancestor link goes into the first down joint's
-        origin (the top reversed joint's keeps its nominal value, plus its own zero).
+        """A copy whose chain joint frames at zero joint values are ``joint_frames`` (n, 4,
+        4) T_B_Ji: only the chain joints' placements change (the original tree, never
+        re-rooted). On a tree path a reversed joint's frame is its child link (base side): a
+        change of its zero (a turn about, slide along, its axis) commutes with its motion and
+        goes into its own origin; the first joint's link holds the base frame, any other
+        change there is refused. The transform through the common ancestor link goes into
+        the first down joint's origin (the top reversed joint's keeps its own, plus its zero).
         """
         m = pin.Model(self.model)
         C = np.array(joint_frames, dtype=float)
@@ -421,10 +408,26 @@ class Robot:
             return bool(np.abs(R - np.eye(3)).max() < tol and np.abs(t - (t @ a) * a).max() < tol)
         return bool(np.abs(R @ a - a).max() < tol and np.abs(t).max() < tol)
 
-    def urdf_origins(self) -> dict[str, np.ndarray]:
-        """URDF ``<origin>`` (pose of the joint in its parent link) of every chain joint."""
+    def urdf_origins(self, joints=None) -> dict[str, np.ndarray]:
+        """URDF ``<origin>`` (pose of the joint in its parent link) of every chain joint, or
+        of the movable URDF joints named in ``joints``."""
+        ids = self._chain if joints is None else [self.model.getJointId(n) for n in joints]
         return {self.model.names[j]: inverse(self._parent_link(j)) @ _mat(self.model.jointPlacements[j])
-                for j in self._chain}
+                for j in ids}
+
+    def with_origins(self, origins: dict) -> "Robot":
+        """A copy whose URDF origins of the named movable joints (on this chain or not) are
+        ``origins`` {joint: (4, 4) pose in its parent link} [m]: the writer of corrections
+        per URDF origin, as several chains sharing joints identify them."""
+        m = pin.Model(self.model)
+        for name, T in origins.items():
+            j = self.model.getJointId(name)
+            m.jointPlacements[j] = _se3(self._parent_link(j) @ np.asarray(T, float))
+        return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source, self.off_chain)
+
+    def joint_axis(self, name: str) -> np.ndarray:
+        """(3,) the URDF axis of the movable joint ``name`` in its own frame."""
+        return self._axis(self.model.getJointId(name))[0]
 
     def __repr__(self) -> str:
         return (f"Robot({self.name!r}, base={self.base!r}, tip={self.tip!r}, "
@@ -440,11 +443,9 @@ class Robot:
         Damped least squares, clipped to the joint limits. Returns (q (n,), converged).
         """
         g = self.geometry
-        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        lo, hi = (np.where(np.isfinite(b), b, s * np.pi) for b, s in ((g.lower, -1), (g.upper, 1)))
         q = np.clip(np.zeros(g.n) if start is None else np.asarray(start, float), lo, hi)
-        target = np.asarray(position, float)
-        tool = np.asarray(tool, float)
+        target, tool = np.asarray(position, float), np.asarray(tool, float)
         for _ in range(max_iterations):
             T, J = self._relative(self.configuration(q))
             R, rt = T[:3, :3], T[:3, :3] @ tool
@@ -460,13 +461,12 @@ class Robot:
             q = np.clip(q + dq, lo, hi)
         return q, False
 
-    def changed_origins(self, corrected: "Robot", tol: float = 1e-14) -> dict[str, np.ndarray]:
-        """URDF origins of ``corrected`` that differ from this robot's by more than ``tol``.
-
-        Both sides come out of the same arithmetic, so a joint whose placement did not
-        change compares equal to roundoff and its text in the URDF is left untouched.
-        """
-        mine, theirs = self.urdf_origins(), corrected.urdf_origins()
+    def changed_origins(self, corrected: "Robot", tol: float = 1e-14,
+                        joints=None) -> dict[str, np.ndarray]:
+        """URDF origins of ``corrected`` (the chain's, or of ``joints``) that differ from this
+        robot's by more than ``tol``: both sides come out of the same arithmetic, so an
+        unchanged placement compares equal to roundoff and its URDF text stays untouched."""
+        mine, theirs = self.urdf_origins(joints), corrected.urdf_origins(joints)
         return {name: T for name, T in theirs.items() if np.abs(T - mine[name]).max() > tol}
 
     def child_joint_origins(self, joint: str) -> dict[str, np.ndarray]:

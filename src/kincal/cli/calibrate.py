@@ -18,8 +18,14 @@ from kincal.errors import KincalError, KincalWarning, OptionError
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("calibrate", help="identify the kinematics and write a corrected URDF")
-    add_common(p)
+    add_common(p, chains=True)
     add_kinds(p)
+    group(p, "inputs").add_argument(
+        "--shared-plane", action="store_true", dest="shared_planes",
+        help="with --on-plane: the files touch the same physical plane(s): one set of plane "
+             "parameters (plane.rx .ry .d; with a 'plane' column, one per plane number, the "
+             "same number meaning the same plane in every file) instead of one per file. The "
+             "planes are fitted in the base frame: the files' chains must have one --base")
     add_model(p)
     g = group(p, "model and penalty")
     g.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
@@ -102,6 +108,7 @@ class Calibrate:
     robust: str | None
     robust_scale_mm: float | None
     cv_max_poses: int
+    shared_planes: bool
     out: str
     frames_out: str | None
     add_frames: bool
@@ -140,6 +147,7 @@ def calibration_options(c: Calibrate):
                               tool_guess=c.inputs.tool_guess, robust=c.robust,
                               robust_scale_mm=c.robust_scale_mm, progress=progress_bar(),
                               cv_max_poses=c.cv_max_poses or None,
+                              shared_planes=c.shared_planes,
                               solver=SolverOptions(progress=FitStatus.on_terminal()))
 
 
@@ -150,16 +158,23 @@ def run(args) -> int:
 
     c = typed(Calibrate, args, chain=Chain.of(args), inputs=Inputs.of(args),
               accuracy=AccuracyRequest.of(args))
-    robot = c.chain.load()
+    if c.shared_planes and not c.inputs.on_plane:
+        raise OptionError("--shared-plane shares the planes of plane contacts: give it with "
+                          "--on-plane (the files of joint columns are then plane contacts)")
+    robots = Chain.load_all(c.chain.per_file(len(c.inputs.files)))  # each file's chain
+    robot = robots[0]
+    if c.accuracy.asked and len({(r.base, r.tip) for r in robots}) > 1:
+        raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
+                          "calibration has several (one --base/--tip per file)")
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=c.inputs.files,
                   dirs=[c.plots])
-    sets = c.inputs.read_sets(robot)  # every file, each read as its kind
+    sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain
     options = calibration_options(c)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
         warnings.simplefilter("always", KincalWarning)
         targets = c.accuracy.targets(robot)  # bad values fail here, before solving
         try:
-            result = CalibrationProblem(robot, sets, options).solve()
+            result = CalibrationProblem(robots, sets, options).solve()
         finally:
             if options.solver.progress is not None:
                 options.solver.progress.close()
@@ -177,7 +192,7 @@ def run(args) -> int:
     if targets or c.html:
         from kincal.planning.accuracy_map import result_accuracy_map
 
-        if result.covariance is not None or targets:
+        if (result.covariance is not None or targets) and not result.chains.several:
             amap = result_accuracy_map(result, **targets)
 
     def lines(written, notes):

@@ -88,6 +88,7 @@ def _compensate(c: Compensate) -> int:
     # the one FRAMES.json reader, before the robot loads (a broken file is the likelier error)
     frames = None if c.frames is None else CellFrames.read(c.frames)
     if frames is not None:
+        frames = frames.for_chain(c.chain.base, c.chain.tip)  # a chain of several
         c = replace(c, chain=chain_from_frames(c.chain, frames))
     robot = c.chain.load()
     inputs = [c.targets, c.program, c.nominal, c.frames]

@@ -49,6 +49,7 @@ def run(args) -> int:
     frames = None
     if e.frames:
         frames = CellFrames.read(e.frames)  # the one schema, any version; values checked
+        frames = frames.for_chain(e.chain.base, e.chain.tip)  # a chain of several
         e = replace(e, chain=chain_from_frames(e.chain, frames))
     robot = e.chain.load()
     check_outputs(robot, [e.report], overwrite=e.overwrite, inputs=(e.inputs.data, e.frames))

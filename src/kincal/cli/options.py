@@ -51,15 +51,22 @@ def add_units(p, length="positions and prismatic joints in DATA",
                    help=f"unit of {angle} (default rad)")
 
 
-def add_common(p, data=True):
-    """ROBOT [DATA], the chain (--tip, --base, --tool-offset) and DATA's columns and units."""
+def add_common(p, data=True, chains=False):
+    """ROBOT [DATA], the chain (--tip, --base, --tool-offset) and DATA's columns and units;
+    chains: --tip and --base take one frame, or one per data file (several chains)."""
     inputs, chain = group(p, "inputs"), group(p, "chain")
     inputs.add_argument("robot", help="URDF path, 'ec66', or an example-robot-data name "
                         "(ur10, panda, ...)")
     if data:
         inputs.add_argument("data", help="CSV with the chain joint names and x,y,z")
-    chain.add_argument("--tip", help="tip frame (link or joint name); default: the robot's usual tip")
-    chain.add_argument("--base", help="base frame (default: the URDF root link)")
+    several = (" One frame for every data file, or one per data file: several chains of the "
+               "robot calibrated together, a joint on several chains one set of parameters "
+               "(error model placement or offsets)") if chains else ""
+    nargs = {"nargs": "+", "metavar": "FRAME"} if chains else {}
+    chain.add_argument("--tip", help="tip frame (link or joint name); default: the robot's usual "
+                       "tip." + several, **nargs)
+    chain.add_argument("--base", help="base frame (default: the URDF root link)." + several,
+                       **nargs)
     if data:
         add_units(p)
         inputs.add_argument("--position-columns", nargs="+", default=("x", "y", "z"),
@@ -154,12 +161,35 @@ class Chain:
     """The robot and the chain of it a command works on."""
 
     robot: str  # URDF path, a bundled name or an example-robot-data name
-    tip: str | None = None  # tip frame; None: the robot's usual tip
-    base: str | None = None  # base frame; None: the URDF root link
+    tip: str | None = None  # tip frame; None: the robot's usual tip (a tuple: see per_file)
+    base: str | None = None  # base frame; None: the URDF root link (a tuple: see per_file)
 
     @classmethod
     def of(cls, args) -> "Chain":
         return typed(cls, args)
+
+    def per_file(self, n_files: int) -> list["Chain"]:
+        """The chain of each of ``n_files`` data files: --tip and --base give one frame (every
+        file's) or one per file; any other count is refused."""
+        given = {}
+        for role in ("base", "tip"):
+            v = getattr(self, role)
+            v = (v,) if v is None or isinstance(v, str) else tuple(v)
+            if len(v) not in (1, n_files):
+                raise OptionError(f"--{role} takes one frame (for every data file) or one per "
+                                  f"data file: {n_files} data files, {len(v)} --{role} frames "
+                                  f"({' '.join(v)})")
+            given[role] = v * (n_files if len(v) == 1 else 1)
+        return [Chain(self.robot, t, b) for b, t in zip(given["base"], given["tip"])]
+
+    @staticmethod
+    def load_all(chains: list["Chain"]) -> list:
+        """The robot of every chain (one load per distinct chain)."""
+        loaded: dict = {}
+        for c in chains:
+            if (c.base, c.tip) not in loaded:
+                loaded[c.base, c.tip] = c.load()
+        return [loaded[c.base, c.tip] for c in chains]
 
     def load(self):
         from kincal.robot import Robot
@@ -209,7 +239,8 @@ class Inputs:
                               "is one (no qx qy qz qw columns, no --on-plane --flush)")
 
     def read_sets(self, robot) -> list:
-        """Every data file, each read as its kind, weighted by --set-sigma-mm if given."""
+        """Every data file, each read as its kind (on ``robot``'s chain, or with a list, on
+        its own robot's), weighted by --set-sigma-mm if given."""
         import numpy as np
 
         from kincal.measurements.sets import read_set_file
@@ -230,11 +261,12 @@ class Inputs:
                                       f"{lo * 1e3:g} mm to {hi * 1e3:g} mm (a file's "
                                       "measurement noise)")
         pos = self.position_columns if self.position_columns != ("x", "y", "z") else None
-        sets = [read_set_file(path, robot.joint_names, _prismatic(robot), self.length_unit,
+        robots = robot if isinstance(robot, (list, tuple)) else [robot] * len(self.files)
+        sets = [read_set_file(path, r.joint_names, _prismatic(r), self.length_unit,
                               self.angle_unit, pos, self.orientation_columns, self.on_plane,
                               self.orientation_sigma_deg, self.joint_map(), self.order_column,
                               flush=self.flush)
-                for path in self.files]
+                for path, r in zip(self.files, robots)]
         self._orientation_sigma_used(any(kind_of(d) in ("pose", "flush") for d in sets))
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))

@@ -64,13 +64,14 @@ def gate(result, accept_implausible: bool = False, accept_unconverged: bool = Fa
 
 
 def corrected_urdf(result, readable: bool = True, add_frames: bool = False):
-    """(text, export notes) of the corrected URDF: the original file with only the chain's
+    """(text, export notes) of the corrected URDF: the original file with only the chains'
     joint origins changed (plus fixed frames for the measurement frame and tool points
     with ``add_frames``)."""
     from kincal.export.readable_export import corrected_text
 
     edits, moved = corrected_text(result.robot, result.corrected, readable,
-                                  source=str(result.robot.source))
+                                  source=str(result.robot.source),
+                                  joints=tuple(result.error_model.joint_names))
     text = edits.text
     if add_frames:
         from kincal.export.urdf_export import add_frames_of

@@ -73,21 +73,23 @@ def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,
-                   source: str = "<string>") -> tuple[EditResult, tuple[Regauged | RpySwing, ...]]:
+                   source: str = "<string>", joints=None
+                   ) -> tuple[EditResult, tuple[Regauged | RpySwing, ...]]:
     """The corrected URDF text, and what a reader should know about its rpy: the joints
-    whose offset was moved into the child origins, and the swings that remain."""
-    origins = nominal.changed_origins(corrected)
+    whose offset was moved into the child origins, and the swings that remain. joints: the
+    movable joints whose origins may have changed (default: the nominal robot's chain; the
+    union of several chains')."""
+    origins = nominal.changed_origins(corrected, joints=joints)
     result = edit_joint_origins(nominal.urdf_text, origins, source=source)
     if not readable:
         return result, ()
-    old = nominal.urdf_origins()
+    old = nominal.urdf_origins(joints)
     moved = []
     for name, T_new in list(origins.items()):
         edit = result.for_joint(name)
         if _swing(edit, old[name][:3, :3], T_new[:3, :3]) < SWING:
             continue
-        k = nominal.joint_names.index(name)
-        axis = nominal.geometry.axes[k]
+        axis = nominal.joint_axis(name)  # its sign does not matter: angle flips with it
         # the part of the correction that turns the joint about its own axis
         dR = old[name][:3, :3].T @ T_new[:3, :3]
         w = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]]) / 2

@@ -91,6 +91,8 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "robot": {"name": result.robot.name, "urdf": str(result.robot.source),
                   "base": result.robot.base, "tip": result.robot.tip,
                   "joints": list(result.robot.joint_names),
+                  "chains": [{"set": i + 1, "base": s.base_frame, "tip": s.tip_frame}
+                             for i, s in enumerate(result.sets)],
                   "error_model": result.error_model.name,
                   "model_notes": [n for n in result.error_model.notes]},
         "data": {"source": data_source if data_source is not None else first.source,

@@ -7,7 +7,8 @@ One layout for every calibration, whatever its measurement sets::
 The kinematic block is the error model's (``joint_3.a``, ``joint_2.beta``, ...). Each
 measurement set adds the frame parameters of its kind (:mod:`kincal.measurements`): set 1
 keeps the kind's names (``base.x``, ``tool.z``, ``pivot.y``, ``plane.d``), set k >= 2
-prefixes them ``set<k>.``. The backlash terms (``<joint>.backlash``), half the play of a
+prefixes them ``set<k>.``; a frame a set shares with an earlier set (a plane several files
+touch, ``--shared-plane``) is the earlier set's, once. The backlash terms (``<joint>.backlash``), half the play of a
 joint [rad, or m for a prismatic joint], come last.
 
 For one point set the names and order are those of
@@ -38,7 +39,10 @@ class ParameterLayout:
     kinematic_names / kinematic_is_length / kinematic_classes: the error model's
     parameters ("length" / "twist" / "offset" classes). set_frames: per set, its kind's
     frame names (unprefixed) and length flags. backlash: chain joints with a backlash
-    term, in chain order; backlash_is_length: True for prismatic joints.
+    term, in chain order; backlash_is_length: True for prismatic joints. aliases: per set,
+    per frame name, -1 for the set's own parameter, or the index of the earlier set whose
+    parameter of that name it shares (a plane several files touch: ``--shared-plane``);
+    () for none shared.
     """
 
     kinematic_names: tuple[str, ...]
@@ -47,11 +51,13 @@ class ParameterLayout:
     set_frames: tuple[tuple[tuple[str, ...], tuple[bool, ...]], ...]
     backlash: tuple[str, ...] = ()
     backlash_is_length: tuple[bool, ...] = ()
+    aliases: tuple[tuple[int, ...], ...] = ()
 
     @classmethod
-    def of(cls, error_model, kinds, backlash=()) -> "ParameterLayout":
+    def of(cls, error_model, kinds, backlash=(), aliases=()) -> "ParameterLayout":
         """The layout of an error model's chain measured by ``kinds`` (KindModels);
-        ``backlash`` are chain joints (any order: kept in chain order)."""
+        ``backlash`` are chain joints (any order: kept in chain order); aliases: see the
+        class notes."""
         joints = tuple(error_model.joint_names)
         unknown = [j for j in backlash if j not in joints]
         if unknown:
@@ -66,7 +72,14 @@ class ParameterLayout:
                    tuple((tuple(k.frame_names), tuple(bool(b) for b in k.frame_is_length))
                          for k in kinds),
                    chosen,
-                   tuple(error_model.kinds[joints.index(j)] == "prismatic" for j in chosen))
+                   tuple(error_model.kinds[joints.index(j)] == "prismatic" for j in chosen),
+                   tuple(tuple(int(a) for a in row) for row in aliases))
+
+    def own(self, i: int) -> tuple[bool, ...]:
+        """Per frame name of set i: True for its own parameter, False for a shared one."""
+        if not self.aliases:
+            return (True,) * len(self.set_frames[i][0])
+        return tuple(a < 0 for a in self.aliases[i])
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -79,8 +92,8 @@ class ParameterLayout:
 
     @property
     def n_frames(self) -> int:
-        """Frame parameters of all sets together."""
-        return sum(len(names) for names, _ in self.set_frames)
+        """Frame parameters of all sets together (a shared one once)."""
+        return sum(sum(self.own(i)) for i in range(self.n_sets))
 
     @property
     def n_backlash(self) -> int:
@@ -92,11 +105,22 @@ class ParameterLayout:
 
     @property
     def frame_slices(self) -> tuple[slice, ...]:
-        """Per set, the slice of its frame parameters in the vector."""
-        out, start = [], self.n_kinematic
-        for names, _ in self.set_frames:
-            out.append(slice(start, start + len(names)))
-            start += len(names)
+        """Per set, the slice of its frame parameters in the vector (an index array for a
+        set sharing some with an earlier set)."""
+        out, start, where = [], self.n_kinematic, []
+        for i, (names, _) in enumerate(self.set_frames):
+            own = self.own(i)
+            pos = []
+            for k, (name, mine) in enumerate(zip(names, own)):
+                if mine:
+                    pos.append(start)
+                    start += 1
+                else:
+                    owner = self.aliases[i][k]
+                    pos.append(where[owner][self.set_frames[owner][0].index(name)])
+            where.append(pos)
+            out.append(slice(pos[0], pos[-1] + 1) if all(own) and pos else
+                       np.array(pos, dtype=int) if pos else slice(start, start))
         return tuple(out)
 
     @property
@@ -108,20 +132,26 @@ class ParameterLayout:
         return "" if i == 0 else f"set{i + 1}."
 
     def frame_names(self, i: int) -> tuple[str, ...]:
-        """Set i's frame parameter names as they appear in the layout (prefixed)."""
-        return tuple(self.set_prefix(i) + n for n in self.set_frames[i][0])
+        """Set i's frame parameter names as they appear in the layout (prefixed; a shared
+        one by the set that owns it)."""
+        if not self.aliases:
+            return tuple(self.set_prefix(i) + n for n in self.set_frames[i][0])
+        return tuple(self.set_prefix(i if a < 0 else a) + n
+                     for n, a in zip(self.set_frames[i][0], self.aliases[i]))
 
     @property
     def names(self) -> tuple[str, ...]:
         return (self.kinematic_names
-                + tuple(n for i in range(self.n_sets) for n in self.frame_names(i))
+                + tuple(n for i in range(self.n_sets)
+                        for n, own in zip(self.frame_names(i), self.own(i)) if own)
                 + tuple(f"{j}.backlash" for j in self.backlash))
 
     @property
     def is_length(self) -> np.ndarray:
         """(p,) True for lengths [m], False for angles [rad]."""
         return np.array(list(self.kinematic_is_length)
-                        + [b for _, flags in self.set_frames for b in flags]
+                        + [b for i, (_, flags) in enumerate(self.set_frames)
+                           for b, own in zip(flags, self.own(i)) if own]
                         + list(self.backlash_is_length), dtype=bool)
 
     def _mask(self, sl: slice) -> np.ndarray:
@@ -202,7 +232,7 @@ class ParameterLayout:
         return x[:self.n_kinematic]
 
     def frames(self, x: np.ndarray, i: int) -> np.ndarray:
-        """Set i's frame parameters (a view)."""
+        """Set i's frame parameters (a view; a copy for a set sharing some)."""
         return x[self.frame_slices[i]]
 
     def backlash_values(self, x: np.ndarray) -> np.ndarray:

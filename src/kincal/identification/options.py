@@ -73,6 +73,11 @@ class CalibrationOptions:
     blas_threads: BLAS threads while solving (1: faster on a busy machine, see
         kincal.blas_threads); None leaves BLAS as it is.
     progress: callback(done, total) during the CV sweep, or None.
+    shared_planes: the plane and flush sets touch the same physical planes: each plane's
+        parameters (``plane.*``, or ``plane<label>.*`` per label of a ``plane`` column) are
+        one set, the first such set's, shared by every set with that plane name (the sets'
+        chains must have one base frame, in which the planes are fitted). False: every
+        set fits its own planes.
     """
 
     model: str | None = None
@@ -102,6 +107,7 @@ class CalibrationOptions:
     solver: SolverOptions = SolverOptions()
     blas_threads: int | None = 1
     progress: Callable | None = field(default=None, compare=False, repr=False)
+    shared_planes: bool = False
 
     def validated(self) -> "CalibrationOptions":
         """These options checked, with sequences made tuples (``fix=[...]`` works as well as

@@ -64,7 +64,8 @@ def reach(problem: CalibrationProblem, samples: int = 500) -> float:
     lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
     hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
     q = np.random.default_rng(0).uniform(lo, hi, size=(samples, g.n))
-    s = Chain(problem.error_model, q).state(problem.error_model.nominal, None, keep=False)
+    em = problem.kinds[0].error_model  # the first set's chain (problem.robot's)
+    s = Chain(em, q).state(em.nominal, None, keep=False)
     return float(np.max(np.linalg.norm(s.p_tip + s.R_tip @ _tool_start(problem), axis=1)))
 
 

@@ -403,18 +403,21 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         s_pred = spread(_tool_points(problem.robot, dt.joint_values[first], guess))
         ratio = spread(dt.positions[first]) / s_pred if s_pred >= 1e-3 else float("nan")
         spread_mm = spread(dt.positions) * 1e3
-    rev = [j for j, k in enumerate(g.kinds) if k == "revolute"]
     angle_max, outside = 0.0, False
-    if rev:
-        q_all = np.vstack([dt.joint_values for dt in datas])
-        qa = np.abs(q_all[:, rev])
+    for dt, robot in zip(datas, problem.robots):  # each set against its own chain
+        gi = robot.geometry
+        rev = [j for j, k in enumerate(gi.kinds) if k == "revolute"]
+        if not rev:
+            continue
+        qa = np.abs(dt.joint_values[:, rev])
         i, j = np.unravel_index(int(np.argmax(qa)), qa.shape)
-        angle_max = float(qa[i, j])
-        v = q_all[i, rev[j]]
-        outside = bool(v < g.lower[rev[j]] - 1e-6 or v > g.upper[rev[j]] + 1e-6)
+        if qa[i, j] >= angle_max:
+            v = dt.joint_values[i, rev[j]]
+            angle_max = float(qa[i, j])
+            outside = bool(v < gi.lower[rev[j]] - 1e-6 or v > gi.upper[rev[j]] + 1e-6)
     frames = set(problem.robot.frame_names())
     off_chain = tuple(dict.fromkeys(c for dt in datas for c in dt.ignored_columns
-                                    if c in frames and c not in g.joint_names))
+                                    if c in frames and c not in problem.error_model.joint_names))
     return Evidence(
         reach_m=L, residual_median_mm=float(np.median(errors)), residual_rms_mm=worst.after.rms,
         before_rms_mm=worst.before.rms,

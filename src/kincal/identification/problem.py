@@ -1,4 +1,5 @@
-"""The calibration problem: one robot chain, one or many measurement sets of any kind.
+"""The calibration problem: one robot chain (or several sharing joints), one or many
+measurement sets of any kind.
 
 ``CalibrationProblem(robot, sets, options)`` builds; ``.analyze()`` says what the data
 identify; ``.solve()`` identifies (plain least squares, or L2 toward nominal with per-class
@@ -28,6 +29,7 @@ from kincal import models as error_models
 from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
                            ParameterError, listing, suggest)
 from kincal.identification import blas_threads, penalty_choice
+from kincal.identification.chains import Chains
 from kincal.identification.cross_validation import (CrossValidation, cross_validate,
                                                     fold_fitter, lambda_grid)
 from kincal.identification.layout import MM, ParameterLayout
@@ -39,7 +41,7 @@ from kincal.identification.selection import Identifiability, analyze
 from kincal.identification.solver import SolverOptions, SolveSummary, solve
 from kincal.measurements.checks import distinct_poses, length_unit_warnings, set_warnings
 from kincal.measurements.kind import DEFAULT_SIGMA
-from kincal.measurements.sets import as_sets, kind_model
+from kincal.measurements.sets import as_sets
 from kincal.models.mdh import TOOL_AXIS_WARNING
 from kincal.robot import Robot
 
@@ -48,30 +50,24 @@ BLOCK_SAMPLES = 2048
 
 
 class CalibrationProblem:
-    """The identification of one robot chain from a list of measurement sets."""
+    """The identification of robot chains from a list of measurement sets: ``robots`` is one
+    Robot (every set on its chain) or one per set, several chains of one URDF sharing the
+    joints they traverse (:mod:`kincal.identification.chains`)."""
 
-    def __init__(self, robot: Robot, sets, options: CalibrationOptions | None = None):
-        for name, value, kind in (("robot", robot, Robot),
-                                  ("options", options or CalibrationOptions(), CalibrationOptions)):
-            if not isinstance(value, kind):
-                raise OptionError(f"{name} must be a {kind.__name__}, got {type(value).__name__}"
-                                  + ("; for one field use calibrate(robot, data, method=...)"
-                                     if name == "options" else ""))
-        self.robot = robot
+    def __init__(self, robots: Robot | list, sets, options: CalibrationOptions | None = None):
+        if not isinstance(options or CalibrationOptions(), CalibrationOptions):
+            raise OptionError(f"options must be a CalibrationOptions, got {type(options).__name__}"
+                              "; for one field use calibrate(robot, data, method=...)")
         self.options = o = (options or CalibrationOptions()).validated()
-        # the chain's default model when none is named: complete, placement on a tree path
-        self.model_name = o.model or error_models.default_for(robot.geometry)
-        self.error_model = em = error_models.build(self.model_name, robot.geometry)
-        chain = tuple(em.joint_names)
-        unknown = [j for j in o.backlash if j not in chain]
-        if unknown:
-            raise ParameterError(f"no chain joint {unknown[0]!r} for a backlash term."
-                                 + suggest(unknown[0], chain)
-                                 + f" Chain joints: {listing(chain, 60)}", valid=chain)
-        backlash = tuple(j for j in chain if j in set(o.backlash))
-        bidx = tuple(chain.index(j) for j in backlash)
-        self.kinds = [kind_model(em, d, bidx) for d in as_sets(sets)]
-        self.layout = ParameterLayout.of(em, self.kinds, o.backlash)
+        sets = as_sets(sets)
+        # the default model: complete, placement on a tree path or with several chains
+        self.chains = ch = Chains(robots, len(sets), o.model)
+        self.robot, self.robots = ch.robot, ch.robots
+        self.model_name, self.error_model = ch.model_name, ch.model
+        backlash = ch.backlash(o.backlash)
+        self.kinds = [ch.kind(i, d, backlash) for i, d in enumerate(sets)]
+        self.layout = ParameterLayout.of(ch.model, self.kinds, o.backlash,
+                                         ch.shared_planes(self.kinds) if o.shared_planes else ())
         self.scale = np.where(self.layout.is_length, o.length_scale, o.angle_scale)
         self.offsets = np.cumsum([0] + [km.N for km in self.kinds])
         stated = [km.data.sigma is not None for km in self.kinds]
@@ -132,8 +128,10 @@ class CalibrationProblem:
     def _warn_inputs(self) -> None:
         """Joint values outside the URDF limits or in the wrong angle unit, and backlash
         joints seen from one direction only: warnings, per set."""
-        for km in self.kinds:
-            for message in set_warnings(km.data, self.robot.geometry, self.layout.backlash):
+        for i, km in enumerate(self.kinds):
+            g = self.robots[i].geometry  # the set's own chain, and its backlash joints
+            for message in set_warnings(km.data, g, [j for j in self.layout.backlash
+                                                     if j in g.joint_names]):
                 warnings.warn(f"{km.data.source}: {message}", KincalWarning)
 
     # -------------------------------------------------------------- residuals
@@ -242,11 +240,13 @@ class CalibrationProblem:
         nominal = self.error_model.nominal
         for i, km in enumerate(self.kinds):
             self._unit_warnings(km)
-            if km.kind == "point":
-                x[lay.frame_slices[i]] = km.start(nominal, o.tool_guess,
-                                                  o.base_guess if i == 0 else None)
-            else:
-                x[lay.frame_slices[i]] = km.start(nominal, o.tool_guess)
+            fs, own = lay.frame_slices[i], np.array(lay.own(i), dtype=bool)
+            v = (km.start(nominal, o.tool_guess, o.base_guess if i == 0 else None)
+                 if km.kind == "point" else km.start(nominal, o.tool_guess))
+            if not own.all():  # a shared plane keeps the first set's start
+                v = getattr(km, "adopt", lambda v, given, own: np.where(own, v, given))(
+                    v, x[fs], own)
+            x[fs] = v
         free = lay.is_frame & self._unfixed()
         if o.tool_guess is not None:  # a fixed tool point is held where the user put it
             for i in range(lay.n_sets):
@@ -267,7 +267,7 @@ class CalibrationProblem:
         if getattr(d, "positions", None) is None:
             return
         first = np.ones(len(d), bool) if getattr(d, "points", None) is None else d.points == 0
-        s = km.chain.state(self.error_model.nominal, None, keep=False)
+        s = km.chain.state(km.error_model.nominal, None, keep=False)
         guess = np.zeros(3) if self.options.tool_guess is None else np.asarray(
             self.options.tool_guess, float)
         for message in length_unit_warnings(d.positions[first],
@@ -357,10 +357,10 @@ class CalibrationProblem:
         for i, km in enumerate(self.kinds):
             if km.kind == "point":
                 f = lay.frames(x, i)
-                dists += [self.error_model.last_axis_distance(t) for t in f[6:].reshape(-1, 3)]
+                dists += [km.error_model.last_axis_distance(t) for t in f[6:].reshape(-1, 3)]
         if not dists or dists[0] is None or max(dists) >= TOOL_AXIS_WARNING:
             return ""
-        dist, last = max(dists), self.error_model.joint_names[-1]
+        dist, last = max(dists), self.kinds[0].error_model.joint_names[-1]
         which = "tool point is" if len(dists) == 1 else f"{len(dists)} measured points are all"
         return (f"the {which} {dist * 1e3:.2f} mm from the axis of {last}: turning about "
                 f"that axis barely moves it, so {last}.theta and the tilt of that axis "

@@ -62,6 +62,7 @@ class SetResult:
     errors_before / errors_after: (N,) each sample's error [m] (position, distance, distance
     to the plane; poses: position and orientation together); before / after: their
     statistics [mm]. orientation_after_deg: mean orientation error of a pose set [deg].
+    base_frame / tip_frame: the chain the set was measured on.
     """
 
     kind: str
@@ -76,6 +77,8 @@ class SetResult:
     before: ErrorStats
     after: ErrorStats
     orientation_after_deg: float | None = None
+    base_frame: str = ""
+    tip_frame: str = ""
 
     @property
     def rows(self) -> np.ndarray:
@@ -126,6 +129,9 @@ class CalibrationResult:
     sets: one :class:`SetResult` per measurement set. solve: the final solve's summary.
     covariance: (p, p) read-only sandwich covariance [SI] (zero rows for parameters not
     identified), or None. plausibility: the gate's verdict (solve() always sets it).
+    chains: the chains of the sets (:class:`kincal.identification.chains.Chains`): robot and
+    corrected are the first set's chain; with several chains, corrected carries every
+    corrected URDF origin and error_model is the union's names (no kinematics of its own).
     """
 
     robot: Robot
@@ -147,6 +153,7 @@ class CalibrationResult:
     evidence: EvidenceFit | None = None
     penalty_choice: str = ""
     plausibility: Plausibility | None = None
+    chains: object = None
 
     @classmethod
     def build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
@@ -164,8 +171,7 @@ class CalibrationResult:
                                        float(se[i]), "identified" if free[i] else
                                        ("fixed" if n in fixed else "dropped"))
                      for i, n in enumerate(lay.names))
-        corrected = problem.robot.with_joint_frames(
-            problem.error_model.joint_frames(lay.kinematic(x)))
+        corrected = problem.chains.corrected(lay.kinematic(x))
         sets = []
         for i, km in enumerate(problem.kinds):
             r0, r = problem.residuals(x_start, i), problem.residuals(x, i)
@@ -178,11 +184,12 @@ class CalibrationResult:
             sets.append(SetResult(km.kind, km.data.source, km.data, tuple(km.frame_names),
                                   np.array(lay.frames(x, i)), r, r0, e0, e,
                                   ErrorStats.from_errors(r0 if km.kind == "point" else e0),
-                                  ErrorStats.from_errors(r if km.kind == "point" else e), ori))
+                                  ErrorStats.from_errors(r if km.kind == "point" else e), ori,
+                                  problem.robots[i].base, problem.robots[i].tip))
         return cls(problem.robot, corrected, problem.options, lay, rows, x_nom, x_start, x,
                    float(lam) if evidence is None else math.nan, cv, tuple(sets), sol, ident,
                    problem.error_model, tuple(downweighted), covariance, evidence,
-                   penalty_choice)
+                   penalty_choice, chains=problem.chains)
 
     # ------------------------------------------------------------ accessors
     @property
@@ -227,10 +234,6 @@ class CalibrationResult:
         if len(self.sets) == 1:
             return self.sets[0].after
         return ErrorStats.from_errors(np.concatenate([s.errors_after for s in self.sets]))
-
-    def _backlash_index(self) -> tuple[int, ...]:
-        joints = tuple(self.error_model.joint_names)
-        return tuple(joints.index(j) for j in self.layout.backlash)
 
     # ----------------------------------- the first set (what one-set callers read)
     @property
@@ -298,7 +301,9 @@ class CalibrationResult:
             robot=self.robot.model_name, chain_hash=chain_hash(self.robot), base_frame=self.robot.base,
             tip_frame=self.robot.tip, joints=tuple(self.robot.joint_names),
             sets=tuple(SetFrames(s.kind, s.source, s.frame_names,
-                                 tuple(float(v) for v in s.frames)) for s in self.sets),
+                                 tuple(float(v) for v in s.frames), s.base_frame or
+                                 self.robot.base, s.tip_frame or self.robot.tip)
+                       for s in self.sets),
             backlash=self.backlash)
 
     def frames_dict(self) -> dict:
@@ -318,10 +323,13 @@ class CalibrationResult:
         g = np.zeros(q.shape) if approach is None else np.atleast_2d(approach)
         idx = np.broadcast_to(np.asarray(points, dtype=int), (len(q),))
         tools = self.tools
-        x = np.concatenate([self.kinematic, self.base, tools.ravel(),
-                            self.layout.backlash_values(self.x)])
-        return MeasurementModel(self.error_model, q, g, self.layout.backlash, idx,
-                                len(tools)).predict(x)
+        em, kin = self.error_model, self.kinematic
+        if self.chains is not None and self.chains.several:  # that set's chain
+            em, k = self.chains.chain_of(self._located())
+            kin = kin[k]
+        b = [j for j in self.layout.backlash if j in em.joint_names]
+        x = np.concatenate([kin, self.base, tools.ravel(), [self.backlash[j] for j in b]])
+        return MeasurementModel(em, q, g, tuple(b), idx, len(tools)).predict(x)
 
     def predict_data(self, data) -> np.ndarray:
         """(N, 3) predictions for the samples of point data ``data`` (its poses, approach
@@ -336,14 +344,18 @@ class CalibrationResult:
         from kincal.measurements.sets import kind_model
 
         s = self.sets[set_index]
-        km = kind_model(self.error_model, data, self._backlash_index())
+        em, idx = ((self.error_model, slice(None)) if self.chains is None
+                   else self.chains.chain_of(set_index))
+        joints = tuple(em.joint_names)
+        b_joints = [j for j in self.layout.backlash if j in joints]
+        km = kind_model(em, data, tuple(joints.index(j) for j in b_joints))
         if km.kind != s.kind or tuple(km.frame_names) != s.frame_names:
             raise ValueError(f"set {set_index + 1} is a {s.kind} set with frames "
                              f"{', '.join(s.frame_names)}; the data are {km.kind} with "
                              f"{', '.join(km.frame_names)}")
-        kin = self.kinematic if kinematic is None else kinematic
-        b = (self.layout.backlash_values(self.x) if kinematic is None
-             else np.zeros(self.layout.n_backlash))
+        kin = (self.kinematic if kinematic is None else np.asarray(kinematic))[idx]
+        b = (np.array([self.backlash[j] for j in b_joints]) if kinematic is None
+             else np.zeros(len(b_joints)))
         return km.sample_errors(km.residuals(kin, s.frames, b))
 
     # --------------------------------------------------------------- summary

@@ -28,7 +28,9 @@ def header(result: CalibrationResult) -> list[str]:
         if r.cv.subsample:
             cv += " on a random {} of the {} poses".format(*r.cv.subsample)
     sets = f"{n} measurement set(s), " if n > 1 else ""
-    return [f"kincal calibration of {r.robot.name} ({r.robot.base} -> {r.robot.tip}), {sets}"
+    chains = ", ".join(dict.fromkeys(f"{s.base_frame} -> {s.tip_frame}" for s in r.sets
+                                     if s.base_frame)) or f"{r.robot.base} -> {r.robot.tip}"
+    return [f"kincal calibration of {r.robot.name} ({chains}), {sets}"
             f"method {r.options.method}, {how}{cv}",
             *([f"  penalty: {r.penalty_choice}"] if r.penalty_choice else []),
             *([f"  {ev.line()}" + ("" if ev.converged

@@ -288,6 +288,20 @@ class FlushKind(KindModel):
                   for j, n in enumerate(normals)]
         return np.concatenate([np.ravel(planes), angles_of(u), t])
 
+    def adopt(self, start, given, own) -> np.ndarray:
+        """The start ``start`` (f,) with the shared planes' values ``given`` where ``own``
+        is False (a plane another set also touches): the face normal is turned to their
+        side when this set's own fit of a shared plane found it the other way up."""
+        out = np.where(own, start, given)
+        planes, _, _ = self.split_frames(start)
+        theirs, a, _ = self.split_frames(out)
+        shared = [j for j in range(len(planes)) if not own[3 * j]]
+        if shared and normal(*planes[shared[0], :2]) @ normal(*theirs[shared[0], :2]) < 0:
+            u = rotx(a[0]) @ roty(a[1]) @ np.array([0.0, 0.0, 1.0])
+            f = 3 * len(planes)
+            out[f:f + 2] = angles_of(-u)
+        return out
+
     def sample_errors(self, r):
         """(N,) the contact point's height above its plane, unsigned [m]."""
         return np.abs(r[:, 0])

@@ -29,9 +29,28 @@ from kincal.rotations import inverse, transform
 @dataclass(frozen=True)
 class OffsetsModel(ErrorModel):
     """Joint offsets (see the module notes); placed frames are the URDF joint frames and
-    ``origins`` (n, 4, 4) their nominal placements in the frame before."""
+    ``origins`` (n, 4, 4) their nominal placements in the frame before; ``urdf`` (n, 4, 4)
+    the nominal URDF origins and ``urdf_axes`` (n, 3) the URDF axes (chain axes, negated
+    for reversed joints)."""
 
     origins: np.ndarray = None
+    urdf: np.ndarray = None
+    urdf_axes: np.ndarray = None
+
+    def urdf_origins(self, x) -> dict[str, np.ndarray]:
+        """{joint: (4, 4) its corrected URDF origin} [m]: the origin turned about (slid
+        along) the URDF axis by the offset, forward or reversed alike (module notes)."""
+        x = np.asarray(x, float).ravel()
+        out = {}
+        for i, name in enumerate(self.joint_names):
+            w = self.urdf_axes[i]
+            if self.kinds[i] == "prismatic":
+                M = transform(None, w * x[i])
+            else:
+                K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+                M = transform(np.eye(3) + np.sin(x[i]) * K + (1 - np.cos(x[i])) * K @ K, None)
+            out[name] = self.urdf[i] @ M
+        return out
 
     def _offset(self, i: int, value: float) -> np.ndarray:
         w = self.screw_axes[i]
@@ -67,4 +86,8 @@ def build(geometry) -> OffsetsModel:
                         np.zeros(n), np.array([k == "prismatic" for k in geometry.kinds]),
                         (OFFSET,) * n, np.arange(n), np.eye(4), np.asarray(geometry.axes, float),
                         np.zeros((n, 3)), np.broadcast_to(np.eye(4), (n, 4, 4)).copy(),
-                        inverse(J[-1]) @ geometry.T_base_tip, ("",) * n, inverse(before) @ J)
+                        inverse(J[-1]) @ geometry.T_base_tip, ("",) * n, inverse(before) @ J,
+                        None if geometry.parent_frames is None
+                        else inverse(np.asarray(geometry.parent_frames, float)) @ J,
+                        np.where(geometry.is_reversed[:, None], -1.0, 1.0)
+                        * np.asarray(geometry.axes, float))

@@ -25,6 +25,12 @@ common ancestor link is then corrected as that first down joint's origin, which 
 every change of it, and the corrected URDF writes it there), or when none follows (its
 origin lies between the last motion and the tip, the tool frame's part). The base frame's
 own link (before the first reversed joint moves) is never corrected: no URDF origin holds it.
+
+Several chains sharing joints (:mod:`kincal.identification.chains`): ``every_origin=True``
+gives the top reversed joint's origin its six errors too when a joint down follows. Within
+one chain they duplicate the first down joint's; across chains they do not (another chain
+may climb through that origin, or descend through the same down joint from another
+branch), and the rank-revealing selection removes what is redundant over the union.
 """
 
 from __future__ import annotations
@@ -65,6 +71,12 @@ class PlacementModel(ErrorModel):
         e[self.has_errors] = np.asarray(x, float).reshape(-1, 6)
         return e
 
+    def urdf_origins(self, x) -> dict[str, np.ndarray]:
+        """{joint: (4, 4) its corrected URDF origin} for the joints whose origins carry
+        errors [m]: what a corrected URDF writes, whatever chain traverses them."""
+        e = self._errors(x)
+        return {self.joint_names[i]: self._origin(i, e[i]) for i in np.flatnonzero(self.has_errors)}
+
     def placements(self, x) -> np.ndarray:
         e = self._errors(x)
         P = self.mid.copy()
@@ -91,6 +103,9 @@ class PlacementModel(ErrorModel):
                 w[rows][3:] = -(Rt @ np.column_stack(turn)).T
             else:
                 L = self.mid[i]  # the parent link frame in the frame before
+                if i and self.reversed[i - 1] and self.has_errors[i - 1]:
+                    # the top reversed joint's inverse origin leads this placement
+                    L = inverse(self._origin(i - 1, e[i - 1])) @ L
                 R, o = L[:3, :3], L[:3, 3]
                 c = o + R @ (self.origins[i][:3, 3] + e[i, :3])  # the joint origin, frame before
                 axes = [R @ t for t in turn]
@@ -127,8 +142,9 @@ class PlacementModel(ErrorModel):
         return cols.reshape(6 * self.n, len(P), 3).transpose(1, 2, 0)
 
 
-def build(geometry) -> PlacementModel:
-    """The placement model of a :class:`kincal.robot.ChainGeometry`."""
+def build(geometry, every_origin: bool = False) -> PlacementModel:
+    """The placement model of a :class:`kincal.robot.ChainGeometry`; every_origin: the top
+    reversed joint's origin keeps its errors when a joint down follows (module notes)."""
     J = np.asarray(geometry.joint_frames, float)
     n = len(J)
     rev = geometry.is_reversed
@@ -137,7 +153,7 @@ def build(geometry) -> PlacementModel:
     origins = inverse(parents) @ J
     top = int(rev.sum()) - 1  # the last reversed joint, -1 if none
     has = ~rev
-    has[:max(top, 0)] = True
+    has[:max(top + (every_origin and top < n - 1), 0)] = True
     # nominal P_k = inverse(frame before) . J_k, split around the origins with errors: the
     # frame before is reached through the previous joint's parent link when that joint's
     # inverse origin leads the placement, J_k through its parent link when k is forward
@@ -147,7 +163,7 @@ def build(geometry) -> PlacementModel:
                             before))
     mid = left @ np.where(rev[:, None, None], J, parents)
     notes = [""] * n
-    if top >= 0:
+    if top >= 0 and not has[top]:
         notes[top] = (f"reversed, its origin lies between {names[top]} and the tip: the tool "
                       "frame's part, no errors of its own" if top == n - 1 else
                       f"reversed at the common ancestor: its origin and {names[top + 1]}'s hold "

@@ -94,7 +94,12 @@ class AccuracyMap:
 
 def _chain_model(owner):
     """The chain's error model of a CalibrationResult or CalibrationProblem (what
-    MeasurementModel takes); the one place that names the attribute."""
+    MeasurementModel takes); the one place that names the attribute. A calibration of
+    several chains has no one chain model: refused."""
+    chains = getattr(owner, "chains", None)
+    if chains is not None and chains.several:
+        raise OptionError("the accuracy map describes one chain; this calibration holds "
+                          "several (one --base/--tip per file): calibrate a chain alone for it")
     return owner.error_model
 
 

@@ -1,0 +1,240 @@
+"""The chains of a calibration: one robot chain, or several sharing the joints they traverse.
+
+A humanoid's two arms share its torso; a dual-arm cell's arms share a base. Each measurement
+set is measured on its own chain (a :class:`kincal.robot.Robot` of one URDF, any base and
+tip), evaluated by its own chain's error model; the kinematic block of the parameter vector
+is the *union* of the chains' parameter names, in order of first appearance, so a joint on
+several chains has one set of parameters, and each chain's Jacobian columns land on the
+union's by name (:class:`MappedKind`).
+
+That needs parameters that belong to URDF joints whatever chain traverses them:
+``placement`` (six errors per URDF origin, the default with several chains, built with
+every traversed origin's errors: what is redundant over the union is left to the
+rank-revealing selection of ``analyze()``) or ``offsets`` (one zero per joint). The MD-H
+models (``complete``, ``mdh``) parametrise one chain's frames, base to tip: refused with
+several chains. The corrected robot is the ONE original URDF with every corrected origin
+(:meth:`Chains.corrected`), written through :meth:`kincal.robot.Robot.with_origins`.
+
+One chain (the usual case) is the same object with an identity map: its kinds are the kind
+models themselves and its model the chain's, any error model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kincal import models as error_models
+from kincal.errors import ChainError, OptionError, ParameterError, listing, suggest
+from kincal.measurements.sets import kind_model
+from kincal.robot import Robot
+
+JOINT_MODELS = ("placement", "offsets")  # whose parameters belong to URDF joints
+
+
+@dataclass(frozen=True)
+class UnionModel:
+    """The kinematic parameters of several chains: names, units, classes and nominal values
+    (the union of the chains' error models, first appearance order) and the union of their
+    joints. It has no kinematics of its own: each set is evaluated on its chain's model."""
+
+    name: str
+    joint_names: tuple[str, ...]
+    kinds: tuple[str, ...]
+    names: tuple[str, ...]
+    nominal: np.ndarray
+    is_length: np.ndarray
+    classes: tuple[str, ...]
+    notes: tuple[str, ...]
+
+    @property
+    def n(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    def describe(self) -> str:
+        return (f"error model {self.name} over several chains: {self.size} kinematic parameters "
+                f"on {self.n} joints")
+
+
+class MappedKind:
+    """A kind model of one chain seen through the union: it takes and gives the union's
+    kinematic vector and backlash values (``idx``: the chain's parameters in the union;
+    ``bpos``: its backlash terms in the layout's). Everything else is the kind model's."""
+
+    def __init__(self, inner, idx: np.ndarray, bpos: np.ndarray, p: int, nb: int):
+        self.__dict__.update(inner=inner, idx=idx, bpos=bpos, p=p, nb=nb)
+
+    def __getattr__(self, name):
+        return getattr(self.__dict__["inner"], name)
+
+    def residuals(self, kin, frames, backlash, jacobian=False, kinematic=True):
+        out = self.inner.residuals(np.asarray(kin)[self.idx], frames,
+                                   np.asarray(backlash)[self.bpos], jacobian, kinematic)
+        if not jacobian:
+            return out
+        r, Jk, Jf, Jb = out
+        K = np.zeros(Jk.shape[:2] + (self.p,))
+        K[..., self.idx] = Jk
+        B = np.zeros(Jb.shape[:2] + (self.nb,))
+        B[..., self.bpos] = Jb
+        return r, K, Jf, B
+
+    def start(self, kin, *args):
+        return self.inner.start(np.asarray(kin)[self.idx], *args)
+
+    def check_fixable(self, kin, *args):
+        return self.inner.check_fixable(np.asarray(kin)[self.idx], *args)
+
+    def subset(self, rows) -> "MappedKind":
+        return MappedKind(self.inner.subset(rows), self.idx, self.bpos, self.p, self.nb)
+
+
+class Chains:
+    """The chains of a calibration (module notes). robots: one Robot for every set, or one
+    per set (``n_sets``); model: the error model's name, None for the default."""
+
+    def __init__(self, robots, n_sets: int, model: str | None = None):
+        robots = list(robots) if isinstance(robots, (list, tuple)) else [robots]
+        for k, r in enumerate(robots):
+            if not isinstance(r, Robot):
+                raise OptionError(f"robot {k + 1} must be a Robot (Robot.load(urdf, base=, tip=))"
+                                  f", got {type(r).__name__}")
+        if len(robots) not in (1, n_sets):
+            raise OptionError(f"{len(robots)} robots for {n_sets} measurement sets: give one "
+                              "robot (every set on its chain) or one per set")
+        first = robots[0]
+        for k, r in enumerate(robots[1:], start=2):
+            if r.urdf_text != first.urdf_text or r.model_name != first.model_name:
+                raise OptionError(
+                    f"the robots of several chains must come from one URDF: robot {k} is "
+                    f"{r.model_name!r} from {r.source}, robot 1 {first.model_name!r} from "
+                    f"{first.source}")
+        self.robots = tuple(robots) * (n_sets if len(robots) == 1 else 1)
+        keys = list(dict.fromkeys((r.base, r.tip) for r in self.robots))
+        self.of_set = tuple(keys.index((r.base, r.tip)) for r in self.robots)
+        self.chain_robots = tuple(self.robots[self.of_set.index(c)] for c in range(len(keys)))
+        if len(keys) == 1:
+            self.model_name = model or error_models.default_for(first.geometry)
+            self.models = (error_models.build(self.model_name, first.geometry),)
+            self.model = self.models[0]
+            self.idx = (np.arange(self.model.size),)
+            return
+        self.model_name = model or "placement"
+        if self.model_name not in JOINT_MODELS:
+            raise OptionError(
+                f"error model {self.model_name} cannot calibrate several chains: its parameters "
+                "describe one chain's frames from its base to its tip, not URDF joints that "
+                f"chains share; choose one of {', '.join(JOINT_MODELS)} (default placement)")
+        from kincal.models import offsets, placement
+
+        self.models = tuple(placement.build(r.geometry, every_origin=True)
+                            if self.model_name == "placement" else offsets.build(r.geometry)
+                            for r in self.chain_robots)
+        self._check_origins()
+        names = tuple(dict.fromkeys(n for m in self.models for n in m.names))
+        self.idx = tuple(np.array([names.index(n) for n in m.names], int) for m in self.models)
+        joints = tuple(dict.fromkeys(j for m in self.models for j in m.joint_names))
+        kinds = {j: k for m in self.models for j, k in zip(m.joint_names, m.kinds)}
+        first_of = {}
+        for m in self.models:
+            for k, n in enumerate(m.names):
+                first_of.setdefault(n, (m, k))
+        self.model = UnionModel(
+            self.model_name, joints, tuple(kinds[j] for j in joints), names,
+            np.array([first_of[n][0].nominal[first_of[n][1]] for n in names]),
+            np.array([bool(first_of[n][0].is_length[first_of[n][1]]) for n in names]),
+            tuple(first_of[n][0].classes[first_of[n][1]] for n in names),
+            tuple(dict.fromkeys(n for m in self.models for n in m.notes if n)))
+
+    def _check_origins(self) -> None:
+        """A chain that ends climbing (its tip above its base, on the base's way up) cannot
+        correct the origin of its last joint: refused when another chain corrects it."""
+        owned = {n.rsplit(".", 1)[0] for m in self.models for n in m.names}
+        for r, m in zip(self.chain_robots, self.models):
+            mine = {n.rsplit(".", 1)[0] for n in m.names}
+            lost = [j for j in m.joint_names if j not in mine and j in owned]
+            if lost:
+                raise ChainError(
+                    f"the chain {r.base} -> {r.tip} ends climbing through {lost[0]}, whose "
+                    "origin lies between its last motion and its tip: it cannot carry that "
+                    "origin's errors, which another chain corrects; choose a tip below "
+                    f"{lost[0]}'s parent link for it")
+
+    @property
+    def several(self) -> bool:
+        return len(self.models) > 1
+
+    @property
+    def robot(self) -> Robot:
+        """The first set's robot (what one-chain readers of a result look at)."""
+        return self.robots[0]
+
+    def backlash(self, joints) -> tuple[str, ...]:
+        """The backlash joints ``joints`` checked and in the union's joint order."""
+        chain = tuple(self.model.joint_names)
+        unknown = [j for j in joints if j not in chain]
+        if unknown:
+            raise ParameterError(f"no chain joint {unknown[0]!r} for a backlash term."
+                                 + suggest(unknown[0], chain)
+                                 + f" Chain joints: {listing(chain, 60)}", valid=chain)
+        return tuple(j for j in chain if j in set(joints))
+
+    def kind(self, i: int, data, backlash: tuple[str, ...]):
+        """The kind model of set i on its chain (mapped into the union with several)."""
+        c = self.of_set[i]
+        em = self.models[c]
+        chain = tuple(em.joint_names)
+        mine = tuple(j for j in backlash if j in chain)
+        km = kind_model(em, data, tuple(chain.index(j) for j in mine))
+        if not self.several:
+            return km
+        return MappedKind(km, self.idx[c], np.array([backlash.index(j) for j in mine], int),
+                          self.model.size, len(backlash))
+
+    def shared_planes(self, kinds) -> tuple[tuple[int, ...], ...]:
+        """The layout's aliases (:class:`kincal.identification.layout.ParameterLayout`) when
+        the files touch the same physical planes: every plane or flush set's plane
+        parameters (``plane.*``, or ``plane<label>.*`` per label of a ``plane`` column) are
+        those of the first such set with that name; () when none is shared. A plane is
+        fitted in its chain's base frame: sets on chains with different bases are refused."""
+        owner: dict[str, int] = {}
+        out, shared = [], False
+        for i, km in enumerate(kinds):
+            row = []
+            for name in km.frame_names:
+                j = owner.setdefault(name, i) if (km.kind in ("plane", "flush")
+                                                  and name.startswith("plane")) else i
+                if j != i and self.robots[j].base != self.robots[i].base:
+                    raise OptionError(
+                        f"--shared-plane: set {i + 1} ({km.data.source}) is measured from base "
+                        f"{self.robots[i].base!r}, set {j + 1} from {self.robots[j].base!r}; a "
+                        "plane is fitted in its chain's base frame, so only sets of chains "
+                        "with one base can share it (give those chains one --base)")
+                row.append(-1 if j == i else j)
+                shared |= j != i
+            out.append(tuple(row))
+        return tuple(out) if shared else ()
+
+    def chain_of(self, i: int):
+        """(error model, (p_c,) its parameters' positions in the union) of set i's chain."""
+        c = self.of_set[i]
+        return self.models[c], self.idx[c]
+
+    def origins(self, kin: np.ndarray) -> dict[str, np.ndarray]:
+        """{joint: (4, 4) corrected URDF origin} of every origin the chains correct [m]."""
+        out = {}
+        for m, idx in zip(self.models, self.idx):
+            out.update(m.urdf_origins(np.asarray(kin)[idx]))
+        return out
+
+    def corrected(self, kin: np.ndarray) -> Robot:
+        """The first set's robot with the identified kinematics ``kin`` (the union's): one
+        chain through its joint frames, several through every corrected URDF origin."""
+        if not self.several:
+            return self.robot.with_joint_frames(self.model.joint_frames(kin))
+        return self.robot.with_origins(self.origins(kin))

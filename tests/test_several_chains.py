@@ -1,0 +1,392 @@
+"""Several chains of one robot in one calibration, sharing the joints they traverse: the
+Jacobian of a two-chain problem against central differences, planted errors on shared joints
+recovered from two chains, two chains together against each alone on held-out poses, the
+corrected URDF (one original tree, every corrected origin) through Pinocchio, FRAMES.json
+per set, the command line and its refusals."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+from chains import random_tree
+
+from kincal.cli.main import main
+from kincal.errors import ChainError, OptionError
+from kincal.export.outputs import corrected_urdf_text
+from kincal.frames_file import CellFrames
+from kincal.identification.chains import Chains
+from kincal.identification.options import CalibrationOptions
+from kincal.identification.problem import CalibrationProblem, calibrate
+from kincal.measurements.data import Measurements
+from kincal.measurements.flush import FlushData
+from kincal.models.chain import Chain
+from kincal.robot import Robot
+from kincal.rotations import base_rotation
+
+STEP = 1e-6  # central differences in the solver's variables (mm, deg): O(STEP^2) + roundoff
+TOOLS = (np.array([0.03, -0.02, 0.05]), np.array([-0.04, 0.01, 0.06]))
+FRAMES = (np.array([0.5, -0.2, 0.1, 0.1, -0.2, 0.3]), np.array([-0.3, 0.4, 0.2, -0.1, 0.2, 1.0]))
+
+
+def _tree(tmp_path, seed=3):
+    """A random tree (tests/chains.py) and two chains sharing its trunk ``t``: the root to
+    leaf ``atip`` (all forward), and leaf ``ctip`` up its branch, through the root, down the
+    trunk and branch b to ``btip``."""
+    text, joints = random_tree(np.random.default_rng(seed))
+    path = tmp_path / f"tree_{seed}.urdf"
+    path.write_text(text)
+    return (Robot.load(path, base="base_link", tip="atip"),
+            Robot.load(path, base="ctip", tip="btip")), joints
+
+
+def _q(robot, n, rng):
+    g = robot.geometry
+    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+    return rng.uniform(0.8 * lo, 0.8 * hi, (n, g.n))
+
+
+def _points(robot, true, q, k, noise=0.0, rng=None, source=""):
+    """Point measurements of chain k's tool point on the true robot (Pinocchio), in a
+    measurement frame (FRAMES[k]: the base frame's pose in it)."""
+    T = true.tip_poses(q)
+    P = T[:, :3, 3] + T[:, :3, :3] @ TOOLS[k]
+    b = FRAMES[k]
+    M = P @ base_rotation(*b[3:]).T + b[:3]
+    if noise:
+        M = M + rng.normal(0, noise, M.shape)
+    return Measurements(joint_names=robot.joint_names, joint_values=q, positions=M,
+                        source=source or f"chain{k + 1}")
+
+
+def _truth(robots, kin_scale, rng, model="placement", planted=None):
+    ch = Chains(list(robots), 2, model)
+    kin = rng.normal(0, kin_scale, ch.model.size) if planted is None else planted(ch)
+    origins = ch.origins(kin)
+    return ch, kin, [r.with_origins(origins) for r in robots]
+
+
+def _identifiable(robots, qs):
+    """The kinematic parameters two point sets at poses ``qs`` identify (nominal data)."""
+    sets = [_points(robots[k], robots[k], qs[k], k) for k in range(2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = CalibrationProblem(list(robots), sets, CalibrationOptions(method="ls"))
+        kept = set(p.analyze().kept)
+    return [k for k, n in enumerate(p.layout.kinematic_names) if n in kept]
+
+
+def _planted_on_identifiable(robots, qs, scale, rng):
+    """Errors planted in the identifiable kinematic parameters only (the others redundant
+    over the union or too weak: the data cannot tell what they were)."""
+    keep = _identifiable(robots, qs)
+
+    def planted(ch):
+        kin = np.zeros(ch.model.size)
+        kin[keep] = rng.normal(0, scale, len(keep))
+        return kin
+
+    return _truth(robots, 0, rng, planted=planted)
+
+
+def test_union_layout_one_set_of_parameters_per_shared_joint(tmp_path):
+    robots, joints = _tree(tmp_path)
+    ch = Chains(list(robots), 2)
+    names = ch.model.names
+    assert len(names) == len(set(names))
+    for j in joints["t"]:  # the trunk is on both chains: its six errors once
+        assert [n for n in names if n.startswith(j + ".")] == [f"{j}.{f}" for f in
+                                                                ("tx", "ty", "tz", "rx", "ry", "rz")]
+    # every traversed origin has its errors, the top reversed joint's (c's first) included
+    assert f"{joints['c'][0]}.tx" in ch.models[1].names
+    for m, idx in zip(ch.models, ch.idx):
+        assert tuple(names[k] for k in idx) == m.names
+
+
+def test_two_chain_jacobian_against_central_differences(tmp_path):
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(0)
+    sets = [_points(robots[k], robots[k], _q(robots[k], 12, rng), k) for k in range(2)]
+    # and a flush set on chain 2 (its residuals need no consistent data for a Jacobian)
+    sets.append(FlushData(joint_names=robots[1].joint_names, joint_values=_q(robots[1], 8, rng)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = CalibrationProblem([robots[0], robots[1], robots[1]], sets,
+                               CalibrationOptions(backlash=("aj1", "tj2", "bj1")))
+    assert p.chains.several and p.layout.backlash == ("tj2", "aj1", "bj1")  # union order
+    u = p.start() / p.scale + rng.normal(0, 0.5, p.layout.size)  # off the start: mm, deg
+    f = p.residual_function()
+    _, J = f(u, True)
+    D = np.empty_like(J)
+    for k in range(len(u)):
+        e = np.zeros(len(u))
+        e[k] = STEP
+        D[:, k] = (f(u + e, False)[0] - f(u - e, False)[0]) / (2 * STEP)
+    assert np.abs(J - D).max() < 1e-6 * max(1.0, np.abs(D).max())
+    # the columns of a chain's set are zero for parameters of joints off that chain
+    only_b = [k for k, n in enumerate(p.layout.kinematic_names) if n.startswith("b")]
+    rows = slice(0, 3 * 12)
+    assert only_b and np.all(J[rows, only_b] == 0)
+
+
+@pytest.mark.parametrize("seed", [3, 7])
+def test_planted_errors_recovered_from_two_chains(tmp_path, seed):
+    """Noise-free points on two chains, errors planted in the parameters they identify
+    (placement): recovered to 1e-9, both chains' tool points reproduced at held-out poses,
+    and the corrected URDF (the one original tree) reproduces every chain's model to
+    1e-12 m through Pinocchio."""
+    robots, _ = _tree(tmp_path, seed)
+    rng = np.random.default_rng(seed)
+    qs = [_q(robots[k], 40, rng) for k in range(2)]
+    ch, kin, true = _planted_on_identifiable(robots, qs, 2e-3, rng)
+    sets = [_points(robots[k], true[k], qs[k], k) for k in range(2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = calibrate(list(robots), sets, method="ls")
+    assert res.layout.kinematic_names == ch.model.names
+    assert np.abs(res.kinematic - kin).max() < 1e-9
+    for k in range(2):
+        em, idx = res.chains.chain_of(k)
+        q = _q(robots[k], 30, rng)
+        s = Chain(em, q).state(res.kinematic[idx], None, keep=False)
+        T = true[k].tip_poses(q)
+        err = (s.p_tip + s.R_tip @ TOOLS[k]) - (T[:, :3, 3] + T[:, :3, :3] @ TOOLS[k])
+        assert np.abs(err).max() < 1e-9
+    # the corrected URDF: reload each chain from the written text, compare with the model
+    path = tmp_path / "corrected.urdf"
+    path.write_text(corrected_urdf_text(res))
+    for k in range(2):
+        em, idx = res.chains.chain_of(k)
+        back = Robot.load(path, base=robots[k].base, tip=robots[k].tip)
+        q = _q(robots[k], 20, rng)
+        s = Chain(em, q).state(res.kinematic[idx], None, keep=False)
+        T = back.tip_poses(q)
+        assert np.abs(T[:, :3, 3] - s.p_tip).max() < 1e-12
+        assert np.abs(T[:, :3, :3] - s.R_tip).max() < 1e-12
+
+
+def test_planted_offsets_of_shared_joints_recovered(tmp_path):
+    """Joint offsets planted on the two trunk joints, which both chains traverse: recovered
+    to 1e-9 rad from the two chains together (offsets model)."""
+    robots, joints = _tree(tmp_path)
+    rng = np.random.default_rng(1)
+    trunk = [f"{j}.theta" for j in joints["t"]]
+
+    def planted(ch):
+        kin = np.zeros(ch.model.size)
+        kin[[ch.model.names.index(n) for n in trunk]] = (0.01, -0.02)
+        return kin
+
+    ch, kin, true = _truth(robots, 0, rng, "offsets", planted)
+    sets = [_points(robots[k], true[k], _q(robots[k], 30, rng), k) for k in range(2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = calibrate(list(robots), sets, method="ls", model="offsets")
+    for n, v in zip(trunk, (0.01, -0.02)):
+        assert res.parameter(n).status == "identified"
+        assert abs(res.parameter(n).estimate - v) < 1e-9
+    assert np.abs(res.kinematic).max() < 0.021  # nothing else moved much
+
+
+def test_two_chains_together_at_least_as_good_as_each_alone(tmp_path):
+    """Noisy points (20 um), few poses on chain 1: calibrated together, each chain predicts
+    its held-out measurements at least as well as calibrated alone (RMS over four noise
+    draws: one draw can favour either by a few percent), chain 1 markedly better."""
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(5)
+    qs = [_q(robots[k], n, rng) for k, n in ((0, 25), (1, 60))]
+    ch, kin, true = _planted_on_identifiable(robots, qs, 1e-3, rng)
+    held = [_q(robots[k], 200, rng) for k in range(2)]
+
+    def held_out(res, k, i):
+        """RMS [m] of chain k's predicted measurements (its set i's frames) at held-out
+        poses against the noise-free truth: what the frames and kinematics give together,
+        free of the gauge between the measurement frame and the first joints."""
+        em, idx = (res.error_model, slice(None)) if not res.chains.several \
+            else res.chains.chain_of(i)
+        s = Chain(em, held[k]).state(res.kinematic[idx], None, keep=False)
+        f = res.sets[i].frames
+        P = (s.p_tip + s.R_tip @ f[6:9]) @ base_rotation(*f[3:6]).T + f[:3]
+        d = P - _points(robots[k], true[k], held[k], k).positions
+        return float(np.mean(np.sum(d ** 2, axis=1)))
+
+    together, alone = np.zeros(2), np.zeros(2)
+    for _ in range(4):
+        sets = [_points(robots[k], true[k], qs[k], k, 20e-6, rng) for k in range(2)]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            both = calibrate(list(robots), sets, method="ls")
+            for k in range(2):
+                together[k] += held_out(both, k, k)
+                alone[k] += held_out(calibrate(robots[k], [sets[k]], method="ls",
+                                               model="placement"), k, 0)
+    together, alone = np.sqrt(together / 4), np.sqrt(alone / 4)
+    # chain 1 (few poses) gains from chain 2's view of the shared trunk; chain 2 (many) can
+    # only gain little, and four draws resolve its expected gain to about 1 %
+    assert together[0] < 0.95 * alone[0] and together[1] <= 1.01 * alone[1], (together, alone)
+
+
+def test_bad_input_refused(tmp_path):
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(0)
+    sets = [_points(robots[k], robots[k], _q(robots[k], 12, rng), k) for k in range(2)]
+    for model in ("complete", "mdh"):
+        with pytest.raises(OptionError, match=f"error model {model} cannot calibrate several "
+                                              "chains.*placement, offsets"):
+            CalibrationProblem(list(robots), sets, CalibrationOptions(model=model))
+    other = tmp_path / "other.urdf"
+    other.write_text(random_tree(np.random.default_rng(99))[0])
+    stranger = Robot.load(other, base="ctip", tip="btip")
+    with pytest.raises(OptionError, match="must come from one URDF"):
+        CalibrationProblem([robots[0], stranger], sets)
+    with pytest.raises(OptionError, match="3 robots for 2 measurement sets"):
+        CalibrationProblem([robots[0]] * 3, sets)
+    # a chain ending on its way up cannot carry the origin another chain corrects
+    climbing = Robot.load(robots[0].source, base="atip", tip="base_link")
+    with pytest.raises(ChainError, match="ends climbing"):
+        Chains([robots[0], climbing], 2)
+
+
+def test_frames_file_records_each_sets_chain(tmp_path):
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(2)
+    ch, kin, true = _truth(robots, 1e-3, rng)
+    sets = [_points(robots[k], true[k], _q(robots[k], 30, rng), k) for k in range(2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = calibrate(list(robots), sets, method="ls")
+    text = res.frames().dumps()
+    back = CellFrames.from_dict(json.loads(text))
+    assert [(s.base_frame, s.tip_frame) for s in back.sets] == [("base_link", "atip"),
+                                                                ("ctip", "btip")]
+    # an older file without them: the sets are on the top-level chain
+    data = json.loads(text)
+    for s in data["sets"]:
+        del s["base_frame"], s["tip_frame"]
+    old = CellFrames.from_dict(data)
+    assert {(s.base_frame, s.tip_frame) for s in old.sets} == {("base_link", "atip")}
+
+
+def _csv(path, data):
+    path.write_text(data.to_csv_text())
+    return str(path)
+
+
+def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(4)
+    ch, kin, true = _truth(robots, 1e-3, rng)
+    files = [_csv(tmp_path / f"s{k}.csv", _points(robots[k], true[k], _q(robots[k], 40, rng),
+                                                  k, 10e-6, rng)) for k in range(2)]
+    urdf = str(robots[0].source)
+    out, frames = tmp_path / "CAL.urdf", tmp_path / "FRAMES.json"
+    before = {p: p.read_bytes() for p in tmp_path.iterdir()}
+    for base, tip, what in ((["base_link", "ctip", "ctip"], ["atip", "btip"], "--base"),
+                            (["base_link", "ctip"], ["atip", "btip", "btip"], "--tip")):
+        assert main(["calibrate", urdf, *files, "--base", *base, "--tip", *tip,
+                     "--out", str(out), "--quiet"]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"kincal: error: {what} takes one frame")
+        assert "2 data files, 3 " in err[0]
+    assert main(["calibrate", urdf, *files, "--shared-plane", "--out", str(out)]) == 1
+    assert "--shared-plane shares the planes of plane contacts" in capsys.readouterr().err
+    assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
+                 "btip", "--accuracy-map", "0", "0", "0", "0.1", "--out", str(out)]) == 1
+    assert "describe one chain; this calibration has several" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
+                     "btip", "--method", "ls", "--out", str(out), "--frames-out", str(frames),
+                     "--quiet"]) == 0
+    f = CellFrames.read(frames)
+    assert [(s.base_frame, s.tip_frame) for s in f.sets] == [("base_link", "atip"),
+                                                             ("ctip", "btip")]
+    for k in range(2):  # the one corrected URDF holds both chains' corrections
+        q = _q(robots[k], 50, rng)
+        truth = _points(robots[k], true[k], q, k).positions
+        s = f.sets[k]
+        errors = []
+        for robot in (robots[k], Robot.load(out, base=robots[k].base, tip=robots[k].tip)):
+            T = robot.tip_poses(q)
+            P = (T[:, :3, 3] + T[:, :3, :3] @ s.tools[0]) @ base_rotation(*s.base[3:]).T
+            errors.append(np.abs(P + s.base[:3] - truth).max())
+        assert errors[1] < 0.1e-3 and errors[1] < 0.1 * errors[0], errors
+    # kincal evaluate on one chain: the first by default, the second by its base and tip
+    capsys.readouterr()
+    assert main(["evaluate", str(out), files[0], "--frames", str(frames)]) == 0
+    assert main(["evaluate", str(out), files[1], "--base", "ctip", "--tip", "btip",
+                 "--frames", str(frames)]) == 0
+    said = capsys.readouterr().out
+    assert "(base_link -> atip)" in said and "(ctip -> btip)" in said
+    rms = [float(line.split("RMS")[1].split()[0]) for line in said.splitlines() if "RMS" in line]
+    assert len(rms) == 2 and max(rms) < 0.05, said  # [mm]: noise 0.01 mm per axis
+
+
+def _plane_touches(robot, true, n, rng, height, tool):
+    """Joint values (n, ...) putting ``tool`` (tip frame) of the true robot on the plane
+    z = height of the base frame (inverse kinematics from random starts)."""
+    out = []
+    while len(out) < n:
+        q0 = _q(robot, 1, rng)[0]
+        T = true.tip_poses(q0[None])[0]
+        p = T[:3, 3] + T[:3, :3] @ tool
+        q, ok = true.inverse_kinematics(np.r_[p[:2], height], tool, start=q0)
+        if ok:
+            out.append(q)
+    return np.array(out)
+
+
+def _shared_plane_sets(tmp_path, rng):
+    from kincal.measurements.plane import PlaneData
+
+    text, _ = random_tree(np.random.default_rng(3))
+    path = tmp_path / "tree.urdf"
+    path.write_text(text)
+    robots = [Robot.load(path, base="ctip", tip=t) for t in ("atip", "btip")]  # one base
+    ch, kin, true = _truth(robots, 1e-3, rng)
+    sets = [PlaneData(joint_names=robots[k].joint_names, source=f"touches{k + 1}",
+                      joint_values=_plane_touches(robots[k], true[k], 30, rng, 0.1, TOOLS[k]))
+            for k in range(2)]
+    return robots, sets
+
+
+def test_shared_plane_one_set_of_plane_parameters(tmp_path):
+    """Two chains from one base touching one plane: --shared-plane gives one plane.*, its
+    Jacobian columns right (central differences), and noise-free touches are fitted to
+    zero; chains from different bases are refused."""
+    rng = np.random.default_rng(8)
+    robots, sets = _shared_plane_sets(tmp_path, rng)
+    o = CalibrationOptions(method="ls", shared_planes=True, tool_guess=tuple(TOOLS[0]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = CalibrationProblem(robots, sets, o)
+        alone = CalibrationProblem(robots, sets, CalibrationOptions(method="ls"))
+    names = p.layout.names
+    assert "plane.d" in names and "set2.plane.d" not in names and "set2.tool.x" in names
+    assert p.layout.size == alone.layout.size - 3
+    at = [np.arange(p.layout.size)[p.layout.frame_slices[i]] for i in range(2)]
+    for name in ("plane.rx", "plane.ry", "plane.d"):  # set 2 reads set 1's plane
+        assert at[1][p.layout.frame_names(1).index(name)] == at[0][
+            p.layout.frame_names(0).index(name)]
+    u = p.start() / p.scale + rng.normal(0, 0.5, p.layout.size)
+    f = p.residual_function()
+    _, J = f(u, True)
+    D = np.empty_like(J)
+    for k in range(len(u)):
+        e = np.zeros(len(u))
+        e[k] = STEP
+        D[:, k] = (f(u + e, False)[0] - f(u - e, False)[0]) / (2 * STEP)
+    assert np.abs(J - D).max() < 1e-6 * max(1.0, np.abs(D).max())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = p.solve()
+    assert max(s.after.max for s in res.sets) < 1e-6  # [mm]
+    plane = [[s.frame(n) for n in ("plane.rx", "plane.ry", "plane.d")] for s in res.sets]
+    assert plane[0] == plane[1]
+    other = Robot.load(robots[0].source, base="atip", tip="btip")
+    with pytest.raises(OptionError, match="--shared-plane: set 2 .* base 'atip'.* one base"):
+        CalibrationProblem([robots[0], other], [sets[0], type(sets[1])(
+            joint_names=other.joint_names, joint_values=_q(other, 30, rng))], o)
+
