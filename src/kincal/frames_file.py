@@ -72,6 +72,7 @@ class SetFrames:
     values: tuple[float, ...]
     base_frame: str = ""
     tip_frame: str = ""
+    joints: tuple[str, ...] = ()  # the chain joints of that chain, root first
 
     def value(self, name: str) -> float:
         return self.values[self.names.index(name)]
@@ -163,6 +164,7 @@ class CellFrames:
                "sets": [{"kind": s.kind, "source": s.source,
                          "base_frame": s.base_frame or self.base_frame,
                          "tip_frame": s.tip_frame or self.tip_frame,
+                         "joints": list(s.joints or self.joints),
                          "frames": dict(zip(s.names, map(float, s.values))), **s.derived()}
                         for s in self.sets]}
         if self.backlash:
@@ -249,7 +251,8 @@ class CellFrames:
                 raise TypeError("a set's frames must be an object of named values")
             sets.append(SetFrames(str(s["kind"]), str(s.get("source", "")),
                                   tuple(str(k) for k in f), tuple(float(v) for v in f.values()),
-                                  str(s.get("base_frame", base)), str(s.get("tip_frame", tip))))
+                                  str(s.get("base_frame", base)), str(s.get("tip_frame", tip)),
+                                  tuple(str(j) for j in s.get("joints", data.get("joints", ())))))
         if not sets:
             raise DataError(f"{source}: the frames file holds no measurement set")
         return cls(str(data.get("robot", "")), str(data.get("chain_hash", "")),
@@ -319,15 +322,15 @@ class CellFrames:
     def for_chain(self, base: str | None, tip: str | None) -> "CellFrames":
         """The frames of the sets measured on the chain ``base`` -> ``tip`` (None: as
         recorded) when that is another chain of a calibration of several (not the file's
-        top-level one); this file otherwise. The chain hash and joints recorded are the
-        top-level chain's: the selected chain is checked by its base and tip."""
+        top-level one); this file otherwise. The chain hash recorded is the top-level
+        chain's: the selected chain is checked by its base, tip and joints."""
         base, tip = base or self.base_frame, tip or self.tip_frame
         if (base, tip) == (self.base_frame, self.tip_frame):
             return self
         mine = tuple(s for s in self.sets if (s.base_frame, s.tip_frame) == (base, tip))
         if not mine:
             return self
-        return CellFrames(self.robot, "", base, tip, (), mine,
+        return CellFrames(self.robot, "", base, tip, mine[0].joints, mine,
                           {j: v for j, v in self.backlash.items()}, self.source)
 
     # ------------------------------------------------------------ checks

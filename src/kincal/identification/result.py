@@ -302,7 +302,8 @@ class CalibrationResult:
             tip_frame=self.robot.tip, joints=tuple(self.robot.joint_names),
             sets=tuple(SetFrames(s.kind, s.source, s.frame_names,
                                  tuple(float(v) for v in s.frames), s.base_frame or
-                                 self.robot.base, s.tip_frame or self.robot.tip)
+                                 self.robot.base, s.tip_frame or self.robot.tip,
+                                 tuple(s.data.joint_names))
                        for s in self.sets),
             backlash=self.backlash)
 
