@@ -129,7 +129,10 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
         else:
             where = (f"the point {np.round(p, 4)} m of the {size * 1e3:g} mm cube at "
                      f"{np.round(center, 4)} m")
-            if max_tilt is not None and robot.inverse_kinematics(p, tool, None, start=home)[1]:
+            starts = [s for s in (home, solved.nearest(p)) if s is not None] + [
+                rng.uniform(lo, hi) for _ in range(8)]
+            if max_tilt is not None and any(  # the position alone, from several starts
+                    robot.inverse_kinematics(p, tool, None, start=s0)[1] for s0 in starts):
                 # the position is reachable: the asked orientation is what fails
                 raise OptionError(f"no joint solution reaches {where} with the tool within "
                                   f"{np.degrees(max_tilt):g} deg of pointing down: the tip's "
