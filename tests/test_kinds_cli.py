@@ -66,6 +66,9 @@ def test_flush_contacts_from_simulation_to_calibration_and_plan(tmp_path, capsys
     assert after < 0.1  # [mm] heights to the 0.05 mm noise
     saved = json.loads(frames.read_text())
     assert saved["sets"][0]["kind"] == "flush"
+    # the contact point, which flush touches cannot see, stays exactly at --tool-offset
+    # (the start fit included: issue 18 item 4)
+    assert saved["tool"] == {"x": 0.0, "y": 0.0, "z": 0.1}
     assert any(k.startswith("plane") and k.endswith("_in_base") for k in saved["sets"][0])
     assert main(["evaluate", str(out), str(data), "--frames", str(frames), "--on-plane",
                  "--flush"]) == 0

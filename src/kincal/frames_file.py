@@ -172,7 +172,11 @@ class CellFrames:
             out["backlash_convention"] = BACKLASH_CONVENTION
         try:  # version 1's keys, of the first point or pose set, for readers of version 1
             s = self.located()
-        except DataError:
+        except DataError:  # no measurement frame: the first set's tool point (contacts)
+            s = next((t for t in self.sets if t.has("tool.x", "tool.y", "tool.z")), None)
+            if s is not None:
+                out["tool"] = dict(zip("xyz", map(float, s.tools[0])))
+                out.update({k: v for k, v in s.derived().items()})
             return out
         tools = s.tools
         out["base"] = dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, s.base)))

@@ -255,8 +255,12 @@ class CalibrationProblem:
                     if name in lay.names and not free[lay.index(name)]:
                         x[lay.index(name)] = v
         if free.any():
-            sol = solve(self.residual_function(kinematic=False), x / self.scale, free,
-                        options=o.solver)
+            residual = self.residual_function(kinematic=False)
+            # only what the data can fix moves (an unseen flush contact point stays put)
+            J = residual(x / self.scale, True)[1] * (lay.reporting_scale() / self.scale)
+            kept = analyze(J, lay.names, lay.n_kinematic, free, o.rank_tol).kept
+            free = free & np.isin(np.array(lay.names), kept)
+            sol = solve(residual, x / self.scale, free, options=o.solver)
             x = sol.u * self.scale
         self._x_start = x
         return x
