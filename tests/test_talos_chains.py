@@ -107,7 +107,7 @@ def test_talos_two_arms_command_line_smoke(tmp_path, capsys):
         assert main(["calibrate", str(urdf), left, right, "--base", "left_sole_link",
                      "right_sole_link", "--tip", "gripper_left_base_link",
                      "gripper_right_base_link", "--on-plane", "--flush", "--tool-offset", "0",
-                     "0", "-0.12", "--lambda", "evidence", "--out", str(out), "--frames-out",
+                     "0", "-0.12", "--out", str(out), "--frames-out",
                      str(frames), "--quiet"]) == 0
     f = CellFrames.read(frames)
     assert [(s.base_frame, s.tip_frame) for s in f.sets] == [
