@@ -160,3 +160,40 @@ def test_calibrate_a_xacro_file_through_the_cli(workspace, tmp_path, capsys):
     check_urdf_text(written)
     assert "flange_joint" in written and arm.read_text() == XACRO  # the xacro is untouched
     assert main(["analyze", str(arm).replace("arm.urdf", "nothere.urdf"), str(data)]) == 1
+
+
+def test_xacro_arguments_on_ur_description(tmp_path, capsys):
+    """--xacro-arg NAME:=VALUE on every command that reads a robot: ur_description's
+    ur.urdf.xacro (shared test data, BSD-3) needs ur_type and name; without them one line
+    says so; with them it loads as the ur5e whose kinematics file it reads; a plain URDF
+    refuses the option; a malformed one is named."""
+    from conftest import SHARED
+
+    xacro_file = SHARED / "data" / "ur_description" / "urdf" / "ur.urdf.xacro"
+    if not xacro_file.exists():
+        pytest.skip("../shared/data/ur_description is not present")
+    out = tmp_path / "u.csv"
+    assert main(["simulate", str(xacro_file), "--tip", "tool0", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("kincal: error:") == 1 and "--xacro-arg NAME:=VALUE" in err
+    args = ["--xacro-arg", "ur_type:=ur5e", "--xacro-arg", "name:=ur5e"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = Robot.load(xacro_file, tip="tool0", xacro_args={"ur_type": "ur5e", "name": "ur5e"})
+        ur10 = Robot.load(xacro_file, tip="tool0", xacro_args={"ur_type": "ur10", "name": "ur10"})
+    assert robot.joint_names[0].endswith("shoulder_pan_joint")
+    # the arguments reach the kinematics: a ur5e's upper arm is 425 mm, a ur10's 612 mm
+    reach5 = np.linalg.norm(robot.tip_poses(np.zeros((1, 6)))[0, :3, 3])
+    reach10 = np.linalg.norm(ur10.tip_poses(np.zeros((1, 6)))[0, :3, 3])
+    assert 0.8 < reach5 < 0.9 and reach10 > reach5 + 0.3
+    assert main(["simulate", str(xacro_file), *args, "--tip", "tool0", "--center-m", "0.4",
+                 "0", "0.3", "--out", str(out)]) == 0
+    cal = tmp_path / "u.urdf"
+    assert main(["calibrate", str(xacro_file), str(out), *args, "--tip", "tool0", "--out",
+                 str(cal)]) == 0
+    capsys.readouterr()
+    assert main(["simulate", "ec66", "--xacro-arg", "a:=b", "--out", str(tmp_path / "e.csv")]) == 1
+    assert "is plain URDF, not xacro" in capsys.readouterr().err
+    assert main(["simulate", str(xacro_file), "--xacro-arg", "ur_type", "--out",
+                 str(tmp_path / "e.csv")]) == 1
+    assert "expects NAME:=VALUE" in capsys.readouterr().err

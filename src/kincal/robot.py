@@ -146,16 +146,14 @@ class Robot:
     # ------------------------------------------------------------------ loading
     @classmethod
     def load(cls, robot: str | Path, tip: str | None = None, base: str | None = None,
-             joint_values: dict | None = None) -> "Robot":
-        """Load a URDF path, ``"ec66"``, or an example-robot-data name (``"ur10"``, ...).
-
-        ``tip`` defaults to the description's usual tip frame when known; ``base`` to the
-        URDF root link. Any two frames of the URDF may be base and tip: the chain follows
-        the tree path between them. ``joint_values``: {name: value} for joints off the
-        chain.
-        """
+             joint_values: dict | None = None, xacro_args: dict | None = None) -> "Robot":
+        """Load a URDF (or xacro: ``xacro_args`` {name: value}) path, ``"ec66"``, or an
+        example-robot-data name (``"ur10"``, ...). ``tip`` defaults to the description's
+        usual tip frame when known; ``base`` to the URDF root link. Any two frames of the URDF
+        may be base and tip: the chain follows the tree path between them.
+        ``joint_values``: {name: value} for joints off the chain."""
         desc = descriptions.resolve(robot)
-        text = read_urdf_text(desc.urdf)
+        text = read_urdf_text(desc.urdf, xacro_args)
         model = _build_model(text, desc.urdf)
         root = next((f.name for f in model.frames if f.type == pin.FrameType.BODY), None)
         if root is None:

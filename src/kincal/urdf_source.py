@@ -70,13 +70,14 @@ _UTF8_NAMES = ("utf-8", "utf8", "us-ascii", "ascii")
 _MOVING = ("revolute", "continuous", "prismatic")  # joints whose axis is used
 
 
-def read_urdf_text(path) -> str:
+def read_urdf_text(path, xacro_args=None) -> str:
     """The text of the URDF file at ``path``, checked by :func:`check_urdf_text`.
 
     Raises :class:`InputFileError` for a missing, unreadable or directory path and
     :class:`UrdfError` for a file over :data:`MAX_URDF_BYTES`, text that is not
     UTF-8, or anything :func:`check_urdf_text` rejects. Line endings are kept. A xacro
-    file comes back expanded (see the module notes).
+    file comes back expanded (see the module notes), ``xacro_args`` {name: value} set; they
+    are refused for a plain URDF (they would be ignored).
     """
     p = Path(path)
     if p.exists() and not p.is_dir():  # a FIFO would block open(); a device never ends
@@ -111,10 +112,14 @@ def read_urdf_text(path) -> str:
         pass  # a xacro file: expanded below
     else:
         if p.suffix != ".xacro":
+            if xacro_args:
+                raise UrdfError(f"{p}: is plain URDF, not xacro: --xacro-arg "
+                                f"{' '.join(f'{k}:={v}' for k, v in xacro_args.items())} would "
+                                "be ignored; drop it, or give the .xacro file")
             return text
     from kincal.xacro_source import expand_xacro
 
-    text = expand_xacro(p, MAX_URDF_BYTES)
+    text = expand_xacro(p, MAX_URDF_BYTES, xacro_args)
     check_urdf_text(text, source=f"{p} (expanded by xacro)")
     return text
 

@@ -104,10 +104,11 @@ def _cause(exc: BaseException) -> BaseException | None:
     return None
 
 
-def expand_xacro(path, max_chars: int) -> str:
-    """The URDF text that xacro makes of the file at ``path`` (its defaults for every
-    ``xacro:arg``). Raises :class:`UrdfError`, one line, when the expansion fails or the
-    result is over ``max_chars``; xacro's own warnings become :class:`KincalWarning`\\ s.
+def expand_xacro(path, max_chars: int, args=None) -> str:
+    """The URDF text that xacro makes of the file at ``path``, with ``args`` {name: value}
+    for its ``xacro:arg``\\ s (the others at their defaults). Raises :class:`UrdfError`, one
+    line, when the expansion fails or the result is over ``max_chars``; xacro's own
+    warnings become :class:`KincalWarning`\\ s.
     """
     p = Path(path)
     try:
@@ -118,7 +119,7 @@ def expand_xacro(path, max_chars: int) -> str:
     stderr = io.StringIO()
     try:
         with _package_lookup(p), contextlib.redirect_stderr(stderr):
-            doc = xacro.process_file(str(p.resolve()))
+            doc = xacro.process_file(str(p.resolve()), mappings=dict(args or {}))
             text = doc.toprettyxml(indent="  ")
     except Exception as exc:  # xacro raises XacroException, expat, eval and OS errors
         cause = _cause(exc)
@@ -126,7 +127,9 @@ def expand_xacro(path, max_chars: int) -> str:
         where = f" (in {stack[-1]})" if stack and stack[-1] != str(p.resolve()) else ""
         reason = str(cause) if cause is not None else (str(exc) or type(exc).__name__)
         reason = " ".join(_ANSI.sub("", reason).split())
-        raise UrdfError(f"{p}: xacro expansion failed{where}: {reason}") from None
+        hint = ("; pass the file's arguments with --xacro-arg NAME:=VALUE"
+                if "substitution argument" in reason and not args else "")
+        raise UrdfError(f"{p}: xacro expansion failed{where}: {reason}{hint}") from None
     for line in dict.fromkeys(_ANSI.sub("", stderr.getvalue()).splitlines()):
         if line.startswith("warning:"):
             warnings.warn(f"{p}: xacro {line}", KincalWarning)

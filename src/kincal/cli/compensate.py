@@ -7,7 +7,8 @@ from dataclasses import dataclass, replace
 
 from kincal.cli.checks import check_outputs
 from kincal.cli.console import say_and_write
-from kincal.cli.options import Chain, add_overwrite, add_units, chain_from_frames, group, typed
+from kincal.cli.options import (Chain, add_overwrite, add_units, add_xacro_args,
+                                chain_from_frames, group, typed)
 from kincal.errors import DataError, OptionError
 
 
@@ -25,6 +26,7 @@ def register(subparsers) -> None:
                    help="seed joint columns and x,y,z [qx,qy,qz,qw] in the measurement frame")
     c.add_argument("--tip", help="tip frame (as in the calibration)")
     c.add_argument("--base", help="base frame (default: the URDF root link)")
+    add_xacro_args(i)
     c.add_argument("--frames", help="FRAMES.json from 'kincal calibrate --frames-out'")
     i.add_argument("--program", metavar="PROGRAM.csv",
                    help="joint values planned on the nominal model (chain joint columns)")

@@ -51,6 +51,26 @@ def add_units(p, length="positions and prismatic joints in DATA",
                    help=f"unit of {angle} (default rad)")
 
 
+def add_xacro_args(group_) -> None:
+    group_.add_argument("--xacro-arg", action="append", default=[], metavar="NAME:=VALUE",
+                        help="an argument of a xacro robot description (repeatable), e.g. "
+                             "ur_type:=ur5e name:=ur5e")
+
+
+def xacro_args(given) -> dict[str, str] | None:
+    """{name: value} of --xacro-arg NAME:=VALUE ..., or None; OptionError for a bad one."""
+    out: dict[str, str] = {}
+    for item in given or ():
+        name, sep, value = item.partition(":=")
+        if not sep or not name.strip() or any(c.isspace() for c in name.strip()):
+            raise OptionError(f"--xacro-arg expects NAME:=VALUE (as xacro and ros2 launch "
+                              f"write it), got {item!r}")
+        if name.strip() in out:
+            raise OptionError(f"--xacro-arg {name.strip()} given twice")
+        out[name.strip()] = value
+    return out or None
+
+
 def add_common(p, data=True, chains=False):
     """ROBOT [DATA], the chain (--tip, --base, --tool-offset) and DATA's columns and units;
     chains: --tip and --base take one frame, or one per data file (several chains)."""
@@ -67,6 +87,7 @@ def add_common(p, data=True, chains=False):
                        "tip." + several, **nargs)
     chain.add_argument("--base", help="base frame (default: the URDF root link)." + several,
                        **nargs)
+    add_xacro_args(inputs)
     if data:
         add_units(p)
         inputs.add_argument("--position-columns", nargs="+", default=("x", "y", "z"),
@@ -163,6 +184,7 @@ class Chain:
     robot: str  # URDF path, a bundled name or an example-robot-data name
     tip: str | None = None  # tip frame; None: the robot's usual tip (a tuple: see per_file)
     base: str | None = None  # base frame; None: the URDF root link (a tuple: see per_file)
+    xacro_arg: tuple[str, ...] = ()  # NAME:=VALUE of a xacro description
 
     @classmethod
     def of(cls, args) -> "Chain":
@@ -180,7 +202,8 @@ class Chain:
                                   f"data file: {n_files} data files, {len(v)} --{role} frames "
                                   f"({' '.join(v)})")
             given[role] = v * (n_files if len(v) == 1 else 1)
-        return [Chain(self.robot, t, b) for b, t in zip(given["base"], given["tip"])]
+        return [Chain(self.robot, t, b, self.xacro_arg)
+                for b, t in zip(given["base"], given["tip"])]
 
     @staticmethod
     def load_all(chains: list["Chain"]) -> list:
@@ -194,7 +217,8 @@ class Chain:
     def load(self):
         from kincal.robot import Robot
 
-        return Robot.load(self.robot, tip=self.tip, base=self.base)
+        return Robot.load(self.robot, tip=self.tip, base=self.base,
+                          xacro_args=xacro_args(self.xacro_arg))
 
 
 @dataclass(frozen=True)
