@@ -127,3 +127,30 @@ def test_frames_file_values_are_validated(rtest, tmp_path, case, message):
         path.write_text(json.dumps(content))
     with pytest.raises(DataError, match=message):
         CellFrames.read(path).check_chain(robot)
+
+
+def test_a_urdf_the_second_parser_reads_otherwise_is_not_written(rtest, tmp_path, monkeypatch):
+    """The one writer reads the corrected URDF back with yourdfpy and compares every chain's
+    forward kinematics with the calibrated model: a text that says something else (here an
+    origin nudged by 1 um after the edit) is refused and nothing is written."""
+    import re
+
+    from kincal.errors import ExportError
+    from kincal.export import outputs
+
+    robot, data, _ = rtest
+    result = _quiet(calibrate, robot, data)
+    honest = outputs.corrected_urdf
+
+    def nudged(result, readable=True, add_frames=False):
+        text, notes = honest(result, readable, add_frames)
+        m = re.search(r'(<joint name="joint_3".*?<origin[^>]*xyz=")([-0-9.e]+)', text, re.S)
+        return text[:m.start(2)] + repr(float(m.group(2)) + 1e-6) + text[m.end(2):], notes
+
+    out = tmp_path / "c.urdf"
+    write_calibration(result, Outputs(urdf=out))  # the honest text passes
+    assert out.is_file()
+    monkeypatch.setattr(outputs, "corrected_urdf", nudged)
+    with pytest.raises(ExportError, match="read back by a second parser"):
+        write_calibration(result, Outputs(urdf=tmp_path / "d.urdf", frames=tmp_path / "f.json"))
+    assert not (tmp_path / "d.urdf").exists() and not (tmp_path / "f.json").exists()

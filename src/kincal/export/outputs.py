@@ -3,7 +3,8 @@
 ``write_calibration(result, Outputs(urdf=..., frames=..., report=..., html=..., yaml=...,
 mdh=..., plots=...))`` is the only way the API and ``kincal calibrate`` write what a
 calibration produced. It refuses an implausible or unconverged result (one KincalError line
-naming the evidence) unless accepted, then composes every output and writes them as one
+naming the evidence) unless accepted, then composes every output, reads the corrected URDF
+back with a second parser (:mod:`kincal.export.readback`), and writes them as one
 transaction: all of them, or none (:func:`kincal.export.safe_write.write_all`).
 """
 
@@ -116,7 +117,10 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     files: list = []
     notes: tuple[str, ...] = ()
     if o.urdf is not None:
+        from kincal.export.readback import check_readback
+
         text, notes = corrected_urdf(result, add_frames=o.add_frames)
+        check_readback(result, text)  # a second parser agrees with the calibrated model
         files.append((o.urdf, text))
     if o.frames is not None:
         files.append((o.frames, result.frames().dumps()))
