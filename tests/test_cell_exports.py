@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 from chains import random_chain
-from conftest import TIAGO_URDF, random_joint_values
+from conftest import TIAGO_URDF, random_joint_values, ur10_path
 
 from kincal.cli.main import main
 from kincal.errors import ExportError
@@ -77,7 +77,7 @@ def _mdh_product(text, q):
     out = []
     for qk in q:
         T = fixed["T_base_0"]
-        for (kind, (a, alpha, d, theta)), qi in zip(rows, qk):
+        for (kind, (a, alpha, beta, d, theta)), qi in zip(rows, qk):
             if kind == "revolute":
                 theta = theta + qi
             else:
@@ -87,9 +87,11 @@ def _mdh_product(text, q):
             Tx = np.eye(4)
             Tx[0, 3] = a
             Rz = np.array([[ct, -st, 0, 0], [st, ct, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+            cb, sb = np.cos(beta), np.sin(beta)
+            Ry = np.array([[cb, 0, sb, 0], [0, 1, 0, 0], [-sb, 0, cb, 0], [0, 0, 0, 1]])
             Tz = np.eye(4)
             Tz[2, 3] = d
-            T = T @ Rx @ Tx @ Rz @ Tz
+            T = T @ Rx @ Tx @ Ry @ Rz @ Tz
         out.append(T @ fixed["T_n_tip"])
     return np.array(out)
 
@@ -113,8 +115,24 @@ def test_mdh_table_through_an_independent_product_reproduces_the_corrected_model
 def test_mdh_table_states_its_convention():
     robot = Robot.load("ec66", tip="flange")
     text = mdh_table_csv(robot)
-    assert "Rx(alpha_i) Tx(a_i) Rz(theta_i + q_i) Tz(d_i)" in text
-    assert "joint,type,a_m,alpha_rad,d_m,theta_rad" in text
+    assert "Rx(alpha_i) Tx(a_i) Ry(beta_i) Rz(theta_i + q_i) Tz(d_i)" in text
+    assert "joint,type,a_m,alpha_rad,beta_rad,d_m,theta_rad" in text
+
+
+def test_mdh_table_of_a_calibrated_ur10_has_finite_lengths(rng):
+    """UR10 (parallel joints 2-3-4): a calibrated chain's MD-H lengths run off to kilometres
+    (1,239 m and -1,955 m were seen); with Hayati's beta every length stays within the arm,
+    and the table still reproduces the corrected model (issue 19 item 3)."""
+    robot = Robot.load(ur10_path(), tip="tool0")
+    corrected = _corrected(robot, rng)
+    text = mdh_table_csv(corrected)
+    rows = [line.split(",") for line in text.splitlines()
+            if not line.startswith("#") and not line.startswith("joint,")]
+    lengths = np.abs([[float(r[2]), float(r[5])] for r in rows])
+    assert lengths.max() < 2.0  # [m] a UR10 reaches 1.3 m
+    assert any(abs(float(r[4])) > 0 for r in rows)  # a beta where the axes are parallel
+    q = random_joint_values(robot.geometry, rng, 20)
+    assert _tip_error(_mdh_product(text, q), corrected.tip_poses(q)) < 1e-12
 
 
 def test_frames_matrices_and_quaternions_reproduce_the_predictions(tmp_path):

@@ -79,12 +79,19 @@ def _xyz_rpy(T: np.ndarray) -> str:
 
 
 def mdh_table_csv(corrected) -> str:
-    """The corrected chain as an MD-H table (CSV text, SI units).
+    """The corrected chain as an MD-H table with Hayati's beta (CSV text, SI units): the
+    ``complete`` model's form, so nearly parallel axes (UR, EC66 joints 2-3-4) get a beta
+    and finite lengths instead of MD-H's common normal thousands of metres away.
 
-    Raises ExportError where MD-H cannot describe the corrected chain exactly (a joint
-    axis parallel to the next one only to within the extraction's tolerance).
+    Raises ExportError where the table cannot describe the corrected chain exactly, or a
+    length in it exceeds ten times the chain's own length (a description no controller
+    should be given).
     """
-    m = extract(corrected.geometry)
+    import math
+
+    from kincal.models.complete import NEARLY_PARALLEL_DEG
+
+    m = extract(corrected.geometry, beta_below=math.sin(math.radians(NEARLY_PARALLEL_DEG)))
     off_axis = np.abs(m.screw_axes - [0.0, 0.0, 1.0]).max(axis=1)
     off_line = np.abs(m.screw_points[:, :2]).max(axis=1)
     bad = np.flatnonzero((off_axis > EXACT) | (off_line > EXACT))
@@ -93,17 +100,30 @@ def mdh_table_csv(corrected) -> str:
                           + ", ".join(m.joint_names[i] for i in bad) + " is parallel to the next "
                           "one only to within the extraction tolerance; use the URDF or the YAML "
                           "overlay instead")
-    lines = [f"# kincal: corrected modified Denavit-Hartenberg table (Craig) of {corrected.name}, "
-             f"{corrected.base} -> {corrected.tip}",
-             "# A_i = Rx(alpha_i) Tx(a_i) Rz(theta_i + q_i) Tz(d_i) for a revolute joint, "
-             "Rx(alpha_i) Tx(a_i) Rz(theta_i) Tz(d_i + q_i) for a prismatic one;",
-             "# a_i, alpha_i of row i are Craig's a_(i-1), alpha_(i-1); q_i is the URDF joint "
-             "value, same sign; metres and radians",
+    g = corrected.geometry
+    chain = float(np.sum(np.linalg.norm(np.diff(np.concatenate(
+        [g.joint_frames[:, :3, 3], g.T_base_tip[None, :3, 3]]), axis=0), axis=1)))
+    lengths = np.abs(m.table[:, [0, 2]])
+    if lengths.max() > 10 * max(chain, 1e-3):
+        i, j = np.unravel_index(int(np.argmax(lengths)), lengths.shape)
+        raise ExportError(f"the MD-H table of the corrected chain has {m.joint_names[i]}."
+                          f"{'ad'[j]} = {m.table[i, 2 * j]:.4g} m, more than ten times the chain's "
+                          f"length ({chain:.3g} m): not a table to give a controller; use the URDF "
+                          "or the YAML overlay instead")
+    lines = [f"# kincal: corrected modified Denavit-Hartenberg table (Craig) with Hayati's beta "
+             f"of {corrected.name}, {corrected.base} -> {corrected.tip}",
+             "# A_i = Rx(alpha_i) Tx(a_i) Ry(beta_i) Rz(theta_i + q_i) Tz(d_i) for a revolute "
+             "joint, Rx(alpha_i) Tx(a_i) Ry(beta_i) Rz(theta_i) Tz(d_i + q_i) for a prismatic "
+             "one;",
+             "# a_i, alpha_i of row i are Craig's a_(i-1), alpha_(i-1); beta_i is 0 except where "
+             f"two consecutive axes are within {NEARLY_PARALLEL_DEG:g} deg of parallel (Hayati); "
+             "q_i is the URDF joint value, same sign; metres and radians",
              "# T_base_tip(q) = T_base_0 A_1 ... A_n T_n_tip, the fixed transforms as x y z "
              "[m] roll pitch yaw [rad] (URDF rpy):",
              f"# T_base_0: {_xyz_rpy(m.T_base_0)}",
              f"# T_n_tip: {_xyz_rpy(m.T_n_tip)}",
-             "joint,type,a_m,alpha_rad,d_m,theta_rad"]
-    for name, kind, row in zip(m.joint_names, m.kinds, m.table):
-        lines.append(",".join([name, kind, *(_num(v) for v in row)]))
+             "joint,type,a_m,alpha_rad,beta_rad,d_m,theta_rad"]
+    for name, kind, row, beta in zip(m.joint_names, m.kinds, m.table, m.beta):
+        a, alpha, d, theta = row
+        lines.append(",".join([name, kind, *(_num(v) for v in (a, alpha, beta, d, theta))]))
     return "\n".join(lines) + "\n"
