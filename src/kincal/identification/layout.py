@@ -20,13 +20,13 @@ penalised; the kinematic and backlash parameters are pulled toward nominal by L2
 
 from __future__ import annotations
 
-import fnmatch
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from kincal.errors import ParameterError, listing, suggest
+from kincal.measurements.point_space import expand_names, name_index
 
 MM = 1e-3  # [m]
 DEG = math.pi / 180.0  # [rad]
@@ -191,37 +191,13 @@ class ParameterLayout:
 
     # ----------------------------------------------------------- look-ups
     def index(self, name: str) -> int:
-        names = self.names
-        try:
-            return names.index(name)
-        except ValueError:
-            raise ParameterError(f"unknown parameter {name!r}." + suggest(name, names)
-                                 + f" Valid names: {listing(names, 60)}", valid=names) from None
+        return name_index(self.names, name)
 
     def expand(self, patterns) -> tuple[str, ...]:
-        """The names that ``patterns`` select, in parameter order, each once.
-
-        A pattern is a name (``"joint_3.a"``) or a shell-style pattern (``"*.d"``,
-        ``"joint_[456].*"``, ``"tool*"``; :func:`fnmatch.fnmatchcase`); a single string is
-        one pattern. An unknown name, or a pattern matching nothing, raises
-        :class:`ParameterError` listing the valid names."""
-        if isinstance(patterns, str):
-            patterns = (patterns,)
-        names = self.names
-        chosen: set[int] = set()
-        for pattern in patterns:
-            if not isinstance(pattern, str):
-                raise ParameterError(f"a parameter name or pattern must be a string, got "
-                                     f"{pattern!r}", valid=names)
-            if not any(c in pattern for c in "*?["):
-                chosen.add(self.index(pattern))
-                continue
-            hits = [k for k, n in enumerate(names) if fnmatch.fnmatchcase(n, pattern)]
-            if not hits:
-                raise ParameterError(f"pattern {pattern!r} matches no parameter. Valid names: "
-                                     f"{listing(names, 60)}", valid=names)
-            chosen.update(hits)
-        return tuple(names[k] for k in sorted(chosen))
+        """The names that ``patterns`` select, in parameter order, each once: names
+        (``"joint_3.a"``) or shell-style patterns (``"*.d"``, ``"joint_[456].*"``); unknown
+        ones raise ParameterError listing the valid names (:func:`expand_names`)."""
+        return expand_names(self.names, patterns)
 
     def indices(self, patterns) -> np.ndarray:
         """(k,) indices of the parameters that ``patterns`` select (see :meth:`expand`)."""

@@ -49,6 +49,44 @@ def _check_backlash_joints(joint_names: tuple[str, ...], backlash: tuple[str, ..
         raise ParameterError(f"backlash joints given twice: {', '.join(backlash)}")
 
 
+def name_index(names: tuple[str, ...], name: str) -> int:
+    """Position of parameter ``name`` in ``names``; ParameterError listing the valid ones."""
+    try:
+        return names.index(name)
+    except ValueError:
+        raise ParameterError(f"unknown parameter {name!r}." + suggest(name, names)
+                             + f" Valid names: {listing(names, 60)}", valid=names) from None
+
+
+def expand_names(names: tuple[str, ...], patterns) -> tuple[str, ...]:
+    """The ``names`` that ``patterns`` select, in their order, each once (the one matcher of
+    --fix/--free names, for every parameter layout).
+
+    A pattern is a name (``"joint_3.a"``) or a shell-style pattern (``"*.d"``,
+    ``"joint_[456].*"``, ``"tool*"``; :func:`fnmatch.fnmatchcase`). A single string is one
+    pattern. An unknown name, or a pattern that matches nothing, raises
+    :class:`ParameterError` listing the valid names.
+    """
+    import fnmatch
+
+    if isinstance(patterns, str):
+        patterns = (patterns,)
+    chosen = set()
+    for pattern in patterns:
+        if not isinstance(pattern, str):
+            raise ParameterError(f"a parameter name or pattern must be a string, got "
+                                 f"{pattern!r}", valid=names)
+        if not any(c in pattern for c in "*?["):
+            chosen.add(name_index(names, pattern))
+            continue
+        hits = [k for k, n in enumerate(names) if fnmatch.fnmatchcase(n, pattern)]
+        if not hits:
+            raise ParameterError(f"pattern {pattern!r} matches no parameter. Valid names: "
+                                 f"{listing(names, 60)}", valid=names)
+        chosen.update(hits)
+    return tuple(names[k] for k in sorted(chosen))
+
+
 @dataclass(frozen=True)
 class ParameterSpace:
     """The parameters of one chain: stable names, units and vector layout.
@@ -160,40 +198,11 @@ class ParameterSpace:
         return np.where(self.is_length, MM, DEG)
 
     def index(self, name: str) -> int:
-        names = self.names
-        try:
-            return names.index(name)
-        except ValueError:
-            raise ParameterError(f"unknown parameter {name!r}." + suggest(name, names)
-                                 + f" Valid names: {listing(names, 60)}", valid=names) from None
+        return name_index(self.names, name)
 
     def expand(self, patterns) -> tuple[str, ...]:
-        """The parameter names that ``patterns`` select, in parameter order, each once.
-
-        A pattern is a name (``"joint_3.a"``) or a shell-style pattern (``"*.d"``,
-        ``"joint_[456].*"``, ``"tool*"``; :func:`fnmatch.fnmatchcase`). A single string
-        is one pattern. An unknown name, or a pattern that matches nothing, raises
-        :class:`ParameterError` listing the valid names.
-        """
-        import fnmatch
-
-        if isinstance(patterns, str):
-            patterns = (patterns,)
-        names = self.names
-        chosen = set()
-        for pattern in patterns:
-            if not isinstance(pattern, str):
-                raise ParameterError(f"a parameter name or pattern must be a string, got "
-                                     f"{pattern!r}", valid=names)
-            if not any(c in pattern for c in "*?["):
-                chosen.add(self.index(pattern))
-                continue
-            hits = [k for k, n in enumerate(names) if fnmatch.fnmatchcase(n, pattern)]
-            if not hits:
-                raise ParameterError(f"pattern {pattern!r} matches no parameter. Valid names: "
-                                     f"{listing(names, 60)}", valid=names)
-            chosen.update(hits)
-        return tuple(names[k] for k in sorted(chosen))
+        """The parameter names that ``patterns`` select (see :func:`expand_names`)."""
+        return expand_names(self.names, patterns)
 
     def indices(self, names) -> np.ndarray:
         """(k,) indices of the parameters that ``names`` select (names or patterns, see
