@@ -44,6 +44,8 @@ def test_ur_yaml_loads_through_the_xacro_and_matches_the_corrected_urdf(calibrat
     assert "  hash: calib_kincal_test_42\n" in text
     body = [line for line in text.splitlines() if not line.startswith("#")]
     assert body[0] == "kinematics:" and body[1] == "  shoulder:" and body[-1].startswith("  hash:")
+    wrist_3 = body[body.index("  wrist_3:") + 1:body.index("  wrist_3:") + 7]
+    assert abs(float(wrist_3[4].split(":")[1]) - np.pi) < 0.01  # the factory's r, pi, pi branch
     via_yaml = Robot.load(str(XACRO), tip="tool0", xacro_args=_args(tmp / "K.yaml"))
     corrected = Robot.load(str(tmp / "C.urdf"), tip="tool0")
     nominal = Robot.load(str(XACRO), tip="tool0", xacro_args=_args(factory))

@@ -100,6 +100,21 @@ def ur_hash_of(source, xacro_args: dict | None) -> str | None:
     return found.group(1) if found else None
 
 
+def _written_rpy(nominal, origins: dict) -> dict[str, np.ndarray]:
+    """{joint: rpy as the nominal URDF text spells it}: the triple the corrected rpy stay
+    closest to, as in the corrected URDF (ur_description writes wrist_3 as r, pi, pi; the
+    canonical triple of that rotation is -r, 0, 0)."""
+    from kincal.export.urdf_export import edit_joint_origins
+
+    out = {}
+    for edit in edit_joint_origins(nominal.urdf_text, origins).edits:
+        try:
+            out[edit.joint] = np.array([float(v) for v in (edit.old_rpy or "0 0 0").split()])
+        except ValueError:  # an rpy text that is not three numbers: the canonical triple
+            continue
+    return {k: v for k, v in out.items() if v.shape == (3,)}
+
+
 def ur_kinematics_yaml(nominal, corrected, ur_hash: str) -> str:
     """The corrected origins as ur_description's ``default_kinematics.yaml``: segment keys
     (shoulder .. wrist_3) of x, y, z [m], roll, pitch, yaw [rad] (the URDF joint <origin>,
@@ -112,12 +127,13 @@ def ur_kinematics_yaml(nominal, corrected, ur_hash: str) -> str:
                           + ", ".join(j for _, j in UR_SEGMENTS) + "); this chain has "
                           + ", ".join(corrected.joint_names))
     old, new = nominal.urdf_origins(), corrected.urdf_origins()
+    near = _written_rpy(nominal, {name: new[name] for name in joints})
     lines = [f"# kincal: corrected kinematics of {corrected.name} ({corrected.base} -> "
              f"{corrected.tip}), ur_description's layout; the hash is the factory file's",
              "kinematics:"]
     for (segment, _), name in zip(UR_SEGMENTS, joints):
         T = new[name]
-        rpy = matrix_to_rpy(T[:3, :3], near=matrix_to_rpy(old[name][:3, :3]))
+        rpy = matrix_to_rpy(T[:3, :3], near=near.get(name, matrix_to_rpy(old[name][:3, :3])))
         lines.append(f"  {segment}:")
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("x", "y", "z"), T[:3, 3])]
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("roll", "pitch", "yaw"), rpy)]
