@@ -68,8 +68,14 @@ def register(subparsers) -> None:
                         "frames (kincal_measurement_frame, kincal_tool_point)")
     o.add_argument("--report", help="REPORT.json: the whole result")
     o.add_argument("--yaml-out", metavar="KINEMATICS.yaml",
-                   help="corrected joint origins as YAML keyed by joint name (x y z roll pitch "
-                        "yaw, ur_description's kinematics layout)")
+                   help="corrected joint origins as YAML (x y z roll pitch yaw per joint; "
+                        "--yaml-format says how it is keyed)")
+    o.add_argument("--yaml-format", choices=("kincal", "ur"), default=None,
+                   help="--yaml-out's layout: kincal (joint-name keys, the default) or ur "
+                        "(ur_description's kinematics file: segment keys and hash)")
+    o.add_argument("--ur-hash", metavar="HASH",
+                   help="the hash for --yaml-format ur (default: copied from the "
+                        "kinematics_params file the xacro was expanded with)")
     o.add_argument("--mdh-out", metavar="MDH.csv",
                    help="corrected modified-DH (Craig) table, convention in its header")
     o.add_argument("--plots", help="directory for PNG plots")
@@ -114,6 +120,8 @@ class Calibrate:
     add_frames: bool
     report: str | None
     yaml_out: str | None
+    yaml_format: str | None
+    ur_hash: str | None
     mdh_out: str | None
     plots: str | None
     html: str | None
@@ -151,6 +159,22 @@ def calibration_options(c: Calibrate):
                               solver=SolverOptions(progress=FitStatus.on_terminal()))
 
 
+def _ur_hash(c: Calibrate, robot) -> str:
+    """The hash of --yaml-format ur: --ur-hash, else the xacro's kinematics_params file's."""
+    from kincal.cli.options import xacro_args
+    from kincal.export.cell_exports import UR_SEGMENTS, ur_hash_of, ur_joints
+
+    if ur_joints(robot.joint_names) is None:
+        raise OptionError("--yaml-format ur needs a chain of the six UR joints ("
+                          + ", ".join(j for _, j in UR_SEGMENTS) + "); this chain has "
+                          + (", ".join(robot.joint_names) or "none"))
+    found = c.ur_hash or ur_hash_of(robot.source, xacro_args(c.chain.xacro_arg))
+    if not found:
+        raise OptionError("--yaml-format ur: no hash found (no kinematics_params file with a "
+                          "hash: line for this robot); pass --ur-hash HASH")
+    return found
+
+
 def run(args) -> int:
     from kincal.cli.console import say
     from kincal.export.outputs import Outputs, gate, write_calibration
@@ -161,8 +185,12 @@ def run(args) -> int:
     if c.shared_planes and not c.inputs.on_plane:
         raise OptionError("--shared-plane shares the planes of plane contacts: give it with "
                           "--on-plane (the files of joint columns are then plane contacts)")
+    if (c.yaml_format is not None or c.ur_hash is not None) and c.yaml_out is None:
+        raise OptionError("--yaml-format and --ur-hash describe --yaml-out's file: give "
+                          "--yaml-out KINEMATICS.yaml")
     robots = Chain.load_all(c.chain.per_file(len(c.inputs.files)))  # each file's chain
     robot = robots[0]
+    ur_hash = _ur_hash(c, robot) if c.yaml_format == "ur" else None
     if c.accuracy.asked and len({(r.base, r.tip) for r in robots}) > 1:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
@@ -207,7 +235,8 @@ def run(args) -> int:
         return out + [f"  wrote {path}" for path in written]
 
     outputs = Outputs(urdf=c.out, frames=c.frames_out, report=c.report, html=c.html,
-                      yaml=c.yaml_out, mdh=c.mdh_out, plots=c.plots, add_frames=c.add_frames,
+                      yaml=c.yaml_out, yaml_format=c.yaml_format or "kincal",
+                      ur_hash=ur_hash, mdh=c.mdh_out, plots=c.plots, add_frames=c.add_frames,
                       overwrite=c.overwrite, protect=tuple(c.inputs.files))
     with warnings.catch_warnings():  # the gate's warnings were given above, by gate()
         warnings.simplefilter("ignore", KincalWarning)

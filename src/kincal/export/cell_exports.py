@@ -4,6 +4,8 @@
   joint name, ``x, y, z`` [m] and ``roll, pitch, yaw`` [rad] (URDF rpy) per joint, the
   layout of ur_description's ``default_kinematics.yaml`` (there keyed by its own segment
   names). Every chain joint is listed, changed or not, so the file is the whole chain.
+- :func:`ur_kinematics_yaml`: the same values as ur_description's own file (segment keys
+  and the robot's ``hash``, :func:`ur_hash_of`), which its ``ur.urdf.xacro`` reads back.
 - :func:`mdh_table_csv`: the corrected chain as a modified Denavit-Hartenberg (Craig)
   table, extracted afresh from the corrected geometry (:func:`kincal.models.mdh.extract`),
   with the convention and the two fixed transforms stated in its header.
@@ -14,6 +16,9 @@ YAML is written by hand: the file is flat, and PyYAML is not a dependency.
 """
 
 from __future__ import annotations
+
+import re
+from pathlib import Path
 
 import numpy as np
 
@@ -48,6 +53,91 @@ def kinematics_yaml(nominal, corrected) -> str:
         lines.append(f"  {name}:")
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("x", "y", "z"), T[:3, 3])]
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("roll", "pitch", "yaw"), rpy)]
+    return "\n".join(lines) + "\n"
+
+
+# ur_description's segment keys and the URDF joint each one sets (ur_macro.xacro: the
+# joint's <origin> is ${segment_x ...} rpy ${segment_roll ...}); joint names may carry tf_prefix.
+UR_SEGMENTS = (("shoulder", "shoulder_pan_joint"), ("upper_arm", "shoulder_lift_joint"),
+               ("forearm", "elbow_joint"), ("wrist_1", "wrist_1_joint"),
+               ("wrist_2", "wrist_2_joint"), ("wrist_3", "wrist_3_joint"))
+_HASH = re.compile(r"^\s*hash:\s*['\"]?([^'\"#\s]+)", re.MULTILINE)
+
+
+def ur_joints(joint_names) -> tuple[str, ...] | None:
+    """The chain's URDF joint of each UR segment, in UR_SEGMENTS order, or None when the
+    chain's joints are not the six UR joints (one shared tf_prefix allowed)."""
+    names = tuple(joint_names)
+    if len(names) != 6:
+        return None
+    prefix = names[0][: len(names[0]) - len(UR_SEGMENTS[0][1])]
+    if names != tuple(prefix + j for _, j in UR_SEGMENTS):
+        return None
+    return names
+
+
+def ur_hash_of(source, xacro_args: dict | None) -> str | None:
+    """The ``hash`` of the kinematics_params file a ur_description xacro was expanded with:
+    the ``kinematics_params`` argument (relative to the working folder, as xacro reads it),
+    else the xacro's default ``$(find ur_description)/config/<ur_type>/default_kinematics.yaml``
+    found as kincal's expansion finds packages. None when no file or no hash is found."""
+    args = dict(xacro_args or {})
+    path = args.get("kinematics_params")
+    if path is None:
+        if source is None or not str(source).endswith(".xacro") or "ur_type" not in args:
+            return None
+        from kincal.xacro_source import find_package
+
+        try:
+            path = find_package("ur_description", Path(source)) / "config" / \
+                args["ur_type"] / "default_kinematics.yaml"
+        except Exception:  # the package is not found: no hash to copy
+            return None
+    try:
+        found = _HASH.search(Path(path).read_text(encoding="utf-8", errors="replace"))
+    except OSError:
+        return None
+    return found.group(1) if found else None
+
+
+def _written_rpy(nominal, origins: dict) -> dict[str, np.ndarray]:
+    """{joint: rpy as the nominal URDF text spells it}: the triple the corrected rpy stay
+    closest to, as in the corrected URDF (ur_description writes wrist_3 as r, pi, pi; the
+    canonical triple of that rotation is -r, 0, 0)."""
+    from kincal.export.urdf_export import edit_joint_origins
+
+    out = {}
+    for edit in edit_joint_origins(nominal.urdf_text, origins).edits:
+        try:
+            out[edit.joint] = np.array([float(v) for v in (edit.old_rpy or "0 0 0").split()])
+        except ValueError:  # an rpy text that is not three numbers: the canonical triple
+            continue
+    return {k: v for k, v in out.items() if v.shape == (3,)}
+
+
+def ur_kinematics_yaml(nominal, corrected, ur_hash: str) -> str:
+    """The corrected origins as ur_description's ``default_kinematics.yaml``: segment keys
+    (shoulder .. wrist_3) of x, y, z [m], roll, pitch, yaw [rad] (the URDF joint <origin>,
+    rpy kept closest to the nominal), then ``hash:`` (the robot's calibration id, which
+    ur_robot_driver compares with the controller's). Raises ExportError for a chain that
+    is not the six UR joints."""
+    joints = ur_joints(corrected.joint_names)
+    if joints is None:
+        raise ExportError("--yaml-format ur needs a chain of the six UR joints ("
+                          + ", ".join(j for _, j in UR_SEGMENTS) + "); this chain has "
+                          + ", ".join(corrected.joint_names))
+    old, new = nominal.urdf_origins(), corrected.urdf_origins()
+    near = _written_rpy(nominal, {name: new[name] for name in joints})
+    lines = [f"# kincal: corrected kinematics of {corrected.name} ({corrected.base} -> "
+             f"{corrected.tip}), ur_description's layout; the hash is the factory file's",
+             "kinematics:"]
+    for (segment, _), name in zip(UR_SEGMENTS, joints):
+        T = new[name]
+        rpy = matrix_to_rpy(T[:3, :3], near=near.get(name, matrix_to_rpy(old[name][:3, :3])))
+        lines.append(f"  {segment}:")
+        lines += [f"    {k}: {_num(v)}" for k, v in zip(("x", "y", "z"), T[:3, 3])]
+        lines += [f"    {k}: {_num(v)}" for k, v in zip(("roll", "pitch", "yaw"), rpy)]
+    lines.append(f"  hash: {ur_hash}")
     return "\n".join(lines) + "\n"
 
 

@@ -22,7 +22,8 @@ class Outputs:
     """What to write (None: not written). urdf: the corrected URDF; frames: FRAMES.json
     (:mod:`kincal.frames_file`); report: REPORT.json; html: the self-contained report;
     yaml / mdh: the cell formats of :mod:`kincal.export.cell_exports`; plots: a folder of
-    PNG plots. add_frames: also put the measurement frame and tool point(s) into the URDF
+    PNG plots. yaml_format: "kincal" (joint-name keys) or "ur" (ur_description's segment
+    keys and ``ur_hash``, the robot's calibration hash, required then). add_frames: also put the measurement frame and tool point(s) into the URDF
     as fixed frames. overwrite: replace existing files. protect: input files that must
     never be replaced (the URDF and data are added from the result)."""
 
@@ -33,6 +34,8 @@ class Outputs:
     yaml: Path | str | None = None
     mdh: Path | str | None = None
     plots: Path | str | None = None
+    yaml_format: str = "kincal"
+    ur_hash: str | None = None
     add_frames: bool = False
     overwrite: bool = False
     protect: tuple = ()
@@ -111,6 +114,11 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         if value is not None and (not isinstance(value, (str, Path)) or not str(value).strip()):
             raise ExportError(f"the {name} output path {value!r} is empty or not a path; "
                               "expected a file name (a folder for plots)")
+    if o.yaml_format not in ("kincal", "ur"):
+        raise ExportError(f"yaml_format must be 'kincal' or 'ur', got {o.yaml_format!r}")
+    if o.yaml_format == "ur" and o.yaml is not None and not o.ur_hash:
+        raise ExportError("yaml_format 'ur' needs ur_hash (the hash of the robot's "
+                          "kinematics_params file)")
     for message in gate(result, accept_implausible, accept_unconverged):
         warnings.warn(message, KincalWarning)
     sources = [s.source for s in result.sets]
@@ -130,9 +138,13 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
             content["accuracy_map"] = accuracy.as_dict()
         files.append((o.report, report.dumps(content)))
     if o.yaml is not None or o.mdh is not None:
-        from kincal.export.cell_exports import kinematics_yaml, mdh_table_csv
+        from kincal.export.cell_exports import (kinematics_yaml, mdh_table_csv,
+                                                ur_kinematics_yaml)
 
-        if o.yaml is not None:
+        if o.yaml is not None and o.yaml_format == "ur":
+            files.append((o.yaml, ur_kinematics_yaml(result.robot, result.corrected,
+                                                     o.ur_hash)))
+        elif o.yaml is not None:
             files.append((o.yaml, kinematics_yaml(result.robot, result.corrected)))
         if o.mdh is not None:
             files.append((o.mdh, mdh_table_csv(result.corrected)))

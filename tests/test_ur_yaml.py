@@ -1,0 +1,96 @@
+"""--yaml-format ur: ur_description's kinematics file, read back through ur.urdf.xacro."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from kincal.cli import main
+from kincal.robot import Robot
+
+UR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "ur_description"
+XACRO = UR / "urdf" / "ur.urdf.xacro"
+pytestmark = pytest.mark.skipif(not XACRO.is_file(), reason="ur_description is absent")
+
+
+def _args(params):
+    return {"ur_type": "ur10e", "name": "ur", "kinematics_params": str(params)}
+
+
+def _cli_args(params):
+    return [a for k, v in _args(params).items() for a in ("--xacro-arg", f"{k}:={v}")]
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("ur")
+    factory = tmp / "FACTORY.yaml"
+    text = (UR / "config" / "ur10e" / "default_kinematics.yaml").read_text()
+    factory.write_text(text.replace("calib_5119701370761913513", "calib_kincal_test_42"))
+    data = tmp / "data.csv"
+    assert main(["simulate", str(XACRO), *_cli_args(factory), "--tip", "tool0",
+                 "--tool-m", "0.01", "0.02", "0.1", "--center-m", "0.7", "0.0", "0.4", "--length-error-mm", "1",
+                 "--angle-error-deg", "0.1", "--noise-mm", "0", "--poses", "60",
+                 "--out", str(data)]) == 0
+    assert main(["calibrate", str(XACRO), str(data), *_cli_args(factory), "--tip", "tool0",
+                 "--out", str(tmp / "C.urdf"), "--yaml-out", str(tmp / "K.yaml"),
+                 "--yaml-format", "ur", "--quiet"]) == 0
+    return tmp, factory, data
+
+
+def test_ur_yaml_loads_through_the_xacro_and_matches_the_corrected_urdf(calibrated):
+    tmp, factory, _ = calibrated
+    text = (tmp / "K.yaml").read_text()
+    assert "  hash: calib_kincal_test_42\n" in text
+    body = [line for line in text.splitlines() if not line.startswith("#")]
+    assert body[0] == "kinematics:" and body[1] == "  shoulder:" and body[-1].startswith("  hash:")
+    wrist_3 = body[body.index("  wrist_3:") + 1:body.index("  wrist_3:") + 7]
+    assert abs(float(wrist_3[4].split(":")[1]) - np.pi) < 0.01  # the factory's r, pi, pi branch
+    via_yaml = Robot.load(str(XACRO), tip="tool0", xacro_args=_args(tmp / "K.yaml"))
+    corrected = Robot.load(str(tmp / "C.urdf"), tip="tool0")
+    nominal = Robot.load(str(XACRO), tip="tool0", xacro_args=_args(factory))
+    q = np.random.default_rng(0).uniform(-np.pi, np.pi, (50, 6))
+    p = via_yaml.tip_poses(q)[:, :3, 3]  # tool0 in base_link [m]
+    worst = np.linalg.norm(p - corrected.tip_poses(q)[:, :3, 3], axis=1).max()
+    moved = np.linalg.norm(p - nominal.tip_poses(q)[:, :3, 3], axis=1).max()
+    assert worst < 1e-9
+    assert moved > 1e-4  # the file carries the correction, not the factory values
+
+
+def test_ur_hash_overrides(calibrated, tmp_path):
+    tmp, factory, data = calibrated
+    assert main(["calibrate", str(XACRO), str(data), *_cli_args(factory), "--tip", "tool0",
+                 "--out", str(tmp_path / "C.urdf"), "--yaml-out", str(tmp_path / "K.yaml"),
+                 "--yaml-format", "ur", "--ur-hash", "calib_given", "--quiet"]) == 0
+    assert "  hash: calib_given\n" in (tmp_path / "K.yaml").read_text()
+
+
+def _refused(argv, capsys, *words):
+    assert main(argv) != 0
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("kincal: error:")]
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+
+
+def test_format_and_hash_need_yaml_out(calibrated, tmp_path, capsys):
+    _, factory, data = calibrated
+    base = ["calibrate", str(XACRO), str(data), *_cli_args(factory), "--tip", "tool0",
+            "--out", str(tmp_path / "C.urdf")]
+    _refused(base + ["--yaml-format", "ur"], capsys, "--yaml-out")
+    _refused(base + ["--ur-hash", "x"], capsys, "--yaml-out")
+    assert not (tmp_path / "C.urdf").exists()
+
+
+def test_ur_format_needs_the_six_ur_joints(calibrated, tmp_path, capsys):
+    _, factory, data = calibrated
+    _refused(["calibrate", str(XACRO), str(data), *_cli_args(factory), "--tip", "wrist_2_link",
+              "--out", str(tmp_path / "C.urdf"), "--yaml-out", str(tmp_path / "K.yaml"),
+              "--yaml-format", "ur"], capsys, "six UR joints")
+
+
+def test_no_hash_found_says_pass_ur_hash(calibrated, tmp_path, capsys):
+    # a plain URDF of a UR (here kincal's corrected one) was expanded from no kinematics file
+    tmp, _, data = calibrated
+    _refused(["calibrate", str(tmp / "C.urdf"), str(data), "--tip", "tool0",
+              "--out", str(tmp_path / "C.urdf"), "--yaml-out", str(tmp_path / "K.yaml"),
+              "--yaml-format", "ur"], capsys, "--ur-hash")
+    assert not (tmp_path / "C.urdf").exists()
