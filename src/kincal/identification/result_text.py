@@ -20,8 +20,6 @@ def header(result: CalibrationResult) -> list[str]:
     r, ev, n = result, result.evidence, len(result.sets)
     how = (f"lambda = {r.lam:.4g}" if ev is None else "priors toward nominal per class, "
            + ("given" if ev.given.all() and ev.noise_given else "chosen by maximum evidence"))
-    if r.options.method != "l2" and ev is None:
-        how = f"lambda = {r.lam:.4g}"
     cv = ""
     if r.cv is not None:
         cv = " (chosen by cross-validation)"

@@ -44,7 +44,7 @@ import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.kind import DEFAULT_SIGMA, KindModel, SampleSet, read_set, readonly
-from kincal.measurements.plane import MIN_SPREAD, fit_plane, normal, plane_labels
+from kincal.measurements.plane import MIN_SPREAD, fit_plane, normal, plane_indices, plane_labels
 from kincal.models.chain import cross_rows
 from kincal.rotations import rotx, roty
 
@@ -70,11 +70,7 @@ class FlushData(SampleSet):
     def __post_init__(self):
         super().__post_init__()
         n = len(self.joint_values)
-        k = readonly(np.zeros(n, int) if self.planes is None else self.planes, int)
-        if k.shape != (n,) or (n and (k.min() < 0 or k.max() >= len(self.labels))):
-            raise DataError(f"{self.source}: plane indices must be {n} values in "
-                            f"0..{len(self.labels) - 1}")
-        object.__setattr__(self, "planes", k)
+        object.__setattr__(self, "planes", plane_indices(self))
         if self.sigma_deg is not None:
             if self.sigma is None:
                 raise DataError(f"{self.source}: a tilt sigma (sigma_deg) needs a height sigma "

@@ -27,6 +27,17 @@ from kincal.rotations import rotx, roty
 MIN_SPREAD = 1e-3  # [m] RMS spread of a plane's contacts across their best line
 
 
+def plane_indices(data) -> np.ndarray:
+    """(N,) read-only plane index of each sample of ``data`` (a set with ``planes`` and
+    ``labels``; default all 0), checked against its labels (the plane and flush kinds)."""
+    n = len(data.joint_values)
+    k = readonly(np.zeros(n, int) if data.planes is None else data.planes, int)
+    if k.shape != (n,) or (n and (k.min() < 0 or k.max() >= len(data.labels))):
+        raise DataError(f"{data.source}: plane indices must be {n} values in "
+                        f"0..{len(data.labels) - 1}")
+    return k
+
+
 @dataclass(frozen=True, kw_only=True)
 class PlaneData(SampleSet):
     """Contacts with planes: planes (N,) index of each sample's plane into labels."""
@@ -38,12 +49,7 @@ class PlaneData(SampleSet):
 
     def __post_init__(self):
         super().__post_init__()
-        n = len(self.joint_values)
-        k = readonly(np.zeros(n, int) if self.planes is None else self.planes, int)
-        if k.shape != (n,) or (n and (k.min() < 0 or k.max() >= len(self.labels))):
-            raise DataError(f"{self.source}: plane indices must be {n} values in "
-                            f"0..{len(self.labels) - 1}")
-        object.__setattr__(self, "planes", k)
+        object.__setattr__(self, "planes", plane_indices(self))
 
     def per_sample_fields(self):
         return super().per_sample_fields() + ("planes",)
