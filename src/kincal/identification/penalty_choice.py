@@ -24,9 +24,15 @@ if TYPE_CHECKING:
 
 
 def prior_classes(problem: CalibrationProblem) -> tuple[str | None, ...]:
-    """(p,) prior class of every parameter (None: flat prior, the sets' frames)."""
+    """(p,) prior class of every parameter (None: flat prior, the sets' frames): the error
+    model's class (a joint's zero is an "offset" whatever the model calls it), with a
+    prismatic joint's zero, a length, among the lengths (one prior scale per unit)."""
     lay = problem.layout
-    return tuple(evidence.prior_class(n, bool(pen)) for n, pen in zip(lay.names, lay.is_penalised))
+    return tuple(None if not pen else
+                 "length" if (c == "offset" and is_len) else
+                 c if c in evidence.CLASSES else evidence.prior_class(n)
+                 for n, c, pen, is_len in zip(lay.names, lay.classes, lay.is_penalised,
+                                              lay.is_length))
 
 
 def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.EvidenceFit]:

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.models.base import LENGTH, TWIST, ErrorModel
+from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
 from kincal.rotations import inverse, rotx, roty, rotz, transform
 
 FIELDS = ("tx", "ty", "tz", "rx", "ry", "rz")
@@ -142,6 +142,18 @@ class PlacementModel(ErrorModel):
         return cols.reshape(6 * self.n, len(P), 3).transpose(1, 2, 0)
 
 
+def _field_class(field: str, axis_in_parent: np.ndarray, kind: str) -> str:
+    """The class of one placement error of a joint whose axis is ``axis_in_parent`` (unit,
+    in its parent link frame): the turn about a revolute joint's own axis (or the slide
+    along a prismatic joint's) is that joint's zero, an "offset" (it commutes with the
+    joint's motion), when the axis lies along the error's axis; else a length or a twist."""
+    k = "xyz".index(field[1])
+    along = abs(float(axis_in_parent[k])) > 1.0 - 1e-9
+    if field.startswith("t"):
+        return OFFSET if (along and kind == "prismatic") else LENGTH
+    return OFFSET if (along and kind == "revolute") else TWIST
+
+
 def build(geometry, every_origin: bool = False) -> PlacementModel:
     """The placement model of a :class:`kincal.robot.ChainGeometry`; every_origin: the top
     reversed joint's origin keeps its errors when a joint down follows (module notes)."""
@@ -170,11 +182,13 @@ def build(geometry, every_origin: bool = False) -> PlacementModel:
                       f"one transform, corrected as {names[top + 1]}'s origin")
     p = 6 * int(has.sum())
     joint_of = np.repeat(np.where(rev, np.arange(n) + 1, np.arange(n))[has], 6)
+    classes = tuple(_field_class(f, origins[i][:3, :3] @ np.asarray(geometry.axes[i], float),
+                                 geometry.kinds[i])
+                    for i in range(n) if has[i] for f in FIELDS)
     return PlacementModel("placement", tuple(names), tuple(geometry.kinds),
                           tuple(f"{j}.{f}" for j, h in zip(names, has) if h for f in FIELDS),
                           np.zeros(p), np.array([f.startswith("t") for f in FIELDS] * (p // 6)),
-                          tuple((LENGTH if f.startswith("t") else TWIST) for _ in range(p // 6)
-                                for f in FIELDS),
+                          classes,
                           joint_of, np.eye(4), np.asarray(geometry.axes, float),
                           np.zeros((n, 3)), np.broadcast_to(np.eye(4), (n, 4, 4)).copy(),
                           inverse(J[-1]) @ geometry.T_base_tip, tuple(notes),
