@@ -222,3 +222,39 @@ def test_complete_and_placement_reach_the_noise_floor_where_mdh_does_not():
     # the floor: noise 5 um over 80 poses leaves a few um of prediction error
     assert held["complete"] < 10e-6 and held["placement"] < 10e-6, held
     assert held["mdh"] > 5 * held["complete"], held
+
+
+@pytest.mark.parametrize("name,base,tip", [("talos", "left_sole_link", "gripper_left_base_link"),
+                                           ("tiago_file", None, "wrist_ft_tool_link")])
+def test_placement_offset_class_is_exactly_a_joint_zero(name, base, tip, rng):
+    """A placement error of class "offset" (the evidence gives it the joint offsets' prior)
+    moves the tip exactly as shifting that joint's value does; no "twist" error does."""
+    robot = (Robot.load(tiago_urdf(), tip=tip) if name == "tiago_file"
+             else Robot.load(name, base=base, tip=tip))
+    model = models.build("placement", robot.geometry)
+    q = random_joint_values(robot.geometry, rng, 5)
+    joints = list(robot.geometry.joint_names)
+
+    def tip_of(x, qq):
+        s = MeasurementModel(model, qq).chain.state(x)
+        return np.concatenate([s.p_tip, s.R_tip.reshape(len(qq), 9)], axis=1)
+
+    n_offsets = 0
+    for i, (pname, cls) in enumerate(zip(model.names, model.classes)):
+        if cls not in ("offset", "twist"):
+            continue
+        x = model.nominal.copy()
+        x[i] = 2e-3
+        moved = tip_of(x, q)
+        j = joints.index(pname.rsplit(".", 1)[0])
+        gaps = []
+        for sign in (1.0, -1.0):
+            qq = q.copy()
+            qq[:, j] += sign * 2e-3
+            gaps.append(np.abs(moved - tip_of(model.nominal, qq)).max())
+        if cls == "offset":
+            n_offsets += 1
+            assert min(gaps) < 1e-12, pname
+        else:
+            assert min(gaps) > 1e-7, pname
+    assert n_offsets >= len(joints) - 2  # a revolute joint's zero per origin with errors
