@@ -83,7 +83,7 @@ def matrix_to_rpy(R: np.ndarray, near=(0.0, 0.0, 0.0)) -> np.ndarray:
     M = R @ rotx(r).T @ roty(p).T
     y = math.atan2(M[1, 0], M[0, 0])
     candidates = [(r, p, y), (r + math.pi, math.pi - p, y + math.pi)]
-    best, best_d = None, math.inf
+    best, best_d = np.asarray(near, float), math.inf
     for c in candidates:
         w = np.array([_wrap_near(c[i], near[i]) for i in range(3)])
         d = float(np.sum((w - near) ** 2))
@@ -157,10 +157,10 @@ def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
     else:
         i, j, m = k, (k + 1) % 3, (k + 2) % 3
         s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[m, m])
-        q = [0.0] * 4
+        q: list[float] = [0.0] * 4
         q[i] = s / 4
         q[j] = (R[j, i] + R[i, j]) / s
         q[m] = (R[m, i] + R[i, m]) / s
         q[3] = (R[m, j] - R[j, m]) / s
-    q = np.array(q)
-    return q if q[3] >= 0 else -q
+    v = np.array(q)
+    return v if v[3] >= 0 else -v

@@ -128,9 +128,9 @@ class MdhModel(ErrorModel):
     origin up to PARALLEL_TOL), T_last_tip the tip in MD-H frame n.
     """
 
-    table: np.ndarray = None
-    beta: np.ndarray = None
-    has_beta: np.ndarray = None
+    table: np.ndarray
+    beta: np.ndarray
+    has_beta: np.ndarray
 
     @classmethod
     def build(cls, name, joint_names, kinds, table, beta, has_beta, T_first, joint_offsets,

@@ -33,9 +33,9 @@ class OffsetsModel(ErrorModel):
     the nominal URDF origins and ``urdf_axes`` (n, 3) the URDF axes (chain axes, negated
     for reversed joints)."""
 
-    origins: np.ndarray = None
-    urdf: np.ndarray = None
-    urdf_axes: np.ndarray = None
+    origins: np.ndarray
+    urdf: np.ndarray
+    urdf_axes: np.ndarray
 
     def urdf_origins(self, x) -> dict[str, np.ndarray]:
         """{joint: (4, 4) its corrected URDF origin} [m]: the origin turned about (slid

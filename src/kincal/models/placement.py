@@ -57,10 +57,10 @@ class PlacementModel(ErrorModel):
     has_errors: (n,) which joints' origins carry the six errors (in names order).
     """
 
-    mid: np.ndarray = None
-    origins: np.ndarray = None
-    reversed: np.ndarray = None
-    has_errors: np.ndarray = None
+    mid: np.ndarray
+    origins: np.ndarray
+    reversed: np.ndarray
+    has_errors: np.ndarray
 
     def _origin(self, i: int, e: np.ndarray) -> np.ndarray:
         R = rotx(e[3]) @ roty(e[4]) @ rotz(e[5]) @ self.origins[i][:3, :3]
