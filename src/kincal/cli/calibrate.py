@@ -129,6 +129,7 @@ class Calibrate:
     accept_implausible: bool
     accept_unconverged: bool
     quiet: bool
+    command_line: tuple[str, ...] = ()  # as typed, for the files' provenance
 
     def outputs(self) -> list:
         """Every file this run writes, for the check before the work."""
@@ -177,6 +178,7 @@ def _ur_hash(c: Calibrate, robot) -> str:
 
 def run(args) -> int:
     from kincal.cli.console import say
+    from kincal.cli.options import xacro_args
     from kincal.export.outputs import Outputs, gate, write_calibration
     from kincal.identification.problem import CalibrationProblem
 
@@ -188,6 +190,9 @@ def run(args) -> int:
     if (c.yaml_format is not None or c.ur_hash is not None) and c.yaml_out is None:
         raise OptionError("--yaml-format and --ur-hash describe --yaml-out's file: give "
                           "--yaml-out KINEMATICS.yaml")
+    from kincal.export.provenance import utc_now
+
+    utc_now()  # a bad SOURCE_DATE_EPOCH fails here, before the work
     robots = Chain.load_all(c.chain.per_file(len(c.inputs.files)))  # each file's chain
     robot = robots[0]
     ur_hash = _ur_hash(c, robot) if c.yaml_format == "ur" else None
@@ -208,16 +213,19 @@ def run(args) -> int:
                 options.solver.progress.close()
     for w in caught:  # and passed on to be printed as usual
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    refused = False
     try:  # the gate before any further work (write_calibration checks it again, quietly)
         accepted = gate(result, c.accept_implausible, c.accept_unconverged)
     except KincalError:
-        if not c.quiet:
-            print(result.summary())
-        raise
+        if not (c.report or c.html or c.plots):  # no diagnosis asked for
+            if not c.quiet:
+                print(result.summary())
+            raise
+        refused, accepted = True, []  # the writer writes the diagnosis, then raises
     for message in accepted:
         warnings.warn(message, KincalWarning)
     amap = None
-    if targets or c.html:
+    if (targets or c.html) and not refused:
         from kincal.planning.accuracy_map import result_accuracy_map
 
         if (result.covariance is not None or targets) and not result.chains.several:
@@ -232,6 +240,9 @@ def run(args) -> int:
         out += [f"  export: {n}" for n in notes]
         if amap is not None:
             out.append("  " + amap.summary().replace("\n", "\n  "))
+        if refused:
+            return out + [f"  wrote the diagnosis of the REFUSED calibration: {path}"
+                          for path in written]
         return out + [f"  wrote {path}" for path in written]
 
     outputs = Outputs(urdf=c.out, frames=c.frames_out, report=c.report, html=c.html,
@@ -245,6 +256,7 @@ def run(args) -> int:
             accept_unconverged=c.accept_unconverged, accuracy=amap,
             warnings_seen=[str(w.message) for w in caught
                            if issubclass(w.category, KincalWarning)],
-            data_source=", ".join(c.inputs.files),
+            data_source=", ".join(c.inputs.files), command=c.command_line or None,
+            xacro_args=xacro_args(c.chain.xacro_arg),
             before_commit=lambda written, notes: say(lines(written, notes)))
     return 0

@@ -127,6 +127,7 @@ def main(argv=None) -> int:
     _standard_streams()
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.command_line = ["kincal", *(sys.argv[1:] if argv is None else argv)]
     # SIGTERM unwinds like Ctrl-C (only the main thread may set handlers: main() called
     # from a worker thread keeps the default)
     sigterm = None

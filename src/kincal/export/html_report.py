@@ -21,7 +21,8 @@ import math
 SECTIONS = (("summary", "Summary"), ("identification", "What the data identify"),
             ("parameters", "Parameters"), ("residuals", "Residuals per measurement set"),
             ("joints", "Residuals against the joints"), ("cv", "Choice of lambda"),
-            ("accuracy", "Predicted accuracy"), ("warnings", "Warnings and notes"))
+            ("accuracy", "Predicted accuracy"), ("validation", "Held-out validation"),
+            ("warnings", "Warnings and notes"), ("provenance", "Provenance"))
 
 _STYLE = """
 body { font-family: sans-serif; max-width: 1100px; margin: 1em auto; padding: 0 1em;
@@ -183,14 +184,19 @@ def _warnings(result, warnings, notes) -> str:
 
 
 def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=None,
-                source: str = "kincal") -> str:
+                source: str = "kincal", provenance=None, refused: str | None = None,
+                validation=None) -> str:
     """The report of ``result`` (a CalibrationResult) as one HTML document.
 
     accuracy: an :class:`~kincal.planning.accuracy_map.AccuracyMap` (e.g. from
     ``result_accuracy_map``) or None. warnings: messages of the run (kincal's warnings are
     not stored in the result: pass the ones you caught). notes: further lines (e.g. the
     export notes of the corrected URDF). data_source: the data file's name, for the page.
+    provenance: the run's :class:`~kincal.export.provenance.Provenance`. refused: the
+    gate's refusal message (the page is then a refused run's diagnosis, marked at its
+    top). validation: held-out errors (:class:`~kincal.export.validation.Validation`).
     """
+    from kincal.export import html_run
     from kincal.export import diagnostic_plots as dp
     from kincal.export import plots
 
@@ -241,10 +247,15 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
             + _section("joints", joints)
             + _section("cv", _cv(result, cv_png))
             + _section("accuracy", _accuracy(accuracy, acc_png))
-            + _section("warnings", _warnings(result, warnings, notes)))
+            + _section("validation", html_run.validation_section(validation))
+            + _section("warnings", _warnings(result, warnings, notes))
+            + _section("provenance", html_run.provenance_section(provenance)))
+    if refused is not None:
+        title = "REFUSED: " + title
+        body = html_run.refused_banner(result, refused) + body
     return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
             f"<meta name=\"generator\" content=\"{_e(source)}\">\n<title>{_e(title)}</title>\n"
-            f"<style>{_STYLE}</style>\n</head>\n<body>\n<h1>{_e(title)}</h1>\n"
+            f"<style>{_STYLE}{html_run.REFUSED_STYLE if refused else ''}</style>\n</head>\n<body>\n<h1>{_e(title)}</h1>\n"
             f"<nav>{nav}</nav>\n{body}</body>\n</html>\n")
 
 

@@ -50,10 +50,17 @@ def equal_axes_mm(ax, points: np.ndarray, min_half: float = 0.0) -> None:
     ax.set_zlabel("z (mm)")
 
 
-def _save(fig, path, overwrite: bool, source: str) -> Path | bytes:
-    """Write the PNG to ``path``; with path None return its bytes (to embed, e.g. in HTML)."""
+def _save(fig, path, overwrite: bool, source) -> Path | bytes:
+    """Write the PNG to ``path``; with path None return its bytes (to embed, e.g. in HTML).
+    source: the "Software" text, or a dict of PNG text fields (a calibration's provenance,
+    :meth:`kincal.export.provenance.Provenance.png_text`); a refused run's figures say so
+    on their face."""
+    metadata = dict(source) if isinstance(source, dict) else {"Software": source}
+    if "plausibility gate: REFUSED" in metadata.get("Comment", ""):
+        fig.text(0.01, 0.995, "REFUSED by the plausibility gate: diagnosis only",
+                 color="#b00020", fontsize=9, fontweight="bold", ha="left", va="top")
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", metadata={"Software": source})
+    fig.savefig(buf, format="png", metadata=metadata)
     if path is None:
         return buf.getvalue()
     return write_bytes_atomic(path, buf.getvalue(), overwrite=overwrite)
