@@ -32,6 +32,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
     for command in COMMANDS:
         command.register(sub)
+    from kincal.cli.options import add_console
+
+    for name, p in sub.choices.items():  # the console options, the same on every command
+        add_console(p, json_summary=name == "calibrate")
     return ap
 
 
@@ -118,6 +122,27 @@ def _os_error_line(exc: OSError) -> str:
     return f"{name}{': ' if name else ''}{exc.strerror or exc}"
 
 
+class _NullOut:
+    """stdout of a --quiet run: takes everything, keeps nothing."""
+
+    def write(self, text: str) -> int:
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return False
+
+
+def _quiet(on: bool):
+    """With --quiet, stdout goes nowhere while the command runs (one place for every
+    command: they say what they say, and nobody hears it)."""
+    import contextlib
+
+    return contextlib.redirect_stdout(_NullOut()) if on else contextlib.nullcontext()
+
+
 def main(argv=None) -> int:
     import signal
     import threading
@@ -140,7 +165,10 @@ def main(argv=None) -> int:
             from kincal.cli.checks import check_args
 
             check_args(args)
-            code = args.run(args)
+            if args.verbose:
+                print(f"kincal {__version__}: {' '.join(args.command_line)}", file=sys.stderr)
+            with _quiet(args.quiet):
+                code = args.run(args)
             say([])  # flush: a full disk behind stdout fails here (one line), not at exit
         except (KeyboardInterrupt, _Terminated) as exc:
             name, code = (("SIGINT", 130) if isinstance(exc, KeyboardInterrupt)
@@ -154,6 +182,8 @@ def main(argv=None) -> int:
         except (KincalError, OSError) as exc:
             message = " ".join((str(exc) if isinstance(exc, KincalError)
                                 else _os_error_line(exc)).split())  # one line
+            if args.verbose:
+                message += f" [{type(exc).__name__}]"
             print(f"kincal: error: {message}", file=sys.stderr)
             code = 1
             _drain_stdout()
@@ -170,7 +200,7 @@ def main(argv=None) -> int:
 
                 shutil.rmtree(scratch, ignore_errors=True)
                 os.environ.pop("MPLCONFIGDIR", None)
-    if code == 0:  # an error stays the one line it is
+    if code == 0 and not args.quiet:  # an error stays the one line it is
         print(f"kincal: done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return code
 

@@ -74,8 +74,8 @@ def validation_section(validation) -> str:
     """Held-out errors before and after, per axis."""
     if validation is None:
         return "<p>No held-out data in this run (<code>--validate HELD.csv</code>).</p>"
-    head = ('<tr><th class="name">held-out error [mm]</th><th>before</th><th>after</th>'
-            "</tr>")
+    head = ('<tr><th class="name">held-out error [mm, deg]</th><th>before</th>'
+            "<th>after</th></tr>")
     rows = "".join(f'<tr><td class="name">{_e(name)}</td><td>{b:.4f}</td><td>{a:.4f}</td>'
                    "</tr>" for name, b, a in validation.table())
     return (f"<p>{_e(validation.headline())}</p><table>{head}{rows}</table>"

@@ -23,7 +23,8 @@ class Outputs:
     """What to write (None: not written). urdf: the corrected URDF; frames: FRAMES.json
     (:mod:`kincal.frames_file`); report: REPORT.json; html: the self-contained report;
     yaml / mdh: the cell formats of :mod:`kincal.export.cell_exports`; plots: a folder of
-    PNG plots. yaml_format: "kincal" (joint-name keys) or "ur" (ur_description's segment
+    PNG plots; residuals: every sample's residual vector as CSV
+    (:func:`kincal.export.validation.residuals_csv`, the held-out set's too). yaml_format: "kincal" (joint-name keys) or "ur" (ur_description's segment
     keys and ``ur_hash``, the robot's calibration hash, required then). add_frames: also put the measurement frame and tool point(s) into the URDF
     as fixed frames. overwrite: replace existing files. protect: input files that must
     never be replaced (the URDF and data are added from the result)."""
@@ -35,6 +36,7 @@ class Outputs:
     yaml: Path | str | None = None
     mdh: Path | str | None = None
     plots: Path | str | None = None
+    residuals: Path | str | None = None
     yaml_format: str = "kincal"
     ur_hash: str | None = None
     add_frames: bool = False
@@ -44,7 +46,7 @@ class Outputs:
     def paths(self) -> list[Path]:
         """The files and folders asked for, in writing order."""
         return [Path(p) for p in (self.urdf, self.frames, self.report, self.yaml, self.mdh,
-                                  self.html, self.plots) if p is not None]
+                                  self.residuals, self.html, self.plots) if p is not None]
 
 
 @dataclass(frozen=True)
@@ -114,7 +116,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     if not isinstance(o, Outputs):
         raise ExportError(f"outputs must be an Outputs(urdf=..., frames=..., ...), got "
                           f"{type(o).__name__}")
-    for name in ("urdf", "frames", "report", "html", "yaml", "mdh", "plots"):
+    for name in ("urdf", "frames", "report", "html", "yaml", "mdh", "plots", "residuals"):
         value = getattr(o, name)
         if value is not None and (not isinstance(value, (str, Path)) or not str(value).strip()):
             raise ExportError(f"the {name} output path {value!r} is empty or not a path; "
@@ -127,16 +129,18 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     from kincal.export.provenance import Provenance, stamp_urdf
 
     sources = [s.source for s in result.sets]
+    held = () if validation is None else (validation.source,)
     try:
         accepted = gate(result, accept_implausible, accept_unconverged)
     except (ImplausibleResultError, NotConvergedError) as exc:
-        if o.report is None and o.html is None and o.plots is None:
+        if o.report is None and o.html is None and o.plots is None and o.residuals is None:
             raise
-        diagnosis = Outputs(report=o.report, html=o.html, plots=o.plots,
+        diagnosis = Outputs(report=o.report, html=o.html, plots=o.plots, residuals=o.residuals,
                             overwrite=o.overwrite, protect=o.protect)
         why = _refusal(result, accept_implausible, accept_unconverged,
                        "no URDF, frames or cell file is written")
-        prov = Provenance.of(result, command=command, xacro_args=xacro_args, refused=why)
+        prov = Provenance.of(result, command=command, xacro_args=xacro_args, refused=why,
+                             more_data=held)
         staged = _diagnosis(result, diagnosis, prov, None, warnings_seen,
                             data_source or ", ".join(sources), (), validation, refused=why)
         written = _write(result, diagnosis, staged, sources, before_commit, ())
@@ -147,7 +151,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         raise  # not reached: check() raised
     for message in accepted:
         warnings.warn(message, KincalWarning)
-    prov = Provenance.of(result, command=command, xacro_args=xacro_args)
+    prov = Provenance.of(result, command=command, xacro_args=xacro_args, more_data=held)
     files: list = []
     notes: tuple[str, ...] = ()
     if o.urdf is not None:
@@ -213,6 +217,10 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
             content["refused"] = {"verdict": "REFUSED", "message": refused}
         content["provenance"] = prov.as_dict()
         files.append((o.report, report.dumps(content)))
+    if o.residuals is not None:
+        from kincal.export.validation import residuals_csv
+
+        files.append((o.residuals, residuals_csv(result, validation, prov.hash_comment())))
     if o.plots is not None:
         files += _plots(result, Path(o.plots), accuracy, prov)
     if o.html is not None:

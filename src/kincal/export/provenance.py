@@ -63,13 +63,14 @@ class Provenance:
     gate: str
 
     @classmethod
-    def of(cls, result, *, command=None, xacro_args=None, refused: str | None = None
-           ) -> "Provenance":
+    def of(cls, result, *, command=None, xacro_args=None, refused: str | None = None,
+           more_data=()) -> "Provenance":
         """The provenance of ``result`` (a CalibrationResult) written now.
 
         command: the command line (a list of arguments or one string; None: the Python
         API). xacro_args: {name: value} of a xacro description. refused: the gate's
-        refusal message when the files are a refused run's diagnosis.
+        refusal message when the files are a refused run's diagnosis. more_data: further
+        files read (the held-out data).
         """
         from kincal import __version__
 
@@ -87,7 +88,7 @@ class Provenance:
             gate = "; ".join(f.message for f in p.findings) + " (accepted as asked)"
         else:
             verdict, gate = "plausible", "no finding"
-        data = tuple(FileHash.of(s.source) for s in result.sets)
+        data = tuple(FileHash.of(p) for p in (*(s.source for s in result.sets), *more_data))
         return cls(__version__, utc_now(), command, FileHash.of(result.robot.source or "<robot>"),
                    _sha256(result.robot.urdf_text.encode("utf-8")),
                    tuple(sorted((str(k), str(v)) for k, v in (xacro_args or {}).items())),
