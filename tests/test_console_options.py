@@ -66,3 +66,13 @@ def test_progress_shows_elapsed_time_and_an_estimate():
     bar = progress_bar(stream)
     bar(1, 4)
     assert "1/4 fits" in stream.getvalue() and "left" in stream.getvalue()
+
+
+def test_no_negative_zero_in_the_report_figures():
+    from kincal.export.html_report import _frame_value, _num
+    from kincal.identification.result_text import _z
+
+    assert _num(-3e-9, "+.5f") == "+0.00000" and _num(-3e-9, ".5f") == "0.00000"
+    assert _num(-2e-5, "+.5f") == "-0.00002"  # a value the digits show stays signed
+    assert _frame_value("base.x", -1e-12) == "0.0000"
+    assert f"{_z(-4e-5, 4):.4f}" == "0.0000" and f"{_z(-4e-5):.5f}" == "-0.00004"

@@ -49,13 +49,18 @@ def _img(png: bytes, alt: str) -> str:
 
 
 def _num(v, fmt: str) -> str:
-    return "" if v is None or not math.isfinite(v) else format(v, fmt)
+    """``v`` formatted, "" for None or not finite; never "-0.00000" (a value that is zero
+    to the digits shown is written as zero)."""
+    if v is None or not math.isfinite(v):
+        return ""
+    text = format(v, fmt)
+    return format(0.0, fmt) if float(text) == 0.0 else text
 
 
 def _frame_value(name: str, value: float) -> str:
     """A frame parameter in mm or degrees."""
     angle = name.rsplit(".", 1)[-1] in ("rx", "ry", "rz")
-    return f"{math.degrees(value) if angle else value * 1e3:.4f}"
+    return _num(math.degrees(value) if angle else value * 1e3, ".4f")
 
 
 def _section(sid: str, body: str) -> str:
@@ -130,11 +135,11 @@ def _parameters(result, png) -> str:
         status = p.status + (" (weak)" if p.name in weak else "")
         cls = p.status if p.status != "identified" else ("weak" if p.name in weak else "")
         title = f' title="{_e(why[p.name])}"' if p.name in why else ""
-        shown_dev = "" if p.status != "identified" or is_frame else f"{dev:+.5f}"
+        shown_dev = "" if p.status != "identified" or is_frame else _num(dev, "+.5f")
         rows.append(f'<tr class="{cls}"{title}><td class="name">{_e(p.name)}</td>'
                     f'<td class="name">{_e(status)}</td>'
-                    f"<td>{'' if is_frame else f'{nom:.5f}'}</td><td>{shown_dev}</td>"
-                    f"<td>{nom + dev:.5f}</td><td>{_num(se, '.5f')}</td>"
+                    f"<td>{'' if is_frame else _num(nom, '.5f')}</td><td>{shown_dev}</td>"
+                    f"<td>{_num(nom + dev, '.5f')}</td><td>{_num(se, '.5f')}</td>"
                     f'<td class="name">{unit}</td></tr>')
     note = ("<p class=\"muted\">Lengths in mm, angles in degrees. Dropped and fixed parameters "
             "are held at their nominal value (no deviation, no standard error). The "
