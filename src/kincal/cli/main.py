@@ -18,7 +18,7 @@ import warnings
 
 from kincal import __version__
 from kincal.cli import analyze, calibrate, compensate, demo, evaluate, plan, simulate
-from kincal.cli.console import say, stdout_to_null
+from kincal.cli.console import quiet_stdout, say, stdout_to_null
 from kincal.errors import KincalError, KincalNote, KincalWarning
 
 COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo)
@@ -122,27 +122,6 @@ def _os_error_line(exc: OSError) -> str:
     return f"{name}{': ' if name else ''}{exc.strerror or exc}"
 
 
-class _NullOut:
-    """stdout of a --quiet run: takes everything, keeps nothing."""
-
-    def write(self, text: str) -> int:
-        return len(text)
-
-    def flush(self) -> None:
-        pass
-
-    def isatty(self) -> bool:
-        return False
-
-
-def _quiet(on: bool):
-    """With --quiet, stdout goes nowhere while the command runs (one place for every
-    command: they say what they say, and nobody hears it)."""
-    import contextlib
-
-    return contextlib.redirect_stdout(_NullOut()) if on else contextlib.nullcontext()
-
-
 def main(argv=None) -> int:
     import signal
     import threading
@@ -167,7 +146,7 @@ def main(argv=None) -> int:
             check_args(args)
             if args.verbose:
                 print(f"kincal {__version__}: {' '.join(args.command_line)}", file=sys.stderr)
-            with _quiet(args.quiet):
+            with quiet_stdout(args.quiet):
                 code = args.run(args)
             say([])  # flush: a full disk behind stdout fails here (one line), not at exit
         except (KeyboardInterrupt, _Terminated) as exc:
