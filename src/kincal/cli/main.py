@@ -179,7 +179,7 @@ def main(argv=None) -> int:
 
                 shutil.rmtree(scratch, ignore_errors=True)
                 os.environ.pop("MPLCONFIGDIR", None)
-    if code == 0 and not args.quiet:  # an error stays the one line it is
+    if code == 0:  # an error stays the one line it is
         print(f"kincal: done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return code
 

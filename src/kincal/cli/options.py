@@ -157,8 +157,8 @@ def add_console(p, json_summary: bool = False) -> None:
     where a command has a summary to give as JSON."""
     g = group(p, "console")
     g.add_argument("-q", "--quiet", action="store_true",
-                   help="print nothing on stdout and no progress (warnings and errors still "
-                        "go to stderr)")
+                   help="print nothing on stdout and no progress (warnings, errors and the "
+                        "closing 'done in' line still go to stderr)")
     g.add_argument("-v", "--verbose", action="store_true",
                    help="say more: the version and command line first (stderr), the full "
                         "identifiability report (calibrate), the kind of an error")
