@@ -242,3 +242,30 @@ def test_tiago_report_complete_small_and_rendered(tmp_path):
     assert "arm_4_joint" in text  # the export note about the gimbal-locked rpy
     if CHROMIUM.exists():  # (the checks above stand without a browser)
         _png_ok(_screenshot(out, tmp_path))
+
+
+def test_refused_run_report_rendered_with_its_red_box(tmp_path):
+    """A refused calibration's diagnosis page, looked at in headless Chromium: rendered,
+    figures drawn, and the REFUSED box (red border) at its top."""
+    import csv
+
+    data = tmp_path / "cal.csv"
+    assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--seed", "2"]) == 0
+    rows = list(csv.DictReader(data.open()))
+    mm = tmp_path / "mm.csv"  # millimetres, read as metres: the gate refuses
+    with mm.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows({**r, **{k: str(float(r[k]) * 1000) for k in "xyz"}} for r in rows)
+    page = tmp_path / "refused.html"
+    assert main(["calibrate", "ec66", str(mm), "--lambda", "0.01", "--out",
+                 str(tmp_path / "c.urdf"), "--html", str(page), "-q"]) == 1
+    assert not (tmp_path / "c.urdf").exists()
+    _assert_self_contained(page.read_text(), 3)
+    shot = _screenshot(page, tmp_path)
+    _png_ok(shot)
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(shot).convert("RGB")).astype(int)[:900]
+    red = (rgb[..., 0] > 150) & (rgb[..., 1] < 60) & (rgb[..., 2] < 60)
+    assert red.sum() > 2000  # the box's border and heading

@@ -108,12 +108,20 @@ def test_calibrate_refuses_and_writes_nothing(ur10_csv, tmp_path, capsys, change
                  "--lambda", "1", *extra])
     assert code == 1
     line = _error_line(capsys)
-    assert "implausible calibration, nothing is written" in line
+    # the diagnosis asked for is written (report, plots), marked REFUSED; nothing else
+    assert "implausible calibration, no URDF, frames or cell file is written" in line
+    assert "the diagnosis (marked REFUSED) is in" in line
     assert cause in line, line
     if "read as" in cause:  # a sure unit clue is named alone, once
         assert line.count("Likely cause") == 1 and line.count(cause) == 1
     assert "--accept-implausible" in line
-    assert _snapshot(tmp_path) == before
+    assert json.loads((tmp_path / "r.json").read_text())["refused"]["verdict"] == "REFUSED"
+    assert list((tmp_path / "plots").glob("*.png"))
+    (tmp_path / "r.json").unlink()
+    for png in (tmp_path / "plots").iterdir():
+        png.unlink()
+    (tmp_path / "plots").rmdir()
+    assert _snapshot(tmp_path) == before  # no URDF; the earlier frames.json untouched
 
 
 def test_good_data_pass_the_gate(ur10_csv, tmp_path, capsys):

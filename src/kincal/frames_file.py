@@ -186,8 +186,13 @@ class CellFrames:
         out.update({k: v for k, v in s.derived().items()})
         return out
 
-    def dumps(self) -> str:
-        return json.dumps(self.as_dict(), indent=2) + "\n"
+    def dumps(self, provenance: dict | None = None) -> str:
+        """The file's text; ``provenance`` (who made it, from what) is kept under its own
+        key, which readers ignore."""
+        out = self.as_dict()
+        if provenance is not None:
+            out["provenance"] = provenance
+        return json.dumps(out, indent=2) + "\n"
 
     # ------------------------------------------------------------ reading
     @classmethod

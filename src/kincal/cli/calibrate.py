@@ -7,6 +7,7 @@ through the one writer and its gate (:func:`kincal.export.outputs.write_calibrat
 
 from __future__ import annotations
 
+import sys
 import warnings
 from dataclasses import dataclass
 
@@ -57,6 +58,11 @@ def register(subparsers) -> None:
                    help="robust loss on the per-pose error; down-weighted samples are listed")
     g.add_argument("--robust-scale-mm", type=float, help="scale of the robust loss [mm] "
                    "(default 2.5 x the median pose error)")
+    group(p, "inputs").add_argument(
+        "--validate", metavar="HELD.csv",
+        help="held-out data (read as DATA is, same kind as a training file): its errors "
+             "before and after, per axis, with the frames from the calibration (as kincal "
+             "evaluate --frames), in the summary, --report and --html")
     g.add_argument("--cv-max-poses", type=int, default=2000, metavar="N",
                    help="choose lambda by CV on a random N of the poses when there are more "
                         "(default 2000; 0: all poses); the final fit uses every pose")
@@ -78,6 +84,9 @@ def register(subparsers) -> None:
                         "kinematics_params file the xacro was expanded with)")
     o.add_argument("--mdh-out", metavar="MDH.csv",
                    help="corrected modified-DH (Craig) table, convention in its header")
+    o.add_argument("--residuals-out", metavar="RESIDUALS.csv",
+                   help="every sample's residual vector after calibration as CSV (training "
+                        "sets and the --validate set) [m]")
     o.add_argument("--plots", help="directory for PNG plots")
     o.add_argument("--html", metavar="REPORT.html",
                    help="one self-contained HTML report (plots embedded, opens offline)")
@@ -89,7 +98,6 @@ def register(subparsers) -> None:
                         "implausible (wrong units, rows, tip or data are the usual causes)")
     r.add_argument("--accept-unconverged", action="store_true",
                    help="write the outputs even if the solver did not converge (best iterate)")
-    r.add_argument("--quiet", action="store_true")
     p.set_defaults(run=run)
 
 
@@ -125,15 +133,20 @@ class Calibrate:
     mdh_out: str | None
     plots: str | None
     html: str | None
+    validate: str | None
+    residuals_out: str | None
     overwrite: bool
     accept_implausible: bool
     accept_unconverged: bool
     quiet: bool
+    verbose: bool
+    json: bool
+    command_line: tuple[str, ...] = ()  # as typed, for the files' provenance
 
     def outputs(self) -> list:
         """Every file this run writes, for the check before the work."""
         return [self.out, self.frames_out, self.report, self.yaml_out, self.mdh_out,
-                self.html] + plot_paths(self.plots)
+                self.html, self.residuals_out] + plot_paths(self.plots)
 
 
 def calibration_options(c: Calibrate):
@@ -153,10 +166,12 @@ def calibration_options(c: Calibrate):
                               seed=c.seed, prior_mm=c.prior_mm, prior_deg=c.prior_deg,
                               noise_mm=c.noise_mm, fix=c.fix, free=c.free, backlash=c.backlash,
                               tool_guess=c.inputs.tool_guess, robust=c.robust,
-                              robust_scale_mm=c.robust_scale_mm, progress=progress_bar(),
+                              robust_scale_mm=c.robust_scale_mm,
+                              progress=None if c.quiet or c.json else progress_bar(),
                               cv_max_poses=c.cv_max_poses or None,
                               shared_planes=c.shared_planes,
-                              solver=SolverOptions(progress=FitStatus.on_terminal()))
+                              solver=SolverOptions(progress=None if c.quiet or c.json
+                                                   else FitStatus.on_terminal()))
 
 
 def _ur_hash(c: Calibrate, robot) -> str:
@@ -175,8 +190,27 @@ def _ur_hash(c: Calibrate, robot) -> str:
     return found
 
 
+def json_summary(result, validation, written, refused: bool) -> str:
+    """The summary of ``--json``: the run's figures as one JSON object (REPORT.json's
+    keys, without the per-sample residuals)."""
+    from kincal.export import report
+
+    full = report.result_dict(result)
+    keep = ("robot", "data", "lambda", "penalty_choice", "errors", "parameters", "frames",
+            "convergence", "plausibility")
+    out = {"format": "kincal-summary-1", "kincal_version": full["kincal_version"],
+           "verdict": "REFUSED" if refused else "written",
+           **{k: full[k] for k in keep},
+           "identifiability": {k: full["identifiability"][k] for k in
+                               ("rank", "condition_number", "kept", "fixed")},
+           "validation": None if validation is None else validation.as_dict(),
+           "written": [str(p) for p in written]}
+    return report.dumps(out).rstrip("\n")
+
+
 def run(args) -> int:
     from kincal.cli.console import say
+    from kincal.cli.options import xacro_args
     from kincal.export.outputs import Outputs, gate, write_calibration
     from kincal.identification.problem import CalibrationProblem
 
@@ -188,14 +222,20 @@ def run(args) -> int:
     if (c.yaml_format is not None or c.ur_hash is not None) and c.yaml_out is None:
         raise OptionError("--yaml-format and --ur-hash describe --yaml-out's file: give "
                           "--yaml-out KINEMATICS.yaml")
+    from kincal.export.provenance import utc_now
+
+    utc_now()  # a bad SOURCE_DATE_EPOCH fails here, before the work
     robots = Chain.load_all(c.chain.per_file(len(c.inputs.files)))  # each file's chain
     robot = robots[0]
     ur_hash = _ur_hash(c, robot) if c.yaml_format == "ur" else None
     if c.accuracy.asked and len({(r.base, r.tip) for r in robots}) > 1:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
-    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=c.inputs.files,
-                  dirs=[c.plots])
+    inputs = c.inputs.files + ((c.validate,) if c.validate else ())
+    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots])
+    if c.validate and len({(r.base, r.tip) for r in robots}) > 1:
+        raise OptionError("--validate evaluates one chain; this calibration has several "
+                          "(one --base/--tip per file)")
     sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain
     options = calibration_options(c)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
@@ -208,16 +248,25 @@ def run(args) -> int:
                 options.solver.progress.close()
     for w in caught:  # and passed on to be printed as usual
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    validation = None
+    if c.validate:
+        from kincal.cli.validate import held_out
+
+        validation = held_out(result, c.inputs, c.validate)
+    refused = False
     try:  # the gate before any further work (write_calibration checks it again, quietly)
         accepted = gate(result, c.accept_implausible, c.accept_unconverged)
     except KincalError:
-        if not c.quiet:
-            print(result.summary())
-        raise
+        if not (c.report or c.html or c.plots or c.residuals_out):  # no diagnosis asked
+            if not c.quiet:
+                print(json_summary(result, validation, (), True) if c.json
+                      else result.summary())
+            raise
+        refused, accepted = True, []  # the writer writes the diagnosis, then raises
     for message in accepted:
         warnings.warn(message, KincalWarning)
     amap = None
-    if targets or c.html:
+    if (targets or c.html) and not refused:
         from kincal.planning.accuracy_map import result_accuracy_map
 
         if (result.covariance is not None or targets) and not result.chains.several:
@@ -226,18 +275,27 @@ def run(args) -> int:
     def lines(written, notes):
         if c.quiet:
             return []
+        if c.json:  # stdout holds the JSON alone; what was written goes to stderr
+            for path in written:
+                print(f"kincal: wrote {path}", file=sys.stderr)
+            return [json_summary(result, validation, written, refused)]
         out = [result.summary()]
         out += [f"  {line}" for line in result.identifiability.summary().splitlines()[1:]
-                if line.startswith(("weak", "  the poses"))]
+                if c.verbose or line.startswith(("weak", "  the poses"))]
+        if validation is not None:
+            out += [f"  {line}" for line in validation.lines()]
         out += [f"  export: {n}" for n in notes]
         if amap is not None:
             out.append("  " + amap.summary().replace("\n", "\n  "))
+        if refused:
+            return out + [f"  wrote the diagnosis of the REFUSED calibration: {path}"
+                          for path in written]
         return out + [f"  wrote {path}" for path in written]
 
     outputs = Outputs(urdf=c.out, frames=c.frames_out, report=c.report, html=c.html,
                       yaml=c.yaml_out, yaml_format=c.yaml_format or "kincal",
                       ur_hash=ur_hash, mdh=c.mdh_out, plots=c.plots, add_frames=c.add_frames,
-                      overwrite=c.overwrite, protect=tuple(c.inputs.files))
+                      residuals=c.residuals_out, overwrite=c.overwrite, protect=inputs)
     with warnings.catch_warnings():  # the gate's warnings were given above, by gate()
         warnings.simplefilter("ignore", KincalWarning)
         write_calibration(
@@ -245,6 +303,8 @@ def run(args) -> int:
             accept_unconverged=c.accept_unconverged, accuracy=amap,
             warnings_seen=[str(w.message) for w in caught
                            if issubclass(w.category, KincalWarning)],
-            data_source=", ".join(c.inputs.files),
+            data_source=", ".join(c.inputs.files), command=c.command_line or None,
+            validation=validation,
+            xacro_args=xacro_args(c.chain.xacro_arg),
             before_commit=lambda written, notes: say(lines(written, notes)))
     return 0

@@ -46,3 +46,24 @@ def say_and_write(files, lines, *, overwrite: bool, protect, dirs=()) -> list:
 
     return write_all(files, overwrite=overwrite, protect=protect, dirs=dirs,
                      before_commit=lambda targets: say(lines(targets)))
+
+
+class _NullOut:
+    """stdout of a --quiet run: takes everything, keeps nothing."""
+
+    def write(self, text: str) -> int:
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return False
+
+
+def quiet_stdout(on: bool):
+    """With --quiet, stdout goes nowhere while the command runs (one place for every
+    command: they say what they say, and nobody hears it)."""
+    import contextlib
+
+    return contextlib.redirect_stdout(_NullOut()) if on else contextlib.nullcontext()

@@ -57,21 +57,14 @@ def run(args) -> int:
         frames.check_chain(robot)
     sets = e.inputs.read_sets(robot)
     backlash = tuple(frames.backlash) if frames is not None else ()
-    # with frames given nothing is fitted: the problem only lays out the parameters
-    problem = CalibrationProblem(robot, sets, CalibrationOptions(
-        method="frames" if frames is None else "ls", tool_guess=e.inputs.tool_guess,
-        backlash=backlash))
-    lay = problem.layout
     if frames is None:
+        problem = CalibrationProblem(robot, sets, CalibrationOptions(
+            method="frames", tool_guess=e.inputs.tool_guess))
         x = problem.solve().x
         how = "measurement frame and tool point fitted on these data"
     else:
-        x = problem.x_nominal
-        used: set[int] = set()
-        for i, km in enumerate(problem.kinds):
-            x[lay.frame_slices[i]] = saved_frames(frames, km, used)
-        if backlash:
-            x[lay.backlash_slice] = [frames.backlash[j] for j in lay.backlash]
+        problem, x = with_frames(robot, sets, frames, e.inputs.tool_guess)
+        lay = problem.layout
         how = f"frames from {e.frames}"
         if backlash:
             how += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
@@ -90,6 +83,26 @@ def run(args) -> int:
             "errors": report.stats_dict(stats[0])}))],
             lambda written: lines, overwrite=e.overwrite, protect=[robot.source, e.inputs.data])
     return 0
+
+
+def with_frames(robot, sets, frames, tool_guess=None):
+    """(problem, x): ``sets`` on ``robot``'s kinematics as they are, with the frames (and
+    backlash) of ``frames`` (a CellFrames); nothing is fitted, the problem only lays out
+    the parameters. The one path of ``evaluate --frames`` and ``calibrate --validate``."""
+    from kincal.identification.options import CalibrationOptions
+    from kincal.identification.problem import CalibrationProblem
+
+    backlash = tuple(frames.backlash)
+    problem = CalibrationProblem(robot, sets, CalibrationOptions(
+        method="ls", tool_guess=tool_guess, backlash=backlash))
+    lay = problem.layout
+    x = problem.x_nominal
+    used: set[int] = set()
+    for i, km in enumerate(problem.kinds):
+        x[lay.frame_slices[i]] = saved_frames(frames, km, used)
+    if backlash:
+        x[lay.backlash_slice] = [frames.backlash[j] for j in lay.backlash]
+    return problem, x
 
 
 def saved_frames(frames, km, used: set) -> list[float]:

@@ -18,7 +18,7 @@ import warnings
 
 from kincal import __version__
 from kincal.cli import analyze, calibrate, compensate, demo, evaluate, plan, simulate
-from kincal.cli.console import say, stdout_to_null
+from kincal.cli.console import quiet_stdout, say, stdout_to_null
 from kincal.errors import KincalError, KincalNote, KincalWarning
 
 COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo)
@@ -32,6 +32,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
     for command in COMMANDS:
         command.register(sub)
+    from kincal.cli.options import add_console
+
+    for name, p in sub.choices.items():  # the console options, the same on every command
+        add_console(p, json_summary=name == "calibrate")
     return ap
 
 
@@ -127,6 +131,7 @@ def main(argv=None) -> int:
     _standard_streams()
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.command_line = ["kincal", *(sys.argv[1:] if argv is None else argv)]
     # SIGTERM unwinds like Ctrl-C (only the main thread may set handlers: main() called
     # from a worker thread keeps the default)
     sigterm = None
@@ -139,7 +144,10 @@ def main(argv=None) -> int:
             from kincal.cli.checks import check_args
 
             check_args(args)
-            code = args.run(args)
+            if args.verbose:
+                print(f"kincal {__version__}: {' '.join(args.command_line)}", file=sys.stderr)
+            with quiet_stdout(args.quiet):
+                code = args.run(args)
             say([])  # flush: a full disk behind stdout fails here (one line), not at exit
         except (KeyboardInterrupt, _Terminated) as exc:
             name, code = (("SIGINT", 130) if isinstance(exc, KeyboardInterrupt)
@@ -153,6 +161,8 @@ def main(argv=None) -> int:
         except (KincalError, OSError) as exc:
             message = " ".join((str(exc) if isinstance(exc, KincalError)
                                 else _os_error_line(exc)).split())  # one line
+            if args.verbose:
+                message += f" [{type(exc).__name__}]"
             print(f"kincal: error: {message}", file=sys.stderr)
             code = 1
             _drain_stdout()

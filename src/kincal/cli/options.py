@@ -152,6 +152,22 @@ def add_overwrite(p, help="replace existing output files"):
     group(p, "outputs").add_argument("--overwrite", action="store_true", help=help)
 
 
+def add_console(p, json_summary: bool = False) -> None:
+    """-q/--quiet and -v/--verbose (every command, added by the dispatcher), and --json
+    where a command has a summary to give as JSON."""
+    g = group(p, "console")
+    g.add_argument("-q", "--quiet", action="store_true",
+                   help="print nothing on stdout and no progress (warnings, errors and the "
+                        "closing 'done in' line still go to stderr)")
+    g.add_argument("-v", "--verbose", action="store_true",
+                   help="say more: the version and command line first (stderr), the full "
+                        "identifiability report (calibrate), the kind of an error")
+    if json_summary:
+        g.add_argument("--json", action="store_true",
+                       help="the summary as JSON on stdout (nothing else there; what was "
+                            "written is said on stderr)")
+
+
 # ------------------------------------------------------------ typed values
 def typed(cls, args: argparse.Namespace, **given):
     """The frozen dataclass ``cls`` from the Namespace: each field from the attribute of its

@@ -11,16 +11,34 @@ def progress_bar(stream=None, label="cross-validation", unit="fits"):
     if not getattr(stream, "isatty", lambda: False)():
         return None
 
+    import time
+
+    t0 = time.perf_counter()
+
     def progress(done, total):
         width = 30
         filled = int(width * done / total)
         stream.write(f"\r  {label} [{'#' * filled}{'.' * (width - filled)}] "
-                     f"{done}/{total} {unit}")
+                     f"{done}/{total} {unit}, {timing(time.perf_counter() - t0, done, total)}"
+                     "\033[K")
         if done == total:
             stream.write("\n")
         stream.flush()
 
     return progress
+
+
+def timing(elapsed: float, done: int, total: int) -> str:
+    """"12.3 s, about 40 s left": the time so far and an estimate of the rest from the
+    mean pace (none before the first step is done)."""
+    text = f"{elapsed:.1f} s"
+    if 0 < done < total:
+        text += f", about {_span(elapsed / done * (total - done))} left"
+    return text
+
+
+def _span(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.0f} min"
 
 
 class FitStatus:
@@ -45,8 +63,11 @@ class FitStatus:
     def __call__(self, iteration, max_iterations):
         elapsed = self.clock() - self.t0
         if elapsed >= self.after:
+            # an iteration count has no known end: the bound gives the worst case
             self.stream.write(f"\r  solving: iteration {iteration} (at most {max_iterations}), "
-                              f"{elapsed:.1f} s\033[K")
+                              f"{elapsed:.1f} s, at most about "
+                              f"{_span(elapsed / max(iteration, 1) * max_iterations)} in all"
+                              "\033[K")
             self.stream.flush()
             self.drawn = True
 

@@ -21,7 +21,8 @@ import math
 SECTIONS = (("summary", "Summary"), ("identification", "What the data identify"),
             ("parameters", "Parameters"), ("residuals", "Residuals per measurement set"),
             ("joints", "Residuals against the joints"), ("cv", "Choice of lambda"),
-            ("accuracy", "Predicted accuracy"), ("warnings", "Warnings and notes"))
+            ("accuracy", "Predicted accuracy"), ("validation", "Held-out validation"),
+            ("warnings", "Warnings and notes"), ("provenance", "Provenance"))
 
 _STYLE = """
 body { font-family: sans-serif; max-width: 1100px; margin: 1em auto; padding: 0 1em;
@@ -48,13 +49,18 @@ def _img(png: bytes, alt: str) -> str:
 
 
 def _num(v, fmt: str) -> str:
-    return "" if v is None or not math.isfinite(v) else format(v, fmt)
+    """``v`` formatted, "" for None or not finite; never "-0.00000" (a value that is zero
+    to the digits shown is written as zero)."""
+    if v is None or not math.isfinite(v):
+        return ""
+    text = format(v, fmt)
+    return format(0.0, fmt) if float(text) == 0.0 else text
 
 
 def _frame_value(name: str, value: float) -> str:
     """A frame parameter in mm or degrees."""
     angle = name.rsplit(".", 1)[-1] in ("rx", "ry", "rz")
-    return f"{math.degrees(value) if angle else value * 1e3:.4f}"
+    return _num(math.degrees(value) if angle else value * 1e3, ".4f")
 
 
 def _section(sid: str, body: str) -> str:
@@ -129,11 +135,11 @@ def _parameters(result, png) -> str:
         status = p.status + (" (weak)" if p.name in weak else "")
         cls = p.status if p.status != "identified" else ("weak" if p.name in weak else "")
         title = f' title="{_e(why[p.name])}"' if p.name in why else ""
-        shown_dev = "" if p.status != "identified" or is_frame else f"{dev:+.5f}"
+        shown_dev = "" if p.status != "identified" or is_frame else _num(dev, "+.5f")
         rows.append(f'<tr class="{cls}"{title}><td class="name">{_e(p.name)}</td>'
                     f'<td class="name">{_e(status)}</td>'
-                    f"<td>{'' if is_frame else f'{nom:.5f}'}</td><td>{shown_dev}</td>"
-                    f"<td>{nom + dev:.5f}</td><td>{_num(se, '.5f')}</td>"
+                    f"<td>{'' if is_frame else _num(nom, '.5f')}</td><td>{shown_dev}</td>"
+                    f"<td>{_num(nom + dev, '.5f')}</td><td>{_num(se, '.5f')}</td>"
                     f'<td class="name">{unit}</td></tr>')
     note = ("<p class=\"muted\">Lengths in mm, angles in degrees. Dropped and fixed parameters "
             "are held at their nominal value (no deviation, no standard error). The "
@@ -183,14 +189,19 @@ def _warnings(result, warnings, notes) -> str:
 
 
 def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=None,
-                source: str = "kincal") -> str:
+                source: str = "kincal", provenance=None, refused: str | None = None,
+                validation=None) -> str:
     """The report of ``result`` (a CalibrationResult) as one HTML document.
 
     accuracy: an :class:`~kincal.planning.accuracy_map.AccuracyMap` (e.g. from
     ``result_accuracy_map``) or None. warnings: messages of the run (kincal's warnings are
     not stored in the result: pass the ones you caught). notes: further lines (e.g. the
     export notes of the corrected URDF). data_source: the data file's name, for the page.
+    provenance: the run's :class:`~kincal.export.provenance.Provenance`. refused: the
+    gate's refusal message (the page is then a refused run's diagnosis, marked at its
+    top). validation: held-out errors (:class:`~kincal.export.validation.Validation`).
     """
+    from kincal.export import html_run
     from kincal.export import diagnostic_plots as dp
     from kincal.export import plots
 
@@ -241,10 +252,15 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
             + _section("joints", joints)
             + _section("cv", _cv(result, cv_png))
             + _section("accuracy", _accuracy(accuracy, acc_png))
-            + _section("warnings", _warnings(result, warnings, notes)))
+            + _section("validation", html_run.validation_section(validation))
+            + _section("warnings", _warnings(result, warnings, notes))
+            + _section("provenance", html_run.provenance_section(provenance)))
+    if refused is not None:
+        title = "REFUSED: " + title
+        body = html_run.refused_banner(result, refused) + body
     return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
             f"<meta name=\"generator\" content=\"{_e(source)}\">\n<title>{_e(title)}</title>\n"
-            f"<style>{_STYLE}</style>\n</head>\n<body>\n<h1>{_e(title)}</h1>\n"
+            f"<style>{_STYLE}{html_run.REFUSED_STYLE if refused else ''}</style>\n</head>\n<body>\n<h1>{_e(title)}</h1>\n"
             f"<nav>{nav}</nav>\n{body}</body>\n</html>\n")
 
 

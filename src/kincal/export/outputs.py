@@ -14,7 +14,8 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from kincal.errors import ExportError, KincalWarning
+from kincal.errors import (ExportError, ImplausibleResultError, KincalWarning,
+                           NotConvergedError)
 
 
 @dataclass(frozen=True)
@@ -22,7 +23,8 @@ class Outputs:
     """What to write (None: not written). urdf: the corrected URDF; frames: FRAMES.json
     (:mod:`kincal.frames_file`); report: REPORT.json; html: the self-contained report;
     yaml / mdh: the cell formats of :mod:`kincal.export.cell_exports`; plots: a folder of
-    PNG plots. yaml_format: "kincal" (joint-name keys) or "ur" (ur_description's segment
+    PNG plots; residuals: every sample's residual vector as CSV
+    (:func:`kincal.export.validation.residuals_csv`, the held-out set's too). yaml_format: "kincal" (joint-name keys) or "ur" (ur_description's segment
     keys and ``ur_hash``, the robot's calibration hash, required then). add_frames: also put the measurement frame and tool point(s) into the URDF
     as fixed frames. overwrite: replace existing files. protect: input files that must
     never be replaced (the URDF and data are added from the result)."""
@@ -34,6 +36,7 @@ class Outputs:
     yaml: Path | str | None = None
     mdh: Path | str | None = None
     plots: Path | str | None = None
+    residuals: Path | str | None = None
     yaml_format: str = "kincal"
     ur_hash: str | None = None
     add_frames: bool = False
@@ -43,7 +46,7 @@ class Outputs:
     def paths(self) -> list[Path]:
         """The files and folders asked for, in writing order."""
         return [Path(p) for p in (self.urdf, self.frames, self.report, self.yaml, self.mdh,
-                                  self.html, self.plots) if p is not None]
+                                  self.residuals, self.html, self.plots) if p is not None]
 
 
 @dataclass(frozen=True)
@@ -93,23 +96,27 @@ def corrected_urdf_text(result, readable: bool = True) -> str:
 def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = False,
                       accept_unconverged: bool = False, accuracy=None,
                       warnings_seen=(), data_source: str | None = None,
-                      before_commit=None) -> Written:
+                      before_commit=None, command=None, xacro_args=None,
+                      validation=None) -> Written:
     """Check the gate, then write every output of ``outputs`` all-or-none.
 
     accuracy: a predicted accuracy map to add to the report, the HTML and the plots.
     warnings_seen: the run's warnings, for the HTML report. before_commit: called with
     (written paths, export notes) once every file is staged and before any takes its name
     (the command line prints there, so that a console that fails leaves nothing written).
+    command / xacro_args: the command line and the xacro arguments, for the provenance
+    every file carries (:mod:`kincal.export.provenance`). validation: a
+    :class:`~kincal.export.validation.Validation` (held-out errors) for the report and
+    the HTML. A result the gate refuses still gets the diagnosis asked for (report, HTML,
+    plots, marked REFUSED; never the URDF, frames or cell files), then the refusal is
+    raised naming where the diagnosis went.
     Returns :class:`Written`.
     """
-    from kincal.export import report
-    from kincal.export.safe_write import write_all
-
     o = outputs
     if not isinstance(o, Outputs):
         raise ExportError(f"outputs must be an Outputs(urdf=..., frames=..., ...), got "
                           f"{type(o).__name__}")
-    for name in ("urdf", "frames", "report", "html", "yaml", "mdh", "plots"):
+    for name in ("urdf", "frames", "report", "html", "yaml", "mdh", "plots", "residuals"):
         value = getattr(o, name)
         if value is not None and (not isinstance(value, (str, Path)) or not str(value).strip()):
             raise ExportError(f"the {name} output path {value!r} is empty or not a path; "
@@ -119,9 +126,32 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     if o.yaml_format == "ur" and o.yaml is not None and not o.ur_hash:
         raise ExportError("yaml_format 'ur' needs ur_hash (the hash of the robot's "
                           "kinematics_params file)")
-    for message in gate(result, accept_implausible, accept_unconverged):
-        warnings.warn(message, KincalWarning)
+    from kincal.export.provenance import Provenance, stamp_urdf
+
     sources = [s.source for s in result.sets]
+    held = () if validation is None else (validation.source,)
+    try:
+        accepted = gate(result, accept_implausible, accept_unconverged)
+    except (ImplausibleResultError, NotConvergedError) as exc:
+        if o.report is None and o.html is None and o.plots is None and o.residuals is None:
+            raise
+        diagnosis = Outputs(report=o.report, html=o.html, plots=o.plots, residuals=o.residuals,
+                            overwrite=o.overwrite, protect=o.protect)
+        why = _refusal(result, accept_implausible, accept_unconverged,
+                       "no URDF, frames or cell file is written")
+        prov = Provenance.of(result, command=command, xacro_args=xacro_args, refused=why,
+                             more_data=held)
+        staged = _diagnosis(result, diagnosis, prov, None, warnings_seen,
+                            data_source or ", ".join(sources), (), validation, refused=why)
+        written = _write(result, diagnosis, staged, sources, before_commit, ())
+        result.plausibility.check(  # raises again, saying where the diagnosis went
+            accept_implausible, accept_unconverged,
+            refused="no URDF, frames or cell file is written; the diagnosis (marked REFUSED) "
+                    "is in " + ", ".join(map(str, _shown(written.paths, o.plots))))
+        raise  # not reached: check() raised
+    for message in accepted:
+        warnings.warn(message, KincalWarning)
+    prov = Provenance.of(result, command=command, xacro_args=xacro_args, more_data=held)
     files: list = []
     notes: tuple[str, ...] = ()
     if o.urdf is not None:
@@ -129,33 +159,83 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
 
         text, notes = corrected_urdf(result, add_frames=o.add_frames)
         check_readback(result, text)  # a second parser agrees with the calibrated model
-        files.append((o.urdf, text))
+        files.append((o.urdf, stamp_urdf(text, prov)))
     if o.frames is not None:
-        files.append((o.frames, result.frames().dumps()))
-    if o.report is not None:
-        content = report.result_dict(result, data_source or ", ".join(sources))
-        if accuracy is not None:
-            content["accuracy_map"] = accuracy.as_dict()
-        files.append((o.report, report.dumps(content)))
+        files.append((o.frames, result.frames().dumps(provenance=prov.as_dict())))
     if o.yaml is not None or o.mdh is not None:
         from kincal.export.cell_exports import (kinematics_yaml, mdh_table_csv,
                                                 ur_kinematics_yaml)
 
         if o.yaml is not None and o.yaml_format == "ur":
-            files.append((o.yaml, ur_kinematics_yaml(result.robot, result.corrected,
-                                                     o.ur_hash)))
+            files.append((o.yaml, prov.under_title(ur_kinematics_yaml(
+                result.robot, result.corrected, o.ur_hash))))
         elif o.yaml is not None:
-            files.append((o.yaml, kinematics_yaml(result.robot, result.corrected)))
+            files.append((o.yaml, prov.under_title(
+                kinematics_yaml(result.robot, result.corrected))))
         if o.mdh is not None:
-            files.append((o.mdh, mdh_table_csv(result.corrected)))
+            files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
+    files += _diagnosis(result, o, prov, accuracy, warnings_seen,
+                        data_source or ", ".join(sources), notes, validation)
+    return _write(result, o, files, sources, before_commit, notes)
+
+
+def _refusal(result, accept_implausible, accept_unconverged, refused: str) -> str:
+    """The gate's refusal message, ``refused`` saying what the refusal means."""
+    try:
+        result.plausibility.check(accept_implausible, accept_unconverged, refused=refused)
+    except (ImplausibleResultError, NotConvergedError) as exc:
+        return str(exc)
+    raise ExportError("the gate refused this result once and accepted it the second time")
+
+
+def _shown(written, plots) -> list:
+    """The written paths with a plots folder named once."""
+    out: list = []
+    for p in written:
+        p = Path(p)
+        if plots is not None and p.parent.resolve() == Path(plots).resolve():
+            p = Path(plots)
+        if p not in out:
+            out.append(p)
+    return out
+
+
+def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, notes,
+               validation, refused: str | None = None) -> list:
+    """(path, content) of the report, the plots and the HTML: what a calibration's
+    diagnosis is, written whether the gate accepted the result or refused it."""
+    from kincal.export import report
+
+    files: list = []
+    if o.report is not None:
+        content = report.result_dict(result, data_source)
+        if accuracy is not None:
+            content["accuracy_map"] = accuracy.as_dict()
+        if validation is not None:
+            content["validation"] = validation.as_dict()
+        if refused is not None:
+            content["refused"] = {"verdict": "REFUSED", "message": refused}
+        content["provenance"] = prov.as_dict()
+        files.append((o.report, report.dumps(content)))
+    if o.residuals is not None:
+        from kincal.export.validation import residuals_csv
+
+        files.append((o.residuals, residuals_csv(result, validation, prov.hash_comment())))
     if o.plots is not None:
-        files += _plots(result, Path(o.plots), accuracy)
+        files += _plots(result, Path(o.plots), accuracy, prov)
     if o.html is not None:
         from kincal.export.html_report import html_report
 
         files.append((o.html, html_report(
-            result, accuracy=accuracy, data_source=data_source or ", ".join(sources),
-            warnings=list(warnings_seen), notes=[f"export: {n}" for n in notes])))
+            result, accuracy=accuracy, data_source=data_source,
+            warnings=list(warnings_seen), notes=[f"export: {n}" for n in notes],
+            provenance=prov, refused=refused, validation=validation)))
+    return files
+
+
+def _write(result, o: Outputs, files, sources, before_commit, notes) -> Written:
+    from kincal.export.safe_write import write_all
+
     if not files:
         if before_commit is not None:
             before_commit([], notes)
@@ -167,14 +247,15 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     return Written(tuple(written), notes)
 
 
-def _plots(result, out_dir: Path, accuracy=None) -> list:
+def _plots(result, out_dir: Path, accuracy=None, prov=None) -> list:
     """(path, png bytes) pairs of the calibration plots, so the PNGs go to ``out_dir`` in
-    the same transaction as the other files."""
+    the same transaction as the other files; ``prov`` goes into each PNG's text fields."""
     from kincal.export.plots import calibration_figures
 
-    files = [(out_dir / name, png) for name, png in calibration_figures(result)]
+    source = "kincal" if prov is None else prov.png_text()
+    files = [(out_dir / name, png) for name, png in calibration_figures(result, source)]
     if accuracy is not None and len(accuracy.std):
         from kincal.export.diagnostic_plots import plot_accuracy_map
 
-        files.append((out_dir / "accuracy_map.png", plot_accuracy_map(accuracy)))
+        files.append((out_dir / "accuracy_map.png", plot_accuracy_map(accuracy, source=source)))
     return files

@@ -45,15 +45,29 @@ def equal_axes_mm(ax, points: np.ndarray, min_half: float = 0.0) -> None:
         ax.set_ylim(mid[1] - half, mid[1] + half)
         ax.set_zlim(mid[2] - half, mid[2] + half)
     ax.set_box_aspect((1, 1, 1))
+    from matplotlib.ticker import MaxNLocator
+
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):  # few, small ticks: no labels run together
+        axis.set_major_locator(MaxNLocator(4))
+    ax.tick_params(labelsize=7, pad=1)
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.set_zlabel("z (mm)")
 
 
-def _save(fig, path, overwrite: bool, source: str) -> Path | bytes:
-    """Write the PNG to ``path``; with path None return its bytes (to embed, e.g. in HTML)."""
+def _save(fig, path, overwrite: bool, source) -> Path | bytes:
+    """Write the PNG to ``path``; with path None return its bytes (to embed, e.g. in HTML).
+    source: the "Software" text, or a dict of PNG text fields (a calibration's provenance,
+    :meth:`kincal.export.provenance.Provenance.png_text`); a refused run's figures say so
+    on their face."""
+    metadata = dict(source) if isinstance(source, dict) else {"Software": source}
+    if "plausibility gate: REFUSED" in metadata.get("Comment", ""):
+        mark = "REFUSED by the plausibility gate: diagnosis only"
+        old = fig._suptitle.get_text() if fig._suptitle is not None else ""
+        fig.suptitle(mark + (f"\n{old}" if old else ""), fontsize=10,
+                     color="#b00020" if not old else None)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", metadata={"Software": source})
+    fig.savefig(buf, format="png", metadata=metadata)
     if path is None:
         return buf.getvalue()
     return write_bytes_atomic(path, buf.getvalue(), overwrite=overwrite)
@@ -271,6 +285,7 @@ def _plot_estimates(params, path, overwrite, source, title, weak=frozenset()) ->
     """
     fig = _figure(8.0, 5.6)
     axes = fig.subplots(2, 1)
+    legend: dict = {}  # one legend under the axes, never over the bars
     for ax, length, unit in ((axes[0], True, "mm"), (axes[1], False, "deg")):
         ps = [p for p in params if p.is_length == length]
         if not ps:
@@ -299,8 +314,8 @@ def _plot_estimates(params, path, overwrite, source, title, weak=frozenset()) ->
         if (~ident).any():
             ax.plot(x[~ident], np.zeros((~ident).sum()), "x", color="0.5", ms=6, mew=1.2,
                     label="not identified: dropped as redundant, or fixed (held at nominal)")
-        if (~ident).any() or faint.any():
-            ax.legend(fontsize=7, loc="best")
+        for h, label in zip(*ax.get_legend_handles_labels()):
+            legend.setdefault(label, h)
         ax.axhline(0, color="k", lw=0.6)
         ax.set_xticks(x, [p.name + (f" ({p.status})" if p.status != "identified" else
                                     " (weak)" if p.name in weak else "")
@@ -311,4 +326,7 @@ def _plot_estimates(params, path, overwrite, source, title, weak=frozenset()) ->
         ax.set_ylabel(f"deviation ({unit})")
         ax.grid(True, axis="y", alpha=0.3)
     axes[0].set_title(title + "; error bars: one standard error", fontsize=10)
+    if legend:
+        fig.legend(list(legend.values()), list(legend), loc="outside lower center",
+                   ncol=1, fontsize=7)
     return _save(fig, path, overwrite, source)

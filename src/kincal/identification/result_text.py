@@ -11,9 +11,9 @@ WHAT = {"point": "position", "pose": "position and orientation", "distance": "di
         "plane": "distance to the plane", "flush": "height above the plane"}
 
 
-def _z(v: float) -> float:
-    """No "-0.0000" for values that are zero to the digits shown."""
-    return 0.0 if abs(v) < 5e-6 else v
+def _z(v: float, digits: int = 5) -> float:
+    """No "-0.0000" for values that are zero to the ``digits`` decimals shown."""
+    return 0.0 if abs(v) < 0.5 * 10.0 ** -digits else v
 
 
 def header(result: CalibrationResult) -> list[str]:
@@ -97,9 +97,9 @@ def table(result: CalibrationResult) -> list[str]:
         nom, dev, se, unit = p.reported()
         flag = "" if p.status == "identified" else f"  ({p.status})"
         if is_frame:
-            frames.append(f"  {p.name:<24} {_z(nom + dev):>14.4f} {_z(se):>10.5f}  {unit}{flag}")
+            frames.append(f"  {p.name:<24} {_z(nom + dev, 4):>14.4f} {_z(se):>10.5f}  {unit}{flag}")
         elif p.status != "dropped":
-            lines.append(f"  {p.name:<24} {_z(nom):>10.4f} {_z(dev):>+13.5f} {_z(se):>10.5f}  "
+            lines.append(f"  {p.name:<24} {_z(nom, 4):>10.4f} {_z(dev):>+13.5f} {_z(se):>10.5f}  "
                          f"{unit}{flag}")
     one_point = len(r.sets) == 1 and r.sets[0].kind == "point"
     lines.append("  measurement frame and tool point   estimate    std.err  unit" if one_point

@@ -1,0 +1,198 @@
+"""Provenance: which kincal, inputs and command made a file, and what the gate said.
+
+Every file of a calibration (:func:`kincal.export.outputs.write_calibration`) carries one
+:class:`Provenance`, built here and only here (:meth:`Provenance.of`), in the form its
+format allows: a comment in the URDF, ``#`` lines in the YAML and MD-H CSV, a
+``"provenance"`` object in FRAMES.json and REPORT.json, a section of the HTML report,
+text fields of the PNG plots.
+
+The time is the UTC time of the run, or ``SOURCE_DATE_EPOCH`` when it is set (the
+reproducible-builds convention: the same inputs, command and epoch give byte-identical
+files). Checksums are SHA-256 of the bytes on disk when the file is stamped; the robot
+description's text as kincal parsed it (a xacro expanded with its arguments) has its own.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+from kincal.errors import ExportError
+
+
+@dataclass(frozen=True)
+class FileHash:
+    """A file read by the run: its path as given and SHA-256 of its bytes (None: no file
+    on disk, e.g. data made in code)."""
+
+    path: str
+    sha256: str | None
+
+    @classmethod
+    def of(cls, path) -> "FileHash":
+        p = str(path)
+        if p.startswith("<") or not Path(p).is_file():
+            return cls(p, None)
+        return cls(p, _sha256(Path(p).read_bytes()))
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a calibration's files come from.
+
+    kincal_version: the package version. created_utc: ISO 8601 time [UTC] of the run
+    (SOURCE_DATE_EPOCH when set). command: the command line, shell-quoted (None: the
+    Python API). robot: the robot description file (URDF or xacro); robot_text_sha256:
+    SHA-256 of the URDF text parsed (the xacro's expansion); xacro_args: (name, value)
+    pairs it was expanded with. data: every data file. verdict: the gate's verdict,
+    "plausible", "accepted" (implausible or unconverged, accepted as asked) or "REFUSED";
+    gate: its findings in one line ("no finding" when plausible and converged).
+    """
+
+    kincal_version: str
+    created_utc: str
+    command: str | None
+    robot: FileHash
+    robot_text_sha256: str
+    xacro_args: tuple[tuple[str, str], ...]
+    data: tuple[FileHash, ...]
+    verdict: str
+    gate: str
+
+    @classmethod
+    def of(cls, result, *, command=None, xacro_args=None, refused: str | None = None,
+           more_data=()) -> "Provenance":
+        """The provenance of ``result`` (a CalibrationResult) written now.
+
+        command: the command line (a list of arguments or one string; None: the Python
+        API). xacro_args: {name: value} of a xacro description. refused: the gate's
+        refusal message when the files are a refused run's diagnosis. more_data: further
+        files read (the held-out data).
+        """
+        from kincal import __version__
+
+        if command is not None and not isinstance(command, str):
+            import shlex
+
+            command = shlex.join(str(a) for a in command)
+        p = result.plausibility
+        if refused is not None:
+            verdict, gate = "REFUSED", refused
+        elif p is None:
+            verdict, gate = "unchecked", "no plausibility verdict in the result"
+        elif p.findings:
+            verdict = "accepted"
+            gate = "; ".join(f.message for f in p.findings) + " (accepted as asked)"
+        else:
+            verdict, gate = "plausible", "no finding"
+        data = tuple(FileHash.of(p) for p in (*(s.source for s in result.sets), *more_data))
+        return cls(__version__, utc_now(), command, FileHash.of(result.robot.source or "<robot>"),
+                   _sha256(result.robot.urdf_text.encode("utf-8")),
+                   tuple(sorted((str(k), str(v)) for k, v in (xacro_args or {}).items())),
+                   data, verdict, gate)
+
+    def as_dict(self) -> dict:
+        """For the JSON files."""
+        return {"kincal_version": self.kincal_version, "created_utc": self.created_utc,
+                "command": self.command,
+                "robot": {"path": self.robot.path, "sha256": self.robot.sha256,
+                          "urdf_text_sha256": self.robot_text_sha256,
+                          "xacro_args": dict(self.xacro_args)},
+                "data": [{"path": d.path, "sha256": d.sha256} for d in self.data],
+                "gate": {"verdict": self.verdict, "findings": self.gate}}
+
+    def lines(self) -> list[str]:
+        """The provenance as ``key: value`` lines (for comments and headers)."""
+        out = [f"made by kincal {self.kincal_version} at {self.created_utc}",
+               "command: " + (self.command if self.command is not None else "(Python API)"),
+               f"robot: {self.robot.path} sha256 {self.robot.sha256 or '(no file)'}",
+               f"robot URDF text parsed: sha256 {self.robot_text_sha256}"]
+        if self.xacro_args:
+            out.append("xacro args: " + " ".join(f"{k}:={v}" for k, v in self.xacro_args))
+        out += [f"data: {d.path} sha256 {d.sha256 or '(no file)'}" for d in self.data]
+        out.append(f"plausibility gate: {self.verdict} ({self.gate})")
+        return [" ".join(line.split()) for line in out]  # each one line, whatever was given
+
+    def hash_comment(self) -> str:
+        """``# ``-comment lines (YAML, CSV), newline-terminated."""
+        return "".join(f"# {line}\n" for line in self.lines())
+
+    def under_title(self, text: str) -> str:
+        """A ``#``-commented text (YAML, CSV) with the provenance lines after its first
+        line, the file's title."""
+        title, newline, rest = text.partition("\n")
+        return title + newline + self.hash_comment() + rest
+
+    def xml_comment(self) -> str:
+        """One XML comment. XML forbids "--" inside a comment: the command line's "--"
+        are written "-\\-" there (said in the comment)."""
+        body = "\n     ".join(map(_no_double_hyphen, self.lines()))
+        return (f"<!-- {body}\n     (in this comment \"-\\-\" stands for two hyphens, which "
+                "XML comments cannot hold) -->")
+
+    def png_text(self) -> dict[str, str]:
+        """Text fields of a PNG (matplotlib's savefig metadata)."""
+        return {"Software": f"kincal {self.kincal_version}",
+                "Creation Time": self.created_utc,
+                "Comment": "\n".join(self.lines())}
+
+
+def utc_now() -> str:
+    """The time of the run [UTC], ISO 8601 to the second: SOURCE_DATE_EPOCH if set."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    if epoch is not None and epoch.strip():
+        try:
+            t = datetime.fromtimestamp(int(epoch), tz=timezone.utc)
+        except (ValueError, OverflowError, OSError):
+            raise ExportError(f"SOURCE_DATE_EPOCH={epoch!r} is not a time; expected whole "
+                              "seconds since 1970-01-01 UTC (e.g. 1700000000)") from None
+    else:
+        t = datetime.now(timezone.utc)
+    return t.replace(microsecond=0).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def _no_double_hyphen(line: str) -> str:
+    while "--" in line:  # "---" needs two passes
+        line = line.replace("--", "-\\-")
+    return line
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+# ------------------------------------------------------------ the corrected URDF's header
+_BANNER_WORDS = ("autogenerated", "auto-generated", "generated by", "generated from",
+                 "editing this file by hand")
+
+
+def stamp_urdf(text: str, provenance: Provenance) -> str:
+    """The URDF text with a foreign generator banner removed and kincal's provenance
+    comment put before the root element.
+
+    A banner is the run of whole-line comments between the XML declaration and the root
+    element that says the file was generated (xacro's "This document was autogenerated
+    by xacro ... EDITING THIS FILE BY HAND IS NOT RECOMMENDED" box): it no longer holds
+    once kincal has changed the origins. Any other comment, or a banner anywhere else, is
+    kept byte for byte.
+    """
+    newline = "\r\n" if "\r\n" in text else "\n"
+    lines = text.split(newline)
+    start = 1 if lines and lines[0].lstrip().startswith("<?xml") else 0
+    end = start
+    while end < len(lines) and _whole_comment(lines[end]):
+        end += 1
+    block = newline.join(lines[start:end]).lower()
+    if end > start and any(w in block for w in _BANNER_WORDS):
+        del lines[start:end]
+    comment = provenance.xml_comment().replace("\n", newline)
+    lines.insert(start, comment)
+    return newline.join(lines)
+
+
+def _whole_comment(line: str) -> bool:
+    s = line.strip()
+    return s.startswith("<!--") and s.endswith("-->") and "-->" not in s[4:-3]

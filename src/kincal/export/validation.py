@@ -1,0 +1,125 @@
+"""Held-out validation of a calibration, and the residual vectors per sample as CSV.
+
+:class:`Validation` holds the errors of a held-out data set before calibration (nominal
+kinematics, the frames fitted on the training data with them) and after (the calibrated
+kinematics and frames), per sample and per axis. It is computed by the command line
+(``kincal calibrate --validate``, through ``kincal evaluate``'s path) and written by the
+one writer into the summary, REPORT.json and the HTML report.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kincal.identification.statistics import ErrorStats
+
+AXES = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class Validation:
+    """Errors of held-out data. source / kind: the file and its kind. rows: (N,) its line
+    numbers. residuals_before / residuals_after: (N, dim) measured minus predicted [m];
+    errors_before / errors_after: (N,) each sample's error [m]. Per-axis figures exist
+    for point (one point per pose) and pose data, whose first three residual columns are
+    x, y, z of the position in the measurement frame."""
+
+    source: str
+    kind: str
+    rows: np.ndarray
+    residuals_before: np.ndarray
+    residuals_after: np.ndarray
+    errors_before: np.ndarray
+    errors_after: np.ndarray
+    per_axis: bool
+    orientation_deg: tuple[float, float] | None = None  # poses: mean before, after [deg]
+
+    @property
+    def before(self) -> ErrorStats:
+        return ErrorStats.from_errors(self.errors_before)
+
+    @property
+    def after(self) -> ErrorStats:
+        return ErrorStats.from_errors(self.errors_after)
+
+    def axis_rms_mm(self, residuals: np.ndarray) -> np.ndarray:
+        """(3,) root mean square of the x, y, z residual components [mm]."""
+        return np.sqrt(np.mean(np.asarray(residuals)[:, :3] ** 2, axis=0)) * 1e3
+
+    def table(self) -> list[tuple[str, float, float]]:
+        """(name, before, after) rows [mm]: per axis rms, then the norm's mean, rms, max."""
+        b, a = self.before, self.after
+        out = []
+        if self.per_axis:
+            rb, ra = self.axis_rms_mm(self.residuals_before), self.axis_rms_mm(self.residuals_after)
+            out += [(f"{axis} (rms)", float(rb[k]), float(ra[k])) for k, axis in enumerate(AXES)]
+        out += [("norm: mean", b.mean, a.mean), ("norm: rms", b.rms, a.rms),
+                ("norm: max", b.max, a.max)]
+        if self.orientation_deg is not None:
+            out.append(("orientation: mean [deg]", *self.orientation_deg))
+        return out
+
+    def headline(self) -> str:
+        what = "" if self.kind == "point" else f" ({self.kind} errors)"
+        return (f"held-out {self.source}{what}, {len(self.rows)} samples: mean "
+                f"{self.before.mean:.3f} -> {self.after.mean:.3f} mm, max "
+                f"{self.before.max:.3f} -> {self.after.max:.3f} mm")
+
+    def lines(self) -> list[str]:
+        """For the console summary."""
+        out = [self.headline()]
+        if self.per_axis:
+            rb, ra = self.axis_rms_mm(self.residuals_before), self.axis_rms_mm(self.residuals_after)
+            out.append("  rms per axis [mm]: " + ", ".join(
+                f"{axis} {rb[k]:.3f} -> {ra[k]:.3f}" for k, axis in enumerate(AXES)))
+        if self.orientation_deg is not None:
+            out.append("  orientation mean [deg]: {:.4f} -> {:.4f}".format(*self.orientation_deg))
+        return out
+
+    def as_dict(self) -> dict:
+        """For REPORT.json (mm)."""
+        from kincal.export.report import stats_dict
+
+        out = {"source": self.source, "kind": self.kind, "samples": len(self.rows),
+               "frames": "from the calibration (not refitted on the held-out data)",
+               "errors": {"before": stats_dict(self.before), "after": stats_dict(self.after)}}
+        if self.per_axis:
+            out["rms_per_axis_mm"] = {
+                "before": dict(zip(AXES, self.axis_rms_mm(self.residuals_before).tolist())),
+                "after": dict(zip(AXES, self.axis_rms_mm(self.residuals_after).tolist()))}
+        if self.orientation_deg is not None:
+            out["orientation_mean_deg"] = {"before": self.orientation_deg[0],
+                                           "after": self.orientation_deg[1]}
+        return out
+
+
+def residuals_csv(result, validation: Validation | None, header: str = "") -> str:
+    """Every sample's residual vector after calibration (training sets, then the held-out
+    set) as CSV: split, set, source, kind, row, error_m, r1..rD [m] (D the widest set's
+    residual size; point sets: dx dy dz per measured point; poses: position, then the
+    orientation rows in metres through their sigma ratio). ``header``: ``#`` lines put
+    first."""
+    parts = [("training", k + 1, s.source, s.kind, s.rows, s.residuals, s.errors_after)
+             for k, s in enumerate(result.sets)]
+    if validation is not None:
+        parts.append(("held-out", len(parts) + 1, validation.source, validation.kind,
+                      validation.rows, validation.residuals_after, validation.errors_after))
+    width = max(np.asarray(p[5]).reshape(len(p[4]), -1).shape[1] for p in parts)
+    lines = [f"# residual vectors per sample after calibration, measured minus predicted [m]"]
+    lines += [line for line in header.splitlines() if line]
+    lines.append(",".join(["split", "set", "source", "kind", "row", "error_m"]
+                          + [f"r{k + 1}" for k in range(width)]))
+    for split, k, source, kind, rows, res, err in parts:
+        res = np.asarray(res).reshape(len(rows), -1)
+        for row, r, e in zip(rows, res, err):
+            cells = [split, str(k), _csv(source), kind, str(int(row)), repr(float(e))]
+            cells += [repr(float(v)) for v in r] + [""] * (width - len(r))
+            lines.append(",".join(cells))
+    return "\n".join(lines) + "\n"
+
+
+def _csv(text: str) -> str:
+    text = str(text)
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text

@@ -1,0 +1,79 @@
+"""-q/-v on every command, calibrate --json, and the progress display's estimate."""
+
+import io
+import json
+
+import pytest
+
+from kincal.cli.main import build_parser, main
+from kincal.cli.progress import progress_bar, timing
+
+
+def test_every_command_takes_quiet_and_verbose():
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    for name, p in sub.choices.items():
+        flags = {s for a in p._actions for s in a.option_strings}
+        assert {"-q", "--quiet", "-v", "--verbose"} <= flags, name
+
+
+@pytest.fixture(scope="module")
+def cal(tmp_path_factory):
+    d = tmp_path_factory.mktemp("console")
+    assert main(["simulate", "ec66", "--out", str(d / "cal.csv"), "--poses", "30", "--seed", "2",
+                 "--tool-m", "0.03", "0.02", "0.12"]) == 0
+    return d / "cal.csv"
+
+
+def test_quiet_prints_nothing_on_stdout(cal, tmp_path, capsys):
+    capsys.readouterr()
+    assert main(["analyze", "ec66", str(cal), "-q"]) == 0
+    assert main(["simulate", "ec66", "--out", str(tmp_path / "s.csv"), "--poses", "5", "-q"]) == 0
+    cap = capsys.readouterr()
+    assert cap.out == "" and (tmp_path / "s.csv").exists()
+    assert cap.err.strip().splitlines()[-1].startswith("kincal: done in ")  # stderr keeps it
+
+
+def test_verbose_names_the_command_and_the_error_kind(cal, capsys):
+    capsys.readouterr()
+    assert main(["evaluate", "ec66", str(cal), "--fit-frames", "--tip", "flang", "-v"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("kincal ") and "evaluate" in err[0]
+    assert [line for line in err if line.startswith("kincal: error:")][0].endswith("[FrameError]")
+
+
+def test_json_is_the_only_thing_on_stdout(cal, tmp_path, capsys):
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(cal), "--lambda", "0.01", "--out",
+                 str(tmp_path / "c.urdf"), "--validate", str(cal), "--json"]) == 0
+    cap = capsys.readouterr()
+    summary = json.loads(cap.out)  # the whole of stdout is one JSON object
+    assert summary["format"] == "kincal-summary-1" and summary["verdict"] == "written"
+    assert summary["written"] == [str(tmp_path / "c.urdf")]
+    assert summary["errors"]["after"]["mean_mm"] < summary["errors"]["before"]["mean_mm"]
+    assert summary["validation"]["samples"] == 30
+    assert f"kincal: wrote {tmp_path / 'c.urdf'}" in cap.err
+
+
+def test_progress_shows_elapsed_time_and_an_estimate():
+    assert timing(10.0, 2, 10) == "10.0 s, about 40 s left"
+    assert timing(120.0, 1, 2) == "120.0 s, about 2 min left"
+    assert timing(3.0, 5, 5) == "3.0 s"  # done: no estimate
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    stream = Tty()
+    bar = progress_bar(stream)
+    bar(1, 4)
+    assert "1/4 fits" in stream.getvalue() and "left" in stream.getvalue()
+
+
+def test_no_negative_zero_in_the_report_figures():
+    from kincal.export.html_report import _frame_value, _num
+    from kincal.identification.result_text import _z
+
+    assert _num(-3e-9, "+.5f") == "+0.00000" and _num(-3e-9, ".5f") == "0.00000"
+    assert _num(-2e-5, "+.5f") == "-0.00002"  # a value the digits show stays signed
+    assert _frame_value("base.x", -1e-12) == "0.0000"
+    assert f"{_z(-4e-5, 4):.4f}" == "0.0000" and f"{_z(-4e-5):.5f}" == "-0.00004"

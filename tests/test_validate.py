@@ -1,0 +1,68 @@
+"""calibrate --validate HELD.csv and --residuals-out: held-out errors through evaluate's path."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from kincal.cli.main import main
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    d = tmp_path_factory.mktemp("val")
+    for name, seed, n in (("cal", 3, 40), ("held", 4, 25)):
+        assert main(["simulate", "ec66", "--out", str(d / f"{name}.csv"), "--poses", str(n),
+                     "--seed", str(seed), "--tool-m", "0.03", "0.02", "0.12"]) == 0
+    return d
+
+
+def test_held_out_errors_match_evaluate_and_residuals_csv(data, tmp_path, capsys):
+    out = tmp_path / "c.urdf"
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data / "cal.csv"), "--tip", "flange", "--lambda",
+                 "0.01", "--out", str(out), "--frames-out", str(tmp_path / "f.json"),
+                 "--validate", str(data / "held.csv"), "--report", str(tmp_path / "r.json"),
+                 "--html", str(tmp_path / "r.html"),
+                 "--residuals-out", str(tmp_path / "res.csv")]) == 0
+    text = capsys.readouterr().out
+    assert "held-out" in text and "rms per axis [mm]: x " in text
+    v = json.loads((tmp_path / "r.json").read_text())["validation"]
+    assert v["samples"] == 25 and v["errors"]["after"]["mean_mm"] < v["errors"]["before"]["mean_mm"]
+    assert set(v["rms_per_axis_mm"]["after"]) == {"x", "y", "z"}
+    # the same numbers as kincal evaluate with the calibration's frames
+    assert main(["evaluate", str(out), str(data / "held.csv"), "--frames", str(tmp_path / "f.json"),
+                 "--report", str(tmp_path / "e.json")]) == 0
+    ev = json.loads((tmp_path / "e.json").read_text())["errors"]
+    assert ev["mean_mm"] == pytest.approx(v["errors"]["after"]["mean_mm"], rel=1e-9)
+    # the norm of the per-axis rms is the rms of the norm
+    axis = np.array(list(v["rms_per_axis_mm"]["after"].values()))
+    assert np.linalg.norm(axis) == pytest.approx(v["errors"]["after"]["rms_mm"], rel=1e-9)
+    html = (tmp_path / "r.html").read_text()
+    assert 'id="validation"' in html and "x (rms)" in html
+    rows = [r for r in csv.reader(line for line in (tmp_path / "res.csv").open()
+                                  if not line.startswith("#"))]
+    assert rows[0][:6] == ["split", "set", "source", "kind", "row", "error_m"]
+    splits = [r[0] for r in rows[1:]]
+    assert splits.count("training") == 40 and splits.count("held-out") == 25
+    for r in rows[1:]:  # each error is its residual vector's norm
+        assert float(r[5]) == pytest.approx(np.linalg.norm([float(x) for x in r[6:9]]), rel=1e-12)
+    prov = json.loads((tmp_path / "r.json").read_text())["provenance"]
+    assert [d["path"] for d in prov["data"]] == [str(data / "cal.csv"), str(data / "held.csv")]
+
+
+def test_validate_of_another_kind_is_one_line(data, tmp_path, capsys):
+    held = tmp_path / "dist.csv"
+    rows = list(csv.DictReader((data / "held.csv").open()))
+    joints = [k for k in rows[0] if k.startswith("joint_")]
+    with held.open("w", newline="") as f:  # joint columns only: not a point file
+        w = csv.DictWriter(f, fieldnames=joints)
+        w.writeheader()
+        w.writerows({k: r[k] for k in joints} for r in rows)
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data / "cal.csv"), "--lambda", "0.01", "--out",
+                 str(tmp_path / "c.urdf"), "--validate", str(held)]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(err) == 1 and err[0].startswith("kincal: error:")
+    assert not (tmp_path / "c.urdf").exists()
