@@ -41,7 +41,7 @@ def run(args) -> int:
     from kincal.frames_file import CellFrames
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.problem import CalibrationProblem
-    from kincal.identification.statistics import ErrorStats
+    from kincal.identification.statistics import AngleStats, ErrorStats, angle_errors
 
     e = typed(Evaluate, args, chain=Chain.of(args), inputs=Inputs.of(args))
     if bool(e.frames) == bool(e.fit_frames):
@@ -78,16 +78,22 @@ def run(args) -> int:
                     f"{getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
     stats = [ErrorStats.from_errors(err) for _, err in problem.sample_errors(x)]
     km = problem.kinds[0]
+    angles = angle_errors(km, problem.residuals(x, 0))
+    angle = None if angles is None else AngleStats.from_angles(angles)
     what = "" if km.kind == "point" else f" ({km.kind} errors)"
     lines = [f"{robot.name} ({robot.base} -> {robot.tip}) on {e.inputs.data}, {how}{what}:",
-             f"  {stats[0].line()}"]
+             f"  {'position: ' if km.kind == 'pose' else ''}{stats[0].line()}"]
+    if angle is not None:
+        label = "tilt against the plane" if km.kind == "flush" else "orientation"
+        lines.append(f"  {label}: {angle.line()}")
     if not e.report:
         say(lines)
     else:
         say_and_write([(e.report, report.dumps({
             "format": "kincal-evaluation-1", "robot": str(robot.source),
             "data": str(e.inputs.data), "kind": km.kind, "frames": how,
-            "errors": report.stats_dict(stats[0])}))],
+            "errors": report.stats_dict(stats[0]),
+            "orientation_errors": None if angle is None else report.angle_dict(angle)}))],
             lambda written: lines, overwrite=e.overwrite, protect=[robot.source, e.inputs.data])
     return 0
 

@@ -46,21 +46,27 @@ def errors(result: CalibrationResult) -> list[str]:
         if s.kind != "point":
             out.append(f"  set 1: {s.kind} ({s.source}), {WHAT.get(s.kind, s.kind)} errors")
         out += [f"  before: {s.before.line()}", f"  after:  {s.after.line()}"]
-        if s.orientation_after_deg is not None:
-            out.append(f"  {_angle_label(s)} after: mean {s.orientation_after_deg:.4f} deg")
-        return out
+        return out + _angle_lines(s, "  ")
     out = []
     for k, s in enumerate(r.sets, start=1):
         out.append(f"  set {k}: {s.kind} ({s.source}), {WHAT.get(s.kind, s.kind)} errors")
         out.append(f"    before: {s.before.line()}")
         out.append(f"    after:  {s.after.line()}")
-        if s.orientation_after_deg is not None:
-            out.append(f"    {_angle_label(s)} after: mean {s.orientation_after_deg:.4f} deg")
+        out += _angle_lines(s, "    ")
     return out
 
 
 def _angle_label(s) -> str:
     return "tilt against the plane" if s.kind == "flush" else "orientation"
+
+
+def _angle_lines(s, indent: str) -> list[str]:
+    """The orientation errors of a pose (or flush) set before and after, in degrees."""
+    if s.orientation_after is None:
+        return []
+    label = _angle_label(s)
+    return [f"{indent}{label} before: {s.orientation_before.line()}",
+            f"{indent}{label} after:  {s.orientation_after.line()}"]
 
 
 def status(result: CalibrationResult) -> list[str]:
