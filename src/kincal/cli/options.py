@@ -15,6 +15,9 @@ from dataclasses import dataclass
 
 from kincal.errors import OptionError
 
+# the formats of kincal.measurements.orientation_columns (no numpy at import)
+ORIENTATION_FORMATS = ("quat-xyzw", "quat-wxyz", "rpy-zyx", "rpy-xyz", "rotvec", "matrix")
+
 
 # ------------------------------------------------------------------ groups
 def group(p, title: str):
@@ -43,7 +46,7 @@ def add_joint_columns(p, files="DATA"):
 
 
 def add_units(p, length="positions and prismatic joints in DATA",
-              angle="revolute joints in DATA"):
+              angle="revolute joints and orientation angles in DATA"):
     g = group(p, "inputs")
     g.add_argument("--length-unit", choices=("m", "mm"), default="m",
                    help=f"unit of {length} (default m)")
@@ -108,8 +111,19 @@ def add_kinds(p, several: bool = True):
         g.add_argument("more_data", nargs="*", metavar="MORE.csv",
                        help="further data files, each of its own kind, sharing the robot's "
                             "parameters (set 2, 3, ...: frame parameters set2.base.x, ...)")
-    g.add_argument("--orientation-columns", nargs=4, metavar=("QX", "QY", "QZ", "QW"),
-                   help="quaternion columns of a pose file (default qx qy qz qw, scalar last)")
+    g.add_argument("--orientation-format", choices=ORIENTATION_FORMATS, metavar="FORMAT",
+                   help="how a pose file writes its orientations: quat-xyzw (default; qx qy "
+                        "qz qw, scalar last), quat-wxyz (scalar first), rpy-zyx (angles about "
+                        "x, y, z read as R = Rz Ry Rx: URDF, FIGAROH's phix phiy phiz), "
+                        "rpy-xyz (R = Rx Ry Rz), rotvec (axis times angle), matrix (r11 .. r33 "
+                        "row by row); angles in --angle-unit")
+    g.add_argument("--orientation-columns", nargs="+", metavar="COL",
+                   help="orientation columns of a pose file, in the format's order (default: "
+                        "qx qy qz qw; roll pitch yaw or phix phiy phiz; rx ry rz; r11 .. r33; "
+                        "each also suffixed like the position columns, phix1 for x1)")
+    g.add_argument("--positions-only", action="store_true",
+                   help="read a file with orientation columns as positions only (without it, "
+                        "unread orientation columns are refused)")
     g.add_argument("--orientation-sigma-deg", type=float,
                    help="orientation noise of pose files [deg] (default 0.01, against the "
                         "position sigma, 0.05 mm unless a sigma column says otherwise)")
@@ -231,7 +245,9 @@ class Inputs:
     position_columns: tuple[str, ...] = ("x", "y", "z")
     order_column: str | None = None  # acquisition order, for backlash approach directions
     joint_columns: tuple[tuple[str, str], ...] = ()  # (URDF joint, CSV column) pairs
-    orientation_columns: tuple[str, ...] | None = None  # QX QY QZ QW of pose files
+    orientation_columns: tuple[str, ...] | None = None  # of pose files, the format's order
+    orientation_format: str | None = None  # None: quaternions qx qy qz qw if present
+    positions_only: bool = False  # a file with orientation columns read as positions
     orientation_sigma_deg: float | None = None  # [deg]
     set_sigma_mm: tuple[float, ...] | None = None  # [mm], one per file
     on_plane: bool = False  # joint-only files are plane contacts
@@ -286,11 +302,24 @@ class Inputs:
                                       "measurement noise)")
         pos = self.position_columns if self.position_columns != ("x", "y", "z") else None
         robots = robot if isinstance(robot, (list, tuple)) else [robot] * len(self.files)
-        sets = [read_set_file(path, r.joint_names, _prismatic(r), self.length_unit,
-                              self.angle_unit, pos, self.orientation_columns, self.on_plane,
-                              self.orientation_sigma_deg, self.joint_map(), self.order_column,
-                              flush=self.flush)
-                for path, r in zip(self.files, robots)]
+
+        def read(path, r, fmt):
+            return read_set_file(path, r.joint_names, _prismatic(r), self.length_unit,
+                                 self.angle_unit, pos, self.orientation_columns, self.on_plane,
+                                 self.orientation_sigma_deg, self.joint_map(), self.order_column,
+                                 flush=self.flush, orientation_format=fmt,
+                                 positions_only=self.positions_only)
+
+        sets = [read(path, r, self.orientation_format) for path, r in zip(self.files, robots)]
+        for path, r, d in zip(self.files, robots, sets):  # angles in the other convention?
+            fmt = self.orientation_format or "quat-xyzw"
+            # named quaternion columns say their order; only columns the user names may lie
+            if kind_of(d) == "pose" and (self.orientation_columns or not fmt.startswith("quat")):
+                from kincal.identification.orientation_convention import (
+                    warn_if_other_convention)
+
+                warn_if_other_convention(r, d, fmt,
+                                         lambda f, path=path, r=r: read(path, r, f))
         self._orientation_sigma_used(any(kind_of(d) in ("pose", "flush") for d in sets))
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))
