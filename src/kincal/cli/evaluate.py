@@ -17,8 +17,11 @@ def register(subparsers) -> None:
     add_kinds(p, several=False)
     g = group(p, "frames")
     g.add_argument("--frames", help="FRAMES.json from 'kincal calibrate --frames-out'")
-    g.add_argument("--fit-frames", action="store_true",
-                   help="fit the measurement frame and tool point on these data first")
+    g.add_argument("--fit-frames", nargs="?", const="all", choices=("all", "measurement"),
+                   help="fit frames on these data first: all (the default: measurement frame "
+                        "and tool, without --frames; another tool) or measurement (only the "
+                        "measurement frame, the tool from --frames: the same tool on another "
+                        "day)")
     group(p, "outputs").add_argument("--report", help="write the statistics as JSON")
     add_overwrite(p, help=None)
     p.set_defaults(run=run)
@@ -31,7 +34,7 @@ class Evaluate:
     chain: Chain
     inputs: Inputs
     frames: str | None  # FRAMES.json
-    fit_frames: bool
+    fit_frames: str | None  # "all", "measurement" or None
     report: str | None
     overwrite: bool
 
@@ -44,8 +47,12 @@ def run(args) -> int:
     from kincal.identification.statistics import AngleStats, ErrorStats, angle_errors
 
     e = typed(Evaluate, args, chain=Chain.of(args), inputs=Inputs.of(args))
-    if bool(e.frames) == bool(e.fit_frames):
-        raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
+    if e.fit_frames == "measurement" and not e.frames:
+        raise OptionError("--fit-frames measurement refits the measurement frame and keeps "
+                          "the tool of --frames FRAMES.json: give it")
+    if e.fit_frames != "measurement" and bool(e.frames) == bool(e.fit_frames):
+        raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames (with "
+                          "--frames: --fit-frames measurement)")
     frames = None
     if e.frames:
         frames = CellFrames.read(e.frames)  # the one schema, any version; values checked
@@ -76,6 +83,15 @@ def run(args) -> int:
         if backlash:
             how += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
                     f"{getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
+        if e.fit_frames == "measurement":
+            from kincal.identification.frame_refit import moved, refit_measurement_frame
+
+            saved = x.copy()
+            for i, km in enumerate(problem.kinds):
+                x[lay.frame_slices[i]] = refit_measurement_frame(km, *lay.split(x, i))
+            mm, deg = moved(lay.frames(saved, 0), lay.frames(x, 0), problem.kinds[0])
+            how = (f"tool and kinematics from {e.frames}, measurement frame refitted on these "
+                   f"data (moved {mm:.2f} mm, {deg:.3f} deg)" + how.split(e.frames, 1)[1])
     stats = [ErrorStats.from_errors(err) for _, err in problem.sample_errors(x)]
     km = problem.kinds[0]
     angles = angle_errors(km, problem.residuals(x, 0))
