@@ -100,6 +100,10 @@ def add_common(p, data=True, chains=False):
                             help="column giving the acquisition order (e.g. a time stamp), for "
                                  "the approach directions of backlash terms; default: the row order")
         add_joint_columns(p)
+        inputs.add_argument("--joint-value", action="append", default=[], metavar="NAME=VALUE",
+                            help="a chain joint the data files have no column for, held at "
+                                 "VALUE during the measurements (in --angle-unit, or "
+                                 "--length-unit if prismatic); repeatable")
     chain.add_argument("--tool-offset", nargs=3, type=float, metavar=("X", "Y", "Z"),
                        help="initial guess of the tool point in the tip frame, in the length unit")
 
@@ -248,6 +252,7 @@ class Inputs:
     orientation_columns: tuple[str, ...] | None = None  # of pose files, the format's order
     orientation_format: str | None = None  # None: quaternions qx qy qz qw if present
     positions_only: bool = False  # a file with orientation columns read as positions
+    joint_value: tuple[str, ...] = ()  # NAME=VALUE of chain joints absent from the files
     orientation_sigma_deg: float | None = None  # [deg]
     set_sigma_mm: tuple[float, ...] | None = None  # [mm], one per file
     on_plane: bool = False  # joint-only files are plane contacts
@@ -278,6 +283,35 @@ class Inputs:
                               "(or the tilt noise of flush contacts); none of the data files "
                               "is one (no qx qy qz qw columns, no --on-plane --flush)")
 
+    def held_joints(self, robots) -> dict[str, float]:
+        """{joint: value [SI]} of --joint-value NAME=VALUE (the file's units), checked
+        against the chains of ``robots``."""
+        from kincal.errors import listing, suggest
+
+        names = [j for r in robots for j in r.joint_names]
+        prismatic = {j for r in robots for j in _prismatic(r)}
+        out: dict[str, float] = {}
+        for item in self.joint_value:
+            name, eq, text = item.partition("=")
+            name = name.strip()
+            try:
+                value = float(text)
+            except ValueError:
+                value = math.nan
+            if not eq or not name or not math.isfinite(value):
+                raise OptionError(f"--joint-value expects NAME=VALUE (a chain joint and a "
+                                  f"finite number), got {item!r}")
+            if name not in names:
+                raise OptionError(f"--joint-value {name}: not a joint of the chain."
+                                  f"{suggest(name, names)} Chain joints: "
+                                  f"{listing(tuple(dict.fromkeys(names)))}")
+            if name in out:
+                raise OptionError(f"--joint-value {name} given twice")
+            scale = (length_scale(self.length_unit) if name in prismatic
+                     else (math.pi / 180.0 if self.angle_unit == "deg" else 1.0))
+            out[name] = value * scale
+        return out
+
     def read_sets(self, robot) -> list:
         """Every data file, each read as its kind (on ``robot``'s chain, or with a list, on
         its own robot's), weighted by --set-sigma-mm if given."""
@@ -303,12 +337,20 @@ class Inputs:
         pos = self.position_columns if self.position_columns != ("x", "y", "z") else None
         robots = robot if isinstance(robot, (list, tuple)) else [robot] * len(self.files)
 
+        held = self.held_joints(robots)
+
         def read(path, r, fmt):
-            return read_set_file(path, r.joint_names, _prismatic(r), self.length_unit,
-                                 self.angle_unit, pos, self.orientation_columns, self.on_plane,
-                                 self.orientation_sigma_deg, self.joint_map(), self.order_column,
-                                 flush=self.flush, orientation_format=fmt,
-                                 positions_only=self.positions_only)
+            from kincal.measurements.fixed_joints import check_absent, with_fixed_joints
+            from kincal.measurements.sets import header_of
+
+            fixed = {j: v for j, v in held.items() if j in r.joint_names}
+            check_absent(path, header_of(path), fixed, self.joint_map())
+            d = read_set_file(path, [j for j in r.joint_names if j not in fixed], _prismatic(r),
+                              self.length_unit, self.angle_unit, pos, self.orientation_columns,
+                              self.on_plane, self.orientation_sigma_deg, self.joint_map(),
+                              self.order_column, flush=self.flush, orientation_format=fmt,
+                              positions_only=self.positions_only)
+            return with_fixed_joints(d, r.joint_names, fixed) if fixed else d
 
         sets = [read(path, r, self.orientation_format) for path, r in zip(self.files, robots)]
         for path, r, d in zip(self.files, robots, sets):  # angles in the other convention?

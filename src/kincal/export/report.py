@@ -70,6 +70,7 @@ def set_dict(s) -> dict:
             "frames": dict(zip(s.frame_names, map(float, s.frames))),
             "errors": {"before": stats_dict(s.before), "after": stats_dict(s.after)},
             "orientation_after_mean_deg": s.orientation_after_deg,
+            "fixed_joints": dict(getattr(s.data, "fixed_joints", ())),
             "orientation_errors": None if s.orientation_after is None else {
                 "before": angle_dict(s.orientation_before),
                 "after": angle_dict(s.orientation_after)},

@@ -307,7 +307,8 @@ class CalibrationResult:
             sets=tuple(SetFrames(s.kind, s.source, s.frame_names,
                                  tuple(float(v) for v in s.frames), s.base_frame or
                                  self.robot.base, s.tip_frame or self.robot.tip,
-                                 tuple(s.data.joint_names))
+                                 tuple(s.data.joint_names),
+                                 tuple(getattr(s.data, "fixed_joints", ())))
                        for s in self.sets),
             backlash=self.backlash)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -34,6 +35,20 @@ def header(result: CalibrationResult) -> list[str]:
             *([f"  {ev.line()}" + ("" if ev.converged
                                     else f" [NOT SETTLED in {ev.iterations} rounds]")]
               if ev is not None else [])]
+
+
+def held(result: CalibrationResult) -> list[str]:
+    """The chain joints a set's file had no column for, and the values they were held at."""
+    out = []
+    for k, s in enumerate(result.sets, start=1):
+        fixed = getattr(s.data, "fixed_joints", ())
+        if fixed:
+            kinds = dict(zip(result.robot.joint_names, result.robot.geometry.kinds))
+            out.append(("  " if len(result.sets) == 1 else f"  set {k}: ")
+                       + "joints held during the measurements (not in the file): " + ", ".join(
+                           f"{j} = {v * 1e3:g} mm" if kinds.get(j) == "prismatic"
+                           else f"{j} = {math.degrees(v):g} deg" for j, v in fixed))
+    return out
 
 
 def errors(result: CalibrationResult) -> list[str]:
@@ -117,5 +132,5 @@ def summary(result: CalibrationResult) -> str:
     """Header, penalty, identifiability, errors per set, solver and gate, parameter table."""
     ident = result.identifiability.summary().splitlines()
     notes = [f"  {line}" for line in ident[1:]] if len(result.sets) > 1 else []
-    return "\n".join(header(result) + [f"  {ident[0]}"] + notes + errors(result)
+    return "\n".join(header(result) + held(result) + [f"  {ident[0]}"] + notes + errors(result)
                      + status(result) + table(result))
