@@ -110,6 +110,17 @@ def test_calibrate_summary_before_and_after_match_pinocchio_and_scipy():
     assert f"orientation before: mean {s.orientation_before.mean:.4f}" in text
     assert f"orientation after:  mean {s.orientation_after.mean:.4f}" in text
     assert f"RMS {s.orientation_after.rms:.4f} deg" in text
+    # frame parameters: start (fitted with the nominal kinematics), estimate, std. error
+    assert "frames of the sets" in text or "measurement frame, tool" in text
+    rows = {line.split()[0]: line.split()[1:] for line in text.splitlines()
+            if line.strip().startswith(("base.", "tool."))}
+    for k, name in enumerate(FRAMES):
+        scale = 1e3 if name.split(".")[1] in "xyz" else 180 / np.pi
+        i = lay.index(name)
+        assert float(rows[name][0]) == pytest.approx(result.x_start[i] * scale, abs=1e-4)
+        assert float(rows[name][1]) == pytest.approx(result.x[i] * scale, abs=1e-4)
+        assert float(rows[name][2]) == pytest.approx(result.parameter(name).std_error * scale,
+                                                     abs=1e-5)
 
 
 def marker_poses(path):

@@ -91,7 +91,10 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                        f"nominal_{si}": p.nominal, f"estimate_{si}": p.estimate,
                        f"deviation_{si}": p.deviation, f"std_error_{si}": p.std_error,
                        f"nominal_{unit}": nom, f"deviation_{unit}": dev,
-                       f"std_error_{unit}": se})
+                       f"std_error_{unit}": se,
+                       # a frame parameter has no nominal: its "nominal" is the start
+                       **({f"start_{si}": p.nominal}
+                          if result.layout.is_frame[result.layout.index(p.name)] else {})})
     first = result.sets[0]
     errors_mm = first.errors_after * 1e3
     out = {

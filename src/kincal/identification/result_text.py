@@ -118,13 +118,15 @@ def table(result: CalibrationResult) -> list[str]:
         nom, dev, se, unit = p.reported()
         flag = "" if p.status == "identified" else f"  ({p.status})"
         if is_frame:
-            frames.append(f"  {p.name:<24} {_z(nom + dev):>14.4f} {_z(se):>10.5f}  {unit}{flag}")
+            # a frame has no nominal: its start (fitted with the nominal kinematics) instead
+            frames.append(f"  {p.name:<24} {_z(nom):>10.4f} {_z(nom + dev):>13.4f} "
+                          f"{_z(se):>10.5f}  {unit}{flag}")
         elif p.status != "dropped":
             lines.append(f"  {p.name:<24} {_z(nom):>10.4f} {_z(dev):>+13.5f} {_z(se):>10.5f}  "
                          f"{unit}{flag}")
     one_point = len(r.sets) == 1 and r.sets[0].kind == "point"
-    lines.append("  measurement frame and tool point   estimate    std.err  unit" if one_point
-                 else "  frames of the measurement sets     estimate    std.err  unit")
+    label = "measurement frame, tool" if one_point else "frames of the sets"
+    lines.append(f"  {label:<24} {'start':>10} {'estimate':>13} {'std.err':>10}  unit")
     return lines + frames
 
 
