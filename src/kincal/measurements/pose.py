@@ -23,11 +23,12 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.errors import DataError
+from kincal.errors import DataError, KincalNote
 from kincal.measurements.kind import (
     DEFAULT_SIGMA,
     SIGMA_RANGE_DEG,
@@ -103,9 +104,9 @@ class PoseData(SampleSet):
         last as in ROS; quat-wxyz, rpy-zyx, rpy-xyz, rotvec, matrix); orientation_columns:
         its columns in the format's order (default: the usual names, e.g. qx qy qz qw;
         roll pitch yaw or phix phiy phiz, suffixed like the position columns)."""
+        from kincal.measurements.csv_table import read_columns
         from kincal.measurements.data import ANGLE_UNITS
         from kincal.measurements.orientation_columns import OrientationFormat, rotations
-        from kincal.measurements.sets import header_of
 
         position_columns = tuple(position_columns)
         fmt = OrientationFormat(orientation_format, None if orientation_columns is None
@@ -114,7 +115,10 @@ class PoseData(SampleSet):
             raise DataError(f"a pose needs 3 position columns, got {position_columns}")
         if angle_unit not in ANGLE_UNITS:
             raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
-        orientation_columns = fmt.resolve(header_of(path), position_columns, str(path))
+        with warnings.catch_warnings():  # the reading below gives the notes
+            warnings.simplefilter("ignore", KincalNote)
+            header = read_columns(path, []).header
+        orientation_columns = fmt.resolve(header, position_columns, str(path))
         c = read_set(path, joint_names, position_columns + orientation_columns,
                      ("sigma", "sigma_deg"), prismatic, angle_unit, length_unit, joint_columns,
                      expected=f"the chain joints, positions and orientations ({fmt.name})")
