@@ -145,7 +145,19 @@ RUNNERS = {
     "pip install": _skip("installing is what made this test environment; CI's .ci/run "
                          "installs the package into a fresh environment the same way"),
     "python -m pytest": _skip("the test suite itself"),
+    # a second or so: Kabsch fits of the TIAGo marker files into pose files
+    "python scripts/tiago_pose_files.py": lambda argv: _run_script(argv[1:]),
 }
+
+
+def _run_script(argv: list[str]):
+    """A repository script, in a fresh interpreter (it imports its neighbours)."""
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, str(REPO / argv[0]), *argv[1:]], capture_output=True,
+                       text=True)
+    return r.returncode, r.stdout + r.stderr
 
 
 def _runner(argv: list[str]):

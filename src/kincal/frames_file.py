@@ -12,6 +12,11 @@ compensate`` and the API read. Version 2 (``"format": "kincal-frames", "version"
                "T_tip_tool": [[...]]}, ...],
      "backlash": {"joint_6": ...}, "convention": "...", "backlash_convention": "..."}
 
+A set may also hold ``"fixed_joints": {"joint": value}``: chain joints its data file had no
+column for, held at that value [rad or m] during the measurements (``--joint-value``). The
+key is optional and additive (files without it read as before; readers that do not know it
+ignore it), so the version stays 2.
+
 Frames are in metres and radians, named as the kinds name them (``base.*`` the pose of the
 robot's base frame B in the measurement frame M, ``R_base = rotx(rx) roty(ry) rotz(rz)``;
 ``tool.*`` the tool point (or frame) in the tip frame; ``pivot.*``, ``plane.*``, ...). The
@@ -73,6 +78,7 @@ class SetFrames:
     base_frame: str = ""
     tip_frame: str = ""
     joints: tuple[str, ...] = ()  # the chain joints of that chain, root first
+    fixed_joints: tuple[tuple[str, float], ...] = ()  # held, absent from the file [rad, m]
 
     def value(self, name: str) -> float:
         return self.values[self.names.index(name)]
@@ -165,7 +171,9 @@ class CellFrames:
                          "base_frame": s.base_frame or self.base_frame,
                          "tip_frame": s.tip_frame or self.tip_frame,
                          "joints": list(s.joints or self.joints),
-                         "frames": dict(zip(s.names, map(float, s.values))), **s.derived()}
+                         "frames": dict(zip(s.names, map(float, s.values))), **s.derived(),
+                         **({"fixed_joints": {j: float(v) for j, v in s.fixed_joints}}
+                            if s.fixed_joints else {})}
                         for s in self.sets]}
         if self.backlash:
             out["backlash"] = {j: float(v) for j, v in self.backlash.items()}
@@ -261,7 +269,8 @@ class CellFrames:
             sets.append(SetFrames(str(s["kind"]), str(s.get("source", "")),
                                   tuple(str(k) for k in f), tuple(float(v) for v in f.values()),
                                   str(s.get("base_frame", base)), str(s.get("tip_frame", tip)),
-                                  tuple(str(j) for j in s.get("joints", data.get("joints", ())))))
+                                  tuple(str(j) for j in s.get("joints", data.get("joints", ()))),
+                                  _fixed(s.get("fixed_joints", {}))))
         if not sets:
             raise DataError(f"{source}: the frames file holds no measurement set")
         return cls(str(data.get("robot", "")), str(data.get("chain_hash", "")),
@@ -400,6 +409,13 @@ class CellFrames:
     @property
     def T_base_measurement(self) -> np.ndarray:
         return inverse(self.T_measurement_base)
+
+
+def _fixed(value) -> tuple[tuple[str, float], ...]:
+    """A set's optional "fixed_joints" {joint: value [rad or m]} (absent before it existed)."""
+    if not isinstance(value, dict):
+        raise TypeError("a set's fixed_joints must be an object {joint: value}")
+    return tuple((str(j), float(v)) for j, v in value.items())
 
 
 def _backlash(data: dict) -> dict:

@@ -17,8 +17,11 @@ def register(subparsers) -> None:
     add_kinds(p, several=False)
     g = group(p, "frames")
     g.add_argument("--frames", help="FRAMES.json from 'kincal calibrate --frames-out'")
-    g.add_argument("--fit-frames", action="store_true",
-                   help="fit the measurement frame and tool point on these data first")
+    g.add_argument("--fit-frames", nargs="?", const="all", choices=("all", "measurement"),
+                   help="fit frames on these data first: all (the default: measurement frame "
+                        "and tool, without --frames; another tool) or measurement (only the "
+                        "measurement frame, the tool from --frames: the same tool on another "
+                        "day)")
     group(p, "outputs").add_argument("--report", help="write the statistics as JSON")
     add_overwrite(p, help=None)
     p.set_defaults(run=run)
@@ -31,7 +34,7 @@ class Evaluate:
     chain: Chain
     inputs: Inputs
     frames: str | None  # FRAMES.json
-    fit_frames: bool
+    fit_frames: str | None  # "all", "measurement" or None
     report: str | None
     overwrite: bool
 
@@ -41,11 +44,15 @@ def run(args) -> int:
     from kincal.frames_file import CellFrames
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.problem import CalibrationProblem
-    from kincal.identification.statistics import ErrorStats
+    from kincal.identification.statistics import AngleStats, ErrorStats, angle_errors
 
     e = typed(Evaluate, args, chain=Chain.of(args), inputs=Inputs.of(args))
-    if bool(e.frames) == bool(e.fit_frames):
-        raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames")
+    if e.fit_frames == "measurement" and not e.frames:
+        raise OptionError("--fit-frames measurement refits the measurement frame and keeps "
+                          "the tool of --frames FRAMES.json: give it")
+    if e.fit_frames != "measurement" and bool(e.frames) == bool(e.fit_frames):
+        raise OptionError("give exactly one of --frames FRAMES.json or --fit-frames (with "
+                          "--frames: --fit-frames measurement)")
     frames = None
     if e.frames:
         frames = CellFrames.read(e.frames)  # the one schema, any version; values checked
@@ -69,18 +76,33 @@ def run(args) -> int:
         if backlash:
             how += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
                     f"{getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
+        if e.fit_frames == "measurement":
+            from kincal.identification.frame_refit import moved, refit_measurement_frame
+
+            saved = x.copy()
+            for i, km in enumerate(problem.kinds):
+                x[lay.frame_slices[i]] = refit_measurement_frame(km, *lay.split(x, i))
+            mm, deg = moved(lay.frames(saved, 0), lay.frames(x, 0), problem.kinds[0])
+            how = (f"tool and kinematics from {e.frames}, measurement frame refitted on these "
+                   f"data (moved {mm:.2f} mm, {deg:.3f} deg)" + how.split(e.frames, 1)[1])
     stats = [ErrorStats.from_errors(err) for _, err in problem.sample_errors(x)]
     km = problem.kinds[0]
+    angles = angle_errors(km, problem.residuals(x, 0))
+    angle = None if angles is None else AngleStats.from_angles(angles)
     what = "" if km.kind == "point" else f" ({km.kind} errors)"
     lines = [f"{robot.name} ({robot.base} -> {robot.tip}) on {e.inputs.data}, {how}{what}:",
-             f"  {stats[0].line()}"]
+             f"  {'position: ' if km.kind == 'pose' else ''}{stats[0].line()}"]
+    if angle is not None:
+        label = "tilt against the plane" if km.kind == "flush" else "orientation"
+        lines.append(f"  {label}: {angle.line()}")
     if not e.report:
         say(lines)
     else:
         say_and_write([(e.report, report.dumps({
             "format": "kincal-evaluation-1", "robot": str(robot.source),
             "data": str(e.inputs.data), "kind": km.kind, "frames": how,
-            "errors": report.stats_dict(stats[0])}))],
+            "errors": report.stats_dict(stats[0]),
+            "orientation_errors": None if angle is None else report.angle_dict(angle)}))],
             lambda written: lines, overwrite=e.overwrite, protect=[robot.source, e.inputs.data])
     return 0
 

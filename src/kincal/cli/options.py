@@ -15,6 +15,9 @@ from dataclasses import dataclass
 
 from kincal.errors import OptionError
 
+# the formats of kincal.measurements.orientation_columns (no numpy at import)
+ORIENTATION_FORMATS = ("quat-xyzw", "quat-wxyz", "rpy-zyx", "rpy-xyz", "rotvec", "matrix")
+
 
 # ------------------------------------------------------------------ groups
 def group(p, title: str):
@@ -43,7 +46,7 @@ def add_joint_columns(p, files="DATA"):
 
 
 def add_units(p, length="positions and prismatic joints in DATA",
-              angle="revolute joints in DATA"):
+              angle="revolute joints and orientation angles in DATA"):
     g = group(p, "inputs")
     g.add_argument("--length-unit", choices=("m", "mm"), default="m",
                    help=f"unit of {length} (default m)")
@@ -97,6 +100,10 @@ def add_common(p, data=True, chains=False):
                             help="column giving the acquisition order (e.g. a time stamp), for "
                                  "the approach directions of backlash terms; default: the row order")
         add_joint_columns(p)
+        inputs.add_argument("--joint-value", action="append", default=[], metavar="NAME=VALUE",
+                            help="a chain joint the data files have no column for, held at "
+                                 "VALUE during the measurements (in --angle-unit, or "
+                                 "--length-unit if prismatic); repeatable")
     chain.add_argument("--tool-offset", nargs=3, type=float, metavar=("X", "Y", "Z"),
                        help="initial guess of the tool point in the tip frame, in the length unit")
 
@@ -108,8 +115,19 @@ def add_kinds(p, several: bool = True):
         g.add_argument("more_data", nargs="*", metavar="MORE.csv",
                        help="further data files, each of its own kind, sharing the robot's "
                             "parameters (set 2, 3, ...: frame parameters set2.base.x, ...)")
-    g.add_argument("--orientation-columns", nargs=4, metavar=("QX", "QY", "QZ", "QW"),
-                   help="quaternion columns of a pose file (default qx qy qz qw, scalar last)")
+    g.add_argument("--orientation-format", choices=ORIENTATION_FORMATS, metavar="FORMAT",
+                   help="how a pose file writes its orientations: quat-xyzw (default; qx qy "
+                        "qz qw, scalar last), quat-wxyz (scalar first), rpy-zyx (angles about "
+                        "x, y, z read as R = Rz Ry Rx: URDF, FIGAROH's phix phiy phiz), "
+                        "rpy-xyz (R = Rx Ry Rz), rotvec (axis times angle), matrix (r11 .. r33 "
+                        "row by row); angles in --angle-unit")
+    g.add_argument("--orientation-columns", nargs="+", metavar="COL",
+                   help="orientation columns of a pose file, in the format's order (default: "
+                        "qx qy qz qw; roll pitch yaw or phix phiy phiz; rx ry rz; r11 .. r33; "
+                        "each also suffixed like the position columns, phix1 for x1)")
+    g.add_argument("--positions-only", action="store_true",
+                   help="read a file with orientation columns as positions only (without it, "
+                        "unread orientation columns are refused)")
     g.add_argument("--orientation-sigma-deg", type=float,
                    help="orientation noise of pose files [deg] (default 0.01, against the "
                         "position sigma, 0.05 mm unless a sigma column says otherwise)")
@@ -247,7 +265,10 @@ class Inputs:
     position_columns: tuple[str, ...] = ("x", "y", "z")
     order_column: str | None = None  # acquisition order, for backlash approach directions
     joint_columns: tuple[tuple[str, str], ...] = ()  # (URDF joint, CSV column) pairs
-    orientation_columns: tuple[str, ...] | None = None  # QX QY QZ QW of pose files
+    orientation_columns: tuple[str, ...] | None = None  # of pose files, the format's order
+    orientation_format: str | None = None  # None: quaternions qx qy qz qw if present
+    positions_only: bool = False  # a file with orientation columns read as positions
+    joint_value: tuple[str, ...] = ()  # NAME=VALUE of chain joints absent from the files
     orientation_sigma_deg: float | None = None  # [deg]
     set_sigma_mm: tuple[float, ...] | None = None  # [mm], one per file
     on_plane: bool = False  # joint-only files are plane contacts
@@ -278,6 +299,35 @@ class Inputs:
                               "(or the tilt noise of flush contacts); none of the data files "
                               "is one (no qx qy qz qw columns, no --on-plane --flush)")
 
+    def held_joints(self, robots) -> dict[str, float]:
+        """{joint: value [SI]} of --joint-value NAME=VALUE (the file's units), checked
+        against the chains of ``robots``."""
+        from kincal.errors import listing, suggest
+
+        names = [j for r in robots for j in r.joint_names]
+        prismatic = {j for r in robots for j in _prismatic(r)}
+        out: dict[str, float] = {}
+        for item in self.joint_value:
+            name, eq, text = item.partition("=")
+            name = name.strip()
+            try:
+                value = float(text)
+            except ValueError:
+                value = math.nan
+            if not eq or not name or not math.isfinite(value):
+                raise OptionError(f"--joint-value expects NAME=VALUE (a chain joint and a "
+                                  f"finite number), got {item!r}")
+            if name not in names:
+                raise OptionError(f"--joint-value {name}: not a joint of the chain."
+                                  f"{suggest(name, names)} Chain joints: "
+                                  f"{listing(tuple(dict.fromkeys(names)))}")
+            if name in out:
+                raise OptionError(f"--joint-value {name} given twice")
+            scale = (length_scale(self.length_unit) if name in prismatic
+                     else (math.pi / 180.0 if self.angle_unit == "deg" else 1.0))
+            out[name] = value * scale
+        return out
+
     def read_sets(self, robot) -> list:
         """Every data file, each read as its kind (on ``robot``'s chain, or with a list, on
         its own robot's), weighted by --set-sigma-mm if given."""
@@ -302,11 +352,32 @@ class Inputs:
                                       "measurement noise)")
         pos = self.position_columns if self.position_columns != ("x", "y", "z") else None
         robots = robot if isinstance(robot, (list, tuple)) else [robot] * len(self.files)
-        sets = [read_set_file(path, r.joint_names, _prismatic(r), self.length_unit,
-                              self.angle_unit, pos, self.orientation_columns, self.on_plane,
-                              self.orientation_sigma_deg, self.joint_map(), self.order_column,
-                              flush=self.flush)
-                for path, r in zip(self.files, robots)]
+
+        held = self.held_joints(robots)
+
+        def read(path, r, fmt):
+            from kincal.measurements.fixed_joints import check_absent, with_fixed_joints
+            from kincal.measurements.sets import header_of
+
+            fixed = {j: v for j, v in held.items() if j in r.joint_names}
+            check_absent(path, header_of(path), fixed, self.joint_map())
+            d = read_set_file(path, [j for j in r.joint_names if j not in fixed], _prismatic(r),
+                              self.length_unit, self.angle_unit, pos, self.orientation_columns,
+                              self.on_plane, self.orientation_sigma_deg, self.joint_map(),
+                              self.order_column, flush=self.flush, orientation_format=fmt,
+                              positions_only=self.positions_only)
+            return with_fixed_joints(d, r.joint_names, fixed) if fixed else d
+
+        sets = [read(path, r, self.orientation_format) for path, r in zip(self.files, robots)]
+        for path, r, d in zip(self.files, robots, sets):  # angles in the other convention?
+            fmt = self.orientation_format or "quat-xyzw"
+            # named quaternion columns say their order; only columns the user names may lie
+            if kind_of(d) == "pose" and (self.orientation_columns or not fmt.startswith("quat")):
+                from kincal.identification.orientation_convention import (
+                    warn_if_other_convention)
+
+                warn_if_other_convention(r, d, fmt,
+                                         lambda f, path=path, r=r: read(path, r, f))
         self._orientation_sigma_used(any(kind_of(d) in ("pose", "flush") for d in sets))
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))

@@ -85,6 +85,7 @@ def _summary(result, data_source) -> str:
             ("identifiable", result.identifiability.summary().splitlines()[0]
              .removeprefix("identifiable: ")),
             ("before", result.before.line()), ("after", result.after.line()),
+            *_angle_rows(result),
             ("solver", f"{result.solve.iterations} iterations, {result.solve.reason}"
              + ("" if result.converged else "  [NOT CONVERGED]"))]
     table = "<table>" + "".join(f'<tr><th class="name">{_e(k)}</th><td class="name">{_e(v)}'
@@ -94,8 +95,34 @@ def _summary(result, data_source) -> str:
     text = result.summary().splitlines()
     cut = next((i for i, line in enumerate(text) if line.startswith("  parameter ")), len(text))
     extra = [line.strip() for line in text[1:cut]
-             if not line.strip().startswith(("identifiable:", "before:", "after:", "solver:"))]
+             if not line.strip().startswith(("identifiable:", "before:", "after:", "solver:"))
+             and not (len(result.sets) == 1 and _is_angle_line(line))]
     return table + "".join(f"<p>{_e(line)}</p>" for line in extra)
+
+
+def _angle_rows(result) -> list[tuple[str, str]]:
+    """The orientation errors of a single pose (or flush) set, before and after [deg]."""
+    s = result.sets[0]
+    if len(result.sets) > 1 or s.orientation_after is None:
+        return []
+    label = "tilt" if s.kind == "flush" else "orientation"
+    return [(f"{label} before", s.orientation_before.line()),
+            (f"{label} after", s.orientation_after.line())]
+
+
+def _is_angle_line(line: str) -> bool:
+    return line.strip().startswith(("orientation before:", "orientation after:",
+                                     "tilt against the plane before:",
+                                     "tilt against the plane after:"))
+
+
+def _angle_html(s) -> str:
+    """'<br>orientation before: ...<br>... after: ...' of a pose (or flush) set, or ''."""
+    if s.orientation_after is None:
+        return ""
+    label = "tilt against the plane" if s.kind == "flush" else "orientation"
+    return (f"<br>{label} before: {_e(s.orientation_before.line())}"
+            f"<br>{label} after: {_e(s.orientation_after.line())}")
 
 
 def _identification(result) -> str:
@@ -224,8 +251,7 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
         if len(result.sets) > 1:
             residuals += (f"<h3>Set {i + 1}: {_e(s.kind)} ({_e(s.source)})</h3>"
                           f"<p>before: {_e(s.before.line())}<br>after: {_e(s.after.line())}"
-                          + (f"<br>orientation after: mean {s.orientation_after_deg:.4f} deg"
-                             if s.orientation_after_deg is not None else "") + "</p>"
+                          + _angle_html(s) + "</p>"
                           + "<table><tr><th class=\"name\">frame parameter</th><th>value</th>"
                           "<th>unit</th></tr>" + "".join(
                               f'<tr><td class="name">{_e(n)}</td><td>{_frame_value(n, v)}</td>'

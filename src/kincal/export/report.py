@@ -14,7 +14,7 @@ import numpy as np
 
 from kincal.identification.result import CalibrationResult
 from kincal.identification.selection import Identifiability
-from kincal.identification.statistics import ErrorStats
+from kincal.identification.statistics import AngleStats, ErrorStats
 
 FORMAT = "kincal-report-1"
 
@@ -41,6 +41,11 @@ def stats_dict(stats: ErrorStats) -> dict:
     return {f"{k}_mm" if k != "n" else k: v for k, v in stats.as_dict().items()}
 
 
+def angle_dict(stats: AngleStats) -> dict:
+    """Orientation-error statistics [deg] with the unit in the keys."""
+    return {f"{k}_deg" if k != "n" else k: v for k, v in stats.as_dict().items()}
+
+
 def identifiability_dict(ident: Identifiability) -> dict:
     return {
         "rank": ident.rank,
@@ -65,6 +70,10 @@ def set_dict(s) -> dict:
             "frames": dict(zip(s.frame_names, map(float, s.frames))),
             "errors": {"before": stats_dict(s.before), "after": stats_dict(s.after)},
             "orientation_after_mean_deg": s.orientation_after_deg,
+            "fixed_joints": dict(getattr(s.data, "fixed_joints", ())),
+            "orientation_errors": None if s.orientation_after is None else {
+                "before": angle_dict(s.orientation_before),
+                "after": angle_dict(s.orientation_after)},
             "residuals": {"row": s.rows, "error_mm": s.errors_after * 1e3,
                           "residual_rows_m": s.residuals}}
 
@@ -82,7 +91,10 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                        f"nominal_{si}": p.nominal, f"estimate_{si}": p.estimate,
                        f"deviation_{si}": p.deviation, f"std_error_{si}": p.std_error,
                        f"nominal_{unit}": nom, f"deviation_{unit}": dev,
-                       f"std_error_{unit}": se})
+                       f"std_error_{unit}": se,
+                       # a frame parameter has no nominal: its "nominal" is the start
+                       **({f"start_{si}": p.nominal}
+                          if result.layout.is_frame[result.layout.index(p.name)] else {})})
     first = result.sets[0]
     errors_mm = first.errors_after * 1e3
     out = {

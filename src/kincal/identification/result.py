@@ -19,7 +19,7 @@ from kincal.identification.plausibility import Plausibility
 from kincal.identification.robust import Downweighted
 from kincal.identification.selection import Identifiability
 from kincal.identification.solver import SolveSummary
-from kincal.identification.statistics import ErrorStats
+from kincal.identification.statistics import AngleStats, ErrorStats, angle_errors
 from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 
@@ -61,7 +61,10 @@ class SetResult:
     at the start (orientation rows of poses in metres through their sigma ratio).
     errors_before / errors_after: (N,) each sample's error [m] (position, distance, distance
     to the plane; poses: position and orientation together); before / after: their
-    statistics [mm]. orientation_after_deg: mean orientation error of a pose set [deg].
+    statistics [mm]. orientation_before / orientation_after: statistics [deg] of each
+    sample's orientation error (poses: the angle of the rotation between measured and
+    predicted; flush contacts: the tilt against the plane), None for other kinds;
+    orientation_after_deg: the mean of orientation_after [deg].
     base_frame / tip_frame: the chain the set was measured on.
     """
 
@@ -79,6 +82,8 @@ class SetResult:
     orientation_after_deg: float | None = None
     base_frame: str = ""
     tip_frame: str = ""
+    orientation_before: AngleStats | None = None
+    orientation_after: AngleStats | None = None
 
     @property
     def rows(self) -> np.ndarray:
@@ -175,17 +180,16 @@ class CalibrationResult:
         sets = []
         for i, km in enumerate(problem.kinds):
             r0, r = problem.residuals(x_start, i), problem.residuals(x, i)
-            ori = None
-            if km.kind == "pose":
-                ori = float(np.mean(km.orientation_errors(r)) * 180.0 / math.pi)
-            elif km.kind == "flush":  # the tilts against the plane, roll and pitch together
-                ori = float(np.mean(np.linalg.norm(km.tilt_errors(r), axis=1)) * 180 / math.pi)
+            a0, a = angle_errors(km, r0), angle_errors(km, r)
+            o0 = None if a0 is None else AngleStats.from_angles(a0)
+            o = None if a is None else AngleStats.from_angles(a)
+            ori = None if o is None else o.mean
             e0, e = km.sample_errors(r0), km.sample_errors(r)
             sets.append(SetResult(km.kind, km.data.source, km.data, tuple(km.frame_names),
                                   np.array(lay.frames(x, i)), r, r0, e0, e,
                                   ErrorStats.from_errors(r0 if km.kind == "point" else e0),
                                   ErrorStats.from_errors(r if km.kind == "point" else e), ori,
-                                  problem.robots[i].base, problem.robots[i].tip))
+                                  problem.robots[i].base, problem.robots[i].tip, o0, o))
         return cls(problem.robot, corrected, problem.options, lay, rows, x_nom, x_start, x,
                    float(lam) if evidence is None else math.nan, cv, tuple(sets), sol, ident,
                    problem.error_model, tuple(downweighted), covariance, evidence,
@@ -303,7 +307,8 @@ class CalibrationResult:
             sets=tuple(SetFrames(s.kind, s.source, s.frame_names,
                                  tuple(float(v) for v in s.frames), s.base_frame or
                                  self.robot.base, s.tip_frame or self.robot.tip,
-                                 tuple(s.data.joint_names))
+                                 tuple(s.data.joint_names),
+                                 tuple(getattr(s.data, "fixed_joints", ())))
                        for s in self.sets),
             backlash=self.backlash)
 

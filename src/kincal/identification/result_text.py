@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -36,6 +37,20 @@ def header(result: CalibrationResult) -> list[str]:
               if ev is not None else [])]
 
 
+def held(result: CalibrationResult) -> list[str]:
+    """The chain joints a set's file had no column for, and the values they were held at."""
+    out = []
+    for k, s in enumerate(result.sets, start=1):
+        fixed = getattr(s.data, "fixed_joints", ())
+        if fixed:
+            kinds = dict(zip(result.robot.joint_names, result.robot.geometry.kinds))
+            out.append(("  " if len(result.sets) == 1 else f"  set {k}: ")
+                       + "joints held during the measurements (not in the file): " + ", ".join(
+                           f"{j} = {v * 1e3:g} mm" if kinds.get(j) == "prismatic"
+                           else f"{j} = {math.degrees(v):g} deg" for j, v in fixed))
+    return out
+
+
 def errors(result: CalibrationResult) -> list[str]:
     r = result
     if len(r.sets) == 1:
@@ -46,21 +61,27 @@ def errors(result: CalibrationResult) -> list[str]:
         if s.kind != "point":
             out.append(f"  set 1: {s.kind} ({s.source}), {WHAT.get(s.kind, s.kind)} errors")
         out += [f"  before: {s.before.line()}", f"  after:  {s.after.line()}"]
-        if s.orientation_after_deg is not None:
-            out.append(f"  {_angle_label(s)} after: mean {s.orientation_after_deg:.4f} deg")
-        return out
+        return out + _angle_lines(s, "  ")
     out = []
     for k, s in enumerate(r.sets, start=1):
         out.append(f"  set {k}: {s.kind} ({s.source}), {WHAT.get(s.kind, s.kind)} errors")
         out.append(f"    before: {s.before.line()}")
         out.append(f"    after:  {s.after.line()}")
-        if s.orientation_after_deg is not None:
-            out.append(f"    {_angle_label(s)} after: mean {s.orientation_after_deg:.4f} deg")
+        out += _angle_lines(s, "    ")
     return out
 
 
 def _angle_label(s) -> str:
     return "tilt against the plane" if s.kind == "flush" else "orientation"
+
+
+def _angle_lines(s, indent: str) -> list[str]:
+    """The orientation errors of a pose (or flush) set before and after, in degrees."""
+    if s.orientation_after is None:
+        return []
+    label = _angle_label(s)
+    return [f"{indent}{label} before: {s.orientation_before.line()}",
+            f"{indent}{label} after:  {s.orientation_after.line()}"]
 
 
 def status(result: CalibrationResult) -> list[str]:
@@ -97,13 +118,15 @@ def table(result: CalibrationResult) -> list[str]:
         nom, dev, se, unit = p.reported()
         flag = "" if p.status == "identified" else f"  ({p.status})"
         if is_frame:
-            frames.append(f"  {p.name:<24} {_z(nom + dev, 4):>14.4f} {_z(se):>10.5f}  {unit}{flag}")
+            # a frame has no nominal: its start (fitted with the nominal kinematics) instead
+            frames.append(f"  {p.name:<24} {_z(nom, 4):>10.4f} {_z(nom + dev, 4):>13.4f} "
+                          f"{_z(se):>10.5f}  {unit}{flag}")
         elif p.status != "dropped":
             lines.append(f"  {p.name:<24} {_z(nom, 4):>10.4f} {_z(dev):>+13.5f} {_z(se):>10.5f}  "
                          f"{unit}{flag}")
     one_point = len(r.sets) == 1 and r.sets[0].kind == "point"
-    lines.append("  measurement frame and tool point   estimate    std.err  unit" if one_point
-                 else "  frames of the measurement sets     estimate    std.err  unit")
+    label = "measurement frame, tool" if one_point else "frames of the sets"
+    lines.append(f"  {label:<24} {'start':>10} {'estimate':>13} {'std.err':>10}  unit")
     return lines + frames
 
 
@@ -111,5 +134,5 @@ def summary(result: CalibrationResult) -> str:
     """Header, penalty, identifiability, errors per set, solver and gate, parameter table."""
     ident = result.identifiability.summary().splitlines()
     notes = [f"  {line}" for line in ident[1:]] if len(result.sets) > 1 else []
-    return "\n".join(header(result) + [f"  {ident[0]}"] + notes + errors(result)
+    return "\n".join(header(result) + held(result) + [f"  {ident[0]}"] + notes + errors(result)
                      + status(result) + table(result))

@@ -1,4 +1,4 @@
-"""Position-error statistics, in millimetres."""
+"""Error statistics: positions in millimetres, orientations in degrees."""
 
 from __future__ import annotations
 
@@ -34,3 +34,42 @@ class ErrorStats:
     def line(self) -> str:
         return (f"mean {self.mean:.3f}  max {self.max:.3f}  std {self.std:.3f}  "
                 f"RMS {self.rms:.3f} mm  (n = {self.n})")
+
+
+@dataclass(frozen=True)
+class AngleStats:
+    """Statistics of per-sample orientation errors [deg]: each the angle of the rotation
+    between the measured and the predicted orientation (std with ddof = 1)."""
+
+    n: int
+    mean: float
+    max: float
+    std: float
+    rms: float
+    median: float
+
+    @classmethod
+    def from_angles(cls, angles_rad: np.ndarray) -> "AngleStats":
+        """From (N,) angles [rad], each >= 0."""
+        d = np.degrees(np.abs(np.asarray(angles_rad, dtype=float)))
+        n = d.size
+        return cls(n, float(d.mean()), float(d.max()), float(d.std(ddof=1)) if n > 1 else 0.0,
+                   float(np.sqrt(np.mean(d ** 2))), float(np.median(d)))
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def line(self) -> str:
+        return (f"mean {self.mean:.4f}  max {self.max:.4f}  std {self.std:.4f}  "
+                f"RMS {self.rms:.4f} deg  (n = {self.n})")
+
+
+def angle_errors(kind_model, residuals: np.ndarray) -> np.ndarray | None:
+    """(N,) orientation error of each sample [rad] from a set's residual rows: poses, the
+    angle of the rotation between measured and predicted; flush contacts, the tilt against
+    the plane (roll and pitch together); None for kinds without an orientation."""
+    if kind_model.kind == "pose":
+        return kind_model.orientation_errors(residuals)
+    if kind_model.kind == "flush":
+        return np.linalg.norm(kind_model.tilt_errors(residuals), axis=1)
+    return None

@@ -85,6 +85,8 @@ class Measurements:
     poses: (N,) which pose a sample was taken at (samples of one pose share it, e.g. the
         K points of one file row); None: every sample its own pose. Cross-validation
         never splits a pose.
+    fixed_joints: chain joints the file has no column for, held at one value during the
+        measurements ((name, value [rad or m]), ...).
     """
 
     joint_names: tuple[str, ...]
@@ -100,6 +102,7 @@ class Measurements:
     order_source: str = "the order of the samples"
     points: np.ndarray | None = None
     poses: np.ndarray | None = None
+    fixed_joints: tuple[tuple[str, float], ...] = ()  # (joint, value [SI]) not in the file
 
     def __post_init__(self):
         try:

@@ -53,7 +53,9 @@ class SampleSet:
     rows: (N,) line numbers in the source file (1 = header). source: for messages.
     approach: (N, n) approach directions (+1/-1/0) for backlash terms; None: from the
         order of the samples. poses: (N,) pose of each sample (cross-validation keeps a
-        pose in one fold); None: every sample its own pose.
+        pose in one fold); None: every sample its own pose. fixed_joints: chain joints
+        the file has no column for, held at one value during the measurements
+        ((name, value [rad or m]), ...; see :mod:`kincal.measurements.fixed_joints`).
     """
 
     joint_names: tuple[str, ...]
@@ -64,6 +66,7 @@ class SampleSet:
     approach: np.ndarray | None = None
     poses: np.ndarray | None = None
     ignored_columns: tuple[str, ...] = field(default=())
+    fixed_joints: tuple[tuple[str, float], ...] = ()  # (joint, value [SI]) not in the file
 
     kind = "abstract"
 

@@ -23,11 +23,12 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.errors import DataError
+from kincal.errors import DataError, KincalNote
 from kincal.measurements.kind import (
     DEFAULT_SIGMA,
     SIGMA_RANGE_DEG,
@@ -38,11 +39,10 @@ from kincal.measurements.kind import (
     readonly,
 )
 from kincal.models.chain import cross_rows
-from kincal.rotations import base_angles, base_rotation, quaternion_to_matrix, rotx, roty, rotz
+from kincal.rotations import base_angles, base_rotation, rotx, roty, rotz
 
 DEFAULT_ORIENTATION_SIGMA_DEG = 0.01  # [deg], a 6-DoF laser-tracker probe's order
 QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
-UNIT_TOL = 1e-3  # |norm - 1| accepted (rounding in the file); beyond it the row is refused
 FRAMES = ("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
           "tool.x", "tool.y", "tool.z", "tool.rx", "tool.ry", "tool.rz")
 
@@ -95,32 +95,37 @@ class PoseData(SampleSet):
 
     @classmethod
     def from_csv(cls, path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",
-                 position_columns=("x", "y", "z"), orientation_columns=QUATERNION_COLUMNS,
+                 position_columns=("x", "y", "z"), orientation_columns=None,
                  orientation_sigma_deg=DEFAULT_ORIENTATION_SIGMA_DEG,
-                 joint_columns=None) -> "PoseData":
-        """Joint columns, positions and a unit quaternion (qx, qy, qz, qw: scalar last, as
-        in ROS) per row; optional ``sigma`` [length unit] and ``sigma_deg`` columns."""
-        position_columns, orientation_columns = tuple(position_columns), tuple(orientation_columns)
-        if len(position_columns) != 3 or len(orientation_columns) != 4:
-            raise DataError("a pose needs 3 position columns and 4 quaternion columns "
-                            f"(qx qy qz qw), got {position_columns} and {orientation_columns}")
+                 joint_columns=None, orientation_format="quat-xyzw") -> "PoseData":
+        """Joint columns, positions and an orientation per row; optional ``sigma`` [length
+        unit] and ``sigma_deg`` columns. orientation_format: how the orientation is written
+        (:mod:`kincal.measurements.orientation_columns`: quat-xyzw, the default, scalar
+        last as in ROS; quat-wxyz, rpy-zyx, rpy-xyz, rotvec, matrix); orientation_columns:
+        its columns in the format's order (default: the usual names, e.g. qx qy qz qw;
+        roll pitch yaw or phix phiy phiz, suffixed like the position columns)."""
+        from kincal.measurements.csv_table import read_columns
+        from kincal.measurements.data import ANGLE_UNITS
+        from kincal.measurements.orientation_columns import OrientationFormat, rotations
+
+        position_columns = tuple(position_columns)
+        fmt = OrientationFormat(orientation_format, None if orientation_columns is None
+                                else tuple(orientation_columns))
+        if len(position_columns) != 3:
+            raise DataError(f"a pose needs 3 position columns, got {position_columns}")
+        if angle_unit not in ANGLE_UNITS:
+            raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+        with warnings.catch_warnings():  # the reading below gives the notes
+            warnings.simplefilter("ignore", KincalNote)
+            header = read_columns(path, []).header
+        orientation_columns = fmt.resolve(header, position_columns, str(path))
         c = read_set(path, joint_names, position_columns + orientation_columns,
                      ("sigma", "sigma_deg"), prismatic, angle_unit, length_unit, joint_columns,
-                     expected="the chain joints, positions and quaternions")
+                     expected=f"the chain joints, positions and orientations ({fmt.name})")
         L = 1e-3 if length_unit == "mm" else 1.0
         v = c.values
-        quat = np.column_stack([v[k] for k in orientation_columns])
-        norm = np.linalg.norm(quat, axis=1)
-        bad = np.flatnonzero(np.abs(norm - 1.0) > UNIT_TOL)
-        if bad.size:
-            k = bad[np.argmax(np.abs(norm[bad] - 1.0))]
-            raise DataError(
-                f"{c.source}, line {c.rows[bad[0]]}: the quaternion "
-                f"({', '.join(orientation_columns)}) has norm {norm[bad[0]]:.6g}, not 1 "
-                f"({bad.size} of {len(norm)} rows are off by more than {UNIT_TOL:g}; worst line "
-                f"{c.rows[k]}, norm {norm[k]:.6g}): give unit quaternions, scalar last (qx, qy, "
-                "qz, qw), or name the columns with --orientation-columns")
-        R = quaternion_to_matrix(quat / norm[:, None])  # renormalise the rounding only
+        R = rotations(np.column_stack([v[k] for k in orientation_columns]), fmt.name,
+                      ANGLE_UNITS[angle_unit], c.source, c.rows, orientation_columns)
         P = np.column_stack([v[k] for k in position_columns]) * L
         for name in ("sigma", "sigma_deg"):
             if name in v and np.any(v[name] <= 0):

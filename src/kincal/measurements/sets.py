@@ -3,7 +3,9 @@
 :func:`kind_model` gives the :class:`kincal.measurements.kind.KindModel` of a set's
 samples; :func:`read_set_file` reads a CSV file and tells its kind from its columns:
 
-- ``qx qy qz qw`` (or ``orientation_columns``) beside the positions: ``pose``;
+- ``qx qy qz qw`` (or ``orientation_columns``, or any ``orientation_format``) beside the
+  positions: ``pose`` (other orientation columns unread are refused unless
+  ``positions_only``);
 - ``distance`` and no positions: ``distance`` (both: ambiguous, refused);
 - joint columns only (no positions, no distance), with ``on_plane``: ``plane``;
 - positions otherwise: ``point`` (:class:`kincal.measurements.data.Measurements`).
@@ -65,12 +67,23 @@ def header_of(path) -> list[str]:
 def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",
                   position_columns=None, orientation_columns=None, on_plane=False,
                   orientation_sigma_deg=None, joint_columns=None, order_column=None,
-                  flush=False):
-    """One measurement set from a CSV file, its kind told by its columns (module notes)."""
+                  flush=False, orientation_format=None, positions_only=False):
+    """One measurement set from a CSV file, its kind told by its columns (module notes).
+
+    orientation_format: how a pose file writes its orientations (see
+    :mod:`kincal.measurements.orientation_columns`; None: quaternions qx qy qz qw if the
+    file has them). A file with orientation columns beside its positions is read as poses;
+    read as positions only when ``positions_only`` says so, else refused (angles never
+    ignored silently)."""
+    from kincal.measurements.orientation_columns import DEFAULT_FORMAT, found_columns
+
     header = header_of(path)
     pos = tuple(position_columns) if position_columns else ("x", "y", "z")
     has_pos = all(c in header for c in pos)
     quat = tuple(orientation_columns) if orientation_columns else QUATERNION_COLUMNS
+    if positions_only and (orientation_format or orientation_columns):
+        raise DataError("--positions-only reads the positions alone: it cannot go with "
+                        "--orientation-format or --orientation-columns")
     if on_plane and flush and not has_pos and "distance" not in header:
         return FlushData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
                                   joint_columns=joint_columns,
@@ -86,12 +99,21 @@ def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="
                             "'distance')")
         return DistanceData.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
                                      joint_columns=joint_columns)
-    if has_pos and (orientation_columns or all(c in header for c in quat)):
+    if has_pos and not positions_only and (orientation_format or orientation_columns
+                                           or all(c in header for c in quat)):
         from kincal.measurements.pose import DEFAULT_ORIENTATION_SIGMA_DEG
 
         return PoseData.from_csv(path, joint_names, prismatic, length_unit, angle_unit, pos,
-                                 quat, orientation_sigma_deg or DEFAULT_ORIENTATION_SIGMA_DEG,
-                                 joint_columns)
+                                 orientation_columns,
+                                 orientation_sigma_deg or DEFAULT_ORIENTATION_SIGMA_DEG,
+                                 joint_columns, orientation_format or DEFAULT_FORMAT)
+    unused = found_columns(header, pos) if has_pos and not positions_only else []
+    if unused:
+        raise DataError(f"{path}: orientation columns {', '.join(unused[0])} beside the position "
+                        f"columns {' '.join(pos)} would not be read: give their format "
+                        "(--orientation-format quat-xyzw, quat-wxyz, rpy-zyx, rpy-xyz, rotvec "
+                        "or matrix) to calibrate poses, or --positions-only to use the "
+                        "positions alone")
     return Measurements.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
                                  position_columns or ("x", "y", "z"),
                                  order_column=order_column, joint_columns=joint_columns)

@@ -1,0 +1,165 @@
+"""Orientation columns as loggers write them, read into rotation matrices.
+
+Formats (the name says what the columns hold, in the order the columns are given):
+
+- ``quat-xyzw``: a unit quaternion, scalar last (ROS, scipy): columns qx qy qz qw.
+- ``quat-wxyz``: a unit quaternion, scalar first (Eigen's constructor, MuJoCo, many mocap
+  exports): columns qw qx qy qz.
+- ``rpy-zyx``: three angles (a, b, c) about the x, y and z axes, the rotation
+  ``R = Rz(c) Ry(b) Rx(a)``: roll about the fixed x axis first, then pitch about the fixed
+  y, then yaw about the fixed z (equivalently yaw, then pitch, then roll about the moving
+  axes). URDF's ``rpy``, ROS's ``tf`` Euler angles and FIGAROH's ``phix phiy phiz`` read
+  this way (scipy: ``Rotation.from_euler("xyz", [a, b, c])``, lower case).
+- ``rpy-xyz``: the same three columns (about x, y, z) read as ``R = Rx(a) Ry(b) Rz(c)``
+  (kincal's own measurement frame ``base.rx .ry .rz``; scipy:
+  ``Rotation.from_euler("XYZ", [a, b, c])``, upper case).
+- ``rotvec``: a rotation vector (axis times angle), as UR controllers log ``rx ry rz``.
+- ``matrix``: the nine entries of the rotation matrix, row by row (r11 r12 r13 r21 ...).
+
+Angles (rpy, rotvec) are in the file's angle unit (``--angle-unit``, as its revolute joints).
+Quaternions and matrices must be unit and orthonormal to :data:`UNIT_TOL` (rounding in the
+file); beyond it the row is refused with its line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kincal.errors import DataError
+
+FORMATS = ("quat-xyzw", "quat-wxyz", "rpy-zyx", "rpy-xyz", "rotvec", "matrix")
+DEFAULT_FORMAT = "quat-xyzw"
+UNIT_TOL = 1e-3
+MATRIX_COLUMNS = tuple(f"r{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3))
+# column names tried when --orientation-columns is not given, each also with the suffix of
+# the position columns (x1 y1 z1 -> phix1 phiy1 phiz1)
+CANDIDATES = {
+    "quat-xyzw": (("qx", "qy", "qz", "qw"),),
+    "quat-wxyz": (("qw", "qx", "qy", "qz"),),
+    "rpy-zyx": (("roll", "pitch", "yaw"), ("phix", "phiy", "phiz")),
+    "rpy-xyz": (("roll", "pitch", "yaw"), ("phix", "phiy", "phiz")),
+    "rotvec": (("rx", "ry", "rz"),),
+    "matrix": (MATRIX_COLUMNS,),
+}
+SIZES = {"quat-xyzw": 4, "quat-wxyz": 4, "rpy-zyx": 3, "rpy-xyz": 3, "rotvec": 3, "matrix": 9}
+OTHER_CONVENTION = {"rpy-zyx": "rpy-xyz", "rpy-xyz": "rpy-zyx",
+                    "quat-xyzw": "quat-wxyz", "quat-wxyz": "quat-xyzw"}
+
+
+def suffix_of(position_columns) -> str:
+    """The common suffix of position columns x<s> y<s> z<s> ('' for x y z or other names)."""
+    p = tuple(position_columns or ("x", "y", "z"))
+    s = p[0][1:] if p[0][:1] == "x" else None
+    return s if s is not None and p[:3] == ("x" + s, "y" + s, "z" + s) else ""
+
+
+def candidate_columns(fmt: str, position_columns=None) -> list[tuple[str, ...]]:
+    """The column groups a format is looked for under, suffixed ones first."""
+    s = suffix_of(position_columns)
+    out = [tuple(c + s for c in g) for g in CANDIDATES[fmt]] if s else []
+    return out + list(CANDIDATES[fmt])
+
+
+def found_columns(header, position_columns=None) -> list[tuple[str, ...]]:
+    """Every complete group of orientation columns in ``header`` (any format), for the
+    refusal of a pose file read as positions."""
+    seen = []
+    for fmt in FORMATS:
+        for g in candidate_columns(fmt, position_columns):
+            if all(c in header for c in g) and set(g) not in [set(x) for x in seen]:
+                seen.append(g)
+    return seen
+
+
+@dataclass(frozen=True)
+class OrientationFormat:
+    """How a pose file writes its orientations: ``name`` one of :data:`FORMATS`; columns:
+    the file's columns in the order the format lists them (None: looked for under the
+    usual names, :data:`CANDIDATES`)."""
+
+    name: str = DEFAULT_FORMAT
+    columns: tuple[str, ...] | None = None
+
+    def __post_init__(self):
+        if self.name not in FORMATS:
+            raise DataError(f"unknown orientation format {self.name!r}; expected one of "
+                            f"{', '.join(FORMATS)}")
+        if self.columns is not None and len(self.columns) != SIZES[self.name]:
+            raise DataError(f"orientation format {self.name} takes {SIZES[self.name]} columns, "
+                            f"got {len(self.columns)}: {' '.join(self.columns)}")
+
+    def resolve(self, header, position_columns=None, source="") -> tuple[str, ...]:
+        """The columns to read in ``header`` (DataError naming what is missing)."""
+        if self.columns is not None:
+            return tuple(self.columns)  # the reader says which are missing
+        groups = candidate_columns(self.name, position_columns)
+        for g in groups:
+            if all(c in header for c in g):
+                return g
+        raise DataError(f"{source}: no orientation columns for format {self.name}: looked for "
+                        + " or ".join(" ".join(g) for g in groups)
+                        + "; name them with --orientation-columns")
+
+
+def rotations(values: np.ndarray, fmt: str, angle_scale: float = 1.0, source: str = "",
+              rows=None, columns=()) -> np.ndarray:
+    """(N, 3, 3) rotations from (N, k) column values in format ``fmt``; angle_scale:
+    radians per unit of the angle columns (rpy, rotvec)."""
+    v = np.asarray(values, dtype=float)
+    rows = np.arange(2, len(v) + 2) if rows is None else np.asarray(rows)
+    if fmt in ("quat-xyzw", "quat-wxyz"):
+        q = v if fmt == "quat-xyzw" else v[:, [1, 2, 3, 0]]
+        norm = np.linalg.norm(q, axis=1)
+        _refuse(np.abs(norm - 1.0), source, rows, columns, "the quaternion", "has norm",
+                norm, "not 1: give unit quaternions")
+        from kincal.rotations import quaternion_to_matrix
+
+        return quaternion_to_matrix(q / norm[:, None])  # renormalise the rounding only
+    if fmt == "matrix":
+        M = v.reshape(-1, 3, 3)
+        off = np.abs(np.einsum("nji,njk->nik", M, M) - np.eye(3)).max(axis=(1, 2))
+        off = np.where(np.linalg.det(M) > 0, off, np.inf)
+        _refuse(off, source, rows, columns, "the matrix", "is off orthonormal by", off,
+                "(rows r11 r12 r13, r21 ..., a proper rotation)")
+        U, _, Vt = np.linalg.svd(M)  # the nearest rotation: the rounding only
+        return U @ Vt
+    a = v * angle_scale
+    if fmt == "rotvec":
+        return _exp(a)
+    Rx, Ry, Rz = (_axis_rotation(a[:, k], k) for k in range(3))
+    return Rz @ Ry @ Rx if fmt == "rpy-zyx" else Rx @ Ry @ Rz
+
+
+def _refuse(bad_amount, source, rows, columns, what, verb, shown, expected) -> None:
+    bad = np.flatnonzero(bad_amount > UNIT_TOL)
+    if bad.size:
+        k = bad[np.argmax(bad_amount[bad])]
+        raise DataError(f"{source}, line {rows[bad[0]]}: {what} ({', '.join(columns)}) {verb} "
+                        f"{shown[bad[0]]:.6g}, {expected} ({bad.size} of {len(rows)} rows are "
+                        f"off by more than {UNIT_TOL:g}; worst line {rows[k]}); or is the "
+                        "orientation format another? (--orientation-format, --orientation-columns)")
+
+
+def _axis_rotation(angle: np.ndarray, axis: int) -> np.ndarray:
+    """(N, 3, 3) rotations by ``angle`` [rad] about the x (0), y (1) or z (2) axis."""
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    R = np.zeros((len(angle), 3, 3))
+    R[:, axis, axis] = 1.0
+    R[:, i, i], R[:, j, j], R[:, i, j], R[:, j, i] = c, c, -s, s
+    return R
+
+
+def _exp(phi: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) exp of rotation vectors (N, 3) [rad] (Rodrigues)."""
+    theta = np.linalg.norm(phi, axis=1)
+    small = theta < 1e-8
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta ** 2 / 6.0, np.sin(t) / t)
+    b = np.where(small, 0.5 - theta ** 2 / 24.0, (1.0 - np.cos(t)) / t ** 2)
+    K = np.zeros((len(phi), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -phi[:, 2], phi[:, 1], -phi[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = phi[:, 2], -phi[:, 1], phi[:, 0]
+    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)

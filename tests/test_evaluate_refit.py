@@ -1,0 +1,65 @@
+"""kincal evaluate --fit-frames measurement: the measurement frame refitted, the tool and
+kinematics of FRAMES.json kept (another day, same tool), beside the full refit."""
+
+import json
+
+import numpy as np
+import pytest
+
+from kincal import Robot
+from kincal.cli.main import main
+from kincal.frames_file import CellFrames, SetFrames, chain_hash
+from kincal.measurements.pose import FRAMES
+
+from test_pose_orientation import BASE, TOOL, predicted, write_poses
+
+DAY2 = BASE + np.array([0.006, -0.002, 0.001, 0.004, -0.002, 0.003])  # the frame moved
+
+
+def frames_file(path, robot, base, tool):
+    f = CellFrames(robot.model_name, chain_hash(robot), robot.base, robot.tip, robot.joint_names,
+                   (SetFrames("pose", "", FRAMES, tuple(np.r_[base, tool])),))
+    path.write_text(f.dumps())
+    return path
+
+
+def evaluate(capsys, tmp_path, *argv):
+    report = tmp_path / "e.json"
+    assert main(["evaluate", "ec66", *map(str, argv), "--report", str(report),
+                 "--overwrite"]) == 0
+    out = capsys.readouterr().out
+    return out, json.loads(report.read_text())
+
+
+def test_measurement_refit_recovers_the_moved_frame_and_keeps_the_tool(tmp_path, capsys):
+    robot = Robot.load("ec66")
+    q = np.random.default_rng(5).uniform(-2.5, 2.5, size=(30, 6))
+    p, R = predicted(robot, q, np.r_[DAY2, TOOL])  # day 2: same tool, moved frame
+    data = write_poses(tmp_path / "day2.csv", robot.joint_names, q, p, R)
+    right = frames_file(tmp_path / "right.json", robot, BASE, TOOL)
+    out, rep = evaluate(capsys, tmp_path, data, "--frames", right)
+    assert rep["errors"]["mean_mm"] > 1.0  # the day-1 frame is off by millimetres
+    out, rep = evaluate(capsys, tmp_path, data, "--frames", right, "--fit-frames", "measurement")
+    assert rep["errors"]["max_mm"] < 1e-6 and rep["orientation_errors"]["max_deg"] < 1e-6
+    from kincal.rotations import base_rotation
+
+    R = base_rotation(*BASE[3:]).T @ base_rotation(*DAY2[3:])
+    deg = np.degrees(np.arccos((np.trace(R) - 1) / 2))
+    mm = np.linalg.norm(DAY2[:3] - BASE[:3]) * 1e3
+    assert f"moved {mm:.2f} mm, {deg:.3f} deg" in out
+    # a wrong tool in the file stays wrong: only the full refit absorbs it
+    wrong = frames_file(tmp_path / "wrong.json", robot, BASE, TOOL + [0.005, 0, 0, 0, 0, 0.02])
+    out, rep = evaluate(capsys, tmp_path, data, "--frames", wrong, "--fit-frames", "measurement")
+    assert rep["errors"]["mean_mm"] > 0.5
+    out, rep = evaluate(capsys, tmp_path, data, "--fit-frames")
+    assert rep["errors"]["max_mm"] < 1e-6
+
+
+def test_measurement_refit_needs_frames_and_a_measurement_frame(tmp_path, capsys):
+    robot = Robot.load("ec66")
+    q = np.random.default_rng(6).uniform(-2, 2, size=(8, 6))
+    p, R = predicted(robot, q, np.r_[BASE, TOOL])
+    data = write_poses(tmp_path / "d.csv", robot.joint_names, q, p, R)
+    assert main(["evaluate", "ec66", str(data), "--fit-frames", "measurement"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "keeps the tool of --frames" in err

@@ -1,0 +1,181 @@
+"""Orientation columns as loggers write them (quaternions either way round, roll/pitch/yaw
+in both conventions, rotation vectors, matrices; radians or degrees), a FIGAROH-style file
+calibrated with one option naming its format, the warning for the other convention, and
+the refusal of orientation columns left unread."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from kincal import Robot
+from kincal.cli.main import main
+from kincal.errors import DataError
+from kincal.measurements.orientation_columns import rotations
+from kincal.measurements.pose import PoseData
+
+from test_pose_orientation import TIAGO, marker_poses, write_poses
+
+
+def random_rotations(n=50, seed=0):
+    rng = np.random.default_rng(seed)
+    R = Rotation.random(n, random_state=seed)
+    # the nasty cases on purpose: identity, near gimbal lock (pitch +-90 deg), angle near pi
+    extra = Rotation.from_euler("xyz", [[0, 0, 0], [0.3, np.pi / 2 - 1e-7, -0.2],
+                                        [-1.0, -np.pi / 2 + 1e-9, 2.0]])
+    near_pi = Rotation.from_rotvec(rng.normal(size=(1, 3)) * 0 + [[0, 0, np.pi - 1e-6]])
+    return Rotation.concatenate([R, extra, near_pi])
+
+
+@pytest.mark.parametrize("unit", ["rad", "deg"])
+def test_every_format_reads_the_rotation_scipy_gives(unit):
+    R = random_rotations()
+    k = 1.0 if unit == "rad" else np.pi / 180
+    cases = {"quat-xyzw": R.as_quat(), "quat-wxyz": R.as_quat()[:, [3, 0, 1, 2]],
+             "rotvec": R.as_rotvec() / k, "matrix": R.as_matrix().reshape(-1, 9)}
+    for fmt, values in cases.items():
+        got = rotations(values, fmt, k)
+        np.testing.assert_allclose(got, R.as_matrix(), atol=1e-12, err_msg=fmt)
+    # angles to matrices (scipy's matrix-to-angles loses digits near gimbal lock)
+    rng = np.random.default_rng(1)
+    angles = np.vstack([rng.uniform(-np.pi, np.pi, size=(50, 3)), [[0, 0, 0]],
+                        [[0.3, np.pi / 2 - 1e-7, -0.2]], [[-1.0, -np.pi / 2, 2.0]]])
+    for fmt, seq in (("rpy-zyx", "xyz"), ("rpy-xyz", "XYZ")):
+        np.testing.assert_allclose(rotations(angles / k, fmt, k),
+                                   Rotation.from_euler(seq, angles).as_matrix(), atol=1e-12,
+                                   err_msg=fmt)
+    # the conventions named as documented: rpy-zyx is Rz(c) Ry(b) Rx(a), rpy-xyz Rx Ry Rz
+    a, b, c = 0.3, -0.5, 1.1
+    Rx, Ry, Rz = (Rotation.from_rotvec(np.eye(3)[i] * v).as_matrix()
+                  for i, v in enumerate((a, b, c)))
+    np.testing.assert_allclose(rotations([[a, b, c]], "rpy-zyx")[0], Rz @ Ry @ Rx, atol=1e-15)
+    np.testing.assert_allclose(rotations([[a, b, c]], "rpy-xyz")[0], Rx @ Ry @ Rz, atol=1e-15)
+
+
+def test_bad_quaternion_and_matrix_rows_are_refused_with_their_line():
+    with pytest.raises(DataError, match=r"line 3: the quaternion \(a, b, c, d\) has norm 2"):
+        rotations([[0, 0, 0, 1], [0, 0, 0, 2]], "quat-wxyz", columns="abcd")
+    M = np.eye(3).ravel()
+    with pytest.raises(DataError, match=r"line 2: the matrix .* off orthonormal"):
+        rotations([M * 1.1, M], "matrix")
+    with pytest.raises(DataError, match="line 2: the matrix"):  # a reflection
+        rotations([np.diag([1.0, 1.0, -1.0]).ravel()], "matrix")
+
+
+def figaroh_file(path, names, q, p, R, convention="xyz", degrees=False):
+    """FIGAROH's layout: x1 y1 z1 phix1 phiy1 phiz1 and the joint columns."""
+    phi = Rotation.from_matrix(R).as_euler(convention, degrees=degrees)
+    cols = ["x1", "y1", "z1", "phix1", "phiy1", "phiz1"] + list(names)
+    rows = np.hstack([p, phi, q])
+    path.write_text(",".join(cols) + "\n" + "".join(",".join(map(repr, r.tolist())) + "\n"
+                                                     for r in rows))
+    return path
+
+
+needs_tiago = pytest.mark.skipif(not TIAGO["urdf"].is_file(),
+                                 reason="../shared/data/tiago_mocap absent")
+
+
+def run(capsys, *argv):
+    code = main(list(map(str, argv)))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@needs_tiago
+def test_figaroh_file_calibrates_like_its_quaternion_file(tmp_path, capsys):
+    names, q, p, R = marker_poses(TIAGO["train"])
+    fig = figaroh_file(tmp_path / "figaroh.csv", names, q, p, R)
+    quat = write_poses(tmp_path / "quat.csv", names, q, p, R)
+    common = ("--tip", "wrist_ft_tool_link", "--orientation-sigma-deg", 0.2, "--model",
+              "offsets", "--lambda", 0)
+    code, out1, err = run(capsys, "calibrate", TIAGO["urdf"], fig, "--position-columns", "x1",
+                          "y1", "z1", "--orientation-format", "rpy-zyx", *common, "--out",
+                          tmp_path / "a.urdf", "--frames-out", tmp_path / "a.json")
+    assert code == 0, err
+    assert "convention" not in err  # the right convention: no doubt raised
+    code, out2, err = run(capsys, "calibrate", TIAGO["urdf"], quat, *common, "--out",
+                          tmp_path / "b.urdf", "--frames-out", tmp_path / "b.json")
+    assert code == 0, err
+    fa = json.loads((tmp_path / "a.json").read_text())["sets"][0]["frames"]
+    fb = json.loads((tmp_path / "b.json").read_text())["sets"][0]["frames"]
+    assert fa.keys() == fb.keys()
+    np.testing.assert_allclose([fa[k] for k in fa], [fb[k] for k in fa], atol=1e-9)
+    a, b = (Robot.load(tmp_path / f, tip="wrist_ft_tool_link") for f in ("a.urdf", "b.urdf"))
+    np.testing.assert_allclose(a.tip_poses(q), b.tip_poses(q), atol=1e-9)
+    after = [line for line in out1.splitlines() if "after:" in line]
+    assert after == [line for line in out2.splitlines() if "after:" in line]
+    # the same file in degrees (angles and revolute joints: --angle-unit is the file's)
+    qd = np.hstack([q[:, :1], np.degrees(q[:, 1:])])
+    deg = figaroh_file(tmp_path / "deg.csv", names, qd, p, R, degrees=True)
+    outs = []
+    for path, unit in ((fig, "rad"), (deg, "deg")):
+        code, out, err = run(capsys, "evaluate", tmp_path / "a.urdf", path, "--position-columns",
+                             "x1", "y1", "z1", "--orientation-format", "rpy-zyx",
+                             "--angle-unit", unit, "--frames", tmp_path / "a.json")
+        assert code == 0, err
+        outs.append(out.splitlines()[1:])
+    assert outs[0] == outs[1] and "orientation: mean" in outs[0][1]
+
+
+@needs_tiago
+def test_the_other_convention_is_warned_about_with_evidence(tmp_path, capsys):
+    names, q, p, R = marker_poses(TIAGO["train"])
+    fig = figaroh_file(tmp_path / "figaroh.csv", names, q, p, R)
+    code, out, err = run(capsys, "analyze", TIAGO["urdf"], fig, "--tip", "wrist_ft_tool_link",
+                         "--position-columns", "x1", "y1", "z1", "--orientation-format",
+                         "rpy-xyz", "--model", "offsets")
+    assert code == 0, err
+    warning = [line for line in err.splitlines() if "is the file's convention rpy-zyx?" in line]
+    assert len(warning) == 1, err
+    ours = float(warning[0].split("orientation error of ")[1].split(" deg")[0])
+    other = float(warning[0].split("read as rpy-zyx ")[1].split(" deg")[0])
+    assert ours > 20 and other < 5  # tens of degrees against a few
+
+
+@needs_tiago
+def test_unread_angle_columns_are_refused_unless_positions_only(tmp_path, capsys):
+    names, q, p, R = marker_poses(TIAGO["train"])
+    fig = figaroh_file(tmp_path / "figaroh.csv", names, q, p, R)
+    args = ("analyze", TIAGO["urdf"], fig, "--tip", "wrist_ft_tool_link", "--position-columns",
+            "x1", "y1", "z1", "--model", "offsets")
+    code, out, err = run(capsys, *args)
+    assert code == 1 and err.count("\n") == 1 and err.startswith("kincal: error:")
+    assert "phix1, phiy1, phiz1" in err and "--positions-only" in err
+    code, out, err = run(capsys, *args, "--positions-only")
+    assert code == 0, err
+    code, out, err = run(capsys, *args, "--positions-only", "--orientation-format", "rpy-zyx")
+    assert code == 1 and "cannot go with" in err and err.count("\n") == 1
+
+
+def test_wrong_column_count_and_missing_columns_one_line(tmp_path, capsys):
+    robot = Robot.load("ec66")
+    q = np.zeros((3, 6)) + np.arange(3)[:, None] * 0.1
+    T = robot.tip_poses(q)
+    path = write_poses(tmp_path / "p.csv", robot.joint_names, q, T[:, :3, 3], T[:, :3, :3])
+    code, out, err = run(capsys, "analyze", "ec66", path, "--orientation-format", "rpy-zyx")
+    assert code == 1 and err.count("\n") == 1
+    assert "no orientation columns for format rpy-zyx" in err and "roll pitch yaw" in err
+    code, out, err = run(capsys, "analyze", "ec66", path, "--orientation-format", "rpy-zyx",
+                         "--orientation-columns", "qx", "qy", "qz", "qw")
+    assert code == 1 and "takes 3 columns, got 4" in err and err.count("\n") == 1
+
+
+def test_pose_data_reads_degrees_for_angles():
+    R = random_rotations(5)
+    np.testing.assert_allclose(rotations(R.as_rotvec(degrees=True), "rotvec", np.pi / 180),
+                               R.as_matrix(), atol=1e-12)
+
+
+def test_pose_data_from_csv_reads_a_named_format(tmp_path):
+    robot = Robot.load("ec66")
+    q = np.random.default_rng(3).uniform(-2, 2, size=(6, 6))
+    T = robot.tip_poses(q)
+    path = tmp_path / "m.csv"
+    cols = list(robot.joint_names) + ["x", "y", "z"] + [f"r{i}{j}" for i in (1, 2, 3)
+                                                         for j in (1, 2, 3)]
+    rows = np.hstack([q, T[:, :3, 3], T[:, :3, :3].reshape(-1, 9)])
+    path.write_text(",".join(cols) + "\n" + "".join(",".join(map(repr, r.tolist())) + "\n" for r in rows))
+    data = PoseData.from_csv(path, robot.joint_names, orientation_format="matrix")
+    np.testing.assert_allclose(data.rotations, T[:, :3, :3], atol=1e-14)
