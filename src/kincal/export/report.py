@@ -117,6 +117,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "cross_validation": None if result.cv is None else result.cv.as_dict(),
         "evidence": None if result.evidence is None else result.evidence.as_dict(),
         "penalty_choice": result.penalty_choice,
+        "model_choice": None if result.model_choice is None else result.model_choice.as_dict(),
         "identifiability": identifiability_dict(result.identifiability),
         "parameters": params,
         "frames": result.frames_dict(),

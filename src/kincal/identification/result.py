@@ -154,6 +154,7 @@ class CalibrationResult:
     penalty_choice: str = ""
     plausibility: Plausibility | None = None
     chains: object = None
+    model_choice: object = None
 
     @classmethod
     def build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
@@ -189,7 +190,8 @@ class CalibrationResult:
         return cls(problem.robot, corrected, problem.options, lay, rows, x_nom, x_start, x,
                    float(lam) if evidence is None else math.nan, cv, tuple(sets), sol, ident,
                    problem.error_model, tuple(downweighted), covariance, evidence,
-                   penalty_choice, chains=problem.chains)
+                   penalty_choice, chains=problem.chains,
+                   model_choice=getattr(problem, "model_choice", None))
 
     # ------------------------------------------------------------ accessors
     @property

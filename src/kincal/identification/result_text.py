@@ -111,5 +111,6 @@ def summary(result: CalibrationResult) -> str:
     """Header, penalty, identifiability, errors per set, solver and gate, parameter table."""
     ident = result.identifiability.summary().splitlines()
     notes = [f"  {line}" for line in ident[1:]] if len(result.sets) > 1 else []
-    return "\n".join(header(result) + [f"  {ident[0]}"] + notes + errors(result)
+    models = result.model_choice.lines() if result.model_choice is not None else []
+    return "\n".join(header(result) + models + [f"  {ident[0]}"] + notes + errors(result)
                      + status(result) + table(result))
