@@ -107,3 +107,54 @@ def test_bad_model_names_list_auto(tmp_path, capsys):
     robot, data, _ = model_auto.case("EC66", 0, planted=False)
     with pytest.raises(OptionError, match="unknown error model 'best'; expected auto or one"):
         calibrate(robot, data, model="best")
+
+
+def _with_joint_error(name, seed, joint, error):
+    """A simulated case whose joint ``joint`` sits at q + error(q) (no backlash)."""
+    from kincal.measurements.data import Measurements
+    from kincal.models import mdh
+    from kincal.planning.simulation import Truth, cube_poses, measure, planted_table
+    from kincal.robot import Robot
+
+    path, tip, centre = model_auto.ROBOTS[name]
+    rng = np.random.default_rng(seed)
+    robot = Robot.load(path, tip=tip)
+    model = mdh.extract(robot.geometry)
+    q = cube_poses(robot, 60, centre, 0.4, model_auto.TOOL, rng)
+    truth = Truth(planted_table(model, rng, 0.3e-3, np.radians(0.03)), model_auto.BASE,
+                  model_auto.TOOL)
+    j = robot.joint_names.index(joint)
+    q_true = q.copy()
+    q_true[:, j] += error(q[:, j])
+    d = measure(model, truth, q_true, model_auto.NOISE, rng)
+    return robot, Measurements(d.joint_names, q, d.positions)
+
+
+def test_diagnosis_names_backlash_with_its_size_even_with_a_given_model(planted):
+    robot, data, joint, _ = planted
+    res = calibrate(robot, data, model="complete")
+    from kincal.identification.diagnosis import diagnose
+
+    f = diagnose(res)
+    assert (f.joint, f.cause) == (joint, "backlash")
+    assert abs(f.size) == pytest.approx(np.degrees(model_auto.HALF_PLAY), rel=0.15)
+    assert f.line() in res.summary() and f.rms_mm[1] < f.rms_mm[0]
+
+
+def test_diagnosis_names_a_periodic_joint_error():
+    from kincal.identification.diagnosis import diagnose
+
+    amp = np.radians(0.3)  # over the cube's range of wrist_1 part of it looks like an offset
+    robot, data = _with_joint_error("UR10", 5, "wrist_1_joint",
+                                    lambda v: amp * np.cos(v - 0.4))
+    f = diagnose(calibrate(robot, data, model="complete"))
+    assert (f.joint, f.cause) == ("wrist_1_joint", "periodic")
+    assert f.size == pytest.approx(0.3, rel=0.3)  # [deg] (measured 0.26: the rest is absorbed)
+
+
+def test_diagnosis_is_quiet_on_clean_data():
+    from kincal.identification.diagnosis import diagnose
+
+    robot, data, _ = model_auto.case("EC66", 0, planted=False)
+    res = calibrate(robot, data, model="complete")
+    assert diagnose(res) is None and "diagnosis" not in res.summary()

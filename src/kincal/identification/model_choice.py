@@ -18,8 +18,8 @@ default structure is kept (the table says so).
 
 The guard against choosing on noise: a candidate replaces the current best only when its
 mean validation error is lower by more than ``GUARD`` standard errors of the paired
-differences of the per-sample validation errors (paired: every candidate predicts the same
-held-out samples from the same folds). Per sample, not per fold: five fold means give a
+differences of the validation errors per pose (paired: every candidate predicts the same
+held-out poses from the same folds). Per pose, not per fold: five fold means give a
 standard error with 4 degrees of freedom, which on simulated EC66 and UR10 data without
 backlash let a spurious term through on half the seeds. Another error model must beat the
 default this way too, so the default stays unless the data tell otherwise.
@@ -52,7 +52,8 @@ class Candidate:
 
     model: error model; backlash: joints with a backlash term; free: parameters the fit
     moves (identifiable, incl. frames); fold_errors: (k,) mean validation error per fold
-    [mm] at its best lambda (empty when not scored); lam: that lambda; note: why it was
+    [mm] at its best lambda (empty when not scored); sample_errors: its validation errors
+    per pose [mm] (mean over the pose's samples), for the guard; lam: that lambda; note: why it was
     not scored, or what the guard said; chosen: the structure used."""
 
     model: str
@@ -101,7 +102,7 @@ class ModelChoice:
             return [f"  model: {self.chosen_label}, kept: {self.reason}"]
         out = [f"  model: {self.chosen_label}, chosen by {self.folds}-fold CV among "
                f"{len(self.candidates)} candidates (a candidate must beat the best by more "
-               f"than {GUARD:g} s.e. of the paired per-sample differences)"]
+               f"than {GUARD:g} s.e. of the paired per-pose differences)"]
         w = max(len(c.label) for c in self.candidates)
         out.append(f"    {'candidate':<{w}}  free  CV error [mm]    s.e.")
         for c in self.candidates:
@@ -227,7 +228,7 @@ def choose(robots, sets, options) -> tuple[ModelChoice, object]:
     table = tuple(replace(c, chosen=(c.model, c.backlash) == (best.model, best.backlash))
                   for c in scored)
     reason = (f"{k}-fold CV prediction error on the penalty's folds; a candidate must beat "
-              f"the best by more than {GUARD:g} standard errors of the paired per-sample differences")
+              f"the best by more than {GUARD:g} standard errors of the paired per-pose differences")
     return (ModelChoice(table, best.model, best.backlash, "cv", reason, k),
             replace(o, model=best.model, backlash=best.backlash))
 
@@ -251,8 +252,12 @@ def _fold_scores(p, free, folds, lam0, model, backlash) -> Candidate:
             errors[m, at] = np.concatenate([v for _, v in e]) * 1e3
     best = int(np.argmin(errors.mean(axis=1)))
     fold = np.array([errors[best, np.searchsorted(used, f)].mean() for f in folds])
+    # paired per pose: the points of one pose share its joint values, and its fold's fit
+    groups = np.concatenate([km.data.poses + 10 ** 9 * i for i, km in enumerate(p.kinds)])
+    _, pose = np.unique(groups[used], return_inverse=True)
+    per_pose = np.bincount(pose, errors[best]) / np.bincount(pose)
     return Candidate(model, backlash, int(free.sum()), fold, float(lams[best]),
-                     sample_errors=errors[best])
+                     sample_errors=per_pose)
 
 
 def _backlash_joints(problem, given) -> list[str]:
