@@ -3,7 +3,8 @@
 The candidates are the error models that can describe the chain (complete, placement,
 offsets, mdh) and, where the samples carry approach directions (every set a point set; the
 order of the rows or an order column), a backlash term per joint added by forward
-selection. Each is scored by its K-fold cross-validated prediction error on **the folds
+selection (none when backlash joints are given: those are the user's, in every
+candidate). Each is scored by its K-fold cross-validated prediction error on **the folds
 the penalty choice already makes** (same seed, same pose groups, same subsample): the
 chain's default structure is cross-validated as any ``lam="cv"`` run does, and every
 candidate is then fitted on those folds at that lambda and at 1/3x and 3x it (its own
@@ -209,7 +210,7 @@ def choose(robots, sets, options) -> tuple[ModelChoice, object]:
             if win and (best is scored[0] or c.cv_error_mm < best.cv_error_mm):
                 best = c
         scored.append(c)
-    joints = _backlash_joints(base, o.backlash)
+    joints = [] if o.backlash else _backlash_joints(base, o.backlash)  # given: the user's
     for _ in range(MAX_TERMS):
         step = [score(best.model, tuple(sorted(best.backlash + (j,),
                                                key=base.robot.joint_names.index)))
