@@ -139,17 +139,19 @@ def beats(new: np.ndarray, best: np.ndarray) -> tuple[bool, str]:
                    else "no better")
 
 
-def resolve(robots, sets, options) -> tuple[ModelChoice | None, object]:
+def resolve(problem_class, robots, sets, options) -> tuple[ModelChoice | None, object]:
     """(None, options) unless options.model is "auto"; then :func:`choose`."""
-    return choose(robots, sets, options) if options.model == "auto" else (None, options)
+    if options.model != "auto":
+        return None, options
+    return choose(problem_class, robots, sets, options)
 
 
-def choose(robots, sets, options) -> tuple[ModelChoice, object]:
+def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, object]:
     """(the comparison, options with the chosen ``model`` and ``backlash``) for options
-    whose model is "auto". ``options``: validated CalibrationOptions; the user's own
-    ``backlash`` joints stay in every candidate."""
+    whose model is "auto". CalibrationProblem: the problem class (passed in, so this module
+    does not import the one that calls it); ``options``: validated CalibrationOptions; the
+    user's own ``backlash`` joints stay in every candidate."""
     from kincal.identification import penalty_choice
-    from kincal.identification.problem import CalibrationProblem
 
     o = options
 

@@ -61,7 +61,7 @@ class CalibrationProblem:
         self.options = o = (options or CalibrationOptions()).validated()
         sets = as_sets(sets)
         # model "auto": the candidate structures compared by CV, the best used (model_choice)
-        self.model_choice, o = model_choice.resolve(robots, sets, o)
+        self.model_choice, o = model_choice.resolve(type(self), robots, sets, o)
         self.options = o
         self.chains = ch = Chains(robots, len(sets), o.model)
         self.robot, self.robots = ch.robot, ch.robots

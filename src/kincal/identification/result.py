@@ -132,6 +132,8 @@ class CalibrationResult:
     chains: the chains of the sets (:class:`kincal.identification.chains.Chains`): robot and
     corrected are the first set's chain; with several chains, corrected carries every
     corrected URDF origin and error_model is the union's names (no kinematics of its own).
+    model_choice: with model "auto", the structures compared and the one chosen
+    (:class:`kincal.identification.model_choice.ModelChoice`), else None.
     """
 
     robot: Robot
