@@ -96,3 +96,23 @@ def test_tool_point_near_last_axis_gives_a_note_and_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # an offset tool point raises no warning
         assert _problem([0.05, 0.03, 0.12]).analyze().notes == ()
+
+
+def test_a_run_of_nearly_parallel_columns_never_keeps_more_than_the_rank():
+    """Each column's new part passes the ordered test (2e-7 of its norm > 1e-7), but the
+    twelve span three directions above the rank's tolerance: before the fix all twelve
+    were kept, condition number ~3e7, 'identifiable: 12 ... (rank 3 ...)'."""
+    import numpy as np
+
+    from kincal.identification.selection import analyze
+
+    n = 12
+    T = np.full((n, n), 2e-7) * np.triu(np.ones((n, n)))
+    T[0, :] = 1.0
+    Q, _ = np.linalg.qr(np.random.default_rng(0).normal(size=(60, n)))
+    a = analyze(Q @ T, [f"j{k}.a" for k in range(n)], n)
+    assert a.rank == 3 and 1 <= len(a.kept) <= a.rank
+    assert set(a.kept) | set(a.dropped) == set(a.free)
+    # well separated columns are untouched by the second pass
+    b = analyze(Q @ (np.eye(n) + 0.1 * np.triu(np.ones((n, n)))), [f"j{k}.a" for k in range(n)], n)
+    assert len(b.kept) == b.rank == n

@@ -15,7 +15,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("analyze", help="what the data can identify, without solving")
     add_common(p)
     add_kinds(p)
-    add_model(p, allow_all=True)
+    add_model(p, allow_all=True, allow_auto=True)
     g = group(p, "model and penalty")
     g.add_argument("--fix", nargs="+", default=[], metavar="NAME")
     g.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
@@ -39,7 +39,7 @@ class Analyze:
     chain: Chain
     inputs: Inputs
     accuracy: AccuracyRequest
-    model: str  # an error model, or "all" to compare them
+    model: str  # an error model, "auto" (the candidates compared by CV) or "all" (listed)
     fix: tuple[str, ...]
     backlash: tuple[str, ...]
     report: str | None
@@ -95,8 +95,10 @@ def _analyze(a: Analyze) -> int:
               f"{a.inputs.data}")
     else:
         print(f"kincal analysis of {robot.name} ({robot.base} -> {robot.tip}), error model "
-              f"{a.model or problem.model_name}: " + ", ".join(
+              f"{problem.model_name}: " + ", ".join(
                   f"{km.kind} ({km.data.source}, {km.N} samples)" for km in problem.kinds))
+    if problem.model_choice is not None:  # --model auto: the candidates compared, nothing written
+        print("\n".join(line[2:] for line in problem.model_choice.lines()))
     idents = {}
     for m, p in problems.items():
         ident = idents[m] = p.analyze()

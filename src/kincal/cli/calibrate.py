@@ -27,7 +27,7 @@ def register(subparsers) -> None:
              "parameters (plane.rx .ry .d; with a 'plane' column, one per plane number, the "
              "same number meaning the same plane in every file) instead of one per file. The "
              "planes are fitted in the base frame: the files' chains must have one --base")
-    add_model(p)
+    add_model(p, allow_auto=True)
     g = group(p, "model and penalty")
     g.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
     g.add_argument("--lambda", dest="lam",

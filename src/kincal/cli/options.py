@@ -144,13 +144,17 @@ def add_kinds(p, several: bool = True):
                         "'sigma_deg' columns; tilt noise --orientation-sigma-deg, default 0.05)")
 
 
-def add_model(p, allow_all: bool = False, default: str | None = None, help: str | None = None):
+def add_model(p, allow_all: bool = False, default: str | None = None, help: str | None = None,
+              allow_auto: bool = False):
     from kincal.models import DEFAULT, MODELS, SUITS
 
-    choices = MODELS + (("all",) if allow_all else ())
+    choices = (("auto",) if allow_auto else ()) + MODELS + (("all",) if allow_all else ())
+    auto = ("auto (default): the error models and, with approach directions, backlash terms "
+            "compared by K-fold CV and the best used, the table shown; " if allow_auto else "")
     group(p, "model and penalty").add_argument(
-        "--model", choices=choices, default=default, metavar="NAME",
-        help=help or (f"error model (default: {DEFAULT}; placement on a tree path, a base off "
+        "--model", choices=choices, default="auto" if allow_auto else default, metavar="NAME",
+        help=help or (auto + (f"error model (default: {DEFAULT}; " if not allow_auto else "(")
+                      + "placement on a tree path, a base off "
                       "the tip's branch): " + "; ".join(f"{k}: {v}" for k, v in SUITS.items())
                       + ("; all: compare every model" if allow_all else "")))
 

@@ -195,6 +195,23 @@ def _cv(result, png) -> str:
             f"error {cv.mean_error[cv.best_index]:.4f} mm.</p>" + _img(png, "CV curve"))
 
 
+def _models(result) -> str:
+    """The candidate structures ``model="auto"`` compared, as a table ("" without)."""
+    mc = getattr(result, "model_choice", None)
+    if mc is None:
+        return ""
+    head = (f"<p>Model chosen automatically: <b>{_e(mc.chosen_label)}</b> ({_e(mc.reason)}).</p>")
+    if mc.criterion != "cv":
+        return head
+    rows = "".join(
+        f'<tr><td class="name">{"<b>" if c.chosen else ""}{_e(c.label)}'
+        f'{"</b>" if c.chosen else ""}</td><td>{c.free}</td>'
+        f"<td>{_num(c.cv_error_mm, '.4f') if c.fold_errors.size else '-'}</td>"
+        f"<td>{'chosen' if c.chosen else _e(c.note)}</td></tr>" for c in mc.candidates)
+    return (head + "<table><tr><th class=\"name\">candidate</th><th>free parameters</th>"
+            f"<th>{mc.folds}-fold CV error [mm]</th><th></th></tr>{rows}</table>")
+
+
 def _accuracy(amap, png) -> str:
     if amap is None:
         return "<p>No accuracy map in this run.</p>"
@@ -276,7 +293,7 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
             + _section("parameters", _parameters(result, par_png))
             + _section("residuals", residuals)
             + _section("joints", joints)
-            + _section("cv", _cv(result, cv_png))
+            + _section("cv", _cv(result, cv_png) + _models(result))
             + _section("accuracy", _accuracy(accuracy, acc_png))
             + _section("validation", html_run.validation_section(validation))
             + _section("warnings", _warnings(result, warnings, notes))

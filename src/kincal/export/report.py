@@ -81,6 +81,9 @@ def set_dict(s) -> dict:
 def result_dict(result: CalibrationResult, data_source: str | None = None) -> dict:
     """The whole result (REPORT.json)."""
     from kincal import __version__
+    from kincal.identification.diagnosis import diagnose
+
+    finding = diagnose(result)  # a pattern a missing term would explain
 
     o = result.options
     params = []
@@ -129,6 +132,8 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "cross_validation": None if result.cv is None else result.cv.as_dict(),
         "evidence": None if result.evidence is None else result.evidence.as_dict(),
         "penalty_choice": result.penalty_choice,
+        "model_choice": None if result.model_choice is None else result.model_choice.as_dict(),
+        "diagnosis": None if finding is None else finding.as_dict(),
         "identifiability": identifiability_dict(result.identifiability),
         "parameters": params,
         "frames": result.frames_dict(),

@@ -27,7 +27,9 @@ class CalibrationOptions:
 
     model: the error model (kincal.models: "complete", "mdh", "placement", "offsets"):
         which geometric errors the chain may have; None (default): the chain's default,
-        "complete", or "placement" on a tree path (a base off the tip's branch).
+        "complete", or "placement" on a tree path (a base off the tip's branch); "auto":
+        the candidate structures (error models, backlash terms) compared by K-fold CV and
+        the best used (kincal.identification.model_choice; the problem's ``model_choice``).
     method: "l2" (penalty toward nominal), "ls" (plain least squares) or "frames" (fit
         only the measurement frame and tool point; kinematics stay nominal).
     lam: "auto" (default): "evidence" when the data cover a small measurement volume
@@ -115,8 +117,8 @@ class CalibrationOptions:
         o = self._normalised()
         from kincal.models import MODELS, SUITS
 
-        if o.model is not None and o.model not in MODELS:
-            raise OptionError(f"unknown error model {o.model!r}; expected one of "
+        if o.model is not None and o.model not in MODELS + ("auto",):
+            raise OptionError(f"unknown error model {o.model!r}; expected auto or one of "
                               f"{', '.join(MODELS)} (" + "; ".join(f"{k}: {v}" for k, v in
                                                                  SUITS.items()) + ")")
         if o.method not in METHODS:

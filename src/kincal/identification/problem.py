@@ -28,7 +28,7 @@ import numpy as np
 from kincal import models as error_models
 from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
                            ParameterError, listing, suggest)
-from kincal.identification import blas_threads, penalty_choice
+from kincal.identification import blas_threads, model_choice, penalty_choice
 from kincal.identification.chains import Chains
 from kincal.identification.cross_validation import (CrossValidation, cross_validate,
                                                     fold_fitter, lambda_grid)
@@ -60,7 +60,9 @@ class CalibrationProblem:
                               "; for one field use calibrate(robot, data, method=...)")
         self.options = o = (options or CalibrationOptions()).validated()
         sets = as_sets(sets)
-        # the default model: complete, placement on a tree path or with several chains
+        # model "auto": the candidate structures compared by CV, the best used (model_choice)
+        self.model_choice, o = model_choice.resolve(type(self), robots, sets, o)
+        self.options = o
         self.chains = ch = Chains(robots, len(sets), o.model)
         self.robot, self.robots = ch.robot, ch.robots
         self.model_name, self.error_model = ch.model_name, ch.model
@@ -493,8 +495,5 @@ def calibrate(robot: Robot, data, options: CalibrationOptions | None = None,
     if unknown:
         raise OptionError(f"unknown option(s) {', '.join(unknown)}." + suggest(unknown[0], names)
                           + " Options: " + listing(names))
-    if options is None:
-        options = CalibrationOptions(**overrides)
-    elif overrides:
-        options = replace(options, **overrides)
+    options = CalibrationOptions(**overrides) if options is None else replace(options, **overrides)
     return CalibrationProblem(robot, data, options).solve()

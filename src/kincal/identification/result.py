@@ -137,6 +137,8 @@ class CalibrationResult:
     chains: the chains of the sets (:class:`kincal.identification.chains.Chains`): robot and
     corrected are the first set's chain; with several chains, corrected carries every
     corrected URDF origin and error_model is the union's names (no kinematics of its own).
+    model_choice: with model "auto", the structures compared and the one chosen
+    (:class:`kincal.identification.model_choice.ModelChoice`), else None.
     """
 
     robot: Robot
@@ -159,6 +161,7 @@ class CalibrationResult:
     penalty_choice: str = ""
     plausibility: Plausibility | None = None
     chains: object = None
+    model_choice: object = None
 
     @classmethod
     def build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
@@ -193,7 +196,8 @@ class CalibrationResult:
         return cls(problem.robot, corrected, problem.options, lay, rows, x_nom, x_start, x,
                    float(lam) if evidence is None else math.nan, cv, tuple(sets), sol, ident,
                    problem.error_model, tuple(downweighted), covariance, evidence,
-                   penalty_choice, chains=problem.chains)
+                   penalty_choice, chains=problem.chains,
+                   model_choice=getattr(problem, "model_choice", None))
 
     # ------------------------------------------------------------ accessors
     @property

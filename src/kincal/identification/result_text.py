@@ -104,6 +104,11 @@ def status(result: CalibrationResult) -> list[str]:
                    "0.5: " + ", ".join(f"line {w.row} ({w.error_mm:.3g} mm, weight "
                                        f"{w.weight:.2f})" for w in d[:10])
                    + (" ..." if len(d) > 10 else ""))
+    from kincal.identification.diagnosis import diagnose
+
+    finding = diagnose(r)  # a pattern a missing term would explain, with its size
+    if finding is not None:
+        out.append(f"  {finding.line()}")
     if r.layout.n_backlash:
         out.append(f"  backlash terms ({', '.join(r.layout.backlash)}): approach directions "
                    f"from {r.order_source}; the URDF models the middle of the play")
@@ -134,5 +139,7 @@ def summary(result: CalibrationResult) -> str:
     """Header, penalty, identifiability, errors per set, solver and gate, parameter table."""
     ident = result.identifiability.summary().splitlines()
     notes = [f"  {line}" for line in ident[1:]] if len(result.sets) > 1 else []
-    return "\n".join(header(result) + held(result) + [f"  {ident[0]}"] + notes + errors(result)
+    models = result.model_choice.lines() if result.model_choice is not None else []
+    return "\n".join(header(result) + models + held(result) + [f"  {ident[0]}"] + notes
+                     + errors(result)
                      + status(result) + table(result))

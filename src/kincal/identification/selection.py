@@ -139,6 +139,26 @@ def preference_order(names, n_kinematic: int) -> list[int]:
     return order + list(range(frames_end, len(names)))
 
 
+def _within_rank(J, norms, names, n_kinematic, free, floor) -> tuple[list, list]:
+    """(kept, dropped) by the same order of preference, a column kept only while the
+    smallest singular value of the kept unit-norm columns stays above ``floor`` (the rank's
+    own threshold): never more kept than the rank (by interlacing). The plain ordered
+    test compares each new part with its own column, which a run of nearly parallel
+    columns (a chain of parallel axes, or frames and origins alike) passes one by one
+    although together they span fewer directions: kept > rank, condition number ~1e15."""
+    kept, dropped = [], []
+    for c in preference_order(names, n_kinematic):
+        if not free[c]:
+            continue
+        if norms[c] > 0:
+            trial = J[:, kept + [c]] / norms[kept + [c]]
+            if np.linalg.svd(trial, compute_uv=False)[-1] > floor:
+                kept.append(c)
+                continue
+        dropped.append(c)
+    return sorted(kept), sorted(dropped)
+
+
 def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float = RANK_TOL,
             weak_independence: float = WEAK_INDEPENDENCE,
             weak_sensitivity: float = WEAK_SENSITIVITY) -> Identifiability:
@@ -179,6 +199,8 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     Jn = J[:, free_idx] / np.where(norms[free_idx] > 0, norms[free_idx], 1.0)
     sv = np.linalg.svd(Jn, compute_uv=False) if free_idx.size else np.zeros(0)
     rank = int(np.sum(sv > rank_tol * sv[0])) if sv.size else 0
+    if len(kept) > rank:  # many nearly parallel columns: each new part passes, the set not
+        kept, dropped = _within_rank(J, norms, names, n_kinematic, free, rank_tol * sv[0])
     Jk = J[:, kept]
     Jkn = Jk / norms[kept]
     svk = np.linalg.svd(Jkn, compute_uv=False)

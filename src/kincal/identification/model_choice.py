@@ -1,0 +1,279 @@
+"""The model chooses itself (``model="auto"``): candidate structures compared out of sample.
+
+The candidates are the error models that can describe the chain (complete, placement,
+offsets, mdh) and, where the samples carry approach directions (every set a point set; the
+order of the rows or an order column), a backlash term per joint added by forward
+selection (none when backlash joints are given: those are the user's, in every
+candidate). Each is scored by its K-fold cross-validated prediction error on **the folds
+the penalty choice already makes** (same seed, same pose groups, same subsample): the
+chain's default structure is cross-validated as any ``lam="cv"`` run does, and every
+candidate is then fitted on those folds at that lambda and at 1/3x and 3x it (its own
+best of the three counts: a bigger model may want another pull).
+
+Why CV and not the evidence: CV judges the prediction error the user cares about and is
+robust to errors no candidate carries (compliance, the rest of the backlash), which the
+evidence's Gaussian noise model reads as noise; on data from a small measurement volume,
+or without measured positions, where the penalty is chosen by the evidence because CV
+judges only interpolation there, no out-of-sample comparison is trusted and the chain's
+default structure is kept (the table says so).
+
+The guard against choosing on noise: a candidate replaces the current best only when its
+mean validation error is lower by more than ``GUARD`` standard errors of the paired
+differences of the validation errors per pose (paired: every candidate predicts the same
+held-out poses from the same folds). Per pose, not per fold: five fold means give a
+standard error with 4 degrees of freedom, which on simulated EC66 and UR10 data without
+backlash let a spurious term through on half the seeds. Another error model must beat the
+default this way too, so the default stays unless the data tell otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from kincal.errors import KincalError, KincalWarning
+from kincal.models import MODELS
+
+GUARD = 3.0  # standard errors of the paired validation differences a candidate must win by
+LAMBDA_STEPS = (1 / 3, 1.0, 3.0)  # each candidate's lambdas, times the default's CV lambda
+MAX_TERMS = 3  # backlash terms forward selection may add
+
+
+def label(model: str, backlash) -> str:
+    """"complete + backlash arm_6_joint arm_7_joint": a structure's name in tables."""
+    return model + (" + backlash " + " ".join(backlash) if backlash else "")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One compared structure.
+
+    model: error model; backlash: joints with a backlash term; free: parameters the fit
+    moves (identifiable, incl. frames); fold_errors: (k,) mean validation error per fold
+    [mm] at its best lambda (empty when not scored); sample_errors: its validation errors
+    per pose [mm] (mean over the pose's samples), for the guard; lam: that lambda; note: why it was
+    not scored, or what the guard said; chosen: the structure used."""
+
+    model: str
+    backlash: tuple[str, ...]
+    free: int
+    fold_errors: np.ndarray
+    lam: float
+    note: str = ""
+    chosen: bool = False
+    sample_errors: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def label(self) -> str:
+        return label(self.model, self.backlash)
+
+    @property
+    def cv_error_mm(self) -> float:
+        return float(np.mean(self.fold_errors)) if self.fold_errors.size else math.nan
+
+    def as_dict(self) -> dict:
+        return {"candidate": self.label, "model": self.model, "backlash": list(self.backlash),
+                "free_parameters": self.free,
+                "cv_error_mm": None if not self.fold_errors.size else self.cv_error_mm,
+                "fold_errors_mm": self.fold_errors.tolist(),
+                "lambda": None if not self.fold_errors.size else self.lam,
+                "note": self.note, "chosen": self.chosen}
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The comparison behind ``model="auto"``: every candidate, the criterion, the choice.
+
+    criterion: "cv" (K-fold CV prediction error, mean over folds [mm]) or "none" (the data
+    cannot be compared out of sample: the default kept, ``reason`` says why)."""
+
+    candidates: tuple[Candidate, ...]
+    model: str
+    backlash: tuple[str, ...]
+    criterion: str
+    reason: str
+    folds: int
+
+    def lines(self) -> list[str]:
+        """The table of the summary (mm): candidate, free parameters, CV error, s.e."""
+        if self.criterion != "cv":
+            return [f"  model: {self.chosen_label}, kept: {self.reason}"]
+        out = [f"  model: {self.chosen_label}, chosen by {self.folds}-fold CV among "
+               f"{len(self.candidates)} candidates (a candidate must beat the best by more "
+               f"than {GUARD:g} s.e. of the paired per-pose differences)"]
+        w = max(len(c.label) for c in self.candidates)
+        out.append(f"    {'candidate':<{w}}  free  CV error [mm]    s.e.")
+        for c in self.candidates:
+            if c.fold_errors.size:
+                se = np.std(c.fold_errors, ddof=1) / math.sqrt(c.fold_errors.size)
+                err = f"{c.cv_error_mm:13.4f} {se:7.4f}"
+            else:
+                err = f"{'-':>13} {'':7}"
+            mark = "  <- chosen" if c.chosen else (f"  {c.note}" if c.note else "")
+            out.append(f"    {c.label:<{w}}  {c.free:>4}  {err}{mark}".rstrip())
+        return out
+
+    @property
+    def chosen_label(self) -> str:
+        return label(self.model, self.backlash)
+
+    def as_dict(self) -> dict:
+        return {"criterion": self.criterion, "reason": self.reason, "folds": self.folds,
+                "guard_standard_errors": GUARD, "chosen": {"model": self.model,
+                                                          "backlash": list(self.backlash)},
+                "candidates": [c.as_dict() for c in self.candidates]}
+
+
+def beats(new: np.ndarray, best: np.ndarray) -> tuple[bool, str]:
+    """(True, why) when validation errors ``new`` beat ``best`` (the same samples, the
+    same folds) by more than GUARD standard errors of their paired differences."""
+    d = np.asarray(new) - np.asarray(best)
+    se = float(np.std(d, ddof=1) / math.sqrt(d.size)) if d.size > 1 else math.inf
+    gain = -float(np.mean(d))
+    if gain > GUARD * se:
+        return True, f"{gain:.3g} mm better, s.e. {se:.2g}"
+    return False, (f"{gain:.3g} mm better, within the scatter (s.e. {se:.2g})" if gain > 0
+                   else "no better")
+
+
+def resolve(problem_class, robots, sets, options) -> tuple[ModelChoice | None, object]:
+    """(None, options) unless options.model is "auto"; then :func:`choose`."""
+    if options.model != "auto":
+        return None, options
+    return choose(problem_class, robots, sets, options)
+
+
+def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, object]:
+    """(the comparison, options with the chosen ``model`` and ``backlash``) for options
+    whose model is "auto". CalibrationProblem: the problem class (passed in, so this module
+    does not import the one that calls it); ``options``: validated CalibrationOptions; the
+    user's own ``backlash`` joints stay in every candidate."""
+    from kincal.identification import penalty_choice
+
+    o = options
+
+    def problem(model, backlash, **grid):
+        with warnings.catch_warnings():  # the chosen problem gives them, once
+            warnings.simplefilter("ignore", KincalWarning)
+            return CalibrationProblem(robots, sets, replace(o, model=model, backlash=backlash,
+                                                            **grid))
+
+    base = problem(None, o.backlash)
+    default = base.model_name
+    k = o.folds
+
+    def keep(reason):
+        c = Candidate(default, tuple(o.backlash), int(base.free_mask().sum()), np.zeros(0),
+                      math.nan, chosen=True)
+        return (ModelChoice((c,), default, tuple(o.backlash), "none", reason, k),
+                replace(o, model=default))
+
+    if o.method != "l2":
+        return keep(f"method {o.method}: no penalty chosen by CV to compare the candidates "
+                    "with; the chain's default")
+    how = o.lam
+    if how == "auto":
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", KincalWarning)
+            how, _ = penalty_choice.automatic(base)
+    if how != "cv":
+        return keep("the penalty is not chosen by cross-validation on these data (a small "
+                    "measurement volume, no measured positions, or a given lambda): nothing "
+                    "judges the candidates out of sample; the chain's default")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        cv0 = base.cross_validate()
+    lam0, folds = cv0.best_lambda, cv0.folds
+
+    def score(model, backlash) -> Candidate:
+        try:
+            p = problem(model, backlash, progress=None)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", KincalWarning)
+                free = p.free_mask()
+                return _fold_scores(p, free, folds, lam0, model, backlash)
+        except KincalError as e:  # a model that cannot describe this chain
+            return Candidate(model, backlash, 0, np.zeros(0), math.nan,
+                             "not applicable: " + str(e).split(";")[0][:70])
+
+    scored = [score(default, tuple(o.backlash))]
+    best = scored[0]
+    models = [m for m in MODELS if m != default]
+    if o.fix or o.free:  # parameter names belong to one model
+        models = []
+    for m in models:
+        c = score(m, tuple(o.backlash))
+        if c.fold_errors.size:
+            win, why = beats(c.sample_errors, best.sample_errors)
+            c = replace(c, note=why)
+            if win and (best is scored[0] or c.cv_error_mm < best.cv_error_mm):
+                best = c
+        scored.append(c)
+    joints = [] if o.backlash else _backlash_joints(base, o.backlash)  # given: the user's
+    for _ in range(MAX_TERMS):
+        step = [score(best.model, tuple(sorted(best.backlash + (j,),
+                                               key=base.robot.joint_names.index)))
+                for j in joints if j not in best.backlash]
+        step = [c for c in step if c.fold_errors.size]
+        if not step:
+            break
+        top = min(step, key=lambda c: c.cv_error_mm)
+        for c in step:
+            win, why = beats(c.sample_errors, best.sample_errors)
+            scored.append(replace(c, note=why))
+        win, _ = beats(top.sample_errors, best.sample_errors)
+        if not win:
+            break
+        best = top
+    table = tuple(replace(c, chosen=(c.model, c.backlash) == (best.model, best.backlash))
+                  for c in scored)
+    reason = (f"{k}-fold CV prediction error on the penalty's folds; a candidate must beat "
+              f"the best by more than {GUARD:g} standard errors of the paired per-pose differences")
+    return (ModelChoice(table, best.model, best.backlash, "cv", reason, k),
+            replace(o, model=best.model, backlash=best.backlash))
+
+
+def _fold_scores(p, free, folds, lam0, model, backlash) -> Candidate:
+    """Candidate ``p`` fitted on the folds at each of LAMBDA_STEPS x lam0 (largest first,
+    each from the previous one); its best lambda's validation errors per sample [mm]."""
+    from kincal.identification.cross_validation import fold_fitter
+
+    used = np.sort(np.concatenate(folds))
+    fit = fold_fitter(p, free)
+    lams = sorted((lam0 * s for s in LAMBDA_STEPS), reverse=True)
+    errors = np.empty((len(lams), used.size))
+    weighted = len(p.kinds) > 1
+    for val in folds:
+        train, start = np.setdiff1d(used, val), None
+        at = np.searchsorted(used, val)
+        for m, lam in enumerate(lams):
+            start = fit(train, lam, start)
+            e = p.sample_errors(start.u * p.scale, val, weighted)
+            errors[m, at] = np.concatenate([v for _, v in e]) * 1e3
+    best = int(np.argmin(errors.mean(axis=1)))
+    fold = np.array([errors[best, np.searchsorted(used, f)].mean() for f in folds])
+    # paired per pose: the points of one pose share its joint values, and its fold's fit
+    groups = np.concatenate([km.data.poses + 10 ** 9 * i for i, km in enumerate(p.kinds)])
+    _, pose = np.unique(groups[used], return_inverse=True)
+    per_pose = np.bincount(pose, errors[best]) / np.bincount(pose)
+    return Candidate(model, backlash, int(free.sum()), fold, float(lams[best]),
+                     sample_errors=per_pose)
+
+
+def _backlash_joints(problem, given) -> list[str]:
+    """The chain joints a backlash term may be tried on: every set a point set (the
+    approach directions are the samples'), approached from both sides in every set."""
+    if any(km.kind != "point" for km in problem.kinds) or problem.chains.several:
+        return []
+    out = []
+    for j, name in enumerate(problem.robot.joint_names):
+        if name in given:
+            continue
+        if all(np.any(km.data.approach[:, j] > 0) and np.any(km.data.approach[:, j] < 0)
+               for km in problem.kinds):
+            out.append(name)
+    return out
+
