@@ -26,7 +26,9 @@ if TYPE_CHECKING:
 def prior_classes(problem: CalibrationProblem) -> tuple[str | None, ...]:
     """(p,) prior class of every parameter (None: flat prior, the sets' frames)."""
     lay = problem.layout
-    return tuple(evidence.prior_class(n, bool(pen)) for n, pen in zip(lay.names, lay.is_penalised))
+    fleet = problem.prior.covered if problem.prior is not None else np.zeros(lay.size, bool)
+    return tuple("fleet" if f else evidence.prior_class(n, bool(pen))
+                 for n, pen, f in zip(lay.names, lay.is_penalised, fleet))
 
 
 def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.EvidenceFit]:
@@ -43,7 +45,7 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
     return evidence.estimate(
         lambda w, u: problem.fit(w, start=u * problem.scale, free=free, residual=residual),
         lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,
-        o.noise_mm)
+        o.noise_mm, shape=None if problem.prior is None else problem.prior.precision)
 
 
 def _tool_start(problem: CalibrationProblem) -> np.ndarray:
