@@ -13,7 +13,8 @@ CLI = Path(cli_main.__file__).parent
 def test_main_is_a_dispatcher_of_one_module_per_command():
     assert len((CLI / "main.py").read_text().splitlines()) < 200
     names = [m.__name__.rsplit(".", 1)[1] for m in cli_main.COMMANDS]
-    assert names == ["calibrate", "evaluate", "analyze", "simulate", "plan", "compensate", "demo"]
+    assert names == ["calibrate", "evaluate", "analyze", "simulate", "plan", "compensate", "demo",
+                     "fleet"]
     sub = next(a for a in cli_main.build_parser()._actions if hasattr(a, "choices")
                and isinstance(a.choices, dict))
     for name in names:

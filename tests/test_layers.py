@@ -23,7 +23,7 @@ FLOORS = [
     {"robot", "collision"},
     {"identification"},
     {"planning", "export"},
-    {"experiments"},
+    {"experiments", "fleet"},
     {"cli", "__main__"},
 ]
 MAX_LINES = 500

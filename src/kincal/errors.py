@@ -55,6 +55,11 @@ class OptionError(KincalError):
     """An option out of range (folds, lambda grid, tolerances)."""
 
 
+class PriorError(KincalError):
+    """A fleet prior (FLEET.json) that is malformed or belongs to another robot, error model
+    or parameter set."""
+
+
 class ExportError(KincalError):
     """The corrected URDF or frames file could not be written."""
 

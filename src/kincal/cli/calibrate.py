@@ -44,6 +44,10 @@ def register(subparsers) -> None:
     g.add_argument("--noise-mm", type=float, metavar="MM",
                    help="with --lambda evidence: measurement noise, std per axis [mm], given "
                         "instead of estimated")
+    g.add_argument("--prior", metavar="FLEET.json",
+                   help="a fleet prior (kincal fleet's DIR/FLEET.json): the penalty is centred "
+                        "on the fleet's mean deviation and shaped by its covariance instead of "
+                        "pulling toward nominal (its scale by --lambda as usual)")
     g.add_argument("--folds", type=int, help="k of the k-fold cross-validation (default 5)")
     g.add_argument("--seed", type=int, help="seed of the CV fold split (default 0)")
     g.add_argument("--fix", nargs="+", default=[], metavar="NAME",
@@ -114,6 +118,7 @@ class Calibrate:
     prior_mm: float | None
     prior_deg: float | None
     noise_mm: float | None
+    prior: str | None
     folds: int
     seed: int
     fix: tuple[str, ...]
@@ -153,6 +158,7 @@ def calibration_options(c: Calibrate):
     """The CalibrationOptions of the run."""
     from kincal.cli.progress import FitStatus, progress_bar
     from kincal.identification.options import CalibrationOptions
+    from kincal.identification.prior import read_prior
     from kincal.identification.solver import SolverOptions
 
     lam = c.lam
@@ -170,6 +176,7 @@ def calibration_options(c: Calibrate):
                               progress=None if c.quiet or c.json else progress_bar(),
                               cv_max_poses=c.cv_max_poses or None,
                               shared_planes=c.shared_planes,
+                              prior=None if c.prior is None else read_prior(c.prior),
                               solver=SolverOptions(progress=None if c.quiet or c.json
                                                    else FitStatus.on_terminal()))
 

@@ -17,11 +17,11 @@ import sys
 import warnings
 
 from kincal import __version__
-from kincal.cli import analyze, calibrate, compensate, demo, evaluate, plan, simulate
+from kincal.cli import analyze, calibrate, compensate, demo, evaluate, fleet, plan, simulate
 from kincal.cli.console import quiet_stdout, say, stdout_to_null
 from kincal.errors import KincalError, KincalNote, KincalWarning
 
-COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo)
+COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo, fleet)
 
 
 def build_parser() -> argparse.ArgumentParser:

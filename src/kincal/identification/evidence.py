@@ -32,7 +32,9 @@ from kincal.identification.solver import triangular_factor
 _SUFFIX_CLASS = {"a": "length", "d": "length", "tx": "length", "ty": "length",
                  "tz": "length", "alpha": "twist", "beta": "twist", "rx": "twist",
                  "ry": "twist", "rz": "twist", "theta": "offset", "backlash": "backlash"}
-CLASSES = ("length", "twist", "offset", "backlash")
+# "fleet": the parameters a fleet prior covers, one scale on the fleet's covariance
+# (kincal.identification.prior); its scale is a multiple of that covariance [1]
+CLASSES = ("length", "twist", "offset", "backlash", "fleet")
 # scales stay within [SCALE_MIN, SCALE_MAX] reporting units (mm or deg): a class the data
 # show at exactly nominal would otherwise drive its scale to 0 only asymptotically
 SCALE_MIN, SCALE_MAX = 1e-7, 1e4
@@ -86,7 +88,8 @@ class EvidenceFit:
         return w
 
     def line(self) -> str:
-        unit = {"length": "mm", "twist": "deg", "offset": "deg", "backlash": ""}
+        unit = {"length": "mm", "twist": "deg", "offset": "deg", "backlash": "",
+                "fleet": "x the fleet's scatter"}
         parts = [f"{c} {s:.3g} {unit[c]}".rstrip() + (" (given)" if g else "")
                  for c, s, g in zip(self.classes, self.scales, self.given)]
         return (f"prior scales {', '.join(parts)}; noise {self.noise_mm:.3g} mm"
@@ -94,7 +97,8 @@ class EvidenceFit:
 
     def as_dict(self) -> dict:
         return {"prior_scales": {c: {"scale": float(s), "unit": "mm" if c == "length" else
-                                     ("deg" if c in ("twist", "offset") else "mm or deg"),
+                                     ("deg" if c in ("twist", "offset") else
+                                      "x fleet" if c == "fleet" else "mm or deg"),
                                      "parameters": int(n), "given": bool(g)}
                                  for c, s, n, g in zip(self.classes, self.scales, self.counts,
                                                        self.given)},
@@ -207,7 +211,7 @@ def maximise(problem: LinearEvidence, n_classes: int, alpha0: np.ndarray, beta0:
 def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.ndarray,
              class_of: tuple[str | None, ...], given_scales: dict[str, float] | None = None,
              given_noise_mm: float | None = None, max_outer: int = 20, rtol: float = 1e-3,
-             step_tol: float = 1e-6):
+             step_tol: float = 1e-6, shape: np.ndarray | None = None):
     """Hyperparameters and fit together: linearise, maximise the evidence, refit, repeat.
 
     fit(weights (p,), u_start) -> SolveSummary: the L2 fit with per-parameter weights.
@@ -219,6 +223,11 @@ def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.
     relinearisations, or when the fit itself no longer moves (no parameter by more than
     ``step_tol`` mm or deg): a class the data show at nominal has its scale shrink toward
     0 round after round while its parameters stay pinned, and nothing else changes.
+    shape: (p, p) the fleet prior's precision (kincal.identification.prior), used for the
+    parameters of class "fleet": their prior is N(0, s^2 shape^-1) with one scale s, so the
+    evidence is taken in whitened coordinates (J times V diag(w)^-1/2 of shape = V diag(w) V^T),
+    and the
+    fit's weight for them, alpha / beta, multiplies that precision (the fit's penalty).
     Returns (SolveSummary of the last fit, EvidenceFit).
     """
     given_scales = given_scales or {}
@@ -234,11 +243,19 @@ def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.
     beta = (1.0 / given_noise_mm ** 2 if given_noise_mm is not None
             else r.size / max(float(r @ r), 1e-300))
     converged = False
+    white = None  # columns of the fleet class: d = L^-T z, z ~ N(0, s^2 I)
+    if shape is not None and "fleet" in present:
+        c = np.flatnonzero(groups == present.index("fleet"))
+        w, V = np.linalg.eigh(shape[np.ix_(idx[c], idx[c])])  # shape = V diag(w) V^T
+        white = (c, V / np.sqrt(np.maximum(w, 1e-12 * max(float(w.max()), 1e-300))))
     for it in range(1, max_outer + 1):
         r, J = linearise(u)
         Jf = J[:, idx]
+        if white is not None:
+            Jf = Jf.copy()
+            Jf[:, white[0]] = Jf[:, white[0]] @ white[1]
         shift = np.where(groups >= 0, (u_prior - u)[idx], 0.0)  # flat: centred where we are
-        y = -(r + Jf @ shift)
+        y = -(r + J[:, idx] @ shift)
         problem = LinearEvidence.of(Jf, y, groups)
         new_alpha, new_beta, h, _ = maximise(problem, n, alpha, beta, fixed_a,
                                              given_noise_mm is not None)

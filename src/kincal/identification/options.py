@@ -75,6 +75,10 @@ class CalibrationOptions:
     blas_threads: BLAS threads while solving (1: faster on a busy machine, see
         kincal.blas_threads); None leaves BLAS as it is.
     progress: callback(done, total) during the CV sweep, or None.
+    prior: a fleet prior (kincal.identification.prior.FleetPrior, from FLEET.json) or None:
+        the penalty on the kinematic parameters is centred on the fleet's mean deviation
+        and shaped by its covariance instead of pulling toward nominal; lam chooses its
+        overall scale as usual ("evidence": one scale on the covariance). Method l2 only.
     shared_planes: the plane and flush sets touch the same physical planes: each plane's
         parameters (``plane.*``, or ``plane<label>.*`` per label of a ``plane`` column) are
         one set, the first such set's, shared by every set with that plane name (the sets'
@@ -110,6 +114,7 @@ class CalibrationOptions:
     blas_threads: int | None = 1
     progress: Callable | None = field(default=None, compare=False, repr=False)
     shared_planes: bool = False
+    prior: object = None
 
     def validated(self) -> "CalibrationOptions":
         """These options checked, with sequences made tuples (``fix=[...]`` works as well as
@@ -165,6 +170,15 @@ class CalibrationOptions:
                                                and o.blas_threads >= 1):
             raise OptionError(f"blas_threads must be an integer >= 1 or None, got "
                               f"{o.blas_threads!r}")
+        if o.prior is not None:
+            from kincal.identification.prior import FleetPrior
+
+            if not isinstance(o.prior, FleetPrior):
+                raise OptionError(f"prior must be a FleetPrior (read_prior('FLEET.json')), got "
+                                  f"{type(o.prior).__name__}")
+            if o.method != "l2":
+                raise OptionError(f"a fleet prior (--prior) shapes the penalty of method l2; "
+                                  f"got method {o.method}")
         if o.backlash and o.method == "frames":
             raise OptionError("backlash terms need method l2 or ls; method frames fits only "
                               "the measurement frame and tool point")

@@ -28,11 +28,12 @@ def prior_classes(problem: CalibrationProblem) -> tuple[str | None, ...]:
     model's class (a joint's zero is an "offset" whatever the model calls it), with a
     prismatic joint's zero, a length, among the lengths (one prior scale per unit)."""
     lay = problem.layout
-    return tuple(None if not pen else
+    fleet = problem.prior.covered if problem.prior is not None else np.zeros(lay.size, bool)
+    return tuple("fleet" if f else None if not pen else
                  "length" if (c == "offset" and is_len) else
                  c if c in evidence.CLASSES else evidence.prior_class(n)
-                 for n, c, pen, is_len in zip(lay.names, lay.classes, lay.is_penalised,
-                                              lay.is_length))
+                 for n, c, pen, is_len, f in zip(lay.names, lay.classes, lay.is_penalised,
+                                                 lay.is_length, fleet))
 
 
 def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.EvidenceFit]:
@@ -49,7 +50,7 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
     return evidence.estimate(
         lambda w, u: problem.fit(w, start=u * problem.scale, free=free, residual=residual),
         lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,
-        o.noise_mm)
+        o.noise_mm, shape=None if problem.prior is None else problem.prior.precision)
 
 
 def _tool_start(problem: CalibrationProblem) -> np.ndarray:

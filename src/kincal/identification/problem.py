@@ -29,6 +29,7 @@ from kincal import models as error_models
 from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
                            ParameterError, listing, suggest)
 from kincal.identification import blas_threads, model_choice, penalty_choice
+from kincal.identification import prior as fleet_prior
 from kincal.identification.chains import Chains
 from kincal.identification.cross_validation import (CrossValidation, cross_validate,
                                                     fold_fitter, lambda_grid)
@@ -87,7 +88,7 @@ class CalibrationProblem:
         if not self._unfixed().any():
             raise OptionError(f"nothing to fit: every parameter method {o.method} fits is fixed; "
                               "leave at least one free (fix fewer names)")
-        self.n_poses = 0
+        self.n_poses, self.prior = 0, None if o.prior is None else fleet_prior.bind(o.prior, self)
         for km in self.kinds:
             n = len(np.unique(km.data.poses))
             self.n_poses += n
@@ -238,8 +239,8 @@ class CalibrationProblem:
         if self._x_start is not None:
             return self._x_start
         o, lay = self.options, self.layout
-        x = self.x_nominal
-        nominal = self.error_model.nominal
+        x = self.x_nominal if self.prior is None else self.prior.centre.copy()
+        nominal = self.layout.kinematic(x)  # a fleet prior starts from the fleet mean
         for i, km in enumerate(self.kinds):
             self._unit_warnings(km)
             fs, own = lay.frame_slices[i], np.array(lay.own(i), dtype=bool)
@@ -382,7 +383,7 @@ class CalibrationProblem:
             mask[lay.indices(kept)] = True
         if self.options.free:
             mask[lay.indices(self.options.free)] = True
-        return mask
+        return mask if self.prior is None else mask | self.prior.covered
 
     # ------------------------------------------------------------------- fits
     def fit(self, lam, rows=None, start: np.ndarray | None = None,
@@ -393,7 +394,8 @@ class CalibrationProblem:
         x0 = self.start() if start is None else start
         free = self.free_mask() if free is None else free
         residual = self.residual_function(rows) if residual is None else residual
-        return solve(residual, x0 / self.scale, free, lam=lam,
+        return solve(residual, x0 / self.scale, free,
+                     lam=lam if self.prior is None else self.prior.penalty(lam),
                      penalised=self.layout.is_penalised, prior=self.start() / self.scale,
                      options=options or self.options.solver)
 
@@ -485,8 +487,7 @@ class CalibrationProblem:
                                          downweighted)
         return replace(result, plausibility=judge(gather(self, result)))  # the gate's verdict
 
-def calibrate(robot: Robot, data, options: CalibrationOptions | None = None,
-              **overrides):
+def calibrate(robot: Robot, data, options: CalibrationOptions | None = None, **overrides):
     """Build, analyse and solve in one call: ``data`` is one measurement set (points,
     poses, distances, plane contacts) or a list of them; keyword arguments override
     ``options`` fields."""

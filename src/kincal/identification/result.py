@@ -100,7 +100,10 @@ def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam,
     (p, p) covariance [SI] (zero rows and columns for the parameters held fixed), or None
     when it cannot be estimated. lam: one weight, or (p,) weights per parameter."""
     J = sol.jacobian[:, free]
-    H = J.T @ J + np.diag((np.broadcast_to(lam, penalised.shape) * penalised)[free])
+    if np.ndim(lam) == 2:  # a fleet prior's penalty matrix
+        H = J.T @ J + np.asarray(lam)[np.ix_(free, free)]
+    else:
+        H = J.T @ J + np.diag((np.broadcast_to(lam, penalised.shape) * penalised)[free])
     out = np.full(scale.size, np.nan)
     try:
         Hi = np.linalg.inv(H)
@@ -170,7 +173,8 @@ class CalibrationResult:
         lay = problem.layout
         x = sol.u * problem.scale
         free = problem.free_mask()
-        se, covariance = _std_errors(sol, free, lay.is_penalised, lam, problem.scale)
+        se, covariance = _std_errors(sol, free, lay.is_penalised, lam if problem.prior is None
+                                     else problem.prior.penalty(lam), problem.scale)
         fixed = set(ident.fixed)
         x_start = problem.start()
         x_nom = problem.x_nominal

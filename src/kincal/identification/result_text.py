@@ -32,6 +32,9 @@ def header(result: CalibrationResult) -> list[str]:
     return [f"kincal calibration of {r.robot.name} ({chains}), {sets}"
             f"method {r.options.method}, {how}{cv}",
             *([f"  penalty: {r.penalty_choice}"] if r.penalty_choice else []),
+            *([f"  fleet prior: {r.options.prior.n_units} units ({r.options.prior.method}); "
+               "the kinematic penalty is centred on the fleet mean, shaped by its covariance"]
+              if r.options.prior is not None else []),
             *([f"  {ev.line()}" + ("" if ev.converged
                                     else f" [NOT SETTLED in {ev.iterations} rounds]")]
               if ev is not None else [])]

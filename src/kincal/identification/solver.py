@@ -137,20 +137,34 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         either sign convention works as long as J = dr/du).
     penalised: (p,) bool, parameters pulled toward ``prior`` with weight lam.
     lam: one weight for every penalised parameter, or (p,) weights, one per parameter
-        (per-class priors, kincal.identification.evidence; entries off ``penalised`` unused).
+        (per-class priors, kincal.identification.evidence; entries off ``penalised`` unused),
+        or a (p, p) symmetric positive semidefinite matrix Lam: the penalty
+        (u - prior)^T Lam (u - prior) over the penalised parameters (a fleet prior,
+        kincal.identification.prior); its entries between free and fixed parameters must
+        be zero (the fixed ones' offsets would otherwise pull the free ones).
     """
     p = u0.size
     free_idx = np.flatnonzero(free)
     pen = np.zeros(p, dtype=bool) if penalised is None else np.asarray(penalised, dtype=bool)
     prior = u0.copy() if prior is None else np.asarray(prior, dtype=float)
     pen_f = pen[free_idx]
-    lam_p = np.broadcast_to(np.asarray(lam, dtype=float), (p,))
-    sq_f = np.sqrt(np.maximum(lam_p[free_idx][pen_f], 0.0))  # per penalised free parameter
+    if np.ndim(lam) == 2:  # a matrix (a fleet prior's precision): its root on the free rows
+        Lam = np.asarray(lam, dtype=float)
+        fp = free_idx[pen_f]
+        w, V = np.linalg.eigh(Lam[np.ix_(fp, fp)])
+        root = np.sqrt(np.maximum(w, 0.0))[:, None] * V.T  # root^T root = Lam_ff
+        lam_p = np.zeros(p)
+    else:
+        lam_p = np.broadcast_to(np.asarray(lam, dtype=float), (p,))
+        root = np.diag(np.sqrt(np.maximum(lam_p[free_idx][pen_f], 0.0)))
+    sq_f = np.diag(root) if np.ndim(lam) != 2 else np.ones(root.shape[0])
 
     def objective(u, r):
         d = (u - prior)[pen]
         if np.ndim(lam) == 0:  # the paper's single weight: the original arithmetic
             return float(r @ r), float(lam * (d @ d))
+        if np.ndim(lam) == 2:
+            return float(r @ r), float(d @ Lam[np.ix_(pen, pen)] @ d)
         return float(r @ r), float(lam_p[pen] @ (d * d))
 
     u = u0.astype(float).copy()
@@ -173,11 +187,11 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         k = free_idx.size
         rows, rhs = [Rz[:k, :k]], [Rz[:k, k]]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
-        if np.any(sq_f > 0):
+        if np.any(sq_f > 0) and root.size:
             P = np.zeros((pen_f.sum(), free_idx.size))
-            P[np.arange(pen_f.sum()), np.flatnonzero(pen_f)] = sq_f
+            P[:, np.flatnonzero(pen_f)] = root
             rows.append(P)
-            rhs.append(-sq_f * (u - prior)[free_idx][pen_f])
+            rhs.append(-root @ (u - prior)[free_idx][pen_f])
         A0, b0 = np.vstack(rows), np.concatenate(rhs)
         colnorm2 = np.maximum(np.einsum("ij,ij->j", A0, A0), 1e-30)
         if options.rule == "relative":

@@ -1,0 +1,148 @@
+"""``kincal fleet``: calibrate every unit of a fleet of one robot model on a distributed
+engine (Dask), write each unit's outputs under DIR/<unit>/, the fleet summary and the fleet
+prior DIR/FLEET.json (:mod:`kincal.fleet`)."""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from kincal.cli.options import Chain, Inputs, add_common, add_model, add_overwrite, group, typed
+from kincal.errors import OptionError
+
+SUMMARY_JSON, SUMMARY_HTML, PRIOR = "FLEET_SUMMARY.json", "fleet.html", "FLEET.json"
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("fleet", help="calibrate every unit of a fleet of one robot model "
+                              "and learn the fleet prior (FLEET.json)")
+    add_common(p, data=False)
+    from kincal.cli.options import add_joint_columns, add_units
+
+    group(p, "inputs").add_argument("data", nargs="+", metavar="DATA.csv",
+                                    help="one data file per unit (the unit is named after the "
+                                         "file)")
+    add_units(p)
+    add_joint_columns(p)
+    add_model(p)
+    g = group(p, "model and penalty")
+    g.add_argument("--lambda", dest="lam", default="evidence",
+                   help="as in kincal calibrate: 'evidence' (default here: what a unit's data "
+                        "cannot see stays at nominal instead of drifting into the prior), "
+                        "'auto', 'cv' or a value >= 0")
+    g.add_argument("--fix", nargs="+", default=[], metavar="NAME",
+                   help="parameters held nominal in every unit (names or quoted patterns)")
+    g.add_argument("--hierarchical", type=int, default=0, metavar="ROUNDS",
+                   help="learn the prior by this many rounds of the hierarchical fit "
+                        "(empirical Bayes over the units' data jointly; for fleets measured "
+                        "in small volumes); 0 (default): each unit alone")
+    e = group(p, "engine")
+    e.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="worker processes of the local Dask cluster (default 1)")
+    e.add_argument("--scheduler", metavar="ADDRESS",
+                   help="a running Dask scheduler (tcp://host:8786) instead of a local cluster")
+    o = group(p, "outputs")
+    o.add_argument("--out-dir", required=True, metavar="DIR",
+                   help="DIR/<unit>/ (corrected.urdf, FRAMES.json, REPORT.json), "
+                        "DIR/FLEET.json, DIR/FLEET_SUMMARY.json, DIR/fleet.html")
+    add_overwrite(p)
+    r = group(p, "the plausibility gate and the console")
+    r.add_argument("--accept-implausible", action="store_true",
+                   help="write a unit even if the gate finds its result implausible")
+    r.add_argument("--accept-unconverged", action="store_true",
+                   help="write a unit even if its solver did not converge")
+    r.add_argument("--quiet", action="store_true")
+    p.set_defaults(run=run)
+
+
+@dataclass(frozen=True)
+class Fleet:
+    """The options of ``kincal fleet``, typed."""
+
+    chain: Chain
+    inputs: Inputs  # the reading options (files: every unit's file)
+    model: str | None
+    lam: str
+    fix: tuple[str, ...]
+    hierarchical: int
+    workers: int
+    scheduler: str | None
+    out_dir: str
+    overwrite: bool
+    accept_implausible: bool
+    accept_unconverged: bool
+    quiet: bool
+
+
+def unit_names(files) -> list[str]:
+    """Each file's unit name: its stem, made unique with its position when stems repeat."""
+    stems = [Path(f).stem for f in files]
+    return [s if stems.count(s) == 1 else f"{s}-{i + 1}" for i, s in enumerate(stems)]
+
+
+def run(args) -> int:
+    from kincal.cli.console import say
+    from kincal.export.safe_write import check_outputs, write_all
+    from kincal.fleet import UnitJob, calibrate_fleet
+    from kincal.fleet.unit import STAGING
+    from kincal.identification.options import CalibrationOptions
+
+    inputs = typed(Inputs, args, files=tuple(args.data))
+    c = typed(Fleet, args, chain=Chain.of(args), inputs=inputs)
+    if c.workers < 1:
+        raise OptionError(f"--workers must be >= 1, got {c.workers}")
+    if c.hierarchical < 0:
+        raise OptionError(f"--hierarchical must be >= 0 rounds, got {c.hierarchical}")
+    lam = c.lam
+    if lam not in ("auto", "cv", "evidence"):
+        try:
+            lam = float(lam)
+        except ValueError:
+            raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
+                              f"{lam!r}") from None
+    options = CalibrationOptions(model=c.model, lam=lam, fix=c.fix,
+                                 tool_guess=inputs.tool_guess).validated()
+    robot = c.chain.load()  # a bad robot or chain: one line, before any worker starts
+    out = Path(c.out_dir)
+    names = unit_names(inputs.files)
+    fixed = [out / n for n in (PRIOR, SUMMARY_JSON, SUMMARY_HTML)]
+    check_outputs(fixed, overwrite=c.overwrite, protect=inputs.files, dirs=[out])
+    taken = [n for n in names if (out / n).exists()]
+    if taken and not c.overwrite:
+        raise OptionError(f"{out}: unit folders exist ({', '.join(taken[:5])}); give "
+                          "--overwrite to replace them")
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = [UnitJob(n, f, c.chain.load, replace(inputs, files=(f,)).read_sets, options,
+                    str(out), c.accept_implausible, c.accept_unconverged, c.overwrite)
+            for n, f in zip(names, inputs.files)]
+
+    def progress(done, total, outcome):
+        if not c.quiet:
+            print(f"  unit {done}/{total}: {outcome.name} {outcome.status}", file=sys.stderr,
+                  flush=True)
+
+    try:
+        summary = calibrate_fleet(robot, jobs, c.workers, c.scheduler, c.hierarchical,
+                                  progress)
+    except KeyboardInterrupt:  # finished units stay; no staging folder is left behind
+        for stage in out.glob(f"{STAGING}*"):
+            shutil.rmtree(stage, ignore_errors=True)
+        raise
+    files = [(out / SUMMARY_JSON, _json(summary.as_dict())), (out / SUMMARY_HTML, summary.html())]
+    if summary.prior is not None:
+        files.append((out / PRIOR, summary.prior.dumps()))
+    lines = [] if c.quiet else [summary.table()]
+    write_all(files, overwrite=c.overwrite, protect=inputs.files,
+              before_commit=lambda written: say(lines + [f"  wrote {p}" for p in written]))
+    if summary.prior is None:
+        raise OptionError(f"fewer than 2 of the {len(jobs)} units were calibrated: no fleet "
+                          f"prior written (see {out / SUMMARY_JSON})")
+    return 0
+
+
+def _json(d) -> str:
+    import json
+
+    return json.dumps(d, indent=1) + "\n"

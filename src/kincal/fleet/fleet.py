@@ -1,0 +1,84 @@
+"""A fleet's calibration: every unit through the one calibration path on the distributed
+engine, the fleet prior learned from them, optionally by a hierarchical fit.
+
+Per unit (rounds=0): each unit is calibrated alone (its own data, the usual pull toward
+nominal); the prior is the mean and the covariance (shrunk toward diagonal) of their
+estimated deviations. Right when every unit is measured widely (a tracker): each estimate
+is then close to the unit's truth.
+
+Hierarchical (rounds=N > 0), for fleets measured only in small volumes, where each unit
+alone identifies only part of its parameters and the per-unit estimates are pulled toward
+nominal where its data are blind: an empirical-Bayes (EM-like) iteration over the units'
+data jointly. Round 0 calibrates each unit alone and learns a first prior; each further
+round calibrates every unit with the current prior (its penalty centred on the fleet mean,
+shaped by the fleet covariance) and re-estimates the prior from the units' posteriors:
+mean = the mean of the posterior means, covariance = the shrunk scatter of the posterior
+means + the mean posterior covariance (the EM update of a Gaussian hierarchical model,
+which credits the uncertainty each unit leaves). What it assumes: the units are
+independent draws from one Gaussian over the kinematic deviations (no unit-specific
+structure, no outlier mixture); each unit's posterior is Gaussian at its linearisation
+(the sandwich covariance of its fit); the units' measurement frames and tool points are
+nuisance parameters of each unit (flat prior); the fleet's blind directions (a parameter no
+unit's data see) stay at their start, and the prior carries no information there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Callable
+
+import numpy as np
+
+from kincal.fleet import engine
+from kincal.fleet.summary import FleetSummary
+from kincal.fleet.unit import UnitJob, UnitOutcome, calibrate_unit
+from kincal.identification.prior import FleetPrior
+
+
+def learn_prior(robot, outcomes, method: str = "per-unit", with_covariances: bool = False
+                ) -> FleetPrior | None:
+    """The prior of the calibrated outcomes (None with fewer than 2). with_covariances:
+    add the units' mean posterior covariance to the scatter (the hierarchical update)."""
+    ok = [u for u in outcomes if u.status == "calibrated"]
+    if len(ok) < 2:
+        return None
+    extra = None
+    if with_covariances:
+        covs = [u.covariance for u in ok if u.covariance is not None]
+        extra = np.mean(covs, axis=0) if covs else None
+    return FleetPrior.estimate(robot, ok[0].model, ok[0].names, ok[0].is_length,
+                               np.array([u.deviation for u in ok]), [u.name for u in ok],
+                               method, extra)
+
+
+def calibrate_fleet(robot, jobs: list[UnitJob], workers: int = 1, scheduler: str | None = None,
+                    rounds: int = 0, progress: Callable | None = None) -> FleetSummary:
+    """Every job on the engine; the summary with the prior. The outputs are written by the
+    last round only (its jobs' out_dir); earlier rounds of the hierarchical fit write
+    nothing. progress(done, total, outcome) after each unit (total counts every round)."""
+    total, done = len(jobs) * (rounds + 1), [0]
+    prior, outcomes = None, []
+    for r in range(rounds + 1):
+        last = r == rounds
+        round_jobs = [replace(j, options=replace(j.options, prior=prior),
+                              out_dir=j.out_dir if last else None) for j in jobs]
+        got: dict[str, UnitOutcome] = {}
+
+        def finished(outcome, got=got):
+            got[outcome.name] = outcome
+            done[0] += 1
+            if progress is not None:
+                progress(done[0], total, outcome)
+
+        def crashed(job, exc, finished=finished):
+            finished(UnitOutcome(job.name, job.source, "failed",
+                                 f"internal error: {type(exc).__name__}: {exc}"))
+
+        engine.run(calibrate_unit, round_jobs, finished, workers, scheduler, crashed)
+        outcomes = [got[j.name] for j in jobs]
+        if not last or rounds == 0:
+            prior = learn_prior(robot, outcomes, "hierarchical" if r else "per-unit",
+                                with_covariances=r > 0)
+    if rounds:
+        prior = learn_prior(robot, outcomes, "hierarchical", with_covariances=True)
+    return FleetSummary.of(outcomes, prior, rounds)

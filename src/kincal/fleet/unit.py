@@ -1,0 +1,149 @@
+"""One unit of a fleet: calibrate one data file through the one calibration path and write
+its outputs through the one writer, all or none, under DIR/<unit>/.
+
+:func:`calibrate_unit` runs on a worker of the distributed engine (:mod:`kincal.fleet.engine`):
+a :class:`UnitJob` and a :class:`UnitOutcome` are plain picklable values. A unit whose file is
+bad, whose calibration fails or whose result the gate refuses comes back as an outcome with
+that status and its one-line reason; it never raises (the fleet goes on).
+
+All or none per unit: the writer writes into a hidden staging folder ``DIR/.partial-<unit>``,
+which then takes the unit's name in one rename; an interrupted run leaves no ``DIR/<unit>``
+half written (the staging folders of an interrupted run are removed by the command).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import warnings
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from kincal.errors import ImplausibleResultError, KincalError, KincalWarning, NotConvergedError
+
+STAGING = ".partial-"
+URDF, FRAMES, REPORT = "corrected.urdf", "FRAMES.json", "REPORT.json"
+
+
+@dataclass(frozen=True)
+class UnitJob:
+    """One unit's calibration. name: the unit (its folder under out_dir). source: its data
+    file. load: () -> Robot (the chain; cached per worker). read: (Robot) -> [measurement
+    set] (the command's own reader, so a unit reads its file as ``kincal calibrate`` does).
+    options: the CalibrationOptions (no callbacks: they do not travel to workers).
+    out_dir: the fleet's folder, or None to write nothing (a round of the hierarchical fit).
+    accept_implausible / accept_unconverged: the gate's overrides. overwrite: replace an
+    existing DIR/<unit>."""
+
+    name: str
+    source: str
+    load: Callable
+    read: Callable
+    options: object
+    out_dir: str | None
+    accept_implausible: bool = False
+    accept_unconverged: bool = False
+    overwrite: bool = False
+
+
+@dataclass(frozen=True)
+class UnitOutcome:
+    """What came back of one unit.
+
+    status: "calibrated", "refused" (the gate refused the result: nothing written) or
+    "failed" (a bad file or option, or a calibration that could not be made). message: the
+    reason, one line ("" when calibrated). model / names / is_length: the error model and
+    its kinematic parameters; deviation: (k,) estimate - nominal [SI]; covariance: (k, k)
+    kinematic block of the result's covariance [SI] (None if not estimated); identified:
+    (k,) which the unit's fit moved. before_mm / after_mm: mean error before and after [mm].
+    written: the unit's files. warnings: its warnings, one line each.
+    """
+
+    name: str
+    source: str
+    status: str
+    message: str = ""
+    model: str = ""
+    names: tuple[str, ...] = ()
+    is_length: tuple[bool, ...] = ()
+    deviation: np.ndarray | None = None
+    covariance: np.ndarray | None = None
+    identified: np.ndarray | None = None
+    before_mm: float = float("nan")
+    after_mm: float = float("nan")
+    written: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+@lru_cache(maxsize=4)
+def _robot(load):
+    return load()
+
+
+def calibrate_unit(job: UnitJob) -> UnitOutcome:
+    """Calibrate and write one unit; every KincalError becomes the outcome's status."""
+    from kincal.export.outputs import gate
+    from kincal.identification.problem import CalibrationProblem
+
+    seen: list[str] = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", KincalWarning)
+            robot = _robot(job.load)
+            result = CalibrationProblem(robot, job.read(robot), job.options).solve()
+            gate(result, job.accept_implausible, job.accept_unconverged)  # refused: raises
+        seen = [str(w.message) for w in caught if issubclass(w.category, KincalWarning)]
+        k = result.layout.n_kinematic
+        cov = None if result.covariance is None else np.array(result.covariance[:k, :k])
+        out = UnitOutcome(job.name, job.source, "calibrated", "", result.chains.model_name, tuple(result.layout.kinematic_names),
+                          tuple(bool(v) for v in result.layout.is_length[:k]),
+                          np.array(result.x[:k] - result.x_nominal[:k]), cov,
+                          np.array([p.status == "identified" for p in result.parameters[:k]]),
+                          float(result.before.mean), float(result.after.mean), (), tuple(seen))
+        if job.out_dir is not None:
+            out = replace(out, written=_write(job, result))
+        return out
+    except (ImplausibleResultError, NotConvergedError) as e:
+        return UnitOutcome(job.name, job.source, "refused", _line(e), warnings=tuple(seen))
+    except KincalError as e:
+        return UnitOutcome(job.name, job.source, "failed", _line(e), warnings=tuple(seen))
+
+
+def _line(e: BaseException) -> str:
+    return " ".join(str(e).split())
+
+
+def _write(job: UnitJob, result) -> tuple[str, ...]:
+    """The unit's files through the one writer into the staging folder, then one rename."""
+    from kincal.export.outputs import Outputs, write_calibration
+
+    final = Path(job.out_dir) / job.name
+    stage = Path(job.out_dir) / f"{STAGING}{job.name}"
+    if stage.exists():
+        shutil.rmtree(stage)
+    stage.mkdir(parents=True)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", KincalWarning)  # collected in the outcome
+            write_calibration(result, Outputs(urdf=stage / URDF, frames=stage / FRAMES,
+                                              report=stage / REPORT, protect=(job.source,)),
+                              accept_implausible=job.accept_implausible,
+                              accept_unconverged=job.accept_unconverged,
+                              data_source=job.source)
+        old = None
+        if final.exists():
+            if not job.overwrite:
+                raise KincalError(f"{final} exists; give --overwrite to replace it")
+            old = final.with_name(f"{STAGING}old-{job.name}")
+            os.replace(final, old)
+        os.replace(stage, final)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    finally:
+        if stage.exists():
+            shutil.rmtree(stage, ignore_errors=True)
+    return tuple(str(final / n) for n in (URDF, FRAMES, REPORT))

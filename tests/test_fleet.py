@@ -1,0 +1,193 @@
+"""Fleets: the prior in the penalty (API and --prior), FLEET.json's checks, and kincal fleet
+on a local Dask cluster (units all-or-none, a bad unit reported, the prior written)."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from kincal.cli import main
+from kincal.errors import KincalWarning, OptionError, PriorError
+from kincal.fleet.simulated import FleetModel
+from kincal.identification.options import CalibrationOptions
+from kincal.identification.prior import FleetPrior, shrink_to_diagonal
+from kincal.identification.problem import CalibrationProblem
+from kincal.identification.solver import solve
+from kincal.robot import Robot
+
+distributed = pytest.importorskip(
+    "distributed", reason='kincal fleet needs Dask distributed: pip install "kincal[fleet]"')
+
+
+@pytest.fixture(scope="module")
+def fleet_files(tmp_path_factory):
+    """4 tracker units (u01..u04), a bad file, and a new unit by R-test (new.csv)."""
+    d = tmp_path_factory.mktemp("fleet")
+    robot = Robot.load("ec66", tip="flange")
+    fm = FleetModel.of(robot, 0)
+    rng = np.random.default_rng(1)
+    for u in range(4):
+        (d / f"u{u + 1:02d}.csv").write_text(fm.tracker(fm.unit(rng), rng, n=30).to_csv_text())
+    (d / "new.csv").write_text(fm.rtest(fm.unit(rng), rng, n=30).to_csv_text())
+    (d / "bad.csv").write_text("joint_1,x\n1,2\n")
+    return d
+
+
+@pytest.fixture(scope="module")
+def fleet_dir(fleet_files):
+    out = fleet_files / "D"
+    files = [str(fleet_files / f"u{u:02d}.csv") for u in range(1, 5)] + [
+        str(fleet_files / "bad.csv")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert main(["fleet", "ec66", *files, "--tip", "flange", "--tool-offset", "0", "0",
+                     "0.045", "--out-dir", str(out), "--workers", "2", "--quiet"]) == 0
+    return out
+
+
+def test_fleet_writes_units_prior_and_summary(fleet_dir):
+    for u in ("u01", "u02", "u03", "u04"):
+        assert sorted(p.name for p in (fleet_dir / u).iterdir()) == [
+            "FRAMES.json", "REPORT.json", "corrected.urdf"]
+    assert not (fleet_dir / "bad").exists()  # a bad unit writes nothing ...
+    assert not list(fleet_dir.glob(".partial-*"))
+    summary = json.loads((fleet_dir / "FLEET_SUMMARY.json").read_text())
+    status = {u["name"]: u["status"] for u in summary["units"]}
+    assert status == {"u01": "calibrated", "u02": "calibrated", "u03": "calibrated",
+                      "u04": "calibrated", "bad": "failed"}  # ... and is reported
+    assert "missing column" in [u for u in summary["units"] if u["name"] == "bad"][0]["message"]
+    prior = FleetPrior.read(fleet_dir / "FLEET.json")
+    assert prior.n_units == 4 and prior.model == "complete"
+    assert prior.covariance.shape == (len(prior.names),) * 2
+    assert "<img" in (fleet_dir / "fleet.html").read_text()
+    # the tool is not in the prior: only the kinematic parameters
+    assert not any(n.startswith(("tool", "base")) for n in prior.names)
+
+
+def test_calibrate_with_prior_and_another_tool(fleet_files, fleet_dir, capsys):
+    out = fleet_files / "new.urdf"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert main(["calibrate", "ec66", str(fleet_files / "new.csv"), "--tip", "flange",
+                     "--tool-offset", "0", "0", "0.11", "--prior", str(fleet_dir / "FLEET.json"),
+                     "--out", str(out)]) == 0
+    assert out.exists()
+    assert "fleet" in capsys.readouterr().out  # the evidence's fleet class
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--model", "mdh"], "error model complete"),
+    (["--tip", "link_6"], "another robot or chain"),
+    (["--method", "ls"], "method l2"),
+])
+def test_a_prior_of_another_chain_or_model_is_refused(fleet_files, fleet_dir, capsys, extra,
+                                                      words):
+    argv = ["calibrate", "ec66", str(fleet_files / "new.csv"), "--tip", "flange",
+            "--prior", str(fleet_dir / "FLEET.json"), "--out", str(fleet_files / "x.urdf")]
+    i = argv.index("--tip")
+    if extra[0] == "--tip":
+        argv[i + 1] = extra[1]
+    else:
+        argv += extra
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("kincal: error:") and words in err[-1]
+    assert not (fleet_files / "x.urdf").exists()
+
+
+def test_a_malformed_prior_is_refused(tmp_path, fleet_dir):
+    d = json.loads((fleet_dir / "FLEET.json").read_text())
+    d["covariance"] = d["covariance"][:-1]
+    bad = tmp_path / "F.json"
+    bad.write_text(json.dumps(d))
+    with pytest.raises(PriorError, match="covariance"):
+        FleetPrior.read(bad)
+    with pytest.raises(PriorError, match="not a fleet prior"):
+        (tmp_path / "G.json").write_text("[]")
+        FleetPrior.read(tmp_path / "G.json")
+
+
+def test_prior_option_needs_a_fleet_prior():
+    with pytest.raises(OptionError, match="FleetPrior"):
+        CalibrationOptions(prior="FLEET.json").validated()
+
+
+def test_matrix_penalty_matches_the_closed_form():
+    """A linear problem: (J^T J + Lam) d = J^T y + Lam m, the solver's answer with a
+    matrix penalty (a fleet prior's precision) centred on m."""
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(12, 4))
+    y = rng.normal(size=12)
+    A = rng.normal(size=(4, 4))
+    Lam = A @ A.T + 0.1 * np.eye(4)
+    m = rng.normal(size=4)
+    residual = lambda u, jac: (J @ u - y, J if jac else None)  # noqa: E731
+    sol = solve(residual, np.zeros(4), np.ones(4, bool), lam=Lam,
+                penalised=np.ones(4, bool), prior=m)
+    expected = np.linalg.solve(J.T @ J + Lam, J.T @ y + Lam @ m)
+    assert np.allclose(sol.u, expected, atol=1e-9)
+
+
+def test_shrinkage_keeps_variances_and_shrinks_correlations():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(6, 5))
+    S, lam = shrink_to_diagonal(X)
+    assert np.allclose(np.diag(S), X.var(axis=0, ddof=1))
+    assert 0 <= lam <= 1
+    C = np.cov(X.T)
+    off = ~np.eye(5, dtype=bool)
+    assert np.allclose(S[off], (1 - lam) * C[off])
+
+
+def test_prior_pulls_toward_the_fleet_mean_where_data_are_blind():
+    """With a prior whose mean is a planted deviation and a tight covariance, the R-test
+    fit (lambda 1: the prior as given, 0.01 mm per a) ends near the fleet mean on those
+    parameters; without it, elsewhere."""
+    robot = Robot.load("ec66", tip="flange")
+    fm = FleetModel.of(robot, 2)
+    rng = np.random.default_rng(2)
+    table = fm.model.nominal + fm.systematic
+    data = fm.rtest(table, rng, n=30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        p = CalibrationProblem(robot, data, CalibrationOptions(tool_guess=(0, 0, 0.11)))
+        plain = p.solve()
+        k = p.layout.n_kinematic
+        units = np.array([plain.x[:k] - plain.x_nominal[:k]] * 2)
+        mean = np.zeros(k)
+        moved = np.array([p.layout.kinematic_names[i].endswith(".a") for i in range(k)])
+        mean[moved] = 2e-4  # 0.2 mm on every a
+        prior = FleetPrior.estimate(robot, p.model_name, p.layout.kinematic_names,
+                                    p.layout.is_length[:k], units, ["a", "b"])
+        prior = FleetPrior(prior.robot, prior.robot_hash, prior.model, prior.names,
+                           prior.is_length, mean, np.diag(np.where(moved, 1e-10, 0.0)),
+                           prior.units, 1.0)
+        fitted = CalibrationProblem(robot, data, CalibrationOptions(
+            tool_guess=(0, 0, 0.11), prior=prior, lam=1.0)).solve()
+    dev = fitted.x[:k] - fitted.x_nominal[:k]
+    assert np.allclose(dev[moved], 2e-4, atol=5e-5)
+    assert np.max(np.abs((plain.x[:k] - plain.x_nominal[:k])[moved] - 2e-4)) > 5e-5
+
+
+def test_hierarchical_rounds_write_once_and_learn_a_hierarchical_prior(fleet_files, capsys):
+    out = fleet_files / "H"
+    files = [str(fleet_files / f"u{u:02d}.csv") for u in range(1, 4)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert main(["fleet", "ec66", *files, "--tip", "flange", "--tool-offset", "0", "0",
+                     "0.045", "--out-dir", str(out), "--hierarchical", "1"]) == 0
+    captured = capsys.readouterr()
+    assert "unit 6/6" in captured.err  # progress counts the units of both rounds
+    assert "1 rounds of the hierarchical fit" in captured.out
+    prior = FleetPrior.read(out / "FLEET.json")
+    assert prior.method == "hierarchical" and prior.n_units == 3
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["u01", "u02", "u03"]
+
+
+def test_existing_unit_folders_need_overwrite(fleet_files, fleet_dir, capsys):
+    assert main(["fleet", "ec66", str(fleet_files / "u01.csv"), str(fleet_files / "u02.csv"),
+                 "--tip", "flange", "--out-dir", str(fleet_dir)]) == 1
+    assert "kincal: error:" in capsys.readouterr().err
