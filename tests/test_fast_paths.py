@@ -124,3 +124,17 @@ def test_chain_without_cached_motions_is_the_same(monkeypatch):
     assert fresh._motion is None
     state = fresh.state(x)
     assert np.array_equal(state.p_tip, cached.p_tip) and np.array_equal(state.R_tip, cached.R_tip)
+
+
+def test_rodrigues_is_the_old_sum_to_the_bit():
+    """The rotations with fewer temporaries are c I + s K + (1 - c) w w^T exactly."""
+    from kincal.models.chain import rodrigues
+
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        w = rng.normal(size=3)
+        w /= np.linalg.norm(w)
+        q = np.concatenate([[0.0, np.pi, -np.pi / 2], rng.uniform(-7, 7, 500)])
+        c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
+        K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+        assert np.array_equal(rodrigues(w, q), c * np.eye(3) + s * K + (1.0 - c) * np.outer(w, w))

@@ -22,9 +22,14 @@ from kincal.models.base import ErrorModel
 
 def rodrigues(w: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(N, 3, 3) rotations by angles q (N,) about the unit axis w (3,)."""
-    c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
+    c = np.cos(q)
     K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    return c * np.eye(3) + s * K + (1.0 - c) * np.outer(w, w)
+    # s K + (1 - c) w w^T, then c on the diagonal: the same sums as c I + s K + (1 - c) w w^T
+    # (adding the zeros changes no bit) with two (N, 3, 3) arrays made instead of six
+    R = np.multiply.outer(np.sin(q), K)
+    R += np.multiply.outer(1.0 - c, np.outer(w, w))
+    R[:, [0, 1, 2], [0, 1, 2]] += c[:, None]
+    return R
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
