@@ -17,6 +17,8 @@ EC66, tracker-like poses in a 400 mm cube (and an R-test-like 20 mm cube for the
   (targets 0.3 s and 0.8 s; --cli-only runs just these).
 
 Usage: python scripts/bench_identification.py [--repeats 5] [--no-busy] [--cli-only] [--no-200k]
+       python scripts/bench_identification.py --issue20 [--large]   (issue 20's table: CPU
+       time, minimum of repeats, each row next to numpy's least-squares solve of its size)
 """
 
 from __future__ import annotations
@@ -91,17 +93,145 @@ def _cli_times(data, repeats):
     return out
 
 
+# ---------------------------------------------------------------- issue 20's table
+def _cpu_min(fn, repeats):
+    """Minimum CPU time [s] of fn() over repeats (a shared machine disturbs it least)."""
+    best = float("inf")
+    for _ in range(repeats):
+        c = time.process_time()
+        fn()
+        best = min(best, time.process_time() - c)
+    return best
+
+
+def _child(cmd, repeats=1):
+    """(min CPU [s] of the child, its peak resident memory [MiB]) of a new process."""
+    import resource
+
+    best, peak = float("inf"), 0.0
+    for _ in range(repeats):
+        before = os.times()
+        out = subprocess.run(["/usr/bin/time", "-f", "%M", *cmd], capture_output=True,
+                             text=True, check=True) if shutil.which("time") else \
+            subprocess.run(cmd, capture_output=True, text=True, check=True)
+        after = os.times()
+        best = min(best, after.children_user - before.children_user
+                   + after.children_system - before.children_system)
+        last = out.stderr.strip().splitlines()[-1] if out.stderr.strip() else ""
+        peak = max(peak, float(last) / 1024 if last.isdigit() else
+                   resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)
+    return best, peak
+
+
+def _floor(m, p, repeats):
+    """CPU [s] of numpy's least-squares solve of an (m, p) system: the raw-numpy floor."""
+    rng = np.random.default_rng(0)
+    A, b = rng.normal(size=(m, p)), rng.normal(size=m)
+    return _cpu_min(lambda: np.linalg.lstsq(A, b, rcond=None), repeats)
+
+
+def _fit_cpu_and_peak(robot, data, repeats):
+    opts = CalibrationOptions(method="ls")
+    cpu = _cpu_min(lambda: CalibrationProblem(robot, data, opts).solve(), repeats)
+    tracemalloc.start()
+    res = CalibrationProblem(robot, data, opts).solve()
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return cpu, peak, res
+
+
+def issue20(robot, model, rng, repeats, large):
+    """Issue 20's rows: kincal's figure, the raw-numpy floor of the same size, the target."""
+    exe = shutil.which("kincal")
+    kincal = [exe] if exe else [sys.executable, "-m", "kincal"]
+    p = 45  # parameters of the default model with the frames (EC66), for the floors
+    try:
+        import figaroh  # noqa: F401
+        print("FIGAROH is installed: its side-by-side runs are scripts/bench_peers.py")
+    except ImportError:
+        print("FIGAROH is not installed in this environment: its column is skipped")
+    print(f"{'work':<58} {'kincal':>34} {'numpy floor':>22}  target")
+    row = lambda w, k, f, t: print(f"{w:<58} {k:>34} {f:>22}  {t}")
+    # the per-fit cost that does not depend on the pose count: a 60-pose fit less 60 times
+    # the per-pose slope of a 2,000 -> 10,000-pose fit
+    d60 = _data(robot, model, 60, 0.4, rng)
+    t60, _, _ = _fit_cpu_and_peak(robot, d60, repeats)
+    t2k, _, _ = _fit_cpu_and_peak(robot, _data(robot, model, 2000, 0.4, rng), max(1, repeats // 2))
+    t10k, _, _ = _fit_cpu_and_peak(robot, _data(robot, model, 10000, 0.4, rng), max(1, repeats // 2))
+    slope = (t10k - t2k) / 8000
+    row("LS fit, 60 poses", f"{t60 * 1e3:.1f} ms", f"{_floor(180, p, repeats) * 1e3:.2f} ms", "")
+    row("time per fit that does not depend on the pose count", f"{(t60 - 60 * slope) * 1e3:.1f} ms",
+        "", "<= 5 ms")
+    cpu, peak, res = _fit_cpu_and_peak(robot, _data(robot, model, 100000, 0.4, rng), 1)
+    row("LS fit, 100,000 poses", f"{cpu:.2f} s, {peak / 2**20:.0f} MiB "
+        f"({peak / 1e5 / 1024:.2f} KiB/pose)", f"{_floor(300000, p, 1):.2f} s", "")
+    if large:
+        cpu, peak, res = _fit_cpu_and_peak(robot, _data(robot, model, 1000000, 0.4, rng), 1)
+        row("LS fit, 1,000,000 poses", f"{cpu:.1f} s, {peak / 2**20:.0f} MiB",
+            f"{_floor(3000000, p, 1):.1f} s", "<= 25 s, <= 600 MB")
+    with tempfile.TemporaryDirectory(prefix="kincal-bench-") as tmp:
+        csv = os.path.join(tmp, "p60.csv")
+        with open(csv, "w") as fh:
+            fh.write(d60.to_csv_text())
+        out = os.path.join(tmp, "out.urdf")
+        cal = lambda f: kincal + ["calibrate", "ec66", f, "--method", "ls", "--out", out,
+                                  "--overwrite", "--quiet"]
+        cpu, _ = _child(cal(csv), repeats)
+        floor, _ = _child([sys.executable, "-c", "import numpy"], repeats)
+        row("`kincal calibrate --method ls`, 60 poses, whole command", f"{cpu:.2f} s",
+            f"{floor:.2f} s (import numpy)", "<= 0.5 s")
+        cpu, _ = _child(kincal + ["--help"], repeats)
+        floor, _ = _child([sys.executable, "-c", "pass"], repeats)
+        row("`kincal --help`", f"{cpu:.3f} s", f"{floor:.3f} s (python)", "<= 0.12 s")
+        if large:
+            big = os.path.join(tmp, "p300k.csv")
+            with open(big, "w") as fh:
+                fh.write(_data(robot, model, 300000, 0.4, rng).to_csv_text())
+            cpu, peak = _child(cal(big))
+            row("`kincal calibrate` 300,000 poses, --method ls", f"{cpu:.1f} s, "
+                f"{peak * 1024 / 300:.2f} KiB/pose", f"{_floor(900000, p, 1):.1f} s",
+                "<= 8 s, <= 1.0 KiB/pose")
+            cpu, _ = _child(kincal + ["simulate", "ec66", "--poses", "20000", "--out",
+                                      os.path.join(tmp, "sim.csv")])
+            row("`kincal simulate`, 20,000 poses", f"{cpu:.1f} s", "", "<= 2 s")
+        # reading a 200,000-row CSV: kincal's reader against np.loadtxt (the floor here)
+        from kincal.measurements.csv_table import read_columns
+
+        rows = os.path.join(tmp, "r200k.csv")
+        with open(rows, "w") as fh:
+            fh.write(_data(robot, model, 200000, 0.4, rng).to_csv_text())
+        names = list(robot.joint_names) + ["x", "y", "z"]
+        cpu = _cpu_min(lambda: read_columns(rows, names), 1)
+        floor = _cpu_min(lambda: np.loadtxt(rows, delimiter=",", skiprows=1), 1)
+        row("reading a 200,000-row CSV", f"{cpu:.2f} s", f"{floor:.2f} s (loadtxt)", "<= 0.8 s")
+    t = _cpu_min(lambda: CalibrationProblem(robot, d60, CalibrationOptions(method="l2",
+                                                                           lam="cv")).solve(),
+                 max(1, repeats // 2))
+    row("the paper's Algorithm 1 (50 lambdas x 5 folds), 60 poses", f"{t:.2f} s",
+        f"{251 * _floor(144, p, repeats):.3f} s (251 lstsq)", "<= 0.25 s")
+    print("not measured here: `kincal compensate` of 100,000 targets (issue 20 item 5, "
+          "not batched yet)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--no-busy", action="store_true", help="skip the busy-machine figures")
     ap.add_argument("--cli-only", action="store_true", help="only the command-line wall times")
     ap.add_argument("--no-200k", action="store_true", help="skip the 200,000-pose figures")
+    ap.add_argument("--issue20", action="store_true",
+                    help="issue 20's table (CPU minimum of repeats, raw-numpy floors) only")
+    ap.add_argument("--large", action="store_true",
+                    help="with --issue20: the 1,000,000-pose fit, the 300,000-pose command and "
+                    "the 20,000-pose simulate too (minutes)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(0)
     robot = Robot.load("ec66")
     model = mdh.extract(robot.geometry)
+    if args.issue20:
+        issue20(robot, model, rng, args.repeats, args.large)
+        return
     print("kincal identification benchmark: EC66, 2-core machine, times are medians of "
           f"{args.repeats} runs, whole calls from data to result")
     tracker = _data(robot, model, 60, 0.4, rng)

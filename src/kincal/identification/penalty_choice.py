@@ -132,5 +132,5 @@ def cv_warning(problem: CalibrationProblem, cv: CrossValidation, sol: SolveSumma
         return ""
     free = problem.free_mask()
     return small_volume_warning(cv, extent, r,
-                                free_fraction(sol.jacobian[:, free],
+                                free_fraction(sol.jacobian_root(free),
                                               problem.layout.is_penalised[free], lam))

@@ -36,6 +36,7 @@ from kincal.identification.cross_validation import (CrossValidation, cross_valid
 from kincal.identification.layout import MM, ParameterLayout
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.plausibility import gather, judge
+from kincal.identification.reduction import analyze_rows, with_blocks
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze
@@ -209,7 +210,7 @@ class CalibrationProblem:
             J *= s / MM
             return r, J
 
-        return residual
+        return with_blocks(residual, parts, lay, weights, s, kinematic, m)  # reduction.py
 
     def sample_errors(self, x: np.ndarray, rows=None, weighted: bool = False) -> list:
         """Per set with samples in ``rows``: (set index, (n,) sample errors [m]) at x."""
@@ -260,8 +261,8 @@ class CalibrationProblem:
         if free.any():
             residual = self.residual_function(kinematic=False)
             # only what the data can fix moves (an unseen flush contact point stays put)
-            J = residual(x / self.scale, True)[1] * (lay.reporting_scale() / self.scale)
-            kept = analyze(J, lay.names, lay.n_kinematic, free, o.rank_tol).kept
+            kept = analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
+                                lay.names, lay.n_kinematic, free, o.rank_tol).kept
             free = free & np.isin(np.array(lay.names), kept)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = sol.u * self.scale
@@ -296,10 +297,9 @@ class CalibrationProblem:
         """Which parameters these data identify, at the start, with each kind's notes."""
         if self._ident is not None:
             return self._ident
-        lay = self.layout
-        _, J = self.residual_function()(self.start() / self.scale, True)
-        J = J * (lay.reporting_scale() / self.scale)  # mm per mm or per degree
-        ident = analyze(J, lay.names, lay.n_kinematic, self._unfixed(), self.options.rank_tol)
+        lay, u = self.layout, self.start() / self.scale  # J below in mm per mm or per deg
+        ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
+                             lay.names, lay.n_kinematic, self._unfixed(), self.options.rank_tol)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):

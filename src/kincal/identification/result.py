@@ -99,19 +99,18 @@ def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam,
     """Sandwich standard errors [SI] of the free parameters (NaN for the others), and their
     (p, p) covariance [SI] (zero rows and columns for the parameters held fixed), or None
     when it cannot be estimated. lam: one weight, or (p,) weights per parameter."""
-    J = sol.jacobian[:, free]
+    JtJ = sol.normal_matrix(free)
     if np.ndim(lam) == 2:  # a fleet prior's penalty matrix
-        H = J.T @ J + np.asarray(lam)[np.ix_(free, free)]
+        H = JtJ + np.asarray(lam)[np.ix_(free, free)]
     else:
-        H = J.T @ J + np.diag((np.broadcast_to(lam, penalised.shape) * penalised)[free])
+        H = JtJ + np.diag((np.broadcast_to(lam, penalised.shape) * penalised)[free])
     out = np.full(scale.size, np.nan)
     try:
         Hi = np.linalg.inv(H)
     except np.linalg.LinAlgError:
         return out, None
-    JtJ = J.T @ J
     dof = float(np.trace(Hi @ JtJ))  # effective number of parameters, trace of the hat matrix
-    m = J.shape[0]
+    m = sol.residual.shape[0]
     if m - dof <= 0.5:
         return out, None
     s2 = float(sol.residual @ sol.residual) / (m - dof)

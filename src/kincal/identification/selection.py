@@ -161,16 +161,19 @@ def _within_rank(J, norms, names, n_kinematic, free, floor) -> tuple[list, list]
 
 def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float = RANK_TOL,
             weak_independence: float = WEAK_INDEPENDENCE,
-            weak_sensitivity: float = WEAK_SENSITIVITY) -> Identifiability:
+            weak_sensitivity: float = WEAK_SENSITIVITY, m: int | None = None
+            ) -> Identifiability:
     """Identifiability of the parameters from a Jacobian in reporting units.
 
-    J: (m, p) rows = residual components [mm], columns = parameters [mm or deg].
+    J: (m, p) rows = residual components [mm], columns = parameters [mm or deg]; or the
+    triangle R (p, p) of its QR factorisation, with its number of rows ``m`` given.
     free: (p,) bool, the parameters the user did not fix (default: all).
     """
     names = tuple(names)
     p = len(names)
     free = np.ones(p, dtype=bool) if free is None else np.asarray(free, dtype=bool)
-    rows = J.shape[0] // 3 if J.shape[0] % 3 == 0 else J.shape[0]  # poses, for RMS figures
+    m = J.shape[0] if m is None else m
+    rows = m // 3 if m % 3 == 0 else m  # poses, for RMS figures
     # J = Q R: R has the same column norms, projections and singular values, so all
     # that follows works on p x p numbers whatever the number of poses
     if J.shape[0] > J.shape[1]:

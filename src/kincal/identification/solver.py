@@ -102,8 +102,27 @@ class SolveSummary:
     iterations: int
     converged: bool
     reason: str
-    jacobian: np.ndarray = field(repr=False)  # (m, p) at the solution, reporting units
+    jacobian: np.ndarray | None = field(repr=False)  # (m, p) at the solution, reporting
+    # units; None when the rows were streamed in blocks (many poses): then ``gram`` holds
+    # J^T J, which is all the statistics need
     residual: np.ndarray = field(repr=False)  # (m,) at the solution [mm]
+    gram: np.ndarray | None = field(default=None, repr=False)  # (p, p) J^T J, streamed fits
+
+    def normal_matrix(self, free: np.ndarray) -> np.ndarray:
+        """(k, k) J^T J of the columns ``free`` (mask or indices) at the solution."""
+        if self.jacobian is None:
+            idx = np.flatnonzero(free) if np.asarray(free).dtype == bool else np.asarray(free)
+            return self.gram[np.ix_(idx, idx)]
+        J = self.jacobian[:, free]
+        return J.T @ J
+
+    def jacobian_root(self, free: np.ndarray) -> np.ndarray:
+        """A matrix B with B^T B = J^T J over the columns ``free``: the Jacobian's columns
+        themselves, or (streamed fits) a square root of the Gram matrix."""
+        if self.jacobian is not None:
+            return self.jacobian[:, free]
+        w, V = np.linalg.eigh(self.normal_matrix(free))
+        return np.sqrt(np.maximum(w, 0.0))[:, None] * V.T
 
 
 def triangular_factor(A: np.ndarray) -> np.ndarray:
@@ -167,8 +186,21 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             return float(r @ r), float(d @ Lam[np.ix_(pen, pen)] @ d)
         return float(r @ r), float(lam_p[pen] @ (d * d))
 
+    streamed = getattr(residual, "n_blocks", 1) > 1
+
+    def linearise(u):
+        """(r, J or None, G or None, Rz or None): streamed in blocks for many poses
+        (:mod:`kincal.identification.reduction`), else the dense J factored below."""
+        if not streamed:
+            r, J = residual(u, True)
+            return r, J, None, None
+        from kincal.identification.reduction import linearise as reduce
+
+        r, G, Rz = reduce(residual.blocks, u, residual.rows, p, free_idx)
+        return r, None, G, Rz
+
     u = u0.astype(float).copy()
-    r, J = residual(u, True)
+    r, J, G, Rz = linearise(u)
     data, penalty = objective(u, r)
     costs, damps = [data + penalty], []
     # Levenberg-Marquardt with Nielsen's damping update: mu scales diag(J^T J); a step
@@ -183,7 +215,8 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         # One QR of [J | -r] reduces the data rows to a k x k triangle R and z = Q^T (-r):
         # ||J d + r||^2 = ||R d - z||^2 + rho^2, so every damping attempt below solves a
         # small system whatever the number of poses.
-        Rz = triangular_factor(np.column_stack([J[:, free_idx], -r]))
+        if not streamed:
+            Rz = triangular_factor(np.column_stack([J[:, free_idx], -r]))
         k = free_idx.size
         rows, rhs = [Rz[:k, :k]], [Rz[:k, k]]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
@@ -216,7 +249,7 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             u_new = u.copy()
             u_new[free_idx] += step
             # with the Jacobian at once: most steps are accepted, and then it is needed
-            r_new, J_new = residual(u_new, True)
+            r_new, J_new, G_new, Rz_new = linearise(u_new)
             d_new, p_new = objective(u_new, r_new)
             lin = A0 @ step - b0
             predicted = costs[-1] - float(lin @ lin) - rho2
@@ -238,7 +271,7 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         if not accepted:
             reason, converged = "no step lowers the objective (local minimum)", True
             break
-        u, r, J = u_new, r_new, J_new
+        u, r, J, G, Rz = u_new, r_new, J_new, G_new, Rz_new
         data, penalty = d_new, p_new
         costs.append(data + penalty)
         if np.max(np.abs(step)) < options.step_tol:
@@ -257,4 +290,4 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
                                  f"{options.cost_window} iterations"), True
             break
     return SolveSummary(u, np.array(costs), data, penalty, np.array(damps), it, converged,
-                        reason, J, r)
+                        reason, J, r, G)

@@ -153,7 +153,8 @@ def sniff_separator(header_line: str) -> str:
 
 
 def read_columns(path, required, optional=(), kind: str = "data", expected: str = "",
-                 rows_name: str = "samples", aliases=None, ranges=None) -> Columns:
+                 rows_name: str = "samples", aliases=None, ranges=None,
+                 header_only: bool = False) -> Columns:
     """Read the ``required`` (and any ``optional``) columns of the CSV file ``path``.
 
     kind: what the file is, for "<kind> file not found". expected: what the required
@@ -161,6 +162,7 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     {column: what it stands for} (e.g. the URDF joint a renamed column holds), for
     messages. ranges: {column: (low, high, unit)} of accepted values (default
     COLUMN_RANGES). Warns a :class:`KincalNote` when the separator is not a comma.
+    header_only: read the header and check that it fits the first row; no values.
     """
     ranges = COLUMN_RANGES if ranges is None else ranges
     if not isinstance(path, (str, os.PathLike)) or str(path) == "":
@@ -213,6 +215,9 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
             for line, row in rows:
                 if not lines:  # the first row tells whether the header fits
                     _check_fit(path, line, header, row, cols, separator)
+                    if header_only:  # the rows are left to the reading that follows
+                        return Columns(path, {}, np.zeros(0, dtype=int), tuple(header),
+                                       separator)
                 if len(row) != len(header):
                     hint = (f" (decimal commas? {_DECIMAL_COMMA_HINT})"
                             if separator == "," and len(row) > len(header) else "")

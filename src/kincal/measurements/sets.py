@@ -61,7 +61,7 @@ def header_of(path) -> list[str]:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalNote)
-        return list(read_columns(path, []).header)
+        return list(read_columns(path, [], header_only=True).header)
 
 
 def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",

@@ -22,9 +22,14 @@ from kincal.models.base import ErrorModel
 
 def rodrigues(w: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(N, 3, 3) rotations by angles q (N,) about the unit axis w (3,)."""
-    c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
+    c = np.cos(q)
     K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    return c * np.eye(3) + s * K + (1.0 - c) * np.outer(w, w)
+    # s K + (1 - c) w w^T, then c on the diagonal: the same sums as c I + s K + (1 - c) w w^T
+    # (adding the zeros changes no bit) with two (N, 3, 3) arrays made instead of six
+    R = np.multiply.outer(np.sin(q), K)
+    R += np.multiply.outer(1.0 - c, np.outer(w, w))
+    R[:, [0, 1, 2], [0, 1, 2]] += c[:, None]
+    return R
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -37,6 +42,7 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+MOTION_CACHE_POSES = 1024  # poses up to which a chain keeps its joint motions
 _GATHER_BUDGET = 4_000_000  # floats gathered at once for the kinematic columns (32 MB)
 
 
@@ -58,7 +64,11 @@ class Chain:
         if self.backlash and (self.approach is None or self.approach.shape != self.q.shape):
             raise ValueError(f"backlash terms need approach directions of shape {self.q.shape}")
         self._backlash_of = {i: k for k, i in enumerate(self.backlash)}
-        self._motion = [self.joint_motion(i, self.q[:, i]) for i in range(model.n)]
+        # the joint motions, (N, 4, 4) per joint, are kept for few poses (cheap to reuse
+        # across evaluations); for many (MOTION_CACHE_POSES) they are made anew at each
+        # evaluation: 128 bytes per pose and joint would otherwise stay for the whole fit
+        self._motion = ([self.joint_motion(i, self.q[:, i]) for i in range(model.n)]
+                        if self.N <= MOTION_CACHE_POSES else None)
         # each joint's parameters are contiguous in the vector: slices keep the writes cheap
         edges = np.searchsorted(model.joint_of, np.arange(model.n + 1))
         if np.any(np.diff(model.joint_of) < 0):
@@ -101,7 +111,8 @@ class Chain:
                 placed.append(H)
             k = self._backlash_of.get(i)
             if k is None or backlash is None or backlash[k] == 0.0:
-                G = H @ self._motion[i]
+                G = H @ (self._motion[i] if self._motion is not None
+                         else self.joint_motion(i, self.q[:, i]))
             else:
                 G = H @ self.joint_motion(i, self.q[:, i] + backlash[k] * self.approach[:, i])
         T = G @ m.T_last_tip

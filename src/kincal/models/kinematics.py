@@ -46,6 +46,13 @@ class ChainKinematics:
     def T_last_tip(self) -> np.ndarray:
         return self.model.T_last_tip
 
+    def tip_points(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """(N, 3) the point ``tool`` (3,) of the tip frame [m], in B, for joint values q
+        (N, n) [rad or m]; the tip pose only, no Jacobian."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        state = Chain(self.model, q).state(np.zeros(self.model.n), keep=False)
+        return state.p_tip + state.R_tip @ np.asarray(tool, dtype=float)
+
     def evaluate(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)):
         """Tip pose and Jacobians for joint values ``q`` (N, n) [rad or m].
 

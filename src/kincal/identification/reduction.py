@@ -1,0 +1,142 @@
+"""The data rows of a least-squares problem reduced block by block to small matrices.
+
+Plain numpy. Many poses give a tall Jacobian J (m x p, m = 3 N): at a million poses one J
+is about 1 GB, and the dense path built it, a copy with the residual column and two more
+for its factorisation at every iteration. Here the rows arrive in blocks of poses
+(``blocks(u)`` yields ``(span, r_b, J_b)``, J_b in a buffer reused from block to block)
+and only p x p quantities are kept:
+
+- :func:`normal_equations`: the Gram matrix J^T J and J^T r summed over the blocks (one
+  pass, one BLAS product per block). The solver's step needs the triangle R of J's free
+  columns; R = chol(J_f^T J_f) (Cholesky-QR) is used when its diagonal ratio is above
+  :data:`CHOLESKY_MIN_RATIO` (cond(J_f) below ~1e7, so the Gram matrix keeps at least
+  ~2 significant digits: the step is then a few digits short of Householder's at worst,
+  which costs at most an extra iteration, and the point the iterations converge to is
+  where J^T r = 0, which both compute to working precision). Below that ratio it is
+  refused and :func:`stacked_triangle` is used.
+- :func:`stacked_triangle`: Householder R of [R; J_b] block after block (a tall-skinny QR):
+  as accurate as one QR of the whole J, several times the Gram's cost; the identifiability
+  analysis, whose rank decisions need full accuracy, uses it.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Iterable
+
+import numpy as np
+
+from kincal.identification.layout import MM
+
+CHOLESKY_MIN_RATIO = 1e-7  # smallest diag(R) / largest diag(R) accepted from the Gram
+
+
+def stacked_triangle(blocks: Iterable[tuple[slice, np.ndarray, np.ndarray]],
+                     columns: np.ndarray | None = None, with_residual: bool = False
+                     ) -> tuple[np.ndarray, int]:
+    """(R (c, c) upper triangular, m): R^T R = A^T A for A the stacked J_b[:, columns]
+    (with -r_b as a last column if ``with_residual``), and the number of rows m."""
+    R, m = None, 0
+    for _, r, J in blocks:
+        A = J if columns is None else J[:, columns]
+        if with_residual:
+            A = np.column_stack([A, -r])
+        m += A.shape[0]
+        R = np.linalg.qr(A if R is None else np.vstack([R, A]), mode="r")
+    return R, m
+
+
+def normal_equations(blocks: Iterable[tuple[slice, np.ndarray, np.ndarray]], m: int,
+                     p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(r (m,), G = J^T J (p, p), g = J^T r (p,)) over the blocks."""
+    r = np.empty(m)
+    G, g = np.zeros((p, p)), np.zeros(p)
+    for span, rb, Jb in blocks:
+        r[span] = rb
+        G += Jb.T @ Jb
+        g += Jb.T @ rb
+    return r, G, g
+
+
+def triangle_from_gram(G: np.ndarray, g: np.ndarray, rr: float) -> np.ndarray | None:
+    """The (k+1, k+1) triangle of [J | -r] from G = J^T J, g = J^T r and rr = r^T r, or
+    None when G is too ill-conditioned for Cholesky-QR (see the module notes)."""
+    k = G.shape[0]
+    try:
+        R = np.linalg.cholesky(G).T
+    except np.linalg.LinAlgError:
+        return None
+    d = np.abs(np.diag(R))
+    if k and d.min() <= CHOLESKY_MIN_RATIO * d.max():
+        return None
+    z = np.linalg.solve(R.T, -g) if k else np.zeros(0)  # R^T z = J^T (-r)
+    out = np.zeros((k + 1, k + 1))
+    out[:k, :k], out[:k, k] = R, z
+    out[k, k] = np.sqrt(max(rr - float(z @ z), 0.0))
+    return out
+
+
+def linearise(blocks: Callable, u: np.ndarray, m: int, p: int, free_idx: np.ndarray):
+    """(r (m,), G (p, p) = J^T J of every column, Rz (k+1, k+1) triangle of [J_free | -r])
+    at u, from the blocks: one pass for the normal equations, a second (stacked QR) only
+    when they are too ill-conditioned."""
+    r, G, g = normal_equations(blocks(u), m, p)
+    Rz = triangle_from_gram(G[np.ix_(free_idx, free_idx)], g[free_idx], float(r @ r))
+    if Rz is None:
+        Rz, _ = stacked_triangle(blocks(u), free_idx, with_residual=True)
+    return r, G, Rz
+
+
+def row_blocks(parts, layout, weights, scale, kinematic: bool = True) -> Callable:
+    """blocks(u) for the residual of :meth:`CalibrationProblem.residual_function`: yields
+    (rows, r_b [mm], J_b) per block of samples at u = x / scale, the same numbers as the
+    rows of residual(u, True); J_b is a buffer that the next block overwrites.
+    parts: [(set index, kind model, global rows, [(local slice, block kind model)])]."""
+    buffers: dict = {}
+    k, bl = layout.n_kinematic, layout.backlash_slice
+
+    def blocks(u):
+        x = u * scale
+        at = 0
+        for i, km, g, blocks_i in parts:
+            kin, fr, b = layout.split(x, i)
+            fs = layout.frame_slices[i]
+            for sl, block in blocks_i:
+                w = weights[g[sl]][:, None]
+                n = block.N * km.dim
+                if n not in buffers:
+                    buffers[n] = np.zeros((n, layout.size))
+                J = buffers[n]
+                J[:] = 0.0
+                rr, Jk, Jf, Jb = block.residuals(kin, fr, b, jacobian=True, kinematic=kinematic)
+                w3 = w[:, :, None]
+                J[:, :k] = (Jk * w3).reshape(n, -1)
+                J[:, fs] = (Jf * w3).reshape(n, -1)
+                if Jb.shape[2]:
+                    J[:, bl] = (Jb * w3).reshape(n, -1)
+                J *= scale / MM
+                yield (slice(at + km.dim * sl.start, at + km.dim * sl.stop),
+                       (rr * w).ravel() / MM, J)
+            at += km.N * km.dim
+
+    return blocks
+
+
+def with_blocks(residual: Callable, parts, layout, weights, scale, kinematic: bool,
+                m: int) -> Callable:
+    """``residual`` with ``blocks`` (:func:`row_blocks`), ``rows`` (m) and ``n_blocks``."""
+    residual.blocks = row_blocks(parts, layout, weights, scale, kinematic)
+    residual.rows, residual.n_blocks = m, sum(len(part[3]) for part in parts)
+    return residual
+
+
+def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
+                 n_kinematic: int, free: np.ndarray, rank_tol: float):
+    """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
+    scaled by ``column_scale``; for rows streamed in blocks (many poses), of its QR triangle
+    (the same column norms, projections and singular values), built without the whole J."""
+    from kincal.identification.selection import analyze
+
+    if getattr(residual, "n_blocks", 1) <= 1:
+        return analyze(residual(u, True)[1] * column_scale, names, n_kinematic, free, rank_tol)
+    R, m = stacked_triangle(residual.blocks(u))
+    return analyze(R * column_scale, names, n_kinematic, free, rank_tol, m=m)

@@ -1,0 +1,140 @@
+"""The batched paths of the performance work against the arithmetic they replace: each new
+path is compared with the old one (Pinocchio calls per pose, dense residual and Jacobian,
+the per-pose loops) on seeded data, to 1e-9 or better."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from chains import random_chain, random_tree
+
+from kincal.identification import plausibility
+from kincal.robot import Robot
+
+
+def _robots(tmp_path):
+    out = [Robot.load("ec66")]
+    for seed in (3, 4):
+        text, _ = random_chain(np.random.default_rng(seed), cases=("prismatic", "parallel",
+                                                                   "gimbal", "general"))
+        path = tmp_path / f"chain_{seed}.urdf"
+        path.write_text(text)
+        out.append(Robot.load(path, tip="tip"))
+    text, _ = random_tree(np.random.default_rng(5))
+    path = tmp_path / "tree.urdf"
+    path.write_text(text)
+    out.append(Robot.load(path, base="atip", tip="btip"))
+    return out
+
+
+def test_gate_tool_points_match_pinocchio(tmp_path):
+    """The gate's tool points through the vectorised chain equal Pinocchio's, per pose."""
+    rng = np.random.default_rng(0)
+    for robot in _robots(tmp_path):
+        g = robot.geometry
+        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        q = rng.uniform(lo, hi, (40, g.n))
+        q[0] = 0.0
+        tool = rng.normal(size=3) * 0.1
+        T = robot.tip_poses(q)
+        want = T[:, :3, 3] + T[:, :3, :3] @ tool
+        assert np.abs(plausibility._tool_points(robot, q, tool) - want).max() < 1e-12
+
+
+def _point_data(n, seed=0):
+    from kincal.models import mdh
+    from kincal.planning.simulation import Truth, measure, planted_table
+
+    rng = np.random.default_rng(seed)
+    robot = Robot.load("ec66")
+    model = mdh.extract(robot.geometry)
+    g = robot.geometry
+    q = rng.uniform(np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi), size=(n, g.n))
+    tool = np.array([0.02, 0.01, 0.12])
+    truth = Truth(planted_table(model, rng), np.array([0.8, 0.3, -0.2, 0.02, -0.03, 1.2]),
+                  tool + [0.001, -0.001, 0.002])
+    return robot, measure(model, truth, q, 5e-5, rng)
+
+
+@pytest.mark.parametrize("method", ["ls", "l2"])
+def test_streamed_fit_equals_the_dense_fit(method, monkeypatch):
+    """Rows streamed in blocks (normal equations per block, stacked QR for the analysis)
+    give the dense path's identifiable set, parameters and covariance."""
+    from kincal.identification import problem as problem_module
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    robot, data = _point_data(300)
+    opts = CalibrationOptions(method=method, lam=1e-3 if method == "l2" else "auto")
+    results = {}
+    for size in (10 ** 9, 64):  # one block: the dense J; 64 samples: five blocks
+        monkeypatch.setattr(problem_module, "BLOCK_SAMPLES", size)
+        problem = CalibrationProblem(robot, data, opts)
+        assert problem.residual_function().n_blocks == (1 if size > 300 else 5)
+        results[size] = problem.solve()
+    dense, streamed = results[10 ** 9], results[64]
+    assert dense.solve.jacobian is not None and streamed.solve.jacobian is None
+    assert streamed.identifiability.kept == dense.identifiability.kept
+    assert streamed.identifiability.dropped == dense.identifiability.dropped
+    assert abs(streamed.identifiability.condition_number
+               / dense.identifiability.condition_number - 1) < 1e-9
+    assert np.abs(streamed.x - dense.x).max() < 1e-9
+    assert np.abs(streamed.covariance - dense.covariance).max() < 1e-9 * np.abs(
+        dense.covariance).max()
+    assert np.abs(streamed.solve.residual - dense.solve.residual).max() < 1e-9
+    free = np.isin(np.array(dense.layout.names), dense.identifiability.kept)
+    B = streamed.solve.jacobian_root(free)
+    J = dense.solve.jacobian[:, free]
+    assert np.abs(B.T @ B - J.T @ J).max() < 1e-9 * np.abs(J.T @ J).max()
+
+
+def test_reduction_against_one_qr():
+    """The stacked QR and the Gram triangle against numpy's QR of the whole matrix; an
+    ill-conditioned Gram matrix is refused rather than trusted."""
+    from kincal.identification import reduction
+
+    rng = np.random.default_rng(1)
+    J, r = rng.normal(size=(500, 7)), rng.normal(size=500)
+    blocks = [(slice(a, a + 100), r[a:a + 100], J[a:a + 100]) for a in range(0, 500, 100)]
+    R, m = reduction.stacked_triangle(blocks, with_residual=True)
+    R0 = np.linalg.qr(np.column_stack([J, -r]), mode="r")
+    assert m == 500
+    assert np.abs(np.abs(R) - np.abs(R0)).max() < 1e-12 * np.abs(R0).max()
+    rr, G, g = reduction.normal_equations(blocks, 500, 7)
+    assert np.array_equal(rr, r)
+    Rz = reduction.triangle_from_gram(G, g, float(r @ r))
+    assert np.abs(np.abs(Rz) - np.abs(R0)).max() < 1e-10 * np.abs(R0).max()
+    J[:, 6] = J[:, 5] + 1e-9 * J[:, 0]  # cond ~ 1e9: Cholesky-QR is not trusted
+    _, G, g = reduction.normal_equations(blocks, 500, 7)
+    assert reduction.triangle_from_gram(G, g, float(r @ r)) is None
+
+
+def test_chain_without_cached_motions_is_the_same(monkeypatch):
+    """Many poses: joint motions made at each evaluation equal the cached ones."""
+    from kincal.models import chain as chain_module
+    from kincal.models import mdh
+
+    robot = Robot.load("ec66")
+    model = mdh.extract(robot.geometry)
+    q = np.random.default_rng(2).uniform(-3, 3, (50, 6))
+    x = model.nominal + np.random.default_rng(3).normal(size=model.size) * 1e-3
+    cached = chain_module.Chain(model, q).state(x)
+    monkeypatch.setattr(chain_module, "MOTION_CACHE_POSES", 10)
+    fresh = chain_module.Chain(model, q)
+    assert fresh._motion is None
+    state = fresh.state(x)
+    assert np.array_equal(state.p_tip, cached.p_tip) and np.array_equal(state.R_tip, cached.R_tip)
+
+
+def test_rodrigues_is_the_old_sum_to_the_bit():
+    """The rotations with fewer temporaries are c I + s K + (1 - c) w w^T exactly."""
+    from kincal.models.chain import rodrigues
+
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        w = rng.normal(size=3)
+        w /= np.linalg.norm(w)
+        q = np.concatenate([[0.0, np.pi, -np.pi / 2], rng.uniform(-7, 7, 500)])
+        c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
+        K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+        assert np.array_equal(rodrigues(w, q), c * np.eye(3) + s * K + (1.0 - c) * np.outer(w, w))
