@@ -53,7 +53,6 @@ def register(subparsers) -> None:
                    help="write a unit even if the gate finds its result implausible")
     r.add_argument("--accept-unconverged", action="store_true",
                    help="write a unit even if its solver did not converge")
-    r.add_argument("--quiet", action="store_true")
     p.set_defaults(run=run)
 
 
