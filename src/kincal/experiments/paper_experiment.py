@@ -94,7 +94,7 @@ import math
 import time
 import warnings
 from dataclasses import asdict, dataclass, field, replace
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -408,12 +408,12 @@ def run(config: ExperimentConfig | None = None, progress: Callable[[str], None] 
 
     guess_err = np.concatenate([r_split.normal(size=3) * cfg.frame_guess_error_m,
                                 r_split.normal(size=3) * math.radians(cfg.frame_guess_error_deg)])
-    common = dict(model="mdh", folds=cfg.folds, seed=cfg.seed, n_lambdas=cfg.n_lambdas,
+    common: dict[str, Any] = dict(model="mdh", folds=cfg.folds, seed=cfg.seed, n_lambdas=cfg.n_lambdas,
                   lambda_min=cfg.lambda_min, lambda_max=cfg.lambda_max, solver=_PAPER_SOLVER)
     rt_opts = CalibrationOptions(lam=cfg.l2_lambda, base_guess=tuple(rtest_base + guess_err),
                                  tool_guess=tuple(tool + r_split.normal(size=3)
                                                   * cfg.frame_guess_error_m), **common)
-    fits, notes = {}, []
+    fits, notes = {}, []  # type: dict[str, Any], list[str]
     for key, label in METHODS:
         say(f"calibrating: {label}")
         if key == "ls_tracker":

@@ -87,7 +87,7 @@ class _Scan:
 
 def _scan(data: bytes, source: str) -> _Scan:
     """Locate top-level joints, their first ``<origin>`` child, links and ``</robot>``."""
-    scan, stack = _Scan(), []
+    scan, stack = _Scan(), []  # type: _Scan, list[str]
     joint: _Joint | None = None
     parser = expat.ParserCreate(encoding="UTF-8")
 
@@ -198,12 +198,12 @@ def _edit_joint(data: bytes, joint: _Joint, T, source: str):
 
     replacements = []
     if joint.origin_start is not None:
-        tag = _START_TAG.match(data, joint.origin_start)
+        tag = _tag_at(data, joint.origin_start)
         quote = _quote_of(tag.group(0))
         spans = {m.group(1): m.span(2) for m in _ATTRIBUTE.finditer(data, tag.start(), tag.end())}
         appended = b""
         for key, old, new in ((b"xyz", attrs.get("xyz"), new_xyz), (b"rpy", attrs.get("rpy"), new_rpy)):
-            if new == old:
+            if new is None or new == old:  # None: no value before and none needed
                 continue
             if key in spans:  # replace inside the quotes, keeping the user's quote character
                 start, end = spans[key]
@@ -223,9 +223,17 @@ def _edit_joint(data: bytes, joint: _Joint, T, source: str):
     return replacements, edit
 
 
+def _tag_at(data: bytes, pos: int) -> re.Match[bytes]:
+    """The start tag that the scan located at ``pos`` (a miss is a bug of the scan)."""
+    tag = _START_TAG.match(data, pos)
+    if tag is None:
+        raise AssertionError(f"urdf_export: no start tag at byte {pos}, where the scan saw one")
+    return tag
+
+
 def _insert_origin(data: bytes, joint: _Joint, xyz: str | None, rpy: str | None):
     """Replacement adding ``<origin/>`` as the first child of a joint that has none."""
-    tag = _START_TAG.match(data, joint.start)
+    tag = _tag_at(data, joint.start)
     quote = _quote_of(tag.group(0))
     attributes = b"".join(
         b" " + key + b"=" + quote + value.encode() + quote

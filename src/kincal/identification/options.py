@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -187,7 +187,7 @@ class CalibrationOptions:
     def _normalised(self) -> "CalibrationOptions":
         """A copy with names as tuples of str, guesses as tuples of finite floats, and the
         counts as ints; OptionError for what cannot be made so."""
-        changes = {}
+        changes: dict[str, Any] = {}
         for name in ("fix", "free", "backlash"):
             value = getattr(self, name)
             items = (value,) if isinstance(value, str) else value

@@ -62,7 +62,7 @@ class PlacementModel(ErrorModel):
     reversed: np.ndarray
     has_errors: np.ndarray
 
-    def _origin(self, i: int, e: np.ndarray) -> np.ndarray:
+    def _origin(self, i: int | np.integer, e: np.ndarray) -> np.ndarray:
         R = rotx(e[3]) @ roty(e[4]) @ rotz(e[5]) @ self.origins[i][:3, :3]
         return transform(R, self.origins[i][:3, 3] + e[:3])
 
