@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 from kincal.cli.checks import check_outputs, plot_paths
 from kincal.cli.options import (AccuracyRequest, Chain, Inputs, add_accuracy_options,
-                                add_common, add_kinds, add_model, add_overwrite, group, typed)
+                                add_common, add_gate_overrides, add_kinds, add_model,
+                                add_overwrite, group, typed)
 from kincal.errors import KincalError, KincalWarning, OptionError
 
 
@@ -96,12 +97,7 @@ def register(subparsers) -> None:
                    help="one self-contained HTML report (plots embedded, opens offline)")
     add_accuracy_options(p)
     add_overwrite(p)
-    r = group(p, "the plausibility gate and the console")
-    r.add_argument("--accept-implausible", action="store_true",
-                   help="write the outputs even if the plausibility gate finds the result "
-                        "implausible (wrong units, rows, tip or data are the usual causes)")
-    r.add_argument("--accept-unconverged", action="store_true",
-                   help="write the outputs even if the solver did not converge (best iterate)")
+    add_gate_overrides(p)
     p.set_defaults(run=run)
 
 

@@ -9,7 +9,8 @@ import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from kincal.cli.options import Chain, Inputs, add_common, add_model, add_overwrite, group, typed
+from kincal.cli.options import (Chain, Inputs, add_common, add_gate_overrides, add_model,
+                                add_overwrite, group, typed)
 from kincal.errors import OptionError
 
 SUMMARY_JSON, SUMMARY_HTML, PRIOR = "FLEET_SUMMARY.json", "fleet.html", "FLEET.json"
@@ -48,11 +49,7 @@ def register(subparsers) -> None:
                    help="DIR/<unit>/ (corrected.urdf, FRAMES.json, REPORT.json), "
                         "DIR/FLEET.json, DIR/FLEET_SUMMARY.json, DIR/fleet.html")
     add_overwrite(p)
-    r = group(p, "the plausibility gate and the console")
-    r.add_argument("--accept-implausible", action="store_true",
-                   help="write a unit even if the gate finds its result implausible")
-    r.add_argument("--accept-unconverged", action="store_true",
-                   help="write a unit even if its solver did not converge")
+    add_gate_overrides(p, "a unit's outputs")
     p.set_defaults(run=run)
 
 

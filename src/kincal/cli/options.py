@@ -174,6 +174,16 @@ def add_overwrite(p, help="replace existing output files"):
     group(p, "outputs").add_argument("--overwrite", action="store_true", help=help)
 
 
+def add_gate_overrides(p, what: str = "the outputs") -> None:
+    """--accept-implausible and --accept-unconverged: write ``what`` despite the gate."""
+    r = group(p, "the plausibility gate and the console")
+    r.add_argument("--accept-implausible", action="store_true",
+                   help=f"write {what} even if the plausibility gate finds the result "
+                        "implausible (wrong units, rows, tip or data are the usual causes)")
+    r.add_argument("--accept-unconverged", action="store_true",
+                   help=f"write {what} even if the solver did not converge (best iterate)")
+
+
 def add_console(p, json_summary: bool = False) -> None:
     """-q/--quiet and -v/--verbose (every command, added by the dispatcher), and --json
     where a command has a summary to give as JSON."""

@@ -7,6 +7,13 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 
+def _summary(d: np.ndarray) -> tuple[int, float, float, float, float, float]:
+    """(n, mean, max, std with ddof = 1, RMS, median) of (N,) non-negative values."""
+    n = d.size
+    return (n, float(d.mean()), float(d.max()), float(d.std(ddof=1)) if n > 1 else 0.0,
+            float(np.sqrt(np.mean(d ** 2))), float(np.median(d)))
+
+
 @dataclass(frozen=True)
 class ErrorStats:
     """Statistics of per-pose Euclidean position errors [mm] (std with ddof = 1)."""
@@ -23,10 +30,7 @@ class ErrorStats:
         """From (N, 3) position differences or (N,) distances [m]."""
         e = np.asarray(errors_m, dtype=float)
         d = np.linalg.norm(e, axis=1) if e.ndim == 2 else np.abs(e)
-        d = d * 1e3
-        n = d.size
-        return cls(n, float(d.mean()), float(d.max()), float(d.std(ddof=1)) if n > 1 else 0.0,
-                   float(np.sqrt(np.mean(d ** 2))), float(np.median(d)))
+        return cls(*_summary(d * 1e3))
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -51,10 +55,7 @@ class AngleStats:
     @classmethod
     def from_angles(cls, angles_rad: np.ndarray) -> "AngleStats":
         """From (N,) angles [rad], each >= 0."""
-        d = np.degrees(np.abs(np.asarray(angles_rad, dtype=float)))
-        n = d.size
-        return cls(n, float(d.mean()), float(d.max()), float(d.std(ddof=1)) if n > 1 else 0.0,
-                   float(np.sqrt(np.mean(d ** 2))), float(np.median(d)))
+        return cls(*_summary(np.degrees(np.abs(np.asarray(angles_rad, dtype=float)))))
 
     def as_dict(self) -> dict:
         return asdict(self)
