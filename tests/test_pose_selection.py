@@ -334,3 +334,18 @@ def test_cli_plan_with_a_missing_measured_file_writes_nothing(tmp_path, capsys):
     assert main(["plan", "ec66", "--random", "100", "--poses", "10", "--measured",
                  str(tmp_path / "nope.csv"), "--out", str(out)]) == 1
     assert "measured poses file not found" in _one_line_error(capsys) and not out.exists()
+
+
+def test_target_poses_are_for_point_measurements(ec66, tmp_path, capsys):
+    """I-optimal selection weighs the predicted tool-point position: asked for another kind
+    it is refused in one line (it used to fail with an UnboundLocalError)."""
+    q = random_candidates(ec66, 200, 1)
+    with pytest.raises(OptionError, match="for --kind point, not 'pose'"):
+        select_poses(ec66, q, 12, tool=TOOL, targets=q[:20], method="I", kind="pose")
+    capsys.readouterr()
+    assert main(["plan", "ec66", "--random", "200", "--poses", "12", "--kind", "pose",
+                 "--criterion", "i", "--target-cube", "0.4", "0", "0.3", "0.2",
+                 "--out", str(tmp_path / "p.csv")]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert [e for e in err if e.startswith("kincal: error:")][0].endswith("not 'pose'")
+    assert not (tmp_path / "p.csv").exists()

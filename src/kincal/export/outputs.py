@@ -1,4 +1,5 @@
-"""The one writer of a calibration's files, with the plausibility gate in front of it.
+"""The one writer of every file kincal writes, with the plausibility gate in front of a
+calibration's.
 
 ``write_calibration(result, Outputs(urdf=..., frames=..., report=..., html=..., yaml=...,
 mdh=..., plots=...))`` is the only way the API and ``kincal calibrate`` write what a
@@ -6,6 +7,9 @@ calibration produced. It refuses an implausible or unconverged result (one Kinca
 naming the evidence) unless accepted, then composes every output, reads the corrected URDF
 back with a second parser (:mod:`kincal.export.readback`), and writes them as one
 transaction: all of them, or none (:func:`kincal.export.safe_write.write_all`).
+``write_files(files, provenance, ...)`` does the same for the other commands' files
+(simulate, plan, evaluate, ...): each carries the run's provenance
+(:mod:`kincal.export.provenance`), the one way it gets there.
 """
 
 from __future__ import annotations
@@ -47,6 +51,30 @@ class Outputs:
         """The files and folders asked for, in writing order."""
         return [Path(p) for p in (self.urdf, self.frames, self.report, self.yaml, self.mdh,
                                   self.residuals, self.html, self.plots) if p is not None]
+
+
+@dataclass(frozen=True)
+class File:
+    """One file of a command other than calibrate, for :func:`write_files`: where it goes,
+    its format (the kinds of :meth:`kincal.export.provenance.Provenance.stamp`: json, csv,
+    yaml, urdf, html, md, png) and its content in that kind's form."""
+
+    path: Path | str
+    kind: str
+    content: object
+
+
+def write_files(files, provenance, *, overwrite: bool, protect=(), dirs=(),
+                before_commit=None) -> list[Path]:
+    """The one writer of every command's files other than a calibration's: each
+    :class:`File` stamped with ``provenance`` (a Provenance) in its format, then all written
+    or none (:func:`kincal.export.safe_write.write_all`; before_commit as there). Returns
+    the written paths."""
+    from kincal.export.safe_write import write_all
+
+    staged = [(f.path, provenance.stamp(f.kind, f.content)) for f in files]
+    return write_all(staged, overwrite=overwrite, protect=protect, dirs=dirs,
+                     before_commit=before_commit)
 
 
 @dataclass(frozen=True)
@@ -167,6 +195,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                                                 ur_kinematics_yaml)
 
         if o.yaml is not None and o.yaml_format == "ur":
+            assert o.ur_hash is not None  # checked above
             files.append((o.yaml, prov.under_title(ur_kinematics_yaml(
                 result.robot, result.corrected, o.ur_hash))))
         elif o.yaml is not None:

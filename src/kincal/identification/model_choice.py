@@ -31,11 +31,15 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kincal.errors import KincalError, KincalWarning
 from kincal.models import MODELS
+
+if TYPE_CHECKING:
+    from kincal.identification.options import CalibrationOptions
 
 GUARD = 3.0  # standard errors of the paired validation differences a candidate must win by
 LAMBDA_STEPS = (1 / 3, 1.0, 3.0)  # each candidate's lambdas, times the default's CV lambda
@@ -139,14 +143,16 @@ def beats(new: np.ndarray, best: np.ndarray) -> tuple[bool, str]:
                    else "no better")
 
 
-def resolve(problem_class, robots, sets, options) -> tuple[ModelChoice | None, object]:
+def resolve(problem_class, robots, sets, options: CalibrationOptions
+            ) -> tuple[ModelChoice | None, CalibrationOptions]:
     """(None, options) unless options.model is "auto"; then :func:`choose`."""
     if options.model != "auto":
         return None, options
     return choose(problem_class, robots, sets, options)
 
 
-def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, object]:
+def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
+           ) -> tuple[ModelChoice, CalibrationOptions]:
     """(the comparison, options with the chosen ``model`` and ``backlash``) for options
     whose model is "auto". CalibrationProblem: the problem class (passed in, so this module
     does not import the one that calls it); ``options``: validated CalibrationOptions; the

@@ -327,7 +327,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                      "(use --method l2)") if ev.method == "ls" else
                     "data that do not fit the model (see the residual), or a very "
                     "ill-conditioned problem",)))
-    notes = ()
+    notes: tuple[str, ...] = ()
     if ev.off_chain_columns and not any(f.kind == "residual" for f in out):
         # the data fit, yet name joints the chain leaves out: a tip short of the data's,
         # harmless only if those joints cannot move the measured point (e.g. a tool on
@@ -382,8 +382,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     corrections = []
     for p in result.parameters:
         if p.status == "identified" and lay.is_kinematic[lay.index(p.name)]:
-            k, unit = (1e3, "mm") if p.is_length else (180.0 / math.pi, "deg")
-            corrections.append((p.name, p.deviation * k, unit))
+            factor, unit = (1e3, "mm") if p.is_length else (180.0 / math.pi, "deg")
+            corrections.append((p.name, p.deviation * factor, unit))
     # largest first, lengths against the reach and angles in degrees on one footing
     corrections.sort(key=lambda c: -abs(c[1]) / (L * 1e3 if c[2] == "mm" else 180.0))
     worst = max(result.sets, key=lambda s: float(np.median(s.errors_after)))

@@ -65,7 +65,7 @@ def candidate_columns(fmt: str, position_columns=None) -> list[tuple[str, ...]]:
 def found_columns(header, position_columns=None) -> list[tuple[str, ...]]:
     """Every complete group of orientation columns in ``header`` (any format), for the
     refusal of a pose file read as positions."""
-    seen = []
+    seen: list[tuple[str, ...]] = []
     for fmt in FORMATS:
         for g in candidate_columns(fmt, position_columns):
             if all(c in header for c in g) and set(g) not in [set(x) for x in seen]:

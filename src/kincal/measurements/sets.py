@@ -129,7 +129,7 @@ def to_csv_text(data) -> str:
     if kind in ("point", "flush"):
         return data.to_csv_text()
     cols = list(data.joint_names)
-    extra = []
+    extra: np.ndarray = np.zeros((0, 0))
     if kind == "pose":
         cols += ["x", "y", "z", "qx", "qy", "qz", "qw"]
         extra = np.hstack([data.positions, np.array([matrix_to_quaternion(R)
