@@ -9,27 +9,25 @@ position errors only, so the orientation is held to the nominal model's)."""
 import json
 import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REPO, TIAGO_DIR
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from kincal import Robot
-from kincal.cli.main import main
 
-REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "scripts"))
 import tiago_pose_files  # noqa: E402  (writes the pose files; its --score is checked here)
 
-DATA = REPO.parent / "shared" / "data" / "tiago_mocap"
+DATA = TIAGO_DIR
 TIP = "wrist_ft_tool_link"
 FIGAROH_RMS, FIGAROH_MEAN, FIGAROH_MAX = tiago_pose_files.FIGAROH_MM
 SIGMA_MM, SIGMA_DEG = 0.2, 0.14  # the noise the data state (tiago_pose_files.NOISE)
 
 pytestmark = pytest.mark.skipif(not (DATA / "tiago_48_schunk.urdf").is_file(),
-                                reason=f"{DATA} is not present (shared data live outside the repo)")
+                                reason=f"{DATA} is absent (shared data live outside the repo)")
 
 
 def read(path):

@@ -3,8 +3,8 @@
 The candidates are the error models that can describe the chain (complete, placement,
 offsets, mdh) and, where the samples carry approach directions (every set a point or pose
 set, :data:`BACKLASH_KINDS`; the order of the rows or an order column), a backlash term per
-joint added by forward selection (none when backlash joints are given: those are the user's, in every
-candidate). Each is scored by its K-fold cross-validated prediction error on **the folds
+joint added by forward selection (none when backlash joints are given: those are the
+user's, in every candidate). Each is scored by its K-fold cross-validated prediction error on **the folds
 the penalty choice already makes** (same seed, same pose groups, same subsample): the
 chain's default structure is cross-validated as any ``lam="cv"`` run does, and every
 candidate is then fitted on those folds at that lambda and at 1/3x and 3x it (its own
