@@ -88,6 +88,14 @@ def score(data: Path, out: Path) -> int:
     r, m, x = FIGAROH_MM
     print(f"{'FIGAROH 1.0.2, frames from training':36s} {r:9.2f} / {m:6.2f} / {x:6.2f}"
           f"   {'not published':>24s}")
+    # the weight of the orientation rows against the position rows: the stated noise
+    # ratio, and the ratio the training residuals show after the fit
+    after = json.loads((out / "calibration.json").read_text())["sets"][0]
+    p, o = after["errors"]["after"]["rms_mm"], after["orientation_errors"]["after"]["rms_deg"]
+    stated = float(NOISE[1]) / float(NOISE[3])
+    print(f"orientation weight: stated {NOISE[1]} mm / {NOISE[3]} deg = {stated:.2f} mm per "
+          f"deg; training residuals after the fit {p:.3f} mm / {o:.3f} deg RMS = "
+          f"{p / o:.2f} mm per deg")
     return 0
 
 
