@@ -181,15 +181,17 @@ def orientation_values(R: np.ndarray, fmt: str, angle_scale: float = 1.0) -> np.
                         f"{', '.join(FORMATS)}")
     if fmt == "matrix":
         return R.reshape(-1, 9)
-    if fmt in ("quat-xyzw", "quat-wxyz"):
+    if fmt in ("quat-xyzw", "quat-wxyz", "rotvec"):
         from kincal.rotations import matrix_to_quaternion
 
         q = np.array([matrix_to_quaternion(r) for r in R]).reshape(-1, 4)  # qw >= 0
-        return q if fmt == "quat-xyzw" else q[:, [3, 0, 1, 2]]
-    if fmt == "rotvec":
-        from scipy.spatial.transform import Rotation
-
-        a = Rotation.from_matrix(R).as_rotvec() if len(R) else np.zeros((0, 3))
+        if fmt != "rotvec":
+            return q if fmt == "quat-xyzw" else q[:, [3, 0, 1, 2]]
+        s = np.linalg.norm(q[:, :3], axis=1)  # sin(angle / 2), the angle in [0, pi]
+        big = s > 1e-12  # else the small-angle limit of angle / sin(angle / 2): 2 / qw
+        k = np.where(big, 2.0 * np.arctan2(s, q[:, 3]) / np.where(big, s, 1.0),
+                     2.0 / np.maximum(q[:, 3], 0.5))
+        a = q[:, :3] * k[:, None]
     elif fmt == "rpy-zyx":  # R = Rz(c) Ry(b) Rx(a): a, then b and c from R Rx(a)^T
         x = np.arctan2(R[:, 2, 1], R[:, 2, 2])  # so that the angles give R back to
         M = R @ np.transpose(_axis_rotation(x, 0), (0, 2, 1))  # rounding even at gimbal lock
