@@ -226,13 +226,18 @@ def run(args) -> int:
     utc_now()  # a bad SOURCE_DATE_EPOCH fails here, before the work
     robots = Chain.load_all(c.chain.per_file(len(c.inputs.files)))  # each file's chain
     robot = robots[0]
+    several = len({(r.base, r.tip) for r in robots}) > 1
+    if several and (c.mdh_out is not None or c.yaml_format == "ur"):
+        raise OptionError("--mdh-out and --yaml-format ur describe one chain; this calibration "
+                          "has several (one --base/--tip per file): write --out or --yaml-out "
+                          "(kincal format, every chain's joints)")
     ur_hash = _ur_hash(c, robot) if c.yaml_format == "ur" else None
-    if c.accuracy.asked and len({(r.base, r.tip) for r in robots}) > 1:
+    if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
     inputs = c.inputs.files + ((c.validate,) if c.validate else ())
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots])
-    if c.validate and len({(r.base, r.tip) for r in robots}) > 1:
+    if c.validate and several:
         raise OptionError("--validate evaluates one chain; this calibration has several "
                           "(one --base/--tip per file)")
     sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain

@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING
 
 from kincal.cli.checks import check_outputs
 from kincal.cli.console import say_and_write, summary_lines
-from kincal.cli.options import Chain, add_common, add_model, add_overwrite, group, typed
+from kincal.cli.options import (ORIENTATION_FORMATS, Chain, add_common, add_model,
+                                add_overwrite, group, typed)
 from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
 from kincal.errors import OptionError
 
@@ -34,6 +35,11 @@ def register(subparsers) -> None:
     m.add_argument("--orientation-noise-deg", type=float,
                    help="sd of orientation noise per axis [deg] (--kind pose, default 0.01; "
                         "--kind flush: of the face's two tilts, default 0.05)")
+    m.add_argument("--orientation-format", choices=ORIENTATION_FORMATS, metavar="FORMAT",
+                   help="how --kind pose writes its orientations (default quat-xyzw: qx qy qz "
+                        "qw; quat-wxyz, rpy-zyx: roll pitch yaw as R = Rz Ry Rx, rpy-xyz, "
+                        "rotvec, matrix; angles in radians): read it back with the same "
+                        "--orientation-format")
     m.add_argument("--poses", type=int, help="poses to simulate (default 60)")
     m.add_argument("--center-m", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="cube centre in the base frame [m]")
@@ -74,6 +80,7 @@ class Simulate:
     design: str  # tracker | rtest
     kind: str  # point | pose | distance | plane | flush
     orientation_noise_deg: float
+    orientation_format: str | None  # of --kind pose; None: quat-xyzw
     poses: int
     center_m: tuple[float, float, float] | None
     size_mm: float | None
@@ -99,6 +106,9 @@ def run(args) -> int:
     from kincal import models
     from kincal.planning import simulation
 
+    if s.orientation_format is not None and s.kind != "pose":
+        raise OptionError(f"--orientation-format is how --kind pose writes its orientations; "
+                          f"--kind {s.kind} writes none")
     robot = s.chain.load()
     check_outputs(robot, [s.out, s.truth_out], overwrite=s.overwrite, inputs=[s.poses_file])
     model = models.build(s.model, robot.geometry)
@@ -219,4 +229,4 @@ def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str
         per = max(3, len(q) // 3)
         data = ks.simulate_contacts(model, table, tool, planes, cand, per, noise, rng,
                                     source="simulated")
-    return to_csv_text(data)
+    return to_csv_text(data, s.orientation_format or "quat-xyzw")

@@ -151,6 +151,11 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                               "expected a file name (a folder for plots)")
     if o.yaml_format not in ("kincal", "ur"):
         raise ExportError(f"yaml_format must be 'kincal' or 'ur', got {o.yaml_format!r}")
+    several = result.chains is not None and result.chains.several
+    if several and ((o.yaml is not None and o.yaml_format == "ur") or o.mdh is not None):
+        raise ExportError("a UR kinematics file and an MD-H table describe one chain; this "
+                          "calibration has several: write the URDF or the kincal YAML (every "
+                          "chain's joints)")
     if o.yaml_format == "ur" and o.yaml is not None and not o.ur_hash:
         raise ExportError("yaml_format 'ur' needs ur_hash (the hash of the robot's "
                           "kinematics_params file)")
@@ -199,13 +204,20 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
             files.append((o.yaml, prov.under_title(ur_kinematics_yaml(
                 result.robot, result.corrected, o.ur_hash))))
         elif o.yaml is not None:
-            files.append((o.yaml, prov.under_title(
-                kinematics_yaml(result.robot, result.corrected))))
+            files.append((o.yaml, prov.under_title(kinematics_yaml(
+                result.robot, result.corrected, joints=result.error_model.joint_names,
+                chains=_chains_title(result)))))
         if o.mdh is not None:
             files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,
                         data_source or ", ".join(sources), notes, validation)
     return _write(result, o, files, sources, before_commit, notes)
+
+
+def _chains_title(result) -> str:
+    """"base -> tip" of every chain of the result, in set order."""
+    robots = result.chains.chain_robots if result.chains is not None else (result.robot,)
+    return ", ".join(f"{r.base} -> {r.tip}" for r in robots)
 
 
 def _refusal(result, accept_implausible, accept_unconverged, refused: str) -> str:
