@@ -1,4 +1,5 @@
-"""Forward kinematics and Jacobians of a chain, vectorised over configurations.
+"""Forward kinematics, Jacobians and damped least-squares steps of a chain, vectorised
+over configurations.
 
 The inverse kinematics of many targets needs the tip pose and the joint Jacobians for N
 configurations at once (Pinocchio's Python API takes one configuration per call). kincal
@@ -17,6 +18,7 @@ import numpy as np
 
 from kincal.models import offsets
 from kincal.models.chain import Chain
+from kincal.rotations import rotation_log
 
 
 @dataclass(frozen=True)
@@ -60,10 +62,69 @@ class ChainKinematics:
         tip orientation in B, the position in B of the point ``tool`` (3,) given in the
         tip frame [m], and the Jacobians of that point's position [m per rad or m] and of
         the tip frame's orientation (angular velocity in B axes per joint velocity).
+
+        The chain's product T_first P_1 M_1(q_1) ... P_n M_n(q_n) T_last_tip as rotations
+        and translations (the offsets model at zero: P_i its origins), each product by a
+        fixed matrix one product over all rows; joint i's columns are its axis line's
+        motion: a x (p - c) and a for a revolute joint (axis a through c, in B), a and 0
+        for a prismatic one.
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        state = Chain(self.model, q).state(np.zeros(self.model.n))
-        point = state.p_tip + state.R_tip @ np.asarray(tool, dtype=float)
-        J_point, _ = state.point_columns(point)
-        J_rot, _ = state.rotation_columns()
-        return state.R_tip, point, J_point, J_rot
+        m = self.model
+        N = len(q)
+        R = np.broadcast_to(m.T_first[:3, :3], (N, 3, 3))
+        t = np.broadcast_to(m.T_first[:3, 3], (N, 3))
+        axes, points = np.empty((N, 3, m.n)), np.empty((N, 3, m.n))
+        for i in range(m.n):
+            O, w = m.origins[i], m.screw_axes[i]
+            HR, Ht = _times(R, O[:3, :3]), _times(R, O[:3, 3]) + t  # joint i's placed frame
+            a = axes[:, :, i] = _times(HR, w)
+            if m.kinds[i] == "prismatic":
+                R, t = HR, Ht + a * q[:, i, None]
+                continue
+            # the turn M = cos I + sin K + (1 - cos) w w^T about the line through c, K = [w]x:
+            # HR M = cos HR + sin HR K + (1 - cos) a w^T; c - M c = (1 - cos) u - sin (w x c)
+            # with u = c - w (w . c)
+            c = m.screw_points[i]
+            K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+            cos, sin = np.cos(q[:, i])[:, None], np.sin(q[:, i])[:, None]
+            points[:, :, i] = _times(HR, c) + Ht
+            R = cos[:, :, None] * HR + sin[:, :, None] * _times(HR, K) + (
+                1.0 - cos)[:, :, None] * (a[:, :, None] * w)
+            t = (1.0 - cos) * _times(HR, c - w * (w @ c)) - sin * _times(HR, np.cross(w, c)) + Ht
+        R_tip = _times(R, m.T_last_tip[:3, :3])
+        point = _times(R, m.T_last_tip[:3, 3]) + t + _times(R_tip, np.asarray(tool, dtype=float))
+        rev = ~self.prismatic
+        J_point, J_rot = axes.copy(), np.zeros((N, 3, m.n))
+        a, d = axes[:, :, rev], point[:, :, None] - points[:, :, rev]
+        J_point[:, :, rev] = np.stack([a[:, 1] * d[:, 2] - a[:, 2] * d[:, 1],  # a x (p - c)
+                                       a[:, 2] * d[:, 0] - a[:, 0] * d[:, 2],
+                                       a[:, 0] * d[:, 1] - a[:, 1] * d[:, 0]], axis=1)
+        J_rot[:, :, rev] = a
+        return R_tip, point, J_point, J_rot
+
+    def damped_step(self, q: np.ndarray, tool, positions: np.ndarray, rotations, lower,
+                    upper) -> tuple[np.ndarray, np.ndarray]:
+        """One damped least-squares step toward the targets, for N configurations at once:
+        the step of :meth:`kincal.robot.Robot.inverse_kinematics`, on the vectorised chain.
+
+        q: (N, n) joint values; positions: (N, 3) wanted positions of the point ``tool``
+        (3,) of the tip frame, in B [m]; rotations: (N, 3, 3) wanted tip orientations in B,
+        or None (position only); lower, upper: (n,) finite joint limits. Returns (|e| (N,),
+        the next q (N, n)): the norm of the error [m and rad stacked] at q and
+        q + A^T (A A^T + 1e-8 I)^-1 e clipped to the limits, A the Jacobian of the error.
+        """
+        R, p, J_point, J_rot = self.evaluate(q, tool)
+        e, A = np.asarray(positions, dtype=float) - p, J_point
+        if rotations is not None:
+            e = np.concatenate([e, rotation_log(rotations @ np.swapaxes(R, 1, 2))], axis=1)
+            A = np.concatenate([J_point, J_rot], axis=1)
+        M = A @ np.swapaxes(A, 1, 2)
+        M += 1e-8 * np.eye(e.shape[1])
+        dq = (np.swapaxes(A, 1, 2) @ np.linalg.solve(M, e[:, :, None]))[:, :, 0]
+        return np.linalg.norm(e, axis=1), np.clip(q + dq, lower, upper)
+
+
+def _times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A (N, 3, 3) times a fixed B (3, 3) or (3,): one matrix product over all N rows."""
+    return (A.reshape(-1, 3) @ B).reshape(A.shape[:2] + B.shape[1:])
