@@ -195,7 +195,7 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     R_MB = base_rotation(*frames.base[3:])
     t_MB = frames.base[:3]
     positions_B = (targets.positions - t_MB) @ R_MB  # R_MB^T (p - t) row-wise
-    R_seed, p_seed, _, _ = chain.evaluate(targets.seeds, tool)
+    R_seed, p_seed = chain.tool_poses(targets.seeds, tool)
     _check_units(chain, tool, g.lower, g.upper, positions_B, targets.positions,
                  p_seed @ R_MB.T + t_MB, targets.source, length_unit)
     if targets.quaternions is None:
@@ -233,7 +233,7 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
                              f"{len(frames.tools)} tool point(s)")
         tool = frames.tools[point]
     program = np.atleast_2d(np.asarray(program, dtype=float))
-    R_nom, p_nom, _, _ = ChainKinematics.of(nominal.geometry).evaluate(program, tool)
+    R_nom, p_nom = ChainKinematics.of(nominal.geometry).tool_poses(program, tool)
     g = calibrated.geometry
     required = np.full(len(program), g.n >= 6)
     sol = solve(ChainKinematics.of(g), tool, p_nom, R_nom, required, program, g.lower, g.upper,

@@ -22,11 +22,11 @@ reachable only beyond a limit is reported as not reached, never clipped silently
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
-from kincal.models.kinematics import ChainKinematics
+from kincal.models.kinematics import BLOCK, ChainKinematics
 from kincal.errors import OptionError
 from kincal.rotations import rotation_log
 
@@ -100,8 +100,15 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
 
     rotations: (N, 3, 3) wanted tip orientations in B; required: (N,) bool, True where
     the orientation must be met, False where it is only preferred. seeds: (N, n) start
-    values; lower, upper: (n,) joint limits (+-inf allowed).
+    values; lower, upper: (n,) joint limits (+-inf allowed). Solved in blocks of
+    :data:`kincal.models.kinematics.BLOCK` targets: the memory of the iterations is bounded.
     """
+    if len(seeds) > BLOCK:  # in blocks of targets: each is solved on its own anyway
+        parts = [solve(chain, tool, positions[s:s + BLOCK], rotations[s:s + BLOCK],
+                       required[s:s + BLOCK], seeds[s:s + BLOCK], lower, upper, options)
+                 for s in range(0, len(seeds), BLOCK)]
+        return IkSolution(*(np.concatenate([getattr(p, f.name) for p in parts])
+                            for f in fields(IkSolution)))
     q = np.clip(np.array(seeds, dtype=float), lower, upper)
     N, n = q.shape
     eye = np.eye(n)

@@ -21,6 +21,9 @@ from kincal.models.chain import Chain
 from kincal.rotations import rotation_log
 
 
+BLOCK = 4096  # configurations evaluated at once
+
+
 @dataclass(frozen=True)
 class ChainKinematics:
     """The chain of a ChainGeometry, ready for batched evaluation (its offsets model)."""
@@ -55,6 +58,15 @@ class ChainKinematics:
         state = Chain(self.model, q).state(np.zeros(self.model.n), keep=False)
         return state.p_tip + state.R_tip @ np.asarray(tool, dtype=float)
 
+    def tool_poses(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+        """(R_tip (N, 3, 3), p_point (N, 3)) of :meth:`evaluate`, without keeping the
+        Jacobians (made block by block and dropped)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        R, p = np.empty((len(q), 3, 3)), np.empty((len(q), 3))
+        for s in range(0, len(q), BLOCK):
+            R[s:s + BLOCK], p[s:s + BLOCK] = self.evaluate(q[s:s + BLOCK], tool)[:2]
+        return R, p
+
     def evaluate(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)):
         """Tip pose and Jacobians for joint values ``q`` (N, n) [rad or m].
 
@@ -70,6 +82,9 @@ class ChainKinematics:
         for a prismatic one.
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
+        if len(q) > BLOCK:  # in blocks of configurations: see _times
+            parts = [self.evaluate(q[s:s + BLOCK], tool) for s in range(0, len(q), BLOCK)]
+            return tuple(np.concatenate(p) for p in zip(*parts))
         m = self.model
         N = len(q)
         R = np.broadcast_to(m.T_first[:3, :3], (N, 3, 3))
@@ -126,5 +141,6 @@ class ChainKinematics:
 
 
 def _times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """A (N, 3, 3) times a fixed B (3, 3) or (3,): one matrix product over all N rows."""
+    """A (N, 3, 3) times a fixed B (3, 3) or (3,): one matrix product over all N rows (for
+    N up to :data:`BLOCK`: a larger one would go to BLAS's threads, slower on busy cores)."""
     return (A.reshape(-1, 3) @ B).reshape(A.shape[:2] + B.shape[1:])
