@@ -120,7 +120,7 @@ def _compensate(c: Compensate) -> int:
                           "reached=0")
     said = [result.summary()] + [f"  NOT reached, written with reached=0: {line}"
                                  for line in failures]
-    say_and_write([(c.out, result.to_csv_text(c.length_unit, c.angle_unit))],
+    say_and_write([(c.out, result.csv_blocks(c.length_unit, c.angle_unit))],
                   lambda written: said + [f"  wrote {path} (joint values in {c.angle_unit} and "
                                           f"{c.length_unit}, as the input)" for path in written],
                   overwrite=c.overwrite,

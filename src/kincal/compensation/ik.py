@@ -104,11 +104,15 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
     :data:`kincal.models.kinematics.BLOCK` targets: the memory of the iterations is bounded.
     """
     if len(seeds) > BLOCK:  # in blocks of targets: each is solved on its own anyway
-        parts = [solve(chain, tool, positions[s:s + BLOCK], rotations[s:s + BLOCK],
-                       required[s:s + BLOCK], seeds[s:s + BLOCK], lower, upper, options)
-                 for s in range(0, len(seeds), BLOCK)]
-        return IkSolution(*(np.concatenate([getattr(p, f.name) for p in parts])
-                            for f in fields(IkSolution)))
+        out = {}
+        for s in range(0, len(seeds), BLOCK):
+            part = solve(chain, tool, positions[s:s + BLOCK], rotations[s:s + BLOCK],
+                         required[s:s + BLOCK], seeds[s:s + BLOCK], lower, upper, options)
+            for f in fields(IkSolution):
+                v = getattr(part, f.name)
+                out.setdefault(f.name, np.empty((len(seeds),) + v.shape[1:], v.dtype))[
+                    s:s + BLOCK] = v
+        return IkSolution(**out)
     q = np.clip(np.array(seeds, dtype=float), lower, upper)
     N, n = q.shape
     eye = np.eye(n)
