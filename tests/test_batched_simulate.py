@@ -55,13 +55,15 @@ def _per_pose(robot, n, center, size, tool, rng, max_tilt=np.radians(30), attemp
     ("ec66", 120, (0.4, 0.0, 0.25), 0.4, 30.0),
     ("ec66", 60, (0.4, 0.0, 0.25), 0.02, 15.0),
     ("ur5", 60, (0.4, 0.0, 0.25), 0.3, 30.0),  # poses that need random restarts
+    ("panda", 100, (0.4, 0.0, 0.4), 0.6, None),  # position only, with random restarts
 ])
 def test_batched_cube_poses_equal_the_per_pose_path(name, n, center, size, tilt):
     robot = Robot.load(name)
+    tilt = None if tilt is None else np.radians(tilt)
     for seed in (0, 1):
         a_rng, b_rng = np.random.default_rng(seed), np.random.default_rng(seed)
-        expected = _per_pose(robot, n, center, size, (0, 0, 0.12), a_rng, np.radians(tilt))
-        got = cube_poses(robot, n, center, size, (0, 0, 0.12), b_rng, max_tilt=np.radians(tilt))
+        expected = _per_pose(robot, n, center, size, (0, 0, 0.12), a_rng, tilt)
+        got = cube_poses(robot, n, center, size, (0, 0, 0.12), b_rng, max_tilt=tilt)
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
         assert a_rng.random() == b_rng.random()  # the generator is where it was before
 
@@ -110,11 +112,18 @@ def test_batched_simulate_is_the_same_file_as_per_pose(tmp_path, monkeypatch):
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("n", [1, 7, 300, 3000])
-def test_nearest_earlier_is_what_a_scan_finds(n):
+@pytest.mark.parametrize("n, shape", [(1, "cube"), (7, "cube"), (300, "cube"), (3000, "cube"),
+                                      (3000, "plane"), (1000, "line"), (600, "one point")])
+def test_nearest_earlier_is_what_a_scan_finds(n, shape):
     rng = np.random.default_rng(n)
     c, P = rng.random(3), rng.random((n, 3))
     P[n // 2:n // 2 + n // 4] = P[:n // 4]  # exact ties: the first of equals wins
+    if shape == "plane":
+        P[:, 2] = 0.5
+    elif shape == "line":
+        P[:, 1:] = 0.5
+    elif shape == "one point":
+        P[:] = c
     A = np.vstack([c[None], P])
     expected = [int(np.argmin(np.linalg.norm(A[:i + 1] - P[i], axis=1))) - 1 for i in range(n)]
     assert nearest_earlier(c, P).tolist() == expected
@@ -136,3 +145,19 @@ def test_damped_step_is_the_step_of_robot_inverse_kinematics():
             one, _ = robot.inverse_kinematics(p[k], tool, None if rot is None else rot[k],
                                               start=q0[k], max_iterations=1)
             np.testing.assert_allclose(q1[k], one, rtol=0, atol=1e-10)  # a long step
+
+
+def test_measurements_csv_text_is_the_text_as_before():
+    """Measurements.to_csv_text made from one table (several points per pose, sigma)."""
+    from kincal.measurements.data import Measurements
+
+    rng = np.random.default_rng(0)
+    n, K = 20, 2
+    m = Measurements(("a", "b", "c"), np.repeat(rng.normal(size=(n, 3)), K, axis=0),
+                     rng.normal(size=(n * K, 3)), points=np.tile(np.arange(K), n),
+                     poses=np.repeat(np.arange(n), K), sigma=np.full(n * K, 1e-4))
+    lines = ["a,b,c,x1,y1,z1,x2,y2,z2,sigma"]
+    for idx in np.lexsort((m.points, m.poses)).reshape(-1, K):  # as it was written before
+        vals = list(m.joint_values[idx[0]]) + list(m.positions[idx].ravel()) + [m.sigma[idx[0]]]
+        lines.append(",".join(repr(float(v)) for v in vals))
+    assert m.to_csv_text() == "\n".join(lines) + "\n"

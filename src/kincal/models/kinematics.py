@@ -12,6 +12,7 @@ joint's motion, so the joint Jacobians are that model's columns. Tests check the
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +59,18 @@ class ChainKinematics:
         state = Chain(self.model, q).state(np.zeros(self.model.n), keep=False)
         return state.p_tip + state.R_tip @ np.asarray(tool, dtype=float)
 
+    @functools.cached_property
+    def _joints(self) -> list:
+        """Per joint: (origin, axis w, axis point c, [w]x, c - w (w . c), w x c), the last
+        three None for a prismatic joint."""
+        m, out = self.model, []
+        for i in range(m.n):
+            w, c = m.screw_axes[i], m.screw_points[i]
+            K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+            out.append((m.origins[i], w, c) + ((None, None, None) if m.kinds[i] == "prismatic"
+                                               else (K, c - w * (w @ c), K @ c)))
+        return out
+
     def tool_poses(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
         """(R_tip (N, 3, 3), p_point (N, 3)) of :meth:`evaluate`, without keeping the
         Jacobians (made block by block and dropped)."""
@@ -90,23 +103,20 @@ class ChainKinematics:
         R = np.broadcast_to(m.T_first[:3, :3], (N, 3, 3))
         t = np.broadcast_to(m.T_first[:3, 3], (N, 3))
         axes, points = np.empty((N, 3, m.n)), np.empty((N, 3, m.n))
-        for i in range(m.n):
-            O, w = m.origins[i], m.screw_axes[i]
+        for i, (O, w, c, K, u, v) in enumerate(self._joints):
             HR, Ht = _times(R, O[:3, :3]), _times(R, O[:3, 3]) + t  # joint i's placed frame
             a = axes[:, :, i] = _times(HR, w)
-            if m.kinds[i] == "prismatic":
+            if K is None:  # prismatic
                 R, t = HR, Ht + a * q[:, i, None]
                 continue
             # the turn M = cos I + sin K + (1 - cos) w w^T about the line through c, K = [w]x:
-            # HR M = cos HR + sin HR K + (1 - cos) a w^T; c - M c = (1 - cos) u - sin (w x c)
-            # with u = c - w (w . c)
-            c = m.screw_points[i]
-            K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+            # HR M = cos HR + sin HR K + (1 - cos) a w^T; c - M c = (1 - cos) u - sin v
+            # with u = c - w (w . c) and v = w x c
             cos, sin = np.cos(q[:, i])[:, None], np.sin(q[:, i])[:, None]
             points[:, :, i] = _times(HR, c) + Ht
             R = cos[:, :, None] * HR + sin[:, :, None] * _times(HR, K) + (
                 1.0 - cos)[:, :, None] * (a[:, :, None] * w)
-            t = (1.0 - cos) * _times(HR, c - w * (w @ c)) - sin * _times(HR, np.cross(w, c)) + Ht
+            t = (1.0 - cos) * _times(HR, u) - sin * _times(HR, v) + Ht
         R_tip = _times(R, m.T_last_tip[:3, :3])
         point = _times(R, m.T_last_tip[:3, 3]) + t + _times(R_tip, np.asarray(tool, dtype=float))
         rev = ~self.prismatic

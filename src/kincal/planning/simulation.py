@@ -75,11 +75,15 @@ def random_rotation_near(R0: np.ndarray, max_angle: float, rng) -> np.ndarray:
     return _rotations_near(R0, max_angle, rng, 1)[0]
 
 
-def _rotations_near(R0: np.ndarray, max_angle: float, rng, count: int) -> np.ndarray:
+def _rotations_near(R0: np.ndarray, max_angle: float, rng, count: int,
+                    marks: dict | None = None) -> np.ndarray:
     """(count, 3, 3): ``count`` draws of :func:`random_rotation_near`, the random numbers
-    taken in the same order as ``count`` calls of it, the rotations made at once."""
+    taken in the same order as ``count`` calls of it, the rotations made at once. marks:
+    filled with {k: the generator's state before draw k} every 1024 draws."""
     axes, angles = np.empty((count, 3)), np.empty(count)
     for k in range(count):
+        if marks is not None and k % 1024 == 0:
+            marks[k] = rng.bit_generator.state
         axes[k] = rng.normal(size=3)
         angles[k] = rng.uniform(0, max_angle)
     axes /= np.linalg.norm(axes, axis=1)[:, None]
@@ -142,16 +146,18 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
         report = lambda k: progress(k, n)  # noqa: E731
     while first < n:
         done[0] = first
-        state = rng.bit_generator.state
-        R = None if max_tilt is None else _rotations_near(R0, max_tilt, rng, n - first)
+        marks = {0: rng.bit_generator.state}
+        R = None if max_tilt is None else _rotations_near(R0, max_tilt, rng, n - first, marks)
         bad = _solve_from_parents(chain, P, R, tool, parent, first, home, solved,
                                   lo, hi, report, done)
         if bad == n:
             break
         # pose `bad` needs random restarts: its random numbers come after the rotations of
         # the poses before it and its own, and every later pose draws anew after them
-        rng.bit_generator.state = state
-        R_bad = None if max_tilt is None else _rotations_near(R0, max_tilt, rng, bad + 1 - first)[-1]
+        mark = (bad - first) // 1024 * 1024 if max_tilt is not None else 0
+        rng.bit_generator.state = marks[mark]  # the state before the draws up to `bad`'s
+        R_bad = None if max_tilt is None else _rotations_near(R0, max_tilt, rng,
+                                                              bad - first - mark + 1)[-1]
         solved[bad] = _random_restarts(robot, P[bad], tool, R_bad, R0, max_tilt, home,
                                        solved[parent[bad]] if parent[bad] >= 0 else home,
                                        rng, lo, hi, attempts, size, center)
@@ -268,31 +274,51 @@ def measure(mdh: ErrorModel, truth: Truth, q: np.ndarray, noise_sd: float,
                         approach=g, points=points, poses=np.repeat(np.arange(n), K))
 
 
-def nearest_earlier(center, P: np.ndarray, k: int = 16) -> np.ndarray:
+def nearest_earlier(center, P: np.ndarray) -> np.ndarray:
     """(N,) for each point of P (N, 3) the nearest of ``center`` and the points before it
     in P: its index, -1 for the centre (the first of equals).
 
-    Up to 2,048 points by a scan of all; more by a k-d tree over all of them that finds
-    each point's k nearest, and a scan for the few points with none earlier among those
-    (the first ones, mostly). The same answer as a scan of all either way."""
+    Through grids of cubes of edge h, about two points a cube at first: the nearest
+    earlier point among the 27 cubes around a point is the nearest of all when it is
+    within h (any other is farther). The points without one go to a grid of twice the
+    edge, and so on; the last few (the first points, mostly) are scanned. The same
+    answer as a scan of all."""
     A = np.vstack([np.asarray(center, float)[None], P])  # A[i + 1] is P[i]
     N = len(P)
     out = np.full(N, -2)
     todo = np.arange(N)
-    if N > 2048:
-        from scipy.spatial import cKDTree
-
-        d, j = cKDTree(A).query(P, k=k)
-        earlier = j <= np.arange(N)[:, None]  # A indices up to i: the centre and P[:i]
-        d = np.where(earlier, d, np.inf)
-        best = d.min(axis=1)
-        found = np.isfinite(best)
-        first = np.where(earlier & (d == best[:, None]), j, N + 1).min(axis=1)
-        out[found] = first[found] - 1
-        todo = np.flatnonzero(~found)
+    span = np.ptp(A, axis=0)
+    h = (float(np.prod(np.maximum(span, 1e-3 * span.max()))) / max(N, 1)) ** (1 / 3) * 1.25
+    while len(todo) > 256 and h < span.max():
+        found, arg = _nearest_earlier_in_grid(A, todo, h)
+        out[todo[found]] = arg[found] - 1
+        todo, h = todo[~found], 2 * h
     for s in range(0, len(todo), 256):  # a block of points against all before its last
         rows = todo[s:s + 256]
         d = np.linalg.norm(A[None, :rows[-1] + 1] - P[rows, None], axis=2)
         d[np.arange(A.shape[0])[None, :rows[-1] + 1] > rows[:, None]] = np.inf
         out[rows] = np.argmin(d, axis=1) - 1
     return out
+
+
+def _nearest_earlier_in_grid(A: np.ndarray, todo: np.ndarray, h: float):
+    """For the points P[todo] (A[todo + 1]): whether the nearest of the earlier points of
+    A lies within h, found among the 27 cubes of edge h around each, and its index in A."""
+    cell = np.floor((A - A.min(axis=0)) / h).astype(np.int64) + 1  # a margin of empty cubes
+    dims = cell.max(axis=0) + 2
+    key = np.ravel_multi_index(cell.T, dims)
+    order = np.argsort(key, kind="stable")  # the points cube by cube, in order within one
+    counts = np.bincount(key, minlength=int(np.prod(dims)))
+    starts = np.cumsum(counts) - counts
+    me = todo + 1
+    best, arg = np.full(len(todo), np.inf), np.full(len(todo), len(A))
+    for off in np.ndindex(3, 3, 3):
+        k = np.ravel_multi_index((cell[me] + np.array(off) - 1).T, dims)
+        first, count = starts[k], counts[k]
+        for m in range(int(count.max(initial=0))):
+            has = np.flatnonzero(count > m)
+            j = order[first[has] + m]
+            d = np.linalg.norm(A[j] - A[me[has]], axis=1)
+            better = (j < me[has]) & ((d < best[has]) | ((d == best[has]) & (j < arg[has])))
+            best[has[better]], arg[has[better]] = d[better], j[better]
+    return best <= h, arg
