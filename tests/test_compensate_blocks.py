@@ -36,7 +36,7 @@ def test_blocked_inverse_kinematics_equals_one_block(monkeypatch):
     whole = ik.solve(chain, (0.0, 0.0, 0.12), p, R, required, seeds, lo, hi)
     assert whole.reached.mean() > 0.9
     monkeypatch.setattr(ik, "BLOCK", 7)
-    monkeypatch.setattr(kinematics, "BLOCK", 5)
+    monkeypatch.setattr(kinematics, "_ROWS", 5)
     blocked = ik.solve(chain, (0.0, 0.0, 0.12), p, R, required, seeds, lo, hi)
     for name in ("q", "position_error", "orientation_error", "reached", "at_limit",
                  "iterations"):
@@ -47,7 +47,7 @@ def test_blocked_tool_poses_and_evaluate_equal_one_block(monkeypatch):
     chain, *_ = _problem()
     q = np.random.default_rng(3).uniform(-3, 3, (23, chain.n))
     whole = chain.evaluate(q, (0.01, 0.0, 0.1))
-    monkeypatch.setattr(kinematics, "BLOCK", 4)
+    monkeypatch.setattr(kinematics, "_ROWS", 4)
     for a, b in zip(chain.evaluate(q, (0.01, 0.0, 0.1)), whole):
         np.testing.assert_array_equal(a, b)
     R, p = chain.tool_poses(q, (0.01, 0.0, 0.1))

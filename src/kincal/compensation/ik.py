@@ -129,9 +129,11 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         # a joint on a limit that the step pushes outward is taken out of the step, so the
         # other joints meet the position (the orientation gives way first if it must)
         blocked = ((q[idx] <= lower) & (dq < 0)) | ((q[idx] >= upper) & (dq > 0))
-        if blocked.any():
-            keep = (~blocked)[:, None, :]
-            dq = _step(Jp * keep, Jo * keep, e_p, e_o, eye, options.damping)
+        rows = np.flatnonzero(blocked.any(axis=1))  # the step again for these rows only
+        if rows.size:
+            keep = (~blocked[rows])[:, None, :]
+            dq[rows] = _step(Jp[rows] * keep, Jo[rows] * keep, e_p[rows], e_o[rows], eye,
+                             options.damping)
         biggest = np.abs(dq).max(axis=1)
         dq *= np.minimum(1.0, options.max_step / np.maximum(biggest, 1e-300))[:, None]
         q_new = np.clip(q[idx] + dq, lower, upper)

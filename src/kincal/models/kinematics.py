@@ -22,7 +22,8 @@ from kincal.models.chain import Chain
 from kincal.rotations import rotation_log
 
 
-BLOCK = 4096  # configurations evaluated at once
+BLOCK = 4096  # configurations (targets) its users take at once
+_ROWS = 1024  # configurations evaluated at once: products small enough for one BLAS thread
 
 
 @dataclass(frozen=True)
@@ -61,14 +62,26 @@ class ChainKinematics:
 
     @functools.cached_property
     def _joints(self) -> list:
-        """Per joint: (origin, axis w, axis point c, [w]x, c - w (w . c), w x c), the last
-        three None for a prismatic joint."""
+        """Per joint a fixed (4, 18) matrix G = P [E_cos E_sin E_(1-cos) E_1 | w | c]: the
+        frame T = [R | t] (3, 4) before joint i's placement P times G gives at once the
+        four parts of the frame after its motion M(q) = E_cos cos q + E_sin sin q +
+        E_(1-cos) (1 - cos q) + E_1 (Rodrigues' formula about the line through c: [w]x,
+        w w^T, and u = c - w (w . c), v = w x c for the translation), the axis a = R P w and
+        the point R P c + t of the axis line. A prismatic joint: E_cos = I, E_sin = 0,
+        E_(1-cos) = 0, and the slide a q added to the translation."""
         m, out = self.model, []
         for i in range(m.n):
             w, c = m.screw_axes[i], m.screw_points[i]
-            K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-            out.append((m.origins[i], w, c) + ((None, None, None) if m.kinds[i] == "prismatic"
-                                               else (K, c - w * (w @ c), K @ c)))
+            E = np.zeros((4, 4, 4))
+            E[0, :3, :3] = np.eye(3)
+            E[3, 3, 3] = 1.0
+            if m.kinds[i] != "prismatic":
+                K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+                E[1, :3, :3], E[1, :3, 3] = K, -(K @ c)
+                E[2, :3, :3], E[2, :3, 3] = np.outer(w, w), c - w * (w @ c)
+            cols = np.hstack([E[0], E[1], E[2], E[3], np.r_[w, 0.0][:, None],
+                              np.r_[c, 1.0][:, None]])
+            out.append((m.origins[i] @ cols, m.kinds[i] == "prismatic"))
         return out
 
     def tool_poses(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
@@ -95,30 +108,26 @@ class ChainKinematics:
         for a prismatic one.
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        if len(q) > BLOCK:  # in blocks of configurations: see _times
-            parts = [self.evaluate(q[s:s + BLOCK], tool) for s in range(0, len(q), BLOCK)]
+        if len(q) > _ROWS:  # in blocks of configurations: see _times
+            parts = [self.evaluate(q[s:s + _ROWS], tool) for s in range(0, len(q), _ROWS)]
             return tuple(np.concatenate(p) for p in zip(*parts))
         m = self.model
         N = len(q)
-        R = np.broadcast_to(m.T_first[:3, :3], (N, 3, 3))
-        t = np.broadcast_to(m.T_first[:3, 3], (N, 3))
+        T = np.broadcast_to(m.T_first[:3], (N, 3, 4))  # [R | t]
         axes, points = np.empty((N, 3, m.n)), np.empty((N, 3, m.n))
-        for i, (O, w, c, K, u, v) in enumerate(self._joints):
-            HR, Ht = _times(R, O[:3, :3]), _times(R, O[:3, 3]) + t  # joint i's placed frame
-            a = axes[:, :, i] = _times(HR, w)
-            if K is None:  # prismatic
-                R, t = HR, Ht + a * q[:, i, None]
+        for i, (G, prismatic) in enumerate(self._joints):
+            Y = (T.reshape(-1, 4) @ G).reshape(N, 3, 18)
+            axes[:, :, i] = Y[:, :, 16]
+            if prismatic:
+                T = Y[:, :, 0:4] + Y[:, :, 12:16]
+                T[:, :, 3] += Y[:, :, 16] * q[:, i, None]
                 continue
-            # the turn M = cos I + sin K + (1 - cos) w w^T about the line through c, K = [w]x:
-            # HR M = cos HR + sin HR K + (1 - cos) a w^T; c - M c = (1 - cos) u - sin v
-            # with u = c - w (w . c) and v = w x c
-            cos, sin = np.cos(q[:, i])[:, None], np.sin(q[:, i])[:, None]
-            points[:, :, i] = _times(HR, c) + Ht
-            R = cos[:, :, None] * HR + sin[:, :, None] * _times(HR, K) + (
-                1.0 - cos)[:, :, None] * (a[:, :, None] * w)
-            t = (1.0 - cos) * _times(HR, u) - sin * _times(HR, v) + Ht
-        R_tip = _times(R, m.T_last_tip[:3, :3])
-        point = _times(R, m.T_last_tip[:3, 3]) + t + _times(R_tip, np.asarray(tool, dtype=float))
+            points[:, :, i] = Y[:, :, 17]
+            cos, sin = np.cos(q[:, i])[:, None, None], np.sin(q[:, i])[:, None, None]
+            T = cos * Y[:, :, 0:4] + sin * Y[:, :, 4:8] + (1.0 - cos) * Y[:, :, 8:12] + Y[:, :, 12:16]
+        tip = (T.reshape(-1, 4) @ m.T_last_tip).reshape(N, 3, 4)
+        R_tip = tip[:, :, :3]
+        point = tip[:, :, 3] + _times(R_tip, np.asarray(tool, dtype=float))
         rev = ~self.prismatic
         J_point, J_rot = axes.copy(), np.zeros((N, 3, m.n))
         a, d = axes[:, :, rev], point[:, :, None] - points[:, :, rev]
@@ -152,5 +161,5 @@ class ChainKinematics:
 
 def _times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """A (N, 3, 3) times a fixed B (3, 3) or (3,): one matrix product over all N rows (for
-    N up to :data:`BLOCK`: a larger one would go to BLAS's threads, slower on busy cores)."""
+    N up to :data:`_ROWS`: a larger one would go to BLAS's threads, slower on busy cores)."""
     return (A.reshape(-1, 3) @ B).reshape(A.shape[:2] + B.shape[1:])
