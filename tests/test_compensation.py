@@ -11,7 +11,7 @@ from conftest import TIAGO_URDF, random_joint_values
 
 from kincal.cli.main import main
 from kincal.compensation import CellFrames, IkOptions, Targets, compensate, filter_program
-from kincal.compensation.ik import rotation_log
+from kincal.rotations import rotation_log
 from kincal.models.kinematics import ChainKinematics
 from kincal.descriptions import default_center
 from kincal.errors import DataError

@@ -163,17 +163,3 @@ def test_simulate_reports_progress_to_the_last_pose():
                    np.random.default_rng(0), progress=lambda done, total: seen.append(done))
     assert len(q) == 250 and seen[0] == 0 and seen[-1] == 250
     assert seen == sorted(seen) and len(seen) > 100
-
-
-def test_nearest_solved_pose_is_the_one_a_full_scan_finds():
-    from kincal.planning.simulation import _Solved
-
-    rng = np.random.default_rng(4)
-    pts = rng.random((3000, 3))
-    solved = _Solved(pts[0], np.array([0.0]), len(pts))
-    for k in range(1, len(pts)):  # the k-d tree is rebuilt at 257, 515, 1031 and 2063 points
-        p = rng.random(3)
-        expected = int(np.argmin(np.linalg.norm(pts[:k] - p, axis=1)))
-        assert solved.nearest(p)[0] == expected
-        solved.add(pts[k], np.array([float(k)]))
-    assert solved.tree is not None and solved.in_tree == 2063

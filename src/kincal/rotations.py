@@ -164,3 +164,21 @@ def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
         q[3] = (R[m, j] - R[j, m]) / s
     v = np.array(q)
     return v if v[3] >= 0 else -v
+
+
+def rotation_log(R: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors [rad] of rotations (N, 3, 3) (angle in [0, pi])."""
+    w = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1)
+    s = np.linalg.norm(w, axis=1) / 2.0
+    c = (np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0
+    angle = np.arctan2(s, c)
+    small = s < 1e-9
+    scale = np.where(small, 0.5, angle / (2.0 * np.where(small, 1.0, s)))
+    out = w * scale[:, None]
+    # near pi the antisymmetric part vanishes: take the axis from the symmetric part
+    flip = small & (c < 0)
+    for k in np.flatnonzero(flip):
+        B = (R[k] + np.eye(3)) / 2.0
+        axis = B[np.argmax(np.diag(B))]
+        out[k] = np.pi * axis / np.linalg.norm(axis)
+    return out

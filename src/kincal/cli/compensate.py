@@ -126,7 +126,9 @@ def _compensate(c: Compensate) -> int:
     said = [result.summary()] + [f"  NOT reached, written with reached=0: {line}"
                                  for line in failures]
     r = result.reached
-    summary = {"command": "compensate", "robot": str(robot.source), "source": result.source,
+    # built only for --json: the joint values of 100,000 targets as Python floats weigh
+    # tens of MB, which the blocked writing below is there to avoid
+    summary = {} if not c.json else {"command": "compensate", "robot": str(robot.source), "source": result.source,
                "targets": len(result), "reached": int(r.sum()), "not_reached": failures,
                "max_position_error_m": float(result.position_error[r].max()) if r.any() else None,
                "max_orientation_error_rad": (float(result.orientation_error[r].max())
@@ -136,7 +138,7 @@ def _compensate(c: Compensate) -> int:
                "notes": list(result.notes)}
     from kincal.export.outputs import File
 
-    say_and_write([File(c.out, "csv", result.to_csv_text(c.length_unit, c.angle_unit))],
+    say_and_write([File(c.out, "csv", result.csv_blocks(c.length_unit, c.angle_unit))],
                   lambda written: summary_lines(c.json, said, summary, written, wrote=lambda path: (
                       f"  wrote {path} (joint values in {c.angle_unit} and {c.length_unit}, as "
                       "the input)")),

@@ -105,16 +105,22 @@ class Compensation:
     def to_csv_text(self, length_unit: str = "m", angle_unit: str = "rad") -> str:
         """CSV: the file's line of each target, the compensated joint values in the given
         units, the residual in mm and degrees, and reached (1/0)."""
+        return "".join(self.csv_blocks(length_unit, angle_unit))
+
+    def csv_blocks(self, length_unit: str = "m", angle_unit: str = "rad", rows: int = 4096):
+        """The text of :meth:`to_csv_text` in pieces of ``rows`` rows (the header first),
+        made as they are written: a large file is never held as one string."""
         scale = joint_scales(self.kinds, length_unit, angle_unit)
-        rows = [",".join(["target_line", *self.joint_names, "position_error_mm",
-                          "orientation_error_deg", "reached"])]
-        for k in range(len(self)):
-            cells = [str(int(self.lines[k]))] + [repr(float(v)) for v in
-                                                 self.joint_values[k] / scale]
-            cells += [f"{self.position_error[k] * 1e3:.6g}",
-                      f"{np.degrees(self.orientation_error[k]):.6g}", str(int(self.reached[k]))]
-            rows.append(",".join(cells))
-        return "\n".join(rows) + "\n"
+        yield ",".join(["target_line", *self.joint_names, "position_error_mm",
+                        "orientation_error_deg", "reached"]) + "\n"
+        for s in range(0, len(self), rows):
+            b = slice(s, s + rows)
+            yield "".join(
+                f"{line},{','.join(map(repr, q))},{p:.6g},{o:.6g},{r}\n" for line, q, p, o, r in
+                zip(self.lines[b].astype(int).tolist(), (self.joint_values[b] / scale).tolist(),
+                    (self.position_error[b] * 1e3).tolist(),
+                    np.degrees(self.orientation_error[b]).tolist(),
+                    self.reached[b].astype(int).tolist()))
 
 
 def _reach(chain: ChainKinematics, tool: np.ndarray, lower, upper) -> tuple[np.ndarray, float]:
@@ -195,7 +201,7 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     R_MB = base_rotation(*frames.base[3:])
     t_MB = frames.base[:3]
     positions_B = (targets.positions - t_MB) @ R_MB  # R_MB^T (p - t) row-wise
-    R_seed, p_seed, _, _ = chain.evaluate(targets.seeds, tool)
+    R_seed, p_seed = chain.tool_poses(targets.seeds, tool)
     _check_units(chain, tool, g.lower, g.upper, positions_B, targets.positions,
                  p_seed @ R_MB.T + t_MB, targets.source, length_unit)
     if targets.quaternions is None:
@@ -233,7 +239,7 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
                              f"{len(frames.tools)} tool point(s)")
         tool = frames.tools[point]
     program = np.atleast_2d(np.asarray(program, dtype=float))
-    R_nom, p_nom, _, _ = ChainKinematics.of(nominal.geometry).evaluate(program, tool)
+    R_nom, p_nom = ChainKinematics.of(nominal.geometry).tool_poses(program, tool)
     g = calibrated.geometry
     required = np.full(len(program), g.n >= 6)
     sol = solve(ChainKinematics.of(g), tool, p_nom, R_nom, required, program, g.lower, g.upper,

@@ -22,12 +22,13 @@ reachable only beyond a limit is reported as not reached, never clipped silently
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
-from kincal.models.kinematics import ChainKinematics
+from kincal.models.kinematics import BLOCK, ChainKinematics
 from kincal.errors import OptionError
+from kincal.rotations import rotation_log
 
 
 @dataclass(frozen=True)
@@ -75,24 +76,6 @@ class IkSolution:
     iterations: np.ndarray
 
 
-def rotation_log(R: np.ndarray) -> np.ndarray:
-    """(N, 3) rotation vectors [rad] of rotations (N, 3, 3) (angle in [0, pi])."""
-    w = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1)
-    s = np.linalg.norm(w, axis=1) / 2.0
-    c = (np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0
-    angle = np.arctan2(s, c)
-    small = s < 1e-9
-    scale = np.where(small, 0.5, angle / (2.0 * np.where(small, 1.0, s)))
-    out = w * scale[:, None]
-    # near pi the antisymmetric part vanishes: take the axis from the symmetric part
-    flip = small & (c < 0)
-    for k in np.flatnonzero(flip):
-        B = (R[k] + np.eye(3)) / 2.0
-        axis = B[np.argmax(np.diag(B))]
-        out[k] = np.pi * axis / np.linalg.norm(axis)
-    return out
-
-
 def _damped_pinv(A: np.ndarray, damping: float) -> np.ndarray:
     """(N, n, m) damped pseudo-inverses A^T (A A^T + d^2 I)^-1 of (N, m, n) matrices."""
     m = A.shape[1]
@@ -117,8 +100,19 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
 
     rotations: (N, 3, 3) wanted tip orientations in B; required: (N,) bool, True where
     the orientation must be met, False where it is only preferred. seeds: (N, n) start
-    values; lower, upper: (n,) joint limits (+-inf allowed).
+    values; lower, upper: (n,) joint limits (+-inf allowed). Solved in blocks of
+    :data:`kincal.models.kinematics.BLOCK` targets: the memory of the iterations is bounded.
     """
+    if len(seeds) > BLOCK:  # in blocks of targets: each is solved on its own anyway
+        out: dict[str, np.ndarray] = {}
+        for s in range(0, len(seeds), BLOCK):
+            part = solve(chain, tool, positions[s:s + BLOCK], rotations[s:s + BLOCK],
+                         required[s:s + BLOCK], seeds[s:s + BLOCK], lower, upper, options)
+            for f in fields(IkSolution):
+                v = getattr(part, f.name)
+                out.setdefault(f.name, np.empty((len(seeds),) + v.shape[1:], v.dtype))[
+                    s:s + BLOCK] = v
+        return IkSolution(**out)
     q = np.clip(np.array(seeds, dtype=float), lower, upper)
     N, n = q.shape
     eye = np.eye(n)
@@ -135,9 +129,11 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         # a joint on a limit that the step pushes outward is taken out of the step, so the
         # other joints meet the position (the orientation gives way first if it must)
         blocked = ((q[idx] <= lower) & (dq < 0)) | ((q[idx] >= upper) & (dq > 0))
-        if blocked.any():
-            keep = (~blocked)[:, None, :]
-            dq = _step(Jp * keep, Jo * keep, e_p, e_o, eye, options.damping)
+        rows = np.flatnonzero(blocked.any(axis=1))  # the step again for these rows only
+        if rows.size:
+            keep = (~blocked[rows])[:, None, :]
+            dq[rows] = _step(Jp[rows] * keep, Jo[rows] * keep, e_p[rows], e_o[rows], eye,
+                             options.damping)
         biggest = np.abs(dq).max(axis=1)
         dq *= np.minimum(1.0, options.max_step / np.maximum(biggest, 1e-300))[:, None]
         q_new = np.clip(q[idx] + dq, lower, upper)

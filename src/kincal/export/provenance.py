@@ -109,6 +109,11 @@ class Provenance:
                    tuple(sorted((str(k), str(v)) for k, v in (xacro_args or {}).items())),
                    files, verdict, gate)
 
+    def _stamped_pieces(self, kind: str, pieces):
+        """The pieces of a text file, its first stamped (it holds the title or header)."""
+        yield self.stamp(kind, next(pieces, ""))
+        yield from pieces
+
     def stamp(self, kind: str, content):
         """``content`` of a file of format ``kind`` with this provenance in it: "json" (a
         dict, given a "provenance" key, returned as JSON text), "csv" / "yaml" (text: ``#``
@@ -124,6 +129,8 @@ class Provenance:
         if kind == "png":
             return content(self.png_text())
         if kind in ("csv", "yaml"):
+            if not isinstance(content, str):  # text in pieces, written as they come
+                return self._stamped_pieces(kind, iter(content))
             return (self.under_title(content) if content.startswith("#")
                     else self.hash_comment() + content)
         if kind == "urdf":

@@ -182,15 +182,17 @@ def _default_mode(target: Path) -> int:
     return 0o666 & ~umask
 
 
-def _stage(target: Path, data: bytes, path) -> str:
-    """A temporary file beside ``target`` holding ``data``, fsync'ed; returns its path."""
+def _stage(target: Path, data, path) -> str:
+    """A temporary file beside ``target`` holding ``data`` (bytes, or an iterable of bytes
+    pieces), fsync'ed; returns its path."""
     try:
         fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
     except OSError as exc:
         raise ExportError(f"{path}: cannot write in {target.parent} ({exc.strerror or exc})") from exc
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            for piece in (data,) if isinstance(data, bytes) else data:
+                f.write(piece)
             f.flush()
             os.fsync(f.fileno())
         # mkstemp makes the file 0600; give it the mode a plain open() would
@@ -199,6 +201,12 @@ def _stage(target: Path, data: bytes, path) -> str:
         Path(tmp).unlink(missing_ok=True)
         raise
     return tmp
+
+
+def _encoded(pieces):
+    """UTF-8 bytes of an iterable of str pieces, one piece at a time."""
+    for piece in pieces:
+        yield piece.encode("utf-8")
 
 
 def _place_new(tmp: str, target: Path, path) -> None:
@@ -245,7 +253,8 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
               before_commit=None) -> list[Path]:
     """Write several files as one transaction: all of them, or none; return the resolved paths.
 
-    files: (path, bytes or str) pairs. dirs: folders that may be created for them (see
+    files: (path, content) pairs, the content bytes, str, or an iterable of str pieces
+    (staged piece by piece, never joined: a large file written in blocks). dirs: folders that may be created for them (see
     :func:`check_outputs`). Every target is checked before the first byte is written,
     all contents are staged next to their targets, then committed; a failure at any
     point (KeyboardInterrupt included) restores every target and removes what was made.
@@ -254,6 +263,7 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
     flushes its console output there, so a console that fails leaves no file behind).
     """
     files = [(p, d.encode("utf-8") if isinstance(d, str) else d) for p, d in files]
+    files = [(p, d if isinstance(d, bytes) else _encoded(d)) for p, d in files]
     targets = check_outputs([p for p, _ in files], overwrite=overwrite, protect=protect, dirs=dirs)
     made_dirs: list[Path] = []
     staged: list[str] = []

@@ -286,10 +286,8 @@ class Measurements:
                                 "points once")
         xyz = ["x", "y", "z"] if K == 1 else [f"{c}{k}" for k in range(1, K + 1) for c in "xyz"]
         cols = list(self.joint_names) + xyz + (["sigma"] if self.sigma is not None else [])
-        lines = [",".join(cols)]
-        for idx in groups:
-            vals = list(self.joint_values[idx[0]]) + list(self.positions[idx].ravel())
-            if self.sigma is not None:
-                vals.append(self.sigma[idx[0]])
-            lines.append(",".join(repr(float(v)) for v in vals))
-        return "\n".join(lines) + "\n"
+        table = [self.joint_values[groups[:, 0]], self.positions[groups].reshape(len(groups), -1)]
+        if self.sigma is not None:
+            table.append(self.sigma[groups[:, 0], None])
+        rows = np.hstack(table).tolist()  # Python floats: repr gives the shortest exact text
+        return "\n".join([",".join(cols)] + [",".join(map(repr, r)) for r in rows]) + "\n"

@@ -1,4 +1,5 @@
-"""Forward kinematics and Jacobians of a chain, vectorised over configurations.
+"""Forward kinematics, Jacobians and damped least-squares steps of a chain, vectorised
+over configurations.
 
 The inverse kinematics of many targets needs the tip pose and the joint Jacobians for N
 configurations at once (Pinocchio's Python API takes one configuration per call). kincal
@@ -11,12 +12,18 @@ joint's motion, so the joint Jacobians are that model's columns. Tests check the
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from kincal.models import offsets
 from kincal.models.chain import Chain
+from kincal.rotations import rotation_log
+
+
+BLOCK = 4096  # configurations (targets) its users take at once
+_ROWS = 1024  # configurations evaluated at once: products small enough for one BLAS thread
 
 
 @dataclass(frozen=True)
@@ -53,6 +60,39 @@ class ChainKinematics:
         state = Chain(self.model, q).state(np.zeros(self.model.n), keep=False)
         return state.p_tip + state.R_tip @ np.asarray(tool, dtype=float)
 
+    @functools.cached_property
+    def _joints(self) -> list:
+        """Per joint a fixed (4, 18) matrix G = P [E_cos E_sin E_(1-cos) E_1 | w | c]: the
+        frame T = [R | t] (3, 4) before joint i's placement P times G gives at once the
+        four parts of the frame after its motion M(q) = E_cos cos q + E_sin sin q +
+        E_(1-cos) (1 - cos q) + E_1 (Rodrigues' formula about the line through c: [w]x,
+        w w^T, and u = c - w (w . c), v = w x c for the translation), the axis a = R P w and
+        the point R P c + t of the axis line. A prismatic joint: E_cos = I, E_sin = 0,
+        E_(1-cos) = 0, and the slide a q added to the translation."""
+        m, out = self.model, []
+        for i in range(m.n):
+            w, c = m.screw_axes[i], m.screw_points[i]
+            E = np.zeros((4, 4, 4))
+            E[0, :3, :3] = np.eye(3)
+            E[3, 3, 3] = 1.0
+            if m.kinds[i] != "prismatic":
+                K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+                E[1, :3, :3], E[1, :3, 3] = K, -(K @ c)
+                E[2, :3, :3], E[2, :3, 3] = np.outer(w, w), c - w * (w @ c)
+            cols = np.hstack([E[0], E[1], E[2], E[3], np.r_[w, 0.0][:, None],
+                              np.r_[c, 1.0][:, None]])
+            out.append((m.origins[i] @ cols, m.kinds[i] == "prismatic"))
+        return out
+
+    def tool_poses(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+        """(R_tip (N, 3, 3), p_point (N, 3)) of :meth:`evaluate`, without keeping the
+        Jacobians (made block by block and dropped)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        R, p = np.empty((len(q), 3, 3)), np.empty((len(q), 3))
+        for s in range(0, len(q), BLOCK):
+            R[s:s + BLOCK], p[s:s + BLOCK] = self.evaluate(q[s:s + BLOCK], tool)[:2]
+        return R, p
+
     def evaluate(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)):
         """Tip pose and Jacobians for joint values ``q`` (N, n) [rad or m].
 
@@ -60,10 +100,66 @@ class ChainKinematics:
         tip orientation in B, the position in B of the point ``tool`` (3,) given in the
         tip frame [m], and the Jacobians of that point's position [m per rad or m] and of
         the tip frame's orientation (angular velocity in B axes per joint velocity).
+
+        The chain's product T_first P_1 M_1(q_1) ... P_n M_n(q_n) T_last_tip as rotations
+        and translations (the offsets model at zero: P_i its origins), each product by a
+        fixed matrix one product over all rows; joint i's columns are its axis line's
+        motion: a x (p - c) and a for a revolute joint (axis a through c, in B), a and 0
+        for a prismatic one.
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        state = Chain(self.model, q).state(np.zeros(self.model.n))
-        point = state.p_tip + state.R_tip @ np.asarray(tool, dtype=float)
-        J_point, _ = state.point_columns(point)
-        J_rot, _ = state.rotation_columns()
-        return state.R_tip, point, J_point, J_rot
+        if len(q) > _ROWS:  # in blocks of configurations: see _times
+            parts = [self.evaluate(q[s:s + _ROWS], tool) for s in range(0, len(q), _ROWS)]
+            return tuple(np.concatenate(p) for p in zip(*parts))
+        m = self.model
+        N = len(q)
+        T = np.broadcast_to(m.T_first[:3], (N, 3, 4))  # [R | t]
+        axes, points = np.empty((N, 3, m.n)), np.empty((N, 3, m.n))
+        for i, (G, prismatic) in enumerate(self._joints):
+            Y = (T.reshape(-1, 4) @ G).reshape(N, 3, 18)
+            axes[:, :, i] = Y[:, :, 16]
+            if prismatic:
+                T = Y[:, :, 0:4] + Y[:, :, 12:16]
+                T[:, :, 3] += Y[:, :, 16] * q[:, i, None]
+                continue
+            points[:, :, i] = Y[:, :, 17]
+            cos, sin = np.cos(q[:, i])[:, None, None], np.sin(q[:, i])[:, None, None]
+            T = cos * Y[:, :, 0:4] + sin * Y[:, :, 4:8] + (1.0 - cos) * Y[:, :, 8:12] + Y[:, :, 12:16]
+        tip = (T.reshape(-1, 4) @ m.T_last_tip).reshape(N, 3, 4)
+        R_tip = tip[:, :, :3]
+        point = tip[:, :, 3] + _times(R_tip, np.asarray(tool, dtype=float))
+        rev = ~self.prismatic
+        J_point, J_rot = axes.copy(), np.zeros((N, 3, m.n))
+        a, d = axes[:, :, rev], point[:, :, None] - points[:, :, rev]
+        J_point[:, :, rev] = np.stack([a[:, 1] * d[:, 2] - a[:, 2] * d[:, 1],  # a x (p - c)
+                                       a[:, 2] * d[:, 0] - a[:, 0] * d[:, 2],
+                                       a[:, 0] * d[:, 1] - a[:, 1] * d[:, 0]], axis=1)
+        J_rot[:, :, rev] = a
+        return R_tip, point, J_point, J_rot
+
+    def damped_step(self, q: np.ndarray, tool, positions: np.ndarray, rotations, lower,
+                    upper) -> tuple[np.ndarray, np.ndarray]:
+        """One damped least-squares step toward the targets, for N configurations at once:
+        the step of :meth:`kincal.robot.Robot.inverse_kinematics`, on the vectorised chain.
+
+        q: (N, n) joint values; positions: (N, 3) wanted positions of the point ``tool``
+        (3,) of the tip frame, in B [m]; rotations: (N, 3, 3) wanted tip orientations in B,
+        or None (position only); lower, upper: (n,) finite joint limits. Returns (|e| (N,),
+        the next q (N, n)): the norm of the error [m and rad stacked] at q and
+        q + A^T (A A^T + 1e-8 I)^-1 e clipped to the limits, A the Jacobian of the error.
+        """
+        R, p, J_point, J_rot = self.evaluate(q, tool)
+        e, A = np.asarray(positions, dtype=float) - p, J_point
+        if rotations is not None:
+            e = np.concatenate([e, rotation_log(rotations @ np.swapaxes(R, 1, 2))], axis=1)
+            A = np.concatenate([J_point, J_rot], axis=1)
+        M = A @ np.swapaxes(A, 1, 2)
+        M += 1e-8 * np.eye(e.shape[1])
+        dq = (np.swapaxes(A, 1, 2) @ np.linalg.solve(M, e[:, :, None]))[:, :, 0]
+        return np.linalg.norm(e, axis=1), np.clip(q + dq, lower, upper)
+
+
+def _times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A (N, 3, 3) times a fixed B (3, 3) or (3,): one matrix product over all N rows (for
+    N up to :data:`_ROWS`: a larger one would go to BLAS's threads, slower on busy cores)."""
+    return (A.reshape(-1, 3) @ B).reshape(A.shape[:2] + B.shape[1:])

@@ -18,6 +18,7 @@ from kincal.measurements.point_space import ParameterSpace
 from kincal.measurements.data import Measurements
 from kincal.measurements.point import MeasurementModel
 from kincal.models.backlash import approach_directions
+from kincal.models.kinematics import ChainKinematics
 from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 from kincal.rotations import rotx
@@ -71,11 +72,27 @@ def latin_hypercube(n: int, rng: np.random.Generator, dim: int = 3) -> np.ndarra
 
 def random_rotation_near(R0: np.ndarray, max_angle: float, rng) -> np.ndarray:
     """R0 turned by a uniformly random axis and an angle uniform in [0, max_angle]."""
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    angle = rng.uniform(0, max_angle)
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return (np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K) @ R0
+    return _rotations_near(R0, max_angle, rng, 1)[0]
+
+
+def _rotations_near(R0: np.ndarray, max_angle: float, rng, count: int,
+                    marks: dict | None = None) -> np.ndarray:
+    """(count, 3, 3): ``count`` draws of :func:`random_rotation_near`, the random numbers
+    taken in the same order as ``count`` calls of it, the rotations made at once. marks:
+    filled with {k: the generator's state before draw k} every 1024 draws."""
+    axes, angles = np.empty((count, 3)), np.empty(count)
+    for k in range(count):
+        if marks is not None and k % 1024 == 0:
+            marks[k] = rng.bit_generator.state
+        axes[k] = rng.normal(size=3)
+        angles[k] = rng.uniform(0, max_angle)
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    K = np.zeros((count, 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axes[:, 2], axes[:, 1], -axes[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = axes[:, 2], -axes[:, 1], axes[:, 0]
+    turn = np.eye(3) + np.sin(angles)[:, None, None] * K + (
+        1 - np.cos(angles))[:, None, None] * (K @ K)
+    return turn @ R0
 
 
 def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.Generator,
@@ -88,6 +105,14 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     tool z pointing down), varied by up to ``max_tilt`` per pose; None orientation with
     max_tilt=None leaves the orientation free (position-only IK). progress:
     callback(done, n) about every 1 % of the poses, or None.
+
+    The poses are solved from the centre out, each from the solution of the nearest
+    point solved before it (as a real robot program moves), then from the centre's: all
+    poses at once on the vectorised chain (:meth:`ChainKinematics.damped_step`), each
+    entering as soon as the pose it starts from is solved; then, for the few poses that
+    neither reaches, from random starts one after the other (:func:`_random_restarts`).
+    The same solutions (to rounding) and the same random numbers as solving the poses
+    one after the other with :meth:`Robot.inverse_kinematics`, as kincal did before.
     """
     if n < 1:
         raise OptionError(f"need at least one pose, got {n}")
@@ -97,11 +122,11 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     g = robot.geometry
     lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
     hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
-    out = np.empty((n, g.n))
+    tool = np.asarray(tool, float)
     # One arm branch for every pose, whatever the seed: the solution at the centre, in the
     # mean orientation, comes from a fixed-seed search (so calibration and validation sets
     # made with different seeds share it), and each pose starts from the nearest pose
-    # already solved, as a real robot program moves, never from a random restart first.
+    # already solved, never from a random restart first.
     search = np.random.default_rng(0)
     home = None
     for _ in range(attempts):
@@ -109,39 +134,109 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
                                             start=search.uniform(lo, hi))
         if ok:
             break
-    solved = _Solved(center, home, n + 1)
-    every = max(1, n // 100)
-    for done, k in enumerate(np.argsort(np.linalg.norm(pts - center, axis=1))):  # centre out
-        if progress is not None and done % every == 0:
-            progress(done, n)
-        p = pts[k]
-        R = None if max_tilt is None else random_rotation_near(R0, max_tilt, rng)
-        near = solved.nearest(p)
-        for attempt in range(attempts):
-            start = near if attempt == 0 else home if attempt == 1 else rng.uniform(lo, hi)
-            if attempt >= 2 and attempt % 2 == 0 and max_tilt is not None:
-                R = random_rotation_near(R0, max_tilt, rng)  # that orientation may be out of reach
-            q, ok = robot.inverse_kinematics(p, tool, R, start=start, max_iterations=60)
-            if ok:
-                out[k] = q
-                solved.add(p, q)
-                break
-        else:
-            where = (f"the point {np.round(p, 4)} m of the {size * 1e3:g} mm cube at "
-                     f"{np.round(center, 4)} m")
-            starts = [s for s in (home, solved.nearest(p)) if s is not None] + [
-                rng.uniform(lo, hi) for _ in range(8)]
-            if max_tilt is not None and any(  # the position alone, from several starts
-                    robot.inverse_kinematics(p, tool, None, start=s0)[1] for s0 in starts):
-                # the position is reachable: the asked orientation is what fails
-                raise OptionError(f"no joint solution reaches {where} with the tool within "
-                                  f"{np.degrees(max_tilt):g} deg of pointing down: the tip's "
-                                  "orientation is the cause (an arm that cannot point its tip "
-                                  "down there); allow a larger --tilt-deg or choose another --tip")
-            raise OptionError(f"no joint solution reaches {where}; move the cube")
+    chain = ChainKinematics.of(g)
+    order = np.argsort(np.linalg.norm(pts - center, axis=1))  # centre out
+    P = pts[order]
+    parent = nearest_earlier(center, P)
+    solved = np.empty((n, g.n))  # in the order solved
+    first, done = 0, [0, 0]  # poses solved, multiples of 1 % reported
+    report = None
+    if progress is not None:
+        progress(0, n)
+        report = lambda k: progress(k, n)  # noqa: E731
+    while first < n:
+        done[0] = first
+        marks = {0: rng.bit_generator.state}
+        R = None if max_tilt is None else _rotations_near(R0, max_tilt, rng, n - first, marks)
+        bad = _solve_from_parents(chain, P, R, tool, parent, first, home, solved,
+                                  lo, hi, report, done)
+        if bad == n:
+            break
+        # pose `bad` needs random restarts: its random numbers come after the rotations of
+        # the poses before it and its own, and every later pose draws anew after them
+        mark = (bad - first) // 1024 * 1024 if max_tilt is not None else 0
+        rng.bit_generator.state = marks[mark]  # the state before the draws up to `bad`'s
+        R_bad = None if max_tilt is None else _rotations_near(R0, max_tilt, rng,
+                                                              bad - first - mark + 1)[-1]
+        solved[bad] = _random_restarts(robot, P[bad], tool, R_bad, R0, max_tilt, home,
+                                       solved[parent[bad]] if parent[bad] >= 0 else home,
+                                       rng, lo, hi, attempts, size, center)
+        first = bad + 1
     if progress is not None:
         progress(n, n)
+    out = np.empty((n, g.n))
+    out[order] = solved
     return out
+
+
+def _solve_from_parents(chain, P, R, tool, parent, first, home, solved, lo, hi, report, done,
+                        max_iterations: int = 60, tolerance: float = 1e-10) -> int:
+    """Solve the poses ``first`` ... of P (in the order of solving) into ``solved``, each
+    from its parent's solution (parent -1: ``home``), then from ``home``; R: the
+    orientations of poses first ... (or None). Returns the first pose that neither start
+    solves (len(P) if none): later poses are then to be solved again."""
+    n = len(P)
+    later = np.flatnonzero(parent[first:] >= first) + first
+    kids = later[np.argsort(parent[later], kind="stable")]
+    edges = np.searchsorted(parent[kids], np.arange(n + 1))
+    idx = np.flatnonzero(parent[first:] < first) + first  # their starts are solved already
+    q = np.where((parent[idx] >= 0)[:, None], solved[np.maximum(parent[idx], 0)], home)
+    q = np.clip(q, lo, hi)
+    steps = np.zeros(len(idx), int)
+    from_home = np.zeros(len(idx), bool)
+    bad = n
+    every = max(1, n // 100)
+    while idx.size:
+        err, q_next = chain.damped_step(q, tool, P[idx], None if R is None else R[idx - first],
+                                        lo, hi)
+        ok = err < tolerance
+        solved[idx[ok]] = q[ok]
+        out_of_steps = ~ok & (steps + 1 == max_iterations)
+        lost = out_of_steps & from_home
+        if lost.any():
+            bad = min(bad, int(idx[lost].min()))
+        retry = out_of_steps & ~from_home  # from the centre's solution next
+        q_next[retry], steps[retry], from_home[retry] = np.clip(home, lo, hi), -1, True
+        go = ~ok & ~lost & (idx < bad)  # poses after `bad` draw anew: solved again later
+        new = np.concatenate([kids[edges[k]:edges[k + 1]] for k in idx[ok]]) if ok.any() \
+            else np.empty(0, int)
+        new = new[new < bad]
+        done[0] += int(ok.sum())
+        while report is not None and (done[1] + 1) * every <= min(done[0], n - 1):
+            done[1] += 1  # every multiple of ``every`` poses once, as one by one would
+            report(done[1] * every)
+        idx = np.concatenate([idx[go], new])
+        q = np.concatenate([q_next[go], np.clip(solved[parent[new]], lo, hi)])
+        steps = np.concatenate([steps[go] + 1, np.zeros(len(new), int)])
+        from_home = np.concatenate([from_home[go], np.zeros(len(new), bool)])
+    return bad
+
+
+def _random_restarts(robot, p, tool, R, R0, max_tilt, home, near, rng, lo, hi, attempts,
+                     size, center) -> np.ndarray:
+    """The joint values of a pose that neither its nearest solved pose's solution nor
+    the centre's reach: from random starts (a new orientation every other one), one
+    after the other on Pinocchio's solver. A random start's path passes near singular
+    configurations (Jacobians with condition numbers up to 1e17) where the last bit of
+    a rounding decides where it goes: solved as before, a seed gives the same poses."""
+    for attempt in range(2, attempts):
+        start = rng.uniform(lo, hi)
+        if attempt % 2 == 0 and max_tilt is not None:
+            R = random_rotation_near(R0, max_tilt, rng)  # that orientation may be out of reach
+        q, ok = robot.inverse_kinematics(p, tool, R, start=start, max_iterations=60)
+        if ok:
+            return q
+    where = (f"the point {np.round(p, 4)} m of the {size * 1e3:g} mm cube at "
+             f"{np.round(center, 4)} m")
+    starts = [s for s in (home, near) if s is not None] + [rng.uniform(lo, hi) for _ in range(8)]
+    if max_tilt is not None and any(  # the position alone, from several starts
+            robot.inverse_kinematics(p, tool, None, start=s0)[1] for s0 in starts):
+        # the position is reachable: the asked orientation is what fails
+        raise OptionError(f"no joint solution reaches {where} with the tool within "
+                          f"{np.degrees(max_tilt):g} deg of pointing down: the tip's "
+                          "orientation is the cause (an arm that cannot point its tip "
+                          "down there); allow a larger --tilt-deg or choose another --tip")
+    raise OptionError(f"no joint solution reaches {where}; move the cube")
 
 
 def true_positions(mdh: ErrorModel, truth: Truth, q: np.ndarray, points=0) -> np.ndarray:
@@ -179,33 +274,51 @@ def measure(mdh: ErrorModel, truth: Truth, q: np.ndarray, noise_sd: float,
                         approach=g, points=points, poses=np.repeat(np.arange(n), K))
 
 
-class _Solved:
-    """The points solved so far and their joint values; the nearest one to a new point.
+def nearest_earlier(center, P: np.ndarray) -> np.ndarray:
+    """(N,) for each point of P (N, 3) the nearest of ``center`` and the points before it
+    in P: its index, -1 for the centre (the first of equals).
 
-    A k-d tree over the older points, rebuilt as they double, plus a plain scan of the
-    newer ones: the same nearest point (first of equals) as a scan of all, without its
-    n^2 cost (200,000 poses: hours before, seconds now).
-    """
+    Through grids of cubes of edge h, about two points a cube at first: the nearest
+    earlier point among the 27 cubes around a point is the nearest of all when it is
+    within h (any other is farther). The points without one go to a grid of twice the
+    edge, and so on; the last few (the first points, mostly) are scanned. The same
+    answer as a scan of all."""
+    A = np.vstack([np.asarray(center, float)[None], P])  # A[i + 1] is P[i]
+    N = len(P)
+    out = np.full(N, -2)
+    todo = np.arange(N)
+    span = np.ptp(A, axis=0)
+    h = (float(np.prod(np.maximum(span, 1e-3 * span.max()))) / max(N, 1)) ** (1 / 3) * 1.25
+    while len(todo) > 256 and h < span.max():
+        found, arg = _nearest_earlier_in_grid(A, todo, h)
+        out[todo[found]] = arg[found] - 1
+        todo, h = todo[~found], 2 * h
+    for s in range(0, len(todo), 256):  # a block of points against all before its last
+        rows = todo[s:s + 256]
+        d = np.linalg.norm(A[None, :rows[-1] + 1] - P[rows, None], axis=2)
+        d[np.arange(A.shape[0])[None, :rows[-1] + 1] > rows[:, None]] = np.inf
+        out[rows] = np.argmin(d, axis=1) - 1
+    return out
 
-    def __init__(self, point, q, capacity: int):
-        self.pts = np.empty((capacity, 3))
-        self.q = np.empty((capacity, np.size(q)))
-        self.count, self.tree, self.in_tree = 0, None, 0
-        self.add(point, q)
 
-    def add(self, point, q):
-        self.pts[self.count], self.q[self.count] = point, q
-        self.count += 1
-        if self.count - self.in_tree > max(256, self.in_tree):
-            from scipy.spatial import cKDTree
-
-            self.tree, self.in_tree = cKDTree(self.pts[:self.count]), self.count
-
-    def nearest(self, p) -> np.ndarray:
-        d = np.linalg.norm(self.pts[self.in_tree:self.count] - p, axis=1)
-        k, best = (self.in_tree + int(np.argmin(d)), d.min()) if d.size else (-1, np.inf)
-        if self.tree is not None:
-            dt, kt = self.tree.query(p)
-            if dt <= best:  # ties go to the older point, as a scan from the first would
-                k = int(kt)
-        return self.q[k]
+def _nearest_earlier_in_grid(A: np.ndarray, todo: np.ndarray, h: float):
+    """For the points P[todo] (A[todo + 1]): whether the nearest of the earlier points of
+    A lies within h, found among the 27 cubes of edge h around each, and its index in A."""
+    cell = np.floor((A - A.min(axis=0)) / h).astype(np.int64) + 1  # a margin of empty cubes
+    dims = cell.max(axis=0) + 2
+    key = np.ravel_multi_index(cell.T, dims)
+    order = np.argsort(key, kind="stable")  # the points cube by cube, in order within one
+    counts = np.bincount(key, minlength=int(np.prod(dims)))
+    starts = np.cumsum(counts) - counts
+    me = todo + 1
+    best, arg = np.full(len(todo), np.inf), np.full(len(todo), len(A))
+    for off in np.ndindex(3, 3, 3):
+        k = np.ravel_multi_index((cell[me] + np.array(off) - 1).T, dims)
+        first, count = starts[k], counts[k]
+        for m in range(int(count.max(initial=0))):
+            has = np.flatnonzero(count > m)
+            j = order[first[has] + m]
+            d = np.linalg.norm(A[j] - A[me[has]], axis=1)
+            better = (j < me[has]) & ((d < best[has]) | ((d == best[has]) & (j < arg[has])))
+            best[has[better]], arg[has[better]] = d[better], j[better]
+    return best <= h, arg

@@ -1,0 +1,100 @@
+"""``kincal compensate`` in blocks: the inverse kinematics of the targets block by block,
+the output written piece by piece; the same numbers and the same text as in one piece."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kincal.compensation.targets import joint_scales
+from kincal.compensation import ik
+from kincal.compensation.compensate import Compensation
+from kincal.errors import ExportError
+from kincal.export.safe_write import write_all
+from kincal.models import kinematics
+from kincal.models.kinematics import ChainKinematics
+from kincal.planning.simulation import random_rotation_near
+from kincal.robot import Robot
+from kincal.rotations import rotx
+
+
+def _problem(n=50, seed=0):
+    robot = Robot.load("ec66")
+    g = robot.geometry
+    chain = ChainKinematics.of(g)
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-1.0, 1.0, (n, g.n))
+    R, p = chain.tool_poses(q, (0.0, 0.0, 0.12))
+    seeds = q + rng.normal(size=q.shape) * 0.02
+    rotations = np.array([random_rotation_near(R[k], 0.01, rng) for k in range(n)])
+    required = rng.random(n) < 0.5
+    return chain, p, rotations, required, seeds, g.lower, g.upper
+
+
+def test_blocked_inverse_kinematics_equals_one_block(monkeypatch):
+    chain, p, R, required, seeds, lo, hi = _problem()
+    whole = ik.solve(chain, (0.0, 0.0, 0.12), p, R, required, seeds, lo, hi)
+    assert whole.reached.mean() > 0.9
+    monkeypatch.setattr(ik, "BLOCK", 7)
+    monkeypatch.setattr(kinematics, "_ROWS", 5)
+    blocked = ik.solve(chain, (0.0, 0.0, 0.12), p, R, required, seeds, lo, hi)
+    for name in ("q", "position_error", "orientation_error", "reached", "at_limit",
+                 "iterations"):
+        np.testing.assert_array_equal(getattr(blocked, name), getattr(whole, name), name)
+
+
+def test_blocked_tool_poses_and_evaluate_equal_one_block(monkeypatch):
+    chain, *_ = _problem()
+    q = np.random.default_rng(3).uniform(-3, 3, (23, chain.n))
+    whole = chain.evaluate(q, (0.01, 0.0, 0.1))
+    monkeypatch.setattr(kinematics, "_ROWS", 4)
+    for a, b in zip(chain.evaluate(q, (0.01, 0.0, 0.1)), whole):
+        np.testing.assert_array_equal(a, b)
+    R, p = chain.tool_poses(q, (0.01, 0.0, 0.1))
+    np.testing.assert_array_equal(R, whole[0])
+    np.testing.assert_array_equal(p, whole[1])
+
+
+def _old_text(c: Compensation, length_unit, angle_unit) -> str:
+    """The CSV text as kincal wrote it before the output was written in blocks."""
+    scale = joint_scales(c.kinds, length_unit, angle_unit)
+    rows = [",".join(["target_line", *c.joint_names, "position_error_mm",
+                      "orientation_error_deg", "reached"])]
+    for k in range(len(c)):
+        cells = [str(int(c.lines[k]))] + [repr(float(v)) for v in c.joint_values[k] / scale]
+        cells += [f"{c.position_error[k] * 1e3:.6g}",
+                  f"{np.degrees(c.orientation_error[k]):.6g}", str(int(c.reached[k]))]
+        rows.append(",".join(cells))
+    return "\n".join(rows) + "\n"
+
+
+@pytest.mark.parametrize("units", [("m", "rad"), ("mm", "deg")])
+def test_csv_blocks_are_the_text_as_before(units):
+    rng = np.random.default_rng(1)
+    n = 23
+    q = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-8, 2, size=(n, 3))
+    c = Compensation(("j1", "j2", "j3"), ("revolute", "prismatic", "revolute"), q, q * 1.001,
+                     np.arange(n) + 2, np.abs(rng.normal(size=n)) * 1e-7,
+                     np.abs(rng.normal(size=n)) * 1e-9, np.zeros(n, bool), rng.random(n) < 0.8,
+                     np.zeros((n, 3), bool))
+    expected = _old_text(c, *units)
+    assert c.to_csv_text(*units) == expected
+    assert "".join(c.csv_blocks(*units, rows=4)) == expected
+
+
+def test_pieces_are_written_as_one_file(tmp_path):
+    out = tmp_path / "o.csv"
+    write_all([(out, (f"row {k}\n" for k in range(5)))])
+    assert out.read_text() == "".join(f"row {k}\n" for k in range(5))
+
+
+def test_a_failing_piece_leaves_nothing_behind(tmp_path):
+    out = tmp_path / "o.csv"
+
+    def pieces():
+        yield "first\n"
+        raise OSError(28, "No space left on device")
+
+    with pytest.raises(ExportError, match="no output was written"):
+        write_all([(out, pieces())])
+    assert list(tmp_path.iterdir()) == []
