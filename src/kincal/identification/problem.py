@@ -36,7 +36,7 @@ from kincal.identification.cross_validation import (CrossValidation, cross_valid
 from kincal.identification.layout import MM, ParameterLayout
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.plausibility import gather, judge
-from kincal.identification.reduction import analyze_rows, with_blocks
+from kincal.identification.reduction import analyze_rows, residual_function
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze
@@ -99,6 +99,7 @@ class CalibrationProblem:
         self._warn_inputs()
         self._x_start = self._ident = self._structural = None
         self._all_blocks: dict = {}  # (set, block size): blocks of a whole set
+        self._subsets: dict = {}  # the last row selections' parts (_parts)
 
     # ----------------------------------------------------------------- layout
     @property
@@ -140,16 +141,24 @@ class CalibrationProblem:
 
     # -------------------------------------------------------------- residuals
     def _parts(self, rows):
-        """[(set index, kind model on those rows, global positions of the rows)]."""
+        """[(set index, kind model on those rows, global positions of the rows)]; the
+        kind models of the last few row selections are kept (CV asks for each fold's
+        again at every lambda)."""
         if rows is None:
             return [(i, km, np.arange(self.offsets[i], self.offsets[i + 1]))
                     for i, km in enumerate(self.kinds)]
         rows = np.asarray(rows)
+        key = (rows.dtype.str, rows.tobytes())
+        if key in self._subsets:
+            return self._subsets[key]
         out = []
         for i, km in enumerate(self.kinds):
             mine = rows[(rows >= self.offsets[i]) & (rows < self.offsets[i + 1])]
             if mine.size:
                 out.append((i, km.subset(mine - self.offsets[i]), mine))
+        if len(self._subsets) >= 2 * self.options.folds + 2:
+            self._subsets.pop(next(iter(self._subsets)))
+        self._subsets[key] = out
         return out
 
     def _blocks(self, i: int, km, g: np.ndarray, cache: bool):
@@ -175,42 +184,7 @@ class CalibrationProblem:
         kinematic=False: kinematic and backlash columns left at zero (frame-only fits)."""
         parts = [(i, km, g, self._blocks(i, km, g, rows is None))
                  for i, km, g in self._parts(rows)]
-        lay, s = self.layout, self.scale
-        weights = self.weights
-        m = sum(km.N * km.dim for _, km, _, _ in parts)
-        k, bl = lay.n_kinematic, lay.backlash_slice
-
-        def residual(u, with_jacobian):
-            x = u * s
-            r = np.empty(m)
-            J = np.zeros((m, lay.size)) if with_jacobian else None
-            at = 0
-            for i, km, g, blocks in parts:
-                kin, fr, b = lay.split(x, i)
-                fs = lay.frame_slices[i]
-                for sl, block in blocks:
-                    w = weights[g[sl]][:, None]
-                    span = slice(at + km.dim * sl.start, at + km.dim * sl.stop)
-                    if not with_jacobian:
-                        r[span] = (block.residuals(kin, fr, b) * w).ravel()
-                        continue
-                    rr, Jk, Jf, Jb = block.residuals(kin, fr, b, jacobian=True,
-                                                     kinematic=kinematic)
-                    r[span] = (rr * w).ravel()
-                    n = block.N * km.dim
-                    w3 = w[:, :, None]
-                    J[span, :k] = (Jk * w3).reshape(n, -1)
-                    J[span, fs] = (Jf * w3).reshape(n, -1)
-                    if Jb.shape[2]:
-                        J[span, bl] = (Jb * w3).reshape(n, -1)
-                at += km.N * km.dim
-            r /= MM
-            if not with_jacobian:
-                return r, None
-            J *= s / MM
-            return r, J
-
-        return with_blocks(residual, parts, lay, weights, s, kinematic, m)  # reduction.py
+        return residual_function(parts, self.layout, self.weights, self.scale, kinematic)
 
     def sample_errors(self, x: np.ndarray, rows=None, weighted: bool = False) -> list:
         """Per set with samples in ``rows``: (set index, (n,) sample errors [m]) at x."""
@@ -388,13 +362,17 @@ class CalibrationProblem:
     # ------------------------------------------------------------------- fits
     def fit(self, lam, rows=None, start: np.ndarray | None = None,
             free: np.ndarray | None = None, residual: Callable | None = None,
-            options: SolverOptions | None = None) -> SolveSummary:
+            options: SolverOptions | None = None,
+            start_u: np.ndarray | None = None) -> SolveSummary:
         """One solve with penalty weight ``lam`` (one, or per parameter) on the samples
-        ``rows`` (default all); residual: a prebuilt :meth:`residual_function` for rows."""
-        x0 = self.start() if start is None else start
+        ``rows`` (default all); residual: a prebuilt :meth:`residual_function` for rows;
+        start_u: the start in the solver's units u = x / scale, as is (instead of start,
+        e.g. a previous solve's u: a warm start at exactly its end)."""
+        u0 = (self.start() if start is None else start) / self.scale if start_u is None \
+            else start_u
         free = self.free_mask() if free is None else free
         residual = self.residual_function(rows) if residual is None else residual
-        return solve(residual, x0 / self.scale, free,
+        return solve(residual, u0, free,
                      lam=lam if self.prior is None else self.prior.penalty(lam),
                      penalised=self.layout.is_penalised, prior=self.start() / self.scale,
                      options=options or self.options.solver)

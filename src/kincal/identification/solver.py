@@ -237,15 +237,20 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
                 reason, converged = (f"predicted decrease below {options.rel_tol:g} of the "
                                      "objective"), True
                 break
+        else:
+            gn = None
         accepted = False
         while True:
             if mu > 0:
                 A = np.vstack([A0, np.diag(np.sqrt(mu * colnorm2))])
                 b = np.concatenate([b0, np.zeros(free_idx.size)])
+                step, *_ = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy",
+                                              check_finite=False)
+            elif gn is not None:  # the undamped step is the decrement's solve above
+                step = gn
             else:
-                A, b = A0, b0
-            step, *_ = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy",
-                                          check_finite=False)
+                step, *_ = scipy.linalg.lstsq(A0, b0, cond=1e-15, lapack_driver="gelsy",
+                                              check_finite=False)
             u_new = u.copy()
             u_new[free_idx] += step
             # with the Jacobian at once: most steps are accepted, and then it is needed
