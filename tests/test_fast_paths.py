@@ -175,3 +175,20 @@ def test_cv_path_equals_fold_fits_from_scratch():
     r1, J1 = residual(v, True)
     assert residual(u, True)[0] is r0 and not np.array_equal(r0, r1)
     assert np.array_equal(residual(v, True)[1], problem.residual_function()(v, True)[1])
+
+
+def test_solver_lstsq_is_scipys_to_the_bit():
+    """The solver's direct gelsy call gives scipy.linalg.lstsq's answer, bit for bit: tall,
+    square, wide and rank-deficient systems."""
+    import scipy.linalg
+
+    from kincal.identification.solver import lstsq
+
+    rng = np.random.default_rng(6)
+    for m, n in ((190, 45), (45, 45), (20, 45), (60, 7)):
+        A, b = rng.normal(size=(m, n)), rng.normal(size=m)
+        if m == 60:
+            A[:, 3] = A[:, 1] - 2 * A[:, 2]
+        want = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy",
+                                  check_finite=False)[0]
+        assert np.array_equal(lstsq(A, b), want)

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-import scipy.linalg
+from scipy.linalg.lapack import get_lapack_funcs
 
 from kincal.errors import OptionError
 
@@ -146,6 +146,31 @@ def triangular_factor(A: np.ndarray) -> np.ndarray:
         return np.linalg.qr(A, mode="r")
 
 
+_GELSY = get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)), np.zeros(1)))
+_LWORK: dict = {}  # (m, n): LAPACK's optimal work size for gelsy
+
+
+def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The minimum-norm least-squares solution of A d = b (A (m, n) float64, b (m,)):
+    LAPACK's gelsy (QR with column pivoting) with rcond 1e-15, the very call that
+    ``scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy", check_finite=False)``
+    makes, without its checks and dispatch (a fold fit of Algorithm 1 solves a 45 x 45
+    system, where they cost as much as the solve)."""
+    m, n = A.shape
+    if m < n:
+        b = np.concatenate([b, np.zeros(n - m)])
+    if (m, n) not in _LWORK:
+        work, info = _GELSY[1](m, n, 1, 1e-15)
+        if info != 0:
+            raise ValueError(f"gelsy's work size query failed: {info}")
+        _LWORK[m, n] = int(work.real)
+    _, x, _, _, info = _GELSY[0](A, b, np.zeros((n, 1), dtype=np.int32), 1e-15, _LWORK[m, n],
+                                 False, False)
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of gelsy")
+    return x[:n]
+
+
 def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.ndarray = 0.0,
           penalised: np.ndarray | None = None, prior: np.ndarray | None = None,
           options: SolverOptions = SolverOptions()) -> SolveSummary:
@@ -229,8 +254,7 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         colnorm2 = np.maximum(np.einsum("ij,ij->j", A0, A0), 1e-30)
         if options.rule == "relative":
             # the Gauss-Newton decrement ||A0 d||^2 = F(u) - min of the linear model
-            gn, *_ = scipy.linalg.lstsq(A0, b0, cond=1e-15, lapack_driver="gelsy",
-                                        check_finite=False)
+            gn = lstsq(A0, b0)
             decrement = float(np.sum((A0 @ gn) ** 2))
             if decrement <= options.rel_tol * costs[-1]:
                 it -= 1  # no step taken
@@ -244,13 +268,11 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             if mu > 0:
                 A = np.vstack([A0, np.diag(np.sqrt(mu * colnorm2))])
                 b = np.concatenate([b0, np.zeros(free_idx.size)])
-                step, *_ = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy",
-                                              check_finite=False)
+                step = lstsq(A, b)
             elif gn is not None:  # the undamped step is the decrement's solve above
                 step = gn
             else:
-                step, *_ = scipy.linalg.lstsq(A0, b0, cond=1e-15, lapack_driver="gelsy",
-                                              check_finite=False)
+                step = lstsq(A0, b0)
             u_new = u.copy()
             u_new[free_idx] += step
             # with the Jacobian at once: most steps are accepted, and then it is needed

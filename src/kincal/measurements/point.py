@@ -22,7 +22,7 @@ import numpy as np
 from kincal.errors import DataError
 from kincal.measurements.point_space import BASE, TOOL, ParameterSpace
 from kincal.models.base import ErrorModel
-from kincal.models.chain import Chain, cross_rows
+from kincal.models.chain import Chain, axis_cross
 from kincal.rotations import base_rotation, rotx, roty, rotz
 
 
@@ -114,10 +114,9 @@ class MeasurementModel:
             J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
         Pm = P @ Rb.T + base[:3]
         J[:, :, k:k + 3] = np.eye(3)
-        ex, ey, ez = np.eye(3)
-        J[:, :, k + 3] = cross_rows(np.broadcast_to(ex, (N, 3)), Pm - base[:3])
-        J[:, :, k + 4] = cross_rows(np.broadcast_to(ey, (N, 3)), P @ (Ry @ Rz).T) @ Rx.T
-        J[:, :, k + 5] = cross_rows(np.broadcast_to(ez, (N, 3)), P @ Rz.T) @ (Rx @ Ry).T
+        J[:, :, k + 3] = axis_cross(0, Pm - base[:3])
+        J[:, :, k + 4] = axis_cross(1, P @ (Ry @ Rz).T) @ Rx.T
+        J[:, :, k + 5] = axis_cross(2, P @ Rz.T) @ (Rx @ Ry).T
         # a sample moves with its own point only: its block gets R_b R_tip, the others 0
         J[:, :, k + 6:k + 6 + 3 * self.space.n_points] = 0.0
         rows, first = np.arange(N), k + 6 + 3 * self.points

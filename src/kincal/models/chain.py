@@ -34,11 +34,21 @@ def rodrigues(w: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product over the last axis, broadcasting (np.cross is slow on small batches)."""
-    a, b = np.broadcast_arrays(a, b)
+    if a.shape != b.shape:
+        a, b = np.broadcast_arrays(a, b)
     out = np.empty(a.shape)
     out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+def axis_cross(i: int, v: np.ndarray) -> np.ndarray:
+    """e_i x v for rows v (N, 3): cross_rows(e_i, v) without its multiplications by 0 and 1
+    (the same numbers, up to the sign of a zero)."""
+    out = np.zeros(v.shape)
+    j, k = (i + 1) % 3, (i + 2) % 3
+    out[:, k], out[:, j] = v[:, j], -v[:, k]
     return out
 
 

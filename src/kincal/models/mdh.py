@@ -175,15 +175,10 @@ class MdhModel(ErrorModel):
             raise ValueError(f"{self.size} kinematic parameters expected, got {x.size}")
         if not self.has_beta.any():
             return x.reshape(self.n, 4), np.zeros(self.n)
-        table, beta, k = np.empty((self.n, 4)), np.zeros(self.n), 0
-        for i in range(self.n):
-            if self.has_beta[i]:
-                table[i, :2], beta[i], table[i, 2:] = x[k:k + 2], x[k + 2], x[k + 3:k + 5]
-                k += 5
-            else:
-                table[i] = x[k:k + 4]
-                k += 4
-        return table, beta
+        ia, ial, ib, idd, ith = self._field_index  # gathered at once: this runs every iteration
+        beta = np.zeros(self.n)
+        beta[self.has_beta] = x[ib]
+        return x[np.column_stack([ia, ial, idd, ith])], beta
 
     def pack(self, table, beta=None) -> np.ndarray:
         """The kinematic vector of a table (n, 4) and beta (n,) (nominal beta if None)."""
