@@ -192,3 +192,20 @@ def test_solver_lstsq_is_scipys_to_the_bit():
         want = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy",
                                   check_finite=False)[0]
         assert np.array_equal(lstsq(A, b), want)
+
+
+def test_set_residuals_in_blocks_equal_the_whole_set(monkeypatch):
+    """A set's residuals and sample errors evaluated in the fit's blocks (many poses) equal
+    one evaluation of the whole set."""
+    from kincal.identification import problem as problem_module
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    robot, data = _point_data(300, seed=7)
+    monkeypatch.setattr(problem_module, "BLOCK_SAMPLES", 64)
+    problem = CalibrationProblem(robot, data, CalibrationOptions(method="ls"))
+    x = problem.start() + 1e-4
+    whole = problem.kinds[0].residuals(*problem.layout.split(x, 0))
+    assert len(problem._blocks(0, problem.kinds[0], None, True)) == 5
+    assert np.abs(problem.residuals(x, 0) - whole).max() < 1e-15
+    (_, e), = problem.sample_errors(x)
+    assert np.abs(e - np.linalg.norm(whole, axis=1)).max() < 1e-15

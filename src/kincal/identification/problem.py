@@ -190,14 +190,23 @@ class CalibrationProblem:
         """Per set with samples in ``rows``: (set index, (n,) sample errors [m]) at x."""
         out = []
         for i, km, g in self._parts(rows):
-            e = km.sample_errors(km.residuals(*self.layout.split(x, i)))
+            e = km.sample_errors(self.residuals(x, i) if rows is None else
+                                 km.residuals(*self.layout.split(x, i)))
             out.append((i, e * self.weights[g] if weighted else e))
         return out
 
     def residuals(self, x: np.ndarray, i: int) -> np.ndarray:
         """(N_i, dim) set i's residuals, measured minus predicted [m] (orientation rows of
-        poses scaled to metres by their sigma ratio)."""
-        return self.kinds[i].residuals(*self.layout.split(x, i))
+        poses scaled to metres by their sigma ratio); many poses in the blocks of the fit
+        (:meth:`_blocks`), so no temporary grows with the whole set."""
+        km, split = self.kinds[i], self.layout.split(x, i)
+        blocks = self._blocks(i, km, None, True)
+        if len(blocks) == 1:
+            return km.residuals(*split)
+        out = np.empty((km.N, km.dim))
+        for sl, block in blocks:
+            out[sl] = block.residuals(*split)
+        return out
 
     # ------------------------------------------------------------------ start
     @property
@@ -249,11 +258,11 @@ class CalibrationProblem:
         if getattr(d, "positions", None) is None:
             return
         first = np.ones(len(d), bool) if getattr(d, "points", None) is None else d.points == 0
-        s = km.chain.state(km.error_model.nominal, None, keep=False)
+        R_tip, p_tip = km.chain.tip(km.error_model.nominal)
         guess = np.zeros(3) if self.options.tool_guess is None else np.asarray(
             self.options.tool_guess, float)
         for message in length_unit_warnings(d.positions[first],
-                                            s.p_tip[first] + s.R_tip[first] @ guess,
+                                            p_tip[first] + R_tip[first] @ guess,
                                             getattr(d, "length_unit", "m")):
             warnings.warn(f"{d.source}: {message}", KincalWarning)
 

@@ -75,8 +75,7 @@ class MeasurementModel:
     def tip_poses(self, kinematic: np.ndarray, backlash: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
         """(R (N, 3, 3), p (N, 3)) of the tip frame in the base frame."""
-        s = self.chain.state(np.asarray(kinematic, float).ravel(), backlash, keep=False)
-        return s.R_tip, s.p_tip
+        return self.chain.tip(np.asarray(kinematic, float).ravel(), backlash)
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """(N, 3) predicted tool-point positions in the measurement frame [m]."""

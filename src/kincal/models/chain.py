@@ -53,6 +53,7 @@ def axis_cross(i: int, v: np.ndarray) -> np.ndarray:
 
 
 MOTION_CACHE_POSES = 1024  # poses up to which a chain keeps its joint motions
+TIP_BLOCK_POSES = 4096  # poses evaluated together by Chain.tip
 _GATHER_BUDGET = 4_000_000  # floats gathered at once for the kinematic columns (32 MB)
 
 
@@ -104,6 +105,23 @@ class Chain:
             M[:, :3, :3] = R
             M[:, :3, 3] = c - R @ c
         return M
+
+    def tip(self, x: np.ndarray, backlash: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
+        """(R (N, 3, 3), p (N, 3)) of the tip: :meth:`state` without the kept frames, for
+        many poses in blocks of TIP_BLOCK_POSES (the same numbers, row by row), so that its
+        (N, 4, 4) temporaries do not grow with the whole set."""
+        if self.N <= TIP_BLOCK_POSES:
+            s = self.state(x, backlash, keep=False)
+            return s.R_tip, s.p_tip
+        R, p = np.empty((self.N, 3, 3)), np.empty((self.N, 3))
+        for a in range(0, self.N, TIP_BLOCK_POSES):
+            rows = slice(a, a + TIP_BLOCK_POSES)
+            part = Chain(self.model, self.q[rows],
+                         None if self.approach is None else self.approach[rows], self.backlash)
+            s = part.state(x, backlash, keep=False)
+            R[rows], p[rows] = s.R_tip, s.p_tip
+        return R, p
 
     def state(self, x: np.ndarray, backlash: np.ndarray | None = None,
               keep: bool = True) -> "ChainState":
