@@ -175,10 +175,9 @@ class MdhModel(ErrorModel):
             raise ValueError(f"{self.size} kinematic parameters expected, got {x.size}")
         if not self.has_beta.any():
             return x.reshape(self.n, 4), np.zeros(self.n)
-        ia, ial, ib, idd, ith = self._field_index  # gathered at once: this runs every iteration
-        beta = np.zeros(self.n)
-        beta[self.has_beta] = x[ib]
-        return x[np.column_stack([ia, ial, idd, ith])], beta
+        beta = np.zeros(self.n)  # gathered at once: this runs every iteration
+        beta[self.has_beta] = x[self._field_index[2]]
+        return x[self._table_index], beta
 
     def pack(self, table, beta=None) -> np.ndarray:
         """The kinematic vector of a table (n, 4) and beta (n,) (nominal beta if None)."""
@@ -255,6 +254,12 @@ class MdhModel(ErrorModel):
             c = Gb[:, :, :3, 3] + a[:, None, None] * Gb[:, :, :3, 0]
             K[:, :, ib] = cross_rows(y1, P - c).transpose(1, 2, 0)
         return K
+
+    @cached_property
+    def _table_index(self) -> np.ndarray:
+        """(n, 4) positions of a, alpha, d, theta in the vector."""
+        ia, ial, _, idd, ith = self._field_index
+        return np.column_stack([ia, ial, idd, ith])
 
     @cached_property
     def _field_index(self) -> tuple[np.ndarray, ...]:
