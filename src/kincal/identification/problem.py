@@ -63,7 +63,8 @@ class CalibrationProblem:
         self.options = o = (options or CalibrationOptions()).validated()
         sets = as_sets(sets)
         # model "auto": the candidate structures compared by CV, the best used (model_choice)
-        self.model_choice, o = model_choice.resolve(type(self), robots, sets, o)
+        with blas_threads.limited(o.blas_threads):  # its fits, as solve's (blas_threads)
+            self.model_choice, o = model_choice.resolve(type(self), robots, sets, o)
         self.options = o
         self.chains = ch = Chains(robots, len(sets), o.model)
         self.robot, self.robots = ch.robot, ch.robots
@@ -280,9 +281,11 @@ class CalibrationProblem:
         """Which parameters these data identify, at the start, with each kind's notes."""
         if self._ident is not None:
             return self._ident
-        lay, u = self.layout, self.start() / self.scale  # J below in mm per mm or per deg
-        ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
-                             lay.names, lay.n_kinematic, self._unfixed(), self.options.rank_tol)
+        with blas_threads.limited(self.options.blas_threads):  # as solve's (blas_threads)
+            lay, u = self.layout, self.start() / self.scale  # J in mm per mm or per deg
+            ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
+                                 lay.names, lay.n_kinematic, self._unfixed(),
+                                 self.options.rank_tol)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):
