@@ -209,3 +209,17 @@ def test_set_residuals_in_blocks_equal_the_whole_set(monkeypatch):
     assert np.abs(problem.residuals(x, 0) - whole).max() < 1e-15
     (_, e), = problem.sample_errors(x)
     assert np.abs(e - np.linalg.norm(whole, axis=1)).max() < 1e-15
+
+
+def test_first_guess_from_spread_samples_reaches_the_same_start(monkeypatch):
+    """Many samples: the closed-form guess of the frames from samples spread through the
+    set, refined on all of them, is the start made from every sample."""
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+    from kincal.measurements import point
+
+    robot, data = _point_data(300, seed=8)
+    full = CalibrationProblem(robot, data, CalibrationOptions(method="ls")).start()
+    monkeypatch.setattr(point, "START_SAMPLES", 40)
+    assert len(data) > point.START_SAMPLES
+    spread = CalibrationProblem(robot, data, CalibrationOptions(method="ls")).start()
+    assert np.abs(spread - full).max() < 1e-9

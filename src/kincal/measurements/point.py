@@ -124,6 +124,12 @@ class MeasurementModel:
         return Pm, J
 
 
+# samples from which the closed-form first guess of the frames is made, at most: it is
+# refined by Gauss-Newton on every sample, and its (N, 3, 6) systems would otherwise be the
+# largest temporaries of a fit of many poses
+START_SAMPLES = 20_000
+
+
 class PointKind:
     """The point kind (the :class:`kincal.measurements.kind.KindModel` interface):
     residuals P_measured - P_predicted [m], through the one point engine
@@ -178,8 +184,15 @@ class PointKind:
         from kincal.measurements.frames_init import initial_frames, point_in_tip
         from kincal.rotations import base_angles, base_rotation
 
-        R_tip, p_tip = self.model.tip_poses(kin)
-        P, pts = self.data.positions, self.data.points
+        model, P, pts = self.model, self.data.positions, self.data.points
+        if self.N > START_SAMPLES:  # a first guess: from samples spread through the set
+            K = self.data.n_points
+            rows = np.concatenate([m[np.linspace(0, len(m) - 1, min(len(m), START_SAMPLES // K))
+                                     .astype(int)] for m in (np.flatnonzero(pts == k)
+                                                             for k in range(K)) if len(m)])
+            rows.sort()
+            model, P, pts = self.model.subset(rows), P[rows], pts[rows]
+        R_tip, p_tip = model.tip_poses(kin)
         first = pts == 0
         Rb, tb, tool, _, _ = initial_frames(R_tip[first], p_tip[first], P[first], tool_guess)
         base = np.concatenate([tb, base_angles(Rb)])
