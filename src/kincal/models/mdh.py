@@ -239,11 +239,9 @@ class MdhModel(ErrorModel):
         xg, zh = G[:, :, :3, 0], H[:, :, :3, 2]
         rg, rh = P - G[:, :, :3, 3], P - H[:, :, :3, 3]
         ia, ial, ib, idd, ith = self._field_index
-        K = np.empty((len(P), 3, self.size))
-        K[:, :, ia] = xg.transpose(1, 2, 0)
-        K[:, :, ial] = cross_rows(xg, rg).transpose(1, 2, 0)
-        K[:, :, idd] = zh.transpose(1, 2, 0)
-        K[:, :, ith] = cross_rows(zh, rh).transpose(1, 2, 0)
+        K = np.empty((self.size, len(P), 3))  # parameter first: whole-block writes
+        K[ia], K[idd] = xg, zh
+        K[ial], K[ith] = cross_rows(xg, rg), cross_rows(zh, rh)
         if ib.size:
             hb = self.has_beta
             table, _ = self.unpack(x)
@@ -252,8 +250,8 @@ class MdhModel(ErrorModel):
             y1 = (np.cos(alpha)[:, None, None] * Gb[:, :, :3, 1]
                   + np.sin(alpha)[:, None, None] * Gb[:, :, :3, 2])
             c = Gb[:, :, :3, 3] + a[:, None, None] * Gb[:, :, :3, 0]
-            K[:, :, ib] = cross_rows(y1, P - c).transpose(1, 2, 0)
-        return K
+            K[ib] = cross_rows(y1, P - c)
+        return K.transpose(1, 2, 0)
 
     @cached_property
     def _table_index(self) -> np.ndarray:
