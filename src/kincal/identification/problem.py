@@ -49,6 +49,7 @@ from kincal.robot import Robot
 
 # samples evaluated together in a residual with Jacobian: more are done block by block
 BLOCK_SAMPLES = 2048
+SUBSET_MEMO_SAMPLES = 20_000  # row selections up to this size keep their kind models
 
 
 class CalibrationProblem:
@@ -143,8 +144,8 @@ class CalibrationProblem:
     # -------------------------------------------------------------- residuals
     def _parts(self, rows):
         """[(set index, kind model on those rows, global positions of the rows)]; the
-        kind models of the last few row selections are kept (CV asks for each fold's
-        again at every lambda)."""
+        kind models of the last few small row selections are kept (CV asks for each
+        fold's again at every lambda)."""
         if rows is None:
             return [(i, km, np.arange(self.offsets[i], self.offsets[i + 1]))
                     for i, km in enumerate(self.kinds)]
@@ -157,9 +158,10 @@ class CalibrationProblem:
             mine = rows[(rows >= self.offsets[i]) & (rows < self.offsets[i + 1])]
             if mine.size:
                 out.append((i, km.subset(mine - self.offsets[i]), mine))
-        if len(self._subsets) >= 2 * self.options.folds + 2:
-            self._subsets.pop(next(iter(self._subsets)))
-        self._subsets[key] = out
+        if rows.size <= SUBSET_MEMO_SAMPLES:  # a large selection is not kept: its memory
+            if len(self._subsets) >= 2 * self.options.folds + 2:
+                self._subsets.pop(next(iter(self._subsets)))
+            self._subsets[key] = out
         return out
 
     def _blocks(self, i: int, km, g: np.ndarray, cache: bool):
