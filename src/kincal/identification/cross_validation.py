@@ -83,21 +83,33 @@ def make_folds(n_samples: int, k: int, seed: int, groups=None,
 def remembering(residual: Callable, keep: int = 2) -> Callable:
     """``residual`` remembering its last ``keep`` linearisations (r and J at u): a warm
     start begins where the previous fit ended, at the same u, so its first linearisation
-    is the previous fit's last one, not evaluated again (the same numbers). The attributes
-    of the streamed path (``blocks``, ``rows``, ``n_blocks``) are passed on."""
-    seen: list = []
+    is the previous fit's last one, not evaluated again (the same numbers), and so is the
+    solver's QR triangle of it (``factor(J, columns, make)``). The attributes of the
+    streamed path (``blocks``, ``rows``, ``n_blocks``) are passed on."""
+    seen: list = []  # (u, (r, J), {free columns: triangle of [J_free | -r]})
 
     def remembered(u, with_jacobian):
         if with_jacobian:
-            for v, out in seen:
+            for v, out, _ in seen:
                 if np.array_equal(v, u):
                     return out
         out = residual(u, with_jacobian)
         if with_jacobian:
-            seen.insert(0, (np.array(u, dtype=float), out))
+            seen.insert(0, (np.array(u, dtype=float), out, {}))
             del seen[keep:]
         return out
 
+    def factor(J, columns, make):
+        """The solver's triangle of a remembered J (made by ``make`` once)."""
+        for _, out, triangles in seen:
+            if out[1] is J:
+                key = columns.tobytes()
+                if key not in triangles:
+                    triangles[key] = make()
+                return triangles[key]
+        return make()
+
+    remembered.factor = factor
     for name in ("blocks", "rows", "n_blocks"):
         if hasattr(residual, name):
             setattr(remembered, name, getattr(residual, name))

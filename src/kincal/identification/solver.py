@@ -161,6 +161,19 @@ def triangular_factor(A: np.ndarray) -> np.ndarray:
         return np.linalg.qr(A, mode="r")
 
 
+def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,
+                   free_idx: np.ndarray) -> np.ndarray:
+    """The triangle of [J_free | -r] (:func:`triangular_factor`), or the one a residual that
+    remembers its linearisations (``factor``, kincal.identification.cross_validation.
+    remembering) kept for this J: a warm start's first iteration factors the matrix the
+    previous fit's last iteration did."""
+    def make():
+        return triangular_factor(np.column_stack([J[:, free_idx], -r]))
+
+    kept = getattr(residual, "factor", None)
+    return make() if kept is None else kept(J, free_idx, make)
+
+
 _GELSY = get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)), np.zeros(1)))
 _LWORK: dict = {}  # (m, n): LAPACK's optimal work size for gelsy
 
@@ -260,7 +273,7 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         # ||J d + r||^2 = ||R d - z||^2 + rho^2, so every damping attempt below solves a
         # small system whatever the number of poses.
         if not streamed:
-            Rz = triangular_factor(np.column_stack([J[:, free_idx], -r]))
+            Rz = _data_triangle(residual, r, J, free_idx)
         k = free_idx.size
         rows, rhs = [Rz[:k, :k]], [Rz[:k, k]]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
@@ -268,7 +281,7 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             rows.append(P)
             rhs.append(-root @ (u - prior)[free_idx][pen_f])
         A0, b0 = np.vstack(rows), np.concatenate(rhs)
-        colnorm2 = np.maximum(np.einsum("ij,ij->j", A0, A0), 1e-30)
+        colnorm2 = None  # Marquardt's scaling, made when a step is damped
         if options.rule == "relative":
             # the Gauss-Newton decrement ||A0 d||^2 = F(u) - min of the linear model
             gn = lstsq(A0, b0)
@@ -283,6 +296,8 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         accepted = False
         while True:
             if mu > 0:
+                if colnorm2 is None:
+                    colnorm2 = np.maximum(np.einsum("ij,ij->j", A0, A0), 1e-30)
                 A = np.vstack([A0, np.diag(np.sqrt(mu * colnorm2))])
                 b = np.concatenate([b0, np.zeros(free_idx.size)])
                 step = lstsq(A, b)
