@@ -109,7 +109,7 @@ def remembering(residual: Callable, keep: int = 2) -> Callable:
                 return triangles[key]
         return make()
 
-    remembered.factor = factor
+    setattr(remembered, "factor", factor)  # the solver looks for it (solver._data_triangle)
     for name in ("blocks", "rows", "n_blocks"):
         if hasattr(residual, name):
             setattr(remembered, name, getattr(residual, name))
@@ -126,7 +126,7 @@ def fold_fitter(problem, free: np.ndarray, samples: np.ndarray | None = None) ->
     refer to (a subsample), or None for all."""
     o = problem.options
     options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol), progress=None)
-    cache = {}
+    cache: dict[bytes, Callable] = {}
 
     def fit(train, lam, start):
         train = train if samples is None else samples[train]

@@ -112,6 +112,7 @@ class SolveSummary:
         """(k, k) J^T J of the columns ``free`` (mask or indices) at the solution."""
         if self.jacobian is None:
             idx = np.flatnonzero(free) if np.asarray(free).dtype == bool else np.asarray(free)
+            assert self.gram is not None  # a streamed fit carries J^T J
             return self.gram[np.ix_(idx, idx)]
         J = self.jacobian[:, free]
         return J.T @ J
@@ -158,7 +159,7 @@ def triangular_factor(A: np.ndarray) -> np.ndarray:
         A1 = A @ np.linalg.inv(R1)  # small n x n inverse: much faster than a wide trsm
         return np.linalg.cholesky(A1.T @ A1).T @ R1
     except np.linalg.LinAlgError:
-        return np.linalg.qr(A, mode="r")
+        return _qr_r(A)
 
 
 def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,
