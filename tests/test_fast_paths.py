@@ -138,3 +138,88 @@ def test_rodrigues_is_the_old_sum_to_the_bit():
         c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
         K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
         assert np.array_equal(rodrigues(w, q), c * np.eye(3) + s * K + (1.0 - c) * np.outer(w, w))
+
+
+def test_cv_path_equals_fold_fits_from_scratch():
+    """Algorithm 1 with each fold's warm start at exactly the previous solution and its
+    linearisation remembered gives the curve of plain fold fits (a new residual and every
+    linearisation evaluated, the start through SI units) to 1e-9, and the same lambda."""
+    from dataclasses import replace
+
+    from kincal.identification.cross_validation import cross_validate, remembering
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    robot, data = _point_data(60, seed=3)
+    problem = CalibrationProblem(robot, data, CalibrationOptions(method="l2", lam="cv"))
+    fast = problem.cross_validate()
+    o, free = problem.options, problem.free_mask()
+    solver = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol), progress=None)
+
+    def plain(train, lam, start):
+        return problem.fit(lam, train, None if start is None else start.u * problem.scale,
+                           free, problem.residual_function(train), solver)
+
+    def error(sol, val):
+        (_, e), = problem.sample_errors(sol.u * problem.scale, val)
+        return float(np.mean(e)) * 1e3
+
+    slow = cross_validate(plain, error, problem.n_samples, fast.lambdas, o.folds, o.seed,
+                          groups=data.poses)
+    assert fast.best_lambda == slow.best_lambda
+    assert np.abs(fast.fold_errors / slow.fold_errors - 1).max() < 1e-9
+    # the remembered residual gives what it was asked for, not what it saw last
+    residual = remembering(problem.residual_function())
+    u = problem.start() / problem.scale
+    r0, J0 = residual(u, True)
+    v = u + 1e-3
+    r1, J1 = residual(v, True)
+    assert residual(u, True)[0] is r0 and not np.array_equal(r0, r1)
+    assert np.array_equal(residual(v, True)[1], problem.residual_function()(v, True)[1])
+
+
+def test_solver_lstsq_is_scipys_to_the_bit():
+    """The solver's direct gelsy call gives scipy.linalg.lstsq's answer, bit for bit: tall,
+    square, wide and rank-deficient systems."""
+    import scipy.linalg
+
+    from kincal.identification.solver import lstsq
+
+    rng = np.random.default_rng(6)
+    for m, n in ((190, 45), (45, 45), (20, 45), (60, 7)):
+        A, b = rng.normal(size=(m, n)), rng.normal(size=m)
+        if m == 60:
+            A[:, 3] = A[:, 1] - 2 * A[:, 2]
+        want = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy",
+                                  check_finite=False)[0]
+        assert np.array_equal(lstsq(A, b), want)
+
+
+def test_set_residuals_in_blocks_equal_the_whole_set(monkeypatch):
+    """A set's residuals and sample errors evaluated in the fit's blocks (many poses) equal
+    one evaluation of the whole set."""
+    from kincal.identification import problem as problem_module
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    robot, data = _point_data(300, seed=7)
+    monkeypatch.setattr(problem_module, "BLOCK_SAMPLES", 64)
+    problem = CalibrationProblem(robot, data, CalibrationOptions(method="ls"))
+    x = problem.start() + 1e-4
+    whole = problem.kinds[0].residuals(*problem.layout.split(x, 0))
+    assert len(problem._blocks(0, problem.kinds[0], None, True)) == 5
+    assert np.abs(problem.residuals(x, 0) - whole).max() < 1e-15
+    (_, e), = problem.sample_errors(x)
+    assert np.abs(e - np.linalg.norm(whole, axis=1)).max() < 1e-15
+
+
+def test_first_guess_from_spread_samples_reaches_the_same_start(monkeypatch):
+    """Many samples: the closed-form guess of the frames from samples spread through the
+    set, refined on all of them, is the start made from every sample."""
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+    from kincal.measurements import point
+
+    robot, data = _point_data(300, seed=8)
+    full = CalibrationProblem(robot, data, CalibrationOptions(method="ls")).start()
+    monkeypatch.setattr(point, "START_SAMPLES", 40)
+    assert len(data) > point.START_SAMPLES
+    spread = CalibrationProblem(robot, data, CalibrationOptions(method="ls")).start()
+    assert np.abs(spread - full).max() < 1e-9

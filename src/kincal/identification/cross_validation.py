@@ -80,12 +80,50 @@ def make_folds(n_samples: int, k: int, seed: int, groups=None,
     return tuple(np.flatnonzero(np.isin(inverse, f)) for f in np.array_split(perm, k))
 
 
+def remembering(residual: Callable, keep: int = 2) -> Callable:
+    """``residual`` remembering its last ``keep`` linearisations (r and J at u): a warm
+    start begins where the previous fit ended, at the same u, so its first linearisation
+    is the previous fit's last one, not evaluated again (the same numbers), and so is the
+    solver's QR triangle of it (``factor(J, columns, make)``). The attributes of the
+    streamed path (``blocks``, ``rows``, ``n_blocks``) are passed on."""
+    seen: list = []  # (u, (r, J), {free columns: triangle of [J_free | -r]})
+
+    def remembered(u, with_jacobian):
+        if with_jacobian:
+            for v, out, _ in seen:
+                if np.array_equal(v, u):
+                    return out
+        out = residual(u, with_jacobian)
+        if with_jacobian:
+            seen.insert(0, (np.array(u, dtype=float), out, {}))
+            del seen[keep:]
+        return out
+
+    def factor(J, columns, make):
+        """The solver's triangle of a remembered J (made by ``make`` once)."""
+        for _, out, triangles in seen:
+            if out[1] is J:
+                key = columns.tobytes()
+                if key not in triangles:
+                    triangles[key] = make()
+                return triangles[key]
+        return make()
+
+    setattr(remembered, "factor", factor)  # the solver looks for it (solver._data_triangle)
+    for name in ("blocks", "rows", "n_blocks"):
+        if hasattr(residual, name):
+            setattr(remembered, name, getattr(residual, name))
+    return remembered
+
+
 def fold_fitter(problem, free: np.ndarray, samples: np.ndarray | None = None) -> Callable:
     """``fit(train, lam, start)`` for :func:`cross_validate` on a calibration ``problem``
     (anything with ``options``, ``scale``, ``residual_function(rows)`` and ``fit``): each
-    fold's training residual is built once and reused along the lambda path; fold fits
-    use the looser ``cv_step_tol`` and show no progress. samples: the problem's rows the
-    fold indices refer to (a subsample), or None for all."""
+    fold's training residual is built once and reused along the lambda path, and a warm
+    start begins exactly at the previous solution (in the solver's units), whose
+    linearisation is remembered (:func:`remembering`); fold fits use the looser
+    ``cv_step_tol`` and show no progress. samples: the problem's rows the fold indices
+    refer to (a subsample), or None for all."""
     o = problem.options
     options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol), progress=None)
     cache: dict[bytes, Callable] = {}
@@ -95,9 +133,9 @@ def fold_fitter(problem, free: np.ndarray, samples: np.ndarray | None = None) ->
         key = train.tobytes()
         if key not in cache:
             cache.clear()
-            cache[key] = problem.residual_function(train)
-        return problem.fit(lam, train, None if start is None else start.u * problem.scale,
-                           free, residual=cache[key], options=options)
+            cache[key] = remembering(problem.residual_function(train))
+        return problem.fit(lam, train, free=free, residual=cache[key], options=options,
+                           start_u=None if start is None else start.u)
 
     return fit
 

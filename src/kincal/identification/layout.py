@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -99,11 +100,11 @@ class ParameterLayout:
     def n_backlash(self) -> int:
         return len(self.backlash)
 
-    @property
+    @cached_property  # the fields are frozen; the solver asks at every block
     def size(self) -> int:
         return self.n_kinematic + self.n_frames + self.n_backlash
 
-    @property
+    @cached_property
     def frame_slices(self) -> tuple[slice | np.ndarray, ...]:
         """Per set, the slice of its frame parameters in the vector (an index array for a
         set sharing some with an earlier set)."""

@@ -36,7 +36,7 @@ from kincal.identification.cross_validation import (CrossValidation, cross_valid
 from kincal.identification.layout import MM, ParameterLayout
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.plausibility import gather, judge
-from kincal.identification.reduction import analyze_rows, with_blocks
+from kincal.identification.reduction import analyze_rows, residual_function
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze
@@ -49,6 +49,7 @@ from kincal.robot import Robot
 
 # samples evaluated together in a residual with Jacobian: more are done block by block
 BLOCK_SAMPLES = 2048
+SUBSET_MEMO_SAMPLES = 20_000  # row selections up to this size keep their kind models
 
 
 class CalibrationProblem:
@@ -63,7 +64,8 @@ class CalibrationProblem:
         self.options = o = (options or CalibrationOptions()).validated()
         sets = as_sets(sets)
         # model "auto": the candidate structures compared by CV, the best used (model_choice)
-        self.model_choice, o = model_choice.resolve(type(self), robots, sets, o)
+        with blas_threads.limited(o.blas_threads):  # its fits, as solve's (blas_threads)
+            self.model_choice, o = model_choice.resolve(type(self), robots, sets, o)
         self.options = o
         self.chains = ch = Chains(robots, len(sets), o.model)
         self.robot, self.robots = ch.robot, ch.robots
@@ -98,6 +100,7 @@ class CalibrationProblem:
         self._ident: Identifiability | None = None
         self._structural: Identifiability | None = None
         self._all_blocks: dict = {}  # (set, block size): blocks of a whole set
+        self._subsets: dict = {}  # the last row selections' parts (_parts)
 
     # ----------------------------------------------------------------- layout
     @property
@@ -139,19 +142,28 @@ class CalibrationProblem:
 
     # -------------------------------------------------------------- residuals
     def _parts(self, rows):
-        """[(set index, kind model on those rows, global positions of the rows)]."""
+        """[(set index, kind model on those rows, global positions of the rows)]; the
+        kind models of the last few small row selections are kept (CV asks for each
+        fold's again at every lambda)."""
         if rows is None:
             return [(i, km, np.arange(self.offsets[i], self.offsets[i + 1]))
                     for i, km in enumerate(self.kinds)]
         rows = np.asarray(rows)
+        key = (rows.dtype.str, rows.tobytes())
+        if key in self._subsets:
+            return self._subsets[key]
         out = []
         for i, km in enumerate(self.kinds):
             mine = rows[(rows >= self.offsets[i]) & (rows < self.offsets[i + 1])]
             if mine.size:
                 out.append((i, km.subset(mine - self.offsets[i]), mine))
+        if rows.size <= SUBSET_MEMO_SAMPLES:  # a large selection is not kept: its memory
+            if len(self._subsets) >= 2 * self.options.folds + 2:
+                self._subsets.pop(next(iter(self._subsets)))
+            self._subsets[key] = out
         return out
 
-    def _blocks(self, i: int, km, g: np.ndarray, cache: bool):
+    def _blocks(self, i: int, km, g: np.ndarray | None, cache: bool):
         """[(local slice, kind model of those samples)] in blocks of BLOCK_SAMPLES.
 
         Evaluating many samples block by block keeps every temporary of the Jacobian small
@@ -174,55 +186,29 @@ class CalibrationProblem:
         kinematic=False: kinematic and backlash columns left at zero (frame-only fits)."""
         parts = [(i, km, g, self._blocks(i, km, g, rows is None))
                  for i, km, g in self._parts(rows)]
-        lay, s = self.layout, self.scale
-        weights = self.weights
-        m = sum(km.N * km.dim for _, km, _, _ in parts)
-        k, bl = lay.n_kinematic, lay.backlash_slice
-
-        def residual(u, with_jacobian):
-            x = u * s
-            r = np.empty(m)
-            J = np.zeros((m, lay.size)) if with_jacobian else None
-            at = 0
-            for i, km, g, blocks in parts:
-                kin, fr, b = lay.split(x, i)
-                fs = lay.frame_slices[i]
-                for sl, block in blocks:
-                    w = weights[g[sl]][:, None]
-                    span = slice(at + km.dim * sl.start, at + km.dim * sl.stop)
-                    if not with_jacobian:
-                        r[span] = (block.residuals(kin, fr, b) * w).ravel()
-                        continue
-                    rr, Jk, Jf, Jb = block.residuals(kin, fr, b, jacobian=True,
-                                                     kinematic=kinematic)
-                    r[span] = (rr * w).ravel()
-                    n = block.N * km.dim
-                    w3 = w[:, :, None]
-                    J[span, :k] = (Jk * w3).reshape(n, -1)
-                    J[span, fs] = (Jf * w3).reshape(n, -1)
-                    if Jb.shape[2]:
-                        J[span, bl] = (Jb * w3).reshape(n, -1)
-                at += km.N * km.dim
-            r /= MM
-            if not with_jacobian:
-                return r, None
-            J *= s / MM
-            return r, J
-
-        return with_blocks(residual, parts, lay, weights, s, kinematic, m)  # reduction.py
+        return residual_function(parts, self.layout, self.weights, self.scale, kinematic)
 
     def sample_errors(self, x: np.ndarray, rows=None, weighted: bool = False) -> list:
         """Per set with samples in ``rows``: (set index, (n,) sample errors [m]) at x."""
         out = []
         for i, km, g in self._parts(rows):
-            e = km.sample_errors(km.residuals(*self.layout.split(x, i)))
+            e = km.sample_errors(self.residuals(x, i) if rows is None else
+                                 km.residuals(*self.layout.split(x, i)))
             out.append((i, e * self.weights[g] if weighted else e))
         return out
 
     def residuals(self, x: np.ndarray, i: int) -> np.ndarray:
         """(N_i, dim) set i's residuals, measured minus predicted [m] (orientation rows of
-        poses scaled to metres by their sigma ratio)."""
-        return self.kinds[i].residuals(*self.layout.split(x, i))
+        poses scaled to metres by their sigma ratio); many poses in the blocks of the fit
+        (:meth:`_blocks`), so no temporary grows with the whole set."""
+        km, split = self.kinds[i], self.layout.split(x, i)
+        blocks = self._blocks(i, km, None, True)
+        if len(blocks) == 1:
+            return km.residuals(*split)
+        out = np.empty((km.N, km.dim))
+        for sl, block in blocks:
+            out[sl] = block.residuals(*split)
+        return out
 
     # ------------------------------------------------------------------ start
     @property
@@ -274,11 +260,11 @@ class CalibrationProblem:
         if getattr(d, "positions", None) is None:
             return
         first = np.ones(len(d), bool) if getattr(d, "points", None) is None else d.points == 0
-        s = km.chain.state(km.error_model.nominal, None, keep=False)
+        R_tip, p_tip = km.chain.tip(km.error_model.nominal)
         guess = np.zeros(3) if self.options.tool_guess is None else np.asarray(
             self.options.tool_guess, float)
         for message in length_unit_warnings(d.positions[first],
-                                            s.p_tip[first] + s.R_tip[first] @ guess,
+                                            p_tip[first] + R_tip[first] @ guess,
                                             getattr(d, "length_unit", "m")):
             warnings.warn(f"{d.source}: {message}", KincalWarning)
 
@@ -296,9 +282,11 @@ class CalibrationProblem:
         """Which parameters these data identify, at the start, with each kind's notes."""
         if self._ident is not None:
             return self._ident
-        lay, u = self.layout, self.start() / self.scale  # J below in mm per mm or per deg
-        ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
-                             lay.names, lay.n_kinematic, self._unfixed(), self.options.rank_tol)
+        with blas_threads.limited(self.options.blas_threads):  # as solve's (blas_threads)
+            lay, u = self.layout, self.start() / self.scale  # J in mm per mm or per deg
+            ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
+                                 lay.names, lay.n_kinematic, self._unfixed(),
+                                 self.options.rank_tol)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):
@@ -387,13 +375,17 @@ class CalibrationProblem:
     # ------------------------------------------------------------------- fits
     def fit(self, lam, rows=None, start: np.ndarray | None = None,
             free: np.ndarray | None = None, residual: Callable | None = None,
-            options: SolverOptions | None = None) -> SolveSummary:
+            options: SolverOptions | None = None,
+            start_u: np.ndarray | None = None) -> SolveSummary:
         """One solve with penalty weight ``lam`` (one, or per parameter) on the samples
-        ``rows`` (default all); residual: a prebuilt :meth:`residual_function` for rows."""
-        x0 = self.start() if start is None else start
+        ``rows`` (default all); residual: a prebuilt :meth:`residual_function` for rows;
+        start_u: the start in the solver's units u = x / scale, as is (instead of start,
+        e.g. a previous solve's u: a warm start at exactly its end)."""
+        u0 = (self.start() if start is None else start) / self.scale if start_u is None \
+            else start_u
         free = self.free_mask() if free is None else free
         residual = self.residual_function(rows) if residual is None else residual
-        return solve(residual, x0 / self.scale, free,
+        return solve(residual, u0, free,
                      lam=lam if self.prior is None else self.prior.penalty(lam),
                      penalised=self.layout.is_penalised, prior=self.start() / self.scale,
                      options=options or self.options.solver)

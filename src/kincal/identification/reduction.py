@@ -91,14 +91,17 @@ def linearise(blocks: Callable, u: np.ndarray, m: int, p: int, free_idx: np.ndar
 
 
 def row_blocks(parts, layout, weights, scale, kinematic: bool = True) -> Callable:
-    """blocks(u) for the residual of :meth:`CalibrationProblem.residual_function`: yields
-    (rows, r_b [mm], J_b) per block of samples at u = x / scale, the same numbers as the
-    rows of residual(u, True); J_b is a buffer that the next block overwrites.
-    parts: [(set index, kind model, global rows, [(local slice, block kind model)])]."""
+    """blocks(u, with_jacobian=True, out=None): the one traversal of the residual's rows
+    (sets in order, each in its blocks of samples), yielding (rows, r_b [mm], J_b) per block
+    at u = x / scale: the rows' weighted residuals and their Jacobian (None without
+    with_jacobian). J_b is a view of ``out[rows]`` when ``out`` (m, p) is given (the dense
+    Jacobian, :func:`residual_function`), else a buffer that the next block overwrites.
+    parts: [(set index, kind model, global rows, [(local slice, block kind model)])];
+    kinematic=False leaves the kinematic and backlash columns at zero."""
     buffers: dict = {}
     k, bl = layout.n_kinematic, layout.backlash_slice
 
-    def blocks(u):
+    def blocks(u, with_jacobian: bool = True, out: np.ndarray | None = None):
         x = u * scale
         at = 0
         for i, km, g, blocks_i in parts:
@@ -106,10 +109,17 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True) -> Callabl
             fs = layout.frame_slices[i]
             for sl, block in blocks_i:
                 w = weights[g[sl]][:, None]
+                span = slice(at + km.dim * sl.start, at + km.dim * sl.stop)
+                if not with_jacobian:
+                    yield span, (block.residuals(kin, fr, b) * w).ravel() / MM, None
+                    continue
                 n = block.N * km.dim
-                if n not in buffers:
-                    buffers[n] = np.zeros((n, layout.size))
-                J = buffers[n]
+                if out is not None:
+                    J = out[span]
+                else:
+                    if n not in buffers:
+                        buffers[n] = np.zeros((n, layout.size))
+                    J = buffers[n]
                 J[:] = 0.0
                 rr, Jk, Jf, Jb = block.residuals(kin, fr, b, jacobian=True, kinematic=kinematic)
                 w3 = w[:, :, None]
@@ -118,15 +128,14 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True) -> Callabl
                 if Jb.shape[2]:
                     J[:, bl] = (Jb * w3).reshape(n, -1)
                 J *= scale / MM
-                yield (slice(at + km.dim * sl.start, at + km.dim * sl.stop),
-                       (rr * w).ravel() / MM, J)
+                yield span, (rr * w).ravel() / MM, J
             at += km.N * km.dim
 
     return blocks
 
 
 class BlockedResidual(Protocol):
-    """A residual function that also streams its rows in blocks (:func:`with_blocks`)."""
+    """A residual function that also streams its rows in blocks (:func:`residual_function`)."""
 
     blocks: Callable
     rows: int
@@ -135,11 +144,22 @@ class BlockedResidual(Protocol):
     def __call__(self, u: np.ndarray, jacobian: bool = ...) -> Any: ...
 
 
-def with_blocks(residual: Callable, parts, layout, weights, scale, kinematic: bool,
-                m: int) -> BlockedResidual:
-    """``residual`` with ``blocks`` (:func:`row_blocks`), ``rows`` (m) and ``n_blocks``."""
+def residual_function(parts, layout, weights, scale, kinematic: bool = True) -> BlockedResidual:
+    """residual(u, with_jacobian) -> (r (m,) [mm], J (m, p) or None), the dense rows of
+    :func:`row_blocks` (the same traversal, so the two cannot differ), with ``blocks``,
+    ``rows`` (m) and ``n_blocks`` for the solver's streamed path."""
+    blocks = row_blocks(parts, layout, weights, scale, kinematic)
+    m = sum(km.N * km.dim for _, km, _, _ in parts)
+
+    def residual(u, with_jacobian):
+        r = np.empty(m)
+        J = np.empty((m, layout.size)) if with_jacobian else None
+        for span, rb, _ in blocks(u, with_jacobian, J):
+            r[span] = rb
+        return r, J
+
     out = cast(BlockedResidual, residual)  # the attributes are set here
-    out.blocks = row_blocks(parts, layout, weights, scale, kinematic)
+    out.blocks = blocks
     out.rows, out.n_blocks = m, sum(len(part[3]) for part in parts)
     return out
 

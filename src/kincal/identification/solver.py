@@ -24,10 +24,10 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass, field
-from typing import Callable, cast
+from typing import Callable
 
 import numpy as np
-import scipy.linalg
+from scipy.linalg.lapack import get_lapack_funcs
 
 from kincal.errors import OptionError
 
@@ -126,6 +126,21 @@ class SolveSummary:
         return np.sqrt(np.maximum(w, 0.0))[:, None] * V.T
 
 
+_BELOW: dict = {}  # (rows, columns): indices below the diagonal
+
+
+def _qr_r(A: np.ndarray) -> np.ndarray:
+    """np.linalg.qr(A, mode="r"), the same numbers: its LAPACK factorisation (mode "raw"),
+    the part below the diagonal zeroed through cached indices rather than np.triu's mask,
+    which costs more than the factorisation of a fold fit's 150 x 46 matrix."""
+    h, _ = np.linalg.qr(A, mode="raw")
+    R = h.T[:min(A.shape)].copy()
+    if R.shape not in _BELOW:
+        _BELOW[R.shape] = np.tril_indices(R.shape[0], -1, R.shape[1])
+    R[_BELOW[R.shape]] = 0.0
+    return R
+
+
 def triangular_factor(A: np.ndarray) -> np.ndarray:
     """R of A = Q R (upper triangular, n x n) for a tall A (m x n).
 
@@ -135,7 +150,7 @@ def triangular_factor(A: np.ndarray) -> np.ndarray:
     """
     m, n = A.shape
     if m <= 50 * n:
-        return _r_of_qr(A)
+        return _qr_r(A)
     try:
         R1 = np.linalg.cholesky(A.T @ A).T
         d = np.abs(np.diag(R1))
@@ -144,13 +159,45 @@ def triangular_factor(A: np.ndarray) -> np.ndarray:
         A1 = A @ np.linalg.inv(R1)  # small n x n inverse: much faster than a wide trsm
         return np.linalg.cholesky(A1.T @ A1).T @ R1
     except np.linalg.LinAlgError:
-        return _r_of_qr(A)
+        return _qr_r(A)
 
 
-def _r_of_qr(A: np.ndarray) -> np.ndarray:
-    """R of Householder QR. (numpy's stubs type ``qr(mode="r")`` as a QRResult; it
-    returns the R array.)"""
-    return cast(np.ndarray, np.linalg.qr(A, mode="r"))
+def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,
+                   free_idx: np.ndarray) -> np.ndarray:
+    """The triangle of [J_free | -r] (:func:`triangular_factor`), or the one a residual that
+    remembers its linearisations (``factor``, kincal.identification.cross_validation.
+    remembering) kept for this J: a warm start's first iteration factors the matrix the
+    previous fit's last iteration did."""
+    def make():
+        return triangular_factor(np.column_stack([J[:, free_idx], -r]))
+
+    kept = getattr(residual, "factor", None)
+    return make() if kept is None else kept(J, free_idx, make)
+
+
+_GELSY = get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)), np.zeros(1)))
+_LWORK: dict = {}  # (m, n): LAPACK's optimal work size for gelsy
+
+
+def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The minimum-norm least-squares solution of A d = b (A (m, n) float64, b (m,)):
+    LAPACK's gelsy (QR with column pivoting) with rcond 1e-15, the very call that
+    ``scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy", check_finite=False)``
+    makes, without its checks and dispatch (a fold fit of Algorithm 1 solves a 45 x 45
+    system, where they cost as much as the solve)."""
+    m, n = A.shape
+    if m < n:
+        b = np.concatenate([b, np.zeros(n - m)])
+    if (m, n) not in _LWORK:
+        work, info = _GELSY[1](m, n, 1, 1e-15)
+        if info != 0:
+            raise ValueError(f"gelsy's work size query failed: {info}")
+        _LWORK[m, n] = int(work.real)
+    _, x, _, _, info = _GELSY[0](A, b, np.zeros((n, 1), dtype=np.int32), 1e-15, _LWORK[m, n],
+                                 False, False)
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of gelsy")
+    return x[:n]
 
 
 def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.ndarray = 0.0,
@@ -216,6 +263,10 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     mu, nu = 0.0, 2.0
     small = 0
     reason, converged = "iteration limit", False
+    P = None  # the penalty's rows of the linear problem, the same at every iteration
+    if np.any(sq_f > 0) and root.size:
+        P = np.zeros((pen_f.sum(), free_idx.size))
+        P[:, np.flatnonzero(pen_f)] = root
     it = 0
     while it < options.max_iterations:
         it += 1
@@ -223,36 +274,38 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         # ||J d + r||^2 = ||R d - z||^2 + rho^2, so every damping attempt below solves a
         # small system whatever the number of poses.
         if not streamed:
-            Rz = triangular_factor(np.column_stack([J[:, free_idx], -r]))
+            Rz = _data_triangle(residual, r, J, free_idx)
         k = free_idx.size
         rows, rhs = [Rz[:k, :k]], [Rz[:k, k]]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
-        if np.any(sq_f > 0) and root.size:
-            P = np.zeros((pen_f.sum(), free_idx.size))
-            P[:, np.flatnonzero(pen_f)] = root
+        if P is not None:
             rows.append(P)
             rhs.append(-root @ (u - prior)[free_idx][pen_f])
         A0, b0 = np.vstack(rows), np.concatenate(rhs)
-        colnorm2 = np.maximum(np.einsum("ij,ij->j", A0, A0), 1e-30)
+        colnorm2 = None  # Marquardt's scaling, made when a step is damped
         if options.rule == "relative":
             # the Gauss-Newton decrement ||A0 d||^2 = F(u) - min of the linear model
-            gn, *_ = scipy.linalg.lstsq(A0, b0, cond=1e-15, lapack_driver="gelsy",
-                                        check_finite=False)
+            gn = lstsq(A0, b0)
             decrement = float(np.sum((A0 @ gn) ** 2))
             if decrement <= options.rel_tol * costs[-1]:
                 it -= 1  # no step taken
                 reason, converged = (f"predicted decrease below {options.rel_tol:g} of the "
                                      "objective"), True
                 break
+        else:
+            gn = None
         accepted = False
         while True:
             if mu > 0:
+                if colnorm2 is None:
+                    colnorm2 = np.maximum(np.einsum("ij,ij->j", A0, A0), 1e-30)
                 A = np.vstack([A0, np.diag(np.sqrt(mu * colnorm2))])
                 b = np.concatenate([b0, np.zeros(free_idx.size)])
+                step = lstsq(A, b)
+            elif gn is not None:  # the undamped step is the decrement's solve above
+                step = gn
             else:
-                A, b = A0, b0
-            step, *_ = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy",
-                                          check_finite=False)
+                step = lstsq(A0, b0)
             u_new = u.copy()
             u_new[free_idx] += step
             # with the Jacobian at once: most steps are accepted, and then it is needed

@@ -22,7 +22,7 @@ import numpy as np
 from kincal.errors import DataError
 from kincal.measurements.point_space import BASE, TOOL, ParameterSpace
 from kincal.models.base import ErrorModel
-from kincal.models.chain import Chain, cross_rows
+from kincal.models.chain import Chain, axis_cross
 from kincal.rotations import base_rotation, rotx, roty, rotz
 
 
@@ -75,8 +75,7 @@ class MeasurementModel:
     def tip_poses(self, kinematic: np.ndarray, backlash: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
         """(R (N, 3, 3), p (N, 3)) of the tip frame in the base frame."""
-        s = self.chain.state(np.asarray(kinematic, float).ravel(), backlash, keep=False)
-        return s.R_tip, s.p_tip
+        return self.chain.tip(np.asarray(kinematic, float).ravel(), backlash)
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """(N, 3) predicted tool-point positions in the measurement frame [m]."""
@@ -114,16 +113,21 @@ class MeasurementModel:
             J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
         Pm = P @ Rb.T + base[:3]
         J[:, :, k:k + 3] = np.eye(3)
-        ex, ey, ez = np.eye(3)
-        J[:, :, k + 3] = cross_rows(np.broadcast_to(ex, (N, 3)), Pm - base[:3])
-        J[:, :, k + 4] = cross_rows(np.broadcast_to(ey, (N, 3)), P @ (Ry @ Rz).T) @ Rx.T
-        J[:, :, k + 5] = cross_rows(np.broadcast_to(ez, (N, 3)), P @ Rz.T) @ (Rx @ Ry).T
+        J[:, :, k + 3] = axis_cross(0, Pm - base[:3])
+        J[:, :, k + 4] = axis_cross(1, P @ (Ry @ Rz).T) @ Rx.T
+        J[:, :, k + 5] = axis_cross(2, P @ Rz.T) @ (Rx @ Ry).T
         # a sample moves with its own point only: its block gets R_b R_tip, the others 0
         J[:, :, k + 6:k + 6 + 3 * self.space.n_points] = 0.0
         rows, first = np.arange(N), k + 6 + 3 * self.points
         for c in range(3):
             J[rows, :, first + c] = np.matmul(Rb, R_tip[:, :, c, None])[:, :, 0]
         return Pm, J
+
+
+# samples from which the closed-form first guess of the frames is made, at most: it is
+# refined by Gauss-Newton on every sample, and its (N, 3, 6) systems would otherwise be the
+# largest temporaries of a fit of many poses
+START_SAMPLES = 20_000
 
 
 class PointKind:
@@ -180,8 +184,15 @@ class PointKind:
         from kincal.measurements.frames_init import initial_frames, point_in_tip
         from kincal.rotations import base_angles, base_rotation
 
-        R_tip, p_tip = self.model.tip_poses(kin)
-        P, pts = self.data.positions, self.data.points
+        model, P, pts = self.model, self.data.positions, self.data.points
+        if self.N > START_SAMPLES:  # a first guess: from samples spread through the set
+            K = self.data.n_points
+            rows = np.concatenate([m[np.linspace(0, len(m) - 1, min(len(m), START_SAMPLES // K))
+                                     .astype(int)] for m in (np.flatnonzero(pts == k)
+                                                             for k in range(K)) if len(m)])
+            rows.sort()
+            model, P, pts = self.model.subset(rows), P[rows], pts[rows]
+        R_tip, p_tip = model.tip_poses(kin)
         first = pts == 0
         Rb, tb, tool, _, _ = initial_frames(R_tip[first], p_tip[first], P[first], tool_guess)
         base = np.concatenate([tb, base_angles(Rb)])

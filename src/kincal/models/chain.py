@@ -34,7 +34,8 @@ def rodrigues(w: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product over the last axis, broadcasting (np.cross is slow on small batches)."""
-    a, b = np.broadcast_arrays(a, b)
+    if a.shape != b.shape:
+        a, b = np.broadcast_arrays(a, b)
     out = np.empty(a.shape)
     out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
@@ -42,7 +43,17 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def axis_cross(i: int, v: np.ndarray) -> np.ndarray:
+    """e_i x v for rows v (N, 3): cross_rows(e_i, v) without its multiplications by 0 and 1
+    (the same numbers, up to the sign of a zero)."""
+    out = np.zeros(v.shape)
+    j, k = (i + 1) % 3, (i + 2) % 3
+    out[:, k], out[:, j] = v[:, j], -v[:, k]
+    return out
+
+
 MOTION_CACHE_POSES = 1024  # poses up to which a chain keeps its joint motions
+TIP_BLOCK_POSES = 4096  # poses evaluated together by Chain.tip
 _GATHER_BUDGET = 4_000_000  # floats gathered at once for the kinematic columns (32 MB)
 
 
@@ -94,6 +105,23 @@ class Chain:
             M[:, :3, :3] = R
             M[:, :3, 3] = c - R @ c
         return M
+
+    def tip(self, x: np.ndarray, backlash: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
+        """(R (N, 3, 3), p (N, 3)) of the tip: :meth:`state` without the kept frames, for
+        many poses in blocks of TIP_BLOCK_POSES (the same numbers, row by row), so that its
+        (N, 4, 4) temporaries do not grow with the whole set."""
+        if self.N <= TIP_BLOCK_POSES:
+            s = self.state(x, backlash, keep=False)
+            return s.R_tip, s.p_tip
+        R, p = np.empty((self.N, 3, 3)), np.empty((self.N, 3))
+        for a in range(0, self.N, TIP_BLOCK_POSES):
+            rows = slice(a, a + TIP_BLOCK_POSES)
+            part = Chain(self.model, self.q[rows],
+                         None if self.approach is None else self.approach[rows], self.backlash)
+            s = part.state(x, backlash, keep=False)
+            R[rows], p[rows] = s.R_tip, s.p_tip
+        return R, p
 
     def state(self, x: np.ndarray, backlash: np.ndarray | None = None,
               keep: bool = True) -> "ChainState":

@@ -175,15 +175,9 @@ class MdhModel(ErrorModel):
             raise ValueError(f"{self.size} kinematic parameters expected, got {x.size}")
         if not self.has_beta.any():
             return x.reshape(self.n, 4), np.zeros(self.n)
-        table, beta, k = np.empty((self.n, 4)), np.zeros(self.n), 0
-        for i in range(self.n):
-            if self.has_beta[i]:
-                table[i, :2], beta[i], table[i, 2:] = x[k:k + 2], x[k + 2], x[k + 3:k + 5]
-                k += 5
-            else:
-                table[i] = x[k:k + 4]
-                k += 4
-        return table, beta
+        beta = np.zeros(self.n)  # gathered at once: this runs every iteration
+        beta[self.has_beta] = x[self._field_index[2]]
+        return x[self._table_index], beta
 
     def pack(self, table, beta=None) -> np.ndarray:
         """The kinematic vector of a table (n, 4) and beta (n,) (nominal beta if None)."""
@@ -245,11 +239,9 @@ class MdhModel(ErrorModel):
         xg, zh = G[:, :, :3, 0], H[:, :, :3, 2]
         rg, rh = P - G[:, :, :3, 3], P - H[:, :, :3, 3]
         ia, ial, ib, idd, ith = self._field_index
-        K = np.empty((len(P), 3, self.size))
-        K[:, :, ia] = xg.transpose(1, 2, 0)
-        K[:, :, ial] = cross_rows(xg, rg).transpose(1, 2, 0)
-        K[:, :, idd] = zh.transpose(1, 2, 0)
-        K[:, :, ith] = cross_rows(zh, rh).transpose(1, 2, 0)
+        K = np.empty((self.size, len(P), 3))  # parameter first: whole-block writes
+        K[ia], K[idd] = xg, zh
+        K[ial], K[ith] = cross_rows(xg, rg), cross_rows(zh, rh)
         if ib.size:
             hb = self.has_beta
             table, _ = self.unpack(x)
@@ -258,8 +250,14 @@ class MdhModel(ErrorModel):
             y1 = (np.cos(alpha)[:, None, None] * Gb[:, :, :3, 1]
                   + np.sin(alpha)[:, None, None] * Gb[:, :, :3, 2])
             c = Gb[:, :, :3, 3] + a[:, None, None] * Gb[:, :, :3, 0]
-            K[:, :, ib] = cross_rows(y1, P - c).transpose(1, 2, 0)
-        return K
+            K[ib] = cross_rows(y1, P - c)
+        return K.transpose(1, 2, 0)
+
+    @cached_property
+    def _table_index(self) -> np.ndarray:
+        """(n, 4) positions of a, alpha, d, theta in the vector."""
+        ia, ial, _, idd, ith = self._field_index
+        return np.column_stack([ia, ial, idd, ith])
 
     @cached_property
     def _field_index(self) -> tuple[np.ndarray, ...]:
