@@ -62,7 +62,8 @@ def test_the_table_is_in_the_summary_and_the_report(planted, tmp_path):
     from kincal.export.report import result_dict
 
     report = json.loads(json.dumps(result_dict(res)))
-    assert report["model_choice"]["chosen"] == {"model": "complete", "backlash": [joint]}
+    assert report["model_choice"]["chosen"] == {"model": "complete", "backlash": [joint],
+                                                "compliance": []}
     assert len(report["model_choice"]["candidates"]) == len(res.model_choice.candidates)
     assert "Model chosen automatically" in html_report(res)
 

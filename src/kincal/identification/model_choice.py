@@ -4,7 +4,9 @@ The candidates are the error models that can describe the chain (complete, place
 offsets, mdh) and, where the samples carry approach directions (every set a point set; the
 order of the rows or an order column), a backlash term per joint added by forward
 selection (none when backlash joints are given: those are the user's, in every
-candidate). Each is scored by its K-fold cross-validated prediction error on **the folds
+candidate), and, where the URDF has inertials, a compliance term per joint that carries a
+gravity torque (:mod:`kincal.models.compliance`), in the same forward selection (none when
+compliance joints are given). Each is scored by its K-fold cross-validated prediction error on **the folds
 the penalty choice already makes** (same seed, same pose groups, same subsample): the
 chain's default structure is cross-validated as any ``lam="cv"`` run does, and every
 candidate is then fitted on those folds at that lambda and at 1/3x and 3x it (its own
@@ -39,12 +41,13 @@ from kincal.models import MODELS
 
 GUARD = 3.0  # standard errors of the paired validation differences a candidate must win by
 LAMBDA_STEPS = (1 / 3, 1.0, 3.0)  # each candidate's lambdas, times the default's CV lambda
-MAX_TERMS = 3  # backlash terms forward selection may add
+MAX_TERMS = 3  # joint terms (backlash, compliance) forward selection may add
 
 
-def label(model: str, backlash) -> str:
-    """"complete + backlash arm_6_joint arm_7_joint": a structure's name in tables."""
-    return model + (" + backlash " + " ".join(backlash) if backlash else "")
+def label(model: str, backlash, compliance=()) -> str:
+    """"complete + backlash arm_6_joint + compliance arm_2_joint": a structure's name."""
+    return (model + (" + backlash " + " ".join(backlash) if backlash else "")
+            + (" + compliance " + " ".join(compliance) if compliance else ""))
 
 
 @dataclass(frozen=True)
@@ -55,7 +58,8 @@ class Candidate:
     moves (identifiable, incl. frames); fold_errors: (k,) mean validation error per fold
     [mm] at its best lambda (empty when not scored); sample_errors: its validation errors
     per pose [mm] (mean over the pose's samples), for the guard; lam: that lambda; note: why it was
-    not scored, or what the guard said; chosen: the structure used."""
+    not scored, or what the guard said; chosen: the structure used; compliance: joints
+    with a compliance term."""
 
     model: str
     backlash: tuple[str, ...]
@@ -65,10 +69,15 @@ class Candidate:
     note: str = ""
     chosen: bool = False
     sample_errors: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    compliance: tuple[str, ...] = ()
 
     @property
     def label(self) -> str:
-        return label(self.model, self.backlash)
+        return label(self.model, self.backlash, self.compliance)
+
+    @property
+    def structure(self) -> tuple:
+        return self.model, self.backlash, self.compliance
 
     @property
     def cv_error_mm(self) -> float:
@@ -76,7 +85,7 @@ class Candidate:
 
     def as_dict(self) -> dict:
         return {"candidate": self.label, "model": self.model, "backlash": list(self.backlash),
-                "free_parameters": self.free,
+                "compliance": list(self.compliance), "free_parameters": self.free,
                 "cv_error_mm": None if not self.fold_errors.size else self.cv_error_mm,
                 "fold_errors_mm": self.fold_errors.tolist(),
                 "lambda": None if not self.fold_errors.size else self.lam,
@@ -96,6 +105,8 @@ class ModelChoice:
     criterion: str
     reason: str
     folds: int
+    compliance: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
         """The table of the summary (mm): candidate, free parameters, CV error, s.e."""
@@ -114,17 +125,18 @@ class ModelChoice:
                 err = f"{'-':>13} {'':7}"
             mark = "  <- chosen" if c.chosen else (f"  {c.note}" if c.note else "")
             out.append(f"    {c.label:<{w}}  {c.free:>4}  {err}{mark}".rstrip())
-        return out
+        return out + [f"  {n}" for n in self.notes]
 
     @property
     def chosen_label(self) -> str:
-        return label(self.model, self.backlash)
+        return label(self.model, self.backlash, self.compliance)
 
     def as_dict(self) -> dict:
         return {"criterion": self.criterion, "reason": self.reason, "folds": self.folds,
-                "guard_standard_errors": GUARD, "chosen": {"model": self.model,
-                                                          "backlash": list(self.backlash)},
-                "candidates": [c.as_dict() for c in self.candidates]}
+                "guard_standard_errors": GUARD,
+                "chosen": {"model": self.model, "backlash": list(self.backlash),
+                           "compliance": list(self.compliance)},
+                "candidates": [c.as_dict() for c in self.candidates], "notes": list(self.notes)}
 
 
 def beats(new: np.ndarray, best: np.ndarray) -> tuple[bool, str]:
@@ -155,11 +167,11 @@ def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, obje
 
     o = options
 
-    def problem(model, backlash, **grid):
+    def problem(model, backlash, compliance=o.compliance, **grid):
         with warnings.catch_warnings():  # the chosen problem gives them, once
             warnings.simplefilter("ignore", KincalWarning)
             return CalibrationProblem(robots, sets, replace(o, model=model, backlash=backlash,
-                                                            **grid))
+                                                            compliance=compliance, **grid))
 
     base = problem(None, o.backlash)
     default = base.model_name
@@ -167,9 +179,9 @@ def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, obje
 
     def keep(reason):
         c = Candidate(default, tuple(o.backlash), int(base.free_mask().sum()), np.zeros(0),
-                      math.nan, chosen=True)
-        return (ModelChoice((c,), default, tuple(o.backlash), "none", reason, k),
-                replace(o, model=default))
+                      math.nan, chosen=True, compliance=tuple(o.compliance))
+        return (ModelChoice((c,), default, tuple(o.backlash), "none", reason, k,
+                            tuple(o.compliance)), replace(o, model=default))
 
     if o.method != "l2":
         return keep(f"method {o.method}: no penalty chosen by CV to compare the candidates "
@@ -188,16 +200,18 @@ def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, obje
         cv0 = base.cross_validate()
     lam0, folds = cv0.best_lambda, cv0.folds
 
-    def score(model, backlash) -> Candidate:
+    def score(model, backlash, compliance=tuple(o.compliance)) -> Candidate:
         try:
-            p = problem(model, backlash, progress=None)
+            p = problem(model, backlash, compliance, progress=None)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", KincalWarning)
                 free = p.free_mask()
-                return _fold_scores(p, free, folds, lam0, model, backlash)
+                return replace(_fold_scores(p, free, folds, lam0, model, backlash),
+                               compliance=compliance)
         except KincalError as e:  # a model that cannot describe this chain
             return Candidate(model, backlash, 0, np.zeros(0), math.nan,
-                             "not applicable: " + str(e).split(";")[0][:70])
+                             "not applicable: " + str(e).split(";")[0][:70],
+                             compliance=compliance)
 
     scored = [score(default, tuple(o.backlash))]
     best = scored[0]
@@ -213,10 +227,17 @@ def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, obje
                 best = c
         scored.append(c)
     joints = [] if o.backlash else _backlash_joints(base, o.backlash)  # given: the user's
+    soft, notes = (([], ()) if o.compliance else _compliance_joints(base))
+    order = base.robot.joint_names.index
+
+    def grown(c, term, j):
+        b = tuple(sorted(c.backlash + (j,), key=order)) if term == "b" else c.backlash
+        s = tuple(sorted(c.compliance + (j,), key=order)) if term == "c" else c.compliance
+        return score(c.model, b, s)
+
     for _ in range(MAX_TERMS):
-        step = [score(best.model, tuple(sorted(best.backlash + (j,),
-                                               key=base.robot.joint_names.index)))
-                for j in joints if j not in best.backlash]
+        step = ([grown(best, "b", j) for j in joints if j not in best.backlash]
+                + [grown(best, "c", j) for j in soft if j not in best.compliance])
         step = [c for c in step if c.fold_errors.size]
         if not step:
             break
@@ -228,12 +249,12 @@ def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, obje
         if not win:
             break
         best = top
-    table = tuple(replace(c, chosen=(c.model, c.backlash) == (best.model, best.backlash))
-                  for c in scored)
+    table = tuple(replace(c, chosen=c.structure == best.structure) for c in scored)
     reason = (f"{k}-fold CV prediction error on the penalty's folds; a candidate must beat "
               f"the best by more than {GUARD:g} standard errors of the paired per-pose differences")
-    return (ModelChoice(table, best.model, best.backlash, "cv", reason, k),
-            replace(o, model=best.model, backlash=best.backlash))
+    return (ModelChoice(table, best.model, best.backlash, "cv", reason, k, best.compliance,
+                        notes),
+            replace(o, model=best.model, backlash=best.backlash, compliance=best.compliance))
 
 
 def _fold_scores(p, free, folds, lam0, model, backlash) -> Candidate:
@@ -277,3 +298,21 @@ def _backlash_joints(problem, given) -> list[str]:
             out.append(name)
     return out
 
+
+
+def _compliance_joints(problem) -> tuple[list[str], tuple[str, ...]]:
+    """(the chain joints a compliance term may be tried on: revolute, carrying an RMS
+    gravity torque above MIN_TORQUE over the samples; notes): one chain only; where the
+    URDF has no inertials, none, and a note says so."""
+    from kincal.models.compliance import MIN_TORQUE
+
+    if problem.chains.several:
+        return [], ()
+    names, kinds = problem.robot.joint_names, problem.robot.geometry.kinds
+    tau = np.concatenate([problem.robot.gravity_torques(km.data.joint_values)
+                          for km in problem.kinds])
+    if not np.any(tau):
+        return [], ("compliance terms unavailable: the URDF has no inertials (masses) to "
+                    "compute the gravity torques from",)
+    rms = np.sqrt(np.mean(tau ** 2, axis=0))
+    return [j for j, k, t in zip(names, kinds, rms) if k == "revolute" and t > MIN_TORQUE], ()
