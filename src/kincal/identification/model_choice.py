@@ -42,6 +42,7 @@ from kincal.models import MODELS
 GUARD = 3.0  # standard errors of the paired validation differences a candidate must win by
 LAMBDA_STEPS = (1 / 3, 1.0, 3.0)  # each candidate's lambdas, times the default's CV lambda
 MAX_TERMS = 3  # joint terms (backlash, compliance) forward selection may add
+SCREEN = 3  # joint terms CV-scored per forward step: the strongest by the score test
 
 
 def label(model: str, backlash, compliance=()) -> str:
@@ -235,10 +236,24 @@ def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, obje
         s = tuple(sorted(c.compliance + (j,), key=order)) if term == "c" else c.compliance
         return score(c.model, b, s)
 
+    def with_terms(c, pool):
+        b = tuple(sorted(set(c.backlash) | {j for t, j in pool if t == "b"}, key=order))
+        s = tuple(sorted(set(c.compliance) | {j for t, j in pool if t == "c"}, key=order))
+        return problem(c.model, b, s, progress=None)
+
+    used, screened = np.sort(np.concatenate(folds)), 0
     for _ in range(MAX_TERMS):
-        step = ([grown(best, "b", j) for j in joints if j not in best.backlash]
-                + [grown(best, "c", j) for j in soft if j not in best.compliance])
-        step = [c for c in step if c.fold_errors.size]
+        pool = ([("b", j) for j in joints if j not in best.backlash]
+                + [("c", j) for j in soft if j not in best.compliance])
+        if len(pool) > SCREEN:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", KincalWarning)
+                strong = _score_test(problem(best.model, best.backlash, best.compliance,
+                                             progress=None), with_terms(best, pool), pool,
+                                     used, best.lam)
+            screened += len(pool) - len(strong)
+            pool = strong
+        step = [c for c in (grown(best, t, j) for t, j in pool) if c.fold_errors.size]
         if not step:
             break
         top = min(step, key=lambda c: c.cv_error_mm)
@@ -249,12 +264,39 @@ def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, obje
         if not win:
             break
         best = top
+    if screened:
+        notes += (f"{screened} joint-term candidates not CV-scored: each forward step scores "
+                  f"the {SCREEN} the score test at the current best's fit ranks strongest",)
     table = tuple(replace(c, chosen=c.structure == best.structure) for c in scored)
     reason = (f"{k}-fold CV prediction error on the penalty's folds; a candidate must beat "
               f"the best by more than {GUARD:g} standard errors of the paired per-pose differences")
     return (ModelChoice(table, best.model, best.backlash, "cv", reason, k, best.compliance,
                         notes),
             replace(o, model=best.model, backlash=best.backlash, compliance=best.compliance))
+
+
+def _score_test(p, wide, pool, used, lam) -> list:
+    """The SCREEN terms of ``pool`` [("b" or "c", joint)] that would lower the residual of
+    ``p`` (the current best structure, fitted at ``lam`` on the samples ``used``) the most
+    to first order: each term's column of ``wide`` (p with every pool term), with what
+    p's free parameters can absorb projected out, against the residual (a score test)."""
+    from kincal.identification.cross_validation import fold_fitter
+
+    free = p.free_mask()
+    x = fold_fitter(p, free)(used, lam, None).u * p.scale
+    xw = wide.x_nominal
+    xw[[wide.layout.index(n) for n in p.layout.names]] = x
+    r, J = wide.residual_function(used)(xw / wide.scale, True)
+    Q, _ = np.linalg.qr(J[:, [wide.layout.index(n) for n in np.array(p.layout.names)[free]]])
+    r = r - Q @ (Q.T @ r)
+    gains = []
+    for t, j in pool:
+        col = J[:, wide.layout.index(f"{j}.{'backlash' if t == 'b' else 'compliance'}")]
+        v = col - Q @ (Q.T @ col)
+        vv = float(v @ v)
+        gains.append(float(v @ r) ** 2 / vv if vv > 1e-12 * float(col @ col) else 0.0)
+    keep = np.argsort(gains)[::-1][:SCREEN]
+    return [pool[i] for i in sorted(keep)]
 
 
 def _fold_scores(p, free, folds, lam0, model, backlash) -> Candidate:
