@@ -8,7 +8,8 @@ backlash term on exactly that joint, or none. Likewise a joint compliance (the j
 turns by c times the gravity torque it carries, from the URDF's inertials) sized to
 deflect the joint by 0.2 deg at its RMS torque, on one of the joints that carry torque
 (turning with the seed). Then the cost of auto against one default calibration on the
-same 60 poses, and the real TIAGo files with the default command.
+same 60 poses (CPU time: the machine may be shared), and the real TIAGo files with the
+default command.
 
     python scripts/model_auto.py [--seeds 20] [--no-tiago] [--terms backlash compliance]
 """
@@ -65,11 +66,11 @@ def study(seeds: int, terms=("backlash", "compliance")) -> None:
             hits, chosen_any, costs = 0, 0, []
             for seed in range(seeds):
                 robot, data, joint = case(name, seed, planted, term)
-                t0 = time.perf_counter()
+                t0 = time.process_time()
                 calibrate(robot, data)
-                t1 = time.perf_counter()
+                t1 = time.process_time()
                 res = calibrate(robot, data, model="auto")
-                costs.append((time.perf_counter() - t1) / (t1 - t0))
+                costs.append((time.process_time() - t1) / (t1 - t0))
                 mc = res.model_choice
                 got = mc.compliance if term == "compliance" else mc.backlash
                 hits += got == ((joint,) if joint else ()) and not (

@@ -28,6 +28,9 @@ def test_the_guard_needs_a_win_beyond_the_paired_scatter():
     se = 0.05 / np.sqrt(200)  # the scatter's standard error of the mean difference
     assert beats(best - 1.5 * GUARD * se + noise, best)[0]
     assert not beats(best - 0.5 * GUARD * se + noise - noise.mean(), best)[0]
+    tiny = best - 0.002 + rng.normal(0, 1e-4, 200)  # consistent, but 0.2 % of the error
+    win, why = beats(tiny, best)
+    assert not win and "under 1% of the best's error" in why
 
 
 @pytest.fixture(scope="module")
