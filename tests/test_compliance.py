@@ -109,6 +109,12 @@ def test_planted_compliance_is_recovered_and_the_frames_carry_it(tmp_path):
     assert "gravity torque" in frames["compliance_convention"]
     back = CellFrames.from_dict(json.loads(json.dumps(frames)))
     assert back.compliance == pytest.approx(res.compliance)
+    text = res.summary()
+    assert "compliance terms: joint_2" in text and "deg/(N m)" in text
+    from kincal.planning.accuracy_map import point_view  # the map: geometry and frames
+
+    space, idx = point_view(res.layout, res.error_model, 0, 1)
+    assert space.size == idx.size == res.layout.size - 2
     # without the term the deflection stays in the residuals
     assert calibrate(robot, data, method="ls").after.rms > 0.02  # [mm], exact data
 
