@@ -20,7 +20,7 @@ FLOORS = [
      "urdf_source"},
     {"models", "frames_file"},
     {"measurements", "compensation"},
-    {"robot", "collision"},
+    {"robot", "collision", "gravity"},
     {"identification"},
     {"planning", "export"},
     {"experiments", "fleet"},

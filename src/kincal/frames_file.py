@@ -53,6 +53,7 @@ CONVENTION = ("P_measured = R_base (p_tip + R_tip t_tool) + t_base, R_base = rot
               "roty(ry) rotz(rz); metres and radians")
 MAX_LENGTH = 1e3  # [m] largest translation accepted in a frames file
 MAX_ANGLE = 100.0  # [rad]
+MAX_COMPLIANCE = 1.0  # [rad/(N m)] largest compliance accepted (1 rad at 1 N m)
 MAX_DEPTH = 32
 ANGLE_NAMES = ("rx", "ry", "rz")
 
@@ -135,6 +136,8 @@ class CellFrames:
     robot / chain_hash: the robot model (see :func:`chain_hash`; "" when an old file does
     not say). base_frame, tip_frame, joints: the chain. sets: one :class:`SetFrames` per
     measurement set. backlash: {joint: half the play [rad or m]}. source: for messages.
+    compliance: {joint: deflection per N m of gravity torque [rad/(N m) or m/N]}
+    (:mod:`kincal.models.compliance`).
     """
 
     robot: str
@@ -145,6 +148,7 @@ class CellFrames:
     sets: tuple[SetFrames, ...]
     backlash: dict = field(default_factory=dict)
     source: str = "<frames>"
+    compliance: dict = field(default_factory=dict)
 
     @classmethod
     def of_points(cls, base, tools, *, robot: str = "", base_frame: str = "",
@@ -162,6 +166,7 @@ class CellFrames:
     # ------------------------------------------------------------ writing
     def as_dict(self) -> dict:
         from kincal.models.backlash import CONVENTION as BACKLASH_CONVENTION
+        from kincal.models.compliance import CONVENTION as COMPLIANCE_CONVENTION
 
         out = {"format": FORMAT, "version": VERSION, "robot": self.robot,
                "chain_hash": self.chain_hash, "base_frame": self.base_frame,
@@ -178,6 +183,9 @@ class CellFrames:
         if self.backlash:
             out["backlash"] = {j: float(v) for j, v in self.backlash.items()}
             out["backlash_convention"] = BACKLASH_CONVENTION
+        if self.compliance:
+            out["compliance"] = {j: float(v) for j, v in self.compliance.items()}
+            out["compliance_convention"] = COMPLIANCE_CONVENTION
         try:  # version 1's keys, of the first point or pose set, for readers of version 1
             s = self.located()
         except DataError:  # no measurement frame: the first set's tool point (contacts)
@@ -276,7 +284,7 @@ class CellFrames:
         return cls(str(data.get("robot", "")), str(data.get("chain_hash", "")),
                    str(data.get("base_frame", "")), str(data.get("tip_frame", "")),
                    tuple(str(j) for j in data.get("joints", ())), tuple(sets),
-                   _backlash(data), source)
+                   _backlash(data), source, _backlash(data, "compliance"))
 
     @classmethod
     def _from_v1(cls, data: dict, source: str) -> "CellFrames":
@@ -323,6 +331,10 @@ class CellFrames:
             if not math.isfinite(v) or abs(v) > MAX_ANGLE:
                 raise DataError(f"{self.source}: backlash of {j} = {v!r} is not a plausible "
                                 "half play [rad or m]")
+        for j, v in self.compliance.items():
+            if not math.isfinite(v) or abs(v) > MAX_COMPLIANCE:
+                raise DataError(f"{self.source}: compliance of {j} = {v!r} is not a plausible "
+                                f"compliance (|c| <= {MAX_COMPLIANCE:g} rad/(N m))")
         given = [s.get("T_measurement_base") for s in data.get("sets", [])] \
             if isinstance(data.get("sets"), list) else [data.get("T_measurement_base")]
         for k, (s, T) in enumerate(zip(self.sets, given), start=1):
@@ -349,7 +361,8 @@ class CellFrames:
         if not mine:
             return self
         return CellFrames(self.robot, "", base, tip, mine[0].joints, mine,
-                          {j: v for j, v in self.backlash.items()}, self.source)
+                          {j: v for j, v in self.backlash.items()}, self.source,
+                          dict(self.compliance))
 
     # ------------------------------------------------------------ checks
     def check_chain(self, robot) -> None:
@@ -375,10 +388,12 @@ class CellFrames:
             raise DataError(f"{self.source} was identified on another robot model or chain "
                             f"than {robot.name} ({robot.base} -> {robot.tip}): its chain hash "
                             "differs (joint kinds or axes)")
-        unknown = [j for j in self.backlash if j not in robot.joint_names]
-        if unknown:
-            raise DataError(f"{self.source}: no chain joint {unknown[0]!r} for a backlash term "
-                            f"(chain joints of {robot.name}: {', '.join(robot.joint_names)})")
+        for term, values in (("backlash", self.backlash), ("compliance", self.compliance)):
+            unknown = [j for j in values if j not in robot.joint_names]
+            if unknown:
+                raise DataError(f"{self.source}: no chain joint {unknown[0]!r} for a {term} "
+                                f"term (chain joints of {robot.name}: "
+                                f"{', '.join(robot.joint_names)})")
 
     def located(self) -> SetFrames:
         """The first set with a measurement frame and tool point (points, poses)."""
@@ -418,10 +433,10 @@ def _fixed(value) -> tuple[tuple[str, float], ...]:
     return tuple((str(j), float(v)) for j, v in value.items())
 
 
-def _backlash(data: dict) -> dict:
-    b = data.get("backlash", {})
+def _backlash(data: dict, key: str = "backlash") -> dict:
+    b = data.get(key, {})
     if not isinstance(b, dict):
-        raise TypeError("backlash must be an object {joint: value}")
+        raise TypeError(f"{key} must be an object {{joint: value}}")
     return {str(j): float(v) for j, v in b.items()}
 
 

@@ -3,7 +3,7 @@
 :class:`Robot` owns the ``pin.Model`` and answers kinematic questions by frame name.
 Everything else in kincal (MD-H layer, identification, statistics) is plain numpy and
 talks to Pinocchio only through this class (and :mod:`kincal.collision`, its collision
-geometry).
+geometry, and :mod:`kincal.gravity`, its links' weights).
 
 Frames: the *base frame* B and the *tip frame* E are any two link or joint frames of the
 URDF (base default: the root link). The chain follows the tree path between them: from B
@@ -28,6 +28,7 @@ import pinocchio as pin
 from kincal import descriptions
 from kincal.errors import (ChainError, DataError, FrameError, KincalWarning, UrdfError,
                            listing, suggest)
+from kincal.gravity import gravity_torques as _gravity_torques
 from kincal.rotations import inverse
 from kincal.urdf_source import read_urdf_text, stderr_captured
 
@@ -335,6 +336,8 @@ class Robot:
             out[k] = _mat(oMb.actInv(oMe))
         return out
 
+    gravity_torques = _gravity_torques  # (N, n) per chain joint [N m]: kincal.gravity
+
     def tip_jacobian(self, joint_values) -> np.ndarray:
         """(6, n) Pinocchio Jacobian of the tip relative to the base for chain joint values
         (n,): rows 0-2 the velocity of the tip origin, rows 3-5 the angular velocity, both
@@ -428,8 +431,7 @@ class Robot:
         return self._axis(self.model.getJointId(name))[0]
 
     def __repr__(self) -> str:
-        return (f"Robot({self.name!r}, base={self.base!r}, tip={self.tip!r}, "
-                f"joints={list(self.joint_names)})")
+        return f"Robot({self.name!r}, base={self.base!r}, tip={self.tip!r}, joints={list(self.joint_names)})"
 
     # ---------------------------------------------------------- inverse kinematics
     def inverse_kinematics(self, position, tool=(0.0, 0.0, 0.0), rotation=None, start=None,

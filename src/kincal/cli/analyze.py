@@ -20,6 +20,8 @@ def register(subparsers) -> None:
     g.add_argument("--fix", nargs="+", default=[], metavar="NAME")
     g.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
                    help="also analyse backlash terms of these joints (see calibrate)")
+    g.add_argument("--compliance", nargs="+", default=[], metavar="JOINT",
+                   help="also analyse compliance terms of these joints (see calibrate)")
     group(p, "outputs").add_argument("--report",
                                      help="write the identifiability report as JSON")
     add_accuracy_options(p)
@@ -42,6 +44,7 @@ class Analyze:
     model: str  # an error model, "auto" (the candidates compared by CV) or "all" (listed)
     fix: tuple[str, ...]
     backlash: tuple[str, ...]
+    compliance: tuple[str, ...]
     report: str | None
     noise_mm: float  # [mm] per axis, for the predicted accuracy
     accuracy_plot: str | None
@@ -97,7 +100,8 @@ def _analyze(a: Analyze):
         raise OptionError("--model all compares the models as they are: give --fix with one "
                           "model (the parameter names differ between models)")
     problems = {m: CalibrationProblem(robot, sets, CalibrationOptions(
-        model=m, fix=a.fix, backlash=a.backlash, tool_guess=a.inputs.tool_guess))
+        model=m, fix=a.fix, backlash=a.backlash, compliance=a.compliance,
+        tool_guess=a.inputs.tool_guess))
         for m in names}
     problem = problems[names[0]]
     if len(sets) == 1 and problem.kinds[0].kind == "point":

@@ -58,6 +58,9 @@ def register(subparsers) -> None:
     g.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
                    help="give these joints a backlash term (needs the acquisition order: "
                         "rows in order, or --order-column)")
+    g.add_argument("--compliance", nargs="+", default=[], metavar="JOINT",
+                   help="give these joints a compliance term: each turns by its compliance "
+                        "times the gravity torque it carries (from the URDF's inertials)")
     g.add_argument("--robust", choices=("huber", "cauchy"),
                    help="robust loss on the per-pose error; down-weighted samples are listed")
     g.add_argument("--robust-scale-mm", type=float, help="scale of the robust loss [mm] "
@@ -119,6 +122,7 @@ class Calibrate:
     fix: tuple[str, ...]
     free: tuple[str, ...]
     backlash: tuple[str, ...]
+    compliance: tuple[str, ...]
     robust: str | None
     robust_scale_mm: float | None
     cv_max_poses: int
@@ -166,6 +170,7 @@ def calibration_options(c: Calibrate):
     return CalibrationOptions(model=c.model, method=c.method, lam=lam, folds=c.folds,
                               seed=c.seed, prior_mm=c.prior_mm, prior_deg=c.prior_deg,
                               noise_mm=c.noise_mm, fix=c.fix, free=c.free, backlash=c.backlash,
+                              compliance=c.compliance,
                               tool_guess=c.inputs.tool_guess, robust=c.robust,
                               robust_scale_mm=c.robust_scale_mm,
                               progress=None if c.quiet or c.json else progress_bar(),

@@ -78,6 +78,9 @@ def run(args) -> int:
         if backlash:
             how += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
                     f"{getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
+        if lay.compliance:
+            how += (f" with compliance of {', '.join(lay.compliance)} (gravity torques from "
+                    "the URDF's inertials)")
         if e.fit_frames == "measurement":
             from kincal.identification.frame_refit import moved, refit_measurement_frame
 
@@ -122,16 +125,17 @@ def with_frames(robot, sets, frames, tool_guess=None):
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.problem import CalibrationProblem
 
-    backlash = tuple(frames.backlash)
+    backlash, compliance = tuple(frames.backlash), tuple(frames.compliance)
     problem = CalibrationProblem(robot, sets, CalibrationOptions(
-        method="ls", tool_guess=tool_guess, backlash=backlash))
+        method="ls", tool_guess=tool_guess, backlash=backlash, compliance=compliance))
     lay = problem.layout
     x = problem.x_nominal
     used: set[int] = set()
     for i, km in enumerate(problem.kinds):
         x[lay.frame_slices[i]] = saved_frames(frames, km, used)
-    if backlash:
-        x[lay.backlash_slice] = [frames.backlash[j] for j in lay.backlash]
+    if backlash or compliance:
+        x[lay.backlash_slice] = ([frames.backlash[j] for j in lay.backlash]
+                                 + [frames.compliance[j] for j in lay.compliance])
     return problem, x
 
 

@@ -17,11 +17,16 @@ Backlash terms (FRAMES.json) are not compensated: the approach direction of a fu
 motion is not known from a target file, so targets are reached with every joint in the
 middle of its play (the corrected URDF's model), and the summary says how large the
 remaining play is.
+
+Compliance terms (FRAMES.json, :mod:`kincal.models.compliance`) are compensated: the joint
+values the solver finds are where the joints must *be*; the commanded values are those
+less the deflection the gravity torque causes there (q_cmd + c tau(q_cmd) = q, solved by
+a few fixed-point steps), and the summary says by how much the largest moved.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,6 +38,7 @@ from kincal.errors import DataError, FrameError
 from kincal.measurements.checks import UNIT_RATIO, spread
 from kincal.rotations import base_rotation, quaternion_to_matrix
 
+COMPLIANCE_STEPS = 4  # fixed-point steps of the commanded joint values under compliance
 REACH_MARGIN = 1.05  # targets beyond this multiple of the chain's reach cannot be reached
 
 
@@ -179,6 +185,28 @@ def _backlash_notes(frames: CellFrames | None, robot) -> list[str]:
             "of its play, the side it is approached from moves the tool by up to that much"]
 
 
+def _deflected(frames: CellFrames | None, robot, sol: IkSolution
+               ) -> tuple[IkSolution, list[str]]:
+    """(the solution with commanded joint values that the gravity torques deflect onto the
+    solver's, notes) for frames with compliance terms; (sol, []) without."""
+    if frames is None or not frames.compliance:
+        return sol, []
+    names = list(robot.joint_names)
+    c = np.zeros(len(names))
+    for j, v in frames.compliance.items():
+        c[names.index(j)] = v
+    q = np.asarray(sol.q, float)
+    cmd = q.copy()
+    for _ in range(COMPLIANCE_STEPS):  # a contraction: |c dtau/dq| << 1
+        cmd = q - c * robot.gravity_torques(cmd)
+    moved = np.abs(cmd - q).max(axis=0) if len(q) else np.zeros(len(names))
+    k = int(np.argmax(moved))
+    return replace(sol, q=cmd), [
+        f"compliance compensated ({', '.join(frames.compliance)}): each command is the "
+        f"solution less its gravity deflection, at most {np.degrees(moved[k]):.3g} deg "
+        f"on {names[k]}"]
+
+
 def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
                options: IkOptions = IkOptions(), length_unit: str = "m") -> Compensation:
     """Joint values with which the calibrated ``robot`` reaches each target.
@@ -213,8 +241,9 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
         required, notes = np.ones(len(targets), bool), []
     sol = solve(chain, tool, positions_B, rotations, required, targets.seeds, g.lower, g.upper,
                 options)
+    sol, soft = _deflected(frames, robot, sol)
     return _solution(robot, sol, targets.seeds, targets.lines, required, targets.source,
-                     notes + _backlash_notes(frames, robot))
+                     notes + _backlash_notes(frames, robot) + soft)
 
 
 def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames | None = None,
@@ -247,5 +276,6 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
     notes = ["program filter: each pose of the nominal model at the program's joint values "
              "(tool point and orientation, base frame) is reached by the calibrated model"]
     lines = np.arange(2, len(program) + 2) if lines is None else lines
+    sol, soft = _deflected(frames, calibrated, sol)
     return _solution(calibrated, sol, program, lines, required, source,
-                     notes + _backlash_notes(frames, calibrated))
+                     notes + _backlash_notes(frames, calibrated) + soft)

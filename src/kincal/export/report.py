@@ -121,6 +121,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                     "penalty_length_scale_m": o.length_scale,
                     "penalty_angle_scale_rad": o.angle_scale,
                     "fix": list(o.fix), "free": list(o.free), "backlash": list(o.backlash),
+                    "compliance": list(o.compliance),
                     "tool_guess_m": o.tool_guess, "rank_tolerance": o.rank_tol,
                     "solver": {"rule": o.solver.rule, "rel_tol": o.solver.rel_tol,
                                "cost_rtol": o.solver.cost_rtol,

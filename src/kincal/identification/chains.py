@@ -176,27 +176,61 @@ class Chains:
         """The first set's robot (what one-chain readers of a result look at)."""
         return self.robots[0]
 
-    def backlash(self, joints) -> tuple[str, ...]:
-        """The backlash joints ``joints`` checked and in the union's joint order."""
+    def backlash(self, joints, term: str = "backlash") -> tuple[str, ...]:
+        """The backlash (or compliance) joints ``joints`` checked and in the union's joint
+        order."""
         chain = tuple(self.model.joint_names)
         unknown = [j for j in joints if j not in chain]
         if unknown:
-            raise ParameterError(f"no chain joint {unknown[0]!r} for a backlash term."
+            raise ParameterError(f"no chain joint {unknown[0]!r} for a {term} term."
                                  + suggest(unknown[0], chain)
                                  + f" Chain joints: {listing(chain, 60)}", valid=chain)
         return tuple(j for j in chain if j in set(joints))
 
-    def kind(self, i: int, data, backlash: tuple[str, ...]):
-        """The kind model of set i on its chain (mapped into the union with several)."""
+    def kind(self, i: int, data, backlash: tuple[str, ...], compliance: tuple[str, ...] = ()):
+        """The kind model of set i on its chain (mapped into the union with several); the
+        joint terms are the backlash terms, then the compliance terms (their gravity
+        torques from set i's robot, :meth:`kincal.robot.Robot.gravity_torques`)."""
         c = self.of_set[i]
         em = self.models[c]
         chain = tuple(em.joint_names)
         mine = tuple(j for j in backlash if j in chain)
-        km = kind_model(em, data, tuple(chain.index(j) for j in mine))
+        soft = tuple(j for j in compliance if j in chain)
+        torque = (self.robots[i].gravity_torques(data.for_chain(chain).joint_values)
+                  if soft else None)
+        km = kind_model(em, data, tuple(chain.index(j) for j in mine),
+                        tuple(chain.index(j) for j in soft), torque)
         if not self.several:
             return km
-        return MappedKind(km, self.idx[c], np.array([backlash.index(j) for j in mine], int),
-                          self.model.size, len(backlash))
+        pos = [backlash.index(j) for j in mine] + [len(backlash) + compliance.index(j)
+                                                   for j in soft]
+        return MappedKind(km, self.idx[c], np.array(pos, int), self.model.size,
+                          len(backlash) + len(compliance))
+
+    def torques(self, q, joints) -> np.ndarray | None:
+        """(N, n) the first chain's gravity torques at joint values q [N m]; None when no
+        ``joints`` have a compliance term."""
+        return self.robot.gravity_torques(q) if joints else None
+
+    @staticmethod
+    def torque_rms(kinds, joints) -> tuple[float, ...]:
+        """(k,) RMS gravity torque of each of ``joints`` (compliance joints) over the
+        samples of ``kinds`` [N m]; OptionError for one that carries none (no inertials in
+        the URDF beyond it, or an axis along gravity): its compliance is not identifiable."""
+        from kincal.models.compliance import MIN_TORQUE
+
+        out = []
+        for j in joints:
+            t = np.concatenate([km.chain.torque[:, km.error_model.joint_names.index(j)]
+                                for km in kinds if j in km.error_model.joint_names])
+            rms = float(np.sqrt(np.mean(t ** 2)))
+            if not rms > MIN_TORQUE:
+                raise OptionError(
+                    f"{j}.compliance: the joint carries no gravity torque in these samples "
+                    f"(RMS {rms:.2g} N m): the URDF has no inertials beyond it, or its axis "
+                    "stays along gravity; no compliance term for it")
+            out.append(rms)
+        return tuple(out)
 
     def shared_planes(self, kinds) -> tuple[tuple[int, ...], ...]:
         """The layout's aliases (:class:`kincal.identification.layout.ParameterLayout`) when

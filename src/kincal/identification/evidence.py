@@ -32,10 +32,11 @@ from kincal.identification.solver import triangular_factor
 # suffix of a parameter name -> its prior class (kinematic error models of every kind)
 _SUFFIX_CLASS = {"a": "length", "d": "length", "tx": "length", "ty": "length",
                  "tz": "length", "alpha": "twist", "beta": "twist", "rx": "twist",
-                 "ry": "twist", "rz": "twist", "theta": "offset", "backlash": "backlash"}
+                 "ry": "twist", "rz": "twist", "theta": "offset", "backlash": "backlash",
+                 "compliance": "compliance"}
 # "fleet": the parameters a fleet prior covers, one scale on the fleet's covariance
 # (kincal.identification.prior); its scale is a multiple of that covariance [1]
-CLASSES = ("length", "twist", "offset", "backlash", "fleet")
+CLASSES = ("length", "twist", "offset", "backlash", "compliance", "fleet")
 # scales stay within [SCALE_MIN, SCALE_MAX] reporting units (mm or deg): a class the data
 # show at exactly nominal would otherwise drive its scale to 0 only asymptotically
 SCALE_MIN, SCALE_MAX = 1e-7, 1e4
@@ -90,6 +91,7 @@ class EvidenceFit:
 
     def line(self) -> str:
         unit = {"length": "mm", "twist": "deg", "offset": "deg", "backlash": "",
+                "compliance": "deg at the RMS torque",
                 "fleet": "x the fleet's scatter"}
         parts = [f"{c} {s:.3g} {unit[c]}".rstrip() + (" (given)" if g else "")
                  for c, s, g in zip(self.classes, self.scales, self.given)]

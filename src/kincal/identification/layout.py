@@ -8,8 +8,10 @@ The kinematic block is the error model's (``joint_3.a``, ``joint_2.beta``, ...).
 measurement set adds the frame parameters of its kind (:mod:`kincal.measurements`): set 1
 keeps the kind's names (``base.x``, ``tool.z``, ``pivot.y``, ``plane.d``), set k >= 2
 prefixes them ``set<k>.``; a frame a set shares with an earlier set (a plane several files
-touch, ``--shared-plane``) is the earlier set's, once. The backlash terms (``<joint>.backlash``), half the play of a
-joint [rad, or m for a prismatic joint], come last.
+touch, ``--shared-plane``) is the earlier set's, once. The joint terms come last: the
+backlash terms (``<joint>.backlash``), half the play of a joint [rad, or m for a prismatic
+joint], then the compliance terms (``<joint>.compliance``), a joint's deflection per N m
+of gravity torque [rad/(N m)]; "backlash" in the names of the slice below means both.
 
 For one point set the names and order are those of
 :class:`kincal.measurements.point_space.ParameterSpace` (kinematic, base, tool points,
@@ -43,7 +45,9 @@ class ParameterLayout:
     term, in chain order; backlash_is_length: True for prismatic joints. aliases: per set,
     per frame name, -1 for the set's own parameter, or the index of the earlier set whose
     parameter of that name it shares (a plane several files touch: ``--shared-plane``);
-    () for none shared.
+    () for none shared. compliance: chain joints with a compliance term, in chain order;
+    torque_rms: their RMS gravity torque over the samples [N m] (one reporting unit of a
+    compliance is 1 deg of deflection at that torque; () before the samples are known).
     """
 
     kinematic_names: tuple[str, ...]
@@ -53,9 +57,12 @@ class ParameterLayout:
     backlash: tuple[str, ...] = ()
     backlash_is_length: tuple[bool, ...] = ()
     aliases: tuple[tuple[int, ...], ...] = ()
+    compliance: tuple[str, ...] = ()
+    torque_rms: tuple[float, ...] = ()
 
     @classmethod
-    def of(cls, error_model, kinds, backlash=(), aliases=()) -> "ParameterLayout":
+    def of(cls, error_model, kinds, backlash=(), aliases=(), compliance=(),
+           torque_rms=()) -> "ParameterLayout":
         """The layout of an error model's chain measured by ``kinds`` (KindModels);
         ``backlash`` are chain joints (any order: kept in chain order); aliases: see the
         class notes."""
@@ -67,6 +74,11 @@ class ParameterLayout:
                                  + f" Chain joints: {listing(joints, 60)}", valid=joints)
         if len(set(backlash)) != len(tuple(backlash)):
             raise ParameterError(f"backlash joints given twice: {', '.join(backlash)}")
+        unknown = [j for j in compliance if j not in joints]
+        if unknown:
+            raise ParameterError(f"no chain joint {unknown[0]!r} for a compliance term."
+                                 + suggest(unknown[0], joints)
+                                 + f" Chain joints: {listing(joints, 60)}", valid=joints)
         chosen = tuple(j for j in joints if j in set(backlash))
         return cls(tuple(error_model.names), tuple(bool(b) for b in error_model.is_length),
                    tuple(error_model.classes),
@@ -74,7 +86,9 @@ class ParameterLayout:
                          for k in kinds),
                    chosen,
                    tuple(error_model.kinds[joints.index(j)] == "prismatic" for j in chosen),
-                   tuple(tuple(int(a) for a in row) for row in aliases))
+                   tuple(tuple(int(a) for a in row) for row in aliases),
+                   tuple(j for j in joints if j in set(compliance)),
+                   tuple(float(t) for t in torque_rms))
 
     def own(self, i: int) -> tuple[bool, ...]:
         """Per frame name of set i: True for its own parameter, False for a shared one."""
@@ -100,9 +114,14 @@ class ParameterLayout:
     def n_backlash(self) -> int:
         return len(self.backlash)
 
+    @property
+    def n_terms(self) -> int:
+        """Joint terms: backlash and compliance."""
+        return len(self.backlash) + len(self.compliance)
+
     @cached_property  # the fields are frozen; the solver asks at every block
     def size(self) -> int:
-        return self.n_kinematic + self.n_frames + self.n_backlash
+        return self.n_kinematic + self.n_frames + self.n_terms
 
     @cached_property
     def frame_slices(self) -> tuple[slice | np.ndarray, ...]:
@@ -147,7 +166,8 @@ class ParameterLayout:
         return (self.kinematic_names
                 + tuple(n for i in range(self.n_sets)
                         for n, own in zip(self.frame_names(i), self.own(i)) if own)
-                + tuple(f"{j}.backlash" for j in self.backlash))
+                + tuple(f"{j}.backlash" for j in self.backlash)
+                + tuple(f"{j}.compliance" for j in self.compliance))
 
     @property
     def is_length(self) -> np.ndarray:
@@ -155,7 +175,17 @@ class ParameterLayout:
         return np.array(list(self.kinematic_is_length)
                         + [b for i, (_, flags) in enumerate(self.set_frames)
                            for b, own in zip(flags, self.own(i)) if own]
-                        + list(self.backlash_is_length), dtype=bool)
+                        + list(self.backlash_is_length) + [False] * len(self.compliance),
+                        dtype=bool)
+
+    def penalty_scale(self, length_scale: float, angle_scale: float) -> np.ndarray:
+        """(p,) the unit s of the penalty per parameter [SI]: ``length_scale`` for lengths,
+        ``angle_scale`` for angles, and for a compliance that deflection at the joint's RMS
+        torque (the solver's variables are x / s)."""
+        out = np.where(self.is_length, length_scale, angle_scale)
+        if self.compliance and self.torque_rms:
+            out[self.is_compliance] = angle_scale / np.asarray(self.torque_rms, float)
+        return out
 
     def _mask(self, sl: slice) -> np.ndarray:
         mask = np.zeros(self.size, dtype=bool)
@@ -174,7 +204,12 @@ class ParameterLayout:
 
     @property
     def is_backlash(self) -> np.ndarray:
+        """(p,) the joint terms (backlash and compliance)."""
         return self._mask(self.backlash_slice)
+
+    @property
+    def is_compliance(self) -> np.ndarray:
+        return self._mask(slice(self.size - len(self.compliance), self.size))
 
     @property
     def is_penalised(self) -> np.ndarray:
@@ -184,13 +219,17 @@ class ParameterLayout:
     @property
     def classes(self) -> tuple[str, ...]:
         """(p,) class of every parameter: the error model's "length" / "twist" / "offset",
-        "frame", "backlash"."""
+        "frame", "backlash", "compliance"."""
         return (self.kinematic_classes + ("frame",) * self.n_frames
-                + ("backlash",) * self.n_backlash)
+                + ("backlash",) * self.n_backlash + ("compliance",) * len(self.compliance))
 
     def reporting_scale(self) -> np.ndarray:
-        """(p,) size of one reporting unit per parameter: 1 mm or 1 deg, in SI."""
-        return np.where(self.is_length, MM, DEG)
+        """(p,) size of one reporting unit per parameter: 1 mm or 1 deg, in SI; for a
+        compliance, 1 deg at the joint's RMS torque (1 deg/(N m) before it is known)."""
+        out = np.where(self.is_length, MM, DEG)
+        if self.compliance and self.torque_rms:
+            out[self.is_compliance] = DEG / np.asarray(self.torque_rms, float)
+        return out
 
     # ----------------------------------------------------------- look-ups
     def index(self, name: str) -> int:
@@ -233,12 +272,12 @@ class ParameterLayout:
 
     def join(self, kinematic, base, tools, backlash=None) -> np.ndarray:
         """The vector of a layout of one point set: kinematic, base (6,), tool points
-        (K, 3) or (3,), backlash (None: zero) [SI]."""
+        (K, 3) or (3,), joint terms: backlash, then compliance (None: zero) [SI]."""
         if self.n_sets != 1 or self.set_frames[0][0][:6] != tuple(
                 f"base.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")):
             raise ParameterError("join() builds the vector of one point set; with other sets, "
                                  "fill the frames through frame_slices")
-        b = np.zeros(self.n_backlash) if backlash is None else np.asarray(backlash, float)
+        b = np.zeros(self.n_terms) if backlash is None else np.asarray(backlash, float)
         x = np.concatenate([np.asarray(kinematic, float).ravel(), np.asarray(base, float),
                             np.asarray(tools, float).ravel(), b])
         if x.size != self.size:

@@ -31,7 +31,7 @@ class CalibrationOptions:
     model: the error model (kincal.models: "complete", "mdh", "placement", "offsets"):
         which geometric errors the chain may have; None (default): the chain's default,
         "complete", or "placement" on a tree path (a base off the tip's branch); "auto":
-        the candidate structures (error models, backlash terms) compared by K-fold CV and
+        the candidate structures (error models, backlash and compliance terms) compared by K-fold CV and
         the best used (kincal.identification.model_choice; the problem's ``model_choice``).
     method: "l2" (penalty toward nominal), "ls" (plain least squares) or "frames" (fit
         only the measurement frame and tool point; kinematics stay nominal).
@@ -59,6 +59,10 @@ class CalibrationOptions:
     backlash: chain joints given a backlash term ``<joint>.backlash`` (half the play,
         nominally 0; see kincal.backlash), identified from the approach directions of
         the samples. Methods "l2" and "ls".
+    compliance: chain joints given a compliance term ``<joint>.compliance`` (the joint's
+        deflection per N m of the gravity torque it carries, nominally 0; see
+        kincal.models.compliance), the torques from the URDF's inertials. Methods "l2"
+        and "ls".
     tool_guess: (3,) tool point in the tip frame [m], a starting guess; None: derived.
     base_guess: (6,) measurement frame (x, y, z [m], rx, ry, rz [rad]) start; None: derived.
     rank_tol: tolerance of the rank-revealing selection (see kincal.selection).
@@ -105,6 +109,7 @@ class CalibrationOptions:
     fix: tuple[str, ...] = ()
     free: tuple[str, ...] = ()
     backlash: tuple[str, ...] = ()
+    compliance: tuple[str, ...] = ()
     tool_guess: tuple[float, float, float] | None = None
     base_guess: tuple[float, ...] | None = None
     rank_tol: float = RANK_TOL
@@ -182,16 +187,17 @@ class CalibrationOptions:
             if o.method != "l2":
                 raise OptionError(f"a fleet prior (--prior) shapes the penalty of method l2; "
                                   f"got method {o.method}")
-        if o.backlash and o.method == "frames":
-            raise OptionError("backlash terms need method l2 or ls; method frames fits only "
-                              "the measurement frame and tool point")
+        for term in ("backlash", "compliance"):
+            if getattr(o, term) and o.method == "frames":
+                raise OptionError(f"{term} terms need method l2 or ls; method frames fits only "
+                                  "the measurement frame and tool point")
         return o
 
     def _normalised(self) -> "CalibrationOptions":
         """A copy with names as tuples of str, guesses as tuples of finite floats, and the
         counts as ints; OptionError for what cannot be made so."""
         changes: dict[str, Any] = {}
-        for name in ("fix", "free", "backlash"):
+        for name in ("fix", "free", "backlash", "compliance"):
             value = getattr(self, name)
             items = (value,) if isinstance(value, str) else value
             try:

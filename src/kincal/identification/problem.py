@@ -70,11 +70,11 @@ class CalibrationProblem:
         self.chains = ch = Chains(robots, len(sets), o.model)
         self.robot, self.robots = ch.robot, ch.robots
         self.model_name, self.error_model = ch.model_name, ch.model
-        backlash = ch.backlash(o.backlash)
-        self.kinds = [ch.kind(i, d, backlash) for i, d in enumerate(sets)]
-        self.layout = ParameterLayout.of(ch.model, self.kinds, o.backlash,
-                                         ch.shared_planes(self.kinds) if o.shared_planes else ())
-        self.scale = np.where(self.layout.is_length, o.length_scale, o.angle_scale)
+        backlash, soft = ch.backlash(o.backlash), ch.backlash(o.compliance, "compliance")
+        self.kinds = [ch.kind(i, d, backlash, soft) for i, d in enumerate(sets)]
+        self.layout = ParameterLayout.of(ch.model, self.kinds, o.backlash, ch.shared_planes(
+            self.kinds) if o.shared_planes else (), soft, ch.torque_rms(self.kinds, soft))
+        self.scale = self.layout.penalty_scale(o.length_scale, o.angle_scale)
         self.offsets = np.cumsum([0] + [km.N for km in self.kinds])
         self.weights = np.ones(self.n_samples)
         if any(km.data.sigma is not None for km in self.kinds):
@@ -213,7 +213,7 @@ class CalibrationProblem:
     # ------------------------------------------------------------------ start
     @property
     def x_nominal(self) -> np.ndarray:
-        """Nominal kinematics, zero frames and backlash."""
+        """Nominal kinematics, zero frames and joint terms."""
         x = np.zeros(self.layout.size)
         x[:self.layout.n_kinematic] = self.error_model.nominal
         return x
@@ -332,13 +332,13 @@ class CalibrationProblem:
         g, lay = self.robot.geometry, self.layout
         lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
         hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
-        rng = np.random.default_rng(0)
-        K = self.kinds[0].data.n_points
+        rng, K = np.random.default_rng(0), self.kinds[0].data.n_points
         q = np.repeat(rng.uniform(lo, hi, size=(2 * lay.size, g.n)), K, axis=0)
         approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * lay.size, g.n)), K, axis=0)
         points = np.tile(np.arange(K), 2 * lay.size)
-        _, J = MeasurementModel(self.chains.models[0], q, approach, lay.backlash, points,
-                                K).jacobian(self.start())
+        _, J = MeasurementModel(self.chains.models[0], q, approach, lay.backlash, points, K,
+                                self.chains.torques(q, lay.compliance), lay.compliance
+                                ).jacobian(self.start())
         J = J.reshape(-1, lay.size) * lay.reporting_scale() / MM
         self._structural = analyze(J, lay.names, lay.n_kinematic, self._unfixed(),
                                    self.options.rank_tol)

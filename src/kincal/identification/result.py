@@ -52,6 +52,8 @@ class ParameterEstimate:
     def reported(self) -> tuple[float, float, float, str]:
         """(nominal, deviation, std_error) in mm or deg, and the unit."""
         k, unit = (1e3, "mm") if self.is_length else (180.0 / math.pi, "deg")
+        if self.name.endswith(".compliance"):
+            unit += "/(N m)"  # [rad/(N m)] reported in deg/(N m)
         return self.nominal * k, self.deviation * k, self.std_error * k, unit
 
 
@@ -234,7 +236,29 @@ class CalibrationResult:
     @property
     def backlash(self) -> dict[str, float]:
         """Half the play of each joint with a backlash term [rad, or m if prismatic]."""
-        return dict(zip(self.layout.backlash, map(float, self.layout.backlash_values(self.x))))
+        b = self.layout.backlash_values(self.x)[:self.layout.n_backlash]
+        return dict(zip(self.layout.backlash, map(float, b)))
+
+    @property
+    def compliance(self) -> dict[str, float]:
+        """Each compliance term: the joint's deflection per N m of gravity torque
+        [rad/(N m), or m/N if prismatic] (:mod:`kincal.models.compliance`)."""
+        c = self.layout.backlash_values(self.x)[self.layout.n_backlash:]
+        return dict(zip(self.layout.compliance, map(float, c)))
+
+    def _terms(self, joints) -> tuple[tuple[str, ...], tuple[str, ...], list[float]]:
+        """(backlash joints, compliance joints, their values) of this result on ``joints``."""
+        b = tuple(j for j in self.layout.backlash if j in joints)
+        c = tuple(j for j in self.layout.compliance if j in joints)
+        return b, c, [self.backlash[j] for j in b] + [self.compliance[j] for j in c]
+
+    def torques(self, joint_values, set_index: int = 0) -> np.ndarray | None:
+        """(N, n) the gravity torques of set ``set_index``'s chain at ``joint_values`` [N m]
+        (its nominal robot, as the fit used), or None without compliance terms."""
+        if not self.layout.compliance:
+            return None
+        robot = self.chains.robots[set_index] if self.chains is not None else self.robot
+        return robot.gravity_torques(np.atleast_2d(joint_values))
 
     @property
     def before(self) -> ErrorStats:
@@ -323,7 +347,7 @@ class CalibrationResult:
                                  tuple(s.data.joint_names),
                                  tuple(getattr(s.data, "fixed_joints", ())))
                        for s in self.sets),
-            backlash=self.backlash)
+            backlash=self.backlash, compliance=self.compliance)
 
     def frames_dict(self) -> dict:
         """The FRAMES.json content (:meth:`kincal.frames_file.CellFrames.as_dict`)."""
@@ -335,7 +359,8 @@ class CalibrationResult:
         """(N, 3) predicted positions in the measurement frame [m] of the first point or pose
         set's measured points. approach: (N, n) approach directions for the backlash terms
         (None: every joint in the middle of its play); points: which measured point
-        (0 = point 1), one for all or (N,) per row."""
+        (0 = point 1), one for all or (N,) per row. Compliance terms deflect the joints by
+        the gravity torques at ``joint_values``."""
         from kincal.measurements.point import MeasurementModel
 
         q = np.atleast_2d(joint_values)
@@ -347,9 +372,10 @@ class CalibrationResult:
             em, k = self.chains.chain_of(self._located())
             kin = kin[k]
         assert isinstance(em, ErrorModel)  # a chain's model, not the union of several
-        b = [j for j in self.layout.backlash if j in em.joint_names]
-        x = np.concatenate([kin, self.base, tools.ravel(), [self.backlash[j] for j in b]])
-        return MeasurementModel(em, q, g, tuple(b), idx, len(tools)).predict(x)
+        b, c, v = self._terms(em.joint_names)
+        x = np.concatenate([kin, self.base, tools.ravel(), v])
+        return MeasurementModel(em, q, g, b, idx, len(tools),
+                                self.torques(q, self._located()) if c else None, c).predict(x)
 
     def predict_data(self, data) -> np.ndarray:
         """(N, 3) predictions for the samples of point data ``data`` (its poses, approach
@@ -359,7 +385,7 @@ class CalibrationResult:
 
     def errors(self, data, set_index: int = 0, kinematic: np.ndarray | None = None):
         """(N,) sample errors [m] of other data of set ``set_index``'s kind, with the
-        identified kinematics (or ``kinematic``, then without backlash) and that set's
+        identified kinematics (or ``kinematic``, then without joint terms) and that set's
         identified frames."""
         from kincal.measurements.sets import kind_model
 
@@ -367,15 +393,17 @@ class CalibrationResult:
         em, idx = ((self.error_model, slice(None)) if self.chains is None
                    else self.chains.chain_of(set_index))
         joints = tuple(em.joint_names)
-        b_joints = [j for j in self.layout.backlash if j in joints]
-        km = kind_model(em, data, tuple(joints.index(j) for j in b_joints))
+        b_joints, c_joints, v = self._terms(joints)
+        torque = (self.torques(data.for_chain(joints).joint_values, set_index)
+                  if c_joints else None)
+        km = kind_model(em, data, tuple(joints.index(j) for j in b_joints),
+                        tuple(joints.index(j) for j in c_joints), torque)
         if km.kind != s.kind or tuple(km.frame_names) != s.frame_names:
             raise ValueError(f"set {set_index + 1} is a {s.kind} set with frames "
                              f"{', '.join(s.frame_names)}; the data are {km.kind} with "
                              f"{', '.join(km.frame_names)}")
         kin = (self.kinematic if kinematic is None else np.asarray(kinematic))[idx]
-        b = (np.array([self.backlash[j] for j in b_joints]) if kinematic is None
-             else np.zeros(len(b_joints)))
+        b = np.array(v) if kinematic is None else np.zeros(len(v))
         return km.sample_errors(km.residuals(kin, s.frames, b))
 
     # --------------------------------------------------------------- summary

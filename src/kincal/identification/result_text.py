@@ -115,6 +115,11 @@ def status(result: CalibrationResult) -> list[str]:
     if r.layout.n_backlash:
         out.append(f"  backlash terms ({', '.join(r.layout.backlash)}): approach directions "
                    f"from {r.order_source}; the URDF models the middle of the play")
+    if r.layout.compliance:
+        out.append("  compliance terms: " + ", ".join(
+            f"{j} {math.degrees(c) * t:.3g} deg at its RMS gravity torque {t:.3g} N m"
+            for (j, c), t in zip(r.compliance.items(), r.layout.torque_rms))
+                   + "; FRAMES.json carries them, the URDF stays geometric")
     return out
 
 

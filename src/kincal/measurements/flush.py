@@ -187,8 +187,8 @@ class FlushKind(KindModel):
     dim = 3
     data: FlushData
 
-    def __init__(self, error_model, data, backlash=()):
-        super().__init__(error_model, data, backlash)
+    def __init__(self, error_model, data, backlash=(), compliance=(), torque=None):
+        super().__init__(error_model, data, backlash, compliance, torque)
         labels = self.data.labels
         prefixes = ["plane"] if labels == ("",) else [f"plane{lab}" for lab in labels]
         self.frame_names = tuple(

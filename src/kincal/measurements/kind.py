@@ -128,7 +128,8 @@ class KindModel:
     Subclasses set ``kind``, ``dim`` (residual rows per sample), ``frame_names`` and
     ``frame_is_length`` and implement :meth:`residuals`, :meth:`start` and
     :meth:`sample_errors`. error_model: the chain's model; data: the kind's samples;
-    backlash: chain indices of the joints with a backlash term.
+    backlash: chain indices of the joints with a backlash term; compliance: those with a
+    compliance term, torque: (N, n) the samples' gravity torques [N m] in the chain's order.
     """
 
     kind = "abstract"
@@ -136,12 +137,13 @@ class KindModel:
     frame_names: tuple[str, ...] = ()
     frame_is_length: tuple[bool, ...] = ()
 
-    def __init__(self, error_model: ErrorModel, data: SampleSet, backlash=()):
+    def __init__(self, error_model: ErrorModel, data: SampleSet, backlash=(), compliance=(),
+                 torque=None):
         self.error_model = error_model
         self.data = data.for_chain(error_model.joint_names)
         self.backlash = tuple(int(i) for i in backlash)
         self.chain = Chain(error_model, self.data.joint_values, self.data.approach,
-                           self.backlash)
+                           self.backlash, torque, tuple(int(i) for i in compliance))
         self.N = len(self.data)
 
     def subset(self, rows) -> "KindModel":
@@ -178,7 +180,7 @@ class KindModel:
 
     def _zero_chain_columns(self, dim: int):
         return (np.zeros((self.N, dim, self.error_model.size)),
-                np.zeros((self.N, dim, len(self.backlash))))
+                np.zeros((self.N, dim, len(self.chain.terms))))
 
 
 @dataclass(frozen=True)

@@ -33,13 +33,15 @@ class MeasurementModel:
     one row per sample. backlash: chain joints with a backlash term; approach: (N, n)
     approach directions of the samples (needed with backlash terms). points: (N,) index of
     the measured point of each sample (default all 0) among n_points (default: as many as
-    the indices name). The joint motions are computed once here, so evaluating many
-    parameter vectors on the same poses is cheap.
+    the indices name). compliance: chain joints with a compliance term; torque: (N, n)
+    gravity torques of the samples [N m] (needed with compliance terms). The joint motions
+    are computed once here, so evaluating many parameter vectors on the same poses is cheap.
     """
 
     def __init__(self, model: ErrorModel, joint_values: np.ndarray,
                  approach: np.ndarray | None = None, backlash=(),
-                 points: np.ndarray | None = None, n_points: int | None = None):
+                 points: np.ndarray | None = None, n_points: int | None = None,
+                 torque: np.ndarray | None = None, compliance=()):
         self.error_model = model
         try:
             q = np.asarray(joint_values, dtype=float)
@@ -54,16 +56,20 @@ class MeasurementModel:
             raise DataError(f"points must be ({len(q)},) indices >= 0")
         if n_points is None:
             n_points = int(self.points.max()) + 1 if len(q) else 1
-        self.space = ParameterSpace.of_model(model, backlash, n_points)
+        self.space = ParameterSpace.of_model(model, backlash, n_points, compliance)
         if len(q) and self.points.max() >= n_points:
             raise DataError(f"a point index is >= n_points = {n_points}")
-        self.chain = Chain(model, q, approach, self.space.backlash_joint_index)
+        self.chain = Chain(model, q, approach, self.space.backlash_joint_index, torque,
+                           self.space.compliance_joint_index)
         self.q, self.approach, self.N = q, self.chain.approach, len(q)
+        self.torque = self.chain.torque
 
     def subset(self, rows) -> "MeasurementModel":
         return MeasurementModel(self.error_model, self.q[rows],
                                 None if self.approach is None else self.approach[rows],
-                                self.space.backlash, self.points[rows], self.space.n_points)
+                                self.space.backlash, self.points[rows], self.space.n_points,
+                                None if self.torque is None else self.torque[rows],
+                                self.space.compliance)
 
     def _measured_points(self, x: np.ndarray, R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
         """(N, 3) each sample's measured point in the base frame."""
@@ -142,12 +148,13 @@ class PointKind:
     kind = "point"
     dim = 3
 
-    def __init__(self, error_model: ErrorModel, data, backlash=()):
+    def __init__(self, error_model: ErrorModel, data, backlash=(), compliance=(), torque=None):
         self.error_model = error_model
         self.data = data.for_chain(error_model.joint_names)
         names = tuple(error_model.joint_names[i] for i in backlash)
         self.model = MeasurementModel(error_model, self.data.joint_values, self.data.approach,
-                                      names, self.data.points, self.data.n_points)
+                                      names, self.data.points, self.data.n_points, torque,
+                                      tuple(error_model.joint_names[i] for i in compliance))
         K = self.data.n_points
         self.frame_names = BASE + TOOL + tuple(f"tool{k}.{c}" for k in range(2, K + 1)
                                                for c in "xyz")

@@ -6,7 +6,8 @@ The parameter vector x holds absolute values (not errors), in SI units:
       base.x, base.y, base.z, base.rx, base.ry, base.rz,          measurement frame
       tool.x, tool.y, tool.z,                                      tool point in the tip frame
       tool2.x, ..., tool<K>.z,                                     further measured points
-      <joint>.backlash, ... ]                                      optional backlash terms
+      <joint>.backlash, ...,                                       optional backlash terms
+      <joint>.compliance, ... ]                                    optional compliance terms
 
 The kinematic block is the error model's (:mod:`kincal.models`): four MD-H parameters
 per joint for ``mdh``, plus ``.beta`` at nearly parallel axes for ``complete``, six
@@ -16,7 +17,9 @@ per joint for ``mdh``, plus ``.beta`` at nearly parallel axes for ``complete``, 
 With K measured points per pose (several targets on the tool: their positions together
 carry its orientation) point 1 is ``tool.*`` and point k >= 2 is ``tool<k>.*``. The
 backlash terms (:mod:`kincal.backlash`) exist only for the joints asked for; each is
-half the play of its joint [rad, or m for a prismatic joint], nominally 0.
+half the play of its joint [rad, or m for a prismatic joint], nominally 0. The compliance
+terms (:mod:`kincal.models.compliance`) likewise, each the joint's deflection per N m of
+gravity torque [rad/(N m)], nominally 0. Together they are the *joint terms*.
 
 The measurement frame M sees the tool point at
 ``P = R_base (p_tip + R_tip t_tool) + t_base`` with ``R_base = Rx(rx) Ry(ry) Rz(rz)``.
@@ -39,14 +42,15 @@ MM = 1e-3  # [m]
 DEG = math.pi / 180.0  # [rad]
 
 
-def _check_backlash_joints(joint_names: tuple[str, ...], backlash: tuple[str, ...]) -> None:
+def _check_backlash_joints(joint_names: tuple[str, ...], backlash: tuple[str, ...],
+                           term: str = "backlash") -> None:
     unknown = [j for j in backlash if j not in joint_names]
     if unknown:
-        raise ParameterError(f"no chain joint {unknown[0]!r} for a backlash term."
+        raise ParameterError(f"no chain joint {unknown[0]!r} for a {term} term."
                              + suggest(unknown[0], joint_names)
                              + f" Chain joints: {listing(joint_names, 60)}", valid=joint_names)
     if len(set(backlash)) != len(backlash):
-        raise ParameterError(f"backlash joints given twice: {', '.join(backlash)}")
+        raise ParameterError(f"{term} joints given twice: {', '.join(backlash)}")
 
 
 def name_index(names: tuple[str, ...], name: str) -> int:
@@ -96,7 +100,8 @@ class ParameterSpace:
     lengths, class "length"/"twist"/"offset", chain index of the joint each belongs to).
     backlash: chain joints with a backlash term, in chain order; backlash_is_length: for
     each, True if the joint is prismatic (the term is a length). n_points: measured
-    points per pose (K), each with its own position in the tip frame.
+    points per pose (K), each with its own position in the tip frame. compliance: chain
+    joints with a compliance term, in chain order (after the backlash terms).
     """
 
     joint_names: tuple[str, ...]
@@ -107,9 +112,11 @@ class ParameterSpace:
     backlash: tuple[str, ...] = ()
     backlash_is_length: tuple[bool, ...] = ()
     n_points: int = 1
+    compliance: tuple[str, ...] = ()
 
     def __post_init__(self):
         _check_backlash_joints(self.joint_names, self.backlash)
+        _check_backlash_joints(self.joint_names, self.compliance, "compliance")
         order = [self.joint_names.index(j) for j in self.backlash]
         if order != sorted(order):
             raise ParameterError("backlash joints must be in chain order")
@@ -119,15 +126,17 @@ class ParameterSpace:
             raise ParameterError(f"n_points must be an integer >= 1, got {self.n_points!r}")
 
     @classmethod
-    def of_model(cls, model: ErrorModel, backlash=(), n_points: int = 1) -> "ParameterSpace":
-        """The space of an error model's chain; ``backlash`` joints in any order."""
+    def of_model(cls, model: ErrorModel, backlash=(), n_points: int = 1,
+                 compliance=()) -> "ParameterSpace":
+        """The space of an error model's chain; ``backlash`` and ``compliance`` joints in
+        any order."""
         joint_names = tuple(model.joint_names)
         _check_backlash_joints(joint_names, tuple(backlash))
         chosen = tuple(j for j in joint_names if j in set(backlash))
         lengths = tuple(model.kinds[joint_names.index(j)] == "prismatic" for j in chosen)
         return cls(joint_names, tuple(model.names), tuple(bool(b) for b in model.is_length),
                    tuple(model.classes), tuple(int(j) for j in model.joint_of), chosen, lengths,
-                   int(n_points))
+                   int(n_points), tuple(j for j in joint_names if j in set(compliance)))
 
     @property
     def n_joints(self) -> int:
@@ -142,6 +151,11 @@ class ParameterSpace:
         return len(self.backlash)
 
     @property
+    def n_terms(self) -> int:
+        """Joint terms: backlash and compliance."""
+        return len(self.backlash) + len(self.compliance)
+
+    @property
     def n_frames(self) -> int:
         """Measurement frame (6) and tool points (3 each)."""
         return 6 + 3 * self.n_points
@@ -151,17 +165,19 @@ class ParameterSpace:
         kin = self.kinematic_names
         tools = TOOL + tuple(f"tool{k}.{c}" for k in range(2, self.n_points + 1)
                              for c in "xyz")
-        return kin + BASE + tools + tuple(f"{j}.backlash" for j in self.backlash)
+        return (kin + BASE + tools + tuple(f"{j}.backlash" for j in self.backlash)
+                + tuple(f"{j}.compliance" for j in self.compliance))
 
     @property
     def size(self) -> int:
-        return self.n_kinematic + self.n_frames + self.n_backlash
+        return self.n_kinematic + self.n_frames + self.n_terms
 
     @property
     def is_length(self) -> np.ndarray:
         """(p,) True for lengths [m], False for angles [rad]."""
         return np.array(list(self.kinematic_is_length) + [True, True, True, False, False, False] + [True] * 3 * self.n_points
-                        + list(self.backlash_is_length), dtype=bool)
+                        + list(self.backlash_is_length) + [False] * len(self.compliance),
+                        dtype=bool)
 
     @property
     def is_kinematic(self) -> np.ndarray:
@@ -193,6 +209,11 @@ class ParameterSpace:
         """Chain index of each backlash joint."""
         return tuple(self.joint_names.index(j) for j in self.backlash)
 
+    @property
+    def compliance_joint_index(self) -> tuple[int, ...]:
+        """Chain index of each compliance joint."""
+        return tuple(self.joint_names.index(j) for j in self.compliance)
+
     def reporting_scale(self) -> np.ndarray:
         """(p,) size of one reporting unit per parameter: 1 mm or 1 deg, in SI."""
         return np.where(self.is_length, MM, DEG)
@@ -220,7 +241,7 @@ class ParameterSpace:
         return x[k:k + 3 * self.n_points].reshape(self.n_points, 3)
 
     def backlash_values(self, x: np.ndarray) -> np.ndarray:
-        """(n_backlash,) view of the backlash terms of a parameter vector."""
+        """(n_terms,) view of the joint terms (backlash, then compliance) of a vector."""
         return x[self.n_kinematic + self.n_frames:]
 
     @property
@@ -228,15 +249,15 @@ class ParameterSpace:
         """(p,) class of every parameter: the error model's "length" / "twist" / "offset",
         "frame" for the measurement frame and tool points, "backlash"."""
         return (self.kinematic_classes + ("frame",) * self.n_frames
-                + ("backlash",) * self.n_backlash)
+                + ("backlash",) * self.n_backlash + ("compliance",) * len(self.compliance))
 
     def join(self, kinematic, base, tools, backlash=None) -> np.ndarray:
         """The parameter vector. kinematic: the error model's vector (an MD-H model without
         beta also takes its (n, 4) table); tools: (3,) with one point, or (n_points, 3);
-        backlash None means zero backlash."""
-        b = np.zeros(self.n_backlash) if backlash is None else np.asarray(backlash, float)
-        if b.shape != (self.n_backlash,):
-            raise ParameterError(f"{self.n_backlash} backlash values expected, got {b.shape}")
+        backlash: the joint terms (backlash, then compliance); None means zero."""
+        b = np.zeros(self.n_terms) if backlash is None else np.asarray(backlash, float)
+        if b.shape != (self.n_terms,):
+            raise ParameterError(f"{self.n_terms} joint-term values expected, got {b.shape}")
         t = np.asarray(tools, float)
         if t.size != 3 * self.n_points:
             raise ParameterError(f"{self.n_points} tool point(s) of 3 numbers expected, got "

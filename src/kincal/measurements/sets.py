@@ -44,12 +44,13 @@ def as_sets(data) -> list:
     return sets
 
 
-def kind_model(error_model, data, backlash=()):
-    """The kind model of one set (backlash: chain indices of the joints with a term)."""
+def kind_model(error_model, data, backlash=(), compliance=(), torque=None):
+    """The kind model of one set (backlash, compliance: chain indices of the joints with
+    such a term; torque: (N, n) the samples' gravity torques [N m], for compliance)."""
     kind = kind_of(data)
     cls = {"point": PointKind, "pose": PoseKind, "distance": DistanceKind,
            "plane": PlaneKind, "flush": FlushKind}[kind]
-    return cls(error_model, data, backlash)
+    return cls(error_model, data, backlash, compliance, torque)
 
 
 def header_of(path) -> list[str]:

@@ -8,9 +8,12 @@ derivative of any points rigidly attached to the tip and :meth:`ChainState.rotat
 the derivative of the tip's orientation (as a small rotation in the base frame). No finite
 differences.
 
-Backlash terms (:mod:`kincal.models.backlash`) move joint i to q_i + b_i g_i, with g the
-approach directions of the poses: their column is the joint's own motion (the turn about,
-or slide along, its axis line) times g.
+Joint terms move joint i to q_i + v f_i, one coefficient v over the poses and a known
+factor f_i per pose: backlash terms (:mod:`kincal.models.backlash`, v = b half the play,
+f = g the approach directions) and compliance terms (:mod:`kincal.models.compliance`,
+v = c the compliance, f = tau the gravity torque the joint carries). A term's column is
+the joint's own motion (the turn about, or slide along, its axis line) times f. The
+terms' values come in one vector: the backlash terms, then the compliance terms.
 """
 
 from __future__ import annotations
@@ -62,19 +65,34 @@ class Chain:
 
     model: the error model. joint_values: (N, n) [rad or m]. approach: (N, n) approach
     directions (+1/-1/0), needed with backlash terms. backlash: chain indices of the
-    joints with a backlash term.
+    joints with a backlash term. torque: (N, n) gravity torque per joint [N m], needed
+    with compliance terms; compliance: chain indices of the joints with one.
     """
 
     def __init__(self, model: ErrorModel, joint_values: np.ndarray,
-                 approach: np.ndarray | None = None, backlash: tuple[int, ...] = ()):
+                 approach: np.ndarray | None = None, backlash: tuple[int, ...] = (),
+                 torque: np.ndarray | None = None, compliance: tuple[int, ...] = ()):
         self.model = model
         self.q = np.asarray(joint_values, dtype=float)
         self.N = len(self.q)
         self.approach = None if approach is None else np.asarray(approach, dtype=float)
+        self.torque = None if torque is None else np.asarray(torque, dtype=float)
         self.backlash = tuple(int(i) for i in backlash)
+        self.compliance = tuple(int(i) for i in compliance)
         if self.backlash and (self.approach is None or self.approach.shape != self.q.shape):
             raise ValueError(f"backlash terms need approach directions of shape {self.q.shape}")
-        self._backlash_of = {i: k for k, i in enumerate(self.backlash)}
+        if self.compliance and (self.torque is None or self.torque.shape != self.q.shape):
+            raise ValueError(f"compliance terms need gravity torques of shape {self.q.shape}")
+        # every joint term: its joint and its factor per pose (backlash, then compliance)
+        self.terms = self.backlash + self.compliance
+        g, t = self.approach, self.torque  # checked above where the terms need them
+        self.factors = np.column_stack(
+            [g[:, i] for i in self.backlash if g is not None]
+            + [t[:, i] for i in self.compliance if t is not None]
+        ) if self.terms else np.zeros((self.N, 0))
+        self._terms_of: dict[int, list[int]] = {}
+        for k, i in enumerate(self.terms):
+            self._terms_of.setdefault(i, []).append(k)
         # the joint motions, (N, 4, 4) per joint, are kept for few poses (cheap to reuse
         # across evaluations); for many (MOTION_CACHE_POSES) they are made anew at each
         # evaluation: 128 bytes per pose and joint would otherwise stay for the whole fit
@@ -88,7 +106,8 @@ class Chain:
 
     def subset(self, rows) -> "Chain":
         return Chain(self.model, self.q[rows],
-                     None if self.approach is None else self.approach[rows], self.backlash)
+                     None if self.approach is None else self.approach[rows], self.backlash,
+                     None if self.torque is None else self.torque[rows], self.compliance)
 
     def joint_motion(self, i: int, qi: np.ndarray) -> np.ndarray:
         """(N, 4, 4) motion of joint i by qi (N,), in its placed frame."""
@@ -117,15 +136,14 @@ class Chain:
         R, p = np.empty((self.N, 3, 3)), np.empty((self.N, 3))
         for a in range(0, self.N, TIP_BLOCK_POSES):
             rows = slice(a, a + TIP_BLOCK_POSES)
-            part = Chain(self.model, self.q[rows],
-                         None if self.approach is None else self.approach[rows], self.backlash)
-            s = part.state(x, backlash, keep=False)
+            s = self.subset(rows).state(x, backlash, keep=False)
             R[rows], p[rows] = s.R_tip, s.p_tip
         return R, p
 
     def state(self, x: np.ndarray, backlash: np.ndarray | None = None,
               keep: bool = True) -> "ChainState":
-        """Evaluate kinematic parameters x (and backlash values) on every pose.
+        """Evaluate kinematic parameters x (and the joint terms' values: backlash, then
+        compliance) on every pose.
 
         keep=False keeps only the tip (cheaper when no derivative is wanted)."""
         m = self.model
@@ -137,13 +155,15 @@ class Chain:
             if keep:
                 before.append(G)
                 placed.append(H)
-            k = self._backlash_of.get(i)
-            if k is None or backlash is None or backlash[k] == 0.0:
+            ks = [k for k in self._terms_of.get(i, ()) if backlash is not None
+                  and backlash[k] != 0.0]
+            if not ks:
                 G = H @ (self._motion[i] if self._motion is not None
                          else self.joint_motion(i, self.q[:, i]))
             else:
-                assert self.approach is not None  # backlash terms have them (__init__)
-                G = H @ self.joint_motion(i, self.q[:, i] + backlash[k] * self.approach[:, i])
+                assert backlash is not None  # ks is empty without the terms' values
+                qi = self.q[:, i] + sum(backlash[k] * self.factors[:, k] for k in ks)
+                G = H @ self.joint_motion(i, qi)
         T = G @ m.T_last_tip
         if T.ndim == 2:
             T = np.broadcast_to(T, (self.N, 4, 4))
@@ -162,7 +182,7 @@ class ChainState:
     def point_columns(self, P: np.ndarray, generic: bool = False
                       ) -> tuple[np.ndarray, np.ndarray]:
         """Derivatives of points P (N, 3) in the base frame, rigidly attached to the tip:
-        (kinematic (N, 3, p), backlash (N, 3, n_backlash)). A model may offer a faster
+        (kinematic (N, 3, p), joint terms (N, 3, n_terms)). A model may offer a faster
         ``point_columns`` of its own (MD-H does); generic=True uses the twists anyway."""
         chain, m = self.chain, self.chain.model
         N = chain.N
@@ -185,9 +205,8 @@ class ChainState:
                 K[rows] = col.transpose(1, 2, 0)
         else:
             K = np.empty((N, 3, m.size))
-        B = np.empty((N, 3, len(chain.backlash)))
-        for k, i in enumerate(chain.backlash):
-            assert chain.approach is not None  # backlash terms have them (Chain.__init__)
+        B = np.empty((N, 3, len(chain.terms)))
+        for k, i in enumerate(chain.terms):
             H = self.placed[i]
             axis = H[:, :3, :3] @ m.screw_axes[i]
             if m.kinds[i] == "prismatic":
@@ -195,21 +214,20 @@ class ChainState:
             else:
                 c = H[:, :3, 3] + H[:, :3, :3] @ m.screw_points[i]
                 col = cross_rows(axis, P - c)
-            B[:, :, k] = col * chain.approach[:, i, None]
+            B[:, :, k] = col * chain.factors[:, k, None]
         return K, B
 
     def rotation_columns(self) -> tuple[np.ndarray, np.ndarray]:
         """Derivatives of the tip's orientation as small rotations in the base frame:
-        (kinematic (N, 3, p), backlash (N, 3, n_backlash))."""
+        (kinematic (N, 3, p), joint terms (N, 3, n_terms))."""
         chain, m = self.chain, self.chain.model
         w, _ = m.twists(self.x)
         K = np.empty((chain.N, 3, m.size))
         for i, idx in enumerate(chain._by_joint):
             if idx.start != idx.stop:
                 K[:, :, idx] = self.before[i][:, :3, :3] @ w[idx].T
-        B = np.empty((chain.N, 3, len(chain.backlash)))
-        for k, i in enumerate(chain.backlash):
-            assert chain.approach is not None  # backlash terms have them (Chain.__init__)
+        B = np.empty((chain.N, 3, len(chain.terms)))
+        for k, i in enumerate(chain.terms):
             axis = self.placed[i][:, :3, :3] @ m.screw_axes[i]
-            B[:, :, k] = (0.0 if m.kinds[i] == "prismatic" else axis) * chain.approach[:, i, None]
+            B[:, :, k] = (0.0 if m.kinds[i] == "prismatic" else axis) * chain.factors[:, k, None]
         return K, B

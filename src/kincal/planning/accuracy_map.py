@@ -208,7 +208,8 @@ def accuracy_map(robot: Robot, chain, space: ParameterSpace, x: np.ndarray,
 def point_view(layout, error_model, i: int, n_points: int):
     """(ParameterSpace of one point set, (q,) indices into ``layout``) for set i, which has
     a measurement frame and tool point(s): the layout's kinematic parameters, that set's
-    base.* and tool points, and the backlash terms, in the point engine's order."""
+    base.* and tool points, and the backlash terms, in the point engine's order (compliance
+    terms are left out: the map is of the geometric model's uncertainty)."""
     names = list(layout.frame_names(i))
     sl = layout.frame_slices[i]
     local = [names.index(layout.set_prefix(i) + n) for n in BASE]
@@ -216,7 +217,8 @@ def point_view(layout, error_model, i: int, n_points: int):
         local += [names.index(layout.set_prefix(i) + ("tool." if k == 1 else f"tool{k}.") + c)
                   for c in "xyz"]
     idx = np.r_[np.arange(layout.n_kinematic), sl.start + np.array(local, dtype=int),
-                np.arange(layout.backlash_slice.start, layout.size)].astype(int)
+                np.arange(layout.backlash_slice.start,
+                          layout.backlash_slice.start + layout.n_backlash)].astype(int)
     return ParameterSpace.of_model(error_model, layout.backlash, n_points), idx
 
 

@@ -34,6 +34,8 @@ class Truth:
     compliance: [rad] amplitude of the non-geometric error.
     backlash: {joint: half the play [rad or m]} (see kincal.backlash); the poses are
     taken in the order given.
+    joint_compliance: {joint: compliance [rad/(N m)]} (see kincal.models.compliance), with
+    ``robot`` the Robot whose inertials give the gravity torques (its chain is the model's).
     """
 
     table: np.ndarray
@@ -41,6 +43,8 @@ class Truth:
     tool: np.ndarray
     compliance: float = 0.0
     backlash: dict = field(default_factory=dict)
+    joint_compliance: dict = field(default_factory=dict)
+    robot: Robot | None = None
 
     @property
     def n_points(self) -> int:
@@ -253,6 +257,14 @@ def true_positions(mdh: ErrorModel, truth: Truth, q: np.ndarray, points=0) -> np
         for joint, b in truth.backlash.items():
             i = mdh.joint_names.index(joint)
             q_eff[:, i] += b * g[:, i]
+    if truth.joint_compliance:
+        if truth.robot is None:
+            raise ValueError("a Truth with joint_compliance needs its robot (the inertials "
+                             "that give the gravity torques)")
+        tau = truth.robot.gravity_torques(q)
+        for joint, c in truth.joint_compliance.items():
+            i = mdh.joint_names.index(joint)
+            q_eff[:, i] += c * tau[:, i]
     idx = np.broadcast_to(np.asarray(points, dtype=int), (len(q_eff),))
     model = MeasurementModel(mdh, q_eff, points=idx, n_points=truth.n_points)
     return model.predict(truth.x(model.space))
