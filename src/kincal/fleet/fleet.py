@@ -52,33 +52,36 @@ def learn_prior(robot, outcomes, method: str = "per-unit", with_covariances: boo
 
 
 def calibrate_fleet(robot, jobs: list[UnitJob], workers: int = 1, scheduler: str | None = None,
-                    rounds: int = 0, progress: Callable | None = None) -> FleetSummary:
+                    rounds: int = 0, progress: Callable | None = None,
+                    batch: int | None = None) -> FleetSummary:
     """Every job on the engine; the summary with the prior. The outputs are written by the
     last round only (its jobs' out_dir); earlier rounds of the hierarchical fit write
-    nothing. progress(done, total, outcome) after each unit (total counts every round)."""
+    nothing. progress(done, total, outcome) after each unit (total counts every round).
+    batch: units per task (None: engine.batch_size)."""
     total, done = len(jobs) * (rounds + 1), [0]
     prior, outcomes = None, []
-    for r in range(rounds + 1):
-        last = r == rounds
-        round_jobs = [replace(j, options=replace(j.options, prior=prior),
-                              out_dir=j.out_dir if last else None) for j in jobs]
-        got: dict[str, UnitOutcome] = {}
+    with engine.Engine(workers, scheduler) as eng:  # started once for every round
+        for r in range(rounds + 1):
+            last = r == rounds
+            round_jobs = [replace(j, options=replace(j.options, prior=prior),
+                                  out_dir=j.out_dir if last else None) for j in jobs]
+            got: dict[str, UnitOutcome] = {}
 
-        def finished(outcome, got=got):
-            got[outcome.name] = outcome
-            done[0] += 1
-            if progress is not None:
-                progress(done[0], total, outcome)
+            def finished(outcome, got=got):
+                got[outcome.name] = outcome
+                done[0] += 1
+                if progress is not None:
+                    progress(done[0], total, outcome)
 
-        def crashed(job, exc, finished=finished):
-            finished(UnitOutcome(job.name, job.source, "failed",
-                                 f"internal error: {type(exc).__name__}: {exc}"))
+            def crashed(job, exc, finished=finished):
+                finished(UnitOutcome(job.name, job.source, "failed",
+                                     f"internal error: {type(exc).__name__}: {exc}"))
 
-        engine.run(calibrate_unit, round_jobs, finished, workers, scheduler, crashed)
-        outcomes = [got[j.name] for j in jobs]
-        if not last or rounds == 0:
-            prior = learn_prior(robot, outcomes, "hierarchical" if r else "per-unit",
-                                with_covariances=r > 0)
+            eng.run(calibrate_unit, round_jobs, finished, crashed, batch)
+            outcomes = [got[j.name] for j in jobs]
+            if not last or rounds == 0:
+                prior = learn_prior(robot, outcomes, "hierarchical" if r else "per-unit",
+                                    with_covariances=r > 0)
     if rounds:
         prior = learn_prior(robot, outcomes, "hierarchical", with_covariances=True)
     return FleetSummary.of(outcomes, prior, rounds)
