@@ -61,13 +61,19 @@ def _gone(pgid: int, timeout: float) -> bool:
     return False
 
 
+def _default_sigint():
+    """The command as a terminal starts it: a test run in the background (``pytest &``)
+    would hand down an ignored SIGINT, which Python then keeps ignoring."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_keeps_finished_units_and_leaves_no_partial_one(units, tmp_path):
     """Ctrl-C as a terminal sends it: SIGINT to the whole process group (the command and its
     local workers) once the first unit is reported finished."""
     out = tmp_path / "D"
     proc = subprocess.Popen([sys.executable, "-m", "kincal", *_fleet_argv(
         units, out, "--workers", "2")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True, start_new_session=True)
+        text=True, start_new_session=True, preexec_fn=_default_sigint)
     seen = []
     try:
         for line in proc.stderr:

@@ -49,7 +49,7 @@ def _client(workers: int, scheduler: str | None):
                               f"({e}); start one (dask scheduler) or use --workers N") from None
     with _workers_ignore_sigint():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, memory_limit=WORKER_MEMORY,
+                               dashboard_address=":0", memory_limit=WORKER_MEMORY,
                                silence_logs=logging.ERROR)
     return Client(cluster), cluster
 

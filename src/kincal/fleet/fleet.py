@@ -53,11 +53,13 @@ def learn_prior(robot, outcomes, method: str = "per-unit", with_covariances: boo
 
 def calibrate_fleet(robot, jobs: list[UnitJob], workers: int = 1, scheduler: str | None = None,
                     rounds: int = 0, progress: Callable | None = None,
-                    batch: int | None = None) -> FleetSummary:
+                    batch: int | None = None, on_round: Callable | None = None
+                    ) -> FleetSummary:
     """Every job on the engine; the summary with the prior. The outputs are written by the
     last round only (its jobs' out_dir); earlier rounds of the hierarchical fit write
     nothing. progress(done, total, outcome) after each unit (total counts every round).
-    batch: units per task (None: engine.batch_size)."""
+    batch: units per task (None: engine.batch_size). on_round(r, prior): the prior learned
+    after round r (0: each unit alone), e.g. to compare the rounds."""
     total, done = len(jobs) * (rounds + 1), [0]
     prior, outcomes = None, []
     with engine.Engine(workers, scheduler) as eng:  # started once for every round
@@ -79,9 +81,8 @@ def calibrate_fleet(robot, jobs: list[UnitJob], workers: int = 1, scheduler: str
 
             eng.run(calibrate_unit, round_jobs, finished, crashed, batch)
             outcomes = [got[j.name] for j in jobs]
-            if not last or rounds == 0:
-                prior = learn_prior(robot, outcomes, "hierarchical" if r else "per-unit",
-                                    with_covariances=r > 0)
-    if rounds:
-        prior = learn_prior(robot, outcomes, "hierarchical", with_covariances=True)
+            prior = learn_prior(robot, outcomes, "hierarchical" if r else "per-unit",
+                                with_covariances=r > 0)
+            if on_round is not None:
+                on_round(r, prior)
     return FleetSummary.of(outcomes, prior, rounds)
