@@ -7,8 +7,10 @@ as the engine batches them. Then writes --units simulated EC66 tracker files
 N in --workers (--repeats times each, the fastest kept), and samples the CPU time and
 resident memory (RSS) of the command and of its worker processes (psutil, a dependency of
 distributed) every 0.2 s. Dask's LocalCluster caps a worker at
-kincal.fleet.engine.WORKER_MEMORY. The load average is printed: on a shared machine a second
-worker only helps when a core is free.
+kincal.fleet.engine.WORKER_MEMORY. The load average is printed, and the cores the run had
+(its CPU time over its wall time): on a shared machine a second worker only helps when it
+gets a core of its own (Linux's autogroup scheduler shares the CPU between sessions, not
+processes: the command and its workers are one session).
 
     python scripts/bench_fleet.py                # 200 units (minutes)
     python scripts/bench_fleet.py --units 10     # quick
@@ -128,12 +130,14 @@ def main(argv=None) -> int:
                 shutil.rmtree(out)
             wall, own, mem, cpu = min(runs, key=lambda r: r[0])
             base = base or wall
+            total = own + sum(cpu.values())
             print(f"--workers {w}: {wall:.1f} s wall ({base / wall:.2f}x the speed of the "
                   f"first; {a.units / wall:.1f} units/s, min of {a.repeats}); CPU time: the "
                   f"command {own:.1f} s, its workers "
-                  f"{' + '.join(f'{v:.1f}' for v in cpu.values())} s; peak memory per worker "
-                  f"process: {', '.join(f'{m:.0f}' for m in mem.values())} MB; load average "
-                  f"now: {os.getloadavg()[0]:.2f}", flush=True)
+                  f"{' + '.join(f'{v:.1f}' for v in cpu.values())} s, in all {total:.1f} s, "
+                  f"so the run had {total / wall:.2f} cores; peak memory per worker process: "
+                  f"{', '.join(f'{m:.0f}' for m in mem.values())} MB; load average now: "
+                  f"{os.getloadavg()[0]:.2f}", flush=True)
     return 0
 
 
