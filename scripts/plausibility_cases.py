@@ -41,7 +41,7 @@ def _row(label, result):
 
 
 def _variant(src: Path, dst: Path, joints, how: str, rng) -> Path:
-    lines = src.read_text().splitlines()
+    lines = [r for r in src.read_text().splitlines() if not r.startswith("#")]  # no provenance
     header = lines[0].split(",")
     v = np.array([[float(x) for x in line.split(",")] for line in lines[1:]])
     pos = [header.index(c) for c in "xyz"]

@@ -30,7 +30,9 @@ def _one_line_error(capsys):
 
 
 def test_simulate_writes_csv_and_truth(sim):
-    header = (sim / "cal.csv").read_text().splitlines()[0].split(",")
+    lines = (sim / "cal.csv").read_text().splitlines()
+    assert lines[0].startswith("# made by kincal ")  # the provenance first, as # lines
+    header = next(line for line in lines if not line.startswith("#")).split(",")
     assert header == [f"joint_{i}" for i in range(1, 7)] + ["x", "y", "z"]
     truth = json.loads((sim / "truth.json").read_text())
     assert len(truth["deviations_si"]) == 36 and truth["seed"] == 3  # 6 placement errors per joint
@@ -194,6 +196,14 @@ def test_demo_writes_tables_and_plots_whose_numbers_hold(tmp_path, capsys):
                  "parameter_deviations.png"):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "Table 2" in (out / "tables.md").read_text()
+    # every file says which kincal and command made it (the robot: the bundled EC66)
+    prov = json.loads((out / "results.json").read_text())["provenance"]
+    assert prov["command"] == f"kincal demo --out {out}" and prov["gate"]["verdict"] == "no gate"
+    assert prov["robot"]["path"].endswith("ec66.urdf") and prov["robot"]["sha256"]
+    assert (out / "tables.md").read_text().startswith("<!-- made by kincal ")
+    from PIL import Image
+
+    assert "command: kincal demo --out" in Image.open(out / "cv_curve.png").text["Comment"]
 
 
 @pytest.mark.parametrize("robot", ["ec66", "panda", "ur3", "ur5", "ur10"])
@@ -202,7 +212,7 @@ def test_simulate_works_out_of_the_box_for_every_robot_with_a_default_cube(robot
     for seed in (0, 1):
         out = tmp_path / f"{robot}-{seed}.csv"
         assert main(["simulate", robot, "--poses", "30", "--seed", str(seed), "--out", str(out)]) == 0
-        assert len(out.read_text().splitlines()) == 31
+        assert len([r for r in out.read_text().splitlines() if not r.startswith("#")]) == 31
     report = tmp_path / "r.json"
     assert main(["calibrate", robot, str(out), "--method", "ls", "--out", str(tmp_path / "c.urdf"),
                  "--report", str(report), "--quiet"]) == 0

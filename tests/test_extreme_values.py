@@ -50,10 +50,15 @@ def _data(made, tmp_path, kind="point", edit=None, name=None):
     if edit is None:
         shutil.copy(made / f"{kind}.csv", path)
     else:
-        header, *rows = (made / f"{kind}.csv").read_text().splitlines()
+        header, *rows = _uncommented(made / f"{kind}.csv")
         new_header, _ = edit(header, None)
         path.write_text("\n".join([new_header] + [edit(None, r)[1] for r in rows]) + "\n")
     return path
+
+
+def _uncommented(path) -> list[str]:
+    """The header and rows of a CSV kincal wrote, without its provenance (# lines)."""
+    return [line for line in path.read_text().splitlines() if not line.startswith("#")]
 
 
 def _calibrate(path, tmp_path, *extra):
@@ -132,7 +137,7 @@ def test_positions_all_zero_are_refused(made, tmp_path, capsys):
 
 
 def _three_poses(made, tmp_path):
-    header, *rows = (made / "point.csv").read_text().splitlines()
+    header, *rows = _uncommented(made / "point.csv")
     path = tmp_path / "three.csv"
     path.write_text("\n".join([header] + rows[:3]) + "\n")
     return path

@@ -196,7 +196,7 @@ def test_cli_html_accuracy_map_report_and_plots(tmp_path):
     assert main(args[:-3] + ["0", "--length-unit", "mm"]) == 1
     assert list(out.iterdir()) == []
     data_mm = tmp_path / "rt_mm.csv"
-    lines = data.read_text().splitlines()
+    lines = [r for r in data.read_text().splitlines() if not r.startswith("#")]
     header = lines[0].split(",")
     pos = [header.index(c) for c in ("x", "y", "z")]
     rows = [[float(v) for v in line.split(",")] for line in lines[1:]]
@@ -251,7 +251,7 @@ def test_refused_run_report_rendered_with_its_red_box(tmp_path):
 
     data = tmp_path / "cal.csv"
     assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--seed", "2"]) == 0
-    rows = list(csv.DictReader(data.open()))
+    rows = list(csv.DictReader(line for line in data.open() if not line.startswith("#")))
     mm = tmp_path / "mm.csv"  # millimetres, read as metres: the gate refuses
     with mm.open("w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))

@@ -26,7 +26,7 @@ def test_held_joint_gives_the_same_calibration_and_is_recorded(tmp_path, capsys)
     full = tmp_path / "full.csv"
     assert main(["simulate", "ec66", "--poses", "30", "--out", str(full), "--seed", "4"]) == 0
     capsys.readouterr()
-    lines = full.read_text().splitlines()
+    lines = [r for r in full.read_text().splitlines() if not r.startswith("#")]
     header = lines[0].split(",")
     rows = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
     k = header.index("joint_6")

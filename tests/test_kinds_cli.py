@@ -21,7 +21,8 @@ def test_simulate_every_kind_and_calibrate_them_together(tmp_path, capsys):
                              "--out", path, "--seed", k)
         assert code == 0, err
         files.append(path)
-    header = {p.stem: p.read_text().splitlines()[0].split(",") for p in files}
+    header = {p.stem: next(line for line in p.read_text().splitlines()
+                           if not line.startswith("#")).split(",") for p in files}
     assert {"qx", "qy", "qz", "qw"} <= set(header["pose"])
     assert header["distance"][-1] == "distance" and header["plane"][-1] == "plane"
     code, out, err = run(capsys, "calibrate", "ec66", *files, "--on-plane", "--lambda", 0.1,

@@ -158,3 +158,48 @@ def test_diagnosis_is_quiet_on_clean_data():
     robot, data, _ = model_auto.case("EC66", 0, planted=False)
     res = calibrate(robot, data, model="complete")
     assert diagnose(res) is None and "diagnosis" not in res.summary()
+
+
+def _pose_case(joint, seed=1002):
+    """UR10, 60 simulated 6-DoF poses (0.05 mm, 0.01 deg noise) in acquisition order, with
+    MD-H errors planted and, on ``joint`` (or none), the study's half-play of backlash: the
+    tool pose is that of q + b g, the file records q."""
+    from kincal.measurements.pose import PoseData
+    from kincal.models import mdh
+    from kincal.models.backlash import approach_directions
+    from kincal.planning.kind_simulation import simulate_poses
+    from kincal.planning.simulation import cube_poses, planted_table
+    from kincal.robot import Robot
+
+    path, tip, centre = model_auto.ROBOTS["UR10"]
+    rng = np.random.default_rng(seed)
+    robot = Robot.load(path, tip=tip)
+    model = mdh.extract(robot.geometry)
+    q = cube_poses(robot, 60, centre, 0.4, model_auto.TOOL, rng)
+    g = approach_directions(q)
+    q_eff = q.copy()
+    if joint is not None:
+        j = robot.joint_names.index(joint)
+        q_eff[:, j] += model_auto.HALF_PLAY * g[:, j]
+    kin = planted_table(model, rng, 0.3e-3, np.radians(0.03))
+    tool6 = np.r_[model_auto.TOOL, 0.1, -0.2, 0.3]
+    d = simulate_poses(model, kin, model_auto.BASE, tool6, q_eff, model_auto.NOISE, 0.01, rng)
+    return robot, PoseData(joint_names=d.joint_names, joint_values=q, positions=d.positions,
+                           rotations=d.rotations, sigma=d.sigma,
+                           orientation_sigma_deg=d.orientation_sigma_deg, approach=g)
+
+
+def test_pose_sets_try_backlash_terms_too():
+    """Forward selection runs on 6-DoF pose sets as on point sets: the planted joint's term
+    is chosen (its play turns the tool's orientation as well as its point), and on the
+    same poses without backlash no term is."""
+    warnings.simplefilter("ignore", KincalWarning)
+    robot, data = _pose_case("elbow_joint")
+    res = calibrate(robot, [data], model="auto")
+    mc = res.model_choice
+    assert mc.criterion == "cv" and mc.backlash == ("elbow_joint",), mc.lines()
+    assert res.backlash["elbow_joint"] == pytest.approx(model_auto.HALF_PLAY, rel=0.2)
+    tried = {c.backlash for c in mc.candidates}
+    assert {(j,) for j in robot.joint_names} <= tried  # every joint was a candidate
+    robot, clean = _pose_case(None)
+    assert calibrate(robot, [clean], model="auto").model_choice.backlash == ()

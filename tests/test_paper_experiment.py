@@ -13,7 +13,7 @@ import pytest
 
 from kincal.errors import ExportError
 from kincal.experiments.paper_experiment import ExperimentConfig, run
-from kincal.experiments.paper_report import (PLOT_FILES, REPORT_FILES, demo, tables, write_plots,
+from kincal.experiments.paper_report import (PLOT_FILES, REPORT_FILES, demo, figures, tables,
                                              write_report)
 from kincal.export import plots
 
@@ -75,8 +75,10 @@ def test_plots_are_png_files_with_content_and_never_replace_a_users_file(result,
     for p in paths[:len(PLOT_FILES)]:
         w, h = png_size(p)
         assert w >= 500 and h >= 400 and p.stat().st_size > 20_000, p.name
+    cv = result.cv
     with pytest.raises(ExportError):  # the plain plot functions never overwrite unasked
-        write_plots(result, out)
+        plots.plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda, out / PLOT_FILES[0])
+    assert [name for name, _ in figures(result)] == list(PLOT_FILES)
     again = write_report([result], out)  # the report replaces its own earlier files
     assert [p.name for p in again] == [p.name for p in paths]
     (out / "point_sets.png").write_bytes(PNG_SIGNATURE + b"a user's picture")

@@ -234,7 +234,7 @@ def test_cli_plan_writes_the_chosen_poses_and_refuses_to_overwrite(ec66, tmp_pat
     text = capsys.readouterr().out
     assert "D-optimal selection of 15 of 300" in text and "random median" in text
     assert "0.02 mm noise" in text and "deg" in text and "wrote" in text
-    lines = out.read_text().splitlines()
+    lines = _rows(out)
     assert lines[0] == "joint_1,joint_2,joint_3,joint_4,joint_5,joint_6,candidate_line"
     assert len(lines) == 16
     table = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
@@ -255,7 +255,7 @@ def test_cli_plan_random_candidates_and_option_errors(tmp_path, capsys):
     assert main(["plan", "ec66", "--random", "200", "--seed", "2", "--poses", "12",
                  "--tool-offset", "0.03", "0.02", "0.12", "--out", str(out)]) == 0
     assert "200 random candidates" in capsys.readouterr().out
-    assert len(out.read_text().splitlines()) == 13
+    assert len(_rows(out)) == 13
     assert main(["plan", "ec66", "--poses", "12", "--out", str(tmp_path / "a.csv")]) == 1
     assert "exactly one of" in _one_line_error(capsys)
     assert main(["plan", "ec66", str(out), "--random", "50", "--poses", "12",
@@ -321,7 +321,7 @@ def test_cli_plan_complements_poses_already_measured(tmp_path, capsys):
                  "--tool-offset", "0.03", "0.02", "0.12", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "plus the 12 poses already measured" in text and "10 new" in text
-    table = np.array([[float(v) for v in line.split(",")] for line in out.read_text().splitlines()[1:]])
+    table = np.array([[float(v) for v in line.split(",")] for line in _rows(out)[1:]])
     expected = select_poses(ec66, np.vstack([measured, cands]), 22, tool=TOOL, keep=range(12))
     assert list(expected.indices[:12]) == list(range(12))
     new = [i - 12 for i in expected.indices[12:]]
@@ -334,3 +334,23 @@ def test_cli_plan_with_a_missing_measured_file_writes_nothing(tmp_path, capsys):
     assert main(["plan", "ec66", "--random", "100", "--poses", "10", "--measured",
                  str(tmp_path / "nope.csv"), "--out", str(out)]) == 1
     assert "measured poses file not found" in _one_line_error(capsys) and not out.exists()
+
+
+def test_target_poses_are_for_point_measurements(ec66, tmp_path, capsys):
+    """I-optimal selection weighs the predicted tool-point position: asked for another kind
+    it is refused in one line (it used to fail with an UnboundLocalError)."""
+    q = random_candidates(ec66, 200, 1)
+    with pytest.raises(OptionError, match="for --kind point, not 'pose'"):
+        select_poses(ec66, q, 12, tool=TOOL, targets=q[:20], method="I", kind="pose")
+    capsys.readouterr()
+    assert main(["plan", "ec66", "--random", "200", "--poses", "12", "--kind", "pose",
+                 "--criterion", "i", "--target-cube", "0.4", "0", "0.3", "0.2",
+                 "--out", str(tmp_path / "p.csv")]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert [e for e in err if e.startswith("kincal: error:")][0].endswith("not 'pose'")
+    assert not (tmp_path / "p.csv").exists()
+
+
+def _rows(path) -> list[str]:
+    """Header and rows of the CSV plan wrote, without its provenance (# lines)."""
+    return [r for r in path.read_text().splitlines() if not r.startswith("#")]

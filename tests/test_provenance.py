@@ -134,7 +134,8 @@ def test_bad_source_date_epoch_is_one_line(tmp_path, capsys, monkeypatch):
 
 def test_refused_run_writes_the_diagnosis_only(run, tmp_path, capsys):
     d, _ = run
-    rows = list(csv.DictReader((d / "cal.csv").open()))
+    rows = list(csv.DictReader(line for line in (d / "cal.csv").open()
+                               if not line.startswith("#")))
     with (tmp_path / "mm.csv").open("w", newline="") as f:  # millimetres, read as metres
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -172,7 +173,7 @@ def test_refused_run_writes_the_diagnosis_only(run, tmp_path, capsys):
 def test_refused_run_without_diagnosis_writes_nothing(run, tmp_path, capsys):
     d, _ = run
     text = (d / "cal.csv").read_text().splitlines()
-    rows = list(csv.DictReader(text))
+    rows = list(csv.DictReader(line for line in text if not line.startswith("#")))
     with (tmp_path / "mm.csv").open("w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -182,3 +183,117 @@ def test_refused_run_without_diagnosis_writes_nothing(run, tmp_path, capsys):
                  "--lambda", "0.01", "--out", str(tmp_path / "c.urdf")]) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mm.csv"]
     assert "nothing is written" in capsys.readouterr().err
+
+
+# ------------------------------------------------ the other commands' files (verdict: no gate)
+def _no_gate_lines(text: str, *, robot: Path, data=(), command: str) -> None:
+    """The provenance lines of a file no gate stands in front of."""
+    assert f"made by kincal {__version__} at {STAMP}" in text
+    # the robot by its hash (a bundled name resolves to the installed copy's path)
+    assert any(line.removeprefix("# ").startswith("robot: ")
+               and line.endswith(f" sha256 {_sha(robot)}")
+               for line in text.splitlines())
+    for f in data:
+        assert f"data: {f} sha256 {_sha(f)}" in text, f
+    assert "plausibility gate: no gate" in text
+    assert f"command: kincal {command}" in text
+
+
+def _comments(path: Path) -> str:
+    """The # lines a CSV kincal wrote starts with (the header line follows them)."""
+    lines = path.read_text().splitlines()
+    head = [line for line in lines if line.startswith("#")]
+    assert lines[:len(head)] == head and not lines[len(head)].startswith("#")
+    return "\n".join(head)
+
+
+@pytest.fixture
+def epoch(monkeypatch):
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", EPOCH)
+
+
+def test_simulate_files_carry_it_and_read_back(run, tmp_path, epoch):
+    d, _ = run
+    # the fixture's data came from simulate too, and calibrate read it as written
+    _no_gate_lines(_comments(d / "cal.csv"), robot=EC66, command="simulate ec66")
+    out, truth = tmp_path / "s.csv", tmp_path / "t.json"
+    assert main(["simulate", "ec66", "--out", str(out), "--poses", "12", "--truth-out",
+                 str(truth)]) == 0
+    _no_gate_lines(_comments(out), robot=EC66, command=f"simulate ec66 --out {out}")
+    prov = json.loads(truth.read_text())["provenance"]
+    assert prov["gate"] == {"verdict": "no gate",
+                            "findings": "no plausibility gate applies to this output"}
+    assert prov["robot"]["sha256"] == _sha(EC66) and prov["created_utc"] == STAMP
+    # plan's CSV, read back by simulate --poses-file, with the files plan read in its header
+    poses = tmp_path / "poses.csv"
+    assert main(["plan", str(EC66), "--tip", "flange", "--random", "200", "--poses", "8",
+                 "--measured", str(out), "--out", str(poses)]) == 0
+    _no_gate_lines(_comments(poses), robot=EC66, data=[out], command=f"plan {EC66}")
+    again = tmp_path / "again.csv"
+    assert main(["simulate", "ec66", "--poses-file", str(poses), "--out", str(again)]) == 0
+    _no_gate_lines(_comments(again), robot=EC66, data=[poses], command="simulate")
+
+
+def test_evaluate_analyze_and_compensate_files_carry_it(run, tmp_path, epoch):
+    d, _ = run
+    cal, urdf, frames = d / "cal.csv", d / "c.urdf", d / "f.json"
+    assert main(["evaluate", str(urdf), str(cal), "--frames", str(frames), "--report",
+                 str(tmp_path / "e.json")]) == 0
+    prov = json.loads((tmp_path / "e.json").read_text())["provenance"]
+    assert prov["robot"] == {"path": str(urdf), "sha256": _sha(urdf),
+                             "urdf_text_sha256": _sha(urdf), "xacro_args": {}}
+    assert prov["data"] == [{"path": str(cal), "sha256": _sha(cal)},
+                            {"path": str(frames), "sha256": _sha(frames)}]
+    assert prov["gate"]["verdict"] == "no gate" and prov["command"].startswith("kincal evaluate")
+    assert main(["analyze", str(EC66), str(cal), "--tip", "flange", "--report",
+                 str(tmp_path / "a.json"), "--accuracy-map", "0.4", "0", "0.3", "0.2",
+                 "--accuracy-plot", str(tmp_path / "a.png")]) == 0
+    prov = json.loads((tmp_path / "a.json").read_text())["provenance"]
+    assert prov["data"] == [{"path": str(cal), "sha256": _sha(cal)}]
+    info = Image.open(tmp_path / "a.png").text
+    assert info["Software"] == f"kincal {__version__}" and info["Creation Time"] == STAMP
+    _no_gate_lines(info["Comment"], robot=EC66, data=[cal], command=f"analyze {EC66}")
+    out = tmp_path / "j.csv"
+    assert main(["compensate", str(urdf), "--program", str(cal), "--nominal", str(EC66),
+                 "--frames", str(frames), "--tip", "flange", "--out", str(out)]) == 0
+    _no_gate_lines(_comments(out), robot=urdf, data=[cal, EC66, frames],
+                   command=f"compensate {urdf}")
+
+
+def test_fleet_files_carry_it_and_read_back(run, tmp_path, epoch):
+    from kincal.identification.prior import read_prior
+
+    d, _ = run
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    for f, seed in ((a, "1"), (b, "2")):
+        assert main(["simulate", "ec66", "--out", str(f), "--poses", "30", "--seed", seed,
+                     "--tool-m", "0.03", "0.02", "0.1"]) == 0
+    out = tmp_path / "fleet"
+    assert main(["fleet", str(EC66), str(a), str(b), "--tip", "flange", "--out-dir", str(out),
+                 "-q"]) == 0
+    for name in ("FLEET_SUMMARY.json", "FLEET.json"):
+        prov = json.loads((out / name).read_text())["provenance"]
+        assert prov["command"].startswith(f"kincal fleet {EC66} {a} {b}")
+        assert [x["sha256"] for x in prov["data"]] == [_sha(a), _sha(b)]
+        assert prov["gate"]["verdict"] == "per unit"
+        assert prov["gate"]["findings"].startswith("each unit's own gate: 2 calibrated, 0 refused")
+    assert read_prior(out / "FLEET.json").n_units == 2  # the prior still reads back
+    html = (out / "fleet.html").read_text()
+    section = html[html.index('id="provenance"'):html.index("</body>")]
+    assert f"sha256 {_sha(a)}" in section and "plausibility gate: per unit" in section
+    unit = (out / "a" / "corrected.urdf").read_text()  # a unit's files: its own gate
+    assert "command: kincal fleet" in unit and "plausibility gate: plausible" in unit
+    assert f"data: {a} sha256 {_sha(a)}" in unit
+
+
+def test_a_format_without_a_stamp_is_refused():
+    from kincal.errors import ExportError
+
+    prov = Provenance.of_run()
+    assert prov.robot.path == "(no robot)" and prov.command is None
+    with pytest.raises(ExportError, match="no provenance stamp"):
+        prov.stamp("docx", "text")
+    with pytest.raises(ExportError, match="without </body>"):
+        prov.stamp("html", "<p>no body</p>")
+    with pytest.raises(ExportError, match="given as a dict"):
+        prov.stamp("json", "[1, 2]")

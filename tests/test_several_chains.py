@@ -256,6 +256,14 @@ def test_frames_file_records_each_sets_chain(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = calibrate(list(robots), sets, method="ls")
+    from kincal.errors import ExportError
+    from kincal.export.outputs import Outputs, write_calibration
+
+    for one_chain in (Outputs(mdh=tmp_path / "MDH.csv"),
+                      Outputs(yaml=tmp_path / "K.yaml", yaml_format="ur", ur_hash="calib_1")):
+        with pytest.raises(ExportError, match="describe one chain; this calibration has several"):
+            write_calibration(res, one_chain)
+    assert not list(tmp_path.glob("MDH.csv")) + list(tmp_path.glob("K.yaml"))
     text = res.frames().dumps()
     back = CellFrames.from_dict(json.loads(text))
     assert [(s.base_frame, s.tip_frame) for s in back.sets] == [("base_link", "atip"),
@@ -294,12 +302,28 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
     assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
                  "btip", "--accuracy-map", "0", "0", "0", "0.1", "--out", str(out)]) == 1
     assert "describe one chain; this calibration has several" in capsys.readouterr().err
+    for one_chain in (["--mdh-out", str(tmp_path / "MDH.csv")],
+                      ["--yaml-out", str(tmp_path / "K.yaml"), "--yaml-format", "ur",
+                       "--ur-hash", "calib_1"]):
+        assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
+                     "btip", *one_chain, "--out", str(out)]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "describe one chain; this calibration has several" in err[0]
     assert {p: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
                      "btip", "--method", "ls", "--out", str(out), "--frames-out", str(frames),
-                     "--quiet"]) == 0
+                     "--yaml-out", str(tmp_path / "K.yaml"), "--quiet"]) == 0
+    # the YAML lists every chain's joints, each origin as the corrected URDF has it
+    from kincal.export.cell_exports import read_kinematics_yaml
+
+    origins = read_kinematics_yaml((tmp_path / "K.yaml").read_text())
+    union = tuple(dict.fromkeys(j for r in robots for j in r.joint_names))
+    assert tuple(origins) == union
+    written = Robot.load(out, base="base_link", tip="atip").urdf_origins(union)
+    for j in union:
+        assert np.abs(origins[j] - written[j]).max() < 1e-12, j
     f = CellFrames.read(frames)
     assert [(s.base_frame, s.tip_frame) for s in f.sets] == [("base_link", "atip"),
                                                              ("ctip", "btip")]
@@ -390,3 +414,33 @@ def test_shared_plane_one_set_of_plane_parameters(tmp_path):
         CalibrationProblem([robots[0], other], [sets[0], type(sets[1])(
             joint_names=other.joint_names, joint_values=_q(other, 30, rng))], o)
 
+
+
+def test_gate_judges_every_chain_not_only_the_first(tmp_path):
+    """A second chain whose own branch the data say is far from its URDF (another robot's
+    arm: a private origin moved by a third of its reach) is refused by the corrections
+    finding, though the first chain barely changes."""
+    from kincal.identification.plausibility import chain_length
+
+    robots, joints = _tree(tmp_path)
+    rng = np.random.default_rng(5)
+    g = robots[1].geometry
+    shift = chain_length(g.joint_frames, g.T_base_tip) / 3
+    T = robots[1].urdf_origins(("bj2",))["bj2"].copy()
+    T[:3, 3] += shift * np.array([0.6, 0.0, 0.8])
+    true = (robots[0], robots[1].with_origins({"bj2": T}))
+    sets = [_points(robots[k], true[k], _q(robots[k], 40, rng), k, 10e-6, rng) for k in range(2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = calibrate(list(robots), sets, method="ls")
+    kinds = [f.kind for f in res.plausibility.findings]
+    assert "corrections" in kinds, res.plausibility.describe()
+    ev = res.plausibility.evidence
+    assert ev.change_rms_mm > 0.1 * ev.reach_m * 1e3
+    # the first chain alone moves far less: the finding is the second chain's
+    first = robots[0].with_origins(res.corrected.urdf_origins(tuple(res.error_model.joint_names)))
+    q = _q(robots[0], 300, np.random.default_rng(0))
+    from kincal.identification.plausibility import _aligned_distances
+
+    d = _aligned_distances(robots[0].tip_poses(q)[:, :3, 3], first.tip_poses(q)[:, :3, 3])
+    assert np.sqrt(np.mean(d ** 2)) * 1e3 < 0.5 * ev.change_rms_mm

@@ -76,7 +76,7 @@ class CollisionChecker:
         zero = self._pair_hits(np.zeros(robot.geometry.n))
         zero &= np.array([self._geom.geometryObjects[int(cp.second)].name != "kincal_floor"
                           for cp in geom.collisionPairs], dtype=bool)
-        self.excluded = tuple(self._pair_name(k) for k in np.flatnonzero(zero))
+        self.excluded = tuple(self._pair_name(int(k)) for k in np.flatnonzero(zero))
         for k in sorted(np.flatnonzero(zero), reverse=True):
             geom.removeCollisionPair(geom.collisionPairs[int(k)])
         self._gdata = pin.GeometryData(geom)

@@ -29,7 +29,7 @@ class Description:
 
 
 # short name -> (path below the robots/ folder of example-robot-data, usual tip frame)
-_ERD = {
+_ERD: dict[str, tuple[str, str | None]] = {
     "ur3": ("ur_description/urdf/ur3_robot.urdf", "tool0"),
     "ur5": ("ur_description/urdf/ur5_robot.urdf", "tool0"),
     "ur10": ("ur_description/urdf/ur10_robot.urdf", "tool0"),
@@ -44,7 +44,7 @@ _ERD = {
     "talos": ("talos_data/robots/talos_full_v2.urdf", "gripper_left_base_link"),
 }
 
-_BUNDLED = {"ec66": ("ec66.urdf", "flange")}
+_BUNDLED: dict[str, tuple[str, str | None]] = {"ec66": ("ec66.urdf", "flange")}
 
 # centre [m] of a measurement cube in each arm's base frame that the arm reaches with
 # the tool pointing down (used by 'kincal simulate' when no --center-m is given), and the
@@ -61,7 +61,7 @@ def erd_robots_dir() -> Path | None:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
         return None
-    path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    path = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
     return path if path.is_dir() else None
 
 

@@ -181,10 +181,10 @@ class CellFrames:
         try:  # version 1's keys, of the first point or pose set, for readers of version 1
             s = self.located()
         except DataError:  # no measurement frame: the first set's tool point (contacts)
-            s = next((t for t in self.sets if t.has("tool.x", "tool.y", "tool.z")), None)
-            if s is not None:
-                out["tool"] = dict(zip("xyz", map(float, s.tools[0])))
-                out.update({k: v for k, v in s.derived().items()})
+            first = next((t for t in self.sets if t.has("tool.x", "tool.y", "tool.z")), None)
+            if first is not None:
+                out["tool"] = dict(zip("xyz", map(float, first.tools[0])))
+                out.update({k: v for k, v in first.derived().items()})
             return out
         tools = s.tools
         out["base"] = dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, s.base)))
@@ -443,7 +443,7 @@ def _depth(value, limit: int = MAX_DEPTH + 1) -> int:
     """Nesting depth of a JSON value, counted up to ``limit`` (iteratively)."""
     depth, level = 0, [value]
     while level and depth <= limit:
-        nxt = []
+        nxt: list = []
         for v in level:
             if isinstance(v, dict):
                 nxt.extend(v.values())

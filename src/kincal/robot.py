@@ -286,11 +286,11 @@ class Robot:
         lo, hi = np.array(m.lowerPositionLimit)[iq], np.array(m.upperPositionLimit)[iq]
         lower = np.where(free | (lo <= -1e300), -np.inf, lo)
         upper = np.where(free | (hi >= 1e300), np.inf, hi)
-        rev = np.array(self._reversed, dtype=bool)
-        rev.flags.writeable = False
+        flips = np.array(self._reversed, dtype=bool)
+        flips.flags.writeable = False
         return ChainGeometry(self.joint_names, tuple(kinds), np.array(frames), np.array(axes),
                              T_tip, lower, upper, np.array(parents),
-                             rev if rev.any() else None)
+                             flips if flips.any() else None)
 
     def _axis(self, j: int) -> tuple[np.ndarray, str]:
         """Unit axis of joint j in its own frame, read from its motion subspace."""

@@ -153,11 +153,11 @@ def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
     k = int(np.argmax([R[0, 0], R[1, 1], R[2, 2], t]))
     if k == 3:
         s = 2.0 * math.sqrt(1.0 + t)
-        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, s / 4]
+        q: list[float] = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, s / 4]
     else:
         i, j, m = k, (k + 1) % 3, (k + 2) % 3
         s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[m, m])
-        q: list[float] = [0.0] * 4
+        q = [0.0] * 4
         q[i] = s / 4
         q[j] = (R[j, i] + R[i, j]) / s
         q[m] = (R[m, i] + R[i, m]) / s

@@ -95,12 +95,13 @@ def _package_lookup(start: Path):
 
 def _cause(exc: BaseException) -> BaseException | None:
     """The first _PackageNotFound wrapped in ``exc`` (xacro wraps errors in its own)."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, _PackageNotFound):
-            return exc
-        seen.add(id(exc))
-        exc = getattr(exc, "exc", None) or exc.__cause__ or exc.__context__
+    seen: set[int] = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        if isinstance(e, _PackageNotFound):
+            return e
+        seen.add(id(e))
+        e = getattr(e, "exc", None) or e.__cause__ or e.__context__
     return None
 
 

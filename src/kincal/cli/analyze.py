@@ -46,12 +46,21 @@ class Analyze:
     noise_mm: float  # [mm] per axis, for the predicted accuracy
     accuracy_plot: str | None
     overwrite: bool
+    json: bool = False
+    command_line: tuple[str, ...] = ()  # as typed, for the files' provenance
 
 
 def run(args) -> int:
+    from kincal.cli.console import quiet_stdout, say_and_write, summary_lines
+
     a = typed(Analyze, args, chain=Chain.of(args), inputs=Inputs.of(args),
               accuracy=AccuracyRequest.of(args))
-    return _analyze(a)
+    with quiet_stdout(a.json):  # with --json, stdout holds the JSON alone
+        robot, summary, files = _analyze(a)
+    say_and_write(files, lambda written: summary_lines(a.json, [], summary, written, wrote=None),
+                  provenance=a.chain.provenance(robot, a.inputs.files, a.command_line),
+                  overwrite=a.overwrite, protect=[robot.source, *a.inputs.files])
+    return 0
 
 
 def _design_accuracy(a: Analyze, robot, problem):
@@ -67,7 +76,8 @@ def _design_accuracy(a: Analyze, robot, problem):
     return design_accuracy_map(problem, a.noise_mm * 1e-3, **a.accuracy.targets(robot))
 
 
-def _analyze(a: Analyze) -> int:
+def _analyze(a: Analyze):
+    """Print the analysis; return (robot, the --json summary, the File values to write)."""
     import numpy as np
 
     from kincal.export import report
@@ -115,23 +125,26 @@ def _analyze(a: Analyze) -> int:
     amap = _design_accuracy(a, robot, problem)
     if amap is not None:
         print(amap.summary())
+    from kincal.export.outputs import File
+
     files = []
+    as_json = (report.identifiability_dict(idents[names[0]]) if len(names) == 1 else
+               {m: report.identifiability_dict(i) for m, i in idents.items()})
+    content = dict(as_json)
+    if amap is not None:
+        content["accuracy_map"] = amap.as_dict()
     if a.report:
-        content = (report.identifiability_dict(idents[names[0]]) if len(names) == 1 else
-                   {m: report.identifiability_dict(i) for m, i in idents.items()})
-        if amap is not None:
-            content["accuracy_map"] = amap.as_dict()
-        files.append((a.report, report.dumps(content)))
+        files.append(File(a.report, "json", content))
     if a.accuracy_plot and amap is not None and len(amap.std):
         from kincal.export.diagnostic_plots import plot_accuracy_map
 
-        files.append((a.accuracy_plot, plot_accuracy_map(amap)))
-    if files:
-        from kincal.cli.console import say_and_write
-
-        say_and_write(files, lambda written: [], overwrite=a.overwrite,
-                      protect=[robot.source, *a.inputs.files])
-    return 0
+        files.append(File(a.accuracy_plot, "png",
+                          lambda fields: plot_accuracy_map(amap, source=fields)))
+    summary = {"command": "analyze", "robot": str(robot.source),
+               "data": [str(f) for f in a.inputs.files], "model": problem.model_name,
+               **({"identifiability": as_json} if len(names) == 1 else {"models": as_json}),
+               "accuracy_map": None if amap is None else amap.as_dict()}
+    return robot, summary, files
 
 
 def _print_comparison(names, problems, idents) -> None:

@@ -7,7 +7,6 @@ through the one writer and its gate (:func:`kincal.export.outputs.write_calibrat
 
 from __future__ import annotations
 
-import sys
 import warnings
 from dataclasses import dataclass
 
@@ -157,10 +156,10 @@ def calibration_options(c: Calibrate):
     from kincal.identification.prior import read_prior
     from kincal.identification.solver import SolverOptions
 
-    lam = c.lam
+    lam: str | float = c.lam
     if lam not in ("auto", "cv", "evidence"):
         try:
-            lam = float(lam)
+            lam = float(c.lam)
         except ValueError:
             raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
                               f"{lam!r}") from None
@@ -193,26 +192,23 @@ def _ur_hash(c: Calibrate, robot) -> str:
     return found
 
 
-def json_summary(result, validation, written, refused: bool) -> str:
-    """The summary of ``--json``: the run's figures as one JSON object (REPORT.json's
-    keys, without the per-sample residuals)."""
+def json_summary(result, validation, refused: bool) -> dict:
+    """The summary of ``--json``: the run's figures (REPORT.json's keys, without the
+    per-sample residuals), given out by :func:`kincal.cli.console.summary_lines`."""
     from kincal.export import report
 
     full = report.result_dict(result)
     keep = ("robot", "data", "lambda", "penalty_choice", "errors", "parameters", "frames",
             "convergence", "plausibility")
-    out = {"format": "kincal-summary-1", "kincal_version": full["kincal_version"],
-           "verdict": "REFUSED" if refused else "written",
-           **{k: full[k] for k in keep},
-           "identifiability": {k: full["identifiability"][k] for k in
-                               ("rank", "condition_number", "kept", "fixed")},
-           "validation": None if validation is None else validation.as_dict(),
-           "written": [str(p) for p in written]}
-    return report.dumps(out).rstrip("\n")
+    return {"command": "calibrate", "verdict": "REFUSED" if refused else "written",
+            **{k: full[k] for k in keep},
+            "identifiability": {k: full["identifiability"][k] for k in
+                                ("rank", "condition_number", "kept", "fixed")},
+            "validation": None if validation is None else validation.as_dict()}
 
 
 def run(args) -> int:
-    from kincal.cli.console import say
+    from kincal.cli.console import say, summary_lines
     from kincal.cli.options import xacro_args
     from kincal.export.outputs import Outputs, gate, write_calibration
     from kincal.identification.problem import CalibrationProblem
@@ -230,13 +226,18 @@ def run(args) -> int:
     utc_now()  # a bad SOURCE_DATE_EPOCH fails here, before the work
     robots = Chain.load_all(c.chain.per_file(len(c.inputs.files)))  # each file's chain
     robot = robots[0]
+    several = len({(r.base, r.tip) for r in robots}) > 1
+    if several and (c.mdh_out is not None or c.yaml_format == "ur"):
+        raise OptionError("--mdh-out and --yaml-format ur describe one chain; this calibration "
+                          "has several (one --base/--tip per file): write --out or --yaml-out "
+                          "(kincal format, every chain's joints)")
     ur_hash = _ur_hash(c, robot) if c.yaml_format == "ur" else None
-    if c.accuracy.asked and len({(r.base, r.tip) for r in robots}) > 1:
+    if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
     inputs = c.inputs.files + ((c.validate,) if c.validate else ())
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots])
-    if c.validate and len({(r.base, r.tip) for r in robots}) > 1:
+    if c.validate and several:
         raise OptionError("--validate evaluates one chain; this calibration has several "
                           "(one --base/--tip per file)")
     sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain
@@ -262,8 +263,8 @@ def run(args) -> int:
     except KincalError:
         if not (c.report or c.html or c.plots or c.residuals_out):  # no diagnosis asked
             if not c.quiet:
-                print(json_summary(result, validation, (), True) if c.json
-                      else result.summary())
+                print("\n".join(summary_lines(c.json, [result.summary()],
+                                               json_summary(result, validation, True))))
             raise
         refused, accepted = True, []  # the writer writes the diagnosis, then raises
     for message in accepted:
@@ -279,9 +280,7 @@ def run(args) -> int:
         if c.quiet:
             return []
         if c.json:  # stdout holds the JSON alone; what was written goes to stderr
-            for path in written:
-                print(f"kincal: wrote {path}", file=sys.stderr)
-            return [json_summary(result, validation, written, refused)]
+            return summary_lines(True, (), json_summary(result, validation, refused), written)
         out = [result.summary()]
         out += [f"  {line}" for line in result.identifiability.summary().splitlines()[1:]
                 if c.verbose or line.startswith(("weak", "  the poses"))]

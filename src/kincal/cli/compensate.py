@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 from kincal.cli.checks import check_outputs
-from kincal.cli.console import say_and_write
+from kincal.cli.console import say_and_write, summary_lines
 from kincal.cli.options import (Chain, add_overwrite, add_units, add_xacro_args,
                                 chain_from_frames, group, typed)
 from kincal.errors import DataError, OptionError
@@ -65,6 +66,8 @@ class Compensate:
     flag_unreachable: bool
     out: str
     overwrite: bool
+    json: bool = False
+    command_line: tuple[str, ...] = ()  # as typed, for the files' provenance
 
 
 def run(args) -> int:
@@ -93,13 +96,14 @@ def _compensate(c: Compensate) -> int:
         frames = frames.for_chain(c.chain.base, c.chain.tip)  # a chain of several
         c = replace(c, chain=chain_from_frames(c.chain, frames))
     robot = c.chain.load()
-    inputs = [c.targets, c.program, c.nominal, c.frames]
+    inputs: list[str | Path | None] = [c.targets, c.program, c.nominal, c.frames]
     check_outputs(robot, [c.out], overwrite=c.overwrite, inputs=inputs)
     if frames is not None:
         frames.check_chain(robot)  # before reading targets: a wrong file is the likelier error
     if c.program is not None:
         from kincal.robot import Robot
 
+        assert c.nominal is not None  # --program comes with --nominal (run)
         nominal = Robot.load(c.nominal, tip=c.chain.tip, base=c.chain.base)
         q, lines = read_candidates(c.program, nominal, c.length_unit, c.angle_unit,
                                    kind="program")
@@ -107,6 +111,7 @@ def _compensate(c: Compensate) -> int:
                                 source=str(c.program))
         inputs = [c.program, nominal.source]
     else:
+        assert frames is not None  # targets come with --frames (run)
         targets = read_targets(c.targets, robot, c.length_unit, c.angle_unit,
                                c.position_columns)
         result = compensate(robot, frames, targets, c.point - 1, options, c.length_unit)
@@ -120,9 +125,22 @@ def _compensate(c: Compensate) -> int:
                           "reached=0")
     said = [result.summary()] + [f"  NOT reached, written with reached=0: {line}"
                                  for line in failures]
-    say_and_write([(c.out, result.to_csv_text(c.length_unit, c.angle_unit))],
-                  lambda written: said + [f"  wrote {path} (joint values in {c.angle_unit} and "
-                                          f"{c.length_unit}, as the input)" for path in written],
+    r = result.reached
+    summary = {"command": "compensate", "robot": str(robot.source), "source": result.source,
+               "targets": len(result), "reached": int(r.sum()), "not_reached": failures,
+               "max_position_error_m": float(result.position_error[r].max()) if r.any() else None,
+               "max_orientation_error_rad": (float(result.orientation_error[r].max())
+                                             if r.any() else None),
+               "joint_names": list(result.joint_names),
+               "joint_values_si": result.joint_values.tolist(),
+               "notes": list(result.notes)}
+    from kincal.export.outputs import File
+
+    say_and_write([File(c.out, "csv", result.to_csv_text(c.length_unit, c.angle_unit))],
+                  lambda written: summary_lines(c.json, said, summary, written, wrote=lambda path: (
+                      f"  wrote {path} (joint values in {c.angle_unit} and {c.length_unit}, as "
+                      "the input)")),
+                  provenance=c.chain.provenance(robot, (*inputs, c.frames), c.command_line),
                   overwrite=c.overwrite,
                   protect=[robot.source, *inputs] + ([c.frames] if c.frames else []))
     return 0

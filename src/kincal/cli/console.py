@@ -39,13 +39,31 @@ def stdout_to_null() -> None:
         pass
 
 
-def say_and_write(files, lines, *, overwrite: bool, protect, dirs=()) -> list:
-    """:func:`kincal.export.safe_write.write_all` with ``lines(targets)`` said between
+def say_and_write(files, lines, *, provenance, overwrite: bool, protect, dirs=()) -> list:
+    """The one writer (:func:`kincal.export.outputs.write_files`: ``files`` are its
+    File values, each stamped with ``provenance``) with ``lines(targets)`` said between
     staging and commit; returns the written paths."""
-    from kincal.export.safe_write import write_all
+    from kincal.export.outputs import write_files
 
-    return write_all(files, overwrite=overwrite, protect=protect, dirs=dirs,
-                     before_commit=lambda targets: say(lines(targets)))
+    return write_files(files, provenance, overwrite=overwrite, protect=protect, dirs=dirs,
+                       before_commit=lambda targets: say(lines(targets)))
+
+
+def summary_lines(json_out: bool, human, summary: dict, written=(),
+                  wrote=lambda path: f"  wrote {path}") -> list[str]:
+    """What a command says at its end: its ``human`` lines and one ``wrote`` line per
+    written file (wrote None: none, the human lines name them); with ``--json`` (json_out) the ``summary`` alone, as one JSON object
+    (SI units; the paths written under "written"), the written files said on stderr
+    instead, so that stdout holds nothing but the JSON."""
+    if not json_out:
+        return list(human) + ([] if wrote is None else [wrote(path) for path in written])
+    from kincal import __version__
+    from kincal.export.report import dumps
+
+    for path in written:
+        print(f"kincal: wrote {path}", file=sys.stderr)
+    return [dumps({"format": "kincal-summary-1", "kincal_version": __version__, **summary,
+                   "written": [str(p) for p in written]}).rstrip("\n")]
 
 
 class _NullOut:

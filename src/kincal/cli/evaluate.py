@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from kincal.cli.checks import check_outputs
-from kincal.cli.console import say, say_and_write
+from kincal.cli.console import say, say_and_write, summary_lines
 from kincal.cli.options import (Chain, Inputs, add_common, add_kinds, add_overwrite,
                                 chain_from_frames, group, typed)
 from kincal.errors import DataError, OptionError
@@ -37,6 +37,8 @@ class Evaluate:
     fit_frames: str | None  # "all", "measurement" or None
     report: str | None
     overwrite: bool
+    json: bool = False
+    command_line: tuple[str, ...] = ()  # as typed, for the files' provenance
 
 
 def run(args) -> int:
@@ -95,15 +97,21 @@ def run(args) -> int:
     if angle is not None:
         label = "tilt against the plane" if km.kind == "flush" else "orientation"
         lines.append(f"  {label}: {angle.line()}")
+    content = {"format": "kincal-evaluation-1", "robot": str(robot.source),
+               "data": str(e.inputs.data), "kind": km.kind, "frames": how,
+               "errors": report.stats_dict(stats[0]),
+               "orientation_errors": None if angle is None else report.angle_dict(angle)}
+    summary = {"command": "evaluate", **{k: v for k, v in content.items() if k != "format"}}
     if not e.report:
-        say(lines)
+        say(summary_lines(e.json, lines, summary))
     else:
-        say_and_write([(e.report, report.dumps({
-            "format": "kincal-evaluation-1", "robot": str(robot.source),
-            "data": str(e.inputs.data), "kind": km.kind, "frames": how,
-            "errors": report.stats_dict(stats[0]),
-            "orientation_errors": None if angle is None else report.angle_dict(angle)}))],
-            lambda written: lines, overwrite=e.overwrite, protect=[robot.source, e.inputs.data])
+        from kincal.export.outputs import File
+
+        say_and_write([File(e.report, "json", content)],
+                      lambda written: summary_lines(e.json, lines, summary, written),
+                      provenance=e.chain.provenance(robot, (e.inputs.data, e.frames),
+                                                    e.command_line),
+                      overwrite=e.overwrite, protect=[robot.source, e.inputs.data])
     return 0
 
 

@@ -71,6 +71,8 @@ class Fleet:
     accept_implausible: bool
     accept_unconverged: bool
     quiet: bool
+    json: bool = False
+    command_line: tuple[str, ...] = ()  # as typed, for the files' provenance
 
 
 def unit_names(files) -> list[str]:
@@ -80,8 +82,10 @@ def unit_names(files) -> list[str]:
 
 
 def run(args) -> int:
-    from kincal.cli.console import say
-    from kincal.export.safe_write import check_outputs, write_all
+    from kincal.cli.console import say_and_write, summary_lines
+    from kincal.cli.options import xacro_args
+    from kincal.export.outputs import File
+    from kincal.export.safe_write import check_outputs
     from kincal.fleet import UnitJob, calibrate_fleet
     from kincal.fleet.unit import STAGING, URDF
     from kincal.identification.options import CalibrationOptions
@@ -118,7 +122,7 @@ def run(args) -> int:
     jobs = [UnitJob(n, os.path.abspath(f), chain.load,
                     replace(inputs, files=(os.path.abspath(f),)).read_sets, options,
                     os.path.abspath(out), c.accept_implausible, c.accept_unconverged,
-                    c.overwrite)
+                    c.overwrite, c.command_line or None, xacro_args(chain.xacro_arg))
             for n, f in zip(names, inputs.files)]
 
     def progress(done, total, outcome):
@@ -140,12 +144,19 @@ def run(args) -> int:
               f"{'' if not finished else ' (' + _shown(finished) + ')'}, the others left "
               f"nothing; no fleet prior or summary was written", file=sys.stderr)
         return 130
-    files = [(out / SUMMARY_JSON, _json(summary.as_dict())), (out / SUMMARY_HTML, summary.html())]
+    files = [File(out / SUMMARY_JSON, "json", summary.as_dict()),
+             File(out / SUMMARY_HTML, "html", summary.html())]
     if summary.prior is not None:
-        files.append((out / PRIOR, summary.prior.dumps()))
-    lines = [] if c.quiet else [summary.table()]
-    write_all(files, overwrite=c.overwrite, protect=inputs.files,
-              before_commit=lambda written: say(lines + [f"  wrote {p}" for p in written]))
+        files.append(File(out / PRIOR, "json", summary.prior.as_dict()))
+    status = [u.status for u in summary.units]
+    gate = (f"each unit's own gate: {status.count('calibrated')} calibrated, "
+            f"{status.count('refused')} refused, {status.count('failed')} failed of "
+            f"{len(status)} units (the prior is learnt from the calibrated ones)")
+    say_and_write(files, lambda written: summary_lines(
+        c.json, [summary.table()], {"command": "fleet", **summary.as_dict()}, written),
+        provenance=c.chain.provenance(robot, inputs.files, c.command_line,
+                                      verdict="per unit", gate=gate),
+        overwrite=c.overwrite, protect=inputs.files)
     if summary.prior is None:
         raise OptionError(f"fewer than 2 of the {len(jobs)} units were calibrated: no fleet "
                           f"prior written (see {out / SUMMARY_JSON})")
@@ -154,9 +165,3 @@ def run(args) -> int:
 
 def _shown(names, at_most: int = 5) -> str:
     return ", ".join(names[:at_most]) + (f", ... ({len(names)})" if len(names) > at_most else "")
-
-
-def _json(d) -> str:
-    import json
-
-    return json.dumps(d, indent=1) + "\n"

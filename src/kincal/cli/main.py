@@ -22,6 +22,8 @@ from kincal.cli.console import quiet_stdout, say, stdout_to_null
 from kincal.errors import KincalError, KincalNote, KincalWarning
 
 COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo, fleet)
+# the commands whose summary --json gives as one JSON object on stdout
+JSON_COMMANDS = ("calibrate", "evaluate", "analyze", "simulate", "plan", "compensate", "fleet")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -35,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     from kincal.cli.options import add_console
 
     for name, p in sub.choices.items():  # the console options, the same on every command
-        add_console(p, json_summary=name == "calibrate")
+        add_console(p, json_summary=name in JSON_COMMANDS)
     return ap
 
 
@@ -64,9 +66,11 @@ def _standard_streams() -> None:
             if getattr(sys, name) is None:
                 setattr(sys, name, open(fd, "r" if fd == 0 else "w", closefd=False))
     for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)  # a TextIOWrapper's, not a capture's
         try:
-            stream.reconfigure(errors="backslashreplace")
-        except (AttributeError, ValueError):
+            if reconfigure is not None:
+                reconfigure(errors="backslashreplace")
+        except ValueError:
             pass
 
 

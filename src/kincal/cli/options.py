@@ -268,6 +268,15 @@ class Chain:
         return Robot.load(self.robot, tip=self.tip, base=self.base,
                           xacro_args=xacro_args(self.xacro_arg))
 
+    def provenance(self, robot, data, command_line=(), **gate):
+        """The provenance of a command's files (:meth:`kincal.export.provenance.Provenance.
+        of_run`): ``robot`` as loaded from this chain, ``data`` the files read (None
+        skipped), the command line as typed; ``gate``: verdict= and gate= where one ran."""
+        from kincal.export.provenance import Provenance
+
+        return Provenance.of_run(robot, data, command=command_line or None,
+                                 xacro_args=xacro_args(self.xacro_arg), **gate)
+
 
 @dataclass(frozen=True)
 class Inputs:

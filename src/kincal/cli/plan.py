@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass, replace
 
 from kincal.cli.checks import check_outputs
-from kincal.cli.console import say_and_write
+from kincal.cli.console import say_and_write, summary_lines
 from kincal.cli.options import (Chain, add_common, add_joint_columns, add_overwrite, add_units,
                                 group, joint_map, tool_guess, typed)
 from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
@@ -90,6 +90,8 @@ class Plan:
     kind: str
     pivot: tuple[float, float, float] | None
     tool_offset: tuple[float, float, float] | None
+    json: bool = False
+    command_line: tuple[str, ...] = ()  # as typed, for the files' provenance
 
 
 def run(args) -> int:
@@ -147,6 +149,7 @@ def _plan(p: Plan, robot) -> int:
                                    joint_columns=columns)
         source = f"{len(q)} candidates from {p.candidates}"
     elif spec is None:
+        assert p.random is not None  # one of CANDIDATES.csv, --random, a volume (run)
         q, lines = random_candidates(robot, p.random, p.seed), None
         source = f"{len(q)} random candidates within the joint limits (seed {p.seed})"
     measured = np.zeros((0, q.shape[1]))
@@ -182,9 +185,22 @@ def _plan(p: Plan, robot) -> int:
         "candidates checked as above; line of sight is not checked")]
     if k:
         said.append(f"  (the selection includes the {k} poses already measured; {len(new)} new)")
-    say_and_write([(p.out, candidates_csv_text(
+    from kincal.export.outputs import File
+
+    summary = {"command": "plan", "robot": str(robot.source), "candidates": int(len(q)),
+               "measured": int(k), "criterion": p.criterion, "kind": p.kind,
+               "chosen": int(len(new)),
+               "candidate_lines": None if lines is None else [int(v) for v in lines[new]],
+               "joint_names": list(selection.joint_names),
+               "joint_values_si": q[new].tolist(), "log_det": selection.log_det,
+               "condition_number": selection.condition, "noise_mm": p.noise_mm,
+               "std_errors": [{"name": n, "unit": u, "std_error": float(v)} for n, u, v in zip(
+                   selection.parameters, selection.units, selection.std_errors(p.noise_mm))],
+               "not_identifiable": list(selection.not_identifiable)}
+    say_and_write([File(p.out, "csv", candidates_csv_text(
         selection.joint_names, q[new], None if lines is None else lines[new]))],
-        lambda written: said + [f"  wrote {path} ({len(new)} new poses, joint values in rad "
-                                "and m)" for path in written],
+        lambda written: summary_lines(p.json, said, summary, written, wrote=lambda path: (
+            f"  wrote {path} ({len(new)} new poses, joint values in rad and m)")),
+        provenance=p.chain.provenance(robot, (p.candidates, p.measured), p.command_line),
         overwrite=p.overwrite, protect=protect)
     return 0

@@ -4,12 +4,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from kincal.cli.checks import check_outputs
-from kincal.cli.console import say_and_write
-from kincal.cli.options import Chain, add_common, add_model, add_overwrite, group, typed
+from kincal.cli.console import say_and_write, summary_lines
+from kincal.cli.options import (ORIENTATION_FORMATS, Chain, add_common, add_model,
+                                add_overwrite, group, typed)
 from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
 from kincal.errors import OptionError
+
+if TYPE_CHECKING:
+    from kincal.measurements.kind import SampleSet
 
 
 def register(subparsers) -> None:
@@ -30,6 +35,11 @@ def register(subparsers) -> None:
     m.add_argument("--orientation-noise-deg", type=float,
                    help="sd of orientation noise per axis [deg] (--kind pose, default 0.01; "
                         "--kind flush: of the face's two tilts, default 0.05)")
+    m.add_argument("--orientation-format", choices=ORIENTATION_FORMATS, metavar="FORMAT",
+                   help="how --kind pose writes its orientations (default quat-xyzw: qx qy qz "
+                        "qw; quat-wxyz, rpy-zyx: roll pitch yaw as R = Rz Ry Rx, rpy-xyz, "
+                        "rotvec, matrix; angles in radians): read it back with the same "
+                        "--orientation-format")
     m.add_argument("--poses", type=int, help="poses to simulate (default 60)")
     m.add_argument("--center-m", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="cube centre in the base frame [m]")
@@ -70,6 +80,7 @@ class Simulate:
     design: str  # tracker | rtest
     kind: str  # point | pose | distance | plane | flush
     orientation_noise_deg: float
+    orientation_format: str | None  # of --kind pose; None: quat-xyzw
     poses: int
     center_m: tuple[float, float, float] | None
     size_mm: float | None
@@ -84,6 +95,8 @@ class Simulate:
     truth_out: str | None
     poses_file: str | None
     overwrite: bool
+    json: bool = False
+    command_line: tuple[str, ...] = ()  # as typed, for the files' provenance
 
 
 def run(args) -> int:
@@ -93,6 +106,9 @@ def run(args) -> int:
     from kincal import models
     from kincal.planning import simulation
 
+    if s.orientation_format is not None and s.kind != "pose":
+        raise OptionError(f"--orientation-format is how --kind pose writes its orientations; "
+                          f"--kind {s.kind} writes none")
     robot = s.chain.load()
     check_outputs(robot, [s.out, s.truth_out], overwrite=s.overwrite, inputs=[s.poses_file])
     model = models.build(s.model, robot.geometry)
@@ -133,41 +149,49 @@ def run(args) -> int:
                                      s.length_error_mm * 1e-3, math.radians(s.angle_error_deg))
     base = np.array(s.base_frame)
     base[3:] = np.radians(base[3:])
+    from kincal.export.outputs import File
+
+    prov = s.chain.provenance(robot, (s.poses_file,), s.command_line)
+    summary = {"command": "simulate", "robot": str(robot.source), "kind": s.kind,
+               "poses": len(q), "design": s.design, "where": where,
+               "noise_m": s.noise_mm * 1e-3, "seed": s.seed, "truth_seed": s.truth_seed}
     if s.kind != "point":
         if s.truth_out:
             raise OptionError("--truth-out is written for --kind point only")
-        say_and_write([(s.out, _other_kind_csv(s, robot, model, q, table, tool, base, rng))],
-                      lambda written: [f"simulated {s.kind} measurements of {robot.name} at "
-                                       f"{len(q)} poses ({s.design} design), noise "
-                                       f"{s.noise_mm} mm: " + ", ".join(map(str, written))],
-                      overwrite=s.overwrite, protect=[robot.source])
+        csv = _other_kind_csv(s, robot, model, q, table, tool, base, rng)
+        say_and_write([File(s.out, "csv", csv)],
+                      lambda written: summary_lines(s.json, [
+                          f"simulated {s.kind} measurements of {robot.name} at {len(q)} poses "
+                          f"({s.design} design), noise {s.noise_mm} mm: "
+                          + ", ".join(map(str, written))], summary, written, wrote=None),
+                      provenance=prov, overwrite=s.overwrite, protect=[robot.source])
         return 0
     truth = simulation.Truth(table, base, tool)
     data = simulation.measure(model, truth, q, s.noise_mm * 1e-3, rng, source="simulated")
-    files = [(s.out, data.to_csv_text())]
+    files = [File(s.out, "csv", data.to_csv_text())]
     if s.truth_out:
-        files.append((s.truth_out, _truth_json(s, robot, model, truth)))
-    say_and_write(files, lambda written: [f"simulated {len(q)} poses of {robot.name} ({where}, "
-                                          f"noise {s.noise_mm} mm): "
-                                          + ", ".join(map(str, written))],
-                  overwrite=s.overwrite, protect=[robot.source])
+        files.append(File(s.truth_out, "json", _truth_json(s, robot, model, truth)))
+    say_and_write(files, lambda written: summary_lines(s.json, [
+        f"simulated {len(q)} poses of {robot.name} ({where}, noise {s.noise_mm} mm): "
+        + ", ".join(map(str, written))], summary, written, wrote=None),
+        provenance=prov, overwrite=s.overwrite, protect=[robot.source])
     return 0
 
 
-def _truth_json(s: Simulate, robot, model, truth) -> str:
+
+def _truth_json(s: Simulate, robot, model, truth) -> dict:
     import numpy as np
 
-    from kincal.export import report
     from kincal.measurements.point_space import ParameterSpace
 
     sp = ParameterSpace.of_model(model)
     x, x0 = truth.x(sp), sp.join(model.nominal, np.zeros(6), np.zeros(3))
-    return report.dumps({
+    return {
         "format": "kincal-truth-1", "robot": str(robot.source), "seed": s.seed,
         "truth_seed": s.truth_seed, "parameters_si": dict(zip(sp.names, x.tolist())),
         "deviations_si": dict(zip(sp.names[:sp.n_kinematic],
                                   (x - x0)[:sp.n_kinematic].tolist())),
-        "noise_m": s.noise_mm * 1e-3})
+        "noise_m": s.noise_mm * 1e-3}
 
 
 def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str:
@@ -178,6 +202,7 @@ def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str
     from kincal.planning import kind_simulation as ks
 
     noise = s.noise_mm * 1e-3
+    data: SampleSet
     if s.kind == "pose":
         data = ks.simulate_poses(model, table, base, np.r_[tool, 0.0, 0.0, 0.0], q, noise,
                                  s.orientation_noise_deg, rng, source="simulated")
@@ -204,4 +229,4 @@ def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str
         per = max(3, len(q) // 3)
         data = ks.simulate_contacts(model, table, tool, planes, cand, per, noise, rng,
                                     source="simulated")
-    return to_csv_text(data)
+    return to_csv_text(data, s.orientation_format or "quat-xyzw")

@@ -40,9 +40,9 @@ def held_out(result, inputs, path: str):
         out.append((problem.residuals(x, 0), errors))
     km = problem.kinds[0]
     per_axis = km.kind == "pose" or (km.kind == "point" and getattr(km.data, "n_points", 1) == 1)
-    orientation = None
+    orientation: tuple[float, float] | None = None
     if km.kind == "pose":  # mean orientation error [deg], before and after
-        orientation = tuple(float(np.degrees(np.mean(km.orientation_errors(r))))
-                            for r, _ in out)
+        before, after = (float(np.degrees(np.mean(km.orientation_errors(r)))) for r, _ in out)
+        orientation = (before, after)
     return Validation(str(path), km.kind, np.asarray(km.data.rows), out[0][0], out[1][0],
                       out[0][1], out[1][1], per_axis, orientation)

@@ -49,6 +49,7 @@ def volume_spec(request: VolumeRequest, robot, unit: float, tool, default_tilt: 
                 raise OptionError(f"--{flag.replace('_', '-')} needs a volume: --in-cube or --in-sphere")
         return None
     c = request.in_cube if request.in_cube is not None else request.in_sphere
+    assert c is not None  # one of them, checked above
     make = Volume.cube if request.in_cube is not None else Volume.sphere
     volume = make([v * unit for v in c[:3]], c[3] * unit)
     home = None
@@ -60,9 +61,11 @@ def volume_spec(request: VolumeRequest, robot, unit: float, tool, default_tilt: 
         home = [v * (unit if k == "prismatic" else angle)
                 for v, k in zip(request.home, robot.geometry.kinds)]
     floor = None if request.no_floor else request.floor * unit
-    return VolumeSpec(volume, tuple(tool), math.radians(default_tilt if request.max_tilt is None
+    x, y, z = (float(v) for v in tool)
+    return VolumeSpec(volume, (x, y, z), math.radians(default_tilt if request.max_tilt is None
                                                         else request.max_tilt),
-                      tuple(request.tilt_direction or (0.0, 0.0, -1.0)), home, floor)
+                      request.tilt_direction or (0.0, 0.0, -1.0),
+                      None if home is None else tuple(home), floor)
 
 
 def add_volume_options(p, unit_help):

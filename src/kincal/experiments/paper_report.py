@@ -3,8 +3,6 @@ folder and ``kincal demo`` (the experiment itself is :mod:`.paper_experiment`)."
 
 from __future__ import annotations
 
-import json
-import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -15,7 +13,6 @@ import numpy as np
 from kincal.errors import ExportError, OptionError
 from kincal.experiments.paper_experiment import (_MARK, METHODS, PAPER, ExperimentConfig,
                                                  ExperimentResult, run)
-from kincal.export.safe_write import write_all
 
 
 # ------------------------------------------------------------------ tables
@@ -110,25 +107,24 @@ PLOT_FILES = ("cv_curve.png", "point_sets.png", "validation_errors.png",
               "parameter_deviations.png")
 
 
-def write_plots(result: ExperimentResult, out_dir, overwrite: bool = False,
-                source: str = "kincal") -> list[Path]:
-    """The paper's Figs. 3-5 and Table 4 as PNGs in ``out_dir`` (which must exist).
+def figures(result: ExperimentResult, source: str | dict[str, str] = "kincal"
+            ) -> list[tuple[str, bytes]]:
+    """(file name, PNG bytes) of the paper's Figs. 3-5 and Table 4 (nothing is written).
 
-    source: written into each PNG's "Software" field.
+    source: the PNGs' "Software" field, or a dict of text fields (the provenance).
     """
     from kincal.export import plots
 
-    out_dir = Path(out_dir)
     cv = result.cv
-    paths = [
-        plots.plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda, out_dir / PLOT_FILES[0],
-                            fold_errors_mm=cv.fold_errors, overwrite=overwrite, source=source,
+    pngs = [
+        plots.plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda, None,
+                            fold_errors_mm=cv.fold_errors, source=source,
                             title=f"Cross-validation of L2 + R-test (seed {result.config.seed})"),
         plots.plot_point_sets(result.rtest_points_mm, result.tracker_points_mm,
-                              out_dir / PLOT_FILES[1], overwrite=overwrite, source=source,
+                              None, source=source,
                               highlight_index=result.tracker_calibration_index),
         plots.plot_error_distributions([(m.label, m.validation_errors_mm) for m in result.methods],
-                                       out_dir / PLOT_FILES[2], overwrite=overwrite, source=source,
+                                       None, source=source,
                                        title="Validation errors, 400 mm cube "
                                              f"({len(result.tracker_points_mm)} points)"),
         plots.plot_parameter_deviations(
@@ -137,9 +133,9 @@ def write_plots(result: ExperimentResult, out_dir, overwrite: bool = False,
               result.method(k).weak)
              for k in ("ls_rtest", "ls_tracker", "l2_rtest")]
             + [("Truth (planted)", result.true_deviations, np.ones(len(result.is_length), bool))],
-            out_dir / PLOT_FILES[3], overwrite=overwrite, source=source),
+            None, source=source),
     ]
-    return paths
+    return [(name, plots.png_bytes(png)) for name, png in zip(PLOT_FILES, pngs)]
 
 
 # ------------------------------------------------------------------ outputs
@@ -156,31 +152,42 @@ def _check_ours(path: Path) -> None:
                       "overwrite it (choose another output folder)")
 
 
-def write_report(results: Sequence[ExperimentResult], out_dir, summary: dict | None = None
-                 ) -> list[Path]:
+def write_report(results: Sequence[ExperimentResult], out_dir, summary: dict | None = None,
+                 provenance=None) -> list[Path]:
     """tables.md (all seeds), results.json (all numbers) and the plots of the first seed.
 
     ``out_dir`` is created if missing. Only the names in REPORT_FILES are written, and
     an existing file of that name is replaced only if this module wrote it (its marker
     is checked first, so nothing is written when one of them belongs to someone else).
-    summary: key numbers stored under "summary" in results.json.
+    summary: key numbers stored under "summary" in results.json. provenance: the run's
+    :class:`~kincal.export.provenance.Provenance` every file carries (default: the Python
+    API's, no robot file, no command line).
     """
     results = list(results)
     out_dir = Path(out_dir).expanduser()
     for name in REPORT_FILES:
         _check_ours(out_dir / name)
-    # plots rendered aside first, so that all files go in as one transaction (write_all):
-    # an interrupted or failed run leaves the folder as it was
-    with tempfile.TemporaryDirectory(prefix="kincal-demo-") as tmp:
-        paths = write_plots(results[0], Path(tmp), overwrite=True, source=_MARK)
-        files = [(out_dir / Path(p).name, Path(p).read_bytes()) for p in paths]
+    from kincal.export.outputs import File, write_files
+    from kincal.export.provenance import Provenance
+
+    prov = provenance if provenance is not None else Provenance.of_run()
+    rendered: dict[str, bytes] = {}
+
+    def png(name: str):  # the figures rendered once, with the provenance's text fields
+        def render(fields: dict) -> bytes:
+            if not rendered:  # the marker in "Title": _check_ours finds it
+                rendered.update(figures(results[0], {**fields, "Title": _MARK}))
+            return rendered[name]
+        return render
+
     md = f"<!-- {_MARK}: simulated reproduction, see the module docstring -->\n" + tables(results)
     payload = {"generator": _MARK, "summary": summary or {},
                "results": [r.as_dict() for r in results]}
-    files += [(out_dir / "tables.md", md),
-              (out_dir / "results.json", json.dumps(payload, indent=1) + "\n")]
+    files = [File(out_dir / name, "png", png(name)) for name in PLOT_FILES]
+    files += [File(out_dir / "tables.md", "md", md), File(out_dir / "results.json", "json", payload)]
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    return write_all(files, overwrite=True, dirs=[out_dir])
+    # all files in one transaction: an interrupted or failed run leaves the folder as it was
+    return write_files(files, prov, overwrite=True, dirs=[out_dir])
 
 
 @dataclass(frozen=True)
@@ -207,8 +214,9 @@ class DemoSummary:
 
 
 def demo(out_dir, config: ExperimentConfig | None = None,
-         progress: Callable[[str], None] | None = None) -> DemoSummary:
-    """Run one seed of :meth:`ExperimentConfig.small` and :func:`write_report` it."""
+         progress: Callable[[str], None] | None = None, provenance=None) -> DemoSummary:
+    """Run one seed of :meth:`ExperimentConfig.small` and :func:`write_report` it (with
+    ``provenance``, see there)."""
     t0 = time.perf_counter()
     config = config or ExperimentConfig.small()
     out_dir = Path(out_dir).expanduser()
@@ -220,7 +228,7 @@ def demo(out_dir, config: ExperimentConfig | None = None,
                           m["l2_rtest"], m["ls_tracker"], 0.0)
     if progress:
         progress("writing tables and plots")
-    files = write_report([result], out_dir, summary.numbers())
+    files = write_report([result], out_dir, summary.numbers(), provenance)
     return replace(summary, files=tuple(files), elapsed_s=time.perf_counter() - t0)
 
 

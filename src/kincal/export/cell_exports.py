@@ -34,20 +34,24 @@ def _num(v: float) -> str:
     return repr(0.0 if v == 0.0 else v)  # no "-0.0"
 
 
-def kinematics_yaml(nominal, corrected) -> str:
+def kinematics_yaml(nominal, corrected, joints=None, chains: str | None = None) -> str:
     """The corrected URDF origins of every chain joint as YAML text.
 
     nominal: the robot the calibration started from (its rpy are the reference the
-    corrected triples stay closest to); corrected: ``result.corrected``. Applying the
-    values to the nominal URDF's ``<origin>`` elements reproduces the corrected model.
+    corrected triples stay closest to); corrected: ``result.corrected``. joints: the
+    movable URDF joints to list (default: the chain's; with several chains, the union of
+    theirs, ``result.error_model.joint_names``); chains: how the title names the chains
+    (default "base -> tip"). Applying the values to the nominal URDF's ``<origin>``
+    elements reproduces the corrected model.
     """
-    old, new = nominal.urdf_origins(), corrected.urdf_origins()
-    lines = [f"# kincal: corrected joint origins of {corrected.name} ({corrected.base} -> "
-             f"{corrected.tip})",
+    names = tuple(corrected.joint_names if joints is None else joints)
+    old, new = nominal.urdf_origins(names), corrected.urdf_origins(names)
+    lines = [f"# kincal: corrected joint origins of {corrected.name} "
+             f"({chains or f'{corrected.base} -> {corrected.tip}'})",
              "# per joint: the <origin> of the URDF joint, the pose of the joint frame in its",
              "# parent link: x, y, z [m]; roll, pitch, yaw [rad], R = Rz(yaw) Ry(pitch) Rx(roll)",
              "kinematics:"]
-    for name in corrected.joint_names:
+    for name in names:
         T = new[name]
         rpy = matrix_to_rpy(T[:3, :3], near=matrix_to_rpy(old[name][:3, :3]))
         lines.append(f"  {name}:")

@@ -1,4 +1,5 @@
-"""The one writer of a calibration's files, with the plausibility gate in front of it.
+"""The one writer of every file kincal writes, with the plausibility gate in front of a
+calibration's.
 
 ``write_calibration(result, Outputs(urdf=..., frames=..., report=..., html=..., yaml=...,
 mdh=..., plots=...))`` is the only way the API and ``kincal calibrate`` write what a
@@ -6,6 +7,9 @@ calibration produced. It refuses an implausible or unconverged result (one Kinca
 naming the evidence) unless accepted, then composes every output, reads the corrected URDF
 back with a second parser (:mod:`kincal.export.readback`), and writes them as one
 transaction: all of them, or none (:func:`kincal.export.safe_write.write_all`).
+``write_files(files, provenance, ...)`` does the same for the other commands' files
+(simulate, plan, evaluate, ...): each carries the run's provenance
+(:mod:`kincal.export.provenance`), the one way it gets there.
 """
 
 from __future__ import annotations
@@ -47,6 +51,30 @@ class Outputs:
         """The files and folders asked for, in writing order."""
         return [Path(p) for p in (self.urdf, self.frames, self.report, self.yaml, self.mdh,
                                   self.residuals, self.html, self.plots) if p is not None]
+
+
+@dataclass(frozen=True)
+class File:
+    """One file of a command other than calibrate, for :func:`write_files`: where it goes,
+    its format (the kinds of :meth:`kincal.export.provenance.Provenance.stamp`: json, csv,
+    yaml, urdf, html, md, png) and its content in that kind's form."""
+
+    path: Path | str
+    kind: str
+    content: object
+
+
+def write_files(files, provenance, *, overwrite: bool, protect=(), dirs=(),
+                before_commit=None) -> list[Path]:
+    """The one writer of every command's files other than a calibration's: each
+    :class:`File` stamped with ``provenance`` (a Provenance) in its format, then all written
+    or none (:func:`kincal.export.safe_write.write_all`; before_commit as there). Returns
+    the written paths."""
+    from kincal.export.safe_write import write_all
+
+    staged = [(f.path, provenance.stamp(f.kind, f.content)) for f in files]
+    return write_all(staged, overwrite=overwrite, protect=protect, dirs=dirs,
+                     before_commit=before_commit)
 
 
 @dataclass(frozen=True)
@@ -123,6 +151,11 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                               "expected a file name (a folder for plots)")
     if o.yaml_format not in ("kincal", "ur"):
         raise ExportError(f"yaml_format must be 'kincal' or 'ur', got {o.yaml_format!r}")
+    several = result.chains is not None and result.chains.several
+    if several and ((o.yaml is not None and o.yaml_format == "ur") or o.mdh is not None):
+        raise ExportError("a UR kinematics file and an MD-H table describe one chain; this "
+                          "calibration has several: write the URDF or the kincal YAML (every "
+                          "chain's joints)")
     if o.yaml_format == "ur" and o.yaml is not None and not o.ur_hash:
         raise ExportError("yaml_format 'ur' needs ur_hash (the hash of the robot's "
                           "kinematics_params file)")
@@ -167,16 +200,24 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                                                 ur_kinematics_yaml)
 
         if o.yaml is not None and o.yaml_format == "ur":
+            assert o.ur_hash is not None  # checked above
             files.append((o.yaml, prov.under_title(ur_kinematics_yaml(
                 result.robot, result.corrected, o.ur_hash))))
         elif o.yaml is not None:
-            files.append((o.yaml, prov.under_title(
-                kinematics_yaml(result.robot, result.corrected))))
+            files.append((o.yaml, prov.under_title(kinematics_yaml(
+                result.robot, result.corrected, joints=result.error_model.joint_names,
+                chains=_chains_title(result)))))
         if o.mdh is not None:
             files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,
                         data_source or ", ".join(sources), notes, validation)
     return _write(result, o, files, sources, before_commit, notes)
+
+
+def _chains_title(result) -> str:
+    """"base -> tip" of every chain of the result, in set order."""
+    robots = result.chains.chain_robots if result.chains is not None else (result.robot,)
+    return ", ".join(f"{r.base} -> {r.tip}" for r in robots)
 
 
 def _refusal(result, accept_implausible, accept_unconverged, refused: str) -> str:

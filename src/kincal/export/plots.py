@@ -75,7 +75,7 @@ def _save(fig, path, overwrite: bool, source) -> Path | bytes:
 
 def plot_cv_curve(lambdas, mean_error_mm, best_lambda: float, path, *, fold_errors_mm=None,
                   title: str = "Cross-validation error against lambda",
-                  overwrite: bool = False, source: str = "kincal") -> Path:
+                  overwrite: bool = False, source: str | dict[str, str] = "kincal") -> Path | bytes:
     """Mean validation error [mm] of each lambda candidate, log x, best lambda marked.
 
     lambdas: (M,); mean_error_mm: (M,); fold_errors_mm: optional (M, k), drawn faintly.
@@ -105,7 +105,7 @@ def plot_cv_curve(lambdas, mean_error_mm, best_lambda: float, path, *, fold_erro
 
 def plot_point_sets(calibration_mm, validation_mm, path, *, highlight_index=None,
                     labels=("R-test calibration points", "laser-tracker validation points"),
-                    overwrite: bool = False, source: str = "kincal") -> Path:
+                    overwrite: bool = False, source: str | dict[str, str] = "kincal") -> Path | bytes:
     """Two point sets [mm] in one 3-D view (paper Fig. 4), equal axis scales.
 
     calibration_mm: (N, 3); validation_mm: (M, 3), both in the same frame.
@@ -129,7 +129,7 @@ def plot_point_sets(calibration_mm, validation_mm, path, *, highlight_index=None
 
 def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
                              title: str = "Position error distribution",
-                             overwrite: bool = False, source: str = "kincal") -> Path:
+                             overwrite: bool = False, source: str | dict[str, str] = "kincal") -> Path | bytes:
     """Box plots (with the points) of per-pose position errors [mm], one per method.
 
     series: (label, (N,) errors [mm]) pairs, drawn left to right. A log axis is used
@@ -160,7 +160,7 @@ def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
 
 def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
                               title: str = "Kinematic parameter deviations from nominal",
-                              overwrite: bool = False, source: str = "kincal") -> Path:
+                              overwrite: bool = False, source: str | dict[str, str] = "kincal") -> Path | bytes:
     """Grouped bars of identified minus nominal parameters: lengths [mm] and angles [deg].
 
     names: (P,) parameter names; is_length: (P,) bool.
@@ -223,11 +223,13 @@ def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
         ax.set_ylabel(f"deviation ({unit})")
         ax.grid(True, axis="y", alpha=0.3)
     fig.suptitle(title, fontsize=10)
+    from matplotlib.artist import Artist
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     # proxies: a column may have only weak (hatched) bars, or none on the first axes
-    handles = [Patch(facecolor=_COLORS[(j + 1) % len(_COLORS)]) for j in range(len(cols))]
+    handles: list[Artist] = [Patch(facecolor=_COLORS[(j + 1) % len(_COLORS)])
+                             for j in range(len(cols))]
     labels = [label for label, _ in cols]
     if any(np.any(~np.isfinite(v[keep])) for _, v in cols):
 
@@ -241,7 +243,7 @@ def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
     return _save(fig, path, overwrite, source)
 
 
-def calibration_figures(result, source: str = "kincal") -> list[tuple[str, bytes]]:
+def calibration_figures(result, source: str | dict[str, str] = "kincal") -> list[tuple[str, bytes]]:
     """(file name, PNG bytes) of the figures of one calibration; nothing is written (the
     files go out through :func:`kincal.export.outputs.write_calibration`, behind the gate).
 
@@ -249,12 +251,12 @@ def calibration_figures(result, source: str = "kincal") -> list[tuple[str, bytes
     first set's samples before and after calibration; residuals_set<k>.png for set k >= 2)
     and parameters.png (identified kinematic deviations with one standard error).
     """
-    out = []
+    out: list[tuple[str, bytes]] = []
     if result.cv is not None:
         cv = result.cv
-        out.append(("cv_curve.png", plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda,
-                                                  None, fold_errors_mm=cv.fold_errors,
-                                                  source=source)))
+        out.append(("cv_curve.png", png_bytes(plot_cv_curve(
+            cv.lambdas, cv.mean_error, cv.best_lambda, None, fold_errors_mm=cv.fold_errors,
+            source=source))))
     for i, s in enumerate(result.sets):  # one residual figure per measurement set
         after = s.errors_after * 1e3
         series = [("before (frames fitted)", s.errors_before * 1e3),
@@ -263,19 +265,26 @@ def calibration_figures(result, source: str = "kincal") -> list[tuple[str, bytes
         title = (f"Calibration residuals{what}, {len(after)} samples; before: mean "
                  f"{s.before.mean:.3f}, max {s.before.max:.3f} mm")
         name = "residuals.png" if i == 0 else f"residuals_set{i + 1}.png"
-        out.append((name, plot_error_distributions(series, None, title=title, source=source)))
+        out.append((name, png_bytes(plot_error_distributions(series, None, title=title,
+                                                        source=source))))
     kin = list(result.parameters[:result.layout.n_kinematic])
     if any(p.status == "identified" for p in kin):
         how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")
         if result.evidence is not None:  # one weight per class, no single lambda
             how = result.options.method + ", evidence priors"
         weak = {w.name for w in result.identifiability.weak}
-        out.append(("parameters.png", _plot_estimates(
-            kin, None, False, source, f"Identified deviations from nominal ({how})", weak)))
+        out.append(("parameters.png", png_bytes(_plot_estimates(
+            kin, None, False, source, f"Identified deviations from nominal ({how})", weak))))
     return out
 
 
-def _plot_estimates(params, path, overwrite, source, title, weak=frozenset()) -> Path:
+def png_bytes(made: Path | bytes) -> bytes:
+    """The PNG bytes of a figure made with path None (:func:`_save`)."""
+    assert isinstance(made, bytes), "made with path None: bytes, not a written file"
+    return made
+
+
+def _plot_estimates(params, path, overwrite, source, title, weak=frozenset()) -> Path | bytes:
     """Bars of deviations with +-1 standard error, lengths [mm] above angles [deg].
 
     Parameters not identified (dropped as redundant, or fixed) get a grey mark on the axis

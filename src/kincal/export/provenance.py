@@ -1,10 +1,11 @@
 """Provenance: which kincal, inputs and command made a file, and what the gate said.
 
-Every file of a calibration (:func:`kincal.export.outputs.write_calibration`) carries one
-:class:`Provenance`, built here and only here (:meth:`Provenance.of`), in the form its
-format allows: a comment in the URDF, ``#`` lines in the YAML and MD-H CSV, a
-``"provenance"`` object in FRAMES.json and REPORT.json, a section of the HTML report,
-text fields of the PNG plots.
+Every file kincal writes carries one :class:`Provenance`, built here and only here
+(:meth:`Provenance.of` for a calibration, :meth:`Provenance.of_run` for the other
+commands), in the form its format allows (:meth:`Provenance.stamp`): a comment in the
+URDF and Markdown, ``#`` lines in the YAML and CSV files, a ``"provenance"`` object in the
+JSON files, a section of the HTML pages, text fields of the PNG plots. The writers
+(:mod:`kincal.export.outputs`) put it in.
 
 The time is the UTC time of the run, or ``SOURCE_DATE_EPOCH`` when it is set (the
 reproducible-builds convention: the same inputs, command and epoch give byte-identical
@@ -41,15 +42,15 @@ class FileHash:
 
 @dataclass(frozen=True)
 class Provenance:
-    """Where a calibration's files come from.
+    """Where a file kincal writes comes from.
 
     kincal_version: the package version. created_utc: ISO 8601 time [UTC] of the run
     (SOURCE_DATE_EPOCH when set). command: the command line, shell-quoted (None: the
     Python API). robot: the robot description file (URDF or xacro); robot_text_sha256:
     SHA-256 of the URDF text parsed (the xacro's expansion); xacro_args: (name, value)
     pairs it was expanded with. data: every data file. verdict: the gate's verdict,
-    "plausible", "accepted" (implausible or unconverged, accepted as asked) or "REFUSED";
-    gate: its findings in one line ("no finding" when plausible and converged).
+    "plausible", "accepted" (implausible or unconverged, accepted as asked) or "REFUSED",
+    "no gate" where none stands in front of the file (simulate, plan, ...); gate: its findings in one line ("no finding" when plausible and converged).
     """
 
     kincal_version: str
@@ -72,12 +73,6 @@ class Provenance:
         refusal message when the files are a refused run's diagnosis. more_data: further
         files read (the held-out data).
         """
-        from kincal import __version__
-
-        if command is not None and not isinstance(command, str):
-            import shlex
-
-            command = shlex.join(str(a) for a in command)
         p = result.plausibility
         if refused is not None:
             verdict, gate = "REFUSED", refused
@@ -88,11 +83,64 @@ class Provenance:
             gate = "; ".join(f.message for f in p.findings) + " (accepted as asked)"
         else:
             verdict, gate = "plausible", "no finding"
-        data = tuple(FileHash.of(p) for p in (*(s.source for s in result.sets), *more_data))
-        return cls(__version__, utc_now(), command, FileHash.of(result.robot.source or "<robot>"),
-                   _sha256(result.robot.urdf_text.encode("utf-8")),
+        return cls.of_run(result.robot, (*(s.source for s in result.sets), *more_data),
+                          command=command, xacro_args=xacro_args, verdict=verdict, gate=gate)
+
+    @classmethod
+    def of_run(cls, robot=None, data=(), *, command=None, xacro_args=None,
+               verdict: str = "no gate",
+               gate: str = "no plausibility gate applies to this output") -> "Provenance":
+        """The provenance of a command's files written now: ``robot`` the Robot it loaded
+        (None: none), ``data`` every file it read (paths; None entries are skipped),
+        command / xacro_args as in :meth:`of`, verdict / gate what a gate said."""
+        from kincal import __version__
+
+        if command is not None and not isinstance(command, str):
+            import shlex
+
+            command = shlex.join(str(a) for a in command)
+        files = tuple(FileHash.of(p) for p in data if p is not None)
+        if robot is None:
+            robot_file, text_sha = FileHash("(no robot)", None), "(no robot)"
+        else:
+            robot_file = FileHash.of(robot.source or "<robot>")
+            text_sha = _sha256(robot.urdf_text.encode("utf-8"))
+        return cls(__version__, utc_now(), command, robot_file, text_sha,
                    tuple(sorted((str(k), str(v)) for k, v in (xacro_args or {}).items())),
-                   data, verdict, gate)
+                   files, verdict, gate)
+
+    def stamp(self, kind: str, content):
+        """``content`` of a file of format ``kind`` with this provenance in it: "json" (a
+        dict, given a "provenance" key, returned as JSON text), "csv" / "yaml" (text: ``#``
+        lines after a ``#`` title line, else first), "urdf" (:func:`stamp_urdf`), "html"
+        (a section before ``</body>``), "md" (an HTML comment first), "png" (a function of
+        the PNG text fields returning the PNG bytes, :meth:`png_text`)."""
+        if kind == "json":
+            from kincal.export.report import dumps
+
+            if not isinstance(content, dict):
+                raise ExportError(f"a JSON output is given as a dict, got {type(content).__name__}")
+            return dumps({**content, "provenance": self.as_dict()})
+        if kind == "png":
+            return content(self.png_text())
+        if kind in ("csv", "yaml"):
+            return (self.under_title(content) if content.startswith("#")
+                    else self.hash_comment() + content)
+        if kind == "urdf":
+            return stamp_urdf(content, self)
+        if kind == "md":
+            return self.xml_comment() + "\n" + content
+        if kind == "html":
+            from kincal.export.html_run import provenance_section
+
+            section = ('<section id="provenance">\n<h2>Provenance</h2>\n'
+                       f"{provenance_section(self)}\n</section>\n")
+            head, body_end, tail = content.rpartition("</body>")
+            if not body_end:
+                raise ExportError("an HTML output without </body>: no place for its provenance")
+            return head + section + body_end + tail
+        raise ExportError(f"no provenance stamp for a {kind!r} file; expected json, csv, yaml, "
+                          "urdf, html, md or png")
 
     def as_dict(self) -> dict:
         """For the JSON files."""

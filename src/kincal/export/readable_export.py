@@ -84,7 +84,7 @@ def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,
     if not readable:
         return result, ()
     old = nominal.urdf_origins(joints)
-    moved = []
+    moved: list[Regauged | RpySwing] = []
     for name, T_new in list(origins.items()):
         edit = result.for_joint(name)
         if _swing(edit, old[name][:3, :3], T_new[:3, :3]) < SWING:
@@ -110,7 +110,7 @@ def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,
         T_old = old[name]
         edit = result.for_joint(name)
         if edit.changed and _swing(edit, T_old[:3, :3], T_new[:3, :3]) >= SWING:
-            moved.append(RpySwing(name, edit.old_rpy or "0 0 0", edit.new_rpy,
+            moved.append(RpySwing(name, edit.old_rpy or "0 0 0", edit.new_rpy or "0 0 0",
                                   rotation_angle(T_old[:3, :3].T @ T_new[:3, :3]),
                                   float(np.max(np.abs(edit.rpy_change)))))
     return result, tuple(moved)

@@ -162,7 +162,7 @@ def check_outputs(paths, *, overwrite: bool = False, protect=(), dirs=()) -> lis
     naming the first target that would be refused, and the same for two paths naming
     one file.
     """
-    new_dirs = set()
+    new_dirs: set[Path] = set()
     for d in dirs:
         r = _check_dir(d, new_dirs)
         if not r.exists():
@@ -284,8 +284,7 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
             if not stat.S_ISREG(target.stat().st_mode):  # swapped in meanwhile
                 raise ExportError(f"{path}: is {_kind(target.stat().st_mode)}; kincal "
                                   "writes regular files only")
-            backup = _backup(target)
-            done.append((target, backup))
+            done.append((target, _backup(target)))
             os.replace(tmp, target)
     except BaseException as exc:
         _roll_back(done, staged, made_dirs)

@@ -18,6 +18,7 @@ from kincal.measurements.data import Measurements
 from kincal.measurements.point_space import ParameterSpace
 from kincal.models import mdh as mdh_layer
 from kincal.planning.simulation import Truth, cube_poses, measure
+from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 
 MM, DEG = 1e-3, math.pi / 180
@@ -30,7 +31,7 @@ class FleetModel:
     the unit-to-unit standard deviation about it [m, rad]."""
 
     robot: Robot
-    model: object
+    model: ErrorModel
     systematic: np.ndarray
     scatter_sd: np.ndarray
     compliance: float = 0.0  # [rad] joint 2 and 3 sag no kinematic model carries

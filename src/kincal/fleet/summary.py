@@ -46,7 +46,7 @@ class FleetSummary:
     def of(cls, units, prior: FleetPrior | None, rounds: int = 0) -> "FleetSummary":
         units = tuple(units)
         ok = [u for u in units if u.status == "calibrated"]
-        outliers = ()
+        outliers: tuple[tuple[str, tuple[str, ...]], ...] = ()
         if len(ok) >= 3:
             X = np.array([u.deviation for u in ok])
             med = np.median(X, axis=0)

@@ -19,11 +19,14 @@ import warnings
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from kincal.errors import ImplausibleResultError, KincalError, KincalWarning, NotConvergedError
+
+if TYPE_CHECKING:
+    from kincal.identification.options import CalibrationOptions
 
 STAGING = ".partial-"
 URDF, FRAMES, REPORT = "corrected.urdf", "FRAMES.json", "REPORT.json"
@@ -37,17 +40,20 @@ class UnitJob:
     options: the CalibrationOptions (no callbacks: they do not travel to workers).
     out_dir: the fleet's folder, or None to write nothing (a round of the hierarchical fit).
     accept_implausible / accept_unconverged: the gate's overrides. overwrite: replace an
-    existing DIR/<unit>."""
+    existing DIR/<unit>. command / xacro_args: the command line and the xacro arguments,
+    for the provenance of the unit's files."""
 
     name: str
     source: str
     load: Callable
     read: Callable
-    options: object
+    options: CalibrationOptions
     out_dir: str | None
     accept_implausible: bool = False
     accept_unconverged: bool = False
     overwrite: bool = False
+    command: tuple[str, ...] | None = None
+    xacro_args: dict[str, str] | None = None
 
 
 @dataclass(frozen=True)
@@ -150,6 +156,7 @@ def _write(job: UnitJob, result) -> tuple[str, ...]:
     """The unit's files through the one writer into the staging folder, then one rename."""
     from kincal.export.outputs import Outputs, write_calibration
 
+    assert job.out_dir is not None  # only a job with an out_dir writes
     final = Path(job.out_dir) / job.name
     stage = Path(job.out_dir) / f"{STAGING}{job.name}"
     if stage.exists():
@@ -162,7 +169,8 @@ def _write(job: UnitJob, result) -> tuple[str, ...]:
                                               report=stage / REPORT, protect=(job.source,)),
                               accept_implausible=job.accept_implausible,
                               accept_unconverged=job.accept_unconverged,
-                              data_source=job.source)
+                              data_source=job.source, command=job.command,
+                              xacro_args=job.xacro_args)
         old = None
         if final.exists():
             if not job.overwrite:

@@ -28,6 +28,7 @@ import numpy as np
 from kincal import models as error_models
 from kincal.errors import ChainError, OptionError, ParameterError, listing, suggest
 from kincal.measurements.sets import kind_model
+from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 
 JOINT_MODELS = ("placement", "offsets")  # whose parameters belong to URDF joints
@@ -120,9 +121,10 @@ class Chains:
         self.chain_robots = tuple(self.robots[self.of_set.index(c)] for c in range(len(keys)))
         if len(keys) == 1:
             self.model_name = model or error_models.default_for(first.geometry)
-            self.models = (error_models.build(self.model_name, first.geometry),)
-            self.model = self.models[0]
-            self.idx = (np.arange(self.model.size),)
+            self.models: tuple[ErrorModel, ...] = (
+                error_models.build(self.model_name, first.geometry),)
+            self.model: ErrorModel | UnionModel = self.models[0]
+            self.idx: tuple[np.ndarray, ...] = (np.arange(self.model.size),)
             return
         self.model_name = model or "placement"
         if self.model_name not in JOINT_MODELS:
@@ -140,7 +142,7 @@ class Chains:
         self.idx = tuple(np.array([names.index(n) for n in m.names], int) for m in self.models)
         joints = tuple(dict.fromkeys(j for m in self.models for j in m.joint_names))
         kinds = {j: k for m in self.models for j, k in zip(m.joint_names, m.kinds)}
-        first_of = {}
+        first_of: dict[str, tuple[ErrorModel, int]] = {}
         for m in self.models:
             for k, n in enumerate(m.names):
                 first_of.setdefault(n, (m, k))
@@ -227,8 +229,12 @@ class Chains:
 
     def origins(self, kin: np.ndarray) -> dict[str, np.ndarray]:
         """{joint: (4, 4) corrected URDF origin} of every origin the chains correct [m]."""
+        from kincal.models.offsets import OffsetsModel
+        from kincal.models.placement import PlacementModel
+
         out = {}
         for m, idx in zip(self.models, self.idx):
+            assert isinstance(m, (PlacementModel, OffsetsModel))  # the models of JOINT_MODELS
             out.update(m.urdf_origins(np.asarray(kin)[idx]))
         return out
 
@@ -236,5 +242,6 @@ class Chains:
         """The first set's robot with the identified kinematics ``kin`` (the union's): one
         chain through its joint frames, several through every corrected URDF origin."""
         if not self.several:
+            assert isinstance(self.model, ErrorModel)  # one chain: its own model
             return self.robot.with_joint_frames(self.model.joint_frames(kin))
         return self.robot.with_origins(self.origins(kin))

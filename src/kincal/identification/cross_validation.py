@@ -88,7 +88,7 @@ def fold_fitter(problem, free: np.ndarray, samples: np.ndarray | None = None) ->
     fold indices refer to (a subsample), or None for all."""
     o = problem.options
     options = replace(o.solver, step_tol=max(o.solver.step_tol, o.cv_step_tol), progress=None)
-    cache = {}
+    cache: dict[bytes, Callable] = {}
 
     def fit(train, lam, start):
         train = train if samples is None else samples[train]

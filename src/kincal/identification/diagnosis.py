@@ -91,7 +91,7 @@ def diagnose(result) -> Finding | None:
     for name, cause, fs, j in tests:
         C = np.column_stack([(Jq[:, :, j] * f[:, None]).reshape(-1) for f in fs])
         C = C - U @ (U.T @ C)
-        if np.linalg.norm(C) <= 1e-12 * max(np.linalg.norm(A), 1e-300):
+        if np.linalg.norm(C) <= 1e-12 * max(float(np.linalg.norm(A)), 1e-300):
             continue
         coef, *_ = np.linalg.lstsq(C, resid, rcond=None)
         gain = float(np.sum((C @ coef) ** 2))

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -141,7 +142,9 @@ class LinearEvidence:
         a[pen] = np.asarray(alpha, float)[self.groups[pen]]
         sb = math.sqrt(beta)
         # H = beta R^T R + diag(a) = R_H^T R_H, from one QR of the stacked square roots
-        RH = np.linalg.qr(np.vstack([sb * self.R, np.diag(np.sqrt(a))]), mode="r")
+        # numpy's stubs type qr(mode="r") as a QRResult; it returns the R array
+        RH = cast(np.ndarray, np.linalg.qr(np.vstack([sb * self.R, np.diag(np.sqrt(a))]),
+                                           mode="r"))
         RHi = np.linalg.solve(RH, np.eye(RH.shape[0]))
         w = beta * (RHi @ (RHi.T @ (self.R.T @ self.z)))
         diag = np.einsum("ij,ij->i", RHi, RHi)
@@ -233,8 +236,8 @@ def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.
     given_scales = given_scales or {}
     idx = np.flatnonzero(free)
     present = [c for c in CLASSES if any(class_of[i] == c for i in idx)]
-    groups = np.array([present.index(class_of[i]) if class_of[i] is not None else -1
-                       for i in idx], dtype=int)
+    groups = np.array([-1 if (cls := class_of[i]) is None else present.index(cls)
+                       for i in idx], dtype=np.intp)
     n = len(present)
     fixed_a = np.array([c in given_scales for c in present], bool)
     alpha = np.array([1.0 / given_scales[c] ** 2 if c in given_scales else 1.0 for c in present])

@@ -104,13 +104,15 @@ class ParameterLayout:
         return self.n_kinematic + self.n_frames + self.n_backlash
 
     @property
-    def frame_slices(self) -> tuple[slice, ...]:
+    def frame_slices(self) -> tuple[slice | np.ndarray, ...]:
         """Per set, the slice of its frame parameters in the vector (an index array for a
         set sharing some with an earlier set)."""
-        out, start, where = [], self.n_kinematic, []
+        out: list[slice | np.ndarray] = []
+        where: list[list[int]] = []
+        start = self.n_kinematic
         for i, (names, _) in enumerate(self.set_frames):
             own = self.own(i)
-            pos = []
+            pos: list[int] = []
             for k, (name, mine) in enumerate(zip(names, own)):
                 if mine:
                     pos.append(start)

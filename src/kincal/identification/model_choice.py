@@ -1,10 +1,10 @@
 """The model chooses itself (``model="auto"``): candidate structures compared out of sample.
 
 The candidates are the error models that can describe the chain (complete, placement,
-offsets, mdh) and, where the samples carry approach directions (every set a point set; the
-order of the rows or an order column), a backlash term per joint added by forward
-selection (none when backlash joints are given: those are the user's, in every
-candidate). Each is scored by its K-fold cross-validated prediction error on **the folds
+offsets, mdh) and, where the samples carry approach directions (every set a point or pose
+set, :data:`BACKLASH_KINDS`; the order of the rows or an order column), a backlash term per
+joint added by forward selection (none when backlash joints are given: those are the
+user's, in every candidate). Each is scored by its K-fold cross-validated prediction error on **the folds
 the penalty choice already makes** (same seed, same pose groups, same subsample): the
 chain's default structure is cross-validated as any ``lam="cv"`` run does, and every
 candidate is then fitted on those folds at that lambda and at 1/3x and 3x it (its own
@@ -31,15 +31,24 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kincal.errors import KincalError, KincalWarning
 from kincal.models import MODELS
 
+if TYPE_CHECKING:
+    from kincal.identification.options import CalibrationOptions
+
 GUARD = 3.0  # standard errors of the paired validation differences a candidate must win by
 LAMBDA_STEPS = (1 / 3, 1.0, 3.0)  # each candidate's lambdas, times the default's CV lambda
 MAX_TERMS = 3  # backlash terms forward selection may add
+# kinds whose samples see a joint's play directly (the tool point or the tool pose at the
+# joint's effective value; a pose's orientation rows turn with it too): forward selection
+# tries backlash terms on their sets. Distances and plane contacts see it only through one
+# scalar per sample and keep the chain's default structure.
+BACKLASH_KINDS = ("point", "pose")
 
 
 def label(model: str, backlash) -> str:
@@ -139,14 +148,16 @@ def beats(new: np.ndarray, best: np.ndarray) -> tuple[bool, str]:
                    else "no better")
 
 
-def resolve(problem_class, robots, sets, options) -> tuple[ModelChoice | None, object]:
+def resolve(problem_class, robots, sets, options: CalibrationOptions
+            ) -> tuple[ModelChoice | None, CalibrationOptions]:
     """(None, options) unless options.model is "auto"; then :func:`choose`."""
     if options.model != "auto":
         return None, options
     return choose(problem_class, robots, sets, options)
 
 
-def choose(CalibrationProblem, robots, sets, options) -> tuple[ModelChoice, object]:
+def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
+           ) -> tuple[ModelChoice, CalibrationOptions]:
     """(the comparison, options with the chosen ``model`` and ``backlash``) for options
     whose model is "auto". CalibrationProblem: the problem class (passed in, so this module
     does not import the one that calls it); ``options``: validated CalibrationOptions; the
@@ -264,9 +275,10 @@ def _fold_scores(p, free, folds, lam0, model, backlash) -> Candidate:
 
 
 def _backlash_joints(problem, given) -> list[str]:
-    """The chain joints a backlash term may be tried on: every set a point set (the
-    approach directions are the samples'), approached from both sides in every set."""
-    if any(km.kind != "point" for km in problem.kinds) or problem.chains.several:
+    """The chain joints a backlash term may be tried on: every set of a kind in
+    BACKLASH_KINDS (the approach directions are the samples'), approached from both sides
+    in every set."""
+    if any(km.kind not in BACKLASH_KINDS for km in problem.kinds) or problem.chains.several:
         return []
     out = []
     for j, name in enumerate(problem.robot.joint_names):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -14,6 +14,9 @@ from kincal.measurements.point_space import DEG, MM
 from kincal.identification.robust import LOSSES
 from kincal.identification.selection import RANK_TOL
 from kincal.identification.solver import SolverOptions
+
+if TYPE_CHECKING:
+    from kincal.identification.prior import FleetPrior
 
 METHODS = ("l2", "ls", "frames")
 # accepted given prior scales [mm or deg] and noise [mm] of the evidence estimator: beyond,
@@ -116,7 +119,7 @@ class CalibrationOptions:
     blas_threads: int | None = 1
     progress: Callable | None = field(default=None, compare=False, repr=False)
     shared_planes: bool = False
-    prior: object = None
+    prior: FleetPrior | None = None
     prior_scale: float | None = None
 
     def validated(self) -> "CalibrationOptions":

@@ -61,8 +61,9 @@ def nominal_errors(robot, data) -> tuple[float, float]:
         problem = CalibrationProblem(robot, [data], CalibrationOptions(method="frames"))
         r = problem.residuals(problem.start(), 0)
     km = problem.kinds[0]
-    return (float(np.mean(km.sample_errors(r))) * 1e3,
-            float(np.degrees(np.mean(angle_errors(km, r)))))
+    angles = angle_errors(km, r)
+    assert angles is not None  # pose data have orientation errors
+    return (float(np.mean(km.sample_errors(r))) * 1e3, float(np.degrees(np.mean(angles))))
 
 
 def convention_evidence(robot, data, other_data, fmt: str, other: str) -> ConventionEvidence:

@@ -327,7 +327,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                      "(use --method l2)") if ev.method == "ls" else
                     "data that do not fit the model (see the residual), or a very "
                     "ill-conditioned problem",)))
-    notes = ()
+    notes: tuple[str, ...] = ()
     if ev.off_chain_columns and not any(f.kind == "residual" for f in out):
         # the data fit, yet name joints the chain leaves out: a tip short of the data's,
         # harmless only if those joints cannot move the measured point (e.g. a tool on
@@ -365,25 +365,14 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     latter being what a URDF export writes), whatever error model was identified. The
     residual is the worst set's (median and RMS of its sample errors); the spread and the
     unit clue come from the first set that measures positions."""
-    g = problem.robot.geometry
     lay = result.layout
-    tool_start, tool = np.zeros(3), np.zeros(3)
-    if "tool.x" in lay.frame_names(0):
-        k = lay.index("tool.x")
-        tool_start, tool = result.x_start[k:k + 3], result.x[k:k + 3]
-    L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
-    # workspace: seeded configurations over the joint limits (unbounded revolute: a turn)
-    span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
-    lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
-    hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
-    q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
-    d = _aligned_distances(_tool_points(problem.robot, q, tool_start),
-                           _tool_points(result.corrected, q, tool)) * 1e3
+    L, d = max((_change(problem, result, k) for k in range(_n_chains(problem))),
+               key=lambda c: float(np.sqrt(np.mean(c[1] ** 2))) / c[0])  # the worst chain's
     corrections = []
     for p in result.parameters:
         if p.status == "identified" and lay.is_kinematic[lay.index(p.name)]:
-            k, unit = (1e3, "mm") if p.is_length else (180.0 / math.pi, "deg")
-            corrections.append((p.name, p.deviation * k, unit))
+            factor, unit = (1e3, "mm") if p.is_length else (180.0 / math.pi, "deg")
+            corrections.append((p.name, p.deviation * factor, unit))
     # largest first, lengths against the reach and angles in degrees on one footing
     corrections.sort(key=lambda c: -abs(c[1]) / (L * 1e3 if c[2] == "mm" else 180.0))
     worst = max(result.sets, key=lambda s: float(np.median(s.errors_after)))
@@ -428,6 +417,40 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
         off_chain_columns=off_chain, converged=bool(result.converged),
         iterations=int(result.solve.iterations), method=problem.options.method)
+
+
+def _n_chains(problem: CalibrationProblem) -> int:
+    chains = getattr(problem, "chains", None)
+    return len(chains.chain_robots) if chains is not None and chains.several else 1
+
+
+def _change(problem: CalibrationProblem, result: CalibrationResult,
+            chain: int) -> tuple[float, np.ndarray]:
+    """(reach [m], (M,) distances [mm]) of chain ``chain``: how far the corrected model
+    moves its tool point (from the chain's first set; none: the tip) from the nominal one's
+    at seeded configurations over the joint limits (unbounded revolute: a turn). Each chain
+    of a several-chain calibration is judged, so that no chain's correction goes unseen."""
+    lay = result.layout
+    if _n_chains(problem) == 1:
+        robot, corrected, first = problem.robot, result.corrected, 0
+    else:
+        robot = problem.chains.chain_robots[chain]
+        corrected = robot.with_origins(result.corrected.urdf_origins(
+            tuple(problem.error_model.joint_names)))
+        first = problem.chains.of_set.index(chain)
+    g = robot.geometry
+    tool_start, tool = np.zeros(3), np.zeros(3)
+    name = lay.set_prefix(first) + "tool.x"
+    if name in lay.frame_names(first):
+        k = lay.index(name)
+        tool_start, tool = result.x_start[k:k + 3], result.x[k:k + 3]
+    L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
+    span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
+    lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
+    hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
+    q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
+    return L, _aligned_distances(_tool_points(robot, q, tool_start),
+                                 _tool_points(corrected, q, tool)) * 1e3
 
 
 def _tool_points(robot, q: np.ndarray, tool: np.ndarray) -> np.ndarray:

@@ -4,16 +4,16 @@ measurement sets of any kind.
 ``CalibrationProblem(robot, sets, options)`` builds; ``.analyze()`` says what the data
 identify; ``.solve()`` identifies (plain least squares, or L2 toward nominal with per-class
 priors chosen by maximum evidence, lambda chosen by k-fold CV, or lambda given) and returns
-a :class:`~kincal.identification.result.CalibrationResult` carrying the plausibility
-gate's verdict. ``calibrate(...)`` does all three. One data set is a list of one: there is
-no other path.
+a :class:`~kincal.identification.result.CalibrationResult` carrying the plausibility gate's
+verdict. ``calibrate(...)`` does all three. One data set is a list of one: there is no other
+path.
 
 The sets share the kinematic and backlash parameters; each adds its kind's frames
 (:mod:`kincal.identification.layout`). Weights: each sample's residual rows are divided by
-its stated sigma (a set's ``sigma``, or
-:data:`kincal.measurements.kind.DEFAULT_SIGMA` where a set states none), normalised to RMS 1
-over all samples; sets without sigmas weigh alike (all weights 1). Residuals are in mm, the
-solver's variables are the parameters over their penalty scale (1 mm, 1 deg).
+its stated sigma (a set's ``sigma``, or :data:`kincal.measurements.kind.DEFAULT_SIGMA` where
+a set states none), normalised to RMS 1 over all samples; sets without sigmas weigh alike
+(all weights 1). Residuals are in mm, the solver's variables are the parameters over their
+penalty scale (1 mm, 1 deg).
 """
 
 from __future__ import annotations
@@ -74,17 +74,14 @@ class CalibrationProblem:
                                          ch.shared_planes(self.kinds) if o.shared_planes else ())
         self.scale = np.where(self.layout.is_length, o.length_scale, o.angle_scale)
         self.offsets = np.cumsum([0] + [km.N for km in self.kinds])
-        stated = [km.data.sigma is not None for km in self.kinds]
-        if not any(stated):
-            self.weights = np.ones(self.n_samples)
-        else:
+        self.weights = np.ones(self.n_samples)
+        if any(km.data.sigma is not None for km in self.kinds):
             sig = np.concatenate([km.data.sigma if km.data.sigma is not None
                                   else np.full(km.N, DEFAULT_SIGMA) for km in self.kinds])
             inv = sig.min() / sig  # in (0, 1]: no overflow whatever the unit of the sigmas
             self.weights = inv / np.sqrt(np.mean(inv ** 2))
-        for name in o.fix + o.free:
-            if not any(c in name for c in "*?["):
-                self._check_name(name)  # a name of another model says which model has it
+        for name in [n for n in o.fix + o.free if not any(c in n for c in "*?[")]:
+            self._check_name(name)  # a name of another model says which model has it
         self.layout.expand(o.fix), self.layout.expand(o.free)  # unknown names raise, listed
         if not self._unfixed().any():
             raise OptionError(f"nothing to fit: every parameter method {o.method} fits is fixed; "
@@ -97,7 +94,9 @@ class CalibrationProblem:
                 raise DataError(f"{km.data.source}: {n} poses; the frames of a measurement set "
                                 "alone need at least 3 (a calibration needs many more)")
         self._warn_inputs()
-        self._x_start = self._ident = self._structural = None
+        self._x_start: np.ndarray | None = None
+        self._ident: Identifiability | None = None
+        self._structural: Identifiability | None = None
         self._all_blocks: dict = {}  # (set, block size): blocks of a whole set
 
     # ----------------------------------------------------------------- layout
@@ -318,7 +317,7 @@ class CalibrationProblem:
                          + ", ".join(lost))
         general = self.structural()
         gone = [n for n in general.kept if n not in ident.kept] if general else []
-        if gone:
+        if gone and general is not None:
             d = self.kinds[0].data
             need = math.ceil(len(general.kept) / (3 * d.n_points))
             notes.append(f"{len(gone)} parameters this chain can identify are not identifiable "
@@ -350,7 +349,7 @@ class CalibrationProblem:
         q = np.repeat(rng.uniform(lo, hi, size=(2 * lay.size, g.n)), K, axis=0)
         approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * lay.size, g.n)), K, axis=0)
         points = np.tile(np.arange(K), 2 * lay.size)
-        _, J = MeasurementModel(self.error_model, q, approach, lay.backlash, points,
+        _, J = MeasurementModel(self.chains.models[0], q, approach, lay.backlash, points,
                                 K).jacobian(self.start())
         J = J.reshape(-1, lay.size) * lay.reporting_scale() / MM
         self._structural = analyze(J, lay.names, lay.n_kinematic, self._unfixed(),

@@ -21,7 +21,7 @@ and only p x p quantities are kept:
 
 from __future__ import annotations
 
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable, Protocol, cast
 
 import numpy as np
 
@@ -35,13 +35,17 @@ def stacked_triangle(blocks: Iterable[tuple[slice, np.ndarray, np.ndarray]],
                      ) -> tuple[np.ndarray, int]:
     """(R (c, c) upper triangular, m): R^T R = A^T A for A the stacked J_b[:, columns]
     (with -r_b as a last column if ``with_residual``), and the number of rows m."""
-    R, m = None, 0
+    R: np.ndarray | None = None
+    m = 0
     for _, r, J in blocks:
         A = J if columns is None else J[:, columns]
         if with_residual:
             A = np.column_stack([A, -r])
         m += A.shape[0]
-        R = np.linalg.qr(A if R is None else np.vstack([R, A]), mode="r")
+        # numpy's stubs type qr(mode="r") as a QRResult; it returns the R array
+        R = cast(np.ndarray, np.linalg.qr(A if R is None else np.vstack([R, A]), mode="r"))
+    if R is None:
+        raise ValueError("no rows to stack: the residual gave no blocks")
     return R, m
 
 
@@ -121,12 +125,23 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True) -> Callabl
     return blocks
 
 
+class BlockedResidual(Protocol):
+    """A residual function that also streams its rows in blocks (:func:`with_blocks`)."""
+
+    blocks: Callable
+    rows: int
+    n_blocks: int
+
+    def __call__(self, u: np.ndarray, jacobian: bool = ...) -> Any: ...
+
+
 def with_blocks(residual: Callable, parts, layout, weights, scale, kinematic: bool,
-                m: int) -> Callable:
+                m: int) -> BlockedResidual:
     """``residual`` with ``blocks`` (:func:`row_blocks`), ``rows`` (m) and ``n_blocks``."""
-    residual.blocks = row_blocks(parts, layout, weights, scale, kinematic)
-    residual.rows, residual.n_blocks = m, sum(len(part[3]) for part in parts)
-    return residual
+    out = cast(BlockedResidual, residual)  # the attributes are set here
+    out.blocks = row_blocks(parts, layout, weights, scale, kinematic)
+    out.rows, out.n_blocks = m, sum(len(part[3]) for part in parts)
+    return out
 
 
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
@@ -138,5 +153,5 @@ def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, na
 
     if getattr(residual, "n_blocks", 1) <= 1:
         return analyze(residual(u, True)[1] * column_scale, names, n_kinematic, free, rank_tol)
-    R, m = stacked_triangle(residual.blocks(u))
+    R, m = stacked_triangle(cast(BlockedResidual, residual).blocks(u))
     return analyze(R * column_scale, names, n_kinematic, free, rank_tol, m=m)

@@ -24,7 +24,11 @@ from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 
 if TYPE_CHECKING:
+    from kincal.identification.chains import Chains, UnionModel
+    from kincal.identification.model_choice import ModelChoice
     from kincal.identification.problem import CalibrationProblem
+    from kincal.measurements.data import Measurements
+    from kincal.measurements.kind import SampleSet
 
 @dataclass(frozen=True)
 class ParameterEstimate:
@@ -70,7 +74,7 @@ class SetResult:
 
     kind: str
     source: str
-    data: object
+    data: Measurements | SampleSet
     frame_names: tuple[str, ...]
     frames: np.ndarray
     residuals: np.ndarray
@@ -156,14 +160,14 @@ class CalibrationResult:
     sets: tuple[SetResult, ...]
     solve: SolveSummary
     identifiability: Identifiability
-    error_model: ErrorModel
+    error_model: ErrorModel | UnionModel  # several chains: the union of their models
     downweighted: tuple[Downweighted, ...] = ()
     covariance: np.ndarray | None = None
     evidence: EvidenceFit | None = None
     penalty_choice: str = ""
     plausibility: Plausibility | None = None
-    chains: object = None
-    model_choice: object = None
+    chains: Chains | None = None
+    model_choice: ModelChoice | None = None
 
     @classmethod
     def build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,
@@ -270,7 +274,9 @@ class CalibrationResult:
 
     @property
     def approach(self) -> np.ndarray:
-        return self.sets[0].data.approach
+        approach = self.sets[0].data.approach
+        assert approach is not None  # filled in by the data's __post_init__
+        return approach
 
     @property
     def order_source(self) -> str:
@@ -340,6 +346,7 @@ class CalibrationResult:
         if self.chains is not None and self.chains.several:  # that set's chain
             em, k = self.chains.chain_of(self._located())
             kin = kin[k]
+        assert isinstance(em, ErrorModel)  # a chain's model, not the union of several
         b = [j for j in self.layout.backlash if j in em.joint_names]
         x = np.concatenate([kin, self.base, tools.ravel(), [self.backlash[j] for j in b]])
         return MeasurementModel(em, q, g, tuple(b), idx, len(tools)).predict(x)

@@ -146,7 +146,8 @@ def _within_rank(J, norms, names, n_kinematic, free, floor) -> tuple[list, list]
     test compares each new part with its own column, which a run of nearly parallel
     columns (a chain of parallel axes, or frames and origins alike) passes one by one
     although together they span fewer directions: kept > rank, condition number ~1e15."""
-    kept, dropped = [], []
+    kept: list[int] = []
+    dropped: list[int] = []
     for c in preference_order(names, n_kinematic):
         if not free[c]:
             continue
@@ -177,11 +178,12 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     # J = Q R: R has the same column norms, projections and singular values, so all
     # that follows works on p x p numbers whatever the number of poses
     if J.shape[0] > J.shape[1]:
-        J = np.linalg.qr(J, mode="r")  # Householder: the rank decision needs full accuracy
+        J = np.asarray(np.linalg.qr(J, mode="r"))  # Householder: the rank decision needs full accuracy
     norms = np.linalg.norm(J, axis=0)
     scale = float(norms.max()) if norms.size else 1.0
     Q = np.zeros((J.shape[0], 0))
-    kept, dropped = [], []
+    kept: list[int] = []
+    dropped: list[int] = []
     for c in preference_order(names, n_kinematic):
         if not free[c]:
             continue

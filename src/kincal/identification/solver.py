@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, cast
 
 import numpy as np
 import scipy.linalg
@@ -112,6 +112,7 @@ class SolveSummary:
         """(k, k) J^T J of the columns ``free`` (mask or indices) at the solution."""
         if self.jacobian is None:
             idx = np.flatnonzero(free) if np.asarray(free).dtype == bool else np.asarray(free)
+            assert self.gram is not None  # a streamed fit carries J^T J
             return self.gram[np.ix_(idx, idx)]
         J = self.jacobian[:, free]
         return J.T @ J
@@ -134,7 +135,7 @@ def triangular_factor(A: np.ndarray) -> np.ndarray:
     """
     m, n = A.shape
     if m <= 50 * n:
-        return np.linalg.qr(A, mode="r")
+        return _r_of_qr(A)
     try:
         R1 = np.linalg.cholesky(A.T @ A).T
         d = np.abs(np.diag(R1))
@@ -143,7 +144,13 @@ def triangular_factor(A: np.ndarray) -> np.ndarray:
         A1 = A @ np.linalg.inv(R1)  # small n x n inverse: much faster than a wide trsm
         return np.linalg.cholesky(A1.T @ A1).T @ R1
     except np.linalg.LinAlgError:
-        return np.linalg.qr(A, mode="r")
+        return _r_of_qr(A)
+
+
+def _r_of_qr(A: np.ndarray) -> np.ndarray:
+    """R of Householder QR. (numpy's stubs type ``qr(mode="r")`` as a QRResult; it
+    returns the R array.)"""
+    return cast(np.ndarray, np.linalg.qr(A, mode="r"))
 
 
 def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.ndarray = 0.0,

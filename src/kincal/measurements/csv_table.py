@@ -95,7 +95,8 @@ def _is_number(cell: str) -> bool:
 
 def _positions(index) -> str:
     """1-based column positions, runs written as ranges: "2, 34-37"."""
-    runs, out = [], []
+    runs: list[list[int]] = []
+    out: list[str] = []
     for i in sorted(index):
         if runs and i == runs[-1][1] + 1:
             runs[-1][1] = i
@@ -148,7 +149,7 @@ def sniff_separator(header_line: str) -> str:
     if "," in header_line:
         return ","
     counts = {sep: header_line.count(sep) for sep in (";", "\t")}
-    best = max(counts, key=counts.get)
+    best = max(counts, key=lambda sep: counts[sep])
     return best if counts[best] else ","
 
 

@@ -163,6 +163,15 @@ class Measurements:
         return len(self.joint_values)
 
     @property
+    def filled(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, approach, points, poses): the fields that may be given as None, which
+        ``__post_init__`` has filled in."""
+        rows, approach, points, poses = self.rows, self.approach, self.points, self.poses
+        assert rows is not None and approach is not None and points is not None \
+            and poses is not None  # filled in by __post_init__
+        return rows, approach, points, poses
+
+    @property
     def has_order_column(self) -> bool:
         """Whether the acquisition order came from an order column (not the sample order)."""
         return self.order_source.startswith("column ")
@@ -170,15 +179,16 @@ class Measurements:
     @property
     def n_points(self) -> int:
         """Measured points per pose (K)."""
-        return int(self.points.max()) + 1 if len(self) else 1
+        return int(self.filled[2].max()) + 1 if len(self) else 1
 
     def subset(self, index) -> "Measurements":
         index = np.asarray(index)
+        rows, approach, points, poses = self.filled
         return replace(self, joint_values=self.joint_values[index],
                        positions=self.positions[index],
                        sigma=None if self.sigma is None else self.sigma[index],
-                       rows=self.rows[index], approach=self.approach[index],
-                       points=self.points[index], poses=self.poses[index])
+                       rows=rows[index], approach=approach[index],
+                       points=points[index], poses=poses[index])
 
     def for_chain(self, joint_names) -> "Measurements":
         """The same samples with columns in the order of ``joint_names`` (checked)."""
@@ -191,7 +201,7 @@ class Measurements:
                             f"the data has {listing(self.joint_names)}")
         idx = [self.joint_names.index(j) for j in joint_names]
         return replace(self, joint_names=joint_names, joint_values=self.joint_values[:, idx],
-                       approach=self.approach[:, idx])
+                       approach=self.filled[1][:, idx])
 
     @classmethod
     def from_csv(cls, path, joint_names, prismatic=(), length_unit: str = "m",
@@ -262,15 +272,17 @@ class Measurements:
         one row per pose; with K points per pose the columns x1, y1, z1, ..., xK, yK, zK
         (every pose must then have each point once)."""
         K = self.n_points
+        _, _, points, poses = self.filled
+        groups: np.ndarray | None
         if K == 1:  # one sample per pose, in the order of the samples
             groups = np.arange(len(self))[:, None]
         else:
-            order = np.lexsort((self.points, self.poses))
+            order = np.lexsort((points, poses))
             groups = order.reshape(-1, K) if len(self) % K == 0 else None
-            if groups is None or np.any(self.points[groups] != np.arange(K)) or np.any(
-                    self.poses[groups] != self.poses[groups[:, :1]]):
+            if groups is None or np.any(points[groups] != np.arange(K)) or np.any(
+                    poses[groups] != poses[groups[:, :1]]):
                 raise DataError(f"{self.source}: writing as CSV needs each of the "
-                                f"{len(np.unique(self.poses))} poses to have each of the {K} "
+                                f"{len(np.unique(poses))} poses to have each of the {K} "
                                 "points once")
         xyz = ["x", "y", "z"] if K == 1 else [f"{c}{k}" for k in range(1, K + 1) for c in "xyz"]
         cols = list(self.joint_names) + xyz + (["sigma"] if self.sigma is not None else [])

@@ -117,8 +117,8 @@ class FlushData(SampleSet):
             raise DataError(f"{c.source}: column 'sigma_deg' without a 'sigma' column: the tilt "
                             "rows weigh by the ratio of the height sigma to the tilt sigma; add "
                             "'sigma' [length unit] or drop 'sigma_deg'")
-        k = np.zeros(len(c.rows), int) if planes is None else planes
-        check_touch_counts(k, labels, c.source)
+        check_touch_counts(np.zeros(len(c.rows), int) if planes is None else planes, labels,
+                           c.source)
         return cls(joint_names=tuple(joint_names), joint_values=c.joint_values, planes=planes,
                    labels=labels, sigma=v["sigma"] * L if "sigma" in v else None,
                    sigma_deg=v.get("sigma_deg"),
@@ -130,6 +130,7 @@ class FlushData(SampleSet):
         """The touches in the layout :meth:`from_csv` reads (SI units, full precision)."""
         cols, table = list(self.joint_names), [self.joint_values]
         if self.labels != ("",):
+            assert self.planes is not None  # filled in by __post_init__
             cols.append("plane")
             table.append(np.array([[float(self.labels[k])] for k in self.planes]))
         for name in ("sigma", "sigma_deg"):
@@ -184,6 +185,7 @@ class FlushKind(KindModel):
 
     kind = "flush"
     dim = 3
+    data: FlushData
 
     def __init__(self, error_model, data, backlash=()):
         super().__init__(error_model, data, backlash)
@@ -246,6 +248,7 @@ class FlushKind(KindModel):
     def check_fixable(self, kin, tool_guess=None) -> None:
         """Raise for a plane its touches cannot fix: fewer than three touches, or touches
         on (nearly) a line, at the kinematics ``kin``."""
+        assert self.data.planes is not None  # filled in by FlushData.__post_init__
         check_touch_counts(self.data.planes, self.data.labels, self.data.source)
         s = self.chain.state(kin, None, keep=False)
         P = s.p_tip + s.R_tip @ (np.zeros(3) if tool_guess is None else

@@ -25,6 +25,7 @@ derivatives through :class:`kincal.models.chain.ChainState`. Plain numpy.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -101,7 +102,7 @@ class SampleSet:
 
     def subset(self, index) -> "SampleSet":
         index = np.asarray(index)
-        cut = {}
+        cut: dict[str, Any] = {}
         for name in self.per_sample_fields():
             value = getattr(self, name)
             cut[name] = None if value is None else value[index]
@@ -116,6 +117,7 @@ class SampleSet:
         if missing:
             raise DataError(f"{self.source}: no values for chain joints {', '.join(missing)}")
         idx = [self.joint_names.index(j) for j in joint_names]
+        assert self.approach is not None  # filled in by __post_init__
         return replace(self, joint_names=joint_names, joint_values=self.joint_values[:, idx],
                        approach=self.approach[:, idx])
 

@@ -65,7 +65,7 @@ def candidate_columns(fmt: str, position_columns=None) -> list[tuple[str, ...]]:
 def found_columns(header, position_columns=None) -> list[tuple[str, ...]]:
     """Every complete group of orientation columns in ``header`` (any format), for the
     refusal of a pose file read as positions."""
-    seen = []
+    seen: list[tuple[str, ...]] = []
     for fmt in FORMATS:
         for g in candidate_columns(fmt, position_columns):
             if all(c in header for c in g) and set(g) not in [set(x) for x in seen]:
@@ -163,3 +163,43 @@ def _exp(phi: np.ndarray) -> np.ndarray:
     K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -phi[:, 2], phi[:, 1], -phi[:, 0]
     K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = phi[:, 2], -phi[:, 1], phi[:, 0]
     return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
+def written_columns(fmt: str, position_columns=None) -> tuple[str, ...]:
+    """The columns a pose file written in format ``fmt`` gets: the format's first usual
+    names (roll pitch yaw for rpy), suffixed like the position columns."""
+    return candidate_columns(fmt, position_columns)[0]
+
+
+def orientation_values(R: np.ndarray, fmt: str, angle_scale: float = 1.0) -> np.ndarray:
+    """(N, k) the columns of format ``fmt`` for rotations R (N, 3, 3): the inverse of
+    :func:`rotations` (angles divided by ``angle_scale``, radians per unit). Quaternions with
+    w >= 0; roll/pitch/yaw with the pitch in [-90, 90] deg; rotation vectors of angle <= pi."""
+    R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
+    if fmt not in FORMATS:
+        raise DataError(f"unknown orientation format {fmt!r}; expected one of "
+                        f"{', '.join(FORMATS)}")
+    if fmt == "matrix":
+        return R.reshape(-1, 9)
+    if fmt in ("quat-xyzw", "quat-wxyz", "rotvec"):
+        from kincal.rotations import matrix_to_quaternion
+
+        q = np.array([matrix_to_quaternion(r) for r in R]).reshape(-1, 4)  # qw >= 0
+        if fmt != "rotvec":
+            return q if fmt == "quat-xyzw" else q[:, [3, 0, 1, 2]]
+        s = np.linalg.norm(q[:, :3], axis=1)  # sin(angle / 2), the angle in [0, pi]
+        big = s > 1e-12  # else the small-angle limit of angle / sin(angle / 2): 2 / qw
+        k = np.where(big, 2.0 * np.arctan2(s, q[:, 3]) / np.where(big, s, 1.0),
+                     2.0 / np.maximum(q[:, 3], 0.5))
+        a = q[:, :3] * k[:, None]
+    elif fmt == "rpy-zyx":  # R = Rz(c) Ry(b) Rx(a): a, then b and c from R Rx(a)^T
+        x = np.arctan2(R[:, 2, 1], R[:, 2, 2])  # so that the angles give R back to
+        M = R @ np.transpose(_axis_rotation(x, 0), (0, 2, 1))  # rounding even at gimbal lock
+        a = np.column_stack([x, np.arctan2(-M[:, 2, 0], M[:, 2, 2]),
+                             np.arctan2(-M[:, 0, 1], M[:, 1, 1])])
+    else:  # rpy-xyz: R = Rx(a) Ry(b) Rz(c): a, then b and c from Rx(a)^T R
+        x = np.arctan2(-R[:, 1, 2], R[:, 2, 2])
+        M = np.transpose(_axis_rotation(x, 0), (0, 2, 1)) @ R
+        a = np.column_stack([x, np.arctan2(M[:, 0, 2], M[:, 2, 2]),
+                             np.arctan2(M[:, 1, 0], M[:, 1, 1])])
+    return a / angle_scale

@@ -101,6 +101,7 @@ class PlaneKind(KindModel):
 
     kind = "plane"
     dim = 1
+    data: PlaneData
 
     def __init__(self, error_model, data, backlash=()):
         super().__init__(error_model, data, backlash)
@@ -144,6 +145,7 @@ class PlaneKind(KindModel):
         s = self.chain.state(kin, None, keep=False)
         t = np.zeros(3) if tool_guess is None else np.asarray(tool_guess, float)
         P = s.p_tip + s.R_tip @ t
+        assert self.data.planes is not None  # filled in by PlaneData.__post_init__
         for j, label in enumerate(self.data.labels):
             on = self.data.planes == j
             name = "the plane" if label == "" else f"plane {label}"

@@ -184,6 +184,7 @@ class PoseKind(KindModel):
 
     kind = "pose"
     dim = 6
+    data: PoseData
     frame_names = FRAMES
     frame_is_length = (True,) * 3 + (False,) * 3 + (True,) * 3 + (False,) * 3
 

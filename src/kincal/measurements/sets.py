@@ -119,21 +119,24 @@ def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="
                                  order_column=order_column, joint_columns=joint_columns)
 
 
-def to_csv_text(data) -> str:
-    """A set in the CSV layout :func:`read_set_file` reads (SI units, full precision)."""
+def to_csv_text(data, orientation_format: str = "quat-xyzw") -> str:
+    """A set in the CSV layout :func:`read_set_file` reads (SI units, full precision);
+    a pose set's orientations in ``orientation_format``
+    (:mod:`kincal.measurements.orientation_columns`, read back with the same
+    ``--orientation-format``; angles in radians)."""
     import numpy as np
 
-    from kincal.rotations import matrix_to_quaternion
+    from kincal.measurements.orientation_columns import orientation_values, written_columns
 
     kind = kind_of(data)
     if kind in ("point", "flush"):
         return data.to_csv_text()
     cols = list(data.joint_names)
-    extra = []
+    extra: np.ndarray = np.zeros((0, 0))
     if kind == "pose":
-        cols += ["x", "y", "z", "qx", "qy", "qz", "qw"]
-        extra = np.hstack([data.positions, np.array([matrix_to_quaternion(R)
-                                                     for R in data.rotations])])
+        cols += ["x", "y", "z", *written_columns(orientation_format)]
+        extra = np.hstack([data.positions, orientation_values(data.rotations,
+                                                              orientation_format)])
     elif kind == "distance":
         cols += ["distance"]
         extra = data.distances[:, None]

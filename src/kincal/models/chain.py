@@ -114,6 +114,7 @@ class Chain:
                 G = H @ (self._motion[i] if self._motion is not None
                          else self.joint_motion(i, self.q[:, i]))
             else:
+                assert self.approach is not None  # backlash terms have them (__init__)
                 G = H @ self.joint_motion(i, self.q[:, i] + backlash[k] * self.approach[:, i])
         T = G @ m.T_last_tip
         if T.ndim == 2:
@@ -158,6 +159,7 @@ class ChainState:
             K = np.empty((N, 3, m.size))
         B = np.empty((N, 3, len(chain.backlash)))
         for k, i in enumerate(chain.backlash):
+            assert chain.approach is not None  # backlash terms have them (Chain.__init__)
             H = self.placed[i]
             axis = H[:, :3, :3] @ m.screw_axes[i]
             if m.kinds[i] == "prismatic":
@@ -179,6 +181,7 @@ class ChainState:
                 K[:, :, idx] = self.before[i][:, :3, :3] @ w[idx].T
         B = np.empty((chain.N, 3, len(chain.backlash)))
         for k, i in enumerate(chain.backlash):
+            assert chain.approach is not None  # backlash terms have them (Chain.__init__)
             axis = self.placed[i][:, :3, :3] @ m.screw_axes[i]
             B[:, :, k] = (0.0 if m.kinds[i] == "prismatic" else axis) * chain.approach[:, i, None]
         return K, B

@@ -344,7 +344,7 @@ def extract(geometry, beta_below: float | None = None, name: str | None = None) 
                 if np.linalg.norm(perp) > _ZERO:
                     x = _signed_toward(_unit(perp), hints[i], perp)
                     what = "are parallel" if np.linalg.norm(c) <= PARALLEL_TOL else \
-                        f"are nearly parallel ({np.degrees(np.arcsin(min(np.linalg.norm(c), 1.0))):.3g} deg)"
+                        f"are nearly parallel ({np.degrees(np.arcsin(min(float(np.linalg.norm(c)), 1.0))):.3g} deg)"
                     note = (f"axes of {names[i]} and {names[i + 1]} {what}: frame kept at the "
                             f"URDF joint origin, {names[i + 1]}.beta added (Hayati)")
                 else:

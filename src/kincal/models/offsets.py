@@ -30,16 +30,19 @@ from kincal.rotations import inverse, transform
 class OffsetsModel(ErrorModel):
     """Joint offsets (see the module notes); placed frames are the URDF joint frames and
     ``origins`` (n, 4, 4) their nominal placements in the frame before; ``urdf`` (n, 4, 4)
-    the nominal URDF origins and ``urdf_axes`` (n, 3) the URDF axes (chain axes, negated
+    the nominal URDF origins (None: a geometry made without its URDF parent frames) and ``urdf_axes`` (n, 3) the URDF axes (chain axes, negated
     for reversed joints)."""
 
     origins: np.ndarray
-    urdf: np.ndarray
+    urdf: np.ndarray | None
     urdf_axes: np.ndarray
 
     def urdf_origins(self, x) -> dict[str, np.ndarray]:
         """{joint: (4, 4) its corrected URDF origin} [m]: the origin turned about (slid
         along) the URDF axis by the offset, forward or reversed alike (module notes)."""
+        if self.urdf is None:
+            raise ValueError("this offsets model was built from a geometry without its URDF "
+                             "parent frames: it has no URDF origins")
         x = np.asarray(x, float).ravel()
         out = {}
         for i, name in enumerate(self.joint_names):

@@ -285,6 +285,10 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     if method == "I" and targets is None:
         raise OptionError("I-optimal selection needs target poses (the volume where the robot "
                           "will work), e.g. --target-cube")
+    if targets is not None and kind != "point":
+        raise OptionError(f"target poses (I-optimal selection, --target-cube) weigh the "
+                          f"predicted tool-point position: they are for --kind point, not "
+                          f"{kind!r}")
     if targets is not None:
         targets = np.asarray(targets, dtype=float)
         if targets.ndim != 2 or targets.shape[1] != g.n or len(targets) == 0 \
@@ -302,17 +306,17 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                               f"[m] (--pivot), got {pivot!r}" if pv.shape != (3,) else
                               "the pivot needs 3 finite numbers (x, y, z in the base frame) "
                               f"[m] (--pivot), got {' '.join(f'{v:g}' for v in pv)}")
-    model = error_models.build(model, g)
-    _warn_tool_on_axis(model, t)
+    em = error_models.build(model, g)
+    _warn_tool_on_axis(em, t)
     if kind == "point":
-        space = ParameterSpace.of_model(model)
-        x = space.join(model.nominal, np.zeros(6), t)
+        space = ParameterSpace.of_model(em)
+        x = space.join(em.nominal, np.zeros(6), t)
         # J^T J does not depend on where the measurement frame is: base at the identity
-        J = MeasurementModel(model, q).jacobian(x)[1] * (space.reporting_scale() / MM)
+        J = MeasurementModel(em, q).jacobian(x)[1] * (space.reporting_scale() / MM)
     else:
         from kincal.measurements.sets import planning_jacobian
 
-        J, space = planning_jacobian(model, kind, q, t, pivot, planes)
+        J, space = planning_jacobian(em, kind, q, t, pivot, planes)
     free = np.ones(space.size, dtype=bool)
     free[space.indices(fix)] = False  # unknown names raise ParameterError with the list
     ident = analyze(J.reshape(-1, space.size), space.names, space.n_kinematic, free, RANK_TOL)
@@ -335,9 +339,10 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
 
     A = None
     if targets is not None:
-        Jt = MeasurementModel(model, targets).jacobian(x)[1] * (space.reporting_scale() / MM)
+        Jt = MeasurementModel(em, targets).jacobian(x)[1] * (space.reporting_scale() / MM)
         A = i_optimal.target_moment(Jt[:, :, cols] / scale)
     if method == "I":
+        assert A is not None  # I-optimal selection has targets (checked above)
         chosen, Minv, ridge = i_optimal.greedy(Jn, n, keep, A)
         greedy_log_det = float(_set_figures(Jn, scale, np.array([chosen]))[0][0])
         chosen, Minv, swaps, converged = i_optimal.exchange(Jn, chosen, len(keep), Minv, A,
