@@ -31,7 +31,7 @@ import warnings
 import numpy as np
 
 from kincal.errors import KincalWarning
-from kincal.fleet import UnitJob, calibrate_unit, learn_prior
+from kincal.fleet import UnitJob, calibrate_fleet
 from kincal.fleet.simulated import FleetModel
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.problem import CalibrationProblem
@@ -51,29 +51,49 @@ def held_out(robot, val) -> float:
     return CalibrationProblem(robot, val, CalibrationOptions(method="frames")).solve().after.mean
 
 
-def one_seed(seed: int, units: int, tracker_poses: int, new_units: int, compliance: float):
+def fleet_data(fleet: FleetModel, rng, kind: str, units: int, tracker_poses: int,
+               spread: float) -> list:
+    """Each fleet unit's measurements: a tracker's (wide) or an R-test's (a 20 mm cube about
+    a centre drawn within +-spread [m] of the new unit's, 45 mm tool)."""
+    data = []
+    for _ in range(units):
+        table = fleet.unit(rng)
+        if kind == "tracker":
+            data.append(fleet.tracker(table, rng, n=tracker_poses))
+        else:
+            centre = np.array([0.4, 0.0, 0.25]) + rng.uniform(-spread, spread, 3)
+            data.append(fleet.measure(table, rng, 60, centre, 0.02, (0, 0, 0.045), 5e-5, 15,
+                                      "<R-test>"))
+    return data
+
+
+def one_seed(seed: int, a) -> list:
     robot = _load()
-    fleet = FleetModel.of(robot, seed, compliance=compliance)
+    fleet = FleetModel.of(robot, seed, compliance=a.compliance)
     rng = np.random.default_rng([seed, 1])
     opts = CalibrationOptions(tool_guess=(0, 0, 0.045), lam="evidence")  # kincal fleet's default
-    outcomes = [calibrate_unit(UnitJob(f"u{i + 1:02d}", "<tracker>", _load, functools.partial(
-        _given, fleet.tracker(fleet.unit(rng), rng, n=tracker_poses)), opts, None))
-        for i in range(units)]
-    prior = learn_prior(robot, outcomes)
+    jobs = [UnitJob(f"u{i + 1:02d}", f"<{a.fleet}>", _load, functools.partial(_given, d), opts,
+                    None)
+            for i, d in enumerate(fleet_data(fleet, rng, a.fleet, a.units, a.tracker_poses,
+                                             a.spread))]
+    priors: dict = {}
+    calibrate_fleet(robot, jobs, a.workers, rounds=a.rounds,
+                    on_round=lambda r, prior: priors.__setitem__(r, prior))
+    chosen = [priors[r] for r in range(a.rounds + 1)]
     rows = []
-    for _ in range(new_units):
+    for _ in range(a.new_units):
         table = fleet.unit(rng)
         rtest = fleet.rtest(table, rng)
         val = fleet.tracker(table, rng, n=150)
-        new = CalibrationOptions(tool_guess=(0, 0, 0.11))
-        with_prior = CalibrationProblem(robot, rtest, new.__class__(
-            tool_guess=(0, 0, 0.11), prior=prior)).solve()
+        with_prior = [CalibrationProblem(robot, rtest, CalibrationOptions(
+            tool_guess=(0, 0, 0.11), prior=prior)).solve() for prior in chosen]
         paper = CalibrationProblem(robot, rtest, CalibrationOptions(
             tool_guess=(0, 0, 0.11), lam="cv")).solve()
         true_robot = CalibrationProblem(robot, rtest, CalibrationOptions(
             model="mdh")).chains.corrected(table)
-        rows.append((held_out(with_prior.corrected, val), held_out(paper.corrected, val),
-                     held_out(true_robot, val), held_out(robot, val)))
+        rows.append([held_out(r.corrected, val) for r in with_prior]
+                    + [held_out(paper.corrected, val), held_out(true_robot, val),
+                       held_out(robot, val)])
     return rows
 
 
@@ -82,26 +102,46 @@ def main(argv=None) -> int:
     ap.add_argument("--units", type=int, default=20)
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--new-units", type=int, default=1, help="new units per seed")
+    ap.add_argument("--fleet", choices=("tracker", "rtest"), default="tracker",
+                    help="how the fleet's units are measured: widely by a tracker (default) "
+                         "or only by an R-test in a 20 mm cube each")
+    ap.add_argument("--rounds", type=int, default=0,
+                    help="also the prior after each of this many rounds of the "
+                         "hierarchical fit (kincal fleet --hierarchical; hierN: after N)")
+    ap.add_argument("--spread", type=float, default=0.15,
+                    help="--fleet rtest: each unit's cube centre within +- this [m] of the "
+                         "new unit's")
     ap.add_argument("--tracker-poses", type=int, default=60)
     ap.add_argument("--compliance", type=float, default=5e-4,
                     help="gravity-like joint 2/3 sag [rad] no kinematic model carries")
+    ap.add_argument("--workers", type=int, default=1, help="kincal fleet --workers")
     a = ap.parse_args(argv)
     warnings.simplefilter("ignore", KincalWarning)
-    print(f"{a.units} tracker units per fleet, new units by R-test (20 mm cube); held-out "
-          "mean error [mm] on 150 tracker poses (400 mm cube)")
-    print(f"{'seed':>4} {'prior':>8} {'paper':>8} {'true':>8} {'nominal':>8} "
-          f"{'prior/true':>10} {'paper/true':>10} {'paper/prior':>11}")
+    measured = (f"tracker ({a.tracker_poses} poses, 400 mm cube)" if a.fleet == "tracker" else
+                f"R-test only (60 poses, 20 mm cube, centres within +-{a.spread * 1e3:.0f} mm)")
+    print(f"{a.units} fleet units measured by {measured}; sag {a.compliance * 1e3:g} mrad; "
+          "new units by R-test (20 mm cube); held-out mean error [mm] on 150 tracker poses "
+          "(400 mm cube)")
+    heads = ["prior"] + [f"hier{r}" for r in range(1, a.rounds + 1)] + ["paper", "true",
+                                                                         "nominal"]
+    ratios = [f"{h}/true" for h in heads[:-2]] + ["paper/prior"]
+    print(f"{'seed':>4} " + " ".join(f"{h:>8}" for h in heads) + " "
+          + " ".join(f"{r:>11}" for r in ratios))
     all_rows = []
     for seed in range(a.seeds):
-        for r in one_seed(seed, a.units, a.tracker_poses, a.new_units, a.compliance):
+        for r in one_seed(seed, a):
             all_rows.append(r)
-            p, q, t, n = r
-            print(f"{seed:>4} {p:>8.4f} {q:>8.4f} {t:>8.4f} {n:>8.4f} {p / t:>10.2f} "
-                  f"{q / t:>10.2f} {q / p:>11.2f}", flush=True)
-    m = np.mean(all_rows, axis=0)
-    print(f"mean {m[0]:>8.4f} {m[1]:>8.4f} {m[2]:>8.4f} {m[3]:>8.4f} {m[0] / m[2]:>10.2f} "
-          f"{m[1] / m[2]:>10.2f} {m[1] / m[0]:>11.2f}")
+            print(f"{seed:>4} " + _line(r), flush=True)
+    print("mean " + _line(np.mean(all_rows, axis=0)))
     return 0
+
+
+def _line(r) -> str:
+    """The errors, then each prior's and the paper's ratio to the true model, and the
+    paper's to the (first) prior."""
+    true, paper = r[-2], r[-3]
+    ratios = [v / true for v in r[:-2]] + [paper / r[0]]
+    return " ".join(f"{v:>8.4f}" for v in r) + " " + " ".join(f"{v:>11.2f}" for v in ratios)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from kincal.cli import main
 from kincal.errors import KincalWarning, OptionError, PriorError
@@ -191,3 +192,42 @@ def test_existing_unit_folders_need_overwrite(fleet_files, fleet_dir, capsys):
     assert main(["fleet", "ec66", str(fleet_files / "u01.csv"), str(fleet_files / "u02.csv"),
                  "--tip", "flange", "--out-dir", str(fleet_dir)]) == 1
     assert "kincal: error:" in capsys.readouterr().err
+
+
+def test_hierarchical_e_step_keeps_the_prior_as_it_is_and_its_width_where_blind(fleet_dir):
+    """A round of the hierarchical fit: the prior's scale held at 1 (the evidence estimates
+    only the noise), and the unit's posterior covariance: narrower than the prior where the
+    R-test sees, as wide where it is blind (not ~0, as the estimator's sandwich would be)."""
+    import functools
+
+    from kincal.fleet import UnitJob, calibrate_unit
+
+    prior = FleetPrior.read(fleet_dir / "FLEET.json")
+    robot = Robot.load("ec66", tip="flange")
+    fm = FleetModel.of(robot, 0)
+    rng = np.random.default_rng(5)
+    data = fm.rtest(fm.unit(rng), rng, n=30)
+    opts = CalibrationOptions(tool_guess=(0, 0, 0.11), prior=prior, lam="evidence",
+                              prior_scale=1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        result = CalibrationProblem(robot, data, opts).solve()
+        unit = calibrate_unit(UnitJob("n", "<R-test>", functools.partial(Robot.load, "ec66",
+                                                                         tip="flange"),
+                                      functools.partial(lambda d, r: [d], data), opts, None))
+    assert result.evidence.scale_of("fleet") == 1.0 and "fleet 1 x" in result.evidence.line()
+    assert unit.status == "calibrated"
+    v = np.diag(prior.covariance) > 0
+    P = prior.covariance[np.ix_(v, v)]
+    # the posterior against the prior, direction by direction: eigenvalues of P^-1 C
+    ratio = scipy.linalg.eigh(unit.covariance[np.ix_(v, v)], P, eigvals_only=True)
+    assert np.all(ratio <= 1 + 1e-6)
+    assert ratio.min() < 0.9 and ratio.max() > 0.99  # seen somewhere, blind elsewhere
+    k = result.layout.n_kinematic
+    sandwich = scipy.linalg.eigh(result.covariance[:k, :k][np.ix_(v, v)], P, eigvals_only=True)
+    assert sandwich.max() < 0.5  # the sandwich loses the blind directions
+
+
+def test_prior_scale_needs_a_prior_and_evidence():
+    with pytest.raises(OptionError, match="prior_scale"):
+        CalibrationOptions(prior_scale=1.0).validated()

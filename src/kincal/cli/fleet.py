@@ -4,6 +4,7 @@ prior DIR/FLEET.json (:mod:`kincal.fleet`)."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import sys
 from dataclasses import dataclass, replace
@@ -86,7 +87,7 @@ def run(args) -> int:
     from kincal.export.outputs import File
     from kincal.export.safe_write import check_outputs
     from kincal.fleet import UnitJob, calibrate_fleet
-    from kincal.fleet.unit import STAGING
+    from kincal.fleet.unit import STAGING, URDF
     from kincal.identification.options import CalibrationOptions
 
     inputs = typed(Inputs, args, files=tuple(args.data))
@@ -114,9 +115,14 @@ def run(args) -> int:
         raise OptionError(f"{out}: unit folders exist ({', '.join(taken[:5])}); give "
                           "--overwrite to replace them")
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [UnitJob(n, f, c.chain.load, replace(inputs, files=(f,)).read_sets, options,
-                    str(out), c.accept_implausible, c.accept_unconverged, c.overwrite,
-                    c.command_line or None, xacro_args(c.chain.xacro_arg))
+    # absolute paths: a worker of a running scheduler (--scheduler) has a cwd of its own
+    chain = c.chain
+    if Path(chain.robot).exists():
+        chain = replace(chain, robot=os.path.abspath(chain.robot))
+    jobs = [UnitJob(n, os.path.abspath(f), chain.load,
+                    replace(inputs, files=(os.path.abspath(f),)).read_sets, options,
+                    os.path.abspath(out), c.accept_implausible, c.accept_unconverged,
+                    c.overwrite, c.command_line or None, xacro_args(chain.xacro_arg))
             for n, f in zip(names, inputs.files)]
 
     def progress(done, total, outcome):
@@ -127,10 +133,17 @@ def run(args) -> int:
     try:
         summary = calibrate_fleet(robot, jobs, c.workers, c.scheduler, c.hierarchical,
                                   progress)
-    except KeyboardInterrupt:  # finished units stay; no staging folder is left behind
-        for stage in out.glob(f"{STAGING}*"):
+    except BaseException as exc:  # Ctrl-C, SIGTERM: the workers are stopped by now
+        for stage in out.glob(f"{STAGING}*"):  # no half-written unit is left behind
             shutil.rmtree(stage, ignore_errors=True)
-        raise
+        if not isinstance(exc, KeyboardInterrupt):
+            raise
+        finished = [n for n in names if (out / n / URDF).is_file()]
+        print(f"kincal: error: interrupted (SIGINT): {len(finished)} of the {len(jobs)} units "
+              f"are complete under {out}{'/' if finished else ''}"
+              f"{'' if not finished else ' (' + _shown(finished) + ')'}, the others left "
+              f"nothing; no fleet prior or summary was written", file=sys.stderr)
+        return 130
     files = [File(out / SUMMARY_JSON, "json", summary.as_dict()),
              File(out / SUMMARY_HTML, "html", summary.html())]
     if summary.prior is not None:
@@ -149,3 +162,6 @@ def run(args) -> int:
                           f"prior written (see {out / SUMMARY_JSON})")
     return 0
 
+
+def _shown(names, at_most: int = 5) -> str:
+    return ", ".join(names[:at_most]) + (f", ... ({len(names)})" if len(names) > at_most else "")

@@ -12,13 +12,19 @@ It is an optional dependency (``pip install "kincal[fleet]"``): only ``kincal fl
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import logging
+import signal
+import threading
 from typing import Callable, Iterable
 
 from kincal.errors import OptionError
 
 WORKER_MEMORY = "2GiB"  # a local worker's memory limit (Dask pauses, then restarts it beyond)
 INSTALL = 'pip install "kincal[fleet]"'
+MAX_BATCH = 8  # units per task at most
+TASKS_PER_WORKER = 4  # tasks per worker at least, when there are units enough
 
 
 def available() -> bool:
@@ -41,44 +47,94 @@ def _client(workers: int, scheduler: str | None):
         except OSError as e:
             raise OptionError(f"--scheduler {scheduler}: no Dask scheduler answers there "
                               f"({e}); start one (dask scheduler) or use --workers N") from None
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None, memory_limit=WORKER_MEMORY,
-                           silence_logs=logging.ERROR)
+    with _workers_ignore_sigint():
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=":0", memory_limit=WORKER_MEMORY,
+                               silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
 
-def run(fn: Callable, jobs: Iterable, on_result: Callable, workers: int = 1,
-        scheduler: str | None = None, on_error: Callable | None = None) -> None:
-    """fn(job) for every job on the engine; on_result(outcome) as each one finishes (in the
-    order they finish). An exception a worker raises goes to on_error(job, exc) and the
-    others go on. Ctrl-C cancels what is not finished and re-raises."""
-    from distributed import as_completed
-
-    jobs = list(jobs)
-    client, cluster = _client(workers, scheduler)
+@contextlib.contextmanager
+def _workers_ignore_sigint():
+    """Start worker processes that ignore SIGINT. Ctrl-C in a terminal reaches every process
+    of the foreground group: the command (which cancels the run and closes the cluster) and
+    its local workers, which would otherwise die mid-unit printing tracebacks. An ignored
+    signal stays ignored across the spawn's exec (Python then installs no handler of its
+    own); the command's own handler is back once the workers are up (a Ctrl-C during those
+    ~1 s of start-up is lost)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        futures = client.map(fn, jobs, pure=False)
-        index = {f.key: j for f, j in zip(futures, jobs)}
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+class Engine:
+    """The engine of one fleet run: a client of a LocalCluster of ``workers`` processes, or
+    of the scheduler at ``scheduler``; one for every round of the fleet (workers start, and
+    import kincal and load the robot, once). A context manager: the cluster closes on exit."""
+
+    def __init__(self, workers: int = 1, scheduler: str | None = None):
+        self.client, self.cluster = _client(workers, scheduler)
+
+    def __enter__(self) -> "Engine":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+    def n_workers(self) -> int:
+        return max(1, len(self.client.scheduler_info(n_workers=-1).get("workers", {})))
+
+    def run(self, fn: Callable, jobs: Iterable, on_result: Callable,
+            on_error: Callable | None = None, batch: int | None = None) -> None:
+        """fn(job) for every job; on_result(outcome) as each one finishes (in the order they
+        finish; the units of one task together). An exception fn raises goes to
+        on_error(job, exc) and the others go on. Ctrl-C cancels what is not finished and
+        re-raises. batch: jobs per task (None: :func:`batch_size`)."""
+        from distributed import as_completed
+
+        jobs = list(jobs)
+        size = batch or batch_size(len(jobs), self.n_workers())
+        chunks = [jobs[i:i + size] for i in range(0, len(jobs), size)]
+        futures = self.client.map(functools.partial(_each, fn), chunks, pure=False)
+        index = {f.key: c for f, c in zip(futures, chunks)}
         try:
             for f in as_completed(futures):
-                if f.status == "error":
-                    exc = f.exception()
-                    if on_error is None:
-                        raise exc
-                    on_error(index[f.key], exc)
+                if f.status == "error":  # the task itself failed (a worker lost, ...)
+                    got = [(False, f.exception())] * len(index[f.key])
                 else:
-                    on_result(f.result())
+                    got = f.result()
+                for job, (ok, value) in zip(index[f.key], got):
+                    if ok:
+                        on_result(value)
+                    elif on_error is None:
+                        raise value
+                    else:
+                        on_error(job, value)
         except KeyboardInterrupt:
-            client.cancel(futures)
+            self.client.cancel(futures)
             raise
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
-def worker_memory(client) -> dict:
-    """{worker address: resident memory [bytes]} (for the benchmark)."""
-    import psutil
+def batch_size(n_jobs: int, n_workers: int) -> int:
+    """Jobs per task: enough to spread the Dask overhead of a task (measured in docs/fleet.md:
+    ~15 ms of CPU between the command and the worker against ~50 ms for a unit), few
+    enough that every worker gets TASKS_PER_WORKER tasks (balance) and progress moves."""
+    return max(1, min(MAX_BATCH, n_jobs // (TASKS_PER_WORKER * n_workers)))
 
-    return client.run(lambda: psutil.Process().memory_info().rss)
+
+def _each(fn: Callable, jobs: list) -> list:
+    """fn over one task's jobs on a worker: (True, outcome) or (False, exception) each."""
+    out = []
+    for job in jobs:
+        try:
+            out.append((True, fn(job)))
+        except Exception as e:  # noqa: BLE001 - reported per job, the others go on
+            out.append((False, e))
+    return out

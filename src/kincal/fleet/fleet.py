@@ -10,16 +10,18 @@ Hierarchical (rounds=N > 0), for fleets measured only in small volumes, where ea
 alone identifies only part of its parameters and the per-unit estimates are pulled toward
 nominal where its data are blind: an empirical-Bayes (EM-like) iteration over the units'
 data jointly. Round 0 calibrates each unit alone and learns a first prior; each further
-round calibrates every unit with the current prior (its penalty centred on the fleet mean,
-shaped by the fleet covariance) and re-estimates the prior from the units' posteriors:
+round (the E-step) calibrates every unit with the current prior as it is (the penalty
+centred on the fleet mean, shaped by the fleet covariance, its scale held at 1; only the
+noise by evidence) and re-estimates the prior from the units' posteriors (the M-step):
 mean = the mean of the posterior means, covariance = the shrunk scatter of the posterior
-means + the mean posterior covariance (the EM update of a Gaussian hierarchical model,
-which credits the uncertainty each unit leaves). What it assumes: the units are
-independent draws from one Gaussian over the kinematic deviations (no unit-specific
-structure, no outlier mixture); each unit's posterior is Gaussian at its linearisation
-(the sandwich covariance of its fit); the units' measurement frames and tool points are
-nuisance parameters of each unit (flat prior); the fleet's blind directions (a parameter no
-unit's data see) stay at their start, and the prior carries no information there.
+means + the mean posterior covariance sigma^2 (J^T J + Lam)^-1 (the EM update of a
+Gaussian hierarchical model, which credits the uncertainty each unit leaves: where a
+unit's data are blind its posterior keeps the prior's width). What it assumes: the units
+are independent draws from one Gaussian over the kinematic deviations (no unit-specific
+structure, no outlier mixture); each unit's posterior is Gaussian at its linearisation;
+the units' measurement frames and tool points are nuisance parameters of each unit (flat
+prior); the fleet's blind directions (a parameter no unit's data see) keep what round 0
+gave them, and the prior carries no information there beyond it.
 """
 
 from __future__ import annotations
@@ -51,34 +53,47 @@ def learn_prior(robot, outcomes, method: str = "per-unit", with_covariances: boo
                                method, extra)
 
 
+def _e_step(options, prior):
+    """A unit's options in a round: the first (no prior yet) as given; the next ones the
+    posterior under the current prior as it is (its scale fixed at 1, the noise by
+    evidence), as the EM update assumes."""
+    if prior is None:
+        return options
+    return replace(options, prior=prior, lam="evidence", prior_scale=1.0)
+
+
 def calibrate_fleet(robot, jobs: list[UnitJob], workers: int = 1, scheduler: str | None = None,
-                    rounds: int = 0, progress: Callable | None = None) -> FleetSummary:
+                    rounds: int = 0, progress: Callable | None = None,
+                    batch: int | None = None, on_round: Callable | None = None
+                    ) -> FleetSummary:
     """Every job on the engine; the summary with the prior. The outputs are written by the
     last round only (its jobs' out_dir); earlier rounds of the hierarchical fit write
-    nothing. progress(done, total, outcome) after each unit (total counts every round)."""
+    nothing. progress(done, total, outcome) after each unit (total counts every round).
+    batch: units per task (None: engine.batch_size). on_round(r, prior): the prior learned
+    after round r (0: each unit alone), e.g. to compare the rounds."""
     total, done = len(jobs) * (rounds + 1), [0]
     prior, outcomes = None, []
-    for r in range(rounds + 1):
-        last = r == rounds
-        round_jobs = [replace(j, options=replace(j.options, prior=prior),
-                              out_dir=j.out_dir if last else None) for j in jobs]
-        got: dict[str, UnitOutcome] = {}
+    with engine.Engine(workers, scheduler) as eng:  # started once for every round
+        for r in range(rounds + 1):
+            last = r == rounds
+            round_jobs = [replace(j, options=_e_step(j.options, prior),
+                                  out_dir=j.out_dir if last else None) for j in jobs]
+            got: dict[str, UnitOutcome] = {}
 
-        def finished(outcome, got=got):
-            got[outcome.name] = outcome
-            done[0] += 1
-            if progress is not None:
-                progress(done[0], total, outcome)
+            def finished(outcome, got=got):
+                got[outcome.name] = outcome
+                done[0] += 1
+                if progress is not None:
+                    progress(done[0], total, outcome)
 
-        def crashed(job, exc, finished=finished):
-            finished(UnitOutcome(job.name, job.source, "failed",
-                                 f"internal error: {type(exc).__name__}: {exc}"))
+            def crashed(job, exc, finished=finished):
+                finished(UnitOutcome(job.name, job.source, "failed",
+                                     f"internal error: {type(exc).__name__}: {exc}"))
 
-        engine.run(calibrate_unit, round_jobs, finished, workers, scheduler, crashed)
-        outcomes = [got[j.name] for j in jobs]
-        if not last or rounds == 0:
+            eng.run(calibrate_unit, round_jobs, finished, crashed, batch)
+            outcomes = [got[j.name] for j in jobs]
             prior = learn_prior(robot, outcomes, "hierarchical" if r else "per-unit",
                                 with_covariances=r > 0)
-    if rounds:
-        prior = learn_prior(robot, outcomes, "hierarchical", with_covariances=True)
+            if on_round is not None:
+                on_round(r, prior)
     return FleetSummary.of(outcomes, prior, rounds)

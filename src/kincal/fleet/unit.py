@@ -64,7 +64,8 @@ class UnitOutcome:
     "failed" (a bad file or option, or a calibration that could not be made). message: the
     reason, one line ("" when calibrated). model / names / is_length: the error model and
     its kinematic parameters; deviation: (k,) estimate - nominal [SI]; covariance: (k, k)
-    kinematic block of the result's covariance [SI] (None if not estimated); identified:
+    [SI] of the kinematic parameters: with a fleet prior under evidence the posterior
+    covariance, else the result's sandwich covariance (None if not estimated); identified:
     (k,) which the unit's fit moved. before_mm / after_mm: mean error before and after [mm].
     written: the unit's files. warnings: its warnings, one line each.
     """
@@ -100,11 +101,14 @@ def calibrate_unit(job: UnitJob) -> UnitOutcome:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", KincalWarning)
             robot = _robot(job.load)
-            result = CalibrationProblem(robot, job.read(robot), job.options).solve()
+            problem = CalibrationProblem(robot, job.read(robot), job.options)
+            result = problem.solve()
             gate(result, job.accept_implausible, job.accept_unconverged)  # refused: raises
         seen = [str(w.message) for w in caught if issubclass(w.category, KincalWarning)]
         k = result.layout.n_kinematic
-        cov = None if result.covariance is None else np.array(result.covariance[:k, :k])
+        cov = _posterior_covariance(problem, result)
+        if cov is None and result.covariance is not None:
+            cov = np.array(result.covariance[:k, :k])
         out = UnitOutcome(job.name, job.source, "calibrated", "", result.chains.model_name, tuple(result.layout.kinematic_names),
                           tuple(bool(v) for v in result.layout.is_length[:k]),
                           np.array(result.x[:k] - result.x_nominal[:k]), cov,
@@ -117,6 +121,31 @@ def calibrate_unit(job: UnitJob) -> UnitOutcome:
         return UnitOutcome(job.name, job.source, "refused", _line(e), warnings=tuple(seen))
     except KincalError as e:
         return UnitOutcome(job.name, job.source, "failed", _line(e), warnings=tuple(seen))
+
+
+def _posterior_covariance(problem, result) -> np.ndarray | None:
+    """(k, k) [SI] the Bayesian posterior covariance of the kinematic parameters of a fit
+    with a fleet prior under evidence, sigma^2 (J^T J + Lam)^-1 with Lam the fit's penalty
+    (the frames' flat prior marginalised by taking the block of the inverse); None without
+    a prior or evidence. Unlike the sandwich covariance (the estimator's scatter over
+    repeated data, ~0 where the data are blind), it keeps the prior's width where the data
+    see nothing: what the hierarchical fit's update needs."""
+    from kincal.identification.penalty_choice import prior_classes
+
+    ev = result.evidence
+    if problem.prior is None or ev is None:
+        return None
+    free = problem.free_mask()
+    lam = problem.prior.penalty(ev.weights(prior_classes(problem)))
+    H = result.solve.normal_matrix(free) + lam[np.ix_(free, free)]
+    try:
+        Hi = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return None
+    k, sc = result.layout.n_kinematic, problem.scale
+    full = np.zeros((sc.size, sc.size))
+    full[np.ix_(free, free)] = ev.noise_mm ** 2 * Hi * np.outer(sc[free], sc[free])
+    return full[:k, :k]
 
 
 def _line(e: BaseException) -> str:

@@ -86,6 +86,8 @@ class CalibrationOptions:
         the penalty on the kinematic parameters is centred on the fleet's mean deviation
         and shaped by its covariance instead of pulling toward nominal; lam chooses its
         overall scale as usual ("evidence": one scale on the covariance). Method l2 only.
+    prior_scale: with a prior and lam "evidence", that scale kept instead of estimated (1:
+        the fleet covariance as it is; the hierarchical fit's rounds, kincal.fleet.fleet).
     shared_planes: the plane and flush sets touch the same physical planes: each plane's
         parameters (``plane.*``, or ``plane<label>.*`` per label of a ``plane`` column) are
         one set, the first such set's, shared by every set with that plane name (the sets'
@@ -123,6 +125,7 @@ class CalibrationOptions:
     progress: Callable | None = field(default=None, compare=False, repr=False)
     shared_planes: bool = False
     prior: FleetPrior | None = None
+    prior_scale: float | None = None
 
     def validated(self) -> "CalibrationOptions":
         """These options checked, with sequences made tuples (``fix=[...]`` works as well as
@@ -157,6 +160,11 @@ class CalibrationOptions:
                 unit = "deg" if key == "prior_deg" else "mm"
                 raise OptionError(f"{key} (--{key.replace('_', '-')}) must be between {lo:g} "
                                   f"and {hi:g} {unit}, got {value!r}")
+        if o.prior_scale is not None and (o.prior is None or o.lam != "evidence" or not (
+                math.isfinite(float(o.prior_scale)) and float(o.prior_scale) > 0)):
+            raise OptionError(f"prior_scale (of a fleet prior, kept by the evidence) needs a "
+                              f"prior, lambda 'evidence' and a value > 0; got "
+                              f"{o.prior_scale!r}, lambda {o.lam!r}")
         if not (o.length_scale > 0 and o.angle_scale > 0):
             raise OptionError("length_scale and angle_scale must be > 0")
         if o.tool_guess is not None and np.shape(o.tool_guess) != (3,):

@@ -47,6 +47,8 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
     given = {} if o.prior_mm is None else {"length": o.prior_mm}
     if o.prior_deg is not None:
         given.update(twist=o.prior_deg, offset=o.prior_deg)
+    if o.prior_scale is not None:
+        given["fleet"] = o.prior_scale
     return evidence.estimate(
         lambda w, u: problem.fit(w, start=u * problem.scale, free=free, residual=residual),
         lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,

@@ -1,0 +1,168 @@
+"""kincal fleet's engine: a run interrupted by Ctrl-C keeps its finished units whole and
+leaves no partial one; the same fleet through a running Dask scheduler (--scheduler) gives
+the local cluster's results; units are batched into tasks without losing any."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+from kincal.cli import main
+from kincal.errors import KincalWarning
+from kincal.fleet.simulated import FleetModel
+from kincal.identification.prior import FleetPrior
+from kincal.robot import Robot
+
+distributed = pytest.importorskip(
+    "distributed", reason='kincal fleet needs Dask distributed: pip install "kincal[fleet]"')
+
+UNIT_FILES = ("FRAMES.json", "REPORT.json", "corrected.urdf")
+N_UNITS = 16
+
+
+@pytest.fixture(scope="module")
+def units(tmp_path_factory):
+    """N_UNITS tracker units u01..u16 (30 poses each)."""
+    d = tmp_path_factory.mktemp("units")
+    robot = Robot.load("ec66", tip="flange")
+    fm = FleetModel.of(robot, 3)
+    rng = np.random.default_rng(4)
+    files = []
+    for u in range(N_UNITS):
+        f = d / f"u{u + 1:02d}.csv"
+        f.write_text(fm.tracker(fm.unit(rng), rng, n=30).to_csv_text())
+        files.append(str(f))
+    return files
+
+
+def _fleet_argv(files, out, *extra):
+    return ["fleet", "ec66", *files, "--tip", "flange", "--tool-offset", "0", "0", "0.045",
+            "--out-dir", str(out), *extra]
+
+
+def _gone(pgid: int, timeout: float) -> bool:
+    """True once no process of the group is left (the workers too)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def _default_sigint():
+    """The command as a terminal starts it: a test run in the background (``pytest &``)
+    would hand down an ignored SIGINT, which Python then keeps ignoring."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def test_ctrl_c_keeps_finished_units_and_leaves_no_partial_one(units, tmp_path):
+    """Ctrl-C as a terminal sends it: SIGINT to the whole process group (the command and its
+    local workers) once the first unit is reported finished."""
+    out = tmp_path / "D"
+    proc = subprocess.Popen([sys.executable, "-m", "kincal", *_fleet_argv(
+        units, out, "--workers", "2")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, start_new_session=True, preexec_fn=_default_sigint)
+    seen = []
+    try:
+        for line in proc.stderr:
+            seen.append(line)
+            if line.strip().startswith("unit 1/"):
+                os.killpg(proc.pid, signal.SIGINT)
+                break
+        rest = proc.stderr.read()
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    err = "".join(seen) + rest
+    assert any(s.strip().startswith("unit 1/") for s in seen), err
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err  # workers too are quiet
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("kincal: error: interrupted (SIGINT):") and "no fleet prior" in last
+    assert [s for s in err.splitlines() if s.startswith("kincal:")] == [last]  # one line
+    # every unit folder complete or absent, and at least the reported one complete
+    names = sorted(p.name for p in out.iterdir())
+    assert names and len(names) < N_UNITS, names  # the run was stopped midway
+    for n in names:
+        assert n.startswith("u") and (out / n).is_dir(), names  # no staging, no FLEET.json
+        assert sorted(p.name for p in (out / n).iterdir()) == list(UNIT_FILES)
+        json.loads((out / n / "REPORT.json").read_text())  # whole files
+    assert f"{len(names)} of the {N_UNITS} units are complete" in last
+    assert _gone(proc.pid, 30), "worker processes outlived the interrupted command"
+
+
+@pytest.fixture(scope="module")
+def local_run(units, tmp_path_factory):
+    out = tmp_path_factory.mktemp("local") / "D"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert main(_fleet_argv(units[:6], out, "--workers", "1", "--quiet")) == 0
+    return out
+
+
+def test_a_running_scheduler_gives_the_local_results(units, local_run, tmp_path):
+    from distributed import LocalCluster
+
+    out = tmp_path / "D"
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", KincalWarning)
+            assert main(_fleet_argv(units[:6], out, "--scheduler", cluster.scheduler_address,
+                                    "--quiet")) == 0
+    here, there = FleetPrior.read(local_run / "FLEET.json"), FleetPrior.read(out / "FLEET.json")
+    assert here.units == there.units and here.names == there.names
+    assert np.allclose(here.mean, there.mean, rtol=1e-9, atol=1e-15)
+    assert np.allclose(here.covariance, there.covariance, rtol=1e-9, atol=1e-24)
+    provenance = re.compile(r"<!--.*?-->", re.S)  # the command line and the time differ
+    for n in here.units:
+        got = provenance.sub("", (out / n / "corrected.urdf").read_text())
+        assert got == provenance.sub("", (local_run / n / "corrected.urdf").read_text())
+        assert "<joint" in got
+
+
+def test_no_scheduler_at_the_address_is_one_line(units, tmp_path, capsys):
+    assert main(_fleet_argv(units[:2], tmp_path / "D", "--scheduler",
+                            "tcp://127.0.0.1:9")) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("kincal: error: --scheduler tcp://127.0.0.1:9")
+    assert not (tmp_path / "D" / "FLEET.json").exists()
+
+
+def _half(x):
+    if x == 3:
+        raise ValueError("three")
+    return x / 2
+
+
+@pytest.mark.parametrize("batch", [1, 3, None])
+def test_batched_tasks_report_every_job_and_each_error_alone(batch):
+    from kincal.fleet.engine import Engine
+
+    got, bad = [], []
+    with Engine(1) as engine:
+        engine.run(_half, list(range(10)), got.append, lambda job, e: bad.append((job, str(e))),
+                   batch)
+    assert sorted(got) == [x / 2 for x in range(10) if x != 3]
+    assert bad == [(3, "three")]
+
+
+def test_batch_size_spreads_units_over_the_workers():
+    from kincal.fleet.engine import MAX_BATCH, TASKS_PER_WORKER, batch_size
+
+    assert batch_size(5, 2) == 1
+    assert batch_size(200, 2) == MAX_BATCH
+    assert batch_size(40, 2) == 40 // (TASKS_PER_WORKER * 2)
