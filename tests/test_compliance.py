@@ -177,6 +177,22 @@ def test_a_urdf_without_inertials_has_no_compliance_term(tmp_path):
                for line in res.model_choice.lines())
 
 
+def test_a_prismatic_joint_has_no_compliance_term(tmp_path):
+    """Compliance turns a revolute joint by its torque; a prismatic joint is refused by name
+    (its sag would be a force over a stiffness in m/N, which kincal does not model)."""
+    from kincal.errors import ParameterError
+
+    text = EC66.read_text().replace('<joint name="joint_3" type="revolute">',
+                                    '<joint name="joint_3" type="prismatic">')
+    assert 'name="joint_3" type="prismatic"' in text
+    slide = tmp_path / "slide.urdf"
+    slide.write_text(text)
+    robot = Robot.load(slide, tip="flange")
+    _, model, q, truth, data = _ec66_with_compliance(noise=1e-5)
+    with pytest.raises(ParameterError, match="joint_3 is prismatic: a compliance term turns"):
+        calibrate(robot, data, compliance=("joint_3",))
+
+
 @pytest.mark.parametrize("name,seed", [("EC66", 1), ("UR10", 2)])
 def test_auto_finds_a_planted_compliance_on_its_joint(name, seed):
     warnings.simplefilter("ignore", KincalWarning)

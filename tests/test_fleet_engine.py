@@ -67,9 +67,11 @@ def _default_sigint():
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def test_ctrl_c_keeps_finished_units_and_leaves_no_partial_one(units, tmp_path):
+@pytest.mark.parametrize("sig,code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_ctrl_c_keeps_finished_units_and_leaves_no_partial_one(units, tmp_path, sig, code):
     """Ctrl-C as a terminal sends it: SIGINT to the whole process group (the command and its
-    local workers) once the first unit is reported finished."""
+    local workers) once the first unit is reported finished; ``kill`` sends SIGTERM to the
+    command alone. Either way the finished units stay and the one line says so."""
     out = tmp_path / "D"
     proc = subprocess.Popen([sys.executable, "-m", "kincal", *_fleet_argv(
         units, out, "--workers", "2")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -79,7 +81,10 @@ def test_ctrl_c_keeps_finished_units_and_leaves_no_partial_one(units, tmp_path):
         for line in proc.stderr:
             seen.append(line)
             if line.strip().startswith("unit 1/"):
-                os.killpg(proc.pid, signal.SIGINT)
+                if sig == "SIGINT":
+                    os.killpg(proc.pid, signal.SIGINT)
+                else:
+                    os.kill(proc.pid, signal.SIGTERM)
                 break
         rest = proc.stderr.read()
         proc.wait(timeout=120)
@@ -88,10 +93,10 @@ def test_ctrl_c_keeps_finished_units_and_leaves_no_partial_one(units, tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
     err = "".join(seen) + rest
     assert any(s.strip().startswith("unit 1/") for s in seen), err
-    assert proc.returncode == 130, err
+    assert proc.returncode == code, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err  # workers too are quiet
     last = err.strip().splitlines()[-1]
-    assert last.startswith("kincal: error: interrupted (SIGINT):") and "no fleet prior" in last
+    assert last.startswith(f"kincal: error: interrupted ({sig}):") and "no fleet prior" in last
     assert [s for s in err.splitlines() if s.startswith("kincal:")] == [last]  # one line
     # every unit folder complete or absent, and at least the reported one complete
     names = sorted(p.name for p in out.iterdir())

@@ -136,7 +136,7 @@ class CellFrames:
     robot / chain_hash: the robot model (see :func:`chain_hash`; "" when an old file does
     not say). base_frame, tip_frame, joints: the chain. sets: one :class:`SetFrames` per
     measurement set. backlash: {joint: half the play [rad or m]}. source: for messages.
-    compliance: {joint: deflection per N m of gravity torque [rad/(N m) or m/N]}
+    compliance: {joint: deflection per N m of gravity torque [rad/(N m)], revolute joints}
     (:mod:`kincal.models.compliance`).
     """
 

@@ -39,6 +39,12 @@ def stdout_to_null() -> None:
         pass
 
 
+
+class Terminated(BaseException):
+    """SIGTERM, raised like KeyboardInterrupt so that writes roll back on the way out
+    (``kincal.cli.main`` installs the handler; a command that can leave finished work, as
+    ``kincal fleet``, catches both to say what is complete)."""
+
 def say_and_write(files, lines, *, provenance, overwrite: bool, protect, dirs=()) -> list:
     """The one writer (:func:`kincal.export.outputs.write_files`: ``files`` are its
     File values, each stamped with ``provenance``) with ``lines(targets)`` said between

@@ -136,14 +136,17 @@ def run(args) -> int:
     except BaseException as exc:  # Ctrl-C, SIGTERM: the workers are stopped by now
         for stage in out.glob(f"{STAGING}*"):  # no half-written unit is left behind
             shutil.rmtree(stage, ignore_errors=True)
-        if not isinstance(exc, KeyboardInterrupt):
+        from kincal.cli.console import Terminated
+
+        if not isinstance(exc, (KeyboardInterrupt, Terminated)):
             raise
+        signal, code = ("SIGINT", 130) if isinstance(exc, KeyboardInterrupt) else ("SIGTERM", 143)
         finished = [n for n in names if (out / n / URDF).is_file()]
-        print(f"kincal: error: interrupted (SIGINT): {len(finished)} of the {len(jobs)} units "
+        print(f"kincal: error: interrupted ({signal}): {len(finished)} of the {len(jobs)} units "
               f"are complete under {out}{'/' if finished else ''}"
               f"{'' if not finished else ' (' + _shown(finished) + ')'}, the others left "
               f"nothing; no fleet prior or summary was written", file=sys.stderr)
-        return 130
+        return code
     files = [File(out / SUMMARY_JSON, "json", summary.as_dict()),
              File(out / SUMMARY_HTML, "html", summary.html())]
     if summary.prior is not None:

@@ -18,7 +18,7 @@ import warnings
 
 from kincal import __version__
 from kincal.cli import analyze, calibrate, compensate, demo, evaluate, fleet, plan, simulate
-from kincal.cli.console import quiet_stdout, say, stdout_to_null
+from kincal.cli.console import Terminated, quiet_stdout, say, stdout_to_null
 from kincal.errors import KincalError, KincalNote, KincalWarning
 
 COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo, fleet)
@@ -41,12 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-class _Terminated(BaseException):
-    """SIGTERM, raised like KeyboardInterrupt so that writes roll back on the way out."""
-
-
 def _on_sigterm(signum, frame):
-    raise _Terminated
+    raise Terminated
 
 
 def _standard_streams() -> None:
@@ -153,7 +149,7 @@ def main(argv=None) -> int:
             with quiet_stdout(args.quiet):
                 code = args.run(args)
             say([])  # flush: a full disk behind stdout fails here (one line), not at exit
-        except (KeyboardInterrupt, _Terminated) as exc:
+        except (KeyboardInterrupt, Terminated) as exc:
             name, code = (("SIGINT", 130) if isinstance(exc, KeyboardInterrupt)
                           else ("SIGTERM", 143))
             print(f"kincal: error: interrupted ({name}); no output was written or changed",

@@ -185,6 +185,12 @@ class Chains:
             raise ParameterError(f"no chain joint {unknown[0]!r} for a {term} term."
                                  + suggest(unknown[0], chain)
                                  + f" Chain joints: {listing(chain, 60)}", valid=chain)
+        kinds = dict(zip(chain, self.model.kinds))
+        sliding = [j for j in joints if kinds[j] == "prismatic"]
+        if term == "compliance" and sliding:
+            raise ParameterError(f"{sliding[0]} is prismatic: a compliance term turns a revolute "
+                                 "joint in proportion to the gravity torque it carries; choose "
+                                 "revolute joints for --compliance")
         return tuple(j for j in chain if j in set(joints))
 
     def kind(self, i: int, data, backlash: tuple[str, ...], compliance: tuple[str, ...] = ()):

@@ -242,7 +242,7 @@ class CalibrationResult:
     @property
     def compliance(self) -> dict[str, float]:
         """Each compliance term: the joint's deflection per N m of gravity torque
-        [rad/(N m), or m/N if prismatic] (:mod:`kincal.models.compliance`)."""
+        [rad/(N m)], revolute joints only (:mod:`kincal.models.compliance`)."""
         c = self.layout.backlash_values(self.x)[self.layout.n_backlash:]
         return dict(zip(self.layout.compliance, map(float, c)))
 

@@ -6,7 +6,8 @@ static part, the load gravity puts on each joint, with one coefficient c per cho
 
     q_effective = q_measured + c * tau,   tau: the gravity torque the joint carries
 
-c is the compliance (1 / stiffness) [rad/(N m), or m/N for a prismatic joint]. tau is the
+c is the compliance (1 / stiffness) [rad/(N m)]; revolute joints only (a prismatic joint's
+sag is a force over a stiffness in m/N, not modelled). tau is the
 moment, about the joint's axis in the chain's positive direction, of the weight of every
 link beyond the joint as seen from the base (the base is the link held fixed: the floor, a
 humanoid's stance sole), computed from the URDF's inertials at the measured joint values
@@ -24,4 +25,4 @@ GRAVITY = 9.81  # [m/s^2], along -z of the base frame
 MIN_TORQUE = 1e-3  # [N m] RMS below which a joint carries no torque worth a term
 CONVENTION = ("q_effective = q + compliance * tau, tau the gravity torque the joint "
               "carries [N m] (URDF inertials, gravity along -z of the base frame, the links "
-              "beyond the joint seen from the base); rad/(N m) (m/N if prismatic)")
+              "beyond the joint seen from the base); rad/(N m), revolute joints")
