@@ -77,3 +77,23 @@ def test_no_negative_zero_in_the_report_figures():
     assert _num(-2e-5, "+.5f") == "-0.00002"  # a value the digits show stays signed
     assert _frame_value("base.x", -1e-12) == "0.0000"
     assert f"{_z(-4e-5, 4):.4f}" == "0.0000" and f"{_z(-4e-5):.5f}" == "-0.00004"
+
+
+def test_a_warning_raised_twice_is_said_once(monkeypatch, capsys):
+    """Work that fits the same data twice (a prior, the model choice) may raise one warning
+    twice; the console says each line once, in order, and every distinct one."""
+    import warnings
+
+    import kincal.cli.checks as checks
+    from kincal.errors import KincalWarning, OptionError
+
+    def check_args(args):
+        for message in ("the same thing", "another thing", "the same thing"):
+            warnings.warn(message, KincalWarning)
+        raise OptionError("stop here")
+
+    monkeypatch.setattr(checks, "check_args", check_args)
+    assert main(["evaluate", "ec66", "data.csv"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["kincal: error: stop here", "kincal: warning: the same thing",
+                   "kincal: warning: another thing"], err

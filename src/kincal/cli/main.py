@@ -167,10 +167,14 @@ def main(argv=None) -> int:
             code = 1
             _drain_stdout()
         finally:
+            said = set()  # a warning raised again (a second fit of the same data) says nothing new
             for w in caught:
                 if issubclass(w.category, KincalWarning):
                     kind = "note" if issubclass(w.category, KincalNote) else "warning"
-                    print(f"kincal: {kind}: {w.message}", file=sys.stderr)
+                    line = f"kincal: {kind}: {w.message}"
+                    if line not in said:
+                        said.add(line)
+                        print(line, file=sys.stderr)
             if sigterm is not None:
                 signal.signal(signal.SIGTERM, sigterm)
             if scratch is not None:
