@@ -15,8 +15,9 @@ def _summary(d: np.ndarray) -> tuple[int, float, float, float, float, float]:
 
 
 @dataclass(frozen=True)
-class ErrorStats:
-    """Statistics of per-pose Euclidean position errors [mm] (std with ddof = 1)."""
+class _Stats:
+    """n, mean, max, std (ddof = 1), RMS and median of per-sample errors, in the unit of
+    the subclass."""
 
     n: int
     mean: float
@@ -24,6 +25,14 @@ class ErrorStats:
     std: float
     rms: float
     median: float
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class ErrorStats(_Stats):
+    """Statistics of per-pose Euclidean position errors [mm] (std with ddof = 1)."""
 
     @classmethod
     def from_errors(cls, errors_m: np.ndarray) -> "ErrorStats":
@@ -32,33 +41,20 @@ class ErrorStats:
         d = np.linalg.norm(e, axis=1) if e.ndim == 2 else np.abs(e)
         return cls(*_summary(d * 1e3))
 
-    def as_dict(self) -> dict:
-        return asdict(self)
-
     def line(self) -> str:
         return (f"mean {self.mean:.3f}  max {self.max:.3f}  std {self.std:.3f}  "
                 f"RMS {self.rms:.3f} mm  (n = {self.n})")
 
 
 @dataclass(frozen=True)
-class AngleStats:
+class AngleStats(_Stats):
     """Statistics of per-sample orientation errors [deg]: each the angle of the rotation
     between the measured and the predicted orientation (std with ddof = 1)."""
-
-    n: int
-    mean: float
-    max: float
-    std: float
-    rms: float
-    median: float
 
     @classmethod
     def from_angles(cls, angles_rad: np.ndarray) -> "AngleStats":
         """From (N,) angles [rad], each >= 0."""
         return cls(*_summary(np.degrees(np.abs(np.asarray(angles_rad, dtype=float)))))
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
     def line(self) -> str:
         return (f"mean {self.mean:.4f}  max {self.max:.4f}  std {self.std:.4f}  "
