@@ -3,7 +3,9 @@
 After any fit (``--model`` chosen or given), the residuals of a point set are tested
 against what each joint's missing term would leave: backlash (the joint off by +-b with
 its approach direction), a scale error of a prismatic joint (off by k * q), a periodic
-error of a revolute joint (off by c * cos q + s * sin q). Each pattern is the joint's own
+error of a revolute joint (off by c * cos q + s * sin q), a compliance of a revolute joint
+(off by c * tau, tau the gravity torque it carries, from the URDF's inertials: only where
+they give it one, :mod:`kincal.gravity`). Each pattern is the joint's own
 motion ``dP/dq_j`` times that function of the samples, with what the fitted parameters
 can already absorb projected out; the pattern with the largest F statistic is reported
 when its p-value, times the number of patterns tried (Bonferroni), is below ``ALPHA``.
@@ -22,9 +24,10 @@ ALPHA = 1e-3  # family-wise false-alarm rate of a reported pattern
 
 @dataclass(frozen=True)
 class Finding:
-    """A pattern in the residuals. cause: "backlash", "scale" or "periodic"; size: half
-    the play [deg], the scale error [%] or the amplitude [deg]; rms_mm: (now, with the
-    term) sample RMS [mm]; p_value: Bonferroni-corrected."""
+    """A pattern in the residuals. cause: "backlash", "scale", "periodic" or "compliance";
+    size: half the play [deg], the scale error [%], the amplitude [deg] or the deflection
+    at the samples' RMS gravity torque [deg]; rms_mm: (now, with the term) sample RMS
+    [mm]; p_value: Bonferroni-corrected."""
 
     joint: str
     cause: str
@@ -37,7 +40,9 @@ class Finding:
                             f"(--backlash {self.joint})",
                 "scale": f"a scale error of about {self.size:+.3g} % of its travel",
                 "periodic": f"a periodic error of about {self.size:.3g} deg amplitude "
-                            "(once per turn)"}[self.cause]
+                            "(once per turn)",
+                "compliance": f"a compliance of about {self.size:+.3g} deg at the RMS "
+                              f"gravity torque (--compliance {self.joint})"}[self.cause]
         return (f"diagnosis: the residuals follow {self.joint}: {what}; modelled, the RMS "
                 f"would go from {self.rms_mm[0]:.3g} to {self.rms_mm[1]:.3g} mm "
                 f"(p = {self.p_value:.2g})")
@@ -70,8 +75,11 @@ def diagnose(result) -> Finding | None:
                             d.n_points).jacobian(x)
     Jq = J[:, :, -n:]  # (N, 3, n) the measured point's motion per joint [m per rad or m]
     have = [joints.index(j) for j in result.layout.backlash if j in joints]
+    stiff = [joints.index(j) for j in result.layout.compliance if j in joints]
+    tau = _torques(result.robot, q, em.kinds)
     A = np.column_stack([J[:, :, :-n].reshape(len(r), -1)]
-                        + [(Jq[:, :, j] * g[:, j:j + 1]).reshape(-1, 1) for j in have])
+                        + [(Jq[:, :, j] * g[:, j:j + 1]).reshape(-1, 1) for j in have]
+                        + [(Jq[:, :, j] * tau[:, j:j + 1]).reshape(-1, 1) for j in stiff])
     U, sv, _ = np.linalg.svd(A, full_matrices=False)
     U = U[:, sv > 1e-9 * sv[0]]
     rank = U.shape[1]
@@ -86,6 +94,8 @@ def diagnose(result) -> Finding | None:
             tests.append((name, "scale", [q[:, j]], j))
         else:
             tests.append((name, "periodic", [np.cos(q[:, j]), np.sin(q[:, j])], j))
+            if j not in stiff and tau[:, j].any():
+                tests.append((name, "compliance", [tau[:, j]], j))
     best = None
     m = len(r)
     for name, cause, fs, j in tests:
@@ -104,8 +114,26 @@ def diagnose(result) -> Finding | None:
             N = len(q)
             size = (100 * coef[0] if cause == "scale" else
                     math.degrees(float(np.hypot(*coef))) if cause == "periodic"
+                    else math.degrees(coef[0] * _rms(fs[0])) if cause == "compliance"
                     else math.degrees(coef[0]))
             rms = (math.sqrt(float(r @ r) / N) * 1e3,
                    math.sqrt(max(float(r @ r) - gain, 0.0) / N) * 1e3)
             best = (F, Finding(name, cause, float(size), rms, p))
     return None if best is None else best[1]
+
+
+def _rms(v: np.ndarray) -> float:
+    return math.sqrt(float(np.mean(v ** 2)))
+
+
+def _torques(robot, q: np.ndarray, kinds) -> np.ndarray:
+    """(N, n) the gravity torques a compliance pattern multiplies [N m]: zero columns for
+    prismatic joints and for joints whose RMS torque is below the compliance model's
+    floor (no inertials beyond them in the URDF)."""
+    from kincal.models.compliance import MIN_TORQUE
+
+    tau = np.asarray(robot.gravity_torques(q), float)
+    for j, kind in enumerate(kinds):
+        if kind == "prismatic" or _rms(tau[:, j]) < MIN_TORQUE:
+            tau[:, j] = 0.0
+    return tau
