@@ -211,11 +211,14 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     svk = np.linalg.svd(Jkn, compute_uv=False)
     cond = float(svk[0] / svk[-1]) if svk.size and svk[-1] > 0 else float("inf")
     duplicates = []
+    seen = [c for c in dropped if norms[c] > rank_tol * scale]
+    # every dropped column against the kept ones in one solve (one SVD of Jk)
+    coefs = dict(zip(seen, np.linalg.lstsq(Jk, J[:, seen], rcond=None)[0].T)) if seen else {}
     for c in dropped:
-        if norms[c] <= rank_tol * scale:
+        if c not in coefs:
             duplicates.append(Duplicate(names[c], ()))
             continue
-        coef, *_ = np.linalg.lstsq(Jk, J[:, c], rcond=None)
+        coef = coefs[c]
         big = np.argsort(-np.abs(coef))
         top = [(names[kept[i]], float(coef[i])) for i in big[:4]
                if abs(coef[i]) >= 0.05 * abs(coef[big[0]])]
