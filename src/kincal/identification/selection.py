@@ -181,7 +181,7 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
         J = np.asarray(np.linalg.qr(J, mode="r"))  # Householder: the rank decision needs full accuracy
     norms = np.linalg.norm(J, axis=0)
     scale = float(norms.max()) if norms.size else 1.0
-    Q = np.zeros((J.shape[0], 0))
+    basis = np.zeros((J.shape[0], J.shape[1]))  # the kept columns' orthonormal basis
     kept: list[int] = []
     dropped: list[int] = []
     for c in preference_order(names, n_kinematic):
@@ -191,11 +191,13 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
         if norms[c] <= rank_tol * scale:
             dropped.append(c)
             continue
+        Q = basis[:, :len(kept)]
         r = col - Q @ (Q.T @ col)
         r = r - Q @ (Q.T @ r)  # second pass keeps the basis orthogonal to working precision
-        if np.linalg.norm(r) > rank_tol * norms[c]:
+        size = np.linalg.norm(r)
+        if size > rank_tol * norms[c]:
+            basis[:, len(kept)] = r / size
             kept.append(c)
-            Q = np.column_stack([Q, r / np.linalg.norm(r)])
         else:
             dropped.append(c)
     kept.sort()
