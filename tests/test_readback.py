@@ -130,3 +130,31 @@ def test_an_offset_moved_into_child_origins_passes(tmp_path, rng):
     q = random_joint_values(robot.geometry, rng, 50)
     assert np.abs(Robot.load(out, tip=robot.tip).tip_poses(q)
                   - result.corrected.tip_poses(q)).max() < 1e-12
+
+
+def test_an_origin_added_to_a_joint_that_had_none_passes(tmp_path, rng):
+    """A calibrated joint without <origin> (identity) gets one written: accepted, and the
+    written file is the calibrated model."""
+    from pathlib import Path
+
+    from kincal.models import mdh
+    from kincal.planning.simulation import Truth, measure
+
+    text = (Path(__file__).parents[1] / "urdf" / "ec66.urdf").read_text()
+    bare = re.sub(r'(<joint name="joint_4".*?)<origin[^>]*/>', r"\1", text, count=1, flags=re.S)
+    assert bare != text
+    path = tmp_path / "bare.urdf"
+    path.write_text(bare)
+    robot = Robot.load(path, tip="flange")
+    model = mdh.extract(robot.geometry)
+    q = rng.uniform(-2, 2, (60, 6))
+    truth = Truth(model.table + rng.normal(size=model.table.shape) * 3e-4,
+                  np.array([0.8, 0.3, -0.2, 0.02, -0.03, 1.2]), np.array([0.02, 0.01, 0.12]))
+    result = _quiet(calibrate, robot, measure(model, truth, q, 1e-6, rng), method="ls")
+    out = tmp_path / "c.urdf"
+    write_calibration(result, Outputs(urdf=out))
+    joint = re.search(r'<joint name="joint_4".*?</joint>', out.read_text(), re.S).group(0)
+    assert "<origin" in joint
+    q = random_joint_values(robot.geometry, rng, 50)
+    assert np.abs(Robot.load(out, tip="flange").tip_poses(q)
+                  - result.corrected.tip_poses(q)).max() < 1e-12
