@@ -5,7 +5,7 @@ calibration's.
 mdh=..., plots=...))`` is the only way the API and ``kincal calibrate`` write what a
 calibration produced. It refuses an implausible or unconverged result (one KincalError line
 naming the evidence) unless accepted, then composes every output, reads the corrected URDF
-back with a second parser (:mod:`kincal.export.readback`), and writes them as one
+back strictly (:mod:`kincal.export.readback`), and writes them as one
 transaction: all of them, or none (:func:`kincal.export.safe_write.write_all`).
 ``write_files(files, provenance, ...)`` does the same for the other commands' files
 (simulate, plan, evaluate, ...): each carries the run's provenance
@@ -191,7 +191,8 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         from kincal.export.readback import check_readback
 
         text, notes = corrected_urdf(result, add_frames=o.add_frames)
-        check_readback(result, text)  # a second parser agrees with the calibrated model
+        check_readback(result, text, o.add_frames)  # only the origins changed, and to
+        # the calibrated model as a URDF reader reads them
         files.append((o.urdf, stamp_urdf(text, prov)))
     if o.frames is not None:
         files.append((o.frames, result.frames().dumps(provenance=prov.as_dict())))

@@ -161,7 +161,7 @@ class ParameterLayout:
         return tuple(self.set_prefix(i if a < 0 else a) + n
                      for n, a in zip(self.set_frames[i][0], self.aliases[i]))
 
-    @property
+    @cached_property  # the fields are frozen; the fit and its checks look names up often
     def names(self) -> tuple[str, ...]:
         return (self.kinematic_names
                 + tuple(n for i in range(self.n_sets)
@@ -232,8 +232,13 @@ class ParameterLayout:
         return out
 
     # ----------------------------------------------------------- look-ups
+    @cached_property
+    def _positions(self) -> dict[str, int]:
+        return {n: i for i, n in reversed(list(enumerate(self.names)))}
+
     def index(self, name: str) -> int:
-        return name_index(self.names, name)
+        i = self._positions.get(name)
+        return name_index(self.names, name) if i is None else i  # unknown: the error
 
     def expand(self, patterns) -> tuple[str, ...]:
         """The names that ``patterns`` select, in parameter order, each once: names

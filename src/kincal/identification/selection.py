@@ -181,7 +181,7 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
         J = np.asarray(np.linalg.qr(J, mode="r"))  # Householder: the rank decision needs full accuracy
     norms = np.linalg.norm(J, axis=0)
     scale = float(norms.max()) if norms.size else 1.0
-    Q = np.zeros((J.shape[0], 0))
+    basis = np.zeros((J.shape[0], J.shape[1]))  # the kept columns' orthonormal basis
     kept: list[int] = []
     dropped: list[int] = []
     for c in preference_order(names, n_kinematic):
@@ -191,11 +191,13 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
         if norms[c] <= rank_tol * scale:
             dropped.append(c)
             continue
+        Q = basis[:, :len(kept)]
         r = col - Q @ (Q.T @ col)
         r = r - Q @ (Q.T @ r)  # second pass keeps the basis orthogonal to working precision
-        if np.linalg.norm(r) > rank_tol * norms[c]:
+        size = np.linalg.norm(r)
+        if size > rank_tol * norms[c]:
+            basis[:, len(kept)] = r / size
             kept.append(c)
-            Q = np.column_stack([Q, r / np.linalg.norm(r)])
         else:
             dropped.append(c)
     kept.sort()
@@ -211,11 +213,14 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     svk = np.linalg.svd(Jkn, compute_uv=False)
     cond = float(svk[0] / svk[-1]) if svk.size and svk[-1] > 0 else float("inf")
     duplicates = []
+    seen = [c for c in dropped if norms[c] > rank_tol * scale]
+    # every dropped column against the kept ones in one solve (one SVD of Jk)
+    coefs = dict(zip(seen, np.linalg.lstsq(Jk, J[:, seen], rcond=None)[0].T)) if seen else {}
     for c in dropped:
-        if norms[c] <= rank_tol * scale:
+        if c not in coefs:
             duplicates.append(Duplicate(names[c], ()))
             continue
-        coef, *_ = np.linalg.lstsq(Jk, J[:, c], rcond=None)
+        coef = coefs[c]
         big = np.argsort(-np.abs(coef))
         top = [(names[kept[i]], float(coef[i])) for i in big[:4]
                if abs(coef[i]) >= 0.05 * abs(coef[big[0]])]

@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from scipy.linalg.lapack import get_lapack_funcs
 
 from kincal.errors import OptionError
 
@@ -175,7 +174,37 @@ def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,
     return make() if kept is None else kept(J, free_idx, make)
 
 
-_GELSY = get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)), np.zeros(1)))
+def _flapack():
+    """scipy's compiled LAPACK wrappers (``scipy.linalg._flapack``, the module whose dgelsy
+    ``scipy.linalg.lapack.get_lapack_funcs`` returns for float64), loaded from scipy's own
+    file without running ``scipy.linalg``'s package import, which costs about 0.15 s of a
+    command's start-up (its array-API layer imports numpy.f2py and numpy.testing) for one
+    LAPACK routine. Once scipy.linalg is imported it is the same module object (the
+    extension is initialised once per process); when the file is not where scipy keeps it,
+    the public import gives it."""
+    import importlib.util
+    import os
+    import sys
+
+    if "scipy.linalg" in sys.modules:
+        from scipy.linalg import _flapack
+        return _flapack
+    import scipy
+
+    folder = os.path.join(os.path.dirname(scipy.__file__), "linalg")
+    files = sorted(f for f in os.listdir(folder) if f.startswith("_flapack.")
+                   and f.endswith((".so", ".pyd")))
+    spec = importlib.util.spec_from_file_location("scipy.linalg._flapack",
+                                                  os.path.join(folder, files[0])) if files else None
+    if spec is None or spec.loader is None:
+        from scipy.linalg import _flapack
+        return _flapack
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_GELSY: tuple = ()  # (dgelsy, dgelsy_lwork), loaded at the first solve
 _LWORK: dict = {}  # (m, n): LAPACK's optimal work size for gelsy
 
 
@@ -185,6 +214,10 @@ def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     ``scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy", check_finite=False)``
     makes, without its checks and dispatch (a fold fit of Algorithm 1 solves a 45 x 45
     system, where they cost as much as the solve)."""
+    global _GELSY
+    if not _GELSY:
+        lapack = _flapack()
+        _GELSY = (lapack.dgelsy, lapack.dgelsy_lwork)
     m, n = A.shape
     if m < n:
         b = np.concatenate([b, np.zeros(n - m)])

@@ -42,7 +42,7 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
         A = np.concatenate([Rb @ R_tip, np.broadcast_to(np.eye(3), (N, 3, 3))], axis=2)
         b = P - p_tip @ Rb.T
         sol, *_ = np.linalg.lstsq(A.reshape(3 * N, 6), b.reshape(-1), rcond=None)
-        if np.allclose(sol[:3], t, rtol=0, atol=1e-9):  # Gauss-Newton refines it after
+        if np.max(np.abs(sol[:3] - t)) <= 1e-9:  # Gauss-Newton refines it after
             t = sol[:3]
             break
         t = sol[:3]
