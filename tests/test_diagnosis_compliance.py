@@ -35,3 +35,35 @@ def test_no_compliance_is_named_on_clean_data(name, seed):
     warnings.simplefilter("ignore", KincalWarning)
     robot, data, _ = model_auto.case(name, seed, planted=False, term="compliance")
     assert diagnose(calibrate(robot, data, model="complete")) is None
+
+
+def test_the_f_tail_matches_scipy():
+    from scipy import stats
+
+    from kincal.identification.diagnosis import f_sf
+
+    for d1 in (1, 2, 3, 7):
+        for d2 in (1, 5, 40, 150, 2000):
+            for F in (1e-6, 0.05, 0.7, 1.0, 2.5, 9.0, 60.0, 400.0, 1e4):
+                want = float(stats.f.sf(F, d1, d2))
+                got = f_sf(F, d1, d2)
+                assert got == pytest.approx(want, rel=1e-9, abs=1e-300), (F, d1, d2)
+    assert f_sf(0.0, 2, 10) == 1.0 and f_sf(float("inf"), 2, 10) == 0.0
+
+
+def test_a_summary_does_not_import_scipy_stats(tmp_path):
+    """The summary's diagnosis runs on every calibration's summary; scipy.stats' import
+    alone costs more than the rest of a small command."""
+    import subprocess
+
+    robot, data, _ = model_auto.case("EC66", 0, planted=False, term="compliance")
+    csv = tmp_path / "poses.csv"
+    csv.write_text(data.to_csv_text())
+    code = ("import sys\nfrom kincal.cli import main\n"
+            f"rc = main(['calibrate', 'ec66', {str(csv)!r}, '--tip', 'flange', '--method', 'ls', "
+            f"'--tool-offset', '0.03', '-0.02', '0.1', '--out', {str(tmp_path / 'o.urdf')!r}])\n"
+            "print('STATS:', 'scipy.stats' in sys.modules, rc)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=True)
+    assert "diagnosis" in out.stdout or "kincal calibration" in out.stdout, out
+    assert out.stdout.strip().splitlines()[-1] == "STATS: False 0", out.stdout[-2000:]

@@ -9,7 +9,11 @@ they give it one, :mod:`kincal.gravity`). Each pattern is the joint's own
 motion ``dP/dq_j`` times that function of the samples, with what the fitted parameters
 can already absorb projected out; the pattern with the largest F statistic is reported
 when its p-value, times the number of patterns tried (Bonferroni), is below ``ALPHA``.
-Plain numpy/scipy over the result's arrays; the Jacobian comes from the point model.
+Plain numpy over the result's arrays; the Jacobian comes from the point model. The F
+distribution's tail is computed here (:func:`f_sf`, the regularised incomplete beta
+function by its continued fraction) rather than by ``scipy.stats``, whose import costs a
+command that prints a summary 0.4-1.2 s (tests/test_diagnosis_compliance.py compares the
+two).
 """
 
 from __future__ import annotations
@@ -57,8 +61,6 @@ class Finding:
 def diagnose(result) -> Finding | None:
     """The strongest significant pattern in the first point set's residuals, or None (also
     for other kinds, several sets or chains)."""
-    from scipy import stats
-
     from kincal.measurements.point import MeasurementModel
 
     if len(result.sets) != 1 or result.sets[0].kind != "point" or (
@@ -109,7 +111,7 @@ def diagnose(result) -> Finding | None:
         if dof <= 0 or rss - gain <= 0:
             continue
         F = (gain / k) / ((rss - gain) / dof)
-        p = min(1.0, float(stats.f.sf(F, k, dof)) * len(tests))
+        p = min(1.0, f_sf(F, k, dof) * len(tests))
         if p < ALPHA and (best is None or F > best[0]):
             N = len(q)
             size = (100 * coef[0] if cause == "scale" else
@@ -137,3 +139,50 @@ def _torques(robot, q: np.ndarray, kinds) -> np.ndarray:
         if kind == "prismatic" or _rms(tau[:, j]) < MIN_TORQUE:
             tau[:, j] = 0.0
     return tau
+
+
+def f_sf(F: float, d1: float, d2: float) -> float:
+    """P(X > F) for X following the F distribution with (d1, d2) degrees of freedom: the
+    regularised incomplete beta function I_x(d2/2, d1/2) at x = d2 / (d2 + d1 F)."""
+    if not F > 0:
+        return 1.0
+    if math.isinf(F):
+        return 0.0
+    return _betainc(d2 / 2, d1 / 2, d2 / (d2 + d1 * F))
+
+
+def _betainc(a: float, b: float, x: float) -> float:
+    """The regularised incomplete beta function I_x(a, b), 0 <= x <= 1, from its continued
+    fraction, on the side of x where the fraction converges fast (I_x(a, b) = 1 -
+    I_{1-x}(b, a)); its prefactor in logarithms, so tails down to 1e-300 are kept."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    log_front = (math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b)
+                 + a * math.log(x) + b * math.log1p(-x))
+    if x < (a + 1) / (a + b + 2):
+        return math.exp(log_front) * _beta_fraction(a, b, x) / a
+    return 1.0 - math.exp(log_front) * _beta_fraction(b, a, 1.0 - x) / b
+
+
+def _beta_fraction(a: float, b: float, x: float, steps: int = 500) -> float:
+    """The continued fraction 1 / (1 + d1 / (1 + d2 / (1 + ...))) of the incomplete beta
+    function, d_{2m+1} = -(a+m)(a+b+m) x / ((a+2m)(a+2m+1)), d_{2m} = m(b-m) x /
+    ((a+2m-1)(a+2m)), evaluated by the modified Lentz method."""
+    tiny = 1e-300
+    c, d = 1.0, 1.0 - (a + b) * x / (a + 1)
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, steps + 1):
+        for num in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
+                    -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):
+            d = 1.0 + num * d
+            d = 1.0 / (d if abs(d) > tiny else tiny)
+            c = 1.0 + num / c
+            c = c if abs(c) > tiny else tiny
+            h *= d * c
+        if abs(d * c - 1.0) < 1e-15:
+            return h
+    raise ArithmeticError(f"the incomplete beta function's continued fraction did not "
+                          f"converge at a={a:g}, b={b:g}, x={x:g}")
