@@ -14,7 +14,9 @@ EC66, tracker-like poses in a 400 mm cube (and an R-test-like 20 mm cube for the
   (CalibrationOptions.blas_threads = 1 / None; skipped with --no-busy);
 - the command line as a user meets it, wall time of a new process (start-up and imports
   included): `kincal --help` and `kincal calibrate --method ls` on the 60 poses
-  (targets 0.3 s and 0.8 s; --cli-only runs just these).
+  (targets 0.3 s and 0.8 s; --cli-only runs just these). Commands run as a user runs
+  them, printing their summaries (no --quiet: the summary's diagnosis is part of the
+  cost).
 
 Usage: python scripts/bench_identification.py [--repeats 5] [--no-busy] [--cli-only] [--no-200k]
        python scripts/bench_identification.py --issue20 [--large]   (issue 20's table: CPU
@@ -76,7 +78,7 @@ def _cli_times(data, repeats):
             fh.write(data.to_csv_text())
         runs = {"help": kincal + ["--help"],
                 "calibrate": kincal + ["calibrate", "ec66", csv, "--method", "ls", "--out",
-                                       os.path.join(tmp, "out.urdf"), "--overwrite", "--quiet"]}
+                                       os.path.join(tmp, "out.urdf"), "--overwrite"]}
         out = {}
         for name, cmd in runs.items():
             subprocess.run(cmd, check=True, capture_output=True)  # warm the file cache
@@ -175,7 +177,7 @@ def issue20(robot, model, rng, repeats, large):
             fh.write(d60.to_csv_text())
         out = os.path.join(tmp, "out.urdf")
         cal = lambda f: kincal + ["calibrate", "ec66", f, "--method", "ls", "--out", out,
-                                  "--overwrite", "--quiet"]
+                                  "--overwrite"]
         cpu, _ = _child(cal(csv), repeats)
         floor, _ = _child([sys.executable, "-c", "import numpy"], repeats)
         row("`kincal calibrate --method ls`, 60 poses, whole command", f"{cpu:.2f} s",
@@ -229,7 +231,7 @@ def _issue20_io_rows(row, kincal, robot, model, rng, repeats):
         # simulate: the default tracker design, EC66, 20,000 poses (about 9 damped
         # least-squares steps per pose, each a 6x6 solve: numpy's floor for those solves)
         cpu, peak = _child(kincal + ["simulate", "ec66", "--poses", "20000", "--out",
-                                     path("sim.csv"), "--overwrite", "--quiet"], repeats)
+                                     path("sim.csv"), "--overwrite"], repeats)
         A = np.eye(6) + 0.1 * np.random.default_rng(0).normal(size=(20000, 6, 6))
         b = np.ones((20000, 6, 1))
         floor = _cpu_min(lambda: [np.linalg.solve(A, b) for _ in range(9)], repeats)
@@ -272,7 +274,7 @@ def _issue20_io_rows(row, kincal, robot, model, rng, repeats):
                     small.writelines(fh.readline() for _ in range(301))
             comp = lambda t: kincal + ["compensate", path(f"cal{cal}.urdf"), path(t),  # noqa
                                        "--frames", path(f"frames{cal}.json"), "--out",
-                                       path("joints.csv"), "--overwrite", "--quiet",
+                                       path("joints.csv"), "--overwrite",
                                        "--flag-unreachable"]
             cpu, peak = _child(comp(targets), repeats)
             _, base = _child(comp("t300.csv"), repeats)

@@ -67,3 +67,18 @@ def test_a_summary_does_not_import_scipy_stats(tmp_path):
                          timeout=120, check=True)
     assert "diagnosis" in out.stdout or "kincal calibration" in out.stdout, out
     assert out.stdout.strip().splitlines()[-1] == "STATS: False 0", out.stdout[-2000:]
+
+
+def test_a_large_set_is_diagnosed_on_evenly_spaced_poses(monkeypatch):
+    """Beyond MAX_POSES the test looks at that many poses spread over the file (their
+    approach directions from the whole sequence): the planted term is still named."""
+    import kincal.identification.diagnosis as diagnosis
+
+    warnings.simplefilter("ignore", KincalWarning)
+    robot, data, joint = model_auto.case("EC66", 0, planted=True, term="compliance")
+    res = calibrate(robot, data, model="complete")
+    whole = diagnose(res)
+    monkeypatch.setattr(diagnosis, "MAX_POSES", 40)
+    part = diagnose(res)
+    assert (part.joint, part.cause) == (whole.joint, whole.cause) == (joint, "compliance")
+    assert part.size == pytest.approx(whole.size, rel=0.1) and part.p_value > whole.p_value
