@@ -264,3 +264,39 @@ def test_poses_selected_for_flush_touches(rng):
     assert sel.log_det > sel.random_log_det
     assert {"plane2.d", "tool.rx", "tool.ry"} <= set(sel.parameters)
     assert not {"tool.x", "tool.y", "tool.z"} & set(sel.parameters)
+
+
+def _noisy_touches(rng, noise, noise_deg, per_plane=40):
+    robot = Robot.load("ec66", tip="flange")
+    em = models.build("complete", robot.geometry)
+    cand = random_joint_values(robot.geometry, rng, 3000)
+    truth = em.nominal + np.where(em.is_length, 0.5e-3, np.radians(0.05)) * rng.normal(
+        size=em.size)
+    planes = np.array([TABLE[0], [1.3, 0.2, 0.3]])
+    g = robot.geometry
+    return robot, simulate_flush(em, truth, CONTACT, planes, cand, per_plane, noise,
+                                 noise_deg, rng, source="touches.csv", limits=(g.lower, g.upper))
+
+
+def test_evidence_estimates_the_noise_of_heights_and_tilts_on_their_own(rng):
+    """Heights with 0.2 mm and tilts with 0.02 deg of noise (10 mm per deg, the default
+    weighs 1 mm against 1 deg): the evidence's variance components find each within 25 %,
+    report them labelled in their units, and weigh the rows by them; stated sigmas stay as
+    given (one group, the rows' weights as stated)."""
+    robot, train = _noisy_touches(rng, 0.2e-3, 0.02)
+    result = kincal.calibrate(robot, [train], method="l2", lam="evidence",
+                              tool_guess=tuple(CONTACT[:3]))
+    groups = {rows: (s, unit) for rows, s, unit in result.evidence.noise_groups}
+    assert set(groups) == {"touches.csv height", "touches.csv tilt"}
+    assert groups["touches.csv height"][1] == "mm" and groups["touches.csv tilt"][1] == "deg"
+    assert groups["touches.csv height"][0] == pytest.approx(0.2, rel=0.25)
+    assert groups["touches.csv tilt"][0] == pytest.approx(0.02, rel=0.25)
+    assert "touches.csv tilt" in result.evidence.line()
+    assert result.evidence.as_dict()["noise_groups"][1]["unit"] == "deg"
+    for stated in (dict(orientation_sigma_deg=0.05),
+                   dict(sigma=np.full(len(train), 0.05e-3))):
+        problem = CalibrationProblem(robot, [replace(train, **stated)], CalibrationOptions(
+            method="l2", lam="evidence", tool_guess=tuple(CONTACT[:3])))
+        ev = problem.solve().evidence
+        assert [g[0] for g in ev.noise_groups] == ["stated sigmas"]
+        assert problem.row_scale is None  # the rows weigh as stated
