@@ -300,3 +300,17 @@ def test_evidence_estimates_the_noise_of_heights_and_tilts_on_their_own(rng):
         ev = problem.solve().evidence
         assert [g[0] for g in ev.noise_groups] == ["stated sigmas"]
         assert problem.row_scale is None  # the rows weigh as stated
+
+
+def test_a_kind_of_row_the_parameters_fit_exactly_shares_its_sets_noise(rng):
+    """8 touches per plane: 16 heights against more parameters than that, which the fit
+    could match exactly (the evidence would then drive their noise to 0): the heights'
+    noise is not identified on its own, and the set's rows keep one noise as the kind
+    weighs them; with 40 per plane each kind has its own (the test above)."""
+    robot, train = _noisy_touches(rng, 0.2e-3, 0.02, per_plane=8)
+    problem = CalibrationProblem(robot, [train], CalibrationOptions(
+        method="l2", lam="evidence", tool_guess=tuple(CONTACT[:3])))
+    result = problem.solve()
+    assert [g[0] for g in result.evidence.noise_groups] == ["touches.csv"]
+    assert result.sets[0].after.rms > 1e-3  # [mm]: the heights are not fitted exactly
+    assert problem.row_scale is None
