@@ -46,10 +46,12 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import json
+import math
 import sys
 import tempfile
 import warnings
-from contextlib import redirect_stdout
+from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
 import numpy as np
@@ -83,9 +85,11 @@ def write_joint_csv(path: Path, names, values) -> None:
 
 
 def held_out(urdf: Path, frames_path: Path, q_train: np.ndarray, q_valid: np.ndarray,
-             names, base: str = BASE, tip: str = TIP, k: int = 0) -> tuple[float, float, float]:
+             names, base: str = BASE, tip: str = TIP, k: int = 0,
+             compliance: bool = True) -> tuple[float, float, float]:
     """(height [mm], roll [deg], pitch [deg]) RMS on the validation touches, from the files
-    a calibration wrote (see the module notes): the chain base -> tip, set k of FRAMES.json."""
+    a calibration wrote (see the module notes): the chain base -> tip, set k of FRAMES.json;
+    compliance False: FRAMES.json's compliance terms not applied (the URDF alone)."""
     from kincal.frames_file import CellFrames
     from kincal.measurements.flush import tilt_angles
     from kincal.measurements.plane import fit_plane
@@ -96,7 +100,8 @@ def held_out(urdf: Path, frames_path: Path, q_train: np.ndarray, q_valid: np.nda
     idx = [list(names).index(j) for j in robot.joint_names]
     cell = CellFrames.read(frames_path)
     s = cell.sets[k]
-    c = np.array([cell.compliance.get(j, 0.0) for j in robot.joint_names])
+    c = np.array([cell.compliance.get(j, 0.0) if compliance else 0.0
+                  for j in robot.joint_names])
     t = np.array([s.value(f"tool.{c}") for c in "xyz"])
     tilt = [s.value(f"tool.{c}") if s.has(f"tool.{c}") else 0.0 for c in ("rx", "ry")]
     R_c = base_rotation(tilt[0], tilt[1], 0.0)
@@ -141,13 +146,19 @@ def calibrate(folder: Path, urdf: Path, train, tag: str, *extra: str, bases=(BAS
     files = [str(f) for f in (train if isinstance(train, (list, tuple)) else [train])]
     argv = ["calibrate", str(urdf), *files, "--base", *bases, "--tip", *tips, "--on-plane",
             "--flush", "--tool-offset", "0", "0", "-0.12", "--out", str(out), "--frames-out",
-            str(frames), "--quiet", *extra]
-    with warnings.catch_warnings(), redirect_stdout(io.StringIO()):
+            str(frames), "--json", *extra]
+    summary = io.StringIO()
+    with warnings.catch_warnings(), redirect_stdout(summary), redirect_stderr(io.StringIO()):
         warnings.simplefilter("ignore")
         code = main(argv)
     if code != 0:
         sys.exit(f"talos_contact: kincal {' '.join(argv)} failed ({code})")
+    evidence = json.loads(summary.getvalue()).get("evidence")
+    LOG_EVIDENCE[tag] = math.nan if evidence is None else evidence["log_evidence"][-1]
     return out, frames
+
+
+LOG_EVIDENCE: dict[str, float] = {}  # [nats] per calibration tag: the evidence's last
 
 # ------------------------------------------------------------------ two chains (simulated)
 RIGHT_BASE, RIGHT_TIP = "right_sole_link", "gripper_right_base_link"
@@ -316,11 +327,12 @@ def main(argv=None) -> int:
         return 0
     names, q_train = joint_rows(DATA / "left_train.csv")
     _, q_valid = joint_rows(DATA / "left_validation.csv")
-    rows = [("FIGAROH (published)", *FIGAROH)]
+    rows = [("FIGAROH (published)", *FIGAROH, math.nan)]
     with tempfile.TemporaryDirectory(prefix="kincal-talos-") as tmp:
         folder = Path(tmp)
         rows.append(("nominal model, plane fitted to the training touches",
-                     *held_out(urdf, nominal_frames(folder, urdf), q_train, q_valid, names)))
+                     *held_out(urdf, nominal_frames(folder, urdf), q_train, q_valid, names),
+                     math.nan))
         train = DATA / "left_train.csv"  # kincal reads the log as it is (metadata skipped)
         variants = [("kincal defaults (placement model, lambda auto: evidence)", ())]
         if args.variants:
@@ -332,10 +344,19 @@ def main(argv=None) -> int:
                          ("kincal, --compliance on the stance leg's 6 joints",
                           ("--compliance", *LEG)),
                          ("kincal, --compliance on the stance leg's roll joints",
-                          ("--compliance", "leg_left_2_joint", "leg_left_6_joint"))]
+                          ("--compliance", "leg_left_2_joint", "leg_left_6_joint")),
+                         ("kincal, --compliance leg_left_5_joint (the evidence's best one)",
+                          ("--compliance", "leg_left_5_joint")),
+                         ("kincal, --compliance leg_left_5_joint leg_left_3_joint",
+                          ("--compliance", "leg_left_5_joint", "leg_left_3_joint"))]
         for k, (label, extra) in enumerate(variants):
             cal, frames = calibrate(folder, urdf, train, f"v{k}", *extra)
-            rows.append((label, *held_out(cal, frames, q_train, q_valid, names)))
+            rows.append((label, *held_out(cal, frames, q_train, q_valid, names),
+                         LOG_EVIDENCE[f"v{k}"]))
+            if "--compliance" in extra:
+                rows.append(("  the same, the URDF alone (FRAMES.json's compliance not applied)",
+                             *held_out(cal, frames, q_train, q_valid, names, compliance=False),
+                             math.nan))
         if args.variants:
             # the floor: both days fitted together, the plane through every touch, judged on
             # the second day's touches in sample: what the chain model can explain at best
@@ -344,14 +365,15 @@ def main(argv=None) -> int:
             q_both = np.vstack([q_train, q_valid])
             cal, frames = calibrate(folder, urdf, both, "both")
             rows.append(("kincal defaults fitted on both days (in sample: the floor)",
-                         *held_out(cal, frames, q_both, q_valid, names)))
+                         *held_out(cal, frames, q_both, q_valid, names), math.nan))
     print(f"TALOS left sole -> left gripper, flush table touches: {len(q_train)} training "
           f"(2022-10-28), {len(q_valid)} held-out (2022-11-07); held-out RMS")
     width = max(len(label) for label, *_ in rows)
-    print(f"| {'model':<{width}} | height [mm] | roll [deg] | pitch [deg] |")
-    print(f"|{'-' * (width + 2)}|-------------|------------|-------------|")
-    for label, h, r, p in rows:
-        print(f"| {label:<{width}} | {h:11.2f} | {r:10.2f} | {p:11.2f} |")
+    print(f"| {'model':<{width}} | height [mm] | roll [deg] | pitch [deg] | log evidence |")
+    print(f"|{'-' * (width + 2)}|-------------|------------|-------------|--------------|")
+    for label, h, r, p, ev in rows:
+        print(f"| {label:<{width}} | {h:11.2f} | {r:10.2f} | {p:11.2f} | "
+              + (f"{ev:12.1f}" if math.isfinite(ev) else " " * 12) + " |")
     return 0
 
 

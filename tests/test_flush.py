@@ -314,3 +314,25 @@ def test_a_kind_of_row_the_parameters_fit_exactly_shares_its_sets_noise(rng):
     assert [g[0] for g in result.evidence.noise_groups] == ["touches.csv"]
     assert result.sets[0].after.rms > 1e-3  # [mm]: the heights are not fitted exactly
     assert problem.row_scale is None
+
+
+def test_json_summary_gives_the_noise_of_heights_and_tilts(tmp_path, capsys):
+    """The command line: heights with 0.3 mm and tilts with 0.03 deg of noise; --json's
+    evidence.noise_groups has each, labelled with the file and its unit."""
+    from kincal.cli.main import main
+
+    data = tmp_path / "t.csv"
+    assert main(["simulate", "ec66", "--kind", "flush", "--poses", "80", "--seed", "1",
+                 "--noise-mm", "0.3", "--orientation-noise-deg", "0.03", "--out", str(data),
+                 "-q"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data), "--on-plane", "--flush", "--tool-offset", "0",
+                 "0", "0.1", "--out", str(tmp_path / "c.urdf"), "--frames-out",
+                 str(tmp_path / "f.json"), "--json"]) == 0
+    import json
+
+    groups = json.loads(capsys.readouterr().out)["evidence"]["noise_groups"]
+    assert [(g["rows"], g["unit"]) for g in groups] == [("t.csv height", "mm"),
+                                                        ("t.csv tilt", "deg")]
+    assert groups[0]["sigma"] == pytest.approx(0.3, rel=0.3)
+    assert groups[1]["sigma"] == pytest.approx(0.03, rel=0.3)
