@@ -18,7 +18,7 @@ The validation file's header lacks the 4 leading empty names of the training fil
 kincal refuses it as it is ("the names look shifted"); the script reads its rows by position
 into a file with the training header, as its README says to.
 
-Usage: python scripts/talos_contact.py [--variants]   (about 3 s; --variants: +1 min)
+Usage: python scripts/talos_contact.py [--variants]   (about 3 s; --variants: about 70 s)
        python scripts/talos_contact.py --two-chains [SEEDS]   (about 20 s per seed)
 
 --two-chains: the two arms together against each alone, on simulated touches (we have the
@@ -38,7 +38,10 @@ leg, whose joints carry the robot's weight: FRAMES.json's compliance is applied 
 held-out touches, with the gravity torques of the chain at each touch, the joints off the
 chain at zero), and a floor: the defaults fitted on both
 days together and judged in sample on the second day's touches (with the plane through
-every touch), which no out-of-sample prediction can be expected to beat.
+every touch), which no out-of-sample prediction can be expected to beat. Each compliance
+row is judged again on the URDF alone (FRAMES.json's compliance not applied, as a reader
+of the URDF would), and each row calibrated by the evidence gives its log evidence [nats]
+(the summary's, comparable between rows that weigh the data alike).
 """
 
 from __future__ import annotations
