@@ -18,14 +18,30 @@ The validation file's header lacks the 4 leading empty names of the training fil
 kincal refuses it as it is ("the names look shifted"); the script reads its rows by position
 into a file with the training header, as its README says to.
 
-Usage: python scripts/talos_contact.py [--variants]   (about 3 s; --variants: +1 min)
+Usage: python scripts/talos_contact.py [--variants]   (about 3 s; --variants: about 70 s)
+       python scripts/talos_contact.py --two-chains [SEEDS]   (about 20 s per seed)
+
+--two-chains: the two arms together against each alone, on simulated touches (we have the
+left chain's real data only). The simulated TALOS is the nominal one with errors planted
+on every origin of both chains (1 mm, 0.3 deg; twice that on the shared torso); each
+chain touches its own table (where the nominal robot's touches put it): the left with the
+postures of the real touches, the right with their mirror images, each moved (Newton,
+least joint motion) until the contact frame lies flush up to the planted noise of its
+file, the left as kincal estimates it on the real touches, the right either quieter or
+5x noisier (another instrument); held-out: the other day's postures, noise-free. Three
+calibrations per seed: each chain alone (the first command of issue 18), both together
+(the second), and both together with one noise for all rows (the same sigma stated for
+both files, as kincal weighed them before it estimated a noise per file and kind of row).
 
 --variants adds other penalty and model choices (among them compliance terms on the stance
 leg, whose joints carry the robot's weight: FRAMES.json's compliance is applied to the
 held-out touches, with the gravity torques of the chain at each touch, the joints off the
 chain at zero), and a floor: the defaults fitted on both
 days together and judged in sample on the second day's touches (with the plane through
-every touch), which no out-of-sample prediction can be expected to beat.
+every touch), which no out-of-sample prediction can be expected to beat. Each compliance
+row is judged again on the URDF alone (FRAMES.json's compliance not applied, as a reader
+of the URDF would), and each row calibrated by the evidence gives its log evidence [nats]
+(the summary's, comparable between rows that weigh the data alike).
 """
 
 from __future__ import annotations
@@ -33,10 +49,12 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import json
+import math
 import sys
 import tempfile
 import warnings
-from contextlib import redirect_stdout
+from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
 
 import numpy as np
@@ -70,20 +88,23 @@ def write_joint_csv(path: Path, names, values) -> None:
 
 
 def held_out(urdf: Path, frames_path: Path, q_train: np.ndarray, q_valid: np.ndarray,
-             names) -> tuple[float, float, float]:
+             names, base: str = BASE, tip: str = TIP, k: int = 0,
+             compliance: bool = True) -> tuple[float, float, float]:
     """(height [mm], roll [deg], pitch [deg]) RMS on the validation touches, from the files
-    a calibration wrote (see the module notes)."""
+    a calibration wrote (see the module notes): the chain base -> tip, set k of FRAMES.json;
+    compliance False: FRAMES.json's compliance terms not applied (the URDF alone)."""
     from kincal.frames_file import CellFrames
     from kincal.measurements.flush import tilt_angles
     from kincal.measurements.plane import fit_plane
     from kincal.robot import Robot
     from kincal.rotations import base_rotation
 
-    robot = Robot.load(urdf, base=BASE, tip=TIP)
+    robot = Robot.load(urdf, base=base, tip=tip)
     idx = [list(names).index(j) for j in robot.joint_names]
     cell = CellFrames.read(frames_path)
-    s = cell.sets[0]
-    c = np.array([cell.compliance.get(j, 0.0) for j in robot.joint_names])
+    s = cell.sets[k]
+    c = np.array([cell.compliance.get(j, 0.0) if compliance else 0.0
+                  for j in robot.joint_names])
     t = np.array([s.value(f"tool.{c}") for c in "xyz"])
     tilt = [s.value(f"tool.{c}") if s.has(f"tool.{c}") else 0.0 for c in ("rx", "ry")]
     R_c = base_rotation(tilt[0], tilt[1], 0.0)
@@ -119,36 +140,202 @@ def nominal_frames(folder: Path, urdf: Path) -> Path:
     return path
 
 
-def calibrate(folder: Path, urdf: Path, train: Path, tag: str, *extra: str):
+def calibrate(folder: Path, urdf: Path, train, tag: str, *extra: str, bases=(BASE,),
+              tips=(TIP,)):
+    """kincal calibrate on the file(s) ``train`` (one path or a list, one chain each)."""
     from kincal.cli.main import main
 
     out, frames = folder / f"{tag}.urdf", folder / f"{tag}_frames.json"
-    argv = ["calibrate", str(urdf), str(train), "--base", BASE, "--tip", TIP, "--on-plane",
+    files = [str(f) for f in (train if isinstance(train, (list, tuple)) else [train])]
+    argv = ["calibrate", str(urdf), *files, "--base", *bases, "--tip", *tips, "--on-plane",
             "--flush", "--tool-offset", "0", "0", "-0.12", "--out", str(out), "--frames-out",
-            str(frames), "--quiet", *extra]
-    with warnings.catch_warnings(), redirect_stdout(io.StringIO()):
+            str(frames), "--json", *extra]
+    summary = io.StringIO()
+    with warnings.catch_warnings(), redirect_stdout(summary), redirect_stderr(io.StringIO()):
         warnings.simplefilter("ignore")
         code = main(argv)
     if code != 0:
         sys.exit(f"talos_contact: kincal {' '.join(argv)} failed ({code})")
+    evidence = json.loads(summary.getvalue()).get("evidence")
+    LOG_EVIDENCE[tag] = math.nan if evidence is None else evidence["log_evidence"][-1]
     return out, frames
+
+
+LOG_EVIDENCE: dict[str, float] = {}  # [nats] per calibration tag: the evidence's last
+
+# ------------------------------------------------------------------ two chains (simulated)
+RIGHT_BASE, RIGHT_TIP = "right_sole_link", "gripper_right_base_link"
+CONTACT = np.array([0.0, 0.0, -0.12, np.radians(0.5), np.radians(-0.3)])  # x y z [m], rx ry
+# planted errors of the simulated robot: every origin of both chains, twice on the torso
+PLANTED_MM, PLANTED_DEG, TORSO = 1.0, 0.3, 2.0
+# noise (height [mm], tilt [deg]) of each file: the left as kincal estimates it on the real
+# left touches (variance components: 0.91 mm, 0.45 deg), the right another instrument's
+NOISE = {"right quieter": ((0.9, 0.45), (0.5, 0.25)),
+         "right 5x noisier": ((0.9, 0.45), (4.5, 2.25))}
+
+
+def mirror(urdf: Path, names) -> np.ndarray:
+    """(32, 32) the matrix that turns a row of joint values into its mirror image (left and
+    right chains swapped, through the soles' xz planes): joint by joint, the right joint
+    and the sign whose motion is the mirror image of the left joint's (nominal TALOS,
+    found numerically); torso and head joints keep or flip their sign likewise."""
+    from kincal.robot import Robot
+
+    chains = {side: Robot.load(urdf, base=f"{side}_sole_link", tip=f"gripper_{side}_base_link")
+              for side in ("left", "right")}
+    M = np.diag([1.0, -1.0, 1.0])
+    out = np.zeros((len(names), len(names)))
+    for a, b in (("left", "right"), ("right", "left")):
+        ca, cb = chains[a], chains[b]
+        # the grippers' frames differ by a constant turn besides the mirror
+        Ra, Rb = (c.tip_poses(np.zeros((1, c.geometry.n)))[0, :3, :3] for c in (ca, cb))
+        C = (M @ Ra @ M).T @ Rb
+        for j, name in enumerate(ca.joint_names):
+            other = name.replace(a, b)
+            qa = np.zeros((1, ca.geometry.n))
+            qa[0, j] = 0.3
+            Ta = ca.tip_poses(qa)[0]
+            errors = []
+            for sign in (1.0, -1.0):
+                qb = np.zeros((1, cb.geometry.n))
+                qb[0, list(cb.joint_names).index(other)] = 0.3 * sign
+                Tb = cb.tip_poses(qb)[0]
+                errors.append(np.abs(Tb[:3, 3] - M @ Ta[:3, 3]).max()
+                              + np.abs(Tb[:3, :3] - M @ Ta[:3, :3] @ M @ C).max())
+            if min(errors) > 1e-6:
+                sys.exit(f"talos_contact: {name} has no mirror image in {other}")
+            out[names.index(other), names.index(name)] = 1.0 if errors[0] < errors[1] else -1.0
+    for j, name in enumerate(names):  # off both chains (head, grippers): kept as they are
+        if not out[:, j].any():
+            out[j, j] = 1.0
+    return out
+
+
+def simulated_touches(model, kin, q_rows, names, robot, plane, noise, rng, source):
+    """(N, 32) rows: q_rows with the chain's joints moved (Newton, least joint motion) until
+    the contact frame lies flush on ``plane`` of the simulated robot ``kin``, up to the
+    planted noise (height [mm], tilt [deg]) in the touch itself."""
+    from kincal.planning.kind_simulation import simulate_flush
+
+    idx = [names.index(j) for j in robot.joint_names]
+    out = np.repeat(q_rows[:1], len(q_rows), axis=0)
+    d = simulate_flush(model, kin, CONTACT, plane[None], q_rows[:, idx], len(q_rows),
+                       noise[0] * 1e-3, noise[1], rng, source=source)
+    out[:, idx] = d.joint_values
+    return out
+
+
+def two_chains(urdf: Path, seeds: int) -> list[tuple]:
+    """Together against alone on simulated TALOS touches, per seed and noise case: rows
+    (case, seed, chain, alone (h, roll, pitch), together (h, roll, pitch))."""
+    from kincal.identification.chains import Chains
+    from kincal.measurements.flush import FlushData, FlushKind
+    from kincal.robot import Robot
+
+    names, q_train = joint_rows(DATA / "left_train.csv")
+    _, q_valid = joint_rows(DATA / "left_validation.csv")
+    names = list(names)
+    arms = [Robot.load(urdf, base=b, tip=t) for b, t in ((BASE, TIP), (RIGHT_BASE, RIGHT_TIP))]
+    ch = Chains(arms, 2, "placement")
+    Mq = mirror(urdf, names)
+    touches = {0: (q_train, q_valid), 1: (q_train @ Mq.T, q_valid @ Mq.T)}
+    planes = []
+    for k, arm in enumerate(arms):  # each table where the nominal robot's touches put it
+        q = touches[k][0][:, [names.index(j) for j in arm.joint_names]]
+        data = FlushData(joint_names=arm.joint_names, joint_values=q)
+        planes.append(FlushKind(ch.models[k], data).start(ch.models[k].nominal, CONTACT[:3])[:3])
+    torso = np.array([n.startswith("torso_") for n in ch.model.names])
+    rows = []
+    for case, noise in NOISE.items():
+        for seed in range(seeds):
+            rng = np.random.default_rng(seed)
+            size = np.where(ch.model.is_length, PLANTED_MM * 1e-3, np.radians(PLANTED_DEG))
+            truth = ch.model.nominal + size * np.where(torso, TORSO, 1.0) * rng.normal(
+                size=ch.model.size)
+            with tempfile.TemporaryDirectory(prefix="kincal-talos2-") as tmp:
+                folder = Path(tmp)
+                sets = []
+                for k, arm in enumerate(arms):
+                    m, kin = ch.models[k], truth[ch.idx[k]]
+                    train = simulated_touches(m, kin, touches[k][0], names, arm, planes[k],
+                                              noise[k], rng, f"chain{k}")
+                    valid = simulated_touches(m, kin, touches[k][1], names, arm, planes[k],
+                                              (0.0, 0.0), rng, f"chain{k} held out")
+                    path = folder / f"{('LEFT', 'RIGHT')[k]}.csv"
+                    write_joint_csv(path, names, train)
+                    sets.append((path, train, valid, arm))
+                files = [p for p, *_ in sets]
+                both = calibrate(folder, urdf, files, "both", bases=(BASE, RIGHT_BASE),
+                                 tips=(TIP, RIGHT_TIP))
+                # one noise for all rows (kincal before variance components): the same
+                # sigma stated for both files, the tilts weighed 1 deg against 1 mm
+                one = calibrate(folder, urdf, files, "one", "--set-sigma-mm", "0.05", "0.05",
+                                bases=(BASE, RIGHT_BASE), tips=(TIP, RIGHT_TIP))
+                for k, (path, train, valid, arm) in enumerate(sets):
+                    alone = calibrate(folder, urdf, path, f"alone{k}", bases=(arm.base,),
+                                      tips=(arm.tip,))
+                    rows.append((case, seed, ("left", "right")[k],
+                                 held_out(*alone, train, valid, names, arm.base, arm.tip),
+                                 held_out(*both, train, valid, names, arm.base, arm.tip, k),
+                                 held_out(*one, train, valid, names, arm.base, arm.tip, k)))
+    return rows
+
+
+def print_two_chains(rows) -> None:
+    print("TALOS, two chains (left sole -> left gripper, right sole -> right gripper, sharing "
+          "the torso), simulated: held-out RMS of noise-free touches of the other day's "
+          "postures, alone vs together")
+    print("| case | seed | chain | alone: height [mm], roll, pitch [deg] | together | "
+          "together, one noise for all rows |")
+    print("|---|---|---|---|---|---|")
+
+    def cells(*runs):
+        return " | ".join(f"{v[0]:.2f}, {v[1]:.3f}, {v[2]:.3f}" for v in runs)
+
+    for case, seed, chain, *runs in rows:
+        print(f"| {case} | {seed} | {chain} | {cells(*runs)} |")
+    for case in NOISE:
+        for chain in ("left", "right"):
+            sel = np.array([runs for c, _, ch, *runs in rows if c == case and ch == chain])
+            rms = np.sqrt(np.mean(np.square(sel), axis=0))
+            print(f"| {case} | RMS over seeds | {chain} | {cells(*rms)} |")
+    print("\nTogether minus alone, mean over the seeds +- its standard error (< 0: together "
+          "better), and the seeds where together is at least as good:")
+    print("| case | chain | height [mm] | roll [deg] | pitch [deg] |")
+    print("|---|---|---|---|---|")
+    for case in NOISE:
+        for chain in ("left", "right"):
+            sel = np.array([runs for c, _, ch, *runs in rows if c == case and ch == chain])
+            d = sel[:, 1] - sel[:, 0]
+            se = np.std(d, axis=0, ddof=1) / np.sqrt(len(d)) if len(d) > 1 else d[0] * np.nan
+            print(f"| {case} | {chain} | " + " | ".join(
+                f"{m:+.3f} +- {e:.3f} ({int(np.sum(x <= 0))}/{len(d)})"
+                for m, e, x in zip(d.mean(axis=0), se, d.T)) + " |")
+
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", action="store_true",
                         help="also the other penalty and error model choices")
+    parser.add_argument("--two-chains", type=int, nargs="?", const=5, default=0,
+                        metavar="SEEDS", help="only the simulated two-chain study (left and "
+                        "right arms together vs alone), over SEEDS seeds (default 5)")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
         sys.exit(f"talos_contact: {DATA} not found (the shared data sit beside the repository)")
     urdf = talos_urdf()
+    if args.two_chains:
+        print_two_chains(two_chains(urdf, args.two_chains))
+        return 0
     names, q_train = joint_rows(DATA / "left_train.csv")
     _, q_valid = joint_rows(DATA / "left_validation.csv")
-    rows = [("FIGAROH (published)", *FIGAROH)]
+    rows = [("FIGAROH (published)", *FIGAROH, math.nan)]
     with tempfile.TemporaryDirectory(prefix="kincal-talos-") as tmp:
         folder = Path(tmp)
         rows.append(("nominal model, plane fitted to the training touches",
-                     *held_out(urdf, nominal_frames(folder, urdf), q_train, q_valid, names)))
+                     *held_out(urdf, nominal_frames(folder, urdf), q_train, q_valid, names),
+                     math.nan))
         train = DATA / "left_train.csv"  # kincal reads the log as it is (metadata skipped)
         variants = [("kincal defaults (placement model, lambda auto: evidence)", ())]
         if args.variants:
@@ -160,10 +347,19 @@ def main(argv=None) -> int:
                          ("kincal, --compliance on the stance leg's 6 joints",
                           ("--compliance", *LEG)),
                          ("kincal, --compliance on the stance leg's roll joints",
-                          ("--compliance", "leg_left_2_joint", "leg_left_6_joint"))]
+                          ("--compliance", "leg_left_2_joint", "leg_left_6_joint")),
+                         ("kincal, --compliance leg_left_5_joint (the evidence's best one)",
+                          ("--compliance", "leg_left_5_joint")),
+                         ("kincal, --compliance leg_left_5_joint leg_left_3_joint",
+                          ("--compliance", "leg_left_5_joint", "leg_left_3_joint"))]
         for k, (label, extra) in enumerate(variants):
             cal, frames = calibrate(folder, urdf, train, f"v{k}", *extra)
-            rows.append((label, *held_out(cal, frames, q_train, q_valid, names)))
+            rows.append((label, *held_out(cal, frames, q_train, q_valid, names),
+                         LOG_EVIDENCE[f"v{k}"]))
+            if "--compliance" in extra:
+                rows.append(("  the same, the URDF alone (FRAMES.json's compliance not applied)",
+                             *held_out(cal, frames, q_train, q_valid, names, compliance=False),
+                             math.nan))
         if args.variants:
             # the floor: both days fitted together, the plane through every touch, judged on
             # the second day's touches in sample: what the chain model can explain at best
@@ -172,14 +368,15 @@ def main(argv=None) -> int:
             q_both = np.vstack([q_train, q_valid])
             cal, frames = calibrate(folder, urdf, both, "both")
             rows.append(("kincal defaults fitted on both days (in sample: the floor)",
-                         *held_out(cal, frames, q_both, q_valid, names)))
+                         *held_out(cal, frames, q_both, q_valid, names), math.nan))
     print(f"TALOS left sole -> left gripper, flush table touches: {len(q_train)} training "
           f"(2022-10-28), {len(q_valid)} held-out (2022-11-07); held-out RMS")
     width = max(len(label) for label, *_ in rows)
-    print(f"| {'model':<{width}} | height [mm] | roll [deg] | pitch [deg] |")
-    print(f"|{'-' * (width + 2)}|-------------|------------|-------------|")
-    for label, h, r, p in rows:
-        print(f"| {label:<{width}} | {h:11.2f} | {r:10.2f} | {p:11.2f} |")
+    print(f"| {'model':<{width}} | height [mm] | roll [deg] | pitch [deg] | log evidence |")
+    print(f"|{'-' * (width + 2)}|-------------|------------|-------------|--------------|")
+    for label, h, r, p, ev in rows:
+        print(f"| {label:<{width}} | {h:11.2f} | {r:10.2f} | {p:11.2f} | "
+              + (f"{ev:12.1f}" if math.isfinite(ev) else " " * 12) + " |")
     return 0
 
 

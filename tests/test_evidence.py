@@ -59,7 +59,7 @@ def test_log_evidence_matches_the_direct_gaussian_marginal():
 def test_maximiser_is_the_brute_force_maximum_and_monotone():
     J, y, groups = _linear(1, m=90, per_class=(6, 6, 6), flat=3)
     problem = LinearEvidence.of(J, y, groups)
-    alpha, beta, history, converged = maximise(problem, 3, np.ones(3), 1.0)
+    alpha, (beta,), history, converged = maximise(problem, 3, np.ones(3), 1.0)
     assert converged
     # every iteration raised (never lowered) the evidence
     assert np.all(np.diff(history) >= -1e-9 * abs(history[-1]))
@@ -86,7 +86,7 @@ def test_recovers_known_prior_scales_and_noise():
     scales, noise = np.array([0.3, 0.05, 1.0]), 0.1
     J, y, groups = _linear(2, m=1500, per_class=(50, 50, 50), flat=6, scales=scales,
                            noise=noise)
-    alpha, beta, _, converged = maximise(LinearEvidence.of(J, y, groups), 3, np.ones(3), 1.0)
+    alpha, (beta,), _, converged = maximise(LinearEvidence.of(J, y, groups), 3, np.ones(3), 1.0)
     assert converged
     # 50 draws per class: a scale is known to ~1/sqrt(100), 10 %
     assert 1 / np.sqrt(alpha) == pytest.approx(scales, rel=0.3)
@@ -96,7 +96,7 @@ def test_recovers_known_prior_scales_and_noise():
 def test_given_hyperparameters_stay_put():
     J, y, groups = _linear(3, m=200)
     alpha0 = np.array([4.0, 100.0, 1.0])
-    alpha, beta, history, _ = maximise(LinearEvidence.of(J, y, groups), 3, alpha0, 50.0,
+    alpha, (beta,), history, _ = maximise(LinearEvidence.of(J, y, groups), 3, alpha0, 50.0,
                                        alpha_fixed=np.array([True, False, True]),
                                        beta_fixed=True)
     assert alpha[0] == 4.0 and alpha[2] == 1.0 and beta == 50.0
@@ -349,3 +349,32 @@ def test_auto_with_several_sets_judges_the_measured_volume(tmp_path):
         res = calibrate(robot, sets)
         assert res.penalty_choice.startswith(f"{expected}, chosen automatically"), res.summary()
         assert (res.evidence is not None) == (expected == "evidence")
+
+
+def test_variance_components_recover_two_planted_noise_levels_and_the_direct_evidence():
+    """Rows in two noise groups (0.1 and 2.0: a flush touch's heights and tilts, two
+    instruments): the log evidence is the direct Gaussian marginal with a diagonal noise
+    covariance, and the maximiser recovers each group's noise (one sigma for all could not:
+    it lies between the two)."""
+    rng = np.random.default_rng(7)
+    J, y, groups = _linear(3, m=600, noise=0.0)
+    rows = np.arange(600) % 3 == 0  # a third of the rows in group 1
+    noise = np.where(rows, 2.0, 0.1)
+    y = y + rng.normal(size=600) * noise
+    problem = LinearEvidence.of(J, y, groups, rows.astype(int))
+    scales = np.array([0.3, 0.05, 1.0])
+    var = np.where(groups >= 0, scales[np.maximum(groups, 0)] ** 2, 1e6)
+    C = np.diag(noise ** 2) + (J * var) @ J.T
+    direct = float(-0.5 * (y @ np.linalg.solve(C, y) + np.linalg.slogdet(C)[1]
+                           + 600 * math.log(2 * math.pi)) + 0.5 * 4 * math.log(1e6))
+    assert problem.log_evidence(1 / scales ** 2, 1 / np.array([0.1, 2.0]) ** 2) == \
+        pytest.approx(direct, abs=1e-3)
+    alpha, beta, history, converged = maximise(problem, 3, np.ones(3), np.ones(2))
+    assert converged and np.all(np.diff(history) >= -1e-9 * np.abs(history[1:]))
+    assert 1 / np.sqrt(beta) == pytest.approx([0.1, 2.0], rel=0.15)
+    (one,) = maximise(LinearEvidence.of(J, y, groups), 3, np.ones(3), 1.0)[1]
+    assert 0.3 < 1 / math.sqrt(one) < 1.5  # one sigma for all: neither
+    # a group's noise given is kept
+    _, kept, _, _ = maximise(problem, 3, np.ones(3), np.array([4.0, 1.0]),
+                             beta_fixed=np.array([True, False]))
+    assert kept[0] == 4.0 and 1 / math.sqrt(kept[1]) == pytest.approx(2.0, rel=0.15)

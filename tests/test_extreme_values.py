@@ -156,7 +156,7 @@ def test_evidence_fit_with_every_parameter_flat():
     b = rng.normal(size=9)
     u0 = np.zeros(4)
 
-    def fit(weights, u_start):
+    def fit(weights, u_start, row_scale):
         assert not weights.any()
         return solve(lambda u, jac: (A @ u - b, A if jac else None), u_start, np.ones(4, bool),
                      lam=weights, penalised=np.zeros(4, bool), prior=u0,

@@ -264,3 +264,75 @@ def test_poses_selected_for_flush_touches(rng):
     assert sel.log_det > sel.random_log_det
     assert {"plane2.d", "tool.rx", "tool.ry"} <= set(sel.parameters)
     assert not {"tool.x", "tool.y", "tool.z"} & set(sel.parameters)
+
+
+def _noisy_touches(rng, noise, noise_deg, per_plane=40):
+    robot = Robot.load("ec66", tip="flange")
+    em = models.build("complete", robot.geometry)
+    cand = random_joint_values(robot.geometry, rng, 3000)
+    truth = em.nominal + np.where(em.is_length, 0.5e-3, np.radians(0.05)) * rng.normal(
+        size=em.size)
+    planes = np.array([TABLE[0], [1.3, 0.2, 0.3]])
+    g = robot.geometry
+    return robot, simulate_flush(em, truth, CONTACT, planes, cand, per_plane, noise,
+                                 noise_deg, rng, source="touches.csv", limits=(g.lower, g.upper))
+
+
+def test_evidence_estimates_the_noise_of_heights_and_tilts_on_their_own(rng):
+    """Heights with 0.2 mm and tilts with 0.02 deg of noise (10 mm per deg, the default
+    weighs 1 mm against 1 deg): the evidence's variance components find each within 25 %,
+    report them labelled in their units, and weigh the rows by them; stated sigmas stay as
+    given (one group, the rows' weights as stated)."""
+    robot, train = _noisy_touches(rng, 0.2e-3, 0.02)
+    result = kincal.calibrate(robot, [train], method="l2", lam="evidence",
+                              tool_guess=tuple(CONTACT[:3]))
+    groups = {rows: (s, unit) for rows, s, unit in result.evidence.noise_groups}
+    assert set(groups) == {"touches.csv height", "touches.csv tilt"}
+    assert groups["touches.csv height"][1] == "mm" and groups["touches.csv tilt"][1] == "deg"
+    assert groups["touches.csv height"][0] == pytest.approx(0.2, rel=0.25)
+    assert groups["touches.csv tilt"][0] == pytest.approx(0.02, rel=0.25)
+    assert "touches.csv tilt" in result.evidence.line()
+    assert result.evidence.as_dict()["noise_groups"][1]["unit"] == "deg"
+    for stated in (dict(orientation_sigma_deg=0.05),
+                   dict(sigma=np.full(len(train), 0.05e-3))):
+        problem = CalibrationProblem(robot, [replace(train, **stated)], CalibrationOptions(
+            method="l2", lam="evidence", tool_guess=tuple(CONTACT[:3])))
+        ev = problem.solve().evidence
+        assert [g[0] for g in ev.noise_groups] == ["stated sigmas"]
+        assert problem.row_scale is None  # the rows weigh as stated
+
+
+def test_a_kind_of_row_the_parameters_fit_exactly_shares_its_sets_noise(rng):
+    """8 touches per plane: 16 heights against more parameters than that, which the fit
+    could match exactly (the evidence would then drive their noise to 0): the heights'
+    noise is not identified on its own, and the set's rows keep one noise as the kind
+    weighs them; with 40 per plane each kind has its own (the test above)."""
+    robot, train = _noisy_touches(rng, 0.2e-3, 0.02, per_plane=8)
+    problem = CalibrationProblem(robot, [train], CalibrationOptions(
+        method="l2", lam="evidence", tool_guess=tuple(CONTACT[:3])))
+    result = problem.solve()
+    assert [g[0] for g in result.evidence.noise_groups] == ["touches.csv"]
+    assert result.sets[0].after.rms > 1e-3  # [mm]: the heights are not fitted exactly
+    assert problem.row_scale is None
+
+
+def test_json_summary_gives_the_noise_of_heights_and_tilts(tmp_path, capsys):
+    """The command line: heights with 0.3 mm and tilts with 0.03 deg of noise; --json's
+    evidence.noise_groups has each, labelled with the file and its unit."""
+    from kincal.cli.main import main
+
+    data = tmp_path / "t.csv"
+    assert main(["simulate", "ec66", "--kind", "flush", "--poses", "80", "--seed", "1",
+                 "--noise-mm", "0.3", "--orientation-noise-deg", "0.03", "--out", str(data),
+                 "-q"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data), "--on-plane", "--flush", "--tool-offset", "0",
+                 "0", "0.1", "--out", str(tmp_path / "c.urdf"), "--frames-out",
+                 str(tmp_path / "f.json"), "--json"]) == 0
+    import json
+
+    groups = json.loads(capsys.readouterr().out)["evidence"]["noise_groups"]
+    assert [(g["rows"], g["unit"]) for g in groups] == [("t.csv height", "mm"),
+                                                        ("t.csv tilt", "deg")]
+    assert groups[0]["sigma"] == pytest.approx(0.3, rel=0.3)
+    assert groups[1]["sigma"] == pytest.approx(0.03, rel=0.3)

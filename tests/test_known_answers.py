@@ -204,7 +204,7 @@ def test_evidence_optimum_is_stationary(scales, seed):
     noise update (m instead of m - gamma, the effective number of parameters): the
     iteration then stops short of the maximum."""
     J, y, groups = _linear(seed, scales=scales)
-    alpha, beta, _, converged = maximise(LinearEvidence.of(J, y, groups), 3, np.ones(3), 1.0)
+    alpha, (beta,), _, converged = maximise(LinearEvidence.of(J, y, groups), 3, np.ones(3), 1.0)
     assert converged
     v = np.concatenate([-0.5 * np.log(alpha), [-0.5 * math.log(beta)]])  # log scales, log noise
 
@@ -245,7 +245,7 @@ def test_evidence_fit_uses_the_weights_of_its_own_hyperparameters():
     u0 = np.zeros(A.shape[1])
     calls = []
 
-    def fit(weights, u_start):
+    def fit(weights, u_start, row_scale):
         calls.append(weights.copy())
         return solve(lambda u, jac: (A @ u - b, A if jac else None), u_start,
                      np.ones(A.shape[1], bool), lam=weights, penalised=weights > 0, prior=u0,

@@ -203,8 +203,8 @@ def json_summary(result, validation, refused: bool) -> dict:
     from kincal.export import report
 
     full = report.result_dict(result)
-    keep = ("robot", "data", "lambda", "penalty_choice", "errors", "parameters", "frames",
-            "convergence", "plausibility")
+    keep = ("robot", "data", "lambda", "penalty_choice", "evidence", "errors", "parameters",
+            "frames", "convergence", "plausibility")
     return {"command": "calibrate", "verdict": "REFUSED" if refused else "written",
             **{k: full[k] for k in keep},
             "identifiability": {k: full["identifiability"][k] for k in

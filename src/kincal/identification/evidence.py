@@ -4,15 +4,18 @@ by maximising the marginal likelihood (type-II maximum likelihood, empirical Bay
 Plain numpy. Linearised at the current parameters, the calibration is the linear Gaussian
 model (reporting units: residuals in mm, parameters in mm or deg)
 
-    y = J d + e,   e ~ N(0, sigma^2 I),   d_i ~ N(0, s_c(i)^2)  (penalised parameters),
+    y = J d + e,   e_j ~ N(0, sigma_g(j)^2),   d_i ~ N(0, s_c(i)^2)  (penalised parameters),
 
 with d the parameters' offsets from nominal and a flat prior on the measurement frame and
 tool points (as the paper's penalty leaves them free). The hyperparameters, one scale
 s_c per parameter class (lengths, twists, joint offsets, backlash; :func:`prior_class`)
-and the noise sigma, maximise the evidence p(y | s, sigma) with d integrated out. In
-those units the posterior mode is the L2 fit with one weight per parameter,
-lambda_i = sigma^2 / s_c(i)^2, so the nonlinear fit is the usual solver; the calibration
-relinearises and re-estimates until the hyperparameters settle (kincal.calibration).
+and the noise sigma_g of each group of rows (variance components: a flush touch's height
+[m] and tilts [rad], two files from two instruments, have unrelated noise levels; one
+group when the user stated the noise), maximise the evidence p(y | s, sigma) with d
+integrated out. In those units the posterior mode is the L2 fit with one weight per
+parameter, lambda_i = sigma^2 / s_c(i)^2, and the rows of group g weighted by
+sigma / sigma_g, so the nonlinear fit is the usual solver; the calibration relinearises
+and re-estimates until the hyperparameters settle (kincal.calibration).
 
 The maximiser: MacKay's fixed point (fast) with an EM step instead whenever MacKay's
 would lower the evidence; EM never lowers it, so the iteration is monotone. Everything
@@ -22,7 +25,7 @@ is p x p (p free parameters): J enters through the triangle R of J = Q R and z =
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import cast
 
 import numpy as np
@@ -65,7 +68,10 @@ class EvidenceFit:
     user gave the scale. noise_mm: standard deviation of one residual component [mm] (of
     a unit-weight sample); noise_given: whether the user gave it. log_evidence: per
     outer iteration (relinearisation) at the chosen hyperparameters [nats]. iterations:
-    outer iterations; converged: whether the hyperparameters settled.
+    outer iterations; converged: whether the hyperparameters settled. row_noise: (G,) the
+    noise of each row group in the weighted rows [mm] (variance components; one group:
+    noise_mm); noise_groups: per group (rows, sigma, unit), in the rows' own units (mm of
+    height, deg of tilt; :func:`kincal.identification.penalty_choice.fit_evidence`).
     """
 
     classes: tuple[str, ...]
@@ -77,6 +83,8 @@ class EvidenceFit:
     log_evidence: np.ndarray
     iterations: int
     converged: bool
+    row_noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    noise_groups: tuple[tuple[str, float, str], ...] = ()
 
     def scale_of(self, cls: str) -> float:
         return float(self.scales[self.classes.index(cls)])
@@ -95,8 +103,10 @@ class EvidenceFit:
                 "fleet": "x the fleet's scatter"}
         parts = [f"{c} {s:.3g} {unit[c]}".rstrip() + (" (given)" if g else "")
                  for c, s, g in zip(self.classes, self.scales, self.given)]
-        return (f"prior scales {', '.join(parts)}; noise {self.noise_mm:.3g} mm"
-                + (" (given)" if self.noise_given else ""))
+        noise = (f"noise {self.noise_mm:.3g} mm" + (" (given)" if self.noise_given else "")
+                 if len(self.noise_groups) < 2 else "noise per row group " + ", ".join(
+                     f"{rows} {s:.3g} {unit}" for rows, s, unit in self.noise_groups))
+        return f"prior scales {', '.join(parts)}; {noise}"
 
     def as_dict(self) -> dict:
         return {"prior_scales": {c: {"scale": float(s), "unit": "mm" if c == "length" else
@@ -106,78 +116,96 @@ class EvidenceFit:
                                  for c, s, n, g in zip(self.classes, self.scales, self.counts,
                                                        self.given)},
                 "noise_mm": self.noise_mm, "noise_given": self.noise_given,
+                "noise_groups": [{"rows": rows, "sigma": s, "unit": unit}
+                                 for rows, s, unit in self.noise_groups],
                 "log_evidence": self.log_evidence.tolist(), "iterations": self.iterations,
                 "converged": self.converged}
 
 
 @dataclass(frozen=True)
 class LinearEvidence:
-    """The linear Gaussian problem y = J d + e in the compressed form of J = Q R.
+    """The linear Gaussian problem y = J d + e in the compressed form of J = Q R, the rows in
+    G noise groups (variance components: group g's noise sigma_g = beta_g^-1/2).
 
-    R: (p, p) triangle, z: (p,) Q^T y, rest2: ||y||^2 - ||z||^2 (the part of y no
-    parameter can fit), m: number of residuals (any; m <= p leaves rows of R zero).
-    groups: (p,) class index per parameter, -1 = flat.
+    R: (G, p, p) triangle of each group's rows, z: (G, p) Q_g^T y_g, rest2: (G,)
+    ||y_g||^2 - ||z_g||^2 (the part of y_g no parameter can fit), m: (G,) rows per group
+    (any; m_g <= p leaves rows of R_g zero). groups: (p,) class index per parameter, -1 =
+    flat.
     """
 
     R: np.ndarray
     z: np.ndarray
-    rest2: float
-    m: int
+    rest2: np.ndarray
+    m: np.ndarray
     groups: np.ndarray
 
     @classmethod
-    def of(cls, J: np.ndarray, y: np.ndarray, groups) -> "LinearEvidence":
+    def of(cls, J: np.ndarray, y: np.ndarray, groups, rows=None) -> "LinearEvidence":
+        """rows: (m,) noise group of each row (0..G-1); None: one group."""
         p = J.shape[1]
-        Rz = triangular_factor(np.column_stack([J, y]))  # no Q: one pass over the rows
-        if Rz.shape[0] < p + 1:  # fewer residuals than parameters: the prior decides
-            Rz = np.vstack([Rz, np.zeros((p + 1 - Rz.shape[0], p + 1))])
-        return cls(Rz[:p, :p], Rz[:p, p], float(Rz[p, p] ** 2), J.shape[0],
-                   np.asarray(groups, int))
+        rows = np.zeros(J.shape[0], int) if rows is None else np.asarray(rows, int)
+        parts = []
+        for g in range(int(rows.max()) + 1 if rows.size else 1):
+            on = rows == g
+            Rz = triangular_factor(np.column_stack([J[on], y[on]]))  # no Q: one pass
+            if Rz.shape[0] < p + 1:  # fewer residuals than parameters: the prior decides
+                Rz = np.vstack([Rz, np.zeros((p + 1 - Rz.shape[0], p + 1))])
+            parts.append((Rz[:p, :p], Rz[:p, p], float(Rz[p, p] ** 2), int(on.sum())))
+        R, z, rest2, m = zip(*parts)
+        return cls(np.array(R), np.array(z), np.array(rest2), np.array(m), np.asarray(groups, int))
 
-    def posterior(self, alpha: np.ndarray, beta: float):
-        """(mean (p,), diag of covariance (p,), ||R (R_H^-1)||_F^2, log|H|, E_D) with prior
-        precision alpha per class (index by groups) and noise precision beta."""
+    def posterior(self, alpha: np.ndarray, beta):
+        """(mean (p,), diag of covariance (p,), ||R_g R_H^-1||_F^2 per group (G,), log|H|,
+        E_D per group (G,), prior precisions (p,)) with prior precision alpha per class
+        (index by groups) and noise precision beta (G,) per row group."""
         # (p,) prior precisions, 0 where flat (indexing only the penalised: with no
         # penalised parameter free, alpha is empty)
         a = np.zeros(self.groups.size)
         pen = self.groups >= 0
         a[pen] = np.asarray(alpha, float)[self.groups[pen]]
-        sb = math.sqrt(beta)
-        # H = beta R^T R + diag(a) = R_H^T R_H, from one QR of the stacked square roots
+        sb = np.sqrt(np.broadcast_to(np.asarray(beta, float), self.m.shape))
+        # H = sum_g beta_g R_g^T R_g + diag(a) = R_H^T R_H, from one QR of the square roots
         # numpy's stubs type qr(mode="r") as a QRResult; it returns the R array
-        RH = cast(np.ndarray, np.linalg.qr(np.vstack([sb * self.R, np.diag(np.sqrt(a))]),
-                                           mode="r"))
+        RH = cast(np.ndarray, np.linalg.qr(np.vstack([*(sb[:, None, None] * self.R),
+                                                      np.diag(np.sqrt(a))]), mode="r"))
         RHi = np.linalg.solve(RH, np.eye(RH.shape[0]))
-        w = beta * (RHi @ (RHi.T @ (self.R.T @ self.z)))
+        w = RHi @ (RHi.T @ np.einsum("g,gij,gi->j", sb ** 2, self.R, self.z))
         diag = np.einsum("ij,ij->i", RHi, RHi)
-        fit = self.z - self.R @ w
-        E_D = float(fit @ fit) + self.rest2
-        trace = float(np.sum((self.R @ RHi) ** 2))
+        fit = self.z - np.einsum("gij,j->gi", self.R, w)
+        E_D = np.sum(fit * fit, axis=1) + self.rest2
+        trace = np.sum(np.einsum("gij,jk->gik", self.R, RHi) ** 2, axis=(1, 2))
         logdetH = 2.0 * float(np.sum(np.log(np.abs(np.diag(RH)))))
         return w, diag, trace, logdetH, E_D, a
 
-    def log_evidence(self, alpha: np.ndarray, beta: float) -> float:
-        """log p(y | alpha, beta) [nats], up to the constant of the flat priors."""
+    def log_evidence(self, alpha: np.ndarray, beta) -> float:
+        """log p(y | alpha, beta) [nats], up to the constant of the flat priors; beta: the
+        noise precision of each row group (G,), or one for all."""
         w, _, _, logdetH, E_D, a = self.posterior(alpha, beta)
+        b = np.broadcast_to(np.asarray(beta, float), self.m.shape)
         pen = self.groups >= 0
-        return float(0.5 * self.m * math.log(beta) + 0.5 * np.sum(np.log(a[pen]))
-                     - 0.5 * logdetH - 0.5 * beta * E_D - 0.5 * float(np.sum(a * w * w))
-                     - 0.5 * self.m * math.log(2.0 * math.pi))
+        return float(0.5 * np.sum(self.m * np.log(b)) + 0.5 * np.sum(np.log(a[pen]))
+                     - 0.5 * logdetH - 0.5 * float(b @ E_D) - 0.5 * float(np.sum(a * w * w))
+                     - 0.5 * float(np.sum(self.m)) * math.log(2.0 * math.pi))
 
 
-def maximise(problem: LinearEvidence, n_classes: int, alpha0: np.ndarray, beta0: float,
-             alpha_fixed: np.ndarray | None = None, beta_fixed: bool = False,
+def maximise(problem: LinearEvidence, n_classes: int, alpha0: np.ndarray, beta0,
+             alpha_fixed: np.ndarray | None = None, beta_fixed=False,
              max_iterations: int = 500, tol: float = 1e-10):
-    """Maximise the evidence over the class precisions alpha = 1/s^2 and beta = 1/sigma^2.
+    """Maximise the evidence over the class precisions alpha = 1/s^2 and the noise
+    precisions beta = 1/sigma^2, one per row group (variance components).
 
-    alpha_fixed: (n_classes,) True where alpha is given and kept; beta_fixed likewise.
-    Returns (alpha, beta, history of log evidence per iteration, converged).
+    beta0: (G,) or one value; alpha_fixed: (n_classes,) True where alpha is given and
+    kept; beta_fixed likewise, (G,) or one flag. The steps per group are MacKay's
+    beta_g = (m_g - gamma_g) / E_D,g, with gamma_g = beta_g tr(J_g H^-1 J_g^T) the
+    parameters group g's rows determine, or EM's m_g / (E_D,g + tr(J_g H^-1 J_g^T)).
+    Returns (alpha, beta (G,), history of log evidence per iteration, converged).
     """
     g = problem.groups
     fixed = np.zeros(n_classes, bool) if alpha_fixed is None else np.asarray(alpha_fixed)
+    b_fixed = np.broadcast_to(np.asarray(beta_fixed, bool), problem.m.shape)
     a_lo, a_hi = 1.0 / SCALE_MAX ** 2, 1.0 / SCALE_MIN ** 2
     alpha = np.clip(np.asarray(alpha0, float).copy(), a_lo, a_hi)
-    beta = float(beta0)
+    beta = np.broadcast_to(np.asarray(beta0, float), problem.m.shape).copy()
     counts = np.bincount(g[g >= 0], minlength=n_classes).astype(float)
     history = [problem.log_evidence(alpha, beta)]
     converged = False
@@ -189,14 +217,16 @@ def maximise(problem: LinearEvidence, n_classes: int, alpha0: np.ndarray, beta0:
         gam = np.bincount(g[g >= 0], weights=gamma[g >= 0], minlength=n_classes)
         with np.errstate(divide="ignore", invalid="ignore"):
             mackay_a = np.where(w2 > 0, gam / w2, a_hi)
-        mackay_b = (problem.m - float(np.sum(gamma))) / max(E_D, 1e-300)
+        E = np.maximum(E_D, 1e-300)
+        mackay_b = (problem.m - beta * trace) / E
         em_a = counts / np.maximum(w2 + s2, 1e-300)
-        em_b = problem.m / max(E_D + trace, 1e-300)
+        em_b = problem.m / np.maximum(E_D + trace, 1e-300)
         best = None
         for new_a, new_b in ((mackay_a, mackay_b), (em_a, em_b)):
             new_a = np.where(fixed | (counts == 0), alpha, np.clip(new_a, a_lo, a_hi))
-            new_b = beta if beta_fixed else float(new_b)
-            if not (np.all(np.isfinite(new_a)) and math.isfinite(new_b) and new_b > 0):
+            new_b = np.where(b_fixed, beta, new_b)
+            if not (np.all(np.isfinite(new_a)) and np.all(np.isfinite(new_b))
+                    and np.all(new_b > 0)):
                 continue
             value = problem.log_evidence(new_a, new_b)
             if value >= history[-1] - 1e-12 * abs(history[-1]):
@@ -216,14 +246,22 @@ def maximise(problem: LinearEvidence, n_classes: int, alpha0: np.ndarray, beta0:
 def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.ndarray,
              class_of: tuple[str | None, ...], given_scales: dict[str, float] | None = None,
              given_noise_mm: float | None = None, max_outer: int = 20, rtol: float = 1e-3,
-             step_tol: float = 1e-6, shape: np.ndarray | None = None):
+             step_tol: float = 1e-6, shape: np.ndarray | None = None,
+             rows: np.ndarray | None = None):
     """Hyperparameters and fit together: linearise, maximise the evidence, refit, repeat.
 
-    fit(weights (p,), u_start) -> SolveSummary: the L2 fit with per-parameter weights.
+    fit(weights (p,), u_start, row_scale (G,)) -> SolveSummary: the L2 fit with
+    per-parameter weights, the rows of group g multiplied by row_scale[g].
     linearise(u) -> (r (m,), J (m, p)): weighted residuals [mm] and dr/du at u.
     u_start, u_prior: (p,) start and nominal values (reporting units); free: (p,) bool.
     class_of: (p,) prior class per parameter, None for a flat prior (see prior_class).
-    given_scales: class -> scale the user gave (mm or deg), kept; given_noise_mm likewise.
+    given_scales: class -> scale the user gave (mm or deg), kept; given_noise_mm likewise
+    (the noise of every row: one group, kept).
+    rows: (m,) noise group of each residual row (0..G-1; None: one): each group's noise is
+    a variance component of its own, maximising the evidence with the rest. The fit weighs
+    group g's rows by row_scale_g = sigma / sigma_g, sigma^-2 the rows' mean precision
+    (the scales' mean square over the rows is 1), and the parameters by
+    lambda_i = sigma^2 / s_c(i)^2 (EvidenceFit.noise_mm is that sigma).
     Stops when no hyperparameter moves by more than ``rtol`` (relative) between two
     relinearisations, or when the fit itself no longer moves (no parameter by more than
     ``step_tol`` mm or deg): a class the data show at nominal has its scale shrink toward
@@ -245,8 +283,12 @@ def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.
     alpha = np.array([1.0 / given_scales[c] ** 2 if c in given_scales else 1.0 for c in present])
     u, sol, history = np.asarray(u_start, float), None, []
     r, _ = linearise(u)
-    beta = (1.0 / given_noise_mm ** 2 if given_noise_mm is not None
-            else r.size / max(float(r @ r), 1e-300))
+    rows = np.zeros(r.size, int) if rows is None or given_noise_mm is not None else \
+        np.asarray(rows, int)
+    m_g = np.bincount(rows, minlength=int(rows.max()) + 1).astype(float)
+    r2 = np.bincount(rows, weights=r * r, minlength=m_g.size)
+    beta = (np.full(m_g.size, 1.0 / given_noise_mm ** 2) if given_noise_mm is not None
+            else m_g / np.maximum(r2, 1e-300))
     converged = False
     white = None  # columns of the fleet class: d = L^-T z, z ~ N(0, s^2 I)
     if shape is not None and "fleet" in present:
@@ -261,17 +303,18 @@ def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.
             Jf[:, white[0]] = Jf[:, white[0]] @ white[1]
         shift = np.where(groups >= 0, (u_prior - u)[idx], 0.0)  # flat: centred where we are
         y = -(r + J[:, idx] @ shift)
-        problem = LinearEvidence.of(Jf, y, groups)
+        problem = LinearEvidence.of(Jf, y, groups, rows)
         new_alpha, new_beta, h, _ = maximise(problem, n, alpha, beta, fixed_a,
                                              given_noise_mm is not None)
         history.append(h[-1])
         moved = max(np.max(np.abs(np.log(new_alpha / alpha)), initial=0.0),
-                    abs(math.log(new_beta / beta)))
+                    float(np.max(np.abs(np.log(new_beta / beta)))))
         alpha, beta = new_alpha, new_beta
+        beta_ref = float(m_g @ beta / m_g.sum())  # the rows' mean precision
         weights = np.zeros(u.size)
         pen = groups >= 0
-        weights[idx[pen]] = alpha[groups[pen]] / beta
-        sol = fit(weights, u)
+        weights[idx[pen]] = alpha[groups[pen]] / beta_ref
+        sol = fit(weights, u, np.sqrt(beta / beta_ref))
         step = float(np.max(np.abs(sol.u - u)))
         u = sol.u
         if it > 1 and (moved <= rtol or step <= step_tol):
@@ -279,6 +322,6 @@ def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.
             break
     counts = np.bincount(groups[groups >= 0], minlength=n)
     result = EvidenceFit(tuple(present), 1.0 / np.sqrt(alpha), counts, fixed_a,
-                         1.0 / math.sqrt(beta), given_noise_mm is not None,
-                         np.array(history), it, converged)
+                         1.0 / math.sqrt(beta_ref), given_noise_mm is not None,
+                         np.array(history), it, converged, row_noise=1.0 / np.sqrt(beta))
     return sol, result

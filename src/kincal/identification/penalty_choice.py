@@ -9,6 +9,7 @@ plain-numpy estimators (:mod:`kincal.identification.evidence`,
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy as np
 from kincal.identification import evidence
 from kincal.identification.cross_validation import (SMALL_VOLUME, CrossValidation,
                                                     free_fraction, small_volume_warning)
+from kincal.identification.layout import MM
 from kincal.identification.solver import SolveSummary
 from kincal.models.chain import Chain
 
@@ -36,23 +38,95 @@ def prior_classes(problem: CalibrationProblem) -> tuple[str | None, ...]:
                                                  lay.is_length, fleet))
 
 
+def noise_groups(problem: CalibrationProblem, J: np.ndarray | None = None):
+    """The residual rows' noise groups for the evidence: (rows (m,) group of each row, per
+    set (dim,) group of each of a sample's rows, [(label, unit)] per group).
+
+    A set that states its noise (``sigma``, ``sigma_deg``, ``--set-sigma-mm``, the tilt
+    sigma) keeps its rows' weights as stated: all such rows are one group, their noise one
+    scale of the stated sigmas (as with one noise for all). Every other set has a group per
+    kind of row (:meth:`kincal.measurements.kind.KindModel.noise_rows`: a flush touch's
+    height, its tilts), labelled with the set's file. With ``noise_mm`` given, one group.
+
+    A noise level is seen only in what no parameter can fit: with J (m, p) the Jacobian
+    at the start (the free columns), a group whose rows the parameters can fit exactly
+    (rank of its rows = their number: 21 flush heights against 53 parameters) has no
+    residual of its own and its noise is not identified (the evidence would drive it to
+    0, fitting those rows exactly). Such a group joins its set's other rows (the set's
+    rows as the kind weighs them, one noise), and a set whose rows all fit exactly joins
+    the one group of every such row."""
+    if J is not None and len(noise_groups(problem)[2]) == 1:
+        J = None  # one group whatever the ranks (one set of one kind of row): none to check
+    keys: list[tuple[str, str]] = []
+    per_set = []
+    rows_of = np.repeat(np.arange(len(problem.kinds)), [km.N * km.dim for km in problem.kinds])
+    for i, km in enumerate(problem.kinds):
+        name = str(km.data.source).replace("\\", "/").rsplit("/", 1)[-1]
+        own = [(f"{name} {kind}".strip(), unit) for kind, unit, _ in km.noise_rows()]
+        if problem.options.noise_mm is not None or km.noise_stated():
+            own = [("stated sigmas", "mm")] * km.dim
+        elif J is not None:
+            mine = J[rows_of == i].reshape(km.N, km.dim, -1)
+            if len(set(own)) > 1 and not all(_has_residual(mine[:, [k for k, o in enumerate(
+                    own) if o == key]].reshape(-1, J.shape[1])) for key in set(own)):
+                own = [(name, "mm")] * km.dim
+            if not _has_residual(mine.reshape(-1, J.shape[1])):
+                own = [("rows fitted exactly", "mm")] * km.dim
+        for key in own:
+            if key not in keys:
+                keys.append(key)
+        per_set.append(np.array([keys.index(key) for key in own], dtype=np.intp))
+    rows = np.concatenate([np.tile(g, km.N) for g, km in zip(per_set, problem.kinds)])
+    return rows, per_set, keys
+
+
+def _has_residual(J: np.ndarray) -> bool:
+    """Whether rows J (r, p) leave a residual no combination of the columns can fit: more
+    rows than their rank."""
+    return J.shape[0] > np.linalg.matrix_rank(J)
+
+
+def _noise_in_units(problem: CalibrationProblem, rows: np.ndarray, keys, row_noise):
+    """Per group (label, sigma, unit): the group's noise in the weighted rows [mm] in its
+    rows' own unit (over the median of its rows' weighted mm per unit); the stated sigmas'
+    group as it is (the noise of a unit-weight sample, as noise_mm)."""
+    per_unit = np.concatenate([
+        (problem.weights[problem.offsets[i]:problem.offsets[i + 1], None]
+         * np.column_stack([m for _, _, m in km.noise_rows()]) / MM).ravel()
+        for i, km in enumerate(problem.kinds)])
+    return tuple((label, float(s if unit == "mm" and label in ("stated sigmas",
+                                                                "rows fitted exactly")
+                               else s / np.median(per_unit[rows == g])), unit)
+                 for g, ((label, unit), s) in enumerate(zip(keys, row_noise)))
+
+
 def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.EvidenceFit]:
-    """Per-class priors and the noise by maximum evidence over every set's residuals
-    (weighted by the sets' stated noise), iterated with the fit; the options' prior_mm /
-    prior_deg / noise_mm are kept where given."""
+    """Per-class priors and the noise of each noise group (:func:`noise_groups`) by maximum
+    evidence over every set's residuals (weighted by the sets' stated noise), iterated with
+    the fit; the options' prior_mm / prior_deg / noise_mm are kept where given. The
+    problem keeps the groups' noise levels as its ``row_scale`` (the last fit's weights)."""
     o = problem.options
     free = problem.free_mask()
+    problem.row_scale = None
     residual = problem.residual_function()
     u_prior = problem.start() / problem.scale
+    rows, per_set, keys = noise_groups(problem, residual(u_prior, True)[1][:, free])
     given = {} if o.prior_mm is None else {"length": o.prior_mm}
     if o.prior_deg is not None:
         given.update(twist=o.prior_deg, offset=o.prior_deg)
     if o.prior_scale is not None:
         given["fleet"] = o.prior_scale
-    return evidence.estimate(
-        lambda w, u: problem.fit(w, start=u * problem.scale, free=free, residual=residual),
-        lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,
-        o.noise_mm, shape=None if problem.prior is None else problem.prior.precision)
+
+    def fit(w, u, row_scale):
+        problem.row_scale = None if len(keys) == 1 else [row_scale[g] for g in per_set]
+        return problem.fit(w, start=u * problem.scale, free=free,
+                           residual=residual if len(keys) == 1 else problem.residual_function())
+
+    sol, ev = evidence.estimate(
+        fit, lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,
+        o.noise_mm, shape=None if problem.prior is None else problem.prior.precision,
+        rows=rows)
+    return sol, replace(ev, noise_groups=_noise_in_units(problem, rows, keys, ev.row_noise))
 
 
 def _tool_start(problem: CalibrationProblem) -> np.ndarray:

@@ -12,8 +12,9 @@ The sets share the kinematic and backlash parameters; each adds its kind's frame
 (:mod:`kincal.identification.layout`). Weights: each sample's residual rows are divided by
 its stated sigma (a set's ``sigma``, or :data:`kincal.measurements.kind.DEFAULT_SIGMA` where
 a set states none), normalised to RMS 1 over all samples; sets without sigmas weigh alike
-(all weights 1). Residuals are in mm, the solver's variables are the parameters over their
-penalty scale (1 mm, 1 deg).
+(all weights 1); ``row_scale`` (per set, one factor per row of a sample) holds the noise
+levels the evidence estimates per kind of row. Residuals are in mm, the solver's variables
+are the parameters over their penalty scale (1 mm, 1 deg).
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ class CalibrationProblem:
             self.kinds) if o.shared_planes else (), soft, ch.torque_rms(self.kinds, soft))
         self.scale = self.layout.penalty_scale(o.length_scale, o.angle_scale)
         self.offsets = np.cumsum([0] + [km.N for km in self.kinds])
-        self.weights = np.ones(self.n_samples)
+        self.weights, self.row_scale = np.ones(self.n_samples), None
         if any(km.data.sigma is not None for km in self.kinds):
             sig = np.concatenate([km.data.sigma if km.data.sigma is not None
                                   else np.full(km.N, DEFAULT_SIGMA) for km in self.kinds])
@@ -186,7 +187,8 @@ class CalibrationProblem:
         kinematic=False: kinematic and backlash columns left at zero (frame-only fits)."""
         parts = [(i, km, g, self._blocks(i, km, g, rows is None))
                  for i, km, g in self._parts(rows)]
-        return residual_function(parts, self.layout, self.weights, self.scale, kinematic)
+        return residual_function(parts, self.layout, self.weights, self.scale, kinematic,
+                                 self.row_scale)
 
     def sample_errors(self, x: np.ndarray, rows=None, weighted: bool = False) -> list:
         """Per set with samples in ``rows``: (set index, (n,) sample errors [m]) at x."""

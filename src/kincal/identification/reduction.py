@@ -90,14 +90,17 @@ def linearise(blocks: Callable, u: np.ndarray, m: int, p: int, free_idx: np.ndar
     return r, G, Rz
 
 
-def row_blocks(parts, layout, weights, scale, kinematic: bool = True) -> Callable:
+def row_blocks(parts, layout, weights, scale, kinematic: bool = True,
+               row_scale=None) -> Callable:
     """blocks(u, with_jacobian=True, out=None): the one traversal of the residual's rows
     (sets in order, each in its blocks of samples), yielding (rows, r_b [mm], J_b) per block
     at u = x / scale: the rows' weighted residuals and their Jacobian (None without
     with_jacobian). J_b is a view of ``out[rows]`` when ``out`` (m, p) is given (the dense
     Jacobian, :func:`residual_function`), else a buffer that the next block overwrites.
     parts: [(set index, kind model, global rows, [(local slice, block kind model)])];
-    kinematic=False leaves the kinematic and backlash columns at zero."""
+    kinematic=False leaves the kinematic and backlash columns at zero. row_scale: None, or
+    per set a (dim,) factor of each of a sample's rows (the noise levels of its kinds of
+    row, :mod:`kincal.identification.evidence`), on top of the samples' weights."""
     buffers: dict = {}
     k, bl = layout.n_kinematic, layout.backlash_slice
 
@@ -108,7 +111,7 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True) -> Callabl
             kin, fr, b = layout.split(x, i)
             fs = layout.frame_slices[i]
             for sl, block in blocks_i:
-                w = weights[g[sl]][:, None]
+                w = weights[g[sl]][:, None] * (1.0 if row_scale is None else row_scale[i])
                 span = slice(at + km.dim * sl.start, at + km.dim * sl.stop)
                 if not with_jacobian:
                     yield span, (block.residuals(kin, fr, b) * w).ravel() / MM, None
@@ -144,11 +147,12 @@ class BlockedResidual(Protocol):
     def __call__(self, u: np.ndarray, jacobian: bool = ...) -> Any: ...
 
 
-def residual_function(parts, layout, weights, scale, kinematic: bool = True) -> BlockedResidual:
+def residual_function(parts, layout, weights, scale, kinematic: bool = True,
+                      row_scale=None) -> BlockedResidual:
     """residual(u, with_jacobian) -> (r (m,) [mm], J (m, p) or None), the dense rows of
     :func:`row_blocks` (the same traversal, so the two cannot differ), with ``blocks``,
     ``rows`` (m) and ``n_blocks`` for the solver's streamed path."""
-    blocks = row_blocks(parts, layout, weights, scale, kinematic)
+    blocks = row_blocks(parts, layout, weights, scale, kinematic, row_scale)
     m = sum(km.N * km.dim for _, km, _, _ in parts)
 
     def residual(u, with_jacobian):

@@ -58,12 +58,14 @@ class FlushData(SampleSet):
     """Flush touches: planes (N,) index of each touch's plane into labels; sigma (N,)
     height standard deviation [m]; sigma_deg (N,) tilt standard deviation [deg] (needs
     ``sigma``: the tilt rows weigh by the ratio of the two); orientation_sigma_deg: the
-    tilt sigma when no sigma_deg is given [deg]."""
+    tilt sigma when no sigma_deg is given [deg] (None: not stated, then
+    :data:`DEFAULT_TILT_SIGMA_DEG` weighs the rows and the evidence estimates the noise of
+    heights and tilts on their own)."""
 
     planes: np.ndarray | None = None
     labels: tuple[str, ...] = ("",)
     sigma_deg: np.ndarray | None = None
-    orientation_sigma_deg: float = DEFAULT_TILT_SIGMA_DEG
+    orientation_sigma_deg: float | None = None
 
     kind = "flush"
 
@@ -81,7 +83,8 @@ class FlushData(SampleSet):
                 raise DataError(f"{self.source}: sigma_deg must be {n} positive finite values "
                                 "[deg]")
             object.__setattr__(self, "sigma_deg", s)
-        if not (math.isfinite(self.orientation_sigma_deg) and self.orientation_sigma_deg > 0):
+        o = self.orientation_sigma_deg
+        if o is not None and not (math.isfinite(o) and o > 0):
             raise DataError(f"the tilt sigma of flush touches must be a finite value > 0 deg, "
                             f"got {self.orientation_sigma_deg}")
 
@@ -91,8 +94,9 @@ class FlushData(SampleSet):
     def ratio(self) -> np.ndarray:
         """(N,) c = sigma_height / sigma_tilt [m/rad]."""
         sh = np.full(len(self), DEFAULT_SIGMA) if self.sigma is None else self.sigma
-        st = (np.full(len(self), self.orientation_sigma_deg) if self.sigma_deg is None
-              else self.sigma_deg)
+        o = self.orientation_sigma_deg
+        st = (np.full(len(self), DEFAULT_TILT_SIGMA_DEG if o is None else o)
+              if self.sigma_deg is None else self.sigma_deg)
         return sh / np.radians(st)
 
     @classmethod
@@ -101,8 +105,8 @@ class FlushData(SampleSet):
                  orientation_sigma_deg=None) -> "FlushData":
         """Joint columns; optional ``plane`` (a whole number naming each touch's plane),
         ``sigma`` [length unit] and ``sigma_deg`` [deg, whatever the angle unit].
-        orientation_sigma_deg: the tilt sigma of rows without sigma_deg [deg]; None:
-        :data:`DEFAULT_TILT_SIGMA_DEG`."""
+        orientation_sigma_deg: the tilt sigma of rows without sigma_deg [deg]; None: not
+        stated (:class:`FlushData`)."""
         c = read_set(path, joint_names, (), (plane_column, "sigma", "sigma_deg"), prismatic,
                      angle_unit, length_unit, joint_columns, expected="the chain joints")
         v = c.values
@@ -122,8 +126,7 @@ class FlushData(SampleSet):
         return cls(joint_names=tuple(joint_names), joint_values=c.joint_values, planes=planes,
                    labels=labels, sigma=v["sigma"] * L if "sigma" in v else None,
                    sigma_deg=v.get("sigma_deg"),
-                   orientation_sigma_deg=(DEFAULT_TILT_SIGMA_DEG if orientation_sigma_deg is None
-                                          else orientation_sigma_deg),
+                   orientation_sigma_deg=orientation_sigma_deg,
                    rows=c.rows, source=c.source, approach=c.approach, ignored_columns=c.ignored)
 
     def to_csv_text(self) -> str:
@@ -309,6 +312,18 @@ class FlushKind(KindModel):
         """(N, 2) the contact frame's roll and pitch against its plane [rad] (signed,
         predicted minus flush) from the residual rows."""
         return -r[:, 1:] / self.data.ratio()[:, None]
+
+    def noise_rows(self):
+        """(height [mm], tilt [deg], tilt [deg]): a touch's residual rows (module notes)."""
+        tilt = self.data.ratio() * (math.pi / 180.0)
+        return (("height", "mm", np.full(self.N, 1e-3)), ("tilt", "deg", tilt),
+                ("tilt", "deg", tilt))
+
+    def noise_stated(self) -> bool:
+        """Whether the touches state a noise: ``sigma``, ``sigma_deg``, or the tilt sigma."""
+        d = self.data
+        return (d.sigma is not None or d.sigma_deg is not None
+                or d.orientation_sigma_deg is not None)
 
     def notes(self):
         return (f"{self.data.source}: a flush touch sees the contact frame's height above the "

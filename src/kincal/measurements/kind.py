@@ -178,6 +178,17 @@ class KindModel:
         """What this kind cannot see, for the identifiability report."""
         return ()
 
+    def noise_rows(self) -> tuple[tuple[str, str, np.ndarray], ...]:
+        """Per residual row of a sample: (kind of row, its unit, (N,) metres of the row per
+        unit). Rows of one kind share a noise level where the evidence estimates it
+        (variance components, :mod:`kincal.identification.evidence`); here every row is a
+        length in mm."""
+        return tuple(("", "mm", np.full(self.N, 1e-3)) for _ in range(self.dim))
+
+    def noise_stated(self) -> bool:
+        """Whether the set states its noise (a ``sigma`` column or ``--set-sigma-mm``)."""
+        return self.data.sigma is not None
+
     def _zero_chain_columns(self, dim: int):
         return (np.zeros((self.N, dim, self.error_model.size)),
                 np.zeros((self.N, dim, len(self.chain.terms))))

@@ -215,5 +215,13 @@ class PointKind:
     def sample_errors(self, r):
         return np.linalg.norm(r, axis=1)
 
+    def noise_rows(self) -> tuple[tuple[str, str, np.ndarray], ...]:
+        """x, y, z: one kind of row, in mm (:meth:`KindModel.noise_rows`)."""
+        return tuple(("", "mm", np.full(self.N, 1e-3)) for _ in range(self.dim))
+
+    def noise_stated(self) -> bool:
+        """Whether the set states its noise (a ``sigma`` column or ``--set-sigma-mm``)."""
+        return self.data.sigma is not None
+
     def notes(self) -> tuple[str, ...]:
         return ()
