@@ -242,7 +242,7 @@ class ExtendedProblem:
             warnings.simplefilter("ignore", KincalWarning)  # reported once, at load
             self.base = CalibrationProblem(robot, session.markers[0],
                                            CalibrationOptions(model="mdh", method="frames"))
-        self.mdh, self.space = self.base.mdh, self.base.space
+        self.mdh, self.space = self.base.error_model, self.base.space
         self.n_kin, self.n_x = self.space.n_kinematic, self.space.size
         self.n_rot = 3 if model.markers else 0
         self.k_terms = self.n_x + self.n_rot
@@ -268,7 +268,8 @@ class ExtendedProblem:
         v = np.zeros(self.size)
         v[: self.n_x] = x
         if self.model.markers:
-            table, base, _ = self.space.split(x)
+            table, frames, _ = self.space.split(x, 0)
+            base = frames[:6]  # the measurement frame (x y z rx ry rz) before the tool point
             R_tip, _ = MeasurementModel(self.mdh, self.session.q).tip_poses(table)
             Rb = base_rotation(*base[3:])
             # R0: the mean of R_tip^T Rb^T B_k projected on SO(3); later angles stay small
