@@ -65,7 +65,7 @@ class CalibrationProblem:
         sets = as_sets(sets)
         # model "auto": the candidate structures compared by CV, the best used (model_choice)
         with blas_threads.limited(o.blas_threads):  # its fits, as solve's (blas_threads)
-            self.model_choice, o = model_choice.resolve(type(self), robots, sets, o)
+            self._model_choice, o = model_choice.resolve(type(self), robots, sets, o)
         self.options = o
         self.chains = ch = Chains(robots, len(sets), o.model)
         self.robot, self.robots = ch.robot, ch.robots
@@ -101,6 +101,10 @@ class CalibrationProblem:
         self._structural: Identifiability | None = None
         self._all_blocks: dict = {}  # (set, block size): blocks of a whole set
         self._subsets: dict = {}  # the last row selections' parts (_parts)
+        self._whole: dict = {}  # kinematic: (weights, scale, residual_function())
+
+    model_choice = property(lambda self: model_choice.counted(self._model_choice, self.free_mask),
+                            doc="model auto: the structures compared and the chosen; else None")
 
     # ----------------------------------------------------------------- layout
     @property
@@ -168,12 +172,13 @@ class CalibrationProblem:
 
         Evaluating many samples block by block keeps every temporary of the Jacobian small
         (a few MB, in cache) instead of a dozen (N, dim, p) arrays: at 200,000 poses it is
-        several times faster. The blocks of a whole set are built once (cache=True)."""
+        several times faster. The blocks of a whole set are built once (cache=True), on
+        views of the set's arrays (slices: no copy of the data)."""
         if km.N <= BLOCK_SAMPLES:
             return [(slice(0, km.N), km)]
         if cache and (i, BLOCK_SAMPLES) in self._all_blocks:
             return self._all_blocks[i, BLOCK_SAMPLES]
-        blocks = [(sl, km.subset(np.arange(sl.start, sl.stop))) for sl in
+        blocks = [(sl, km.subset(sl)) for sl in
                   (slice(a, min(a + BLOCK_SAMPLES, km.N)) for a in range(0, km.N, BLOCK_SAMPLES))]
         if cache:
             self._all_blocks[i, BLOCK_SAMPLES] = blocks
@@ -184,9 +189,14 @@ class CalibrationProblem:
         indices over the sets in order; default all); u = x / scale.
 
         kinematic=False: kinematic and backlash columns left at zero (frame-only fits)."""
+        w = self._whole.get(kinematic) if rows is None else None  # one for all samples:
+        if w is not None and w[0] is self.weights and w[1] is self.scale:  # the pass it
+            return w[2]  # remembers (reduction.analyze_rows); irls changes the weights
         parts = [(i, km, g, self._blocks(i, km, g, rows is None))
                  for i, km, g in self._parts(rows)]
-        return residual_function(parts, self.layout, self.weights, self.scale, kinematic)
+        out = residual_function(parts, self.layout, self.weights, self.scale, kinematic)
+        self._whole.update({kinematic: (self.weights, self.scale, out)} if rows is None else {})
+        return out
 
     def sample_errors(self, x: np.ndarray, rows=None, weighted: bool = False) -> list:
         """Per set with samples in ``rows``: (set index, (n,) sample errors [m]) at x."""
@@ -260,11 +270,10 @@ class CalibrationProblem:
         if getattr(d, "positions", None) is None:
             return
         first = np.ones(len(d), bool) if getattr(d, "points", None) is None else d.points == 0
-        R_tip, p_tip = km.chain.tip(km.error_model.nominal)
         guess = np.zeros(3) if self.options.tool_guess is None else np.asarray(
             self.options.tool_guess, float)
-        for message in length_unit_warnings(d.positions[first],
-                                            p_tip[first] + R_tip[first] @ guess,
+        tips = km.chain.tip_point(km.error_model.nominal, guess)  # in blocks: no (N, 3, 3)
+        for message in length_unit_warnings(d.positions[first], tips[first],
                                             getattr(d, "length_unit", "m")):
             warnings.warn(f"{d.source}: {message}", KincalWarning)
 
