@@ -136,8 +136,8 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         R, p, Jp, Jo = chain.evaluate(q[idx], tool)
         e_p = positions[idx] - p
         e_o = rotation_log(rotations[idx] @ np.swapaxes(R, 1, 2))
-        merit = (np.linalg.norm(e_p, axis=1) / options.position_tolerance
-                 + np.linalg.norm(e_o, axis=1) / options.orientation_tolerance)
+        n_p, n_o = np.linalg.norm(e_p, axis=1), np.linalg.norm(e_o, axis=1)
+        merit = n_p / options.position_tolerance + n_o / options.orientation_tolerance
         better = merit < STALL_GAIN * best[slots]
         best[slots[better]], last[slots[better]] = merit[better], t[better]
         dq = _step(Jp, Jo, e_p, e_o, eye, options.damping)
@@ -156,8 +156,8 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         q[idx] = q_new
         iterations[idx] += 1
         # done when the step no longer changes anything that matters
-        done = (np.linalg.norm(e_p, axis=1) < 1e-3 * options.position_tolerance) & (
-            np.linalg.norm(e_o, axis=1) < 1e-3 * options.orientation_tolerance)
+        done = (n_p < 1e-3 * options.position_tolerance) & (
+            n_o < 1e-3 * options.orientation_tolerance)
         ring[(t + 1) % (W + 1), slots], moves[t % W, slots] = q_new, moved
         stalled = t - last[slots] >= W  # no progress in W iterations: moving on, or in place?
         slow = np.flatnonzero(stalled)
@@ -167,9 +167,12 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
             stalled[slow] = (net < STALL_NET * path) | (path < 1e-12)
         finished = done | (moved < 1e-14) | stalled | (t + 1 >= options.max_iterations)
         target[slots[finished]] = -1
-    R, p = chain.tool_poses(q, tool)
-    pos_err = np.linalg.norm(positions - p, axis=1)
-    rot_err = np.linalg.norm(rotation_log(rotations @ np.swapaxes(R, 1, 2)), axis=1)
+    pos_err, rot_err = np.empty(N), np.empty(N)
+    for s in range(0, N, BLOCK):  # the errors at the end, in blocks: no (N, 3, 3) arrays
+        b = slice(s, s + BLOCK)
+        R, p, _, _ = chain.evaluate(q[b], tool)
+        pos_err[b] = np.linalg.norm(positions[b] - p, axis=1)
+        rot_err[b] = np.linalg.norm(rotation_log(rotations[b] @ np.swapaxes(R, 1, 2)), axis=1)
     reached = (pos_err <= options.position_tolerance) & (
         ~np.asarray(required, bool) | (rot_err <= options.orientation_tolerance))
     span = np.maximum(np.where(np.isfinite(upper - lower), upper - lower, 1.0), 1e-12)
