@@ -43,6 +43,34 @@ def test_blocked_inverse_kinematics_equals_one_block(monkeypatch):
         np.testing.assert_array_equal(getattr(blocked, name), getattr(whole, name), name)
 
 
+def test_targets_that_stall_are_stopped_early_and_the_others_are_untouched():
+    # random joint values over the whole ranges, seeds 0.5 deg off, the seed's orientation
+    # preferred: near singular wrists and limits some targets make no progress; the stall
+    # rule stops them long before the iteration limit, with the same outcome (reached or
+    # not), and every other target's numbers are those of the run without the rule
+    robot = Robot.load("ec66")
+    g = robot.geometry
+    chain, tool = ChainKinematics.of(g), (0.02, 0.01, 0.12)
+    rng = np.random.default_rng(0)
+    q = rng.uniform(np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi), (1500, g.n))
+    _, p = chain.tool_poses(q, tool)
+    seeds = q + np.radians(0.5) * rng.normal(size=q.shape)
+    R, _ = chain.tool_poses(seeds, tool)
+    required = np.zeros(len(q), bool)
+    rule = ik.solve(chain, tool, p, R, required, seeds, g.lower, g.upper)
+    none = ik.solve(chain, tool, p, R, required, seeds, g.lower, g.upper,
+                    ik.IkOptions(stall_window=100))  # a window as long as the limit: no rule
+    limit = ik.IkOptions().max_iterations
+    assert (none.iterations == limit).sum() >= 10  # the case has targets that never finish
+    assert (rule.iterations < limit).all()
+    stopped = rule.iterations < none.iterations
+    assert stopped.sum() >= 10
+    np.testing.assert_array_equal(rule.reached, none.reached)
+    for name in ("q", "position_error", "orientation_error", "iterations"):
+        np.testing.assert_array_equal(getattr(rule, name)[~stopped],
+                                      getattr(none, name)[~stopped], name)
+
+
 def test_blocked_tool_poses_and_evaluate_equal_one_block(monkeypatch):
     chain, *_ = _problem()
     q = np.random.default_rng(3).uniform(-3, 3, (23, chain.n))

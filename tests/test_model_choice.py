@@ -89,6 +89,23 @@ def test_no_out_of_sample_comparison_keeps_the_default():
     assert "kept" in res.summary()
 
 
+def test_a_kept_default_counts_the_free_parameters_of_the_problem_that_fits():
+    # method ls: the default is kept without a throw-away problem; its free parameters are
+    # those of the fit itself (the problem's own analysis), as a CV-scored candidate's are
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    warnings.simplefilter("ignore", KincalWarning)
+    robot, data, _ = model_auto.case("EC66", 0, planted=True)
+    p = CalibrationProblem(robot, data, CalibrationOptions(model="auto", method="ls"))
+    mc = p.model_choice
+    assert mc.criterion == "none" and mc.model == p.model_name == "complete"
+    assert mc.candidates[0].free == int(p.free_mask().sum()) > 0
+    res = p.solve()
+    assert res.model_choice.candidates[0].as_dict()["free_parameters"] == mc.candidates[0].free
+    plain = calibrate(robot, data, method="ls")
+    assert np.array_equal(res.x, plain.x)
+
+
 def test_cli_analyze_prints_the_table_and_writes_nothing(tmp_path, capsys):
     robot, data, joint = model_auto.case("UR10", 2, planted=True)
     csv = tmp_path / "d.csv"

@@ -440,8 +440,9 @@ class Robot:
 
         position: (3,) [m]; tool: (3,) tool point in the tip frame [m]; rotation: optional
         (3, 3) orientation of the tip frame in the base frame; start: (n,) first guess.
-        Damped least squares, clipped to the joint limits. Returns (q (n,), converged).
-        """
+        Damped least squares (the one step, kincal.models.kinematics.damped_least_squares),
+        clipped to the joint limits. Returns (q (n,), converged)."""
+        from kincal.models.kinematics import damped_least_squares
         g = self.geometry
         lo, hi = (np.where(np.isfinite(b), b, s * np.pi) for b, s in ((g.lower, -1), (g.upper, 1)))
         q = np.clip(np.zeros(g.n) if start is None else np.asarray(start, float), lo, hi)
@@ -456,8 +457,7 @@ class Robot:
             e = np.concatenate(err)
             if np.linalg.norm(e) < tolerance:
                 return q, True
-            A = np.vstack(rows)
-            dq = A.T @ np.linalg.solve(A @ A.T + 1e-8 * np.eye(len(e)), e)
+            dq = damped_least_squares(np.vstack(rows)[None], e[None], 1e-8)[0]
             q = np.clip(q + dq, lo, hi)
         return q, False
 

@@ -22,13 +22,17 @@ reachable only beyond a limit is reported as not reached, never clipped silently
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.models.kinematics import BLOCK, ChainKinematics
+from kincal.models.kinematics import BLOCK, ChainKinematics, damped_pinv
 from kincal.errors import OptionError
 from kincal.rotations import rotation_log
+
+
+STALL_GAIN = 0.9  # an error counts as progress below this fraction of the best so far
+STALL_NET = 0.1  # net move over the window / path length below which the joints wander
 
 
 @dataclass(frozen=True)
@@ -38,6 +42,12 @@ class IkOptions:
     position_tolerance: [m] a target is reached when its tool point is this close.
     orientation_tolerance: [rad] the same for a required orientation.
     max_iterations: iterations per target (Newton converges in a few near the seed).
+    stall_window: a target whose error (position and orientation, each over its
+        tolerance, summed) has not fallen below 0.9 times its best for this many
+        iterations, while its joints wander in place (their net move over the window under
+        STALL_NET of the path), is stopped there: near singular wrists and limits the
+        iterations would otherwise run to max_iterations without progress. It is reported
+        as it stands (not reached unless within the tolerances).
     max_step: [rad or m] largest change of one joint in one iteration.
     damping: [m] Levenberg damping of the least-squares steps; keeps the steps bounded
         near singular configurations, negligible elsewhere.
@@ -46,6 +56,7 @@ class IkOptions:
     position_tolerance: float = 1e-6
     orientation_tolerance: float = 1e-6
     max_iterations: int = 100
+    stall_window: int = 20
     max_step: float = 0.1
     damping: float = 1e-6
 
@@ -54,8 +65,9 @@ class IkOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise OptionError(f"IkOptions.{name} must be a positive number, got {v!r}")
-        if int(self.max_iterations) < 1:
-            raise OptionError(f"IkOptions.max_iterations must be >= 1, got {self.max_iterations}")
+        for name in ("max_iterations", "stall_window"):
+            if int(getattr(self, name)) < 1:
+                raise OptionError(f"IkOptions.{name} must be >= 1, got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)
@@ -76,19 +88,12 @@ class IkSolution:
     iterations: np.ndarray
 
 
-def _damped_pinv(A: np.ndarray, damping: float) -> np.ndarray:
-    """(N, n, m) damped pseudo-inverses A^T (A A^T + d^2 I)^-1 of (N, m, n) matrices."""
-    m = A.shape[1]
-    At = np.swapaxes(A, 1, 2)
-    return At @ np.linalg.inv(A @ At + damping ** 2 * np.eye(m))
-
-
 def _step(Jp, Jo, e_p, e_o, eye, damping) -> np.ndarray:
     """(N, n) joint step: the position task, then the orientation in its null space."""
-    Jp_pinv = _damped_pinv(Jp, damping)
+    Jp_pinv = damped_pinv(Jp, damping ** 2)
     dq1 = np.einsum("kij,kj->ki", Jp_pinv, e_p)
     null = eye - Jp_pinv @ Jp
-    dq2 = np.einsum("kij,kj->ki", _damped_pinv(Jo @ null, damping),
+    dq2 = np.einsum("kij,kj->ki", damped_pinv(Jo @ null, damping ** 2),
                     e_o - np.einsum("kij,kj->ki", Jo, dq1))
     return dq1 + np.einsum("kij,kj->ki", null, dq2)
 
@@ -100,31 +105,41 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
 
     rotations: (N, 3, 3) wanted tip orientations in B; required: (N,) bool, True where
     the orientation must be met, False where it is only preferred. seeds: (N, n) start
-    values; lower, upper: (n,) joint limits (+-inf allowed). Solved in blocks of
-    :data:`kincal.models.kinematics.BLOCK` targets: the memory of the iterations is bounded.
+    values; lower, upper: (n,) joint limits (+-inf allowed). At most
+    :data:`kincal.models.kinematics.BLOCK` targets iterate at once: the memory of the
+    iterations is bounded.
     """
-    if len(seeds) > BLOCK:  # in blocks of targets: each is solved on its own anyway
-        out: dict[str, np.ndarray] = {}
-        for s in range(0, len(seeds), BLOCK):
-            part = solve(chain, tool, positions[s:s + BLOCK], rotations[s:s + BLOCK],
-                         required[s:s + BLOCK], seeds[s:s + BLOCK], lower, upper, options)
-            for f in fields(IkSolution):
-                v = getattr(part, f.name)
-                out.setdefault(f.name, np.empty((len(seeds),) + v.shape[1:], v.dtype))[
-                    s:s + BLOCK] = v
-        return IkSolution(**out)
     q = np.clip(np.array(seeds, dtype=float), lower, upper)
     N, n = q.shape
     eye = np.eye(n)
-    active = np.ones(N, dtype=bool)
     iterations = np.zeros(N, dtype=int)
-    for _ in range(options.max_iterations):
-        idx = np.flatnonzero(active)
-        if idx.size == 0:
+    # a pool of at most BLOCK targets iterates together; a finished target's slot takes the
+    # next target at once, so the few slow ones share their iterations with new targets
+    # instead of each block waiting for its slowest (a target's numbers do not depend on
+    # the others in its pool: tests/test_compensate_blocks.py)
+    P, W = min(BLOCK, N), int(options.stall_window)
+    target = np.full(P, -1)  # the target in each slot, -1: free
+    best, last = np.zeros(P), np.zeros(P, dtype=int)  # stall test: best error, its age
+    ring, moves = np.empty((W + 1, P, n)), np.zeros((W, P))  # the last W steps' q, moves
+    queued = 0
+    while True:
+        free = np.flatnonzero(target < 0)[:N - queued]
+        if free.size:
+            target[free] = np.arange(queued, queued + free.size)
+            queued += free.size
+            best[free], last[free], ring[0, free], moves[:, free] = np.inf, 0, q[target[free]], 0
+        slots = np.flatnonzero(target >= 0)
+        if slots.size == 0:
             break
+        idx = target[slots]
+        t = iterations[idx]  # each target's own iteration count
         R, p, Jp, Jo = chain.evaluate(q[idx], tool)
         e_p = positions[idx] - p
         e_o = rotation_log(rotations[idx] @ np.swapaxes(R, 1, 2))
+        n_p, n_o = np.linalg.norm(e_p, axis=1), np.linalg.norm(e_o, axis=1)
+        merit = n_p / options.position_tolerance + n_o / options.orientation_tolerance
+        better = merit < STALL_GAIN * best[slots]
+        best[slots[better]], last[slots[better]] = merit[better], t[better]
         dq = _step(Jp, Jo, e_p, e_o, eye, options.damping)
         # a joint on a limit that the step pushes outward is taken out of the step, so the
         # other joints meet the position (the orientation gives way first if it must)
@@ -141,12 +156,23 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         q[idx] = q_new
         iterations[idx] += 1
         # done when the step no longer changes anything that matters
-        done = (np.linalg.norm(e_p, axis=1) < 1e-3 * options.position_tolerance) & (
-            np.linalg.norm(e_o, axis=1) < 1e-3 * options.orientation_tolerance)
-        active[idx[done | (moved < 1e-14)]] = False
-    R, p, _, _ = chain.evaluate(q, tool)
-    pos_err = np.linalg.norm(positions - p, axis=1)
-    rot_err = np.linalg.norm(rotation_log(rotations @ np.swapaxes(R, 1, 2)), axis=1)
+        done = (n_p < 1e-3 * options.position_tolerance) & (
+            n_o < 1e-3 * options.orientation_tolerance)
+        ring[(t + 1) % (W + 1), slots], moves[t % W, slots] = q_new, moved
+        stalled = t - last[slots] >= W  # no progress in W iterations: moving on, or in place?
+        slow = np.flatnonzero(stalled)
+        if slow.size:
+            net = np.abs(q_new[slow] - ring[(t[slow] + 1 - W) % (W + 1), slots[slow]]).max(axis=1)
+            path = moves[:, slots[slow]].sum(axis=0)
+            stalled[slow] = (net < STALL_NET * path) | (path < 1e-12)
+        finished = done | (moved < 1e-14) | stalled | (t + 1 >= options.max_iterations)
+        target[slots[finished]] = -1
+    pos_err, rot_err = np.empty(N), np.empty(N)
+    for s in range(0, N, BLOCK):  # the errors at the end, in blocks: no (N, 3, 3) arrays
+        b = slice(s, s + BLOCK)
+        R, p, _, _ = chain.evaluate(q[b], tool)
+        pos_err[b] = np.linalg.norm(positions[b] - p, axis=1)
+        rot_err[b] = np.linalg.norm(rotation_log(rotations[b] @ np.swapaxes(R, 1, 2)), axis=1)
     reached = (pos_err <= options.position_tolerance) & (
         ~np.asarray(required, bool) | (rot_err <= options.orientation_tolerance))
     span = np.maximum(np.where(np.isfinite(upper - lower), upper - lower, 1.0), 1e-12)

@@ -37,7 +37,11 @@ class FileHash:
         p = str(path)
         if p.startswith("<") or not Path(p).is_file():
             return cls(p, None)
-        return cls(p, _sha256(Path(p).read_bytes()))
+        h = hashlib.sha256()  # in pieces: a large data file is never held whole
+        with open(p, "rb") as fh:
+            for piece in iter(lambda: fh.read(1 << 20), b""):
+                h.update(piece)
+        return cls(p, h.hexdigest())
 
 
 @dataclass(frozen=True)

@@ -70,7 +70,8 @@ class Candidate:
     """One compared structure.
 
     model: error model; backlash: joints with a backlash term; free: parameters the fit
-    moves (identifiable, incl. frames); fold_errors: (k,) mean validation error per fold
+    moves (identifiable, incl. frames; None until the problem using a kept default counts
+    them, :func:`counted`); fold_errors: (k,) mean validation error per fold
     [mm] at its best lambda (empty when not scored); sample_errors: its validation errors
     per pose [mm] (mean over the pose's samples), for the guard; lam: that lambda; note: why it was
     not scored, or what the guard said; chosen: the structure used; compliance: joints
@@ -78,7 +79,7 @@ class Candidate:
 
     model: str
     backlash: tuple[str, ...]
-    free: int
+    free: int | None
     fold_errors: np.ndarray
     lam: float
     note: str = ""
@@ -171,6 +172,15 @@ def beats(new: np.ndarray, best: np.ndarray) -> tuple[bool, str]:
                    else "no better")
 
 
+def counted(choice: ModelChoice | None, free_mask) -> ModelChoice | None:
+    """``choice`` with the kept default's free parameters counted (``free_mask()``, the
+    problem's own, called only when they are not counted yet)."""
+    if choice is None or choice.criterion != "none" or choice.candidates[0].free is not None:
+        return choice
+    c = replace(choice.candidates[0], free=int(free_mask().sum()))
+    return replace(choice, candidates=(c,) + choice.candidates[1:])
+
+
 def resolve(problem_class, robots, sets, options: CalibrationOptions
             ) -> tuple[ModelChoice | None, CalibrationOptions]:
     """(None, options) unless options.model is "auto"; then :func:`choose`."""
@@ -195,28 +205,33 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
             return CalibrationProblem(robots, sets, replace(o, model=model, backlash=backlash,
                                                             compliance=compliance, **grid))
 
-    base = problem(None, o.backlash)
-    default = base.model_name
     k = o.folds
 
-    def keep(reason):
-        c = Candidate(default, tuple(o.backlash), int(base.free_mask().sum()), np.zeros(0),
-                      math.nan, chosen=True, compliance=tuple(o.compliance))
+    def keep(default, reason):
+        # its free parameters are counted by the problem that uses it (:func:`counted`):
+        # analysing a problem here only to count them would double a large fit's analysis
+        c = Candidate(default, tuple(o.backlash), None, np.zeros(0), math.nan, chosen=True,
+                      compliance=tuple(o.compliance))
         return (ModelChoice((c,), default, tuple(o.backlash), "none", reason, k,
                             tuple(o.compliance)), replace(o, model=default))
 
-    if o.method != "l2":
-        return keep(f"method {o.method}: no penalty chosen by CV to compare the candidates "
+    if o.method != "l2":  # the chain's default model: no problem needs building to know it
+        from kincal.identification.chains import Chains
+
+        return keep(Chains(robots, len(sets)).model_name,
+                    f"method {o.method}: no penalty chosen by CV to compare the candidates "
                     "with; the chain's default")
+    base = problem(None, o.backlash)
+    default = base.model_name
     how = o.lam
     if how == "auto":
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", KincalWarning)
             how, _ = penalty_choice.automatic(base)
     if how != "cv":
-        return keep("the penalty is not chosen by cross-validation on these data (a small "
-                    "measurement volume, no measured positions, or a given lambda): nothing "
-                    "judges the candidates out of sample; the chain's default")
+        return keep(default, "the penalty is not chosen by cross-validation on these data (a "
+                    "small measurement volume, no measured positions, or a given lambda): "
+                    "nothing judges the candidates out of sample; the chain's default")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalWarning)
         cv0 = base.cross_validate()

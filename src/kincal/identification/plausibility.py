@@ -398,12 +398,15 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         rev = [j for j, k in enumerate(gi.kinds) if k == "revolute"]
         if not rev:
             continue
-        qa = np.abs(dt.joint_values[:, rev])
-        i, j = np.unravel_index(int(np.argmax(qa)), qa.shape)
-        if qa[i, j] >= angle_max:
-            v = dt.joint_values[i, rev[j]]
-            angle_max = float(qa[i, j])
-            outside = bool(v < gi.lower[rev[j]] - 1e-6 or v > gi.upper[rev[j]] + 1e-6)
+        # the first largest |value| in row-major order over the revolute columns, a column
+        # at a time (no copy of the whole set's joint values)
+        tops = [(int(np.argmax(np.abs(dt.joint_values[:, c]))), c) for c in rev]
+        top = max(abs(float(dt.joint_values[i, c])) for i, c in tops)
+        i, c = min((i, c) for i, c in tops if abs(float(dt.joint_values[i, c])) == top)
+        if top >= angle_max:
+            v = dt.joint_values[i, c]
+            angle_max = top
+            outside = bool(v < gi.lower[c] - 1e-6 or v > gi.upper[c] + 1e-6)
     frames = set(problem.robot.frame_names())
     off_chain = tuple(dict.fromkeys(c for dt in datas for c in dt.ignored_columns
                                     if c in frames and c not in problem.error_model.joint_names))

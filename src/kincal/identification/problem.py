@@ -42,7 +42,7 @@ from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze
 from kincal.identification.solver import SolverOptions, SolveSummary, solve
-from kincal.measurements.checks import distinct_poses, length_unit_warnings, set_warnings
+from kincal.measurements.checks import distinct_poses, set_warnings, unit_warnings
 from kincal.measurements.kind import DEFAULT_SIGMA
 from kincal.measurements.sets import as_sets
 from kincal.models.mdh import TOOL_AXIS_WARNING
@@ -66,7 +66,7 @@ class CalibrationProblem:
         sets = as_sets(sets)
         # model "auto": the candidate structures compared by CV, the best used (model_choice)
         with blas_threads.limited(o.blas_threads):  # its fits, as solve's (blas_threads)
-            self.model_choice, o = model_choice.resolve(type(self), robots, sets, o)
+            self._model_choice, o = model_choice.resolve(type(self), robots, sets, o)
         self.options = o
         self.chains = ch = Chains(robots, len(sets), o.model)
         self.robot, self.robots = ch.robot, ch.robots
@@ -102,6 +102,10 @@ class CalibrationProblem:
         self._structural: Identifiability | None = None
         self._all_blocks: dict = {}  # (set, block size): blocks of a whole set
         self._subsets: dict = {}  # the last row selections' parts (_parts)
+        self._whole: dict = {}  # kinematic: (weights, scale, row_scale, residual_function())
+
+    model_choice = property(lambda self: model_choice.counted(self._model_choice, self.free_mask),
+                            doc="model auto: the structures compared and the chosen; else None")
 
     # ----------------------------------------------------------------- layout
     @property
@@ -169,12 +173,13 @@ class CalibrationProblem:
 
         Evaluating many samples block by block keeps every temporary of the Jacobian small
         (a few MB, in cache) instead of a dozen (N, dim, p) arrays: at 200,000 poses it is
-        several times faster. The blocks of a whole set are built once (cache=True)."""
+        several times faster. The blocks of a whole set are built once (cache=True), on
+        views of the set's arrays (slices: no copy of the data)."""
         if km.N <= BLOCK_SAMPLES:
             return [(slice(0, km.N), km)]
         if cache and (i, BLOCK_SAMPLES) in self._all_blocks:
             return self._all_blocks[i, BLOCK_SAMPLES]
-        blocks = [(sl, km.subset(np.arange(sl.start, sl.stop))) for sl in
+        blocks = [(sl, km.subset(sl)) for sl in
                   (slice(a, min(a + BLOCK_SAMPLES, km.N)) for a in range(0, km.N, BLOCK_SAMPLES))]
         if cache:
             self._all_blocks[i, BLOCK_SAMPLES] = blocks
@@ -185,10 +190,18 @@ class CalibrationProblem:
         indices over the sets in order; default all); u = x / scale.
 
         kinematic=False: kinematic and backlash columns left at zero (frame-only fits)."""
+        w = self._whole.get(kinematic) if rows is None else None  # one for all samples:
+        if w is not None and all(a is b for a, b in zip(w, (self.weights, self.scale,
+                                                                self.row_scale))):
+            return w[3]  # the pass it remembers (reduction.analyze_rows); irls and the
+            #              evidence's noise groups change the weights
         parts = [(i, km, g, self._blocks(i, km, g, rows is None))
                  for i, km, g in self._parts(rows)]
-        return residual_function(parts, self.layout, self.weights, self.scale, kinematic,
-                                 self.row_scale)
+        out = residual_function(parts, self.layout, self.weights, self.scale, kinematic,
+                                self.row_scale)
+        self._whole.update({kinematic: (self.weights, self.scale, self.row_scale, out)}
+                           if rows is None else {})
+        return out
 
     def sample_errors(self, x: np.ndarray, rows=None, weighted: bool = False) -> list:
         """Per set with samples in ``rows``: (set index, (n,) sample errors [m]) at x."""
@@ -230,7 +243,8 @@ class CalibrationProblem:
         x = self.x_nominal if self.prior is None else self.prior.centre.copy()
         nominal = self.layout.kinematic(x)  # a fleet prior starts from the fleet mean
         for i, km in enumerate(self.kinds):
-            self._unit_warnings(km)
+            for message in unit_warnings(km, o.tool_guess):
+                warnings.warn(message, KincalWarning)
             fs, own = lay.frame_slices[i], np.array(lay.own(i), dtype=bool)
             v = (km.start(nominal, o.tool_guess, o.base_guess if i == 0 else None)
                  if km.kind == "point" else km.start(nominal, o.tool_guess))
@@ -255,20 +269,6 @@ class CalibrationProblem:
             x = sol.u * self.scale
         self._x_start = x
         return x
-
-    def _unit_warnings(self, km) -> None:
-        """Positions about 1000x larger or smaller than the nominal motion (mm read as m)."""
-        d = km.data
-        if getattr(d, "positions", None) is None:
-            return
-        first = np.ones(len(d), bool) if getattr(d, "points", None) is None else d.points == 0
-        R_tip, p_tip = km.chain.tip(km.error_model.nominal)
-        guess = np.zeros(3) if self.options.tool_guess is None else np.asarray(
-            self.options.tool_guess, float)
-        for message in length_unit_warnings(d.positions[first],
-                                            p_tip[first] + R_tip[first] @ guess,
-                                            getattr(d, "length_unit", "m")):
-            warnings.warn(f"{d.source}: {message}", KincalWarning)
 
     # ---------------------------------------------------------------- analyse
     def _unfixed(self) -> np.ndarray:

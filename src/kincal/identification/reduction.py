@@ -31,13 +31,20 @@ CHOLESKY_MIN_RATIO = 1e-7  # smallest diag(R) / largest diag(R) accepted from th
 
 
 def stacked_triangle(blocks: Iterable[tuple[slice, np.ndarray, np.ndarray]],
-                     columns: np.ndarray | None = None, with_residual: bool = False
+                     columns: np.ndarray | None = None, with_residual: bool = False,
+                     normal: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
                      ) -> tuple[np.ndarray, int]:
     """(R (c, c) upper triangular, m): R^T R = A^T A for A the stacked J_b[:, columns]
-    (with -r_b as a last column if ``with_residual``), and the number of rows m."""
+    (with -r_b as a last column if ``with_residual``), and the number of rows m.
+
+    normal: (r (m,), G (p, p), g (p,)) zeroed, summed into from the same blocks as
+    :func:`normal_equations` does (one pass gives both: the analysis and the first
+    linearisation of the fit that follows it at the same point)."""
     R: np.ndarray | None = None
     m = 0
-    for _, r, J in blocks:
+    for span, r, J in blocks:
+        if normal is not None:
+            _add_normal(normal, span, r, J)
         A = J if columns is None else J[:, columns]
         if with_residual:
             A = np.column_stack([A, -r])
@@ -49,16 +56,20 @@ def stacked_triangle(blocks: Iterable[tuple[slice, np.ndarray, np.ndarray]],
     return R, m
 
 
+def _add_normal(normal, span, rb, Jb) -> None:
+    r, G, g = normal
+    r[span] = rb
+    G += Jb.T @ Jb
+    g += Jb.T @ rb
+
+
 def normal_equations(blocks: Iterable[tuple[slice, np.ndarray, np.ndarray]], m: int,
                      p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(r (m,), G = J^T J (p, p), g = J^T r (p,)) over the blocks."""
-    r = np.empty(m)
-    G, g = np.zeros((p, p)), np.zeros(p)
+    normal = np.empty(m), np.zeros((p, p)), np.zeros(p)
     for span, rb, Jb in blocks:
-        r[span] = rb
-        G += Jb.T @ Jb
-        g += Jb.T @ rb
-    return r, G, g
+        _add_normal(normal, span, rb, Jb)
+    return normal
 
 
 def triangle_from_gram(G: np.ndarray, g: np.ndarray, rr: float) -> np.ndarray | None:
@@ -79,11 +90,14 @@ def triangle_from_gram(G: np.ndarray, g: np.ndarray, rr: float) -> np.ndarray | 
     return out
 
 
-def linearise(blocks: Callable, u: np.ndarray, m: int, p: int, free_idx: np.ndarray):
+def linearise(blocks: Callable, u: np.ndarray, m: int, p: int, free_idx: np.ndarray,
+              memo: dict | None = None):
     """(r (m,), G (p, p) = J^T J of every column, Rz (k+1, k+1) triangle of [J_free | -r])
-    at u, from the blocks: one pass for the normal equations, a second (stacked QR) only
-    when they are too ill-conditioned."""
-    r, G, g = normal_equations(blocks(u), m, p)
+    at u, from the blocks: one pass for the normal equations (or none: ``memo``, a
+    residual's remembered pass at exactly this u, :func:`analyze_rows`), a second (stacked
+    QR) only when they are too ill-conditioned."""
+    kept = memo.pop(u.tobytes(), None) if memo else None
+    r, G, g = kept if kept is not None else normal_equations(blocks(u), m, p)
     Rz = triangle_from_gram(G[np.ix_(free_idx, free_idx)], g[free_idx], float(r @ r))
     if Rz is None:
         Rz, _ = stacked_triangle(blocks(u), free_idx, with_residual=True)
@@ -143,6 +157,7 @@ class BlockedResidual(Protocol):
     blocks: Callable
     rows: int
     n_blocks: int
+    memo: dict
 
     def __call__(self, u: np.ndarray, jacobian: bool = ...) -> Any: ...
 
@@ -165,6 +180,7 @@ def residual_function(parts, layout, weights, scale, kinematic: bool = True,
     out = cast(BlockedResidual, residual)  # the attributes are set here
     out.blocks = blocks
     out.rows, out.n_blocks = m, sum(len(part[3]) for part in parts)
+    out.memo = {}  # u bytes: (r, J^T J, J^T r) of a pass made by the analysis (analyze_rows)
     return out
 
 
@@ -172,10 +188,17 @@ def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, na
                  n_kinematic: int, free: np.ndarray, rank_tol: float):
     """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
     scaled by ``column_scale``; for rows streamed in blocks (many poses), of its QR triangle
-    (the same column norms, projections and singular values), built without the whole J."""
+    (the same column norms, projections and singular values), built without the whole J,
+    in a pass that also sums the normal equations at u and leaves them in the residual's
+    ``memo`` for the fit's first linearisation (:func:`linearise`), which starts there."""
     from kincal.identification.selection import analyze
 
     if getattr(residual, "n_blocks", 1) <= 1:
         return analyze(residual(u, True)[1] * column_scale, names, n_kinematic, free, rank_tol)
-    R, m = stacked_triangle(cast(BlockedResidual, residual).blocks(u))
+    blocked = cast(BlockedResidual, residual)
+    p = u.size
+    normal = np.empty(blocked.rows), np.zeros((p, p)), np.zeros(p)
+    R, m = stacked_triangle(blocked.blocks(u), normal=normal)
+    blocked.memo.clear()
+    blocked.memo[u.tobytes()] = normal
     return analyze(R * column_scale, names, n_kinematic, free, rank_tol, m=m)

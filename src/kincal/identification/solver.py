@@ -283,7 +283,8 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             return r, J, None, None
         from kincal.identification.reduction import linearise as reduce
 
-        r, G, Rz = reduce(residual.blocks, u, residual.rows, p, free_idx)
+        r, G, Rz = reduce(residual.blocks, u, residual.rows, p, free_idx,
+                          getattr(residual, "memo", None))
         return r, None, G, Rz
 
     u = u0.astype(float).copy()

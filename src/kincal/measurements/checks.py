@@ -68,6 +68,20 @@ def length_unit_warnings(measured: np.ndarray, predicted: np.ndarray, length_uni
     return []
 
 
+def unit_warnings(km, tool_guess=None) -> list[str]:
+    """A kind model's measured positions about 1000x larger or smaller than its nominal
+    motion (mm read as m), each message naming the file; none for kinds without positions.
+    tool_guess: the tool point on the tip (--tool-offset) [m], default the tip's origin."""
+    d = km.data
+    if getattr(d, "positions", None) is None:
+        return []
+    first = np.ones(len(d), bool) if getattr(d, "points", None) is None else d.points == 0
+    guess = np.zeros(3) if tool_guess is None else np.asarray(tool_guess, float)
+    tips = km.chain.tip_point(km.error_model.nominal, guess)  # in blocks: no (N, 3, 3)
+    return [f"{d.source}: {m}" for m in length_unit_warnings(
+        d.positions[first], tips[first], getattr(d, "length_unit", "m"))]
+
+
 def distinct_poses(q: np.ndarray) -> int:
     """Number of distinct joint configurations (to 1e-9)."""
     return int(np.unique(np.round(q, 9), axis=0).shape[0])

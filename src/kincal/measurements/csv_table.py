@@ -314,7 +314,7 @@ def _read_fast(path: Path, required, optional, ranges) -> Columns | None:
         return None
     if table.shape != (rows, len(header)):
         return None
-    values = table[:, cols]
+    values = table if cols == list(range(len(header))) else table[:, cols]  # all: no copy
     if not np.isfinite(values).all():
         return None
     for k, c in enumerate(wanted):

@@ -30,6 +30,10 @@ ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 
 
 def _readonly(a) -> np.ndarray:
+    """A read-only float array of a: a itself when it is one already (a block's view of
+    its set's arrays, :meth:`Measurements.subset` with a slice), else a copy."""
+    if isinstance(a, np.ndarray) and a.dtype == float and not a.flags.writeable:
+        return a
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
@@ -155,8 +159,9 @@ class Measurements:
             if a.shape != (len(q),) or (a.size and (a.dtype.kind not in "iu" or a.min() < 0)):
                 raise DataError(f"{self.source}: {name} must be {len(q)} integers >= 0, got "
                                 f"{a.dtype} of shape {a.shape}")
-            a = a.astype(int)
-            a.setflags(write=False)
+            if a.dtype != int or a.flags.writeable:  # a read-only int view is kept as is
+                a = a.astype(int)
+                a.setflags(write=False)
             object.__setattr__(self, name, a)
 
     def __len__(self) -> int:
@@ -182,7 +187,9 @@ class Measurements:
         return int(self.filled[2].max()) + 1 if len(self) else 1
 
     def subset(self, index) -> "Measurements":
-        index = np.asarray(index)
+        """The samples ``index`` (indices, a mask, or a slice: then views of these arrays,
+        no copy, as the blocks of a large fit take them)."""
+        index = index if isinstance(index, slice) else np.asarray(index)
         rows, approach, points, poses = self.filled
         return replace(self, joint_values=self.joint_values[index],
                        positions=self.positions[index],
@@ -250,7 +257,9 @@ class Measurements:
                              for j in joint_names])
         K = len(position_columns) // 3
         P = np.stack([np.column_stack([v[c] for c in position_columns[3 * k:3 * k + 3]])
-                      for k in range(K)], axis=1) * L  # (rows, K, 3)
+                      for k in range(K)], axis=1)  # (rows, K, 3)
+        if L != 1.0:
+            P *= L
         sigma = v[sigma_column] * L if sigma_column in v else None
         if sigma is not None and np.any(sigma <= 0):
             k = int(np.argmax(sigma <= 0))
@@ -261,11 +270,18 @@ class Measurements:
             approach = approach_directions(q, v[order_column], source=str(path), rows=rows)
             order_source = f"column {order_column!r}"
         n = len(q)  # one sample per row and point, row-major
-        return cls(tuple(joint_names), np.repeat(q, K, axis=0), P.reshape(n * K, 3),
+
+        def each(a, k=K):  # a row's values for each of its k samples, read-only (kept)
+            a = a if k == 1 else np.repeat(a, k, axis=0)
+            a.setflags(write=False)
+            return a
+
+        ignored = table.ignored()
+        del table, v  # the file's columns: only the arrays kept below stay
+        return cls(tuple(joint_names), each(q), each(P.reshape(n * K, 3), 1),
                    None if sigma is None else np.repeat(sigma, K), np.repeat(rows, K),
-                   str(path), table.ignored(), length_unit, angle_unit,
-                   np.repeat(approach, K, axis=0), order_source,
-                   np.tile(np.arange(K), n), np.repeat(np.arange(n), K))
+                   str(path), ignored, length_unit, angle_unit, each(approach),
+                   order_source, np.tile(np.arange(K), n), each(np.arange(n)))
 
     def to_csv_text(self) -> str:
         """The samples in the CSV layout :meth:`from_csv` reads, SI units, full precision:

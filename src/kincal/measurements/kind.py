@@ -101,7 +101,7 @@ class SampleSet:
         return ("joint_values", "sigma", "rows", "approach", "poses")
 
     def subset(self, index) -> "SampleSet":
-        index = np.asarray(index)
+        index = index if isinstance(index, slice) else np.asarray(index)
         cut: dict[str, Any] = {}
         for name in self.per_sample_fields():
             value = getattr(self, name)

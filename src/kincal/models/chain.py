@@ -55,6 +55,26 @@ def axis_cross(i: int, v: np.ndarray) -> np.ndarray:
     return out
 
 
+def motion_basis(w: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(4, 12): the top rows [R | c - R c] of a turn by q about the unit axis w (3,) through
+    the point c (3,), flattened, are (cos q, sin q, 1 - cos q, 1) times this matrix
+    (:func:`rodrigues`: R = cos I + sin K + (1 - cos) w w^T)."""
+    key = (w.tobytes(), np.asarray(c, float).tobytes())
+    B = _BASES.get(key)
+    if B is None:
+        K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+        B = np.zeros((4, 3, 4))
+        B[0, :, :3], B[1, :, :3], B[2, :, :3] = np.eye(3), K, np.outer(w, w)
+        B[0, :, 3], B[1, :, 3], B[2, :, 3], B[3, :, 3] = -c, -K @ c, -w * (w @ c), c
+        if len(_BASES) > 256:
+            _BASES.clear()
+        B = _BASES[key] = B.reshape(4, 12)
+    return B
+
+
+_BASES: dict = {}  # (axis, point) bytes: motion_basis
+
+
 MOTION_CACHE_POSES = 1024  # poses up to which a chain keeps its joint motions
 TIP_BLOCK_POSES = 4096  # poses evaluated together by Chain.tip
 _GATHER_BUDGET = 4_000_000  # floats gathered at once for the kinematic columns (32 MB)
@@ -113,16 +133,21 @@ class Chain:
         """(N, 4, 4) motion of joint i by qi (N,), in its placed frame."""
         m = self.model
         w = m.screw_axes[i]
-        M = np.zeros((len(qi), 4, 4))
-        M[:, 3, 3] = 1.0
+        M = np.empty((len(qi), 4, 4))
+        M[:, 3] = (0.0, 0.0, 0.0, 1.0)
         if m.kinds[i] == "prismatic":
             M[:, :3, :3] = np.eye(3)
             M[:, :3, 3] = qi[:, None] * w
         else:  # a turn about the axis line through the screw point c: x -> R (x - c) + c
-            R = rodrigues(w, qi)
-            c = m.screw_points[i]
-            M[:, :3, :3] = R
-            M[:, :3, 3] = c - R @ c
+            # R = c I + s K + (1 - c) w w^T and R c, all twelve entries of [R | c - R c]
+            # as one product of (cos, sin, 1 - cos, 1) with the joint's constant basis
+            # (:func:`motion_basis`): a few numpy calls instead of a dozen per joint
+            A = np.empty((len(qi), 4))
+            np.cos(qi, out=A[:, 0])
+            np.sin(qi, out=A[:, 1])
+            np.subtract(1.0, A[:, 0], out=A[:, 2])
+            A[:, 3] = 1.0
+            M[:, :3] = (A @ motion_basis(w, m.screw_points[i])).reshape(len(qi), 3, 4)
         return M
 
     def tip(self, x: np.ndarray, backlash: np.ndarray | None = None
@@ -134,11 +159,24 @@ class Chain:
             s = self.state(x, backlash, keep=False)
             return s.R_tip, s.p_tip
         R, p = np.empty((self.N, 3, 3)), np.empty((self.N, 3))
-        for a in range(0, self.N, TIP_BLOCK_POSES):
-            rows = slice(a, a + TIP_BLOCK_POSES)
-            s = self.subset(rows).state(x, backlash, keep=False)
+        for rows, s in self._tip_blocks(x, backlash):
             R[rows], p[rows] = s.R_tip, s.p_tip
         return R, p
+
+    def tip_point(self, x: np.ndarray, point: np.ndarray,
+                  backlash: np.ndarray | None = None) -> np.ndarray:
+        """(N, 3) the point ``point`` (3,) of the tip frame in the base frame, p + R point
+        of :meth:`tip` (the same numbers) without its (N, 3, 3) rotations."""
+        out = np.empty((self.N, 3))
+        for rows, s in self._tip_blocks(x, backlash):
+            out[rows] = s.p_tip + s.R_tip @ point
+        return out
+
+    def _tip_blocks(self, x, backlash):
+        for a in range(0, self.N, TIP_BLOCK_POSES):
+            rows = slice(a, a + TIP_BLOCK_POSES)
+            yield rows, (self if self.N <= TIP_BLOCK_POSES else self.subset(rows)).state(
+                x, backlash, keep=False)
 
     def state(self, x: np.ndarray, backlash: np.ndarray | None = None,
               keep: bool = True) -> "ChainState":
@@ -146,33 +184,46 @@ class Chain:
         compliance) on every pose.
 
         keep=False keeps only the tip (cheaper when no derivative is wanted)."""
-        m = self.model
+        m, N = self.model, self.N
         P = m.placements(x)
-        G = np.broadcast_to(m.T_first, (self.N, 4, 4)) if keep else m.T_first
-        before, placed = [], []
+        # the frames before and after each placement, written in place when kept (one
+        # (n, N, 4, 4) array each, so the columns need no stacking); a constant frame times
+        # a placement is one (4 N, 4) x (4, 4) product
+        before = np.empty((m.n, N, 4, 4)) if keep else None
+        placed = np.empty((m.n, N, 4, 4)) if keep else None
+        G = m.T_first
         for i in range(m.n):
-            H = G @ P[i]
-            if keep:
-                before.append(G)
-                placed.append(H)
+            if G.ndim == 2:
+                H = G @ P[i]
+                if placed is not None:
+                    placed[i] = H
+            else:
+                H = placed[i] if placed is not None else np.empty((N, 4, 4))
+                np.matmul(G.reshape(-1, 4), P[i], out=H.reshape(-1, 4))
+            if before is not None:
+                before[i] = G
             ks = [k for k in self._terms_of.get(i, ()) if backlash is not None
                   and backlash[k] != 0.0]
             if not ks:
-                G = H @ (self._motion[i] if self._motion is not None
-                         else self.joint_motion(i, self.q[:, i]))
+                M = (self._motion[i] if self._motion is not None
+                     else self.joint_motion(i, self.q[:, i]))
             else:
                 assert backlash is not None  # ks is empty without the terms' values
                 qi = self.q[:, i] + sum(backlash[k] * self.factors[:, k] for k in ks)
-                G = H @ self.joint_motion(i, qi)
-        T = G @ m.T_last_tip
+                M = self.joint_motion(i, qi)
+            G = np.matmul(H, M)
+        T = G @ m.T_last_tip if G.ndim == 2 else np.matmul(G.reshape(-1, 4), m.T_last_tip
+                                                           ).reshape(N, 4, 4)
         if T.ndim == 2:
-            T = np.broadcast_to(T, (self.N, 4, 4))
-        return ChainState(self, x, T[:, :3, :3], T[:, :3, 3], before, placed)
+            T = np.broadcast_to(T, (N, 4, 4))
+        return ChainState(self, x, T[:, :3, :3], T[:, :3, 3],
+                          [] if before is None else before, [] if placed is None else placed)
 
 
 class ChainState:
     """A chain evaluated at one parameter vector: the tip pose and, if kept, the frames
-    before (``before[i]``) and after (``placed[i]``) joint i's placement, each (N, 4, 4)."""
+    before (``before[i]``) and after (``placed[i]``) joint i's placement, each (N, 4, 4)
+    (``before`` and ``placed``: (n, N, 4, 4) arrays; empty lists when not kept)."""
 
     def __init__(self, chain: Chain, x, R_tip, p_tip, before, placed):
         self.chain, self.x = chain, x
@@ -187,11 +238,11 @@ class ChainState:
         chain, m = self.chain, self.chain.model
         N = chain.N
         fast = None if generic else getattr(m, "point_columns", None)
-        if fast is not None and self.before:
+        if fast is not None and len(self.before):
             K = fast(self.x, self.before, self.placed, P)
-        elif self.before:
+        elif len(self.before):
             K = np.empty((N, 3, m.size))
-            G = np.stack(self.before)                             # (n, N, 4, 4)
+            G = np.asarray(self.before)                           # (n, N, 4, 4)
             w, v = m.twists(self.x)
             jo = m.joint_of
             # vectorised over parameters, in row blocks to bound the (p, rows, 3, 3) gather

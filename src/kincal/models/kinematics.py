@@ -153,10 +153,27 @@ class ChainKinematics:
         if rotations is not None:
             e = np.concatenate([e, rotation_log(rotations @ np.swapaxes(R, 1, 2))], axis=1)
             A = np.concatenate([J_point, J_rot], axis=1)
-        M = A @ np.swapaxes(A, 1, 2)
-        M += 1e-8 * np.eye(e.shape[1])
-        dq = (np.swapaxes(A, 1, 2) @ np.linalg.solve(M, e[:, :, None]))[:, :, 0]
+        dq = damped_least_squares(A, e, 1e-8)
         return np.linalg.norm(e, axis=1), np.clip(q + dq, lower, upper)
+
+
+def damped_least_squares(A: np.ndarray, e: np.ndarray, d2: float) -> np.ndarray:
+    """(N, n) steps A^T (A A^T + d2 I)^-1 e of (N, m, n) Jacobians A and (N, m) errors e:
+    the one damped least-squares step of kincal's inverse kinematics (this module's
+    :meth:`ChainKinematics.damped_step`, :meth:`kincal.robot.Robot.inverse_kinematics`
+    with N = 1, and :func:`damped_pinv`'s tasks in kincal.compensation.ik), by a solve of
+    the m x m system, no inverse."""
+    M = A @ np.swapaxes(A, 1, 2)
+    M += d2 * np.eye(e.shape[1])
+    return (np.swapaxes(A, 1, 2) @ np.linalg.solve(M, e[:, :, None]))[:, :, 0]
+
+
+def damped_pinv(A: np.ndarray, d2: float) -> np.ndarray:
+    """(N, n, m) damped pseudo-inverses A^T (A A^T + d2 I)^-1 of (N, m, n) matrices: the
+    operator of :func:`damped_least_squares`, for prioritised tasks that also need its
+    null-space projector I - A^+ A (kincal.compensation.ik)."""
+    At = np.swapaxes(A, 1, 2)
+    return At @ np.linalg.inv(A @ At + d2 * np.eye(A.shape[1]))
 
 
 def _times(A: np.ndarray, B: np.ndarray) -> np.ndarray:

@@ -235,7 +235,7 @@ class MdhModel(ErrorModel):
         twists of :mod:`kincal.models.chain`, written with MD-H's structure because this is
         the identification's hot path (a slides along x_G, alpha turns about it, d slides
         along z_H, theta turns about it, beta about Rx(alpha) y_G through o_G + a x_G)."""
-        G, H = np.stack(before), np.stack(placed)                 # (n, N, 4, 4)
+        G, H = np.asarray(before), np.asarray(placed)                 # (n, N, 4, 4)
         xg, zh = G[:, :, :3, 0], H[:, :, :3, 2]
         rg, rh = P - G[:, :, :3, 3], P - H[:, :, :3, 3]
         ia, ial, ib, idd, ith = self._field_index

@@ -122,12 +122,12 @@ class PlacementModel(ErrorModel):
         generic twists."""
         if self.reversed.any():
             w, v = self.twists(x)
-            G = np.stack(before)[self.joint_of]                       # (p, N, 4, 4)
+            G = np.asarray(before)[self.joint_of]                       # (p, N, 4, 4)
             W = (G[..., :3, :3] @ w[:, None, :, None])[..., 0]
             U = (G[..., :3, :3] @ v[:, None, :, None])[..., 0]
             return (np.cross(W, P[None] - G[..., :3, 3]) + U).transpose(1, 2, 0)
         e = np.asarray(x, float).reshape(self.n, 6)
-        G, H = np.stack(before), np.stack(placed)                 # (n, N, 4, 4)
+        G, H = np.asarray(before), np.asarray(placed)                 # (n, N, 4, 4)
         F = G[:, :, :3, :3] @ self.mid[:, None, :3, :3]           # parent link axes
         c, s = np.cos(e[:, 3]), np.sin(e[:, 3])
         cy, sy = np.cos(e[:, 4]), np.sin(e[:, 4])
