@@ -24,10 +24,10 @@ unknown, 0.05 mm noise, nothing unmodelled):
   them: parallel-axis tilts that MD-H cannot carry), with the tool on the flange axis and
   off it at (30, 20, 120) mm (as in docs/planning.md's loop).
 
---plan i plans I-optimal poses for 200 targets with tilt up to 30 deg in the validation
-cube instead (``kincal plan ... --target-cube 0.4 0 0.25 0.4 --max-tilt 30``, other
-draws than the validation's); --estimator compares others; --first sets the first seed
-(the seeds are first, first + 1, ...).
+--plan i plans I-optimal poses for 200 targets drawn like the validation poses (the 400 mm
+cube, tilt up to 30 deg; other draws) instead: an API setting, since ``--target-cube``
+on the command line takes the candidates' tilt range; --estimator compares others;
+--first sets the first seed (the seeds are first, first + 1, ...).
 
     python scripts/twin_study.py [--seeds 3] [--first 0] [--candidates 2000] [--only NAME ...]
                                  [--plan default|d|i] [--estimator default|ls|cv|mdh|placement]
