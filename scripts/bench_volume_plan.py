@@ -1,7 +1,8 @@
 """Time `kincal plan ec66 --in-cube ... --max-tilt 60 --poses 60` from a few thousand candidates.
 
 Prints, per candidate count, the wall-clock and CPU time of the whole command (load,
-candidate generation, D-optimal selection, writing) and of its two stages, median of
+candidate generation, the default working volume's 1000 target poses, I-optimal
+selection, writing) and of its three stages, median of
 --repeats runs, with the load average at the start (the machine may be shared).
 
 Usage: python scripts/bench_volume_plan.py [--candidates 2000 3000] [--repeats 3]
@@ -23,7 +24,8 @@ import numpy as np
 from kincal.cli.main import main as kincal
 from kincal.identification.blas_threads import limited
 from kincal.planning.pose_selection import select_poses
-from kincal.planning.volume_candidates import Volume, VolumeSpec, volume_candidates
+from kincal.planning.volume_candidates import (Volume, VolumeSpec, volume_candidates,
+                                               working_volume)
 from kincal.robot import Robot
 
 TOOL = (0.03, 0.02, 0.12)  # [m]
@@ -43,10 +45,11 @@ def main(argv=None):
     print(f"load average at start: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     robot = Robot.load("ec66")
     spec = VolumeSpec(Volume.cube((0.4, 0.0, 0.25), 0.02), TOOL, math.radians(60))
-    print("| candidates | whole command, wall (CPU) [s] | generation [s] | selection [s] |")
-    print("|---|---|---|---|")
+    print("| candidates | whole command, wall (CPU) [s] | generation [s] | targets [s] | "
+          "selection [s] |")
+    print("|---|---|---|---|---|")
     for m in args.candidates:
-        whole, gen, sel = [], [], []
+        whole, gen, tgt, sel = [], [], [], []
         for r in range(args.repeats):
             with tempfile.TemporaryDirectory() as tmp:
                 argv = ["plan", "ec66", "--in-cube", "0.4", "0", "0.25", "0.02", "--max-tilt",
@@ -57,16 +60,20 @@ def main(argv=None):
                 assert code == 0
                 whole.append((w, c))
             cands, w1, c1 = _timed(lambda: volume_candidates(robot, spec, m, seed=r))
+            work, w3, c3 = _timed(lambda: volume_candidates(
+                robot, working_volume(spec, cands.home), 1000, seed=r + 1))
             with limited(1):  # as kincal plan does
-                _, w2, c2 = _timed(lambda: select_poses(robot, cands.joint_values, 60, tool=TOOL))
+                _, w2, c2 = _timed(lambda: select_poses(robot, cands.joint_values, 60, tool=TOOL,
+                                                        method="I", targets=work.joint_values))
             gen.append((w1, c1))
+            tgt.append((w3, c3))
             sel.append((w2, c2))
 
         def cell(x):
             a = np.median(np.array(x), axis=0)
             return f"{a[0]:.2f} ({a[1]:.2f})"
 
-        print(f"| {m} | {cell(whole)} | {cell(gen)} | {cell(sel)} |")
+        print(f"| {m} | {cell(whole)} | {cell(gen)} | {cell(tgt)} | {cell(sel)} |")
 
 
 if __name__ == "__main__":

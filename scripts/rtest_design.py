@@ -7,16 +7,22 @@ three designs:
 
 - paper: random poses, tool tilted up to 30 deg from pointing down (``cube_poses``);
 - random 60: random poses among kincal's volume candidates with tilt up to 60 deg;
-- planned 60: D-optimal choice (``select_poses``) among 2000 such candidates
-  (``volume_candidates``, the same as ``kincal plan --in-cube ... --max-tilt 60``);
+- planned 60: the default of ``kincal plan --in-cube ... --max-tilt 60``: I-optimal choice
+  (``select_poses``) among 2000 such candidates (``volume_candidates``) for 1000 target
+  poses in the default working volume (``working_volume``: the 400 mm cube around the
+  measurement cube, tilt up to 30 deg, same branch; the measurement frame and tool point
+  refitted there);
+- D-planned 60: D-optimal choice among the same candidates (``--criterion d``);
 - I-planned 60: I-optimal choice among the same candidates, for 200 target poses in the
-  400 mm validation cube (tilt up to 30 deg, same branch; ``--criterion i --target-cube``).
+  400 mm validation cube with its tilt (up to 30 deg, same branch; other draws than the
+  validation's).
 
 Each design is calibrated with each estimator (LS; L2 with lambda by 5-fold CV, the
 paper's method; others when kincal has them) and validated on 150 poses in a 400 mm cube,
 tilt up to 30 deg, 0.05 mm noise, with the identified kinematics fixed and the
 measurement frame and tool point refitted there (the paper's validation). "truth" is the
-same validation with the true kinematics: the floor that the noise leaves. Figures:
+same validation with the true kinematics: the floor that the noise leaves. Every design
+is measured with the same noise draws (paired comparisons). Figures:
 mean position error [mm] over the validation poses, and the ratio to truth's.
 
 Usage: python scripts/rtest_design.py [--seeds 10] [--candidates 2000]
@@ -35,7 +41,8 @@ from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.models import mdh as mdh_layer
 from kincal.planning.pose_selection import select_poses
 from kincal.planning.simulation import Truth, cube_poses, measure, planted_table
-from kincal.planning.volume_candidates import Volume, VolumeSpec, volume_candidates
+from kincal.planning.volume_candidates import (Volume, VolumeSpec, volume_candidates,
+                                               working_volume)
 from kincal.robot import Robot
 
 CENTER = (0.4, 0.0, 0.25)
@@ -72,12 +79,19 @@ def scenario(seed: int, n_candidates: int, estimators) -> dict:
     targets = volume_candidates(robot, tspec, 200, seed=seed + 1000).joint_values
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the tool point is on the last axis, as in the paper
-        planned = select_poses(robot, cands, 60, tool=TOOL).joint_values
+        work = volume_candidates(robot, working_volume(spec, vc.home), 1000,
+                                 seed=seed + 1).joint_values  # as kincal plan, seed + 1
+        planned = select_poses(robot, cands, 60, tool=TOOL, method="I",
+                               targets=work).joint_values
+        d_planned = select_poses(robot, cands, 60, tool=TOOL).joint_values
         i_planned = select_poses(robot, cands, 60, tool=TOOL, method="I",
                                  targets=targets).joint_values
     designs = {"paper": cube_poses(robot, 60, CENTER, 0.02, TOOL, rng, max_tilt=math.radians(30)),
-               "random 60": cands[:60], "planned 60": planned, "I-planned 60": i_planned}
+               "random 60": cands[:60], "planned 60": planned, "D-planned 60": d_planned,
+               "I-planned 60": i_planned}
+    state = rng.bit_generator.state
     for design, q in designs.items():
+        rng.bit_generator.state = state  # the same noise draws for every design (paired)
         data = measure(model, truth, q, 5e-5, rng)
         for name, kw in estimators:
             with warnings.catch_warnings():
@@ -96,7 +110,7 @@ def main(argv=None):
     estimators = _estimators()
     t = time.perf_counter()
     rows = [scenario(s, args.candidates, estimators) for s in range(args.seeds)]
-    cols = [(d, e) for d in ("paper", "random 60", "planned 60", "I-planned 60")
+    cols = [(d, e) for d in ("paper", "random 60", "planned 60", "D-planned 60", "I-planned 60")
             for e, _ in estimators]
     print("mean validation error [mm] (ratio to the true kinematics'), 400 mm cube:")
     print("| seed | truth | before | " + " | ".join(f"{d}, {e}" for d, e in cols) + " |")
@@ -108,7 +122,7 @@ def main(argv=None):
     mean = {c: np.mean([r[c] for r in rows]) for c in cols + ["truth", "before"]}
     print(f"| mean | {mean['truth']:.3f} | {mean['before']:.3f} | "
           + " | ".join(f"{mean[c]:.3f} ({ratio[c]:.2f})" for c in cols) + " |")
-    for design in ("planned 60", "I-planned 60"):
+    for design in ("planned 60", "D-planned 60", "I-planned 60"):
         for name, _ in estimators:
             worse = [s for s, r in enumerate(rows) if r[design, name] > r["paper", "L2 CV"]]
             print(f"{design} + {name} worse than the paper's method (paper + L2 CV) on seeds: "

@@ -229,7 +229,7 @@ def test_cli_plan_writes_the_chosen_poses_and_refuses_to_overwrite(ec66, tmp_pat
     out = tmp_path / "chosen.csv"
     args = ["plan", "ec66", str(src), "--tip", "flange", "--poses", "15", "--out", str(out),
             "--angle-unit", "deg", "--tool-offset", "30", "20", "120", "--length-unit", "mm",
-            "--noise-mm", "0.02"]
+            "--noise-mm", "0.02", "--criterion", "d"]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "D-optimal selection of 15 of 300" in text and "random median" in text
@@ -246,7 +246,7 @@ def test_cli_plan_writes_the_chosen_poses_and_refuses_to_overwrite(ec66, tmp_pat
     assert "already exists" in _one_line_error(capsys) and out.read_bytes() == before
     assert main(args + ["--overwrite"]) == 0
     capsys.readouterr()
-    assert main(args[:-2] + ["--out", str(src), "--noise-mm", "0.02"]) == 1  # the input
+    assert main(args[:-4] + ["--out", str(src), "--noise-mm", "0.02"]) == 1  # the input
     assert "input file" in _one_line_error(capsys)
 
 
@@ -321,8 +321,10 @@ def test_cli_plan_complements_poses_already_measured(tmp_path, capsys):
                  "--tool-offset", "0.03", "0.02", "0.12", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "plus the 12 poses already measured" in text and "10 new" in text
+    assert "I-optimal selection of 22" in text and "target poses: the candidates" in text
     table = np.array([[float(v) for v in line.split(",")] for line in _rows(out)[1:]])
-    expected = select_poses(ec66, np.vstack([measured, cands]), 22, tool=TOOL, keep=range(12))
+    expected = select_poses(ec66, np.vstack([measured, cands]), 22, tool=TOOL, keep=range(12),
+                            method="I", targets=cands)  # the default: the candidates as targets
     assert list(expected.indices[:12]) == list(range(12))
     new = [i - 12 for i in expected.indices[12:]]
     np.testing.assert_allclose(table[:, :6], cands[new], rtol=0, atol=1e-12)

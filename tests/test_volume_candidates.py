@@ -14,7 +14,8 @@ from kincal.planning import i_optimal
 from kincal.planning.candidates import read_candidates
 from kincal.planning.pose_selection import select_poses
 from kincal.planning.batch_ik import BatchKinematics
-from kincal.planning.volume_candidates import Volume, VolumeSpec, _cap_directions, volume_candidates
+from kincal.planning.volume_candidates import (Volume, VolumeSpec, _cap_directions,
+                                               volume_candidates, working_volume)
 from kincal.collision import CollisionChecker
 from kincal.robot import Robot
 
@@ -224,15 +225,55 @@ def test_i_optimal_gain_formula_and_selection(ec66, cands):
     s_d = select_poses(ec66, q, 30, tool=TOOL, method="D", targets=targets)
     assert s_i.criterion == "I" and s_i.n_targets == 60
     assert s_i.mean_variance < s_d.mean_variance < s_d.random_mean_variance
-    # the reported figure is trace(M^-1 A)/3, recomputed from Jacobians built independently
-    _, Jc, _ = _normalised_jacobian(ec66, q[list(s_i.indices)], s_i)
+    # the reported figure is E|delta p|^2 / 3 over the targets after refitting the frame and
+    # tool there: the least-squares estimate's covariance pushed through that refit, by
+    # sampling, from Jacobians built independently
+    _, Jc, space = _normalised_jacobian(ec66, q[list(s_i.indices)], s_i)
     _, Jt, _ = _normalised_jacobian(ec66, targets, s_i)
+    frames = space.is_frame[space.indices(s_i.parameters)]
     G = np.einsum("kip,kiq->pq", Jc, Jc)
-    V = np.trace(np.linalg.solve(G, np.einsum("kip,kiq->pq", Jt, Jt))) / len(Jt) / 3
-    assert s_i.mean_variance == pytest.approx(V, rel=1e-6)
+    d = np.linalg.cholesky(np.linalg.inv(G)) @ rng.normal(size=(G.shape[0], 4000))
+    S = Jt.reshape(-1, G.shape[0])
+    dp = S[:, ~frames] @ d[~frames]                        # what the kinematic errors move
+    dp -= S[:, frames] @ np.linalg.lstsq(S[:, frames], dp, rcond=None)[0]  # refit frames
+    V = np.mean(np.sum(dp ** 2, axis=0)) / len(Jt) / 3
+    assert s_i.mean_variance == pytest.approx(V, rel=0.05)
     assert "I-optimal selection of 30" in s_i.summary()
     with pytest.raises(OptionError, match="needs target poses"):
         select_poses(ec66, q, 30, tool=TOOL, method="I")
+
+
+def test_target_moment_counts_what_the_frame_refit_leaves():
+    rng = np.random.default_rng(3)
+    Jt = rng.normal(size=(25, 3, 7))
+    frames = np.array([False, False, False, False, True, True, True])
+    A = i_optimal.target_moment(Jt, frames)
+    assert np.allclose(A[frames], 0) and np.allclose(A[:, frames], 0)
+    S = Jt.reshape(-1, 7)
+    for _ in range(3):
+        d = rng.normal(size=7)
+        r = S @ d
+        r -= S[:, frames] @ np.linalg.lstsq(S[:, frames], r, rcond=None)[0]
+        assert d @ A @ d == pytest.approx(r @ r / 25, rel=1e-9)
+    # no frame columns: the plain moment
+    assert np.allclose(i_optimal.target_moment(Jt, np.zeros(7, bool)),
+                       np.einsum("kip,kiq->pq", Jt, Jt) / 25)
+
+
+def test_default_working_volume_and_i_beats_d_on_its_own_measure(ec66, spec60, cands):
+    work = working_volume(spec60, cands.home)
+    assert work.volume == Volume.cube(spec60.volume.center, 0.4)
+    assert (work.max_tilt, work.tilt_direction, work.floor_z) == (
+        math.radians(30), spec60.tilt_direction, spec60.floor_z)  # the working tilt, not 60
+    narrow = VolumeSpec(spec60.volume, TOOL, math.radians(10))
+    assert working_volume(narrow, cands.home).max_tilt == math.radians(10)  # at most the plan's
+    assert work.home == tuple(cands.home)
+    targets = volume_candidates(ec66, work, 60, seed=1).joint_values
+    q = cands.joint_values
+    s_i = select_poses(ec66, q, 30, tool=TOOL, method="I", targets=targets)
+    s_d = select_poses(ec66, q, 30, tool=TOOL, method="D", targets=targets)
+    assert s_i.mean_variance < 0.9 * s_d.mean_variance < s_d.random_mean_variance
+    assert s_d.log_det > s_i.log_det  # each criterion wins on its own measure
 
 
 # ------------------------------------------------------------------ CLI, end to end
@@ -242,7 +283,9 @@ def test_plan_in_cube_cli_poses_satisfy_constraints(tmp_path, capsys, ec66, spec
                  "--random", "300", "--poses", "30", "--tool-offset", "30", "20", "120",
                  "--length-unit", "mm", "--out", str(out), "--seed", "2"])
     text = capsys.readouterr().out
-    assert code == 0 and "300 candidates in the 20 mm cube" in text and "D-optimal" in text
+    assert code == 0 and "300 candidates in the 20 mm cube" in text and "I-optimal" in text
+    assert ("1000 target poses in the 400 mm cube at (0.4, 0, 0.25) m around the measurement "
+            "volume (default working volume; tilt <= 30 deg, same branch)" in text)
     q, _ = read_candidates(out, ec66)
     assert q.shape == (30, 6)
     home = np.array([float(v) for v in text.split("home (found):")[1].split("rad/m")[0].split()])
@@ -281,9 +324,21 @@ def test_plan_criterion_i_cli(tmp_path, capsys):
     text = capsys.readouterr().out
     assert code == 0 and "I-optimal selection of 20" in text
     assert "predicted position std over the 40 target poses" in text
-    assert main(["plan", "ec66", "--random", "50", "--poses", "20", "--criterion", "i",
-                 "--out", str(tmp_path / "x.csv")]) == 1
-    assert "--criterion i needs --target-cube" in capsys.readouterr().err
+    # without a volume the candidates are the targets; the same CSV format either way
+    assert main(["plan", "ec66", "--random", "50", "--poses", "20", "--tool-offset",
+                 *map(str, TOOL), "--out", str(tmp_path / "i.csv")]) == 0
+    text = capsys.readouterr().out
+    assert "target poses: the candidates themselves" in text and "I-optimal" in text
+    assert main(["plan", "ec66", "--random", "50", "--poses", "20", "--tool-offset",
+                 *map(str, TOOL), "--criterion", "d", "--out", str(tmp_path / "d.csv")]) == 0
+    assert "D-optimal selection of 20" in capsys.readouterr().out
+    i_rows, d_rows = ([r for r in (tmp_path / f).read_text().splitlines() if r[:1] != "#"]
+                      for f in ("i.csv", "d.csv"))
+    assert i_rows[0] == d_rows[0] == ",".join(f"joint_{k}" for k in range(1, 7))
+    assert len(i_rows) == len(d_rows) == 21 and i_rows != d_rows
+    assert main(["plan", "ec66", "--random", "50", "--poses", "20", "--criterion", "d",
+                 "--target-cube", "0.4", "0", "0.25", "0.3", "--out", str(tmp_path / "x.csv")]) == 1
+    assert "--target-cube is the working volume of --criterion i" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -118,10 +118,15 @@ def _check_plan(args, volume: bool) -> None:
     _need(args.pivot is None or args.kind == "distance",
           "--pivot is the guess of the pivot of --kind distance")
     _finite("--pivot", args.pivot)
+    if args.criterion is None:  # I-optimal where it applies (the predicted point), else D
+        args.criterion = "i" if args.kind == "point" else "d"
     _need(args.target_poses is None or args.criterion == "i",
           "--target-poses is the number of poses drawn in --target-cube: it needs --criterion i")
+    _need(args.target_poses is None or args.target_cube is not None or volume,
+          "--target-poses is the number of poses drawn in the target cube: give --target-cube, "
+          "or a volume (--in-cube/--in-sphere) whose default working cube they are drawn in")
     _count("--target-poses", args.target_poses, 1, MAX_POSES)
-    args.target_poses = 200 if args.target_poses is None else args.target_poses
+    args.target_poses = 1000 if args.target_poses is None else args.target_poses
     if args.home is not None:
         _finite("--home", args.home)
     for option in ("tilt_direction", "target_cube", "in_cube", "in_sphere"):

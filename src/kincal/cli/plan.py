@@ -1,4 +1,4 @@
-"""``kincal plan``: choose which poses to measure (D- or I-optimal)."""
+"""``kincal plan``: choose which poses to measure (I- or D-optimal)."""
 
 from __future__ import annotations
 
@@ -15,10 +15,14 @@ from kincal.errors import OptionError
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "plan", help="choose which poses to measure (D-optimal)",
-        description="Choose N of the candidate poses that best determine the parameters "
-        "(D-optimal: largest det of J^T J at the nominal robot). The candidates must be safe, "
-        "reachable and measurable: kincal does not check collisions or line of sight.")
+        "plan", help="choose which poses to measure (I- or D-optimal)",
+        description="Choose N of the candidate poses that best predict the measured point "
+        "where the robot works (I-optimal: smallest mean predicted position variance over "
+        "target poses, the measurement frame and tool refitted there; default for --kind "
+        "point) or that best determine the parameters (D-optimal: largest det of J^T J; "
+        "--criterion d, default for the other kinds), at the nominal robot. The candidates "
+        "must be safe, reachable and measurable: kincal does not check collisions or line "
+        "of sight.")
     add_common(p, data=False)
     i = group(p, "inputs")
     i.add_argument("candidates", nargs="?", metavar="CANDIDATES.csv",
@@ -51,13 +55,16 @@ def register(subparsers) -> None:
         "--home", nargs="+", type=float, metavar="J",
         help="with a volume: a configuration on the arm branch to keep (in "
              "--angle-unit/--length-unit); default: found automatically")
-    c.add_argument("--criterion", choices=("d", "i"), default="d",
-                   help="d: D-optimal (default); i: I-optimal over --target-cube")
+    c.add_argument("--criterion", choices=("d", "i"),
+                   help="i: I-optimal over the target poses (default for --kind point); d: "
+                        "D-optimal (default for the other kinds)")
     c.add_argument("--target-cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
                    help="with --criterion i: the working volume whose mean predicted position "
-                        "variance is minimised (in --length-unit)")
+                        "variance is minimised (in --length-unit); default: the 400 mm cube "
+                        "centred on --in-cube/--in-sphere, tilt up to 30 deg, or without a "
+                        "volume the candidates themselves")
     c.add_argument("--target-poses", type=int, metavar="T",
-                   help="poses drawn in the target cube (default 200)")
+                   help="poses drawn in the target cube (default 1000)")
     c.add_argument("--kind", choices=("point", "pose", "distance", "plane", "flush"),
                    default="point",
                    help="the measurement kind the poses are for (D-optimal over its Jacobian)")
@@ -102,9 +109,9 @@ def run(args) -> int:
         raise OptionError("give exactly one of CANDIDATES.csv, --random M or --in-cube/--in-sphere")
     if not (math.isfinite(p.noise_mm) and p.noise_mm > 0):
         raise OptionError(f"--noise-mm must be a positive number, got {p.noise_mm}")
-    if (p.criterion == "i") != (p.target_cube is not None):
-        raise OptionError("--criterion i needs --target-cube CX CY CZ EDGE, and --target-cube "
-                          "is for --criterion i")
+    if p.target_cube is not None and p.criterion != "i":
+        raise OptionError("--target-cube is the working volume of --criterion i; "
+                          "--criterion d does not use it")
     robot = p.chain.load()
     check_outputs(robot, [p.out], overwrite=p.overwrite, inputs=[p.candidates, p.measured])
     return _plan(p, robot)
@@ -170,6 +177,22 @@ def _plan(p: Plan, robot) -> int:
                                              seed=p.seed + 1).joint_values)
         source += (f"\n  {len(targets)} target poses in the {tspec.volume.describe()} (same tilt "
                    "range and branch)")
+    elif p.criterion == "i" and spec is not None:  # the default working volume
+        from kincal.planning.volume_candidates import volume_candidates, working_volume
+
+        tspec = working_volume(spec, vc.home)
+        try:
+            targets = np.array(volume_candidates(robot, tspec, p.target_poses,
+                                                 seed=p.seed + 1).joint_values)
+        except OptionError as e:
+            raise OptionError(f"the default working volume of --criterion i, {e}; give the "
+                              "working volume (--target-cube) or --criterion d") from None
+        source += (f"\n  {len(targets)} target poses in the {tspec.volume.describe()} around "
+                   "the measurement volume (default working volume; tilt <= "
+                   f"{math.degrees(tspec.max_tilt):g} deg, same branch)")
+    elif p.criterion == "i":  # no volume: the candidates are where the robot can work
+        targets = q
+        source += "\n  target poses: the candidates themselves"
     from kincal.identification.blas_threads import limited
 
     with limited(1):  # small batched matrices: BLAS threads would only wait for each other

@@ -11,6 +11,21 @@ I-optimality minimises V: it cares about how well the calibrated model predicts 
 the robot will work (the target volume), not about the parameters as such, so it does
 not spend poses on parameter combinations that barely move the point there.
 
+The measurement frame and tool point are registered again wherever the robot is used (a
+new instrument, a new tool; the paper's validation refits them), so an error that a
+rigid frame and a tool point absorb over the targets costs nothing there. A therefore
+counts only what is left of the kinematic columns after that refit: with the targets'
+stacked Jacobian split into kinematic columns K and frame columns F (``base.*``,
+``tool.*``),
+
+    A = K^T (I - P_F) K / T   (zero in the frame rows and columns),
+
+P_F the projection onto the span of F. This is what trace(M^-1 A) must weigh when the
+validation refits the frames, and it is what made I-optimal poses better than D-optimal
+ones in a 20 mm cube (docs/results.md, "The default beyond its twin"): without it, the
+criterion spends poses on the frame parameters and on the kinematic combinations that
+the frames absorb anyway.
+
 Search, as for D: greedy forward selection from the ridge RIDGE * I, each step scoring
 every candidate k at once by the rank-3 update
 
@@ -32,9 +47,21 @@ EXCHANGE_RTOL = 1e-9  # a swap must lower V by more than this fraction
 SINGULAR = 1e-12
 
 
-def target_moment(Jt: np.ndarray) -> np.ndarray:
-    """(p, p) A = mean over the targets of J_t^T J_t, for target Jacobians (T, 3, p)."""
-    return np.einsum("kip,kiq->pq", Jt, Jt) / len(Jt)
+def target_moment(Jt: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray:
+    """(p, p) A for target Jacobians (T, 3, p): the mean of J_t^T J_t, or with ``frames``
+    ((p,) bool, the frame and tool columns) the kinematic part left after refitting those
+    over the targets (see the module notes)."""
+    T, _, p = Jt.shape
+    if frames is None or not frames.any():
+        return np.einsum("kip,kiq->pq", Jt, Jt) / T
+    S = Jt.reshape(-1, p)
+    K = S[:, ~frames]
+    U, sv, _ = np.linalg.svd(S[:, frames], full_matrices=False)
+    Q = U[:, sv > SINGULAR ** 0.5 * sv[0]]  # an orthonormal basis of the span of F
+    R = K - Q @ (Q.T @ K)
+    A = np.zeros((p, p))
+    A[np.ix_(~frames, ~frames)] = R.T @ R / T
+    return A
 
 
 def mean_variance(Minv: np.ndarray, A: np.ndarray) -> float:

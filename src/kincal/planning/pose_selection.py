@@ -104,7 +104,8 @@ class PoseSelection:
         is in every draw).
     criterion: "D" or "I" (:mod:`kincal.planning.i_optimal`). With target poses
         (n_targets of them): mean_variance, the mean predicted variance of the measured
-        point over the targets per axis [mm^2 per mm^2 of noise], and its random median.
+        point over the targets per axis [mm^2 per mm^2 of noise], after the measurement
+        frame and tool point are refitted there, and its random median.
     """
 
     chain: str
@@ -167,8 +168,8 @@ class PoseSelection:
         lines.append(f"  condition number (information, unit diagonal): {self.condition:.3g} "
                      f"chosen, {self.random_condition:.3g} random median")
         if self.n_targets:
-            lines.append(f"  predicted position std over the {self.n_targets} target poses (RMS "
-                         f"per axis, at {sigma_mm:g} mm noise): "
+            lines.append(f"  predicted position std over the {self.n_targets} target poses, "
+                         f"frame and tool refitted there (RMS per axis, at {sigma_mm:g} mm noise): "
                          f"{math.sqrt(self.mean_variance) * sigma_mm:.4g} mm chosen, "
                          f"{math.sqrt(self.random_mean_variance) * sigma_mm:.4g} mm random median")
         how = "converged" if self.exchange_converged else "stopped at max_swaps"
@@ -340,7 +341,7 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     A = None
     if targets is not None:
         Jt = MeasurementModel(em, targets).jacobian(x)[1] * (space.reporting_scale() / MM)
-        A = i_optimal.target_moment(Jt[:, :, cols] / scale)
+        A = i_optimal.target_moment(Jt[:, :, cols] / scale, space.is_frame[cols])
     if method == "I":
         assert A is not None  # I-optimal selection has targets (checked above)
         chosen, Minv, ridge = i_optimal.greedy(Jn, n, keep, A)

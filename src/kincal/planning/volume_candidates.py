@@ -41,7 +41,7 @@ deterministically: the solution at the volume's centre, pointing along
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,6 +58,11 @@ BRANCH_MARGIN = 0.1  # smallest singular value on the path, relative to home's
 BRANCH_STEP = 0.05  # [rad or m] largest joint change between checks on the path
 HOME_STARTS = 64  # starts of the home search (fixed seed 0)
 MAX_ATTEMPTS = 20  # draws per candidate asked for, at most, before giving up
+# the default working volume (working_volume): the 400 mm validation cube of the paper and
+# of kincal's studies, with the tool at most 30 deg from the tilt direction (the default
+# --max-tilt); docs/results.md ("The default beyond its twin") measures other choices
+WORKING_EDGE = 0.4
+WORKING_TILT = math.radians(30.0)
 
 
 # ------------------------------------------------------------------ values
@@ -158,6 +163,20 @@ class VolumeSpec:
                 raise OptionError(f"home needs finite joint values [rad or m] (--home), got "
                                   f"{shown}")
             object.__setattr__(self, "home", tuple(float(v) for v in h))
+
+
+def working_volume(spec: VolumeSpec, home, edge: float = WORKING_EDGE,
+                   tilt: float = WORKING_TILT) -> VolumeSpec:
+    """Where the calibrated robot is assumed to work when the user does not say (``kincal
+    plan``'s default I-optimal targets): the cube of ``edge`` [m] centred on the
+    measurement volume, the tool within ``tilt`` [rad] (at most the measurement's
+    max_tilt) of its tilt direction, its floor and the branch of ``home`` (the
+    candidates'). The measurement volume is where the user put the instrument, near the
+    work: the calibration should serve the space around it, not only the instrument's few
+    centimetres; and a tilt wider than the default is asked for to gain information (the
+    tilt carries it in a small volume), not because the tool works that way."""
+    return replace(spec, volume=Volume.cube(spec.volume.center, edge),
+                   max_tilt=min(spec.max_tilt, tilt), home=tuple(float(v) for v in home))
 
 
 @dataclass(frozen=True)
