@@ -9,9 +9,17 @@ turns by c times the gravity torque it carries, from the URDF's inertials) sized
 deflect the joint by 0.2 deg at its RMS torque, on one of the joints that carry torque
 (turning with the seed). Then the cost of auto against one default calibration on the
 same 60 poses (CPU time: the machine may be shared), and the real TIAGo files with the
-default command.
+default command. Without a planted term, also how often the first forward step's score
+test (the strongest joint term's Bonferroni p-value) falls below 0.05, 0.01 and the rule's
+0.001: the test's false-positive rate, checked (``--null-seeds``: more seeds for that row).
 
-    python scripts/model_auto.py [--seeds 20] [--no-tiago] [--terms backlash compliance]
+    python scripts/model_auto.py [--seeds 20] [--null-seeds 50] [--no-tiago]
+                                 [--terms backlash compliance] [--null-check FIRST LAST]
+
+``--null-check 100 300``: only the first forward step's score test, on seeds FIRST to
+LAST - 1 without a planted term (the default structure ``complete`` at its CV lambda):
+how often the strongest term's Bonferroni p, and any single term's p, fall below 0.05,
+0.01 and 0.001; calibrated, at most those fractions (Bonferroni: a little less).
 """
 
 from __future__ import annotations
@@ -60,11 +68,13 @@ def case(name: str, seed: int, planted: bool, term: str = "backlash"):
     return robot, measure(model, truth, q, NOISE, rng), joint
 
 
-def study(seeds: int, terms=("backlash", "compliance")) -> None:
+def study(seeds: int, terms=("backlash", "compliance"), null_seeds: int | None = None
+          ) -> None:
     for name in ROBOTS:
         for term, planted in [(t, True) for t in terms] + [(terms[0], False)]:
-            hits, chosen_any, costs = 0, 0, []
-            for seed in range(seeds):
+            hits, chosen_any, costs, first_p = 0, 0, [], []
+            n_seeds = seeds if planted or null_seeds is None else null_seeds
+            for seed in range(n_seeds):
                 robot, data, joint = case(name, seed, planted, term)
                 t0 = time.process_time()
                 calibrate(robot, data)
@@ -76,11 +86,50 @@ def study(seeds: int, terms=("backlash", "compliance")) -> None:
                 hits += got == ((joint,) if joint else ()) and not (
                     mc.backlash if term == "compliance" else mc.compliance)
                 chosen_any += bool(mc.backlash or mc.compliance)
+                first_p += mc.step_p[:1]
             what = (f"{term} planted, found on its joint (and nothing else)" if planted
                     else "none planted, a term chosen")
             n = hits if planted else chosen_any
-            print(f"{name}: {what}: {n} of {seeds} seeds; auto / one default calibration: "
+            print(f"{name}: {what}: {n} of {n_seeds} seeds; auto / one default calibration: "
                   f"median {np.median(costs):.1f}x, max {np.max(costs):.1f}x")
+            if not planted:
+                p = np.array(first_p)
+                print(f"{name}: none planted, first step's strongest term p < 0.05 / 0.01 / "
+                      f"0.001 (Bonferroni): {np.sum(p < 0.05)} / {np.sum(p < 0.01)} / "
+                      f"{np.sum(p < 0.001)} of {p.size} seeds")
+
+
+def null_check(first: int, last: int) -> None:
+    """The score test's false-positive rate on null seeds (model_choice's own test: the
+    one place this script reaches into its private functions)."""
+    from dataclasses import replace
+
+    from kincal.identification import model_choice as mc
+    from kincal.identification.options import CalibrationOptions
+    from kincal.identification.problem import CalibrationProblem
+
+    for name in ROBOTS:
+        strongest, single, terms = [], [], 0
+        for seed in range(first, last):
+            robot, data, _ = case(name, seed, planted=False)
+            o = CalibrationOptions(model="complete", progress=None)
+            p = CalibrationProblem(robot, data, o)
+            pool = ([("b", j) for j in mc._backlash_joints(p, ())]
+                    + [("c", j) for j in mc._compliance_joints(p)[0]])
+            wide = CalibrationProblem(robot, data, replace(
+                o, backlash=tuple(j for t, j in pool if t == "b"),
+                compliance=tuple(j for t, j in pool if t == "c")))
+            tests = mc._score_test(p, wide, pool, np.arange(len(data.joint_values)),
+                                   p.cross_validate().best_lambda)
+            strongest.append(tests[0][2])
+            single += [pv / len(pool) for _, _, pv in tests]  # below 1/len(pool): exact
+            terms += len(pool)
+        b, r = np.array(strongest), np.array(single)
+        print(f"{name}, none planted, seeds {first}-{last - 1}, first step's score test: "
+              f"strongest term's Bonferroni p < 0.05 / 0.01 / 0.001 on "
+              f"{np.sum(b < 0.05)} / {np.sum(b < 0.01)} / {np.sum(b < 0.001)} of {b.size} "
+              f"seeds; a single term's p on {np.sum(r < 0.05)} / {np.sum(r < 0.01)} / "
+              f"{np.sum(r < 0.001)} of {terms} terms")
 
 
 def tiago() -> None:
@@ -101,11 +150,18 @@ def tiago() -> None:
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--null-seeds", type=int, default=None,
+                    help="seeds without a planted term (default: --seeds)")
     ap.add_argument("--no-tiago", action="store_true")
+    ap.add_argument("--null-check", type=int, nargs=2, metavar=("FIRST", "LAST"),
+                    help="only the first step's score test on null seeds FIRST..LAST-1")
     ap.add_argument("--terms", nargs="+", default=["backlash", "compliance"],
                     choices=("backlash", "compliance"))
     a = ap.parse_args()
     warnings.simplefilter("ignore", KincalWarning)
-    study(a.seeds, tuple(a.terms))
+    if a.null_check:
+        null_check(*a.null_check)
+        raise SystemExit(0)
+    study(a.seeds, tuple(a.terms), a.null_seeds)
     if not a.no_tiago:
         tiago()

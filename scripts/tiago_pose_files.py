@@ -76,7 +76,7 @@ def score(data: Path, out: Path) -> int:
         r = json.loads(report.read_text())
         rows.append((how, r["errors"], r["orientation_errors"]))
     choice = json.loads((out / "calibration.json").read_text())["model_choice"]["chosen"]
-    model = label(choice["model"], choice["backlash"])
+    model = label(choice["model"], choice["backlash"], choice["compliance"])
     print(f"kincal default on the training day (model chosen: {model}), held out on "
           f"26 Nov (62 postures):")
     print(f"{'':36s} {'position RMS / mean / max [mm]':>31s}  orientation RMS / mean / max "

@@ -16,6 +16,7 @@ from kincal.cli.main import main
 from kincal.errors import KincalWarning, OptionError
 from kincal.frames_file import CellFrames
 from kincal.identification.problem import calibrate
+from kincal.identification.diagnosis import ALPHA
 from kincal.measurements.point import MeasurementModel
 from kincal.models import mdh
 from kincal.planning.simulation import Truth, cube_poses, measure, true_positions
@@ -206,5 +207,9 @@ def test_auto_chooses_no_term_when_none_is_planted(name, seed):
     warnings.simplefilter("ignore", KincalWarning)
     robot, data, _ = model_auto.case(name, seed, planted=False, term="compliance")
     mc = calibrate(robot, data, model="auto").model_choice
-    assert any(c.compliance for c in mc.candidates)  # compliance terms were tried
     assert mc.compliance == () and mc.backlash == ()
+    # compliance terms were tested (the score test), none significant, none CV-scored
+    note = next(n for n in mc.notes if n.startswith("no further joint term significant"))
+    assert re.search(r"\(\d backlash, [1-9] compliance\)", note), note
+    assert len(mc.step_p) == 1 and mc.step_p[0] >= ALPHA
+    assert not any(c.compliance or c.backlash for c in mc.candidates)

@@ -59,6 +59,17 @@ class Finding:
                 "p_value": self.p_value}
 
 
+def nested_p(gain: float, rss: float, dof: int, k: int = 1, tests: int = 1) -> float:
+    """The p-value of adding k columns to a least-squares fit (F test with k and dof
+    degrees of freedom), times ``tests`` (Bonferroni over the patterns tried), at most 1.
+    gain: the drop of the residual sum of squares the columns bring (what the fit could
+    already absorb projected out of them); rss: the sum after adding them; dof: rows minus
+    the rank of the fit with them. Exact for a linear model with i.i.d. Gaussian noise."""
+    if dof <= 0 or rss <= 0:
+        return 1.0
+    return min(1.0, f_sf((gain / k) / (rss / dof), k, dof) * tests)
+
+
 def diagnose(result) -> Finding | None:
     """The strongest significant pattern in the first point set's residuals, or None (also
     for other kinds, several sets or chains)."""
@@ -119,7 +130,7 @@ def diagnose(result) -> Finding | None:
         if dof <= 0 or rss - gain <= 0:
             continue
         F = (gain / k) / ((rss - gain) / dof)
-        p = min(1.0, f_sf(F, k, dof) * len(tests))
+        p = nested_p(gain, rss - gain, dof, k, len(tests))
         if p < ALPHA and (best is None or F > best[0]):
             N = len(q)
             size = (100 * coef[0] if cause == "scale" else

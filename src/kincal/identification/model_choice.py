@@ -20,15 +20,27 @@ or without measured positions, where the penalty is chosen by the evidence becau
 judges only interpolation there, no out-of-sample comparison is trusted and the chain's
 default structure is kept (the table says so).
 
-The guard against choosing on noise: a candidate replaces the current best only when its
-mean validation error is lower by more than ``GUARD`` standard errors of the paired
-differences of the validation errors per pose (paired: every candidate predicts the same
-held-out poses from the same folds). Per pose, not per fold: five fold means give a
-standard error with 4 degrees of freedom, which on simulated EC66 and UR10 data without
-backlash let a spurious term through on half the seeds. Another error model must beat the
-default this way too, so the default stays unless the data tell otherwise. And by more
-than ``MIN_GAIN`` of the best's mean error: a term whose column nearly repeats others' can
-win a consistent 0.001 mm (on simulated EC66 data, a compliance term beside a planted
+The guard against choosing on noise. Another error model replaces the current best only
+when its mean validation error is lower by more than ``GUARD`` standard errors of the
+paired differences of the validation errors per pose (paired: every candidate predicts the
+same held-out poses from the same folds; per pose, not per fold: five fold means give a
+standard error with 4 degrees of freedom), so the default stays unless the data tell
+otherwise. A joint term is nested in the current best (the same structure plus one
+column), so it has a test with a stated false-positive rate: the score test at the best's
+fit, an F test of the term's column with what the fit already absorbs projected out
+(:func:`kincal.identification.diagnosis.nested_p`), its p-value times the number of terms
+the step could add (Bonferroni) below ``ALPHA`` (0.001, the residual diagnosis's level:
+at 0.01, simulated EC66 noise alone, seed 11, gave a compliance term p = 0.006 and a CV
+gain of 3 %). Under the null (no term missing,
+Gaussian noise) a forward selection adds a term with probability at most ``ALPHA``, as the
+first step must reject. The CV guard was the weaker test for a term: on simulated EC66
+data a planted 0.1 deg backlash of the last joint (F = 56 and 42, p ~ 1e-10) won only
+2.7 and 2.8 standard errors of the paired scatter, where a per-pose difference of
+Euclidean errors carries most of the noise of both fits. The term must also predict
+better out of sample, by more than ``MIN_GAIN`` of the best's mean validation error: the
+test reads errors no candidate carries as noise (on real data the residuals are not
+i.i.d.), which CV does not; and a term whose column nearly repeats others' can win a
+consistent 0.001 mm (on simulated EC66 data, a compliance term beside a planted
 backlash), significant but not worth a term.
 """
 
@@ -42,13 +54,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kincal.errors import KincalError, KincalWarning
+from kincal.identification.diagnosis import ALPHA
 from kincal.models import MODELS
 
 if TYPE_CHECKING:
     from kincal.identification.options import CalibrationOptions
 
-GUARD = 3.0  # standard errors of the paired validation differences a candidate must win by
-MIN_GAIN = 0.01  # and this fraction of the best's mean validation error (a gain worth a term)
+GUARD = 3.0  # standard errors of the paired validation differences another model must win by
+MIN_GAIN = 0.01  # a joint term's CV gain, a fraction of the best's mean validation error
+# ALPHA (imported): the family-wise false-positive rate of a joint term (score test,
+# Bonferroni), the residual diagnosis's, so a term the diagnosis would name may be added
 LAMBDA_STEPS = (1 / 3, 1.0, 3.0)  # each candidate's lambdas, times the default's CV lambda
 # kinds whose samples see a joint's play directly (the tool point or the tool pose at the
 # joint's effective value; a pose's orientation rows turn with it too): forward selection
@@ -56,7 +71,7 @@ LAMBDA_STEPS = (1 / 3, 1.0, 3.0)  # each candidate's lambdas, times the default'
 # scalar per sample and keep the chain's default structure.
 BACKLASH_KINDS = ("point", "pose")
 MAX_TERMS = 3  # joint terms (backlash, compliance) forward selection may add
-SCREEN = 3  # joint terms CV-scored per forward step: the strongest by the score test
+SCREEN = 3  # joint terms CV-scored per forward step: the strongest significant ones
 
 
 def label(model: str, backlash, compliance=()) -> str:
@@ -123,15 +138,14 @@ class ModelChoice:
     folds: int
     compliance: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    step_p: tuple[float, ...] = ()  # per forward step, its strongest term's (Bonferroni) p
 
     def lines(self) -> list[str]:
         """The table of the summary (mm): candidate, free parameters, CV error, s.e."""
         if self.criterion != "cv":
             return [f"  model: {self.chosen_label}, kept: {self.reason}"]
         out = [f"  model: {self.chosen_label}, chosen by {self.folds}-fold CV among "
-               f"{len(self.candidates)} candidates (a candidate must beat the best by more "
-               f"than {GUARD:g} s.e. of the paired per-pose differences and "
-               f"{MIN_GAIN:.0%} of its error)"]
+               f"{len(self.candidates)} candidates ({RULE})"]
         w = max(len(c.label) for c in self.candidates)
         out.append(f"    {'candidate':<{w}}  free  CV error [mm]    s.e.")
         for c in self.candidates:
@@ -151,6 +165,7 @@ class ModelChoice:
     def as_dict(self) -> dict:
         return {"criterion": self.criterion, "reason": self.reason, "folds": self.folds,
                 "guard_standard_errors": GUARD, "guard_min_gain": MIN_GAIN,
+                "term_test_alpha": ALPHA, "term_test_p_values": list(self.step_p),
                 "chosen": {"model": self.model, "backlash": list(self.backlash),
                            "compliance": list(self.compliance)},
                 "candidates": [c.as_dict() for c in self.candidates], "notes": list(self.notes)}
@@ -179,6 +194,24 @@ def counted(choice: ModelChoice | None, free_mask) -> ModelChoice | None:
         return choice
     c = replace(choice.candidates[0], free=int(free_mask().sum()))
     return replace(choice, candidates=(c,) + choice.candidates[1:])
+
+
+RULE = (f"another model must beat the best by more than {GUARD:g} s.e. of the paired "
+        f"per-pose differences; a joint term must pass the score test at family-wise "
+        f"{ALPHA:g} and gain {MIN_GAIN:.0%} of the error")
+
+
+def adds(new: np.ndarray, best: np.ndarray, p: float) -> tuple[bool, str]:
+    """(True, why) when a joint term whose score test gave the (Bonferroni) p-value ``p``
+    is significant (p < ALPHA) and its validation errors ``new`` beat ``best`` (the same
+    poses, the same folds) by more than MIN_GAIN of best's mean."""
+    gain = float(np.mean(best)) - float(np.mean(new))
+    if p >= ALPHA:
+        return False, f"p = {p:.2g}, not significant at {ALPHA:g}"
+    if gain > MIN_GAIN * float(np.mean(best)):
+        return True, f"{gain:.3g} mm better, p = {p:.2g}"
+    return False, (f"{gain:.3g} mm better (p = {p:.2g}), under {MIN_GAIN:.0%} of the best's "
+                   "error" if gain > 0 else f"no better out of sample (p = {p:.2g})")
 
 
 def resolve(problem_class, robots, sets, options: CalibrationOptions
@@ -277,63 +310,77 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
         s = tuple(sorted(set(c.compliance) | {j for t, j in pool if t == "c"}, key=order))
         return problem(c.model, b, s, progress=None)
 
-    used, screened = np.sort(np.concatenate(folds)), 0
+    used, screened, step_p = np.sort(np.concatenate(folds)), 0, ()
     for _ in range(MAX_TERMS):
         pool = ([("b", j) for j in joints if j not in best.backlash]
                 + [("c", j) for j in soft if j not in best.compliance])
-        if len(pool) > SCREEN:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", KincalWarning)
-                strong = _score_test(problem(best.model, best.backlash, best.compliance,
-                                             progress=None), with_terms(best, pool), pool,
-                                     used, best.lam)
-            screened += len(pool) - len(strong)
-            pool = strong
-        step = [c for c in (grown(best, t, j) for t, j in pool) if c.fold_errors.size]
+        if not pool:
+            break
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", KincalWarning)
+            tests = _score_test(problem(best.model, best.backlash, best.compliance,
+                                        progress=None), with_terms(best, pool), pool, used,
+                                best.lam)
+        step_p += (tests[0][2],)
+        strong = [(t, j, pv) for t, j, pv in tests if pv < ALPHA][:SCREEN]
+        screened += len(pool) - len(strong)
+        if not strong:
+            t, j, pv = tests[0]
+            nb = sum(t == "b" for t, _ in pool)
+            notes += (f"no further joint term significant at {ALPHA:g}: the strongest of "
+                      f"{len(pool)} ({nb} backlash, {len(pool) - nb} compliance), "
+                      f"{'backlash' if t == 'b' else 'compliance'} {j}, has p = {pv:.2g} "
+                      "(Bonferroni)",)
+            break
+        step = [(c, pv) for c, pv in ((grown(best, t, j), pv) for t, j, pv in strong)
+                if c.fold_errors.size]
         if not step:
             break
-        top = min(step, key=lambda c: c.cv_error_mm)
-        for c in step:
-            win, why = beats(c.sample_errors, best.sample_errors)
-            scored.append(replace(c, note=why))
-        win, _ = beats(top.sample_errors, best.sample_errors)
-        if not win:
+        top, p_top = min(step, key=lambda cp: cp[0].cv_error_mm)
+        for c, pv in step:
+            scored.append(replace(c, note=adds(c.sample_errors, best.sample_errors, pv)[1]))
+        if not adds(top.sample_errors, best.sample_errors, p_top)[0]:
             break
         best = top
     if screened:
         notes += (f"{screened} joint-term candidates not CV-scored: each forward step scores "
-                  f"the {SCREEN} the score test at the current best's fit ranks strongest",)
+                  f"at most the {SCREEN} strongest the score test at the current best's fit "
+                  f"finds significant",)
     table = tuple(replace(c, chosen=c.structure == best.structure) for c in scored)
-    reason = (f"{k}-fold CV prediction error on the penalty's folds; a candidate must beat "
-              f"the best by more than {GUARD:g} standard errors of the paired per-pose differences "
-              f"and {MIN_GAIN:.0%} of its error")
+    reason = f"{k}-fold CV prediction error on the penalty's folds; {RULE}"
     return (ModelChoice(table, best.model, best.backlash, "cv", reason, k, best.compliance,
-                        notes),
+                        notes, step_p),
             replace(o, model=best.model, backlash=best.backlash, compliance=best.compliance))
 
 
 def _score_test(p, wide, pool, used, lam) -> list:
-    """The SCREEN terms of ``pool`` [("b" or "c", joint)] that would lower the residual of
-    ``p`` (the current best structure, fitted at ``lam`` on the samples ``used``) the most
-    to first order: each term's column of ``wide`` (p with every pool term), with what
-    p's free parameters can absorb projected out, against the residual (a score test)."""
+    """[("b" or "c", joint, p-value)] for every term of ``pool``, strongest first: how much
+    the term would lower the residual of ``p`` (the current best structure, fitted at
+    ``lam`` on the samples ``used``) to first order, as an F test (a score test): the
+    term's column of ``wide`` (p with every pool term), with what p's free parameters can
+    absorb projected out, against the residual; the p-value times len(pool) (Bonferroni)."""
     from kincal.identification.cross_validation import fold_fitter
+    from kincal.identification.diagnosis import nested_p
 
     free = p.free_mask()
     x = fold_fitter(p, free)(used, lam, None).u * p.scale
     xw = wide.x_nominal
     xw[[wide.layout.index(n) for n in p.layout.names]] = x
     r, J = wide.residual_function(used)(xw / wide.scale, True)
-    Q, _ = np.linalg.qr(J[:, [wide.layout.index(n) for n in np.array(p.layout.names)[free]]])
-    r = r - Q @ (Q.T @ r)
-    gains = []
+    U, sv, _ = np.linalg.svd(J[:, [wide.layout.index(n)
+                                   for n in np.array(p.layout.names)[free]]],
+                             full_matrices=False)
+    U = U[:, sv > 1e-9 * sv[0]]
+    r = r - U @ (U.T @ r)  # the linearised least-squares residual of p's free parameters
+    rss, dof = float(r @ r), r.size - U.shape[1] - 1
+    out = []
     for t, j in pool:
         col = J[:, wide.layout.index(f"{j}.{'backlash' if t == 'b' else 'compliance'}")]
-        v = col - Q @ (Q.T @ col)
+        v = col - U @ (U.T @ col)
         vv = float(v @ v)
-        gains.append(float(v @ r) ** 2 / vv if vv > 1e-12 * float(col @ col) else 0.0)
-    keep = np.argsort(gains)[::-1][:SCREEN]
-    return [pool[i] for i in sorted(keep)]
+        gain = float(v @ r) ** 2 / vv if vv > 1e-12 * float(col @ col) else 0.0
+        out.append((gain, t, j, nested_p(gain, rss - gain, dof, 1, len(pool))))
+    return [(t, j, pv) for _, t, j, pv in sorted(out, key=lambda o: -o[0])]
 
 
 def _fold_scores(p, free, folds, lam0, model, backlash) -> Candidate:
