@@ -310,7 +310,8 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
         s = tuple(sorted(set(c.compliance) | {j for t, j in pool if t == "c"}, key=order))
         return problem(c.model, b, s, progress=None)
 
-    used, screened, step_p = np.sort(np.concatenate(folds)), 0, ()
+    used, screened = np.sort(np.concatenate(folds)), 0
+    step_p: tuple[float, ...] = ()
     for _ in range(MAX_TERMS):
         pool = ([("b", j) for j in joints if j not in best.backlash]
                 + [("c", j) for j in soft if j not in best.compliance])
