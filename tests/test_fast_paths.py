@@ -223,3 +223,24 @@ def test_first_guess_from_spread_samples_reaches_the_same_start(monkeypatch):
     assert len(data) > point.START_SAMPLES
     spread = CalibrationProblem(robot, data, CalibrationOptions(method="ls")).start()
     assert np.abs(spread - full).max() < 1e-9
+
+
+def test_gelsy_from_scipys_file_is_the_public_routine():
+    """Loaded from scipy's extension file (no scipy.linalg package import) or by the public
+    get_lapack_funcs, the solver's gelsy gives the same answer to the bit."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np\n"
+        "from kincal.identification.solver import _gelsy, lstsq\n"
+        "rng = np.random.default_rng(3); A = rng.normal(size=(50, 9)); b = rng.normal(size=50)\n"
+        "fast = lstsq(A, b)\n"
+        "print('LINALG:', 'scipy.linalg' in sys.modules)\n"
+        "import scipy.linalg\n"
+        "want = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver='gelsy', check_finite=False)[0]\n"
+        "public = _gelsy()\n"
+        "print('SAME:', np.array_equal(fast, want), public[0].__name__)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=True).stdout.split("\n")
+    assert out[0] == "LINALG: False" and out[1].startswith("SAME: True") and "dgelsy" in out[1], out

@@ -174,34 +174,35 @@ def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,
     return make() if kept is None else kept(J, free_idx, make)
 
 
-def _flapack():
-    """scipy's compiled LAPACK wrappers (``scipy.linalg._flapack``, the module whose dgelsy
-    ``scipy.linalg.lapack.get_lapack_funcs`` returns for float64), loaded from scipy's own
-    file without running ``scipy.linalg``'s package import, which costs about 0.15 s of a
-    command's start-up (its array-API layer imports numpy.f2py and numpy.testing) for one
-    LAPACK routine. Once scipy.linalg is imported it is the same module object (the
-    extension is initialised once per process); when the file is not where scipy keeps it,
-    the public import gives it."""
+def _gelsy() -> tuple:
+    """(dgelsy, dgelsy_lwork): scipy's compiled LAPACK wrappers, the very functions
+    ``scipy.linalg.lapack.get_lapack_funcs`` returns for float64. Before anything imports
+    ``scipy.linalg``, its extension module (``_flapack``) is loaded from scipy's own file
+    without the package import, which costs a command's start-up about 0.15 s (its
+    array-API layer imports numpy.f2py and numpy.testing) for one LAPACK routine. Where
+    scipy keeps that file elsewhere (another release's layout), the public import gives
+    the same functions: only the start-up differs."""
     import importlib.util
     import os
     import sys
 
-    if "scipy.linalg" in sys.modules:
-        from scipy.linalg import _flapack
-        return _flapack
-    import scipy
+    if "scipy.linalg" not in sys.modules:
+        import scipy
 
-    folder = os.path.join(os.path.dirname(scipy.__file__), "linalg")
-    files = sorted(f for f in os.listdir(folder) if f.startswith("_flapack.")
-                   and f.endswith((".so", ".pyd")))
-    spec = importlib.util.spec_from_file_location("scipy.linalg._flapack",
-                                                  os.path.join(folder, files[0])) if files else None
-    if spec is None or spec.loader is None:
-        from scipy.linalg import _flapack
-        return _flapack
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+        folder = os.path.join(os.path.dirname(scipy.__file__), "linalg")
+        files = sorted(f for f in os.listdir(folder) if f.startswith("_flapack.")
+                       and f.endswith((".so", ".pyd")))
+        spec = (importlib.util.spec_from_file_location("scipy.linalg._flapack",
+                                                       os.path.join(folder, files[0]))
+                if files else None)
+        if spec is not None and spec.loader is not None:
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            if hasattr(module, "dgelsy") and hasattr(module, "dgelsy_lwork"):
+                return module.dgelsy, module.dgelsy_lwork
+    from scipy.linalg.lapack import get_lapack_funcs
+
+    return tuple(get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)), np.zeros(1))))
 
 
 _GELSY: tuple = ()  # (dgelsy, dgelsy_lwork), loaded at the first solve
@@ -216,8 +217,7 @@ def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     system, where they cost as much as the solve)."""
     global _GELSY
     if not _GELSY:
-        lapack = _flapack()
-        _GELSY = (lapack.dgelsy, lapack.dgelsy_lwork)
+        _GELSY = _gelsy()
     m, n = A.shape
     if m < n:
         b = np.concatenate([b, np.zeros(n - m)])
