@@ -171,3 +171,31 @@ def test_batch_size_spreads_units_over_the_workers():
     assert batch_size(5, 2) == 1
     assert batch_size(200, 2) == MAX_BATCH
     assert batch_size(40, 2) == 40 // (TASKS_PER_WORKER * 2)
+
+
+def _stop(x):
+    raise KeyboardInterrupt  # as Ctrl-C arrives in the command while results come in
+
+
+def test_an_interrupted_engine_leaves_its_loggers_quiet():
+    """After Ctrl-C (or SIGTERM) the engine's event loop may log errors of its own while the
+    cancelled tasks wind down, after the command's one line (distributed's cancel callback
+    raised a NameError there once): its loggers, children with levels of their own included
+    (tornado.application), say nothing from then on. A plain exception leaves them as they
+    were."""
+    import logging
+
+    from kincal.fleet.engine import Engine
+
+    names = ("distributed", "tornado.application", "asyncio")
+    before = {n: logging.getLogger(n).level for n in names}
+    try:
+        with pytest.raises(ValueError), Engine(1):
+            raise ValueError("not an interrupt")
+        assert all(logging.getLogger(n).isEnabledFor(logging.ERROR) for n in names)
+        with pytest.raises(KeyboardInterrupt), Engine(1) as engine:
+            engine.run(_half, list(range(4)), _stop)
+        assert not any(logging.getLogger(n).isEnabledFor(logging.CRITICAL) for n in names)
+    finally:
+        for n, level in before.items():
+            logging.getLogger(n).setLevel(level)

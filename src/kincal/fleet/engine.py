@@ -83,7 +83,9 @@ class Engine:
     def __enter__(self) -> "Engine":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, kind, value, tb) -> None:
+        if kind is not None and not issubclass(kind, Exception):
+            _quiet_engine_logs()  # Ctrl-C or SIGTERM
         self.client.close()
         if self.cluster is not None:
             self.cluster.close()
@@ -117,9 +119,23 @@ class Engine:
                         raise value
                     else:
                         on_error(job, value)
-        except KeyboardInterrupt:
-            self.client.cancel(futures)
+        except BaseException as exc:  # Ctrl-C or SIGTERM: cancel what is not finished
+            if not isinstance(exc, Exception):
+                _quiet_engine_logs()
+                self.client.cancel(futures)
             raise
+
+
+def _quiet_engine_logs() -> None:
+    """Silence the engine's loggers (distributed, tornado, asyncio and their children, some
+    of which set levels of their own) from here on: after Ctrl-C or SIGTERM the cancelled
+    tasks make the engine's event loop log errors of its own on the way down and after the
+    command's last line (distributed's cancel callback has raised a NameError there), and
+    the command's one line says what is complete. The process is ending."""
+    engine = ("distributed", "tornado", "asyncio")
+    for name in [*engine, *logging.root.manager.loggerDict]:
+        if name.split(".")[0] in engine:
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
 def batch_size(n_jobs: int, n_workers: int) -> int:
