@@ -149,14 +149,11 @@ def _rms(v: np.ndarray) -> float:
 
 def _torques(robot, q: np.ndarray, kinds) -> np.ndarray:
     """(N, n) the gravity torques a compliance pattern multiplies [N m]: zero columns for
-    prismatic joints and for joints whose RMS torque is below the compliance model's
-    floor (no inertials beyond them in the URDF)."""
-    from kincal.models.compliance import MIN_TORQUE
+    the joints no compliance term can describe (:func:`kincal.models.compliance.loaded`)."""
+    from kincal.models.compliance import loaded
 
     tau = np.asarray(robot.gravity_torques(q), float)
-    for j, kind in enumerate(kinds):
-        if kind == "prismatic" or _rms(tau[:, j]) < MIN_TORQUE:
-            tau[:, j] = 0.0
+    tau[:, ~loaded(kinds, tau)] = 0.0
     return tau
 
 

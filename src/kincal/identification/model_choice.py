@@ -429,9 +429,10 @@ def _backlash_joints(problem, given) -> list[str]:
 
 def _compliance_joints(problem) -> tuple[list[str], tuple[str, ...]]:
     """(the chain joints a compliance term may be tried on: revolute, carrying an RMS
-    gravity torque above MIN_TORQUE over the samples; notes): one chain only; where the
+    gravity torque above MIN_TORQUE over the samples, :func:`kincal.models.compliance.loaded`;
+    notes): one chain only; where the
     URDF has no inertials, none, and a note says so."""
-    from kincal.models.compliance import MIN_TORQUE
+    from kincal.models.compliance import loaded
 
     if problem.chains.several:
         return [], ()
@@ -441,5 +442,4 @@ def _compliance_joints(problem) -> tuple[list[str], tuple[str, ...]]:
     if not np.any(tau):
         return [], ("compliance terms unavailable: the URDF has no inertials (masses) to "
                     "compute the gravity torques from",)
-    rms = np.sqrt(np.mean(tau ** 2, axis=0))
-    return [j for j, k, t in zip(names, kinds, rms) if k == "revolute" and t > MIN_TORQUE], ()
+    return [j for j, ok in zip(names, loaded(kinds, tau)) if ok], ()

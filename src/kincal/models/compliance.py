@@ -21,8 +21,21 @@ its axis is vertical) has no compliance term.
 
 from __future__ import annotations
 
+import numpy as np
+
 GRAVITY = 9.81  # [m/s^2], along -z of the base frame
 MIN_TORQUE = 1e-3  # [N m] RMS below which a joint carries no torque worth a term
+
+
+def loaded(kinds, tau) -> np.ndarray:
+    """(n,) bool: the joints a compliance term can describe on samples whose gravity
+    torques are ``tau`` (N, n) [N m]: revolute, carrying an RMS torque above MIN_TORQUE
+    (a joint with no inertials beyond it in the URDF, or an axis along gravity, carries
+    none). The model choice's candidates and the residual diagnosis's patterns."""
+    rms = np.sqrt(np.mean(np.asarray(tau, dtype=float) ** 2, axis=0))
+    return np.array([k == "revolute" for k in kinds], dtype=bool) & (rms > MIN_TORQUE)
+
+
 CONVENTION = ("q_effective = q + compliance * tau, tau the gravity torque the joint "
               "carries [N m] (URDF inertials, gravity along -z of the base frame, the links "
               "beyond the joint seen from the base); rad/(N m), revolute joints")
