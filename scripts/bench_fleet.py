@@ -35,15 +35,8 @@ from kincal.robot import Robot
 
 
 def make_files(folder: Path, units: int, poses: int) -> list[str]:
-    robot = Robot.load("ec66", tip="flange")
-    fm = FleetModel.of(robot, 0)
-    rng = np.random.default_rng(0)
-    files = []
-    for u in range(units):
-        path = folder / f"u{u + 1:03d}.csv"
-        path.write_text(fm.tracker(fm.unit(rng), rng, n=poses).to_csv_text())
-        files.append(str(path))
-    return files
+    fm = FleetModel.of(Robot.load("ec66", tip="flange"), 0)
+    return fm.tracker_files(folder, units, np.random.default_rng(0), n=poses, width=3)
 
 
 def run(files, workers: int, out: Path) -> tuple[float, float, dict, dict]:

@@ -30,8 +30,7 @@ def fleet_files(tmp_path_factory):
     robot = Robot.load("ec66", tip="flange")
     fm = FleetModel.of(robot, 0)
     rng = np.random.default_rng(1)
-    for u in range(4):
-        (d / f"u{u + 1:02d}.csv").write_text(fm.tracker(fm.unit(rng), rng, n=30).to_csv_text())
+    fm.tracker_files(d, 4, rng, n=30)
     (d / "new.csv").write_text(fm.rtest(fm.unit(rng), rng, n=30).to_csv_text())
     (d / "bad.csv").write_text("joint_1,x\n1,2\n")
     return d

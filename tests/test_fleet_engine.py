@@ -32,16 +32,9 @@ N_UNITS = 16
 @pytest.fixture(scope="module")
 def units(tmp_path_factory):
     """N_UNITS tracker units u01..u16 (30 poses each)."""
-    d = tmp_path_factory.mktemp("units")
-    robot = Robot.load("ec66", tip="flange")
-    fm = FleetModel.of(robot, 3)
-    rng = np.random.default_rng(4)
-    files = []
-    for u in range(N_UNITS):
-        f = d / f"u{u + 1:02d}.csv"
-        f.write_text(fm.tracker(fm.unit(rng), rng, n=30).to_csv_text())
-        files.append(str(f))
-    return files
+    fm = FleetModel.of(Robot.load("ec66", tip="flange"), 3)
+    return fm.tracker_files(tmp_path_factory.mktemp("units"), N_UNITS,
+                            np.random.default_rng(4), n=30)
 
 
 def _fleet_argv(files, out, *extra):

@@ -70,3 +70,16 @@ class FleetModel:
     def rtest(self, table, rng, tool=(0, 0, 0.11), n: int = 60, source="<R-test>"):
         """A small-volume calibration: n poses in a 20 mm cube, 50 um noise."""
         return self.measure(table, rng, n, (0.4, 0.0, 0.25), 0.02, tool, 5e-5, 15, source)
+
+    def tracker_files(self, folder, units: int, rng, n: int = 60, width: int = 2) -> list[str]:
+        """Write ``units`` units of the fleet, each a :meth:`tracker` calibration of n
+        poses, as CSV files u01.csv, u02.csv, ... (numbers ``width`` digits wide) in
+        ``folder``; returns their paths (a fleet for the tests and benchmarks)."""
+        from pathlib import Path
+
+        files = []
+        for u in range(units):
+            path = Path(folder) / f"u{u + 1:0{width}d}.csv"
+            path.write_text(self.tracker(self.unit(rng), rng, n=n).to_csv_text())
+            files.append(str(path))
+        return files
