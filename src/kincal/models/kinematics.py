@@ -171,9 +171,36 @@ def damped_least_squares(A: np.ndarray, e: np.ndarray, d2: float) -> np.ndarray:
 def damped_pinv(A: np.ndarray, d2: float) -> np.ndarray:
     """(N, n, m) damped pseudo-inverses A^T (A A^T + d2 I)^-1 of (N, m, n) matrices: the
     operator of :func:`damped_least_squares`, for prioritised tasks that also need its
-    null-space projector I - A^+ A (kincal.compensation.ik)."""
-    At = np.swapaxes(A, 1, 2)
-    return At @ np.linalg.inv(A @ At + d2 * np.eye(A.shape[1]))
+    null-space projector I - A^+ A (kincal.compensation.ik).
+
+    For m = 3 (a position or an orientation task) written out over the rows: the Cholesky
+    factor L of the symmetric positive definite M = A A^T + d2 I (d2 > 0), M^-1 =
+    L^-T L^-1 from it, then M^-1 A as whole-row operations (A^T M^-1 = (M^-1 A)^T): the
+    batched LAPACK inverse costs more than this arithmetic on 3 x 3 matrices. Other m,
+    and d2 = 0, by the inverse."""
+    if A.shape[1] != 3 or not d2 > 0:
+        At = np.swapaxes(A, 1, 2)
+        return At @ np.linalg.inv(A @ At + d2 * np.eye(A.shape[1]))
+    a = np.ascontiguousarray(np.swapaxes(A, 0, 1))  # (3, N, n): each row of A contiguous
+    dot = lambda i, j: np.einsum("ij,ij->i", a[i], a[j])  # noqa: E731
+    l00 = np.sqrt(dot(0, 0) + d2)
+    l10, l20 = dot(1, 0) / l00, dot(2, 0) / l00
+    l11 = np.sqrt(dot(1, 1) + d2 - l10 * l10)
+    l21 = (dot(2, 1) - l20 * l10) / l11
+    l22 = np.sqrt(dot(2, 2) + d2 - l20 * l20 - l21 * l21)
+    m00, m11, m22 = 1.0 / l00, 1.0 / l11, 1.0 / l22  # L^-1, lower triangular
+    m10 = -l10 * m00 * m11
+    m21 = -l21 * m11 * m22
+    m20 = -(l20 * m00 + l21 * m10) * m22
+    s01, s02, s12 = m10 * m11 + m20 * m21, m20 * m22, m21 * m22  # M^-1 = L^-T L^-1
+    inv = ((m00 * m00 + m10 * m10 + m20 * m20, s01, s02),
+           (s01, m11 * m11 + m21 * m21, s12), (s02, s12, m22 * m22))
+    X = np.empty(a.shape)
+    for i, row in enumerate(inv):
+        X[i] = row[0][:, None] * a[0]
+        X[i] += row[1][:, None] * a[1]
+        X[i] += row[2][:, None] * a[2]
+    return X.transpose(1, 2, 0)
 
 
 def _times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
