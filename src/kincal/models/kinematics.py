@@ -113,10 +113,12 @@ class ChainKinematics:
             return tuple(np.concatenate(p) for p in zip(*parts))
         m = self.model
         N = len(q)
-        T = np.broadcast_to(m.T_first[:3], (N, 3, 4))  # [R | t]
+        T = None  # [R | t] (N, 3, 4) so far; None: T_first, the same for every row
         axes, points = np.empty((N, 3, m.n)), np.empty((N, 3, m.n))
         for i, (G, prismatic) in enumerate(self._joints):
-            Y = (T.reshape(-1, 4) @ G).reshape(N, 3, 18)
+            # the constant frame before the first joint: one (3, 4) x (4, 18) product
+            Y = (np.broadcast_to(m.T_first[:3] @ G, (N, 3, 18)) if T is None
+                 else (T.reshape(-1, 4) @ G).reshape(N, 3, 18))
             axes[:, :, i] = Y[:, :, 16]
             if prismatic:
                 T = Y[:, :, 0:4] + Y[:, :, 12:16]
@@ -124,16 +126,26 @@ class ChainKinematics:
                 continue
             points[:, :, i] = Y[:, :, 17]
             cos, sin = np.cos(q[:, i])[:, None, None], np.sin(q[:, i])[:, None, None]
-            T = cos * Y[:, :, 0:4] + sin * Y[:, :, 4:8] + (1.0 - cos) * Y[:, :, 8:12] + Y[:, :, 12:16]
+            # cos Y0 + sin Y1 + (1 - cos) Y2 + Y3, the same sums in the same order, in place
+            T = cos * Y[:, :, 0:4]
+            T += sin * Y[:, :, 4:8]
+            T += (1.0 - cos) * Y[:, :, 8:12]
+            T += Y[:, :, 12:16]
+        if T is None:
+            T = np.broadcast_to(m.T_first[:3], (N, 3, 4))
         tip = (T.reshape(-1, 4) @ m.T_last_tip).reshape(N, 3, 4)
         R_tip = tip[:, :, :3]
         point = tip[:, :, 3] + _times(R_tip, np.asarray(tool, dtype=float))
         rev = ~self.prismatic
+        a, d = (axes, point[:, :, None] - points) if rev.all() else (
+            axes[:, :, rev], point[:, :, None] - points[:, :, rev])
+        cross = np.stack([a[:, 1] * d[:, 2] - a[:, 2] * d[:, 1],  # a x (p - c)
+                          a[:, 2] * d[:, 0] - a[:, 0] * d[:, 2],
+                          a[:, 0] * d[:, 1] - a[:, 1] * d[:, 0]], axis=1)
+        if rev.all():  # every joint revolute (the common case): no gathers
+            return R_tip, point, cross, axes
         J_point, J_rot = axes.copy(), np.zeros((N, 3, m.n))
-        a, d = axes[:, :, rev], point[:, :, None] - points[:, :, rev]
-        J_point[:, :, rev] = np.stack([a[:, 1] * d[:, 2] - a[:, 2] * d[:, 1],  # a x (p - c)
-                                       a[:, 2] * d[:, 0] - a[:, 0] * d[:, 2],
-                                       a[:, 0] * d[:, 1] - a[:, 1] * d[:, 0]], axis=1)
+        J_point[:, :, rev] = cross
         J_rot[:, :, rev] = a
         return R_tip, point, J_point, J_rot
 
