@@ -123,6 +123,10 @@ class MeasurementModel:
         J[:, :, k + 4] = axis_cross(1, P @ (Ry @ Rz).T) @ Rx.T
         J[:, :, k + 5] = axis_cross(2, P @ Rz.T) @ (Rx @ Ry).T
         # a sample moves with its own point only: its block gets R_b R_tip, the others 0
+        if self.space.n_points == 1:  # one point: its columns are whole slices
+            for c in range(3):
+                J[:, :, k + 6 + c] = np.matmul(Rb, R_tip[:, :, c, None])[:, :, 0]
+            return Pm, J
         J[:, :, k + 6:k + 6 + 3 * self.space.n_points] = 0.0
         rows, first = np.arange(N), k + 6 + 3 * self.points
         for c in range(3):
