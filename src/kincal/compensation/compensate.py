@@ -26,6 +26,7 @@ a few fixed-point steps), and the summary says by how much the largest moved.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -119,14 +120,19 @@ class Compensation:
         scale = joint_scales(self.kinds, length_unit, angle_unit)
         yield ",".join(["target_line", *self.joint_names, "position_error_mm",
                         "orientation_error_deg", "reached"]) + "\n"
+        # one %-format of a whole block (its values row after row): %r is repr, %.6g and
+        # %d the f-string's formats, so the text is the per-row f-strings' to the byte
+        # (tests/test_compensate_blocks.py), formatted in C instead of row by row
+        row = "%d," + "%r," * len(self.kinds) + "%.6g,%.6g,%d\n"
         for s in range(0, len(self), rows):
             b = slice(s, s + rows)
-            yield "".join(
-                f"{line},{','.join(map(repr, q))},{p:.6g},{o:.6g},{r}\n" for line, q, p, o, r in
-                zip(self.lines[b].astype(int).tolist(), (self.joint_values[b] / scale).tolist(),
-                    (self.position_error[b] * 1e3).tolist(),
-                    np.degrees(self.orientation_error[b]).tolist(),
-                    self.reached[b].astype(int).tolist()))
+            q = (self.joint_values[b] / scale).T.tolist()
+            cells = zip(self.lines[b].astype(int).tolist(), *q,
+                        (self.position_error[b] * 1e3).tolist(),
+                        np.degrees(self.orientation_error[b]).tolist(),
+                        self.reached[b].astype(int).tolist())
+            yield (row * len(q[0] if q else self.lines[b])) % tuple(
+                itertools.chain.from_iterable(cells))
 
 
 def _reach(chain: ChainKinematics, tool: np.ndarray, lower, upper) -> tuple[np.ndarray, float]:

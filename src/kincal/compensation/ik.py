@@ -88,14 +88,18 @@ class IkSolution:
     iterations: np.ndarray
 
 
-def _step(Jp, Jo, e_p, e_o, eye, damping) -> np.ndarray:
-    """(N, n) joint step: the position task, then the orientation in its null space."""
-    Jp_pinv = damped_pinv(Jp, damping ** 2)
+def _step(Jp, Jo, e_p, e_o, damping) -> np.ndarray:
+    """(N, n) joint step: the position task, then the orientation in its null space.
+
+    The projector N = I - Jp^+ Jp is applied through its factors, never made: Jo N =
+    Jo - (Jo Jp^+) Jp and N v = v - Jp^+ (Jp v) (3 x 3 and 3 x n products instead of
+    n x n ones; the same step up to rounding, tests/test_compensation.py)."""
+    Jp_pinv = damped_pinv(Jp, damping ** 2)  # (N, n, 3)
     dq1 = np.einsum("kij,kj->ki", Jp_pinv, e_p)
-    null = eye - Jp_pinv @ Jp
-    dq2 = np.einsum("kij,kj->ki", damped_pinv(Jo @ null, damping ** 2),
+    Jo_null = Jo - (Jo @ Jp_pinv) @ Jp
+    dq2 = np.einsum("kij,kj->ki", damped_pinv(Jo_null, damping ** 2),
                     e_o - np.einsum("kij,kj->ki", Jo, dq1))
-    return dq1 + np.einsum("kij,kj->ki", null, dq2)
+    return dq1 + dq2 - np.einsum("kij,kj->ki", Jp_pinv, np.einsum("kij,kj->ki", Jp, dq2))
 
 
 def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.ndarray,
@@ -111,7 +115,6 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
     """
     q = np.clip(np.array(seeds, dtype=float), lower, upper)
     N, n = q.shape
-    eye = np.eye(n)
     iterations = np.zeros(N, dtype=int)
     # a pool of at most BLOCK targets iterates together; a finished target's slot takes the
     # next target at once, so the few slow ones share their iterations with new targets
@@ -140,14 +143,14 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         merit = n_p / options.position_tolerance + n_o / options.orientation_tolerance
         better = merit < STALL_GAIN * best[slots]
         best[slots[better]], last[slots[better]] = merit[better], t[better]
-        dq = _step(Jp, Jo, e_p, e_o, eye, options.damping)
+        dq = _step(Jp, Jo, e_p, e_o, options.damping)
         # a joint on a limit that the step pushes outward is taken out of the step, so the
         # other joints meet the position (the orientation gives way first if it must)
         blocked = ((q[idx] <= lower) & (dq < 0)) | ((q[idx] >= upper) & (dq > 0))
         rows = np.flatnonzero(blocked.any(axis=1))  # the step again for these rows only
         if rows.size:
             keep = (~blocked[rows])[:, None, :]
-            dq[rows] = _step(Jp[rows] * keep, Jo[rows] * keep, e_p[rows], e_o[rows], eye,
+            dq[rows] = _step(Jp[rows] * keep, Jo[rows] * keep, e_p[rows], e_o[rows],
                              options.damping)
         biggest = np.abs(dq).max(axis=1)
         dq *= np.minimum(1.0, options.max_step / np.maximum(biggest, 1e-300))[:, None]

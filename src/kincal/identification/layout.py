@@ -145,7 +145,7 @@ class ParameterLayout:
                        np.array(pos, dtype=int) if pos else slice(start, start))
         return tuple(out)
 
-    @property
+    @cached_property  # the fields are frozen; every residual evaluation splits by it
     def backlash_slice(self) -> slice:
         return slice(self.n_kinematic + self.n_frames, self.size)
 

@@ -297,10 +297,14 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     mu, nu = 0.0, 2.0
     small = 0
     reason, converged = "iteration limit", False
-    P = None  # the penalty's rows of the linear problem, the same at every iteration
-    if np.any(sq_f > 0) and root.size:
-        P = np.zeros((pen_f.sum(), free_idx.size))
-        P[:, np.flatnonzero(pen_f)] = root
+    # the linear problem's matrix A0 = [R; P] and right-hand side b0 = [z; -root (u -
+    # prior)], filled in place at each iteration: the penalty's rows P, the same at every
+    # iteration, are written once
+    k = free_idx.size
+    n_pen = int(pen_f.sum()) if np.any(sq_f > 0) and root.size else 0
+    A0, b0 = np.zeros((k + n_pen, k)), np.empty(k + n_pen)
+    if n_pen:
+        A0[k:, np.flatnonzero(pen_f)] = root
     it = 0
     while it < options.max_iterations:
         it += 1
@@ -309,13 +313,10 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         # small system whatever the number of poses.
         if not streamed:
             Rz = _data_triangle(residual, r, J, free_idx)
-        k = free_idx.size
-        rows, rhs = [Rz[:k, :k]], [Rz[:k, k]]
+        A0[:k], b0[:k] = Rz[:k, :k], Rz[:k, k]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
-        if P is not None:
-            rows.append(P)
-            rhs.append(-root @ (u - prior)[free_idx][pen_f])
-        A0, b0 = np.vstack(rows), np.concatenate(rhs)
+        if n_pen:
+            b0[k:] = -root @ (u - prior)[free_idx][pen_f]
         colnorm2 = None  # Marquardt's scaling, made when a step is damped
         if options.rule == "relative":
             # the Gauss-Newton decrement ||A0 d||^2 = F(u) - min of the linear model

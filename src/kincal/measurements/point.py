@@ -26,6 +26,10 @@ from kincal.models.chain import Chain, axis_cross
 from kincal.rotations import base_rotation, rotx, roty, rotz
 
 
+_EYE3 = np.eye(3)  # the base translation's columns (read only)
+_EYE3.flags.writeable = False
+
+
 class MeasurementModel:
     """Forward model and Jacobian of point measurements over a fixed set of poses.
 
@@ -118,11 +122,15 @@ class MeasurementModel:
             J[:, :, :k] = np.matmul(Rb, J[:, :, :k])
             J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
         Pm = P @ Rb.T + base[:3]
-        J[:, :, k:k + 3] = np.eye(3)
+        J[:, :, k:k + 3] = _EYE3
         J[:, :, k + 3] = axis_cross(0, Pm - base[:3])
         J[:, :, k + 4] = axis_cross(1, P @ (Ry @ Rz).T) @ Rx.T
         J[:, :, k + 5] = axis_cross(2, P @ Rz.T) @ (Rx @ Ry).T
         # a sample moves with its own point only: its block gets R_b R_tip, the others 0
+        if self.space.n_points == 1:  # one point: its columns are whole slices
+            for c in range(3):
+                J[:, :, k + 6 + c] = np.matmul(Rb, R_tip[:, :, c, None])[:, :, 0]
+            return Pm, J
         J[:, :, k + 6:k + 6 + 3 * self.space.n_points] = 0.0
         rows, first = np.arange(N), k + 6 + 3 * self.points
         for c in range(3):

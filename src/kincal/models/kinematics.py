@@ -113,10 +113,12 @@ class ChainKinematics:
             return tuple(np.concatenate(p) for p in zip(*parts))
         m = self.model
         N = len(q)
-        T = np.broadcast_to(m.T_first[:3], (N, 3, 4))  # [R | t]
+        T = None  # [R | t] (N, 3, 4) so far; None: T_first, the same for every row
         axes, points = np.empty((N, 3, m.n)), np.empty((N, 3, m.n))
         for i, (G, prismatic) in enumerate(self._joints):
-            Y = (T.reshape(-1, 4) @ G).reshape(N, 3, 18)
+            # the constant frame before the first joint: one (3, 4) x (4, 18) product
+            Y = (np.broadcast_to(m.T_first[:3] @ G, (N, 3, 18)) if T is None
+                 else (T.reshape(-1, 4) @ G).reshape(N, 3, 18))
             axes[:, :, i] = Y[:, :, 16]
             if prismatic:
                 T = Y[:, :, 0:4] + Y[:, :, 12:16]
@@ -124,16 +126,26 @@ class ChainKinematics:
                 continue
             points[:, :, i] = Y[:, :, 17]
             cos, sin = np.cos(q[:, i])[:, None, None], np.sin(q[:, i])[:, None, None]
-            T = cos * Y[:, :, 0:4] + sin * Y[:, :, 4:8] + (1.0 - cos) * Y[:, :, 8:12] + Y[:, :, 12:16]
+            # cos Y0 + sin Y1 + (1 - cos) Y2 + Y3, the same sums in the same order, in place
+            T = cos * Y[:, :, 0:4]
+            T += sin * Y[:, :, 4:8]
+            T += (1.0 - cos) * Y[:, :, 8:12]
+            T += Y[:, :, 12:16]
+        if T is None:
+            T = np.broadcast_to(m.T_first[:3], (N, 3, 4))
         tip = (T.reshape(-1, 4) @ m.T_last_tip).reshape(N, 3, 4)
         R_tip = tip[:, :, :3]
         point = tip[:, :, 3] + _times(R_tip, np.asarray(tool, dtype=float))
         rev = ~self.prismatic
+        a, d = (axes, point[:, :, None] - points) if rev.all() else (
+            axes[:, :, rev], point[:, :, None] - points[:, :, rev])
+        cross = np.stack([a[:, 1] * d[:, 2] - a[:, 2] * d[:, 1],  # a x (p - c)
+                          a[:, 2] * d[:, 0] - a[:, 0] * d[:, 2],
+                          a[:, 0] * d[:, 1] - a[:, 1] * d[:, 0]], axis=1)
+        if rev.all():  # every joint revolute (the common case): no gathers
+            return R_tip, point, cross, axes
         J_point, J_rot = axes.copy(), np.zeros((N, 3, m.n))
-        a, d = axes[:, :, rev], point[:, :, None] - points[:, :, rev]
-        J_point[:, :, rev] = np.stack([a[:, 1] * d[:, 2] - a[:, 2] * d[:, 1],  # a x (p - c)
-                                       a[:, 2] * d[:, 0] - a[:, 0] * d[:, 2],
-                                       a[:, 0] * d[:, 1] - a[:, 1] * d[:, 0]], axis=1)
+        J_point[:, :, rev] = cross
         J_rot[:, :, rev] = a
         return R_tip, point, J_point, J_rot
 
@@ -171,9 +183,36 @@ def damped_least_squares(A: np.ndarray, e: np.ndarray, d2: float) -> np.ndarray:
 def damped_pinv(A: np.ndarray, d2: float) -> np.ndarray:
     """(N, n, m) damped pseudo-inverses A^T (A A^T + d2 I)^-1 of (N, m, n) matrices: the
     operator of :func:`damped_least_squares`, for prioritised tasks that also need its
-    null-space projector I - A^+ A (kincal.compensation.ik)."""
-    At = np.swapaxes(A, 1, 2)
-    return At @ np.linalg.inv(A @ At + d2 * np.eye(A.shape[1]))
+    null-space projector I - A^+ A (kincal.compensation.ik).
+
+    For m = 3 (a position or an orientation task) written out over the rows: the Cholesky
+    factor L of the symmetric positive definite M = A A^T + d2 I (d2 > 0), M^-1 =
+    L^-T L^-1 from it, then M^-1 A as whole-row operations (A^T M^-1 = (M^-1 A)^T): the
+    batched LAPACK inverse costs more than this arithmetic on 3 x 3 matrices. Other m,
+    and d2 = 0, by the inverse."""
+    if A.shape[1] != 3 or not d2 > 0:
+        At = np.swapaxes(A, 1, 2)
+        return At @ np.linalg.inv(A @ At + d2 * np.eye(A.shape[1]))
+    a = np.ascontiguousarray(np.swapaxes(A, 0, 1))  # (3, N, n): each row of A contiguous
+    dot = lambda i, j: np.einsum("ij,ij->i", a[i], a[j])  # noqa: E731
+    l00 = np.sqrt(dot(0, 0) + d2)
+    l10, l20 = dot(1, 0) / l00, dot(2, 0) / l00
+    l11 = np.sqrt(dot(1, 1) + d2 - l10 * l10)
+    l21 = (dot(2, 1) - l20 * l10) / l11
+    l22 = np.sqrt(dot(2, 2) + d2 - l20 * l20 - l21 * l21)
+    m00, m11, m22 = 1.0 / l00, 1.0 / l11, 1.0 / l22  # L^-1, lower triangular
+    m10 = -l10 * m00 * m11
+    m21 = -l21 * m11 * m22
+    m20 = -(l20 * m00 + l21 * m10) * m22
+    s01, s02, s12 = m10 * m11 + m20 * m21, m20 * m22, m21 * m22  # M^-1 = L^-T L^-1
+    inv = ((m00 * m00 + m10 * m10 + m20 * m20, s01, s02),
+           (s01, m11 * m11 + m21 * m21, s12), (s02, s12, m22 * m22))
+    X = np.empty(a.shape)
+    for i, row in enumerate(inv):
+        X[i] = row[0][:, None] * a[0]
+        X[i] += row[1][:, None] * a[1]
+        X[i] += row[2][:, None] * a[2]
+    return X.transpose(1, 2, 0)
 
 
 def _times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
