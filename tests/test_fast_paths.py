@@ -244,3 +244,91 @@ def test_gelsy_from_scipys_file_is_the_public_routine():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120, check=True).stdout.split("\n")
     assert out[0] == "LINALG: False" and out[1].startswith("SAME: True") and "dgelsy" in out[1], out
+
+
+@pytest.mark.parametrize("spread", [1.0, 0.1, 0.0])
+def test_frame_start_from_sums_equals_the_stacked_rows(spread):
+    """The closed-form start's rounds on 3 x 3 sums give the frame and tool point of the
+    rounds on the stacked (3N, 6) rows; tip orientations all alike (spread 0) take the
+    stacked rows themselves (their minimum-norm answer)."""
+    from kincal.measurements import frames_init
+    from kincal.rotations import base_rotation
+
+    rng = np.random.default_rng(7)
+    R = np.array([base_rotation(*rng.uniform(-spread, spread, 3)) for _ in range(60)])
+    p = rng.uniform(-0.5, 0.5, (60, 3))
+    tool = np.array([0.02, 0.01, 0.12])
+    P = (p + R @ tool) @ base_rotation(0.1, 0.2, 0.3).T + [1.0, 2.0, 3.0]
+    P += 1e-5 * rng.normal(size=P.shape)
+    for t0 in (np.zeros(3), frames_init.pivot_tool(R, p)):
+        got = frames_init.alternate(R, p, P, t0)
+        want = frames_init._alternate_rows(R, p, P, np.array(t0, float), 8)
+        for a, b in zip(got, want):
+            assert np.abs(np.asarray(a) - np.asarray(b)).max() < 1e-9
+        if spread == 0.0:
+            assert all(np.array_equal(a, b) for a, b in zip(got, want))
+
+
+def test_fit_starts_from_the_analysis_pass(monkeypatch):
+    """The fit's first linearisation is the Jacobian the identifiability analysis made at
+    the same start (no second pass), and the result is that of a fit that makes its own."""
+    from kincal.identification import reduction
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    robot, data = _point_data(60)
+    used = []
+    pop = dict.pop
+
+    class Spy(dict):
+        def pop(self, key, default=None):
+            out = pop(self, key, default)
+            used.append(out is not None)
+            return out
+
+    class Forgetful(dict):
+        def __setitem__(self, key, value):
+            pass
+
+    def fits(memo_class):
+        made = reduction.residual_function
+
+        def residual_function(*args, **kwargs):
+            out = made(*args, **kwargs)
+            out.memo = memo_class()
+            return out
+
+        monkeypatch.setattr(reduction, "residual_function", residual_function)
+        import kincal.identification.problem as problem_module
+
+        monkeypatch.setattr(problem_module, "residual_function", residual_function)
+        return [CalibrationProblem(robot, data, CalibrationOptions(method=m)).solve()
+                for m in ("ls", "l2")]
+
+    reused = fits(Spy)
+    assert any(used)
+    fresh = fits(Forgetful)
+    for a, b in zip(reused, fresh):
+        assert np.array_equal(a.x, b.x) and a.identifiability.kept == b.identifiability.kept
+
+
+def test_error_models_are_built_once_per_geometry():
+    """Every fit of one robot shares its error models (built once per geometry object),
+    read-only, equal to a fresh build; a corrected robot (a new geometry) gets its own."""
+    from kincal import models
+
+    robot = Robot.load("ec66")
+    for name in models.MODELS:
+        a = models.build(name, robot.geometry)
+        assert models.build(name, robot.geometry) is a
+        fresh = models._build(name, robot.geometry)
+        for key, value in vars(fresh).items():
+            if isinstance(value, np.ndarray):
+                assert np.array_equal(getattr(a, key), value)
+                with pytest.raises(ValueError):
+                    getattr(a, key)[...] = 0.0
+    moved = robot.geometry.joint_frames.copy()
+    moved[2, 0, 3] += 1e-3
+    other = robot.with_joint_frames(moved)
+    b = models.build("complete", other.geometry)
+    assert b is not models.build("complete", robot.geometry)
+    assert not np.array_equal(b.nominal, models.build("complete", robot.geometry).nominal)

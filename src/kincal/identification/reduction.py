@@ -180,7 +180,8 @@ def residual_function(parts, layout, weights, scale, kinematic: bool = True,
     out = cast(BlockedResidual, residual)  # the attributes are set here
     out.blocks = blocks
     out.rows, out.n_blocks = m, sum(len(part[3]) for part in parts)
-    out.memo = {}  # u bytes: (r, J^T J, J^T r) of a pass made by the analysis (analyze_rows)
+    out.memo = {}  # u bytes: of the pass made by the analysis (analyze_rows) at u, for the
+    #                fit's first linearisation there: (r, J^T J, J^T r) streamed, (r, J) dense
     return out
 
 
@@ -194,7 +195,12 @@ def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, na
     from kincal.identification.selection import analyze
 
     if getattr(residual, "n_blocks", 1) <= 1:
-        return analyze(residual(u, True)[1] * column_scale, names, n_kinematic, free, rank_tol)
+        r, J = residual(u, True)
+        memo = getattr(residual, "memo", None)
+        if memo is not None:  # the fit that starts at u takes (r, J) from here (linearise)
+            memo.clear()
+            memo[u.tobytes()] = (r, J)
+        return analyze(J * column_scale, names, n_kinematic, free, rank_tol)
     blocked = cast(BlockedResidual, residual)
     p = u.size
     normal = np.empty(blocked.rows), np.zeros((p, p)), np.zeros(p)
