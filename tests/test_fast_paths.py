@@ -332,3 +332,30 @@ def test_error_models_are_built_once_per_geometry():
     b = models.build("complete", other.geometry)
     assert b is not models.build("complete", robot.geometry)
     assert not np.array_equal(b.nominal, models.build("complete", robot.geometry).nominal)
+
+
+def test_kept_per_robot_equals_made_afresh():
+    """What a fit keeps per robot (the structural analysis's seeded poses, the gate's
+    nominal tip poses) gives what making it afresh gives, to the bit, and a second data set
+    of the same robot reuses it."""
+    from kincal import models
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    robot, data = _point_data(60)
+    _, other = _point_data(60, seed=1)
+    runs = []
+    for clear in (True, False, True):
+        if clear:
+            models._MEMO.clear()
+        for d in (data, other):
+            problem = CalibrationProblem(robot, d, CalibrationOptions(method="ls"))
+            result = problem.solve()
+            runs.append((problem.structural(), result.plausibility.evidence))
+    for k in range(2):
+        first = runs[k]
+        for again in runs[k::2][1:]:
+            assert first[0].kept == again[0].kept and np.array_equal(first[0].singular_values,
+                                                             again[0].singular_values)
+            assert first[1] == again[1]
+    assert any(key[0][0] == "gate configurations" for key in models._MEMO)
+    assert any(key[0][0] == "structural poses" for key in models._MEMO)

@@ -18,6 +18,8 @@ pivoting among equals) and, being greedy in a fixed order, stable as poses are a
 
 from __future__ import annotations
 
+import math
+
 import re
 from dataclasses import dataclass
 
@@ -184,18 +186,20 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     basis = np.zeros((J.shape[0], J.shape[1]))  # the kept columns' orthonormal basis
     kept: list[int] = []
     dropped: list[int] = []
+    free_of, norm_of = free.tolist(), norms.tolist()  # Python numbers: the same comparisons
     for c in preference_order(names, n_kinematic):
-        if not free[c]:
+        if not free_of[c]:
             continue
-        col = J[:, c]
-        if norms[c] <= rank_tol * scale:
+        if norm_of[c] <= rank_tol * scale:
             dropped.append(c)
             continue
-        Q = basis[:, :len(kept)]
-        r = col - Q @ (Q.T @ col)
-        r = r - Q @ (Q.T @ r)  # second pass keeps the basis orthogonal to working precision
-        size = np.linalg.norm(r)
-        if size > rank_tol * norms[c]:
+        r = J[:, c]
+        if kept:  # (with none kept yet, the projections below are zero)
+            Q = basis[:, :len(kept)]
+            r = r - Q @ (Q.T @ r)
+            r = r - Q @ (Q.T @ r)  # second pass keeps the basis orthogonal to working precision
+        size = math.sqrt(r @ r)  # np.linalg.norm's own arithmetic
+        if size > rank_tol * norm_of[c]:
             basis[:, len(kept)] = r / size
             kept.append(c)
         else:

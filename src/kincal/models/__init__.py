@@ -40,29 +40,41 @@ def default_for(geometry) -> str:
     return "placement" if rev is not None and any(rev) else DEFAULT
 
 
-_BUILT: dict = {}  # (name, id(geometry)) -> (geometry, model): the models last built
-_BUILT_MAX = 32
+_MEMO: dict = {}  # (what, id(geometry)) -> (geometry, value): per robot, the last few
+_MEMO_MAX = 64
+
+
+def per_geometry(what, geometry, make):
+    """``make()``, computed once per (``what``, geometry object) and shared after: the one
+    home of what kincal keeps per robot between fits. A Robot is never modified (its
+    corrected copies are new Robots with geometries of their own), so what depends only on
+    a geometry is the same at every fit of that robot. The entry holds the geometry, so its
+    id is not reused while the entry lives; the oldest entries go first."""
+    key = (what, id(geometry))
+    hit = _MEMO.get(key)
+    if hit is not None and hit[0] is geometry:
+        return hit[1]
+    value = make()
+    if len(_MEMO) >= _MEMO_MAX:
+        _MEMO.pop(next(iter(_MEMO)))
+    _MEMO[key] = (geometry, value)
+    return value
 
 
 def build(name: str, geometry):
     """The error model ``name`` (one of MODELS) of a :class:`kincal.robot.ChainGeometry`.
 
-    Built once per geometry object: a Robot is never modified (its corrected copies are
-    new Robots with geometries of their own), so every fit of one robot shares its models
-    (building the complete model costs ~1.3 ms, a tenth of a 60-pose fit). The models are
-    frozen and their arrays read-only, so no user of a shared one can change it."""
-    key = (name, id(geometry))
-    hit = _BUILT.get(key)
-    if hit is not None and hit[0] is geometry:  # the entry holds the geometry: id not reused
-        return hit[1]
-    model = _build(name, geometry)
+    Built once per geometry (:func:`per_geometry`): every fit of one robot shares its
+    models (building the complete model costs ~1.3 ms, a tenth of a 60-pose fit). The
+    models are frozen and their arrays read-only, so no user of a shared one changes it."""
+    return per_geometry(("model", name), geometry, lambda: _read_only(_build(name, geometry)))
+
+
+def _read_only(model):
     for value in vars(model).values():
         flags = getattr(value, "flags", None)  # numpy arrays (numpy not imported here)
         if flags is not None:
             flags.writeable = False
-    if len(_BUILT) >= _BUILT_MAX:
-        _BUILT.pop(next(iter(_BUILT)))
-    _BUILT[key] = (geometry, model)
     return model
 
 
