@@ -359,3 +359,18 @@ def test_kept_per_robot_equals_made_afresh():
             assert first[1] == again[1]
     assert any(key[0][0] == "gate configurations" for key in models._MEMO)
     assert any(key[0][0] == "structural poses" for key in models._MEMO)
+
+
+def test_a_robots_kept_models_outlive_one_off_geometries():
+    """Each fit's corrected robot is a new geometry: many of them (more than the memo
+    holds) do not push out the models of the robot that every fit uses."""
+    from kincal import models
+
+    robot = Robot.load("ec66")
+    kept = models.build("complete", robot.geometry)
+    frames = robot.geometry.joint_frames.copy()
+    for k in range(models._MEMO_MAX + 10):
+        frames[1, 2, 3] += 1e-6
+        models.build("offsets", robot.with_joint_frames(frames).geometry)
+        assert models.build("complete", robot.geometry) is kept
+    assert len(models._MEMO) <= models._MEMO_MAX

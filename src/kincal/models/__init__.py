@@ -19,6 +19,8 @@ export). :func:`build` makes one by name.
 
 from __future__ import annotations
 
+import threading
+
 from kincal.errors import OptionError
 
 MODELS = ("complete", "mdh", "placement", "offsets")
@@ -42,6 +44,7 @@ def default_for(geometry) -> str:
 
 _MEMO: dict = {}  # (what, id(geometry)) -> (geometry, value): per robot, the last few
 _MEMO_MAX = 64
+_LOCK = threading.Lock()
 
 
 def per_geometry(what, geometry, make):
@@ -49,15 +52,18 @@ def per_geometry(what, geometry, make):
     home of what kincal keeps per robot between fits. A Robot is never modified (its
     corrected copies are new Robots with geometries of their own), so what depends only on
     a geometry is the same at every fit of that robot. The entry holds the geometry, so its
-    id is not reused while the entry lives; the oldest entries go first."""
+    id is not reused while the entry lives; the least recently used entries go first."""
     key = (what, id(geometry))
-    hit = _MEMO.get(key)
-    if hit is not None and hit[0] is geometry:
-        return hit[1]
+    with _LOCK:  # fits in threads (kincal fleet) share it
+        hit = _MEMO.pop(key, None)
+        if hit is not None and hit[0] is geometry:
+            _MEMO[key] = hit  # the most recently used go last: a robot's entries stay while
+            return hit[1]  #    one-off geometries (each fit's corrected robot) come and go
     value = make()
-    if len(_MEMO) >= _MEMO_MAX:
-        _MEMO.pop(next(iter(_MEMO)))
-    _MEMO[key] = (geometry, value)
+    with _LOCK:
+        while len(_MEMO) >= _MEMO_MAX:
+            _MEMO.pop(next(iter(_MEMO)))
+        _MEMO[key] = (geometry, value)
     return value
 
 
