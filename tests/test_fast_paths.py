@@ -374,3 +374,31 @@ def test_a_robots_kept_models_outlive_one_off_geometries():
         models.build("offsets", robot.with_joint_frames(frames).geometry)
         assert models.build("complete", robot.geometry) is kept
     assert len(models._MEMO) <= models._MEMO_MAX
+
+
+def test_kept_only_is_the_analysis_partition():
+    """selection.identifiable (the frame start's) keeps exactly what analyze keeps: full
+    rank, exact duplicates, a run of nearly parallel columns (analyze's rank guard), fixed
+    columns, and the triangle of many rows."""
+    from kincal.identification.selection import analyze, identifiable
+
+    rng = np.random.default_rng(3)
+    names = tuple(f"j{i // 4}.{'a alpha d theta'.split()[i % 4]}" for i in range(12)) + (
+        "base.x", "base.y", "base.z", "tool.x", "tool.y", "tool.z")
+    cases = []
+    J = rng.normal(size=(90, 18))
+    cases.append((J, None))
+    D = J.copy()
+    D[:, 5] = D[:, 1] - 2 * D[:, 14]
+    cases.append((D, None))
+    P = J.copy()
+    for c in (2, 6, 10):
+        P[:, c] = P[:, 0] + 1e-9 * rng.normal(size=90)
+    cases.append((P, None))
+    free = np.ones(18, dtype=bool)
+    free[[3, 15]] = False
+    cases.append((D, free))
+    for A, f in cases:
+        assert identifiable(A, names, 12, f) == analyze(A, names, 12, f).kept
+        R = np.linalg.qr(A, mode="r")
+        assert identifiable(R, names, 12, f, m=90) == analyze(R, names, 12, f, m=90).kept

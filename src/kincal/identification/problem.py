@@ -263,7 +263,7 @@ class CalibrationProblem:
             residual = self.residual_function(kinematic=False)
             # only what the data can fix moves (an unseen flush contact point stays put)
             kept = analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
-                                lay.names, lay.n_kinematic, free, o.rank_tol).kept
+                                lay.names, lay.n_kinematic, free, o.rank_tol, kept_only=True)
             free = free & np.isin(np.array(lay.names), kept)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = sol.u * self.scale

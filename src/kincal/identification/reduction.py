@@ -186,13 +186,16 @@ def residual_function(parts, layout, weights, scale, kinematic: bool = True,
 
 
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
-                 n_kinematic: int, free: np.ndarray, rank_tol: float):
+                 n_kinematic: int, free: np.ndarray, rank_tol: float, kept_only: bool = False):
     """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
     scaled by ``column_scale``; for rows streamed in blocks (many poses), of its QR triangle
     (the same column norms, projections and singular values), built without the whole J,
     in a pass that also sums the normal equations at u and leaves them in the residual's
-    ``memo`` for the fit's first linearisation (:func:`linearise`), which starts there."""
-    from kincal.identification.selection import analyze
+    ``memo`` for the fit's first linearisation (:func:`linearise`), which starts there.
+    kept_only: only the names it keeps (:func:`kincal.identification.selection.identifiable`)."""
+    from kincal.identification.selection import analyze, identifiable
+
+    select = identifiable if kept_only else analyze  # the same partition, without the report
 
     if getattr(residual, "n_blocks", 1) <= 1:
         r, J = residual(u, True)
@@ -200,11 +203,11 @@ def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, na
         if memo is not None:  # the fit that starts at u takes (r, J) from here (linearise)
             memo.clear()
             memo[u.tobytes()] = (r, J)
-        return analyze(J * column_scale, names, n_kinematic, free, rank_tol)
+        return select(J * column_scale, names, n_kinematic, free, rank_tol)
     blocked = cast(BlockedResidual, residual)
     p = u.size
     normal = np.empty(blocked.rows), np.zeros((p, p)), np.zeros(p)
     R, m = stacked_triangle(blocked.blocks(u), normal=normal)
     blocked.memo.clear()
     blocked.memo[u.tobytes()] = normal
-    return analyze(R * column_scale, names, n_kinematic, free, rank_tol, m=m)
+    return select(R * column_scale, names, n_kinematic, free, rank_tol, m=m)
