@@ -402,3 +402,19 @@ def test_kept_only_is_the_analysis_partition():
         assert identifiable(A, names, 12, f) == analyze(A, names, 12, f).kept
         R = np.linalg.qr(A, mode="r")
         assert identifiable(R, names, 12, f, m=90) == analyze(R, names, 12, f, m=90).kept
+
+
+def test_offsets_at_zero_are_the_origins(tmp_path):
+    """The offsets model at zero offsets (the URDF chain, ChainKinematics) places each joint
+    at its origin: the same placements as the offset motions' product, and the same tip
+    points through the chain."""
+    from kincal.models import build
+
+    for robot in _robots(tmp_path):
+        model = build("offsets", robot.geometry)
+        zero = np.zeros(model.n)
+        fast = model.placements(zero)
+        slow = np.array([model.origins[i] @ model._offset(i, 0.0) for i in range(model.n)])
+        assert np.array_equal(fast, slow)
+        fast[...] = 0.0  # a copy: the shared model is untouched
+        assert np.array_equal(model.placements(zero), slow)
