@@ -264,7 +264,11 @@ class Robot:
         fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
         return _mat(m.frames[m.frames[fid].parentFrame].placement)
 
-    def _compute_geometry(self) -> ChainGeometry:
+    def _compute_geometry(self, same: ChainGeometry | None = None) -> ChainGeometry:
+        """The chain's geometry read from the Pinocchio model; ``same``: a geometry of a
+        model that differs from this one in joint placements only (:meth:`with_joint_frames`),
+        whose joint axes, kinds and limits are taken as they are (a joint's axis in its own
+        frame, its type and limits do not depend on the placements; tests compare both)."""
         m = self.model
         T = inverse(_mat(m.frames[self._base_id].placement))  # base joint frame expressed in B
         frames, axes, kinds, parents = [], [], [], []
@@ -277,10 +281,14 @@ class Robot:
                 parents.append(T @ self._parent_link(j))
                 T = T @ _mat(m.jointPlacements[j])
                 frames.append(T.copy())
-            axis, kind = self._axis(j)
-            axes.append(-axis if rev else axis)
-            kinds.append(kind)
+            if same is None:
+                axis, kind = self._axis(j)
+                axes.append(-axis if rev else axis)
+                kinds.append(kind)
         T_tip = T @ _mat(m.frames[self._tip_id].placement)
+        if same is not None:
+            return ChainGeometry(same.joint_names, same.kinds, np.array(frames), same.axes,
+                                 T_tip, same.lower, same.upper, np.array(parents), same.reversed)
         # Pinocchio stores "no limit" as +-max double; a continuous joint (nq = 2) has none
         iq = [m.joints[j].idx_q for j in self._chain]
         free = np.array([m.joints[j].nq == 2 for j in self._chain])
@@ -398,7 +406,21 @@ class Robot:
         for j, T in zip(self._chain[r:], C[r:]):
             m.jointPlacements[j] = _se3(inverse(T_prev) @ T)
             T_prev = T
-        return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source, self.off_chain)
+        return self._with_placements(m)
+
+    def _with_placements(self, m: pin.Model) -> "Robot":
+        """A copy on ``m``, a copy of this robot's model with other joint placements only:
+        the chain, its joints' axes, kinds and limits and the joints off the chain are this
+        robot's; the joint frames, parent frames and tip are read from ``m`` (the same
+        numbers as ``Robot(m, ...)`` builds, without finding the chain and reading every
+        axis through Pinocchio again: tests compare the two)."""
+        out = object.__new__(Robot)
+        out.__dict__.update(self.__dict__)
+        out.model, out._data = m, m.createData()
+        out._chain, out._reversed = list(self._chain), list(self._reversed)
+        out.geometry = out._compute_geometry(self.geometry)
+        out.off_chain = dict(self.off_chain)
+        return out
 
     def _is_offset(self, i: int, D: np.ndarray, tol: float = 1e-10) -> bool:
         """Whether the rigid change D (in joint i's frame) changes only joint i's zero: a

@@ -285,3 +285,25 @@ class Chains:
             assert isinstance(self.model, ErrorModel)  # one chain: its own model
             return self.robot.with_joint_frames(self.model.joint_frames(kin))
         return self.robot.with_origins(self.origins(kin))
+
+    def generic_poses(self, model_name: str, layout, K: int):
+        """The first chain's measurement model at 2p seeded generic poses (random joint
+        values over the limits, each with K measured points): the structural analysis's
+        (:meth:`kincal.identification.problem.CalibrationProblem.structural`), the same for
+        every fit of this robot and kept per robot (:func:`kincal.models.per_geometry`)."""
+        from kincal.measurements.point import MeasurementModel
+
+        g, lay = self.robot.geometry, layout
+
+        def poses():
+            lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+            hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+            rng = np.random.default_rng(0)
+            q = np.repeat(rng.uniform(lo, hi, size=(2 * lay.size, g.n)), K, axis=0)
+            approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * lay.size, g.n)), K, axis=0)
+            points = np.tile(np.arange(K), 2 * lay.size)
+            return MeasurementModel(self.models[0], q, approach, lay.backlash, points, K,
+                                    self.torques(q, lay.compliance), lay.compliance)
+
+        return error_models.per_geometry(("structural poses", model_name, lay.size, K,
+                                          lay.backlash, lay.compliance), g, poses)

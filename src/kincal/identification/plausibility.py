@@ -451,16 +451,17 @@ def _change(problem: CalibrationProblem, result: CalibrationResult,
     L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
     # the configurations and the nominal robot's tip poses there depend on the robot alone:
     # kept per robot (models.per_geometry); the same arithmetic as _tool_points after
-    q, R_tip, p_tip = per_geometry(("gate configurations", N_CONFIGURATIONS), g,
-                                   lambda: _configurations(robot))
+    q, R_tip, p_tip, chain = per_geometry(("gate configurations", N_CONFIGURATIONS), g,
+                                          lambda: _configurations(robot))
     return L, _aligned_distances(p_tip + R_tip @ tool_start,
-                                 _tool_points(corrected, q, tool)) * 1e3
+                                 _tool_points(corrected, q, tool, chain)) * 1e3
 
 
-def _configurations(robot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(q (M, n), R_tip (M, 3, 3), p_tip (M, 3)), read-only: the gate's seeded joint values
-    over the robot's limits (unbounded revolute: a turn) and its tip frame there, in the
-    base frame (:func:`_tool_points`' chain)."""
+def _configurations(robot):
+    """(q (M, n), R_tip (M, 3, 3), p_tip (M, 3), chain), read-only: the gate's seeded joint
+    values over the robot's limits (unbounded revolute: a turn), its tip frame there, in the
+    base frame (:func:`_tool_points`' chain), and that chain over q, whose joint motions the
+    corrected robot's chain takes (its placements alone differ: Chain.with_model)."""
     from kincal.models.chain import Chain
     from kincal.models.kinematics import ChainKinematics
 
@@ -470,14 +471,14 @@ def _configurations(robot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
     q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
     model = ChainKinematics.of(g).model
-    state = Chain(model, q).state(np.zeros(model.n), keep=False)
-    out = q, state.R_tip, state.p_tip
-    for a in out:
+    chain = Chain(model, q)
+    state = chain.state(np.zeros(model.n), keep=False)
+    for a in [q, state.R_tip, state.p_tip] + list(chain._motion or ()):
         a.flags.writeable = False
-    return out
+    return q, state.R_tip, state.p_tip, chain
 
 
-def _tool_points(robot, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
+def _tool_points(robot, q: np.ndarray, tool: np.ndarray, like=None) -> np.ndarray:
     """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q.
 
     Through the vectorised chain of the robot's own geometry (read from its Pinocchio
@@ -486,4 +487,4 @@ def _tool_points(robot, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
     :meth:`kincal.robot.Robot.tip_poses`."""
     from kincal.models.kinematics import ChainKinematics
 
-    return ChainKinematics.of(robot.geometry).tip_points(q, tool)
+    return ChainKinematics.of(robot.geometry).tip_points(q, tool, like)

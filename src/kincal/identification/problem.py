@@ -40,7 +40,7 @@ from kincal.identification.plausibility import gather, judge
 from kincal.identification.reduction import analyze_rows, residual_function
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
-from kincal.identification.selection import Identifiability, analyze
+from kincal.identification.selection import Identifiability, analyze, identifiable
 from kincal.identification.solver import SolverOptions, SolveSummary, solve
 from kincal.measurements.checks import distinct_poses, set_warnings, unit_warnings
 from kincal.measurements.kind import DEFAULT_SIGMA
@@ -100,6 +100,8 @@ class CalibrationProblem:
         self._x_start: np.ndarray | None = None
         self._ident: Identifiability | None = None
         self._structural: Identifiability | None = None
+        self._general_J: np.ndarray | None = None  # the structural analysis's Jacobian
+        self._general_kept: tuple[str, ...] | None = None  # and its kept names
         self._all_blocks: dict = {}  # (set, block size): blocks of a whole set
         self._subsets: dict = {}  # the last row selections' parts (_parts)
         self._whole: dict = {}  # kinematic: (weights, scale, row_scale, residual_function())
@@ -305,14 +307,14 @@ class CalibrationProblem:
         if lost:
             notes.append("frame parameters these data cannot fix, held at their start: "
                          + ", ".join(lost))
-        general = self.structural()
-        gone = [n for n in general.kept if n not in ident.kept] if general else []
+        general = self._structural_kept()
+        gone = [n for n in general if n not in ident.kept] if general is not None else []
         if gone and general is not None:
             d = self.kinds[0].data
-            need = math.ceil(len(general.kept) / (3 * d.n_points))
+            need = math.ceil(len(general) / (3 * d.n_points))
             notes.append(f"{len(gone)} parameters this chain can identify are not identifiable "
                          f"from these {self.n_poses} poses ({distinct_poses(d.joint_values)} "
-                         f"distinct): {', '.join(gone)}; the {len(general.kept)} identifiable "
+                         f"distinct): {', '.join(gone)}; the {len(general)} identifiable "
                          f"parameters need at least {need} poses, and many more spread over the "
                          "workspace for a good result")
         note = self._tool_axis_note()
@@ -327,30 +329,29 @@ class CalibrationProblem:
         one set of points (None otherwise). Compared with :meth:`analyze`, it tells which
         parameters are lost to the data (too few or too similar poses) rather than to the
         geometry of the chain."""
-        if self._structural is not None or len(self.kinds) != 1 or self.kinds[0].kind != "point":
-            return self._structural
-        from kincal.measurements.point import MeasurementModel
-
-        g, lay = self.robot.geometry, self.layout
-        K = self.kinds[0].data.n_points
-
-        def poses():  # seeded: the same for every fit of this robot (kept per robot)
-            lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-            hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
-            rng = np.random.default_rng(0)
-            q = np.repeat(rng.uniform(lo, hi, size=(2 * lay.size, g.n)), K, axis=0)
-            approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * lay.size, g.n)), K, axis=0)
-            points = np.tile(np.arange(K), 2 * lay.size)
-            return MeasurementModel(self.chains.models[0], q, approach, lay.backlash, points, K,
-                                    self.chains.torques(q, lay.compliance), lay.compliance)
-
-        _, J = error_models.per_geometry(
-            ("structural poses", self.model_name, lay.size, K, lay.backlash, lay.compliance),
-            g, poses).jacobian(self.start())
-        J = J.reshape(-1, lay.size) * lay.reporting_scale() / MM
-        self._structural = analyze(J, lay.names, lay.n_kinematic, self._unfixed(),
-                                   self.options.rank_tol)
+        J, lay = self._structural_jacobian(), self.layout
+        if self._structural is None and J is not None:
+            self._structural = analyze(J, lay.names, lay.n_kinematic, self._unfixed(),
+                                       self.options.rank_tol)
         return self._structural
+
+    def _structural_kept(self) -> tuple[str, ...] | None:
+        """:meth:`structural`'s kept names without its report (the fit's two uses read only
+        these; :func:`~kincal.identification.selection.identifiable`: the same partition)."""
+        J, lay = self._structural_jacobian(), self.layout
+        if self._general_kept is None and J is not None:
+            self._general_kept = identifiable(J, lay.names, lay.n_kinematic, self._unfixed(),
+                                              self.options.rank_tol)
+        return self._general_kept
+
+    def _structural_jacobian(self) -> np.ndarray | None:
+        """:meth:`structural`'s Jacobian (reporting units) at the start, made once."""
+        if self._general_J is None and len(self.kinds) == 1 and self.kinds[0].kind == "point":
+            lay = self.layout
+            _, J = self.chains.generic_poses(self.model_name, lay, self.kinds[0].data.n_points
+                                             ).jacobian(self.start())
+            self._general_J = J.reshape(-1, lay.size) * lay.reporting_scale() / MM
+        return self._general_J
 
     def _tool_axis_note(self) -> str:
         """A warning when every tool point of a point set sits near the last (revolute) axis."""
@@ -442,15 +443,15 @@ class CalibrationProblem:
                 f"parameters (identifiable: {len(ident.kept)} of {int(self._unfixed().sum())}"
                 "): nothing would be calibrated. Check the sets' sigmas (a weight of 1e-300 "
                 "silences a set), and measure poses that move every joint")
-        general = self.structural()
+        general = self._structural_kept()
         if general is not None:
             m = 3 * self.n_samples
             per_pose = 3 * self.kinds[0].data.n_points
-            if o.method != "l2" and m <= len(general.kept) and len(ident.kept) < len(general.kept):
+            if o.method != "l2" and m <= len(general) and len(ident.kept) < len(general):
                 raise IdentifiabilityError(
-                    f"{self.n_poses} poses give {m} equations for the {len(general.kept)} "
+                    f"{self.n_poses} poses give {m} equations for the {len(general)} "
                     f"parameters this chain can identify; method {o.method} needs at least "
-                    f"{math.ceil((len(general.kept) + 1) / per_pose)} poses (and many more "
+                    f"{math.ceil((len(general) + 1) / per_pose)} poses (and many more "
                     "spread over the workspace); with these poses it would only interpolate. "
                     "Method l2 can work with fewer, pulling what the data cannot fix toward "
                     "nominal")

@@ -68,11 +68,17 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
     return _finish(R_tip, p_tip, P, t)
 
 
+_FLIP = np.array([1.0, 1.0, -1.0])
+
+
 def _rotation(H: np.ndarray) -> np.ndarray:
-    """Kabsch's rotation from the cross-covariance H (:func:`kincal.rotations.kabsch`)."""
+    """Kabsch's rotation from the cross-covariance H (:func:`kincal.rotations.kabsch`):
+    V U^T, or V diag(1, 1, -1) U^T where that is a reflection (the products with the
+    diagonal's ones and zeros are exact: the same numbers as forming V D U^T always)."""
     U, _, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    return Vt.T @ D @ U.T
+    V = Vt.T
+    R = V @ U.T
+    return R if np.linalg.det(R) >= 0 else (V * _FLIP) @ U.T
 
 
 def _finish(R_tip, p_tip, P, t):

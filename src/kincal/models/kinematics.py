@@ -55,11 +55,15 @@ class ChainKinematics:
     def T_last_tip(self) -> np.ndarray:
         return self.model.T_last_tip
 
-    def tip_points(self, q: np.ndarray, tool=(0.0, 0.0, 0.0)) -> np.ndarray:
+    def tip_points(self, q: np.ndarray, tool=(0.0, 0.0, 0.0), like: Chain | None = None
+                   ) -> np.ndarray:
         """(N, 3) the point ``tool`` (3,) of the tip frame [m], in B, for joint values q
-        (N, n) [rad or m]; the tip pose only, no Jacobian."""
+        (N, n) [rad or m]; the tip pose only, no Jacobian. like: a chain over these q whose
+        joint motions are taken where they are this chain's (:meth:`Chain.with_model`)."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        state = Chain(self.model, q).state(np.zeros(self.model.n), keep=False)
+        chain = Chain(self.model, q) if like is None or like.q is not q else like.with_model(
+            self.model)
+        state = chain.state(np.zeros(self.model.n), keep=False)
         return state.p_tip + state.R_tip @ np.asarray(tool, dtype=float)
 
     @functools.cached_property

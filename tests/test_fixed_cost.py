@@ -1,0 +1,132 @@
+"""The per-fit fixed cost's shortcuts against what they replace (issue 20): the corrected
+robot built from the nominal one's parts against a full rebuild, the gate's corrected chain
+on the nominal chain's joint motions against one made anew, the structural analysis's kept
+names without its report, the frame start's rotation; each equal to the bit."""
+
+from __future__ import annotations
+
+import numpy as np
+from chains import random_chain, random_tree
+
+from kincal import models
+from kincal.identification import plausibility
+from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+from kincal.robot import Robot
+
+
+def _robots(tmp_path):
+    out = [Robot.load("ec66"), Robot.load("ur10")]
+    for seed in (3, 4):
+        text, _ = random_chain(np.random.default_rng(seed), cases=("prismatic", "parallel",
+                                                                   "gimbal", "general"))
+        path = tmp_path / f"chain_{seed}.urdf"
+        path.write_text(text)
+        out.append(Robot.load(path, tip="tip"))
+    text, _ = random_tree(np.random.default_rng(5))
+    path = tmp_path / "tree.urdf"
+    path.write_text(text)
+    out.append(Robot.load(path, base="atip", tip="btip"))
+    return out
+
+
+def _corrected(robot, rng):
+    """The robot corrected by a random identified vector of its default error model."""
+    model = models.build(models.default_for(robot.geometry), robot.geometry)
+    x = model.nominal + rng.normal(size=model.size) * np.where(model.is_length, 1e-3, 2e-3)
+    return robot.with_joint_frames(model.joint_frames(x))
+
+
+def test_corrected_robot_equals_a_rebuild(tmp_path):
+    """with_joint_frames reuses the nominal robot's chain, axes, kinds and limits: every
+    field of its geometry, its URDF origins and Pinocchio's tip poses equal those of a Robot
+    built from scratch on the same corrected Pinocchio model."""
+    rng = np.random.default_rng(0)
+    for robot in _robots(tmp_path):
+        fast = _corrected(robot, rng)
+        slow = Robot(fast.model, robot.urdf_text, robot.name, robot.base, robot.tip,
+                     robot.source, robot.off_chain)
+        a, b = fast.geometry, slow.geometry
+        assert a.joint_names == b.joint_names and a.kinds == b.kinds
+        for f in ("joint_frames", "axes", "T_base_tip", "lower", "upper", "parent_frames",
+                  "reversed"):
+            u, v = getattr(a, f), getattr(b, f)
+            assert (u is None and v is None) or np.array_equal(u, v), f
+        assert not np.array_equal(a.joint_frames, robot.geometry.joint_frames)
+        q = rng.uniform(-1.0, 1.0, (5, a.n))
+        assert np.array_equal(fast.tip_poses(q), slow.tip_poses(q))
+        o1, o2 = fast.urdf_origins(), slow.urdf_origins()
+        assert o1.keys() == o2.keys() and all(np.array_equal(o1[k], o2[k]) for k in o1)
+        assert fast._chain == slow._chain and fast._reversed == slow._reversed
+        assert fast.off_chain == slow.off_chain and fast._data is not robot._data
+
+
+def test_gate_chain_on_the_nominal_motions_equals_a_new_chain(tmp_path):
+    """The gate's corrected tool points on the nominal chain's joint motions (kept per robot)
+    equal those of a chain made anew, to the bit, and equal Pinocchio's (1e-12); a model
+    whose joints turn otherwise gets a chain of its own."""
+    from kincal.models.kinematics import ChainKinematics
+
+    rng = np.random.default_rng(1)
+    for robot in _robots(tmp_path):
+        q, _, _, chain = plausibility._configurations(robot)
+        corrected = _corrected(robot, rng)
+        tool = rng.normal(size=3) * 0.1
+        fast = plausibility._tool_points(corrected, q, tool, chain)
+        assert np.array_equal(fast, plausibility._tool_points(corrected, q, tool))
+        T = corrected.tip_poses(q[:20])
+        assert np.abs(fast[:20] - (T[:, :3, 3] + T[:, :3, :3] @ tool)).max() < 1e-12
+        model = ChainKinematics.of(corrected.geometry).model
+        assert chain.with_model(model)._motion is chain._motion
+        other = models.build("offsets", robot.geometry)
+        tilted = type(other)(**{**other.__dict__, "screw_axes": -other.screw_axes})
+        assert chain.with_model(tilted)._motion is not chain._motion
+
+
+def test_structural_kept_is_the_structural_analysis():
+    """The fit's uses of the structural analysis read its kept names without its report:
+    the same names as the full analysis, with few poses (parameters lost to the data, the
+    note and the too-few-poses error) and many."""
+    from kincal.errors import IdentifiabilityError
+    from kincal.models import mdh
+    from kincal.planning.simulation import Truth, measure, planted_table
+
+    robot = Robot.load("ec66")
+    model = mdh.extract(robot.geometry)
+    g = robot.geometry
+    for n, method in ((6, "l2"), (8, "ls"), (60, "ls")):
+        rng = np.random.default_rng(n)
+        q = rng.uniform(np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi), (n, g.n))
+        truth = Truth(planted_table(model, rng), np.zeros(6), np.array([0.02, 0.01, 0.12]))
+        data = measure(model, truth, q, 5e-5, rng)
+        problem = CalibrationProblem(robot, data, CalibrationOptions(method=method, lam=0.01))
+        kept = problem._structural_kept()
+        again = CalibrationProblem(robot, data, CalibrationOptions(method=method, lam=0.01))
+        assert kept == again.structural().kept and again._structural_kept() == kept
+        if n == 8:  # fewer equations than the chain's identifiable parameters
+            try:
+                problem.solve()
+                raise AssertionError("8 poses fitted by ls")
+            except IdentifiabilityError as e:
+                assert f"for the {len(kept)} parameters" in str(e)
+        else:
+            ident = problem.analyze()
+            lost = [k for k in kept if k not in ident.kept]
+            assert bool(lost) == (n == 6)
+            assert any(f"{len(lost)} parameters this chain can identify" in s
+                       for s in ident.notes) == bool(lost)
+
+
+def test_frame_start_rotation_is_kabsch_with_its_diagonal():
+    """The frame start's rotation V U^T (or with the last column of V negated) is Kabsch's
+    V diag(1, 1, det) U^T to the bit, proper rotations and reflections alike."""
+    from kincal.measurements.frames_init import _rotation
+
+    rng = np.random.default_rng(2)
+    seen = set()
+    for k in range(3000):
+        H = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-6, 6)
+        U, _, Vt = np.linalg.svd(H)
+        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+        assert np.array_equal(_rotation(H), Vt.T @ D @ U.T)
+        seen.add(D[2, 2])
+    assert seen == {1.0, -1.0}
