@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -194,8 +194,7 @@ class Robot:
         return out
 
     def _find_chain(self) -> tuple[list[int], list[bool]]:
-        """Movable joints on the tree path from the base up to the common ancestor (reversed)
-        and down to the tip, in that order, with their reversed flags."""
+        """Movable joints base -> common ancestor (reversed) -> tip, and reversed flags."""
         m = self.model
         if self.base == self.tip:
             raise FrameError(f"base and tip are the same frame {self.base!r}: a chain needs two "
@@ -244,14 +243,12 @@ class Robot:
         return self._base_id
 
     def moves_between(self, a: int, b: int) -> bool:
-        """Whether chain joints lie on the tree path between Pinocchio joints a and b: the
-        chain then moves their links relative to each other."""
+        """Whether chain joints (moving their links apart) lie between Pinocchio joints a, b."""
         return bool((set(self._ancestors(a)) ^ set(self._ancestors(b))) & set(self._chain))
 
     def first_moving_joint(self) -> int:
         """Pinocchio joint whose link is the first the chain moves relative to the base."""
-        j = self._chain[0]
-        return self.model.parents[j] if self._reversed[0] else j
+        return self.model.parents[self._chain[0]] if self._reversed[0] else self._chain[0]
 
     # ----------------------------------------------------------------- geometry
     @property
@@ -265,10 +262,8 @@ class Robot:
         return _mat(m.frames[m.frames[fid].parentFrame].placement)
 
     def _compute_geometry(self, same: ChainGeometry | None = None) -> ChainGeometry:
-        """The chain's geometry read from the Pinocchio model; ``same``: a geometry of a
-        model that differs from this one in joint placements only (:meth:`with_joint_frames`),
-        whose joint axes, kinds and limits are taken as they are (a joint's axis in its own
-        frame, its type and limits do not depend on the placements; tests compare both)."""
+        """The chain's geometry from the model; ``same``: that of a model with other joint
+        placements only, whose axes (in their own frames), kinds and limits are kept."""
         m = self.model
         T = inverse(_mat(m.frames[self._base_id].placement))  # base joint frame expressed in B
         frames, axes, kinds, parents = [], [], [], []
@@ -281,14 +276,11 @@ class Robot:
                 parents.append(T @ self._parent_link(j))
                 T = T @ _mat(m.jointPlacements[j])
                 frames.append(T.copy())
-            if same is None:
-                axis, kind = self._axis(j)
-                axes.append(-axis if rev else axis)
-                kinds.append(kind)
+            axis, kind = self._axis(j) if same is None else (0.0, "")
+            axes.append(-axis if rev else axis), kinds.append(kind)
         T_tip = T @ _mat(m.frames[self._tip_id].placement)
-        if same is not None:
-            return ChainGeometry(same.joint_names, same.kinds, np.array(frames), same.axes,
-                                 T_tip, same.lower, same.upper, np.array(parents), same.reversed)
+        if same is not None:  # the placements alone differ
+            return replace(same, joint_frames=np.array(frames), T_base_tip=T_tip, parent_frames=np.array(parents))
         # Pinocchio stores "no limit" as +-max double; a continuous joint (nq = 2) has none
         iq = [m.joints[j].idx_q for j in self._chain]
         free = np.array([m.joints[j].nq == 2 for j in self._chain])
@@ -406,20 +398,9 @@ class Robot:
         for j, T in zip(self._chain[r:], C[r:]):
             m.jointPlacements[j] = _se3(inverse(T_prev) @ T)
             T_prev = T
-        return self._with_placements(m)
-
-    def _with_placements(self, m: pin.Model) -> "Robot":
-        """A copy on ``m``, a copy of this robot's model with other joint placements only:
-        the chain, its joints' axes, kinds and limits and the joints off the chain are this
-        robot's; the joint frames, parent frames and tip are read from ``m`` (the same
-        numbers as ``Robot(m, ...)`` builds, without finding the chain and reading every
-        axis through Pinocchio again: tests compare the two)."""
-        out = object.__new__(Robot)
-        out.__dict__.update(self.__dict__)
-        out.model, out._data = m, m.createData()
-        out._chain, out._reversed = list(self._chain), list(self._reversed)
-        out.geometry = out._compute_geometry(self.geometry)
-        out.off_chain = dict(self.off_chain)
+        out = object.__new__(Robot)  # the chain, its axes, kinds and limits are this robot's,
+        out.__dict__.update(self.__dict__, model=m, _data=m.createData())  # the frames m's
+        out.geometry = out._compute_geometry(self.geometry)  # (= Robot(m, ...): tests compare)
         return out
 
     def _is_offset(self, i: int, D: np.ndarray, tol: float = 1e-10) -> bool:
@@ -485,9 +466,8 @@ class Robot:
 
     def changed_origins(self, corrected: "Robot", tol: float = 1e-14,
                         joints=None) -> dict[str, np.ndarray]:
-        """URDF origins of ``corrected`` (the chain's, or of ``joints``) that differ from this
-        robot's by more than ``tol``: both sides come out of the same arithmetic, so an
-        unchanged placement compares equal to roundoff and its URDF text stays untouched."""
+        """URDF origins of ``corrected`` (the chain's, or ``joints``') more than ``tol`` off
+        this robot's (the same arithmetic both sides: an unchanged one stays untouched)."""
         mine, theirs = self.urdf_origins(joints), corrected.urdf_origins(joints)
         return {name: T for name, T in theirs.items() if np.abs(T - mine[name]).max() > tol}
 
@@ -502,11 +482,9 @@ class Robot:
         for f in m.frames:
             if f.parentFrame != link or f.type not in (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT):
                 continue
-            if f.type == pin.FrameType.JOINT:
-                T = _mat(m.jointPlacements[f.parentJoint])  # relative to the parent joint
-            else:
-                T = _mat(f.placement)
-            out[f.name] = inverse(L) @ T
+            T = f.placement if f.type == pin.FrameType.FIXED_JOINT else m.jointPlacements[
+                f.parentJoint]  # a movable joint's relative to its parent joint
+            out[f.name] = inverse(L) @ _mat(T)
         return out
 
     def link_of(self, frame: str) -> tuple[str, np.ndarray]:
