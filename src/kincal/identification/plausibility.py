@@ -370,8 +370,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     L, d = max((_change(problem, result, k) for k in range(_n_chains(problem))),
                key=lambda c: float(np.sqrt(np.mean(c[1] ** 2))) / c[0])  # the worst chain's
     corrections = []
-    for p in result.parameters:
-        if p.status == "identified" and lay.is_kinematic[lay.index(p.name)]:
+    for p, kinematic in zip(result.parameters, lay.is_kinematic.tolist(), strict=True):
+        if p.status == "identified" and kinematic:
             factor, unit = (1e3, "mm") if p.is_length else (180.0 / math.pi, "deg")
             corrections.append((p.name, p.deviation * factor, unit))
     # largest first, lengths against the reach and angles in degrees on one footing

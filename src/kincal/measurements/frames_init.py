@@ -61,7 +61,9 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
         r2 = P_sum - Rb @ p_sum
         r1 = np.einsum("ijl,lj->i", W, Rb) - c0
         sol = V @ ((V.T @ (r1 - S.T @ (Rb.T @ r2) / N)) / w)
-        if np.max(np.abs(sol - t)) <= 1e-9:  # Gauss-Newton refines it after
+        # Gauss-Newton refines it after; the largest change in Python numbers (the same
+        # differences, fewer numpy calls: this runs up to 16 times per fit)
+        if max(abs(a - b) for a, b in zip(sol.tolist(), t.tolist())) <= 1e-9:
             t = sol
             break
         t = sol
