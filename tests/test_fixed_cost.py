@@ -130,3 +130,41 @@ def test_frame_start_rotation_is_kabsch_with_its_diagonal():
         assert np.array_equal(_rotation(H), Vt.T @ D @ U.T)
         seen.add(D[2, 2])
     assert seen == {1.0, -1.0}
+
+
+def test_chain_keeps_its_last_tip_only_for_the_same_values():
+    """A chain of few poses serves a tip at the values of its last evaluation (a frame fit's
+    evaluations are all at one kinematics) with the numbers a new chain gives, read-only;
+    other kinematic or joint-term values, or another model, are evaluated anew."""
+    from kincal.models.chain import Chain
+
+    robot = Robot.load("ec66")
+    model = models.build("complete", robot.geometry)
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-2.0, 2.0, (40, model.n))
+    approach = rng.choice([-1.0, 1.0], (40, model.n))
+    x = model.nominal + rng.normal(size=model.size) * 1e-3
+    b = np.array([1e-3])
+    chain = Chain(model, q, approach, (2,))
+    for values, terms in ((x, None), (x, b), (x + 1e-9, b), (x, np.zeros(1)), (x, None)):
+        for keep in (True, False, False):
+            s = chain.state(values, terms, keep=keep)
+            fresh = Chain(model, q, approach, (2,)).state(values, terms, keep=False)
+            assert np.array_equal(s.R_tip, fresh.R_tip) and np.array_equal(s.p_tip, fresh.p_tip)
+            if not keep:
+                assert not s.R_tip.flags.writeable and not s.p_tip.flags.writeable
+    served = chain.state(x, None, keep=False)
+    assert chain.state(x, None, keep=False).R_tip is not None
+    assert np.shares_memory(served.R_tip, chain.state(x, None, keep=False).R_tip)
+    from dataclasses import replace
+
+    nominal = Chain(models.build("offsets", robot.geometry), q)
+    zero = np.zeros(model.n)
+    before = nominal.state(zero, keep=False).p_tip
+    origins = nominal.model.origins.copy()
+    origins[2, 0, 3] += 1e-3
+    moved = nominal.with_model(replace(nominal.model, origins=origins))
+    assert moved._motion is nominal._motion and moved._tip is None
+    after = moved.state(zero, keep=False).p_tip
+    assert not np.array_equal(after, before)
+    assert np.array_equal(after, Chain(moved.model, q).state(zero, keep=False).p_tip)

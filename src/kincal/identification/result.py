@@ -194,7 +194,8 @@ class CalibrationResult:
         corrected = problem.chains.corrected(lay.kinematic(x))
         sets = []
         for i, km in enumerate(problem.kinds):
-            r0, r = problem.residuals(x_start, i), problem.residuals(x, i)
+            r = problem.residuals(x, i)  # first: the fit's last evaluation was there
+            r0 = problem.residuals(x_start, i)
             a0, a = angle_errors(km, r0), angle_errors(km, r)
             o0 = None if a0 is None else AngleStats.from_angles(a0)
             o = None if a is None else AngleStats.from_angles(a)

@@ -118,6 +118,7 @@ class Chain:
         # evaluation: 128 bytes per pose and joint would otherwise stay for the whole fit
         self._motion = ([self.joint_motion(i, self.q[:, i]) for i in range(model.n)]
                         if self.N <= MOTION_CACHE_POSES else None)
+        self._tip: tuple | None = None  # (values' bytes, R_tip, p_tip) of the last state
         # each joint's parameters are contiguous in the vector: slices keep the writes cheap
         edges = np.searchsorted(model.joint_of, np.arange(model.n + 1))
         if np.any(np.diff(model.joint_of) < 0):
@@ -136,8 +137,7 @@ class Chain:
                 or not np.array_equal(model.joint_of, m.joint_of)):
             return Chain(model, self.q, self.approach, self.backlash, self.torque, self.compliance)
         out = object.__new__(Chain)
-        out.__dict__.update(self.__dict__)
-        out.model = model
+        out.__dict__.update(self.__dict__, model=model, _tip=None)  # not this model's tip
         return out
 
     def subset(self, rows) -> "Chain":
@@ -201,6 +201,13 @@ class Chain:
 
         keep=False keeps only the tip (cheaper when no derivative is wanted)."""
         m, N = self.model, self.N
+        # few poses: the last tip is kept, for the next evaluation at the same values without
+        # derivatives (a frame fit moves only the frames: its every evaluation is at the same
+        # kinematics); the same numbers, whether the frames were kept or not
+        key = (np.asarray(x, float).tobytes(), None if backlash is None or not np.any(backlash)
+               else np.asarray(backlash, float).tobytes()) if self._motion is not None else None
+        if not keep and key is not None and self._tip is not None and self._tip[0] == key:
+            return ChainState(self, x, self._tip[1], self._tip[2], [], [])
         P = m.placements(x)
         # the frames before and after each placement, written in place when kept (one
         # (n, N, 4, 4) array each, so the columns need no stacking); a constant frame times
@@ -232,6 +239,9 @@ class Chain:
                                                            ).reshape(N, 4, 4)
         if T.ndim == 2:
             T = np.broadcast_to(T, (N, 4, 4))
+        if key is not None:  # read-only: shared by the states it serves
+            T.flags.writeable = False
+            self._tip = (key, T[:, :3, :3], T[:, :3, 3])
         return ChainState(self, x, T[:, :3, :3], T[:, :3, 3],
                           [] if before is None else before, [] if placed is None else placed)
 
