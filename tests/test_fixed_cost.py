@@ -168,3 +168,55 @@ def test_chain_keeps_its_last_tip_only_for_the_same_values():
     after = moved.state(zero, keep=False).p_tip
     assert not np.array_equal(after, before)
     assert np.array_equal(after, Chain(moved.model, q).state(zero, keep=False).p_tip)
+
+
+def test_kept_of_the_free_columns_alone_is_the_analysis_partition():
+    """identifiable of the free columns alone (the frame start's: its kinematic columns are
+    held) keeps what analyze keeps of the whole Jacobian: random columns with duplicates,
+    near duplicates (1e-7 apart, the tolerance), a run of nearly parallel columns, held
+    columns of every kind, and the frame start's own Jacobians of several robots."""
+    from kincal.identification.selection import analyze, identifiable
+    from kincal.models import mdh
+    from kincal.planning.simulation import Truth, measure, planted_table
+
+    rng, robots = np.random.default_rng(6), 0
+    names = tuple(f"j{i // 4}.{'a alpha d theta'.split()[i % 4]}" for i in range(12)) + (
+        "base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz", "tool.x", "tool.y",
+        "tool.z", "j1.backlash")
+    cases = []
+    for k in range(60):
+        J = rng.normal(size=(90, 22)) * 10.0 ** rng.uniform(-3, 3, 22)
+        a, b, c = rng.choice(22, 3, replace=False)
+        J[:, a] = J[:, b] * rng.normal() + J[:, c] * rng.normal()
+        if k % 3 == 0:
+            J[:, c] += 10.0 ** rng.uniform(-9, -5) * rng.normal(size=90) * np.abs(J[:, c]).max()
+        if k % 5 == 0:
+            for d in rng.choice(22, 4, replace=False):
+                J[:, d] = J[:, b] + 1e-9 * rng.normal(size=90)
+        free = rng.random(22) < 0.7
+        free[rng.integers(22)] = False
+        cases.append((J, free))
+    for name in ("ec66", "ur10"):
+        robot = Robot.load(name)
+        model = mdh.extract(robot.geometry)
+        g = robot.geometry
+        q = rng.uniform(np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi), (30, g.n))
+        for tool in ((0.02, 0.01, 0.12), (0.0, 0.0, 0.0)):
+            truth = Truth(planted_table(model, rng), np.zeros(6), np.array(tool))
+            data = measure(model, truth, q, 5e-5, rng)
+            problem = CalibrationProblem(robot, data, CalibrationOptions(method="ls"))
+            lay = problem.layout
+            _, J = problem.residual_function(kinematic=False)(problem.x_nominal / problem.scale,
+                                                              True)
+            cases.append((J * lay.reporting_scale() / problem.scale, lay.is_frame.copy()))
+            robots += 1
+    seen = 0
+    for J, free in cases:
+        p = J.shape[1]
+        nm = names if p == len(names) else tuple(f"j{i}.theta" for i in range(p - 9)) + names[
+            12:21]
+        nk = 12 if p == len(names) else p - 9
+        whole = analyze(J, nm, nk, free).kept
+        assert identifiable(J, nm, nk, free) == whole
+        seen += len(whole) < int(free.sum())
+    assert seen >= 10 and robots == 4  # cases that drop some free column; the robots'

@@ -162,9 +162,11 @@ def _within_rank(J, norms, names, n_kinematic, free, floor) -> tuple[list, list]
     return sorted(kept), sorted(dropped)
 
 
-def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: int | None):
+def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: int | None,
+            scale: float | None = None):
     """The partition of :func:`analyze`: (J or its triangle, names, free, m, column norms,
-    kept, dropped, singular values of the free unit columns, rank)."""
+    kept, dropped, singular values of the free unit columns, rank). scale: the largest
+    column norm (default: of these columns)."""
     names = tuple(names)
     p = len(names)
     free = np.ones(p, dtype=bool) if free is None else np.asarray(free, dtype=bool)
@@ -174,7 +176,8 @@ def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: in
     if J.shape[0] > J.shape[1]:
         J = np.asarray(np.linalg.qr(J, mode="r"))  # Householder: the rank decision needs full accuracy
     norms = np.linalg.norm(J, axis=0)
-    scale = float(norms.max()) if norms.size else 1.0
+    if scale is None:
+        scale = float(norms.max()) if norms.size else 1.0
     basis = np.zeros((J.shape[0], J.shape[1]))  # the kept columns' orthonormal basis
     kept: list[int] = []
     dropped: list[int] = []
@@ -211,8 +214,21 @@ def identifiable(J: np.ndarray, names, n_kinematic: int, free=None,
                  rank_tol: float = RANK_TOL, m: int | None = None) -> tuple[str, ...]:
     """The names :func:`analyze` keeps, without its report (why each dropped one was
     dropped, weak ones, condition number): for a caller that needs only the partition (the
-    frame start's, three analyses per fit)."""
-    _, names, _, _, _, kept, _, _, _ = _select(J, names, n_kinematic, free, rank_tol, m)
+    frame start's, three analyses per fit). Of the free columns alone when some are not
+    free (the frame start's: its kinematic columns are held): the order of preference, the
+    projections and the rank decision the same among them, the scale of every column."""
+    if free is not None and not np.all(free) and J.shape[0] > J.shape[1]:
+        idx = np.flatnonzero(free)
+        norms = np.linalg.norm(J, axis=0)
+        return _identifiable_of(J[:, idx], tuple(names[i] for i in idx),
+                               int(np.sum(idx < n_kinematic)), rank_tol, m,
+                               float(norms.max()) if norms.size else 1.0)
+    return _identifiable_of(J, names, n_kinematic, rank_tol, m, None, free)
+
+
+def _identifiable_of(J, names, n_kinematic, rank_tol, m, scale, free=None) -> tuple[str, ...]:
+    """:func:`identifiable` of these columns, the largest column norm ``scale`` (None: theirs)."""
+    _, names, _, _, _, kept, _, _, _ = _select(J, names, n_kinematic, free, rank_tol, m, scale)
     return tuple(names[i] for i in kept)
 
 
