@@ -256,14 +256,13 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     seen = [c for c in dropped if norms[c] > rank_tol * scale]
     # every dropped column against the kept ones in one solve (one SVD of Jk)
     coefs = dict(zip(seen, np.linalg.lstsq(Jk, J[:, seen], rcond=None)[0].T)) if seen else {}
-    for c in dropped:
+    for c in dropped:  # Python numbers read once (the same values: float of each element)
         if c not in coefs:
             duplicates.append(Duplicate(names[c], ()))
             continue
-        coef = coefs[c]
-        big = np.argsort(-np.abs(coef))
-        top = [(names[kept[i]], float(coef[i])) for i in big[:4]
-               if abs(coef[i]) >= 0.05 * abs(coef[big[0]])]
+        coef = coefs[c].tolist()
+        big = np.argsort(-np.abs(coefs[c]))[:4].tolist()
+        top = [(names[kept[i]], coef[i]) for i in big if abs(coef[i]) >= 0.05 * abs(coef[big[0]])]
         duplicates.append(Duplicate(names[c], tuple(top)))
     weak = []
     if kept:
@@ -271,9 +270,9 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
         Ginv = np.linalg.pinv(G)
         independence = 1.0 / np.sqrt(np.maximum(np.diag(Ginv), 1e-300))
         sensitivity = independence * norms[kept] / np.sqrt(max(rows, 1))
-        for i, c in enumerate(kept):
-            if independence[i] < weak_independence or sensitivity[i] < weak_sensitivity:
-                weak.append(Weak(names[c], float(independence[i]), float(sensitivity[i])))
+        for c, ind, sen in zip(kept, independence.tolist(), sensitivity.tolist()):
+            if ind < weak_independence or sen < weak_sensitivity:
+                weak.append(Weak(names[c], ind, sen))
     return Identifiability(names, tuple(names[i] for i in free_idx), tuple(names[i] for i in kept),
                            tuple(names[i] for i in dropped),
                            tuple(names[i] for i in range(p) if not free[i]), rank, sv, cond,
