@@ -408,7 +408,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             v = dt.joint_values[i, c]
             angle_max = top
             outside = bool(v < gi.lower[c] - 1e-6 or v > gi.upper[c] + 1e-6)
-    frames = set(problem.robot.frame_names())
+    frames = set(problem.robot.frame_names()) if any(dt.ignored_columns for dt in datas) else ()
     off_chain = tuple(dict.fromkeys(c for dt in datas for c in dt.ignored_columns
                                     if c in frames and c not in problem.error_model.joint_names))
     return Evidence(
