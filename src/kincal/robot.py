@@ -266,7 +266,7 @@ class Robot:
         placements only, whose axes (in their own frames), kinds and limits are kept."""
         m = self.model
         T = inverse(_mat(m.frames[self._base_id].placement))  # base joint frame expressed in B
-        frames, axes, kinds, parents = [], [], [], []
+        frames, parents = [], []
         for j, rev in zip(self._chain, self._reversed):
             if rev:  # climbing: joint j's frame is where we stand; its parent joint is next
                 frames.append(T.copy())
@@ -276,11 +276,11 @@ class Robot:
                 parents.append(T @ self._parent_link(j))
                 T = T @ _mat(m.jointPlacements[j])
                 frames.append(T.copy())
-            axis, kind = self._axis(j) if same is None else (0.0, "")
-            axes.append(-axis if rev else axis), kinds.append(kind)
         T_tip = T @ _mat(m.frames[self._tip_id].placement)
         if same is not None:  # the placements alone differ
             return replace(same, joint_frames=np.array(frames), T_base_tip=T_tip, parent_frames=np.array(parents))
+        axes, kinds = zip(*[self._axis(j) for j in self._chain])  # each in its own frame
+        axes = [-a if rev else a for a, rev in zip(axes, self._reversed)]
         # Pinocchio stores "no limit" as +-max double; a continuous joint (nq = 2) has none
         iq = [m.joints[j].idx_q for j in self._chain]
         free = np.array([m.joints[j].nq == 2 for j in self._chain])
