@@ -181,7 +181,8 @@ class Chain:
     def state(self, x: np.ndarray, backlash: np.ndarray | None = None,
               keep: bool = True) -> "ChainState":
         """Evaluate kinematic parameters x (and the joint terms' values: backlash, then
-        compliance) on every pose.
+        compliance) on every pose; x (N, p): one kinematic vector per pose (the folds of
+        Algorithm 1 evaluated together, :mod:`kincal.identification.cross_validation`).
 
         keep=False keeps only the tip (cheaper when no derivative is wanted)."""
         m, N = self.model, self.N
@@ -197,6 +198,9 @@ class Chain:
                 H = G @ P[i]
                 if placed is not None:
                     placed[i] = H
+            elif P.ndim == 4:  # one placement per pose
+                H = placed[i] if placed is not None else np.empty((N, 4, 4))
+                np.matmul(G, P[i], out=H)
             else:
                 H = placed[i] if placed is not None else np.empty((N, 4, 4))
                 np.matmul(G.reshape(-1, 4), P[i], out=H.reshape(-1, 4))
