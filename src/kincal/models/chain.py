@@ -55,6 +55,16 @@ def axis_cross(i: int, v: np.ndarray) -> np.ndarray:
     return out
 
 
+def equal_runs(x: np.ndarray) -> list[tuple[int, int]]:
+    """[(start, stop)] of the runs of equal consecutive rows of x (N, p): one parameter
+    vector per pose, as the folds of Algorithm 1 evaluated together give it (a few
+    vectors, each over many poses), is evaluated once per run where that is cheaper."""
+    first = np.ones(len(x), dtype=bool)
+    np.any(x[1:] != x[:-1], axis=1, out=first[1:])
+    starts = np.flatnonzero(first).tolist()
+    return list(zip(starts, starts[1:] + [len(x)]))
+
+
 def motion_basis(w: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(4, 12): the top rows [R | c - R c] of a turn by q about the unit axis w (3,) through
     the point c (3,), flattened, are (cos q, sin q, 1 - cos q, 1) times this matrix

@@ -59,7 +59,7 @@ import numpy as np
 
 from kincal.errors import OptionError
 from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
-from kincal.models.chain import cross_rows
+from kincal.models.chain import cross_rows, equal_runs
 from kincal.rotations import inverse, transform
 
 PARALLEL_TOL = 1e-6  # |sin| of the angle between axes below which they count as parallel
@@ -197,7 +197,13 @@ class MdhModel(ErrorModel):
 
     def placements(self, x) -> np.ndarray:
         """(n, 4, 4) A_i = Tx(a) Rx(alpha) Ry(beta) Rz(theta) Tz(d), vectorised over joints;
-        (n, N, 4, 4) for one vector per pose x (N, p)."""
+        (n, N, 4, 4) for one vector per pose x (N, p), made once per run of equal rows (the
+        folds of Algorithm 1 evaluated together: a few vectors over many poses)."""
+        if np.ndim(x) == 2 and len(x) > 1:
+            runs = equal_runs(np.asarray(x, dtype=float))
+            if len(runs) < len(x):
+                A = self.placements(np.asarray(x)[[a for a, _ in runs]])
+                return np.repeat(A, [b - a for a, b in runs], axis=1)
         table, beta = self.unpack(x)
         a, alpha, d, theta = table.T  # (n,) each, or (n, N) per pose
         beta = beta.T
