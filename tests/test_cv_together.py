@@ -91,8 +91,20 @@ def test_folds_are_fitted_one_at_a_time_with_joint_terms():
 
     data = _data(8, 0.4)
     plain = CalibrationProblem(ROBOT, data, CalibrationOptions(method="l2"))
-    assert together_possible(plain)
+    assert together_possible(plain, np.arange(plain.n_samples))
     joints = ROBOT.geometry.joint_names
     terms = CalibrationProblem(ROBOT, data, CalibrationOptions(method="l2",
                                                                backlash=(joints[1],)))
-    assert terms.layout.n_terms == 1 and not together_possible(terms)
+    assert terms.layout.n_terms == 1 and not together_possible(terms, np.arange(60))
+
+
+def test_folds_streamed_in_blocks_are_fitted_one_at_a_time():
+    """Folds of more samples than a block (the solver's streamed path) are not evaluated
+    together: their fits stay the streamed ones."""
+    from kincal.identification.cross_validation import together_possible
+    from kincal.identification.problem import BLOCK_SAMPLES
+
+    n = BLOCK_SAMPLES + 100
+    problem = CalibrationProblem(ROBOT, _data(9, None, n), CalibrationOptions(method="l2"))
+    assert together_possible(problem, np.arange(100))
+    assert not together_possible(problem, np.arange(n))

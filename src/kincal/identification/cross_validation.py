@@ -150,7 +150,7 @@ def fold_fitter(problem, free: np.ndarray, samples: np.ndarray | None = None) ->
         return problem.fit(lam, train, free=free, residual=cache[key], options=options,
                            start_u=None if start is None else start.u)
 
-    if together_possible(problem):
+    if together_possible(problem, samples):
         setattr(fit, "together", _together(problem, free, samples, options))
     return fit
 
@@ -174,18 +174,20 @@ def validation_error(problem, samples: np.ndarray) -> Callable:
         edges = np.cumsum([0] + [len(r) for r in rows])
         return [float(np.mean(e[a:b]) / MM) for a, b in zip(edges[:-1], edges[1:])]
 
-    if together_possible(problem):
+    if together_possible(problem, samples):
         setattr(error, "together", together)
     return error
 
 
-def together_possible(problem) -> bool:
-    """Whether the folds' fits can be evaluated together (:func:`_together`): one set of
-    measured points on an MD-H-family chain (whose evaluation takes one parameter vector
-    per pose), without joint terms."""
+def together_possible(problem, samples: np.ndarray) -> bool:
+    """Whether the folds' fits on the rows ``samples`` can be evaluated together
+    (:func:`_together`): one set of measured points on an MD-H-family chain (whose
+    evaluation takes one parameter vector per pose), without joint terms, and few enough
+    samples that no fold's rows are streamed in blocks (the solver's dense path)."""
     kinds = problem.kinds
     return (len(kinds) == 1 and getattr(kinds[0], "kind", "") == "point"
-            and problem.layout.n_terms == 0 and hasattr(kinds[0].error_model, "unpack"))
+            and problem.layout.n_terms == 0 and hasattr(kinds[0].error_model, "unpack")
+            and getattr(problem.residual_function(samples), "n_blocks", 1) == 1)
 
 
 def _together(problem, free: np.ndarray, samples: np.ndarray | None, options) -> Callable:
@@ -224,9 +226,7 @@ def _together(problem, free: np.ndarray, samples: np.ndarray | None, options) ->
             key = rows_of(train).tobytes()
             if key not in folds:
                 folds[key] = remembering(problem.residual_function(rows_of(train)))
-            if getattr(folds[key], "n_blocks", 1) > 1:  # streamed: not evaluated here
-                raise ValueError("a fold's rows are streamed in blocks; fit it on its own")
-            rem = folds[key]
+            rem = folds[key]  # not streamed (together_possible): the solver yields
             run = problem.fit(lam, rows_of(train), free=free, residual=rem, options=options,
                               start_u=None if starts[f] is None else starts[f].u, driven=True)
             runs.append((run, rem))
