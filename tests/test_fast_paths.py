@@ -244,3 +244,177 @@ def test_gelsy_from_scipys_file_is_the_public_routine():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120, check=True).stdout.split("\n")
     assert out[0] == "LINALG: False" and out[1].startswith("SAME: True") and "dgelsy" in out[1], out
+
+
+@pytest.mark.parametrize("spread", [1.0, 0.1, 0.0])
+def test_frame_start_from_sums_equals_the_stacked_rows(spread):
+    """The closed-form start's rounds on 3 x 3 sums give the frame and tool point of the
+    rounds on the stacked (3N, 6) rows; tip orientations all alike (spread 0) take the
+    stacked rows themselves (their minimum-norm answer)."""
+    from kincal.measurements import frames_init
+    from kincal.rotations import base_rotation
+
+    rng = np.random.default_rng(7)
+    R = np.array([base_rotation(*rng.uniform(-spread, spread, 3)) for _ in range(60)])
+    p = rng.uniform(-0.5, 0.5, (60, 3))
+    tool = np.array([0.02, 0.01, 0.12])
+    P = (p + R @ tool) @ base_rotation(0.1, 0.2, 0.3).T + [1.0, 2.0, 3.0]
+    P += 1e-5 * rng.normal(size=P.shape)
+    for t0 in (np.zeros(3), frames_init.pivot_tool(R, p)):
+        got = frames_init.alternate(R, p, P, t0)
+        want = frames_init._alternate_rows(R, p, P, np.array(t0, float), 8)
+        for a, b in zip(got, want):
+            assert np.abs(np.asarray(a) - np.asarray(b)).max() < 1e-9
+        if spread == 0.0:
+            assert all(np.array_equal(a, b) for a, b in zip(got, want))
+
+
+def test_fit_starts_from_the_analysis_pass(monkeypatch):
+    """The fit's first linearisation is the Jacobian the identifiability analysis made at
+    the same start (no second pass), and the result is that of a fit that makes its own."""
+    from kincal.identification import reduction
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    robot, data = _point_data(60)
+    used = []
+    pop = dict.pop
+
+    class Spy(dict):
+        def pop(self, key, default=None):
+            out = pop(self, key, default)
+            used.append(out is not None)
+            return out
+
+    class Forgetful(dict):
+        def __setitem__(self, key, value):
+            pass
+
+    def fits(memo_class):
+        made = reduction.residual_function
+
+        def residual_function(*args, **kwargs):
+            out = made(*args, **kwargs)
+            out.memo = memo_class()
+            return out
+
+        monkeypatch.setattr(reduction, "residual_function", residual_function)
+        import kincal.identification.problem as problem_module
+
+        monkeypatch.setattr(problem_module, "residual_function", residual_function)
+        return [CalibrationProblem(robot, data, CalibrationOptions(method=m)).solve()
+                for m in ("ls", "l2")]
+
+    reused = fits(Spy)
+    assert any(used)
+    fresh = fits(Forgetful)
+    for a, b in zip(reused, fresh):
+        assert np.array_equal(a.x, b.x) and a.identifiability.kept == b.identifiability.kept
+
+
+def test_error_models_are_built_once_per_geometry():
+    """Every fit of one robot shares its error models (built once per geometry object),
+    read-only, equal to a fresh build; a corrected robot (a new geometry) gets its own."""
+    from kincal import models
+
+    robot = Robot.load("ec66")
+    for name in models.MODELS:
+        a = models.build(name, robot.geometry)
+        assert models.build(name, robot.geometry) is a
+        fresh = models._build(name, robot.geometry)
+        for key, value in vars(fresh).items():
+            if isinstance(value, np.ndarray):
+                assert np.array_equal(getattr(a, key), value)
+                with pytest.raises(ValueError):
+                    getattr(a, key)[...] = 0.0
+    moved = robot.geometry.joint_frames.copy()
+    moved[2, 0, 3] += 1e-3
+    other = robot.with_joint_frames(moved)
+    b = models.build("complete", other.geometry)
+    assert b is not models.build("complete", robot.geometry)
+    assert not np.array_equal(b.nominal, models.build("complete", robot.geometry).nominal)
+
+
+def test_kept_per_robot_equals_made_afresh():
+    """What a fit keeps per robot (the structural analysis's seeded poses, the gate's
+    nominal tip poses) gives what making it afresh gives, to the bit, and a second data set
+    of the same robot reuses it."""
+    from kincal import models
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+
+    robot, data = _point_data(60)
+    _, other = _point_data(60, seed=1)
+    runs = []
+    for clear in (True, False, True):
+        if clear:
+            models._MEMO.clear()
+        for d in (data, other):
+            problem = CalibrationProblem(robot, d, CalibrationOptions(method="ls"))
+            result = problem.solve()
+            runs.append((problem.structural(), result.plausibility.evidence))
+    for k in range(2):
+        first = runs[k]
+        for again in runs[k::2][1:]:
+            assert first[0].kept == again[0].kept and np.array_equal(first[0].singular_values,
+                                                             again[0].singular_values)
+            assert first[1] == again[1]
+    assert any(key[0][0] == "gate configurations" for key in models._MEMO)
+    assert any(key[0][0] == "structural poses" for key in models._MEMO)
+
+
+def test_a_robots_kept_models_outlive_one_off_geometries():
+    """Each fit's corrected robot is a new geometry: many of them (more than the memo
+    holds) do not push out the models of the robot that every fit uses."""
+    from kincal import models
+
+    robot = Robot.load("ec66")
+    kept = models.build("complete", robot.geometry)
+    frames = robot.geometry.joint_frames.copy()
+    for k in range(models._MEMO_MAX + 10):
+        frames[1, 2, 3] += 1e-6
+        models.build("offsets", robot.with_joint_frames(frames).geometry)
+        assert models.build("complete", robot.geometry) is kept
+    assert len(models._MEMO) <= models._MEMO_MAX
+
+
+def test_kept_only_is_the_analysis_partition():
+    """selection.identifiable (the frame start's) keeps exactly what analyze keeps: full
+    rank, exact duplicates, a run of nearly parallel columns (analyze's rank guard), fixed
+    columns, and the triangle of many rows."""
+    from kincal.identification.selection import analyze, identifiable
+
+    rng = np.random.default_rng(3)
+    names = tuple(f"j{i // 4}.{'a alpha d theta'.split()[i % 4]}" for i in range(12)) + (
+        "base.x", "base.y", "base.z", "tool.x", "tool.y", "tool.z")
+    cases = []
+    J = rng.normal(size=(90, 18))
+    cases.append((J, None))
+    D = J.copy()
+    D[:, 5] = D[:, 1] - 2 * D[:, 14]
+    cases.append((D, None))
+    P = J.copy()
+    for c in (2, 6, 10):
+        P[:, c] = P[:, 0] + 1e-9 * rng.normal(size=90)
+    cases.append((P, None))
+    free = np.ones(18, dtype=bool)
+    free[[3, 15]] = False
+    cases.append((D, free))
+    for A, f in cases:
+        assert identifiable(A, names, 12, f) == analyze(A, names, 12, f).kept
+        R = np.linalg.qr(A, mode="r")
+        assert identifiable(R, names, 12, f, m=90) == analyze(R, names, 12, f, m=90).kept
+
+
+def test_offsets_at_zero_are_the_origins(tmp_path):
+    """The offsets model at zero offsets (the URDF chain, ChainKinematics) places each joint
+    at its origin: the same placements as the offset motions' product, and the same tip
+    points through the chain."""
+    from kincal.models import build
+
+    for robot in _robots(tmp_path):
+        model = build("offsets", robot.geometry)
+        zero = np.zeros(model.n)
+        fast = model.placements(zero)
+        slow = np.array([model.origins[i] @ model._offset(i, 0.0) for i in range(model.n)])
+        assert np.array_equal(fast, slow)
+        fast[...] = 0.0  # a copy: the shared model is untouched
+        assert np.array_equal(model.placements(zero), slow)

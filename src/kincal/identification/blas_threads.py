@@ -20,7 +20,13 @@ from threadpoolctl import ThreadpoolController
 @functools.lru_cache(maxsize=1)
 def _controller() -> ThreadpoolController:
     """The BLAS libraries loaded in this process, found once (a scan costs ~1 ms, as
-    much as 8 % of a small fit); kincal loads numpy and scipy before it solves."""
+    much as 8 % of a small fit). The solver's LAPACK (scipy's, with an OpenBLAS of its own
+    beside numpy's) is loaded first: loaded later, at a fit's first step, it was not among
+    them, so it ran with its default threads whatever the limit, and the new worker thread
+    it started busy-waited ~0.1 s after the process's first fit (counted as CPU time)."""
+    from kincal.identification import solver
+
+    solver.lapack()
     return ThreadpoolController()
 
 

@@ -169,14 +169,14 @@ class ParameterLayout:
                 + tuple(f"{j}.backlash" for j in self.backlash)
                 + tuple(f"{j}.compliance" for j in self.compliance))
 
-    @property
+    @cached_property  # read-only: the fields are frozen, the fit asks often
     def is_length(self) -> np.ndarray:
         """(p,) True for lengths [m], False for angles [rad]."""
-        return np.array(list(self.kinematic_is_length)
-                        + [b for i, (_, flags) in enumerate(self.set_frames)
-                           for b, own in zip(flags, self.own(i)) if own]
-                        + list(self.backlash_is_length) + [False] * len(self.compliance),
-                        dtype=bool)
+        return _read_only(np.array(list(self.kinematic_is_length)
+                                   + [b for i, (_, flags) in enumerate(self.set_frames)
+                                      for b, own in zip(flags, self.own(i)) if own]
+                                   + list(self.backlash_is_length)
+                                   + [False] * len(self.compliance), dtype=bool))
 
     def penalty_scale(self, length_scale: float, angle_scale: float) -> np.ndarray:
         """(p,) the unit s of the penalty per parameter [SI]: ``length_scale`` for lengths,
@@ -192,29 +192,29 @@ class ParameterLayout:
         mask[sl] = True
         return mask
 
-    @property
+    @cached_property  # read-only: the fields are frozen, the fit asks often
     def is_kinematic(self) -> np.ndarray:
         """(p,) the error model's parameters (what the corrected URDF carries)."""
-        return self._mask(slice(0, self.n_kinematic))
+        return _read_only(self._mask(slice(0, self.n_kinematic)))
 
-    @property
+    @cached_property  # read-only: the fields are frozen, the fit asks often
     def is_frame(self) -> np.ndarray:
         """(p,) the sets' frame parameters (measurement frames, tool points, planes, ...)."""
-        return self._mask(slice(self.n_kinematic, self.n_kinematic + self.n_frames))
+        return _read_only(self._mask(slice(self.n_kinematic, self.n_kinematic + self.n_frames)))
 
-    @property
+    @cached_property  # read-only: the fields are frozen, the fit asks often
     def is_backlash(self) -> np.ndarray:
         """(p,) the joint terms (backlash and compliance)."""
-        return self._mask(self.backlash_slice)
+        return _read_only(self._mask(self.backlash_slice))
 
-    @property
+    @cached_property  # read-only: the fields are frozen, the fit asks often
     def is_compliance(self) -> np.ndarray:
-        return self._mask(slice(self.size - len(self.compliance), self.size))
+        return _read_only(self._mask(slice(self.size - len(self.compliance), self.size)))
 
-    @property
+    @cached_property  # read-only: the fields are frozen, the fit asks often
     def is_penalised(self) -> np.ndarray:
         """(p,) the parameters with a nominal value that L2 pulls toward: all but frames."""
-        return ~self.is_frame
+        return _read_only(~self.is_frame)
 
     @property
     def classes(self) -> tuple[str, ...]:
@@ -289,3 +289,8 @@ class ParameterLayout:
         if x.size != self.size:
             raise ParameterError(f"{self.size} values expected, got {x.size}")
         return x
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a

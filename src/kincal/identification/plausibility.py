@@ -68,6 +68,7 @@ import numpy as np
 
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.measurements.checks import UNIT_RATIO, spread
+from kincal.models import per_geometry
 
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
@@ -448,12 +449,32 @@ def _change(problem: CalibrationProblem, result: CalibrationResult,
         k = lay.index(name)
         tool_start, tool = result.x_start[k:k + 3], result.x[k:k + 3]
     L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
+    # the configurations and the nominal robot's tip poses there depend on the robot alone:
+    # kept per robot (models.per_geometry); the same arithmetic as _tool_points after
+    q, R_tip, p_tip = per_geometry(("gate configurations", N_CONFIGURATIONS), g,
+                                   lambda: _configurations(robot))
+    return L, _aligned_distances(p_tip + R_tip @ tool_start,
+                                 _tool_points(corrected, q, tool)) * 1e3
+
+
+def _configurations(robot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q (M, n), R_tip (M, 3, 3), p_tip (M, 3)), read-only: the gate's seeded joint values
+    over the robot's limits (unbounded revolute: a turn) and its tip frame there, in the
+    base frame (:func:`_tool_points`' chain)."""
+    from kincal.models.chain import Chain
+    from kincal.models.kinematics import ChainKinematics
+
+    g = robot.geometry
     span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
     lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
     hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
     q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
-    return L, _aligned_distances(_tool_points(robot, q, tool_start),
-                                 _tool_points(corrected, q, tool)) * 1e3
+    model = ChainKinematics.of(g).model
+    state = Chain(model, q).state(np.zeros(model.n), keep=False)
+    out = q, state.R_tip, state.p_tip
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def _tool_points(robot, q: np.ndarray, tool: np.ndarray) -> np.ndarray:

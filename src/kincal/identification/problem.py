@@ -264,7 +264,7 @@ class CalibrationProblem:
             residual = self.residual_function(kinematic=False)
             # only what the data can fix moves (an unseen flush contact point stays put)
             kept = analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
-                                lay.names, lay.n_kinematic, free, o.rank_tol).kept
+                                lay.names, lay.n_kinematic, free, o.rank_tol, kept_only=True)
             free = free & np.isin(np.array(lay.names), kept)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = sol.u * self.scale
@@ -333,15 +333,21 @@ class CalibrationProblem:
         from kincal.measurements.point import MeasurementModel
 
         g, lay = self.robot.geometry, self.layout
-        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
-        rng, K = np.random.default_rng(0), self.kinds[0].data.n_points
-        q = np.repeat(rng.uniform(lo, hi, size=(2 * lay.size, g.n)), K, axis=0)
-        approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * lay.size, g.n)), K, axis=0)
-        points = np.tile(np.arange(K), 2 * lay.size)
-        _, J = MeasurementModel(self.chains.models[0], q, approach, lay.backlash, points, K,
-                                self.chains.torques(q, lay.compliance), lay.compliance
-                                ).jacobian(self.start())
+        K = self.kinds[0].data.n_points
+
+        def poses():  # seeded: the same for every fit of this robot (kept per robot)
+            lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
+            hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+            rng = np.random.default_rng(0)
+            q = np.repeat(rng.uniform(lo, hi, size=(2 * lay.size, g.n)), K, axis=0)
+            approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * lay.size, g.n)), K, axis=0)
+            points = np.tile(np.arange(K), 2 * lay.size)
+            return MeasurementModel(self.chains.models[0], q, approach, lay.backlash, points, K,
+                                    self.chains.torques(q, lay.compliance), lay.compliance)
+
+        _, J = error_models.per_geometry(
+            ("structural poses", self.model_name, lay.size, K, lay.backlash, lay.compliance),
+            g, poses).jacobian(self.start())
         J = J.reshape(-1, lay.size) * lay.reporting_scale() / MM
         self._structural = analyze(J, lay.names, lay.n_kinematic, self._unfixed(),
                                    self.options.rank_tol)
@@ -368,9 +374,9 @@ class CalibrationProblem:
         """(p,) the parameters the fit moves: identifiable ones, and ``free`` names."""
         lay = self.layout
         mask = np.zeros(lay.size, dtype=bool)
-        kept = self.analyze().kept
+        kept = self.analyze().kept  # names of this layout: no patterns to expand
         if kept:
-            mask[lay.indices(kept)] = True
+            mask[[lay.index(n) for n in kept]] = True
         if self.options.free:
             mask[lay.indices(self.options.free)] = True
         return mask if self.prior is None else mask | self.prior.covered

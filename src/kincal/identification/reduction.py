@@ -185,25 +185,34 @@ def residual_function(parts, layout, weights, scale, kinematic: bool = True,
     out = cast(BlockedResidual, residual)  # the attributes are set here
     out.blocks = blocks
     out.rows, out.n_blocks = m, sum(len(part[3]) for part in parts)
-    out.memo = {}  # u bytes: (r, J^T J, J^T r) of a pass made by the analysis (analyze_rows)
+    out.memo = {}  # u bytes: of the pass made by the analysis (analyze_rows) at u, for the
+    #                fit's first linearisation there: (r, J^T J, J^T r) streamed, (r, J) dense
     return out
 
 
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
-                 n_kinematic: int, free: np.ndarray, rank_tol: float):
+                 n_kinematic: int, free: np.ndarray, rank_tol: float, kept_only: bool = False):
     """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
     scaled by ``column_scale``; for rows streamed in blocks (many poses), of its QR triangle
     (the same column norms, projections and singular values), built without the whole J,
     in a pass that also sums the normal equations at u and leaves them in the residual's
-    ``memo`` for the fit's first linearisation (:func:`linearise`), which starts there."""
-    from kincal.identification.selection import analyze
+    ``memo`` for the fit's first linearisation (:func:`linearise`), which starts there.
+    kept_only: only the names it keeps (:func:`kincal.identification.selection.identifiable`)."""
+    from kincal.identification.selection import analyze, identifiable
+
+    select = identifiable if kept_only else analyze  # the same partition, without the report
 
     if getattr(residual, "n_blocks", 1) <= 1:
-        return analyze(residual(u, True)[1] * column_scale, names, n_kinematic, free, rank_tol)
+        r, J = residual(u, True)
+        memo = getattr(residual, "memo", None)
+        if memo is not None:  # the fit that starts at u takes (r, J) from here (linearise)
+            memo.clear()
+            memo[u.tobytes()] = (r, J)
+        return select(J * column_scale, names, n_kinematic, free, rank_tol)
     blocked = cast(BlockedResidual, residual)
     p = u.size
     normal = np.empty(blocked.rows), np.zeros((p, p)), np.zeros(p)
     R, m = stacked_triangle(blocked.blocks(u), normal=normal)
     blocked.memo.clear()
     blocked.memo[u.tobytes()] = normal
-    return analyze(R * column_scale, names, n_kinematic, free, rank_tol, m=m)
+    return select(R * column_scale, names, n_kinematic, free, rank_tol, m=m)

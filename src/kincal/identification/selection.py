@@ -18,6 +18,8 @@ pivoting among equals) and, being greedy in a fixed order, stable as poses are a
 
 from __future__ import annotations
 
+import math
+
 import re
 from dataclasses import dataclass
 
@@ -160,21 +162,13 @@ def _within_rank(J, norms, names, n_kinematic, free, floor) -> tuple[list, list]
     return sorted(kept), sorted(dropped)
 
 
-def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float = RANK_TOL,
-            weak_independence: float = WEAK_INDEPENDENCE,
-            weak_sensitivity: float = WEAK_SENSITIVITY, m: int | None = None
-            ) -> Identifiability:
-    """Identifiability of the parameters from a Jacobian in reporting units.
-
-    J: (m, p) rows = residual components [mm], columns = parameters [mm or deg]; or the
-    triangle R (p, p) of its QR factorisation, with its number of rows ``m`` given.
-    free: (p,) bool, the parameters the user did not fix (default: all).
-    """
+def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: int | None):
+    """The partition of :func:`analyze`: (J or its triangle, names, free, m, column norms,
+    kept, dropped, singular values of the free unit columns, rank)."""
     names = tuple(names)
     p = len(names)
     free = np.ones(p, dtype=bool) if free is None else np.asarray(free, dtype=bool)
     m = J.shape[0] if m is None else m
-    rows = m // 3 if m % 3 == 0 else m  # poses, for RMS figures
     # J = Q R: R has the same column norms, projections and singular values, so all
     # that follows works on p x p numbers whatever the number of poses
     if J.shape[0] > J.shape[1]:
@@ -184,18 +178,20 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     basis = np.zeros((J.shape[0], J.shape[1]))  # the kept columns' orthonormal basis
     kept: list[int] = []
     dropped: list[int] = []
+    free_of, norm_of = free.tolist(), norms.tolist()  # Python numbers: the same comparisons
     for c in preference_order(names, n_kinematic):
-        if not free[c]:
+        if not free_of[c]:
             continue
-        col = J[:, c]
-        if norms[c] <= rank_tol * scale:
+        if norm_of[c] <= rank_tol * scale:
             dropped.append(c)
             continue
-        Q = basis[:, :len(kept)]
-        r = col - Q @ (Q.T @ col)
-        r = r - Q @ (Q.T @ r)  # second pass keeps the basis orthogonal to working precision
-        size = np.linalg.norm(r)
-        if size > rank_tol * norms[c]:
+        r = J[:, c]
+        if kept:  # (with none kept yet, the projections below are zero)
+            Q = basis[:, :len(kept)]
+            r = r - Q @ (Q.T @ r)
+            r = r - Q @ (Q.T @ r)  # second pass keeps the basis orthogonal to working precision
+        size = math.sqrt(r @ r)  # np.linalg.norm's own arithmetic
+        if size > rank_tol * norm_of[c]:
             basis[:, len(kept)] = r / size
             kept.append(c)
         else:
@@ -208,6 +204,34 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     rank = int(np.sum(sv > rank_tol * sv[0])) if sv.size else 0
     if len(kept) > rank:  # many nearly parallel columns: each new part passes, the set not
         kept, dropped = _within_rank(J, norms, names, n_kinematic, free, rank_tol * sv[0])
+    return J, names, free, m, norms, kept, dropped, sv, rank
+
+
+def identifiable(J: np.ndarray, names, n_kinematic: int, free=None,
+                 rank_tol: float = RANK_TOL, m: int | None = None) -> tuple[str, ...]:
+    """The names :func:`analyze` keeps, without its report (why each dropped one was
+    dropped, weak ones, condition number): for a caller that needs only the partition (the
+    frame start's, three analyses per fit)."""
+    _, names, _, _, _, kept, _, _, _ = _select(J, names, n_kinematic, free, rank_tol, m)
+    return tuple(names[i] for i in kept)
+
+
+def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float = RANK_TOL,
+            weak_independence: float = WEAK_INDEPENDENCE,
+            weak_sensitivity: float = WEAK_SENSITIVITY, m: int | None = None
+            ) -> Identifiability:
+    """Identifiability of the parameters from a Jacobian in reporting units.
+
+    J: (m, p) rows = residual components [mm], columns = parameters [mm or deg]; or the
+    triangle R (p, p) of its QR factorisation, with its number of rows ``m`` given.
+    free: (p,) bool, the parameters the user did not fix (default: all).
+    """
+    J, names, free, m, norms, kept, dropped, sv, rank = _select(J, names, n_kinematic, free,
+                                                                rank_tol, m)
+    p = len(names)
+    rows = m // 3 if m % 3 == 0 else m  # poses, for RMS figures
+    scale = float(norms.max()) if norms.size else 1.0
+    free_idx = np.flatnonzero(free)
     Jk = J[:, kept]
     Jkn = Jk / norms[kept]
     svk = np.linalg.svd(Jkn, compute_uv=False)

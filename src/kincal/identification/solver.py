@@ -209,25 +209,31 @@ _GELSY: tuple = ()  # (dgelsy, dgelsy_lwork), loaded at the first solve
 _LWORK: dict = {}  # (m, n): LAPACK's optimal work size for gelsy
 
 
+def lapack() -> tuple:
+    """(dgelsy, dgelsy_lwork), loaded once (:func:`_gelsy`)."""
+    global _GELSY
+    if not _GELSY:
+        _GELSY = _gelsy()
+    return _GELSY
+
+
 def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The minimum-norm least-squares solution of A d = b (A (m, n) float64, b (m,)):
     LAPACK's gelsy (QR with column pivoting) with rcond 1e-15, the very call that
     ``scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy", check_finite=False)``
     makes, without its checks and dispatch (a fold fit of Algorithm 1 solves a 45 x 45
     system, where they cost as much as the solve)."""
-    global _GELSY
-    if not _GELSY:
-        _GELSY = _gelsy()
+    gelsy, gelsy_lwork = _GELSY or lapack()
     m, n = A.shape
     if m < n:
         b = np.concatenate([b, np.zeros(n - m)])
     if (m, n) not in _LWORK:
-        work, info = _GELSY[1](m, n, 1, 1e-15)
+        work, info = gelsy_lwork(m, n, 1, 1e-15)
         if info != 0:
             raise ValueError(f"gelsy's work size query failed: {info}")
         _LWORK[m, n] = int(work.real)
-    _, x, _, _, info = _GELSY[0](A, b, np.zeros((n, 1), dtype=np.int32), 1e-15, _LWORK[m, n],
-                                 False, False)
+    _, x, _, _, info = gelsy(A, b, np.zeros((n, 1), dtype=np.int32), 1e-15, _LWORK[m, n],
+                             False, False)
     if info < 0:
         raise ValueError(f"illegal value in argument {-info} of gelsy")
     return x[:n]
@@ -251,10 +257,12 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         be zero (the fixed ones' offsets would otherwise pull the free ones).
     """
     run = steps(residual, u0, free, lam, penalised, prior, options)
+    memo = getattr(residual, "memo", None)  # the analysis's pass at a point, if any
     try:
         u = next(run)
         while True:
-            u = run.send(residual(u, True))
+            kept = memo.pop(u.tobytes(), None) if memo else None
+            u = run.send(residual(u, True) if kept is None else kept)
     except StopIteration as done:
         return done.value
 

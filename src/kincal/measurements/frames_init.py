@@ -33,8 +33,57 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
     """Alternate Kabsch for (R_b, t_b) and a linear solve for (t, t_b) from ``tool``.
 
     Returns (R_b (3, 3), t_b (3,), tool (3,), rms [m]).
-    """
+
+    Each round's work is 3 x 3 arithmetic on sums over the poses made once (a round costs
+    the same whatever the number of poses): Kabsch's cross-covariance of the predicted
+    points x_k = p_k + R_k t with the centred measured ones is H = sum p_k Pc_k^T +
+    sum_j t_j sum_k R_k e_j Pc_k^T, and the linear solve's normal equations
+    [[N I, (R_b S)^T], [R_b S, N I]] (S = sum R_k) reduce by the Schur complement to
+    (N I - S^T S / N) t = r_1 - S^T R_b^T r_2 / N, a matrix the same in every round. When
+    that matrix is ill-conditioned (tip orientations nearly all alike: t and t_b barely
+    separable) the rounds take numpy's least squares of the stacked rows (3N, 6) instead,
+    whose minimum-norm answer the normal equations cannot give."""
     t = np.asarray(tool, dtype=float).copy()
+    N = len(P)
+    S = R_tip.sum(axis=0)
+    C = N * np.eye(3) - S.T @ S / N
+    w, V = np.linalg.eigh(C)
+    if w[0] <= 1e-6 * max(w[-1], 1e-300):
+        return _alternate_rows(R_tip, p_tip, P, t, rounds)
+    Pc = P - P.mean(axis=0)
+    H0 = p_tip.T @ Pc  # sum p_k Pc_k^T
+    HT = np.einsum("kaj,kb->jab", R_tip, Pc).reshape(3, 9)  # [j] = sum R_k e_j Pc_k^T
+    W = np.einsum("kji,kl->ijl", R_tip, P)  # r_1 = W : R_b - sum R_k^T p_k
+    c0 = np.einsum("kji,kj->i", R_tip, p_tip)
+    P_sum, p_sum = P.sum(axis=0), p_tip.sum(axis=0)
+    for _ in range(rounds):
+        Rb = _rotation(H0 + (t @ HT).reshape(3, 3))
+        r2 = P_sum - Rb @ p_sum
+        r1 = np.einsum("ijl,lj->i", W, Rb) - c0
+        sol = V @ ((V.T @ (r1 - S.T @ (Rb.T @ r2) / N)) / w)
+        if np.max(np.abs(sol - t)) <= 1e-9:  # Gauss-Newton refines it after
+            t = sol
+            break
+        t = sol
+    return _finish(R_tip, p_tip, P, t)
+
+
+def _rotation(H: np.ndarray) -> np.ndarray:
+    """Kabsch's rotation from the cross-covariance H (:func:`kincal.rotations.kabsch`)."""
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    return Vt.T @ D @ U.T
+
+
+def _finish(R_tip, p_tip, P, t):
+    x = p_tip + R_tip @ t
+    Rb, tb = kabsch(x, P)
+    rms = float(np.sqrt(np.mean(np.sum((P - (x @ Rb.T + tb)) ** 2, axis=1))))
+    return Rb, tb, t, rms
+
+
+def _alternate_rows(R_tip, p_tip, P, t, rounds):
+    """:func:`alternate` on the stacked rows, for tip orientations nearly all alike."""
     N = len(P)
     for _ in range(rounds):
         x = p_tip + R_tip @ t
@@ -46,10 +95,7 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
             t = sol[:3]
             break
         t = sol[:3]
-    x = p_tip + R_tip @ t
-    Rb, tb = kabsch(x, P)
-    rms = float(np.sqrt(np.mean(np.sum((P - (x @ Rb.T + tb)) ** 2, axis=1))))
-    return Rb, tb, t, rms
+    return _finish(R_tip, p_tip, P, t)
 
 
 def initial_frames(R_tip, p_tip, P, tool_guess=None):

@@ -34,7 +34,9 @@ class ChainKinematics:
 
     @classmethod
     def of(cls, geometry) -> "ChainKinematics":
-        return cls(offsets.build(geometry))
+        from kincal.models import build
+
+        return cls(build("offsets", geometry))
 
     @property
     def n(self) -> int:

@@ -64,6 +64,8 @@ class OffsetsModel(ErrorModel):
 
     def placements(self, x) -> np.ndarray:
         x = np.asarray(x, float).ravel()
+        if not x.any():  # zero offsets (the URDF chain itself, ChainKinematics): each offset
+            return self.origins.copy()  # is the identity, so the origins as they are
         return np.array([self.origins[i] @ self._offset(i, x[i]) for i in range(self.n)])
 
     def twists(self, x) -> tuple[np.ndarray, np.ndarray]:
