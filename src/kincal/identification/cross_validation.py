@@ -179,11 +179,12 @@ def validation_error(problem, samples: np.ndarray) -> Callable:
     return error
 
 
-def together_possible(problem, samples: np.ndarray) -> bool:
+def together_possible(problem, samples: np.ndarray | None) -> bool:
     """Whether the folds' fits on the rows ``samples`` can be evaluated together
     (:func:`_together`): one set of measured points on an MD-H-family chain (whose
     evaluation takes one parameter vector per pose), without joint terms, and few enough
-    samples that no fold's rows are streamed in blocks (the solver's dense path)."""
+    samples that no fold's rows are streamed in blocks (the solver's dense path). samples:
+    the problem's rows (None: all)."""
     kinds = problem.kinds
     return (len(kinds) == 1 and getattr(kinds[0], "kind", "") == "point"
             and problem.layout.n_terms == 0 and hasattr(kinds[0].error_model, "unpack")
@@ -263,6 +264,10 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
         previous solution (same minimiser, far fewer iterations); False starts every fit
         from the nominal parameters, as the paper writes it.
     groups: (n_samples,) pose of each sample; strata: set of each sample (see make_folds).
+    When ``fit`` has ``together(trains, lam, starts) -> solutions`` and ``error`` has
+    ``together(solutions, vals) -> errors`` (:func:`fold_fitter`, :func:`validation_error`),
+    the folds' fits at each lambda run side by side, each on its own path, evaluated
+    together.
     """
     lambdas = np.asarray(lambdas, dtype=float)
     folds = make_folds(n_samples, k, seed, groups, strata)
@@ -271,6 +276,7 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
     total, done = lambdas.size * k, 0
     together = getattr(fit, "together", None)
     errors_together = getattr(error, "together", None)
+    one_by_one = together is None or errors_together is None
     if together is not None and errors_together is not None:
         # the folds side by side, lambda after lambda (each fold's own path as below)
         trains = [np.setdiff1d(np.arange(n_samples), val) for val in folds]
@@ -282,10 +288,7 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
                 done += 1
                 if progress is not None:
                     progress(done, total)
-        folds_done = ()
-    else:
-        folds_done = folds
-    for f, val in enumerate(folds_done):
+    for f, val in enumerate(folds if one_by_one else ()):
         train = np.setdiff1d(np.arange(n_samples), val)
         start = None
         for m in order:

@@ -169,14 +169,14 @@ class MdhModel(ErrorModel):
 
     def unpack(self, x) -> tuple[np.ndarray, np.ndarray]:
         """(table (n, 4), beta (n,)) of a kinematic vector x (or of a (n, 4) table when the
-        model has no beta)."""
+        model has no beta); (tables (N, n, 4), betas (N, n)) of one vector per pose (N, p)."""
         x = np.asarray(x, dtype=float)
-        if x.ndim == 2:  # one vector per pose (N, p): tables (N, n, 4), beta (N, n)
+        if x.ndim == 2:
             if x.shape[1] != self.size:
                 raise ValueError(f"{self.size} kinematic parameters expected, got {x.shape[1]}")
-            beta = np.zeros((len(x), self.n))
-            beta[:, self.has_beta] = x[:, self._field_index[2]]
-            return x[:, self._table_index], beta
+            betas = np.zeros((len(x), self.n))
+            betas[:, self.has_beta] = x[:, self._field_index[2]]
+            return x[:, self._table_index], betas
         x = x.ravel()
         if x.size != self.size:
             raise ValueError(f"{self.size} kinematic parameters expected, got {x.size}")
