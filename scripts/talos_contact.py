@@ -18,7 +18,8 @@ The validation file's header lacks the 4 leading empty names of the training fil
 kincal refuses it as it is ("the names look shifted"); the script reads its rows by position
 into a file with the training header, as its README says to.
 
-Usage: python scripts/talos_contact.py [--variants]   (about 3 s; --variants: about 70 s)
+Usage: python scripts/talos_contact.py [--variants] [--loo]   (about 3 s; --variants: about
+       35 s; --loo: each row also by leave-one-out on the training day, about 17 min)
        python scripts/talos_contact.py --two-chains [SEEDS]   (about 20 s per seed)
 
 --two-chains: the two arms together against each alone, on simulated touches (we have the
@@ -41,7 +42,11 @@ days together and judged in sample on the second day's touches (with the plane t
 every touch), which no out-of-sample prediction can be expected to beat. Each compliance
 row is judged again on the URDF alone (FRAMES.json's compliance not applied, as a reader
 of the URDF would), and each row calibrated by the evidence gives its log evidence [nats]
-(the summary's, comparable between rows that weigh the data alike).
+(the summary's, comparable between rows that weigh the data alike). The default (and each
+row with --fix) is judged again on the URDF's tip frame and the contact point alone
+(FRAMES.json's face tilt not applied), and a second floor fits both days with a plane per
+day (a ``plane`` column), judged on the second day's touches against its own plane: how
+much of the held-out error is the table moving against the sole between the days.
 """
 
 from __future__ import annotations
@@ -448,7 +453,8 @@ def main(argv=None) -> int:
     print(f"| {'model':<{width}} | height [mm] | roll [deg] | pitch [deg] | log evidence |")
     print(f"|{'-' * (width + 2)}|-------------|------------|-------------|--------------|")
     for label, h, r, p, ev in rows:
-        print(f"| {label:<{width}} | {h:11.2f} | {r:10.3f} | {p:11.3f} | "
+        print(f"| {label:<{width}} | " + (f"{h:11.2f}" if math.isfinite(h) else " " * 11)
+              + f" | {r:10.3f} | {p:11.3f} | "
               + (f"{ev:12.1f}" if math.isfinite(ev) else " " * 12) + " |")
     return 0
 
