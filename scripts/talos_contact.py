@@ -20,7 +20,8 @@ into a file with the training header, as its README says to.
 
 Usage: python scripts/talos_contact.py [--variants] [--loo]   (about 3 s; --variants: about
        35 s; --loo: each row also by leave-one-out on the training day, about 17 min)
-       python scripts/talos_contact.py --two-chains [SEEDS]   (about 20 s per seed)
+       python scripts/talos_contact.py --two-chains [SEEDS] [--urdf-alone]   (about 20 s per
+       seed; --urdf-alone: FRAMES.json's face tilts not applied to the held-out touches)
 
 --two-chains: the two arms together against each alone, on simulated touches (we have the
 left chain's real data only). The simulated TALOS is the nominal one with errors planted
@@ -242,7 +243,7 @@ def simulated_touches(model, kin, q_rows, names, robot, plane, noise, rng, sourc
     return out
 
 
-def two_chains(urdf: Path, seeds: int) -> list[tuple]:
+def two_chains(urdf: Path, seeds: int, face_tilt: bool = True) -> list[tuple]:
     """Together against alone on simulated TALOS touches, per seed and noise case: rows
     (case, seed, chain, alone (h, roll, pitch), together (h, roll, pitch))."""
     from kincal.identification.chains import Chains
@@ -292,9 +293,12 @@ def two_chains(urdf: Path, seeds: int) -> list[tuple]:
                     alone = calibrate(folder, urdf, path, f"alone{k}", bases=(arm.base,),
                                       tips=(arm.tip,))
                     rows.append((case, seed, ("left", "right")[k],
-                                 held_out(*alone, train, valid, names, arm.base, arm.tip),
-                                 held_out(*both, train, valid, names, arm.base, arm.tip, k),
-                                 held_out(*one, train, valid, names, arm.base, arm.tip, k)))
+                                 held_out(*alone, train, valid, names, arm.base, arm.tip,
+                                          face_tilt=face_tilt),
+                                 held_out(*both, train, valid, names, arm.base, arm.tip, k,
+                                          face_tilt=face_tilt),
+                                 held_out(*one, train, valid, names, arm.base, arm.tip, k,
+                                          face_tilt=face_tilt)))
     return rows
 
 
@@ -366,6 +370,10 @@ def main(argv=None) -> int:
                         help="also judge each row by leave-one-out on the training day (each "
                         "touch predicted by the calibration on the other 20, the plane fitted "
                         "through their contact points; 21 more calibrations per row)")
+    parser.add_argument("--urdf-alone", action="store_true",
+                        help="with --two-chains: judge the held-out touches on the URDF's tip "
+                        "frames and the contact points alone (FRAMES.json's face tilts not "
+                        "applied)")
     parser.add_argument("--two-chains", type=int, nargs="?", const=5, default=0,
                         metavar="SEEDS", help="only the simulated two-chain study (left and "
                         "right arms together vs alone), over SEEDS seeds (default 5)")
@@ -374,7 +382,7 @@ def main(argv=None) -> int:
         sys.exit(f"talos_contact: {DATA} not found (the shared data sit beside the repository)")
     urdf = talos_urdf()
     if args.two_chains:
-        print_two_chains(two_chains(urdf, args.two_chains))
+        print_two_chains(two_chains(urdf, args.two_chains, not args.urdf_alone))
         return 0
     names, q_train = joint_rows(DATA / "left_train.csv")
     _, q_valid = joint_rows(DATA / "left_validation.csv")
