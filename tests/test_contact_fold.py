@@ -110,3 +110,10 @@ def test_frames_json_alone_keeps_the_tilts(tmp_path, rng):
     identified = dict(zip(result.sets[0].frame_names, result.sets[0].frames))
     assert data["sets"][0]["frames"]["tool.ry"] == identified["tool.ry"]
     assert "tilts_in_urdf" not in data
+
+
+def test_added_frames_leave_the_tilt_in_frames_json_and_say_so(rng):
+    result = _result(rng)
+    text, notes, made = _corrected(result, add_frames=True)
+    assert made == () and any("--add-frames" in n for n in notes), notes
+    check_readback(result, text, True, made)

@@ -122,6 +122,9 @@ def _corrected(result, readable: bool = True, add_frames: bool = False):
         from kincal.export.urdf_export import add_frames_of
 
         text = add_frames_of(result, text)
+        said = tuple(f"the contact face's tilt on {f.tip!r} stays in FRAMES.json only: "
+                     "--add-frames hangs the frames on the tip as identified"
+                     for f in folds(result)[0])
     else:  # the added frames hang tool points on the tip as identified: no fold under them
         from kincal.export.urdf_export import edit_joint_origins
 
