@@ -18,8 +18,10 @@ The validation file's header lacks the 4 leading empty names of the training fil
 kincal refuses it as it is ("the names look shifted"); the script reads its rows by position
 into a file with the training header, as its README says to.
 
-Usage: python scripts/talos_contact.py [--variants]   (about 3 s; --variants: about 70 s)
-       python scripts/talos_contact.py --two-chains [SEEDS]   (about 20 s per seed)
+Usage: python scripts/talos_contact.py [--variants] [--loo]   (about 3 s; --variants: about
+       35 s; --loo: each row also by leave-one-out on the training day, about 17 min)
+       python scripts/talos_contact.py --two-chains [SEEDS] [--urdf-alone]   (about 20 s per
+       seed; --urdf-alone: FRAMES.json's face tilts not applied to the held-out touches)
 
 --two-chains: the two arms together against each alone, on simulated touches (we have the
 left chain's real data only). The simulated TALOS is the nominal one with errors planted
@@ -41,7 +43,11 @@ days together and judged in sample on the second day's touches (with the plane t
 every touch), which no out-of-sample prediction can be expected to beat. Each compliance
 row is judged again on the URDF alone (FRAMES.json's compliance not applied, as a reader
 of the URDF would), and each row calibrated by the evidence gives its log evidence [nats]
-(the summary's, comparable between rows that weigh the data alike).
+(the summary's, comparable between rows that weigh the data alike). The default (and each
+row with --fix) is judged again on the URDF's tip frame and the contact point alone
+(FRAMES.json's face tilt not applied), and a second floor fits both days with a plane per
+day (a ``plane`` column), judged on the second day's touches against its own plane: how
+much of the held-out error is the table moving against the sole between the days.
 """
 
 from __future__ import annotations
@@ -80,22 +86,29 @@ def joint_rows(path: Path) -> tuple[list[str], np.ndarray]:
     return names, np.array([[float(v) for v in r[5:5 + len(names)]] for r in rows])
 
 
-def write_joint_csv(path: Path, names, values) -> None:
+def write_joint_csv(path: Path, names, values, planes=None) -> None:
+    """A joint-column file; planes: (N,) whole numbers, the ``plane`` column (None: none)."""
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(names)
-        w.writerows([[repr(float(v)) for v in row] for row in values])
+        w.writerow(list(names) + ([] if planes is None else ["plane"]))
+        w.writerows([[repr(float(v)) for v in row] + ([] if planes is None else [str(k)])
+                     for k, row in zip([None] * len(values) if planes is None else planes,
+                                       values)])
 
 
 def held_out(urdf: Path, frames_path: Path, q_train: np.ndarray, q_valid: np.ndarray,
              names, base: str = BASE, tip: str = TIP, k: int = 0,
-             compliance: bool = True) -> tuple[float, float, float]:
+             compliance: bool = True, face_tilt: bool = True,
+             plane: str | None = None) -> tuple[float, float, float]:
     """(height [mm], roll [deg], pitch [deg]) RMS on the validation touches, from the files
     a calibration wrote (see the module notes): the chain base -> tip, set k of FRAMES.json;
-    compliance False: FRAMES.json's compliance terms not applied (the URDF alone)."""
+    compliance False: FRAMES.json's compliance terms not applied (the URDF alone);
+    face_tilt False: FRAMES.json's contact frame tilts (tool.rx .ry) not applied either (the
+    URDF's tip frame and the contact point alone); plane: judged against FRAMES.json's
+    plane of that label (``plane<label>.*``) instead of the plane fitted to q_train."""
     from kincal.frames_file import CellFrames
     from kincal.measurements.flush import tilt_angles
-    from kincal.measurements.plane import fit_plane
+    from kincal.measurements.plane import fit_plane, normal
     from kincal.robot import Robot
     from kincal.rotations import base_rotation
 
@@ -106,7 +119,8 @@ def held_out(urdf: Path, frames_path: Path, q_train: np.ndarray, q_valid: np.nda
     c = np.array([cell.compliance.get(j, 0.0) if compliance else 0.0
                   for j in robot.joint_names])
     t = np.array([s.value(f"tool.{c}") for c in "xyz"])
-    tilt = [s.value(f"tool.{c}") if s.has(f"tool.{c}") else 0.0 for c in ("rx", "ry")]
+    tilt = [s.value(f"tool.{c}") if s.has(f"tool.{c}") and face_tilt else 0.0
+            for c in ("rx", "ry")]
     R_c = base_rotation(tilt[0], tilt[1], 0.0)
 
     def contact(q):
@@ -116,10 +130,14 @@ def held_out(urdf: Path, frames_path: Path, q_train: np.ndarray, q_valid: np.nda
         T = robot.tip_poses(q)
         return T[:, :3, 3] + T[:, :3, :3] @ t, T[:, :3, :3] @ R_c
 
-    P, A = contact(q_train)
-    n, d, _ = fit_plane(P)
-    if np.mean(A[:, :, 2] @ n) < 0:  # the normal on the face's side
-        n, d = -n, -d
+    if plane is None:
+        P, A = contact(q_train)
+        n, d, _ = fit_plane(P)
+        if np.mean(A[:, :, 2] @ n) < 0:  # the normal on the face's side
+            n, d = -n, -d
+    else:
+        n = normal(s.value(f"plane{plane}.rx"), s.value(f"plane{plane}.ry"))
+        d = s.value(f"plane{plane}.d")
     P, A = contact(q_valid)
     roll, pitch = tilt_angles(np.einsum("nji,j->ni", A, n))
 
@@ -225,7 +243,7 @@ def simulated_touches(model, kin, q_rows, names, robot, plane, noise, rng, sourc
     return out
 
 
-def two_chains(urdf: Path, seeds: int) -> list[tuple]:
+def two_chains(urdf: Path, seeds: int, face_tilt: bool = True) -> list[tuple]:
     """Together against alone on simulated TALOS touches, per seed and noise case: rows
     (case, seed, chain, alone (h, roll, pitch), together (h, roll, pitch))."""
     from kincal.identification.chains import Chains
@@ -275,9 +293,12 @@ def two_chains(urdf: Path, seeds: int) -> list[tuple]:
                     alone = calibrate(folder, urdf, path, f"alone{k}", bases=(arm.base,),
                                       tips=(arm.tip,))
                     rows.append((case, seed, ("left", "right")[k],
-                                 held_out(*alone, train, valid, names, arm.base, arm.tip),
-                                 held_out(*both, train, valid, names, arm.base, arm.tip, k),
-                                 held_out(*one, train, valid, names, arm.base, arm.tip, k)))
+                                 held_out(*alone, train, valid, names, arm.base, arm.tip,
+                                          face_tilt=face_tilt),
+                                 held_out(*both, train, valid, names, arm.base, arm.tip, k,
+                                          face_tilt=face_tilt),
+                                 held_out(*one, train, valid, names, arm.base, arm.tip, k,
+                                          face_tilt=face_tilt)))
     return rows
 
 
@@ -314,10 +335,45 @@ def print_two_chains(rows) -> None:
 
 
 
+LOO: dict[str, np.ndarray] = {}  # --loo: (height, roll, pitch) RMS per variant
+
+
+def leave_one_out(folder: Path, urdf: Path, names, q_train, extra, tag: str) -> np.ndarray:
+    """(height [mm], roll [deg], pitch [deg]) RMS over the training touches, each judged as
+    :func:`held_out` judges the other day's, by the calibration on the other touches."""
+    out = []
+    for i in range(len(q_train)):
+        keep = np.arange(len(q_train)) != i
+        path = folder / f"{tag}_loo{i}.csv"
+        write_joint_csv(path, names, q_train[keep])
+        cal, frames = calibrate(folder, urdf, path, f"{tag}_loo{i}", *extra)
+        out.append(held_out(cal, frames, q_train[keep], q_train[~keep], names))
+    return np.sqrt(np.mean(np.square(out), axis=0))
+
+
+def plane_change(frames: Path) -> tuple[float, float]:
+    """(angle [deg], offset change [mm]) between planes 1 and 2 of FRAMES.json."""
+    from kincal.frames_file import CellFrames
+    from kincal.measurements.plane import normal
+
+    s = CellFrames.read(frames).sets[0]
+    n1, n2 = (normal(s.value(f"plane{k}.rx"), s.value(f"plane{k}.ry")) for k in "12")
+    return (float(np.degrees(np.arccos(min(1.0, float(n1 @ n2))))),
+            (s.value("plane2.d") - s.value("plane1.d")) * 1e3)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", action="store_true",
                         help="also the other penalty and error model choices")
+    parser.add_argument("--loo", action="store_true",
+                        help="also judge each row by leave-one-out on the training day (each "
+                        "touch predicted by the calibration on the other 20, the plane fitted "
+                        "through their contact points; 21 more calibrations per row)")
+    parser.add_argument("--urdf-alone", action="store_true",
+                        help="with --two-chains: judge the held-out touches on the URDF's tip "
+                        "frames and the contact points alone (FRAMES.json's face tilts not "
+                        "applied)")
     parser.add_argument("--two-chains", type=int, nargs="?", const=5, default=0,
                         metavar="SEEDS", help="only the simulated two-chain study (left and "
                         "right arms together vs alone), over SEEDS seeds (default 5)")
@@ -326,7 +382,7 @@ def main(argv=None) -> int:
         sys.exit(f"talos_contact: {DATA} not found (the shared data sit beside the repository)")
     urdf = talos_urdf()
     if args.two_chains:
-        print_two_chains(two_chains(urdf, args.two_chains))
+        print_two_chains(two_chains(urdf, args.two_chains, not args.urdf_alone))
         return 0
     names, q_train = joint_rows(DATA / "left_train.csv")
     _, q_valid = joint_rows(DATA / "left_validation.csv")
@@ -351,11 +407,25 @@ def main(argv=None) -> int:
                          ("kincal, --compliance leg_left_5_joint (the evidence's best one)",
                           ("--compliance", "leg_left_5_joint")),
                          ("kincal, --compliance leg_left_5_joint leg_left_3_joint",
-                          ("--compliance", "leg_left_5_joint", "leg_left_3_joint"))]
+                          ("--compliance", "leg_left_5_joint", "leg_left_3_joint")),
+                         ("kincal, --prior-deg 1 (the angles' prior scale given)",
+                          ("--prior-deg", "1")),
+                         ("kincal, --noise-mm 1 (the noise given)", ("--noise-mm", "1")),
+                         ("kincal, --fix '*_joint.t?' (placement: rotations only)",
+                          ("--fix", "*_joint.tx", "*_joint.ty", "*_joint.tz")),
+                         ("kincal, --fix tool.rx tool.ry (face tilt held at its start)",
+                          ("--fix", "tool.rx", "tool.ry"))]
         for k, (label, extra) in enumerate(variants):
             cal, frames = calibrate(folder, urdf, train, f"v{k}", *extra)
             rows.append((label, *held_out(cal, frames, q_train, q_valid, names),
                          LOG_EVIDENCE[f"v{k}"]))
+            if args.loo:
+                LOO[label] = leave_one_out(folder, urdf, names, q_train, extra, f"v{k}")
+            if k == 0 or "--fix" in extra:
+                rows.append(("  the same, the URDF's tip frame and the contact point alone "
+                             "(FRAMES.json's face tilt not applied)",
+                             *held_out(cal, frames, q_train, q_valid, names, face_tilt=False),
+                             math.nan))
             if "--compliance" in extra:
                 rows.append(("  the same, the URDF alone (FRAMES.json's compliance not applied)",
                              *held_out(cal, frames, q_train, q_valid, names, compliance=False),
@@ -369,13 +439,30 @@ def main(argv=None) -> int:
             cal, frames = calibrate(folder, urdf, both, "both")
             rows.append(("kincal defaults fitted on both days (in sample: the floor)",
                          *held_out(cal, frames, q_both, q_valid, names), math.nan))
+            # the same with a plane per day (a 'plane' column): the table as the robot's
+            # left sole sees it may move between the days; judged on the second day's
+            # touches against the second day's plane as the calibration identified it
+            days = folder / "both_days_planes.csv"
+            write_joint_csv(days, names, q_both, [1] * len(q_train) + [2] * len(q_valid))
+            cal, frames = calibrate(folder, urdf, days, "days")
+            rows.append(("the same with a plane per day (in sample, the second day's plane)",
+                         *held_out(cal, frames, q_both, q_valid, names, plane="2"), math.nan))
+            rows.append(("  the first day's plane against the second's: tilt [deg], offset "
+                         "[mm]", math.nan, *plane_change(frames), math.nan))
+    if LOO:
+        print("Leave-one-out on the training day (RMS over the 21 touches, each predicted by "
+              "the calibration on the other 20): height [mm], roll, pitch [deg]")
+        for label, v in LOO.items():
+            print(f"| {label} | {v[0]:.2f} | {v[1]:.3f} | {v[2]:.3f} |")
+        print()
     print(f"TALOS left sole -> left gripper, flush table touches: {len(q_train)} training "
           f"(2022-10-28), {len(q_valid)} held-out (2022-11-07); held-out RMS")
     width = max(len(label) for label, *_ in rows)
     print(f"| {'model':<{width}} | height [mm] | roll [deg] | pitch [deg] | log evidence |")
     print(f"|{'-' * (width + 2)}|-------------|------------|-------------|--------------|")
     for label, h, r, p, ev in rows:
-        print(f"| {label:<{width}} | {h:11.2f} | {r:10.2f} | {p:11.2f} | "
+        print(f"| {label:<{width}} | " + (f"{h:11.2f}" if math.isfinite(h) else " " * 11)
+              + f" | {r:10.3f} | {p:11.3f} | "
               + (f"{ev:12.1f}" if math.isfinite(ev) else " " * 12) + " |")
     return 0
 

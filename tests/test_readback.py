@@ -56,15 +56,15 @@ def test_the_written_file_is_the_calibrated_model_to_yourdfpy(ec66_result, tmp_p
 
 
 def _planted(monkeypatch, change):
-    honest = outputs.corrected_urdf
+    honest = outputs._corrected  # what write_calibration writes (text, notes, folds)
 
     def corrupted(result, readable=True, add_frames=False):
-        text, notes = honest(result, readable, add_frames)
+        text, notes, made = honest(result, readable, add_frames)
         bad = change(text)
         assert bad != text  # the corruption did land
-        return bad, notes
+        return bad, notes, made
 
-    monkeypatch.setattr(outputs, "corrected_urdf", corrupted)
+    monkeypatch.setattr(outputs, "_corrected", corrupted)
 
 
 def _sub(pattern, repl):

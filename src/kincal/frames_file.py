@@ -202,10 +202,13 @@ class CellFrames:
         out.update({k: v for k, v in s.derived().items()})
         return out
 
-    def dumps(self, provenance: dict | None = None) -> str:
+    def dumps(self, provenance: dict | None = None, folds: list | None = None) -> str:
         """The file's text; ``provenance`` (who made it, from what) is kept under its own
-        key, which readers ignore."""
+        key, which readers ignore, as are ``folds`` (``tilts_in_urdf``: contact-face tilts
+        the URDF written beside carries, :mod:`kincal.export.contact_fold`)."""
         out = self.as_dict()
+        if folds:
+            out["tilts_in_urdf"] = folds
         if provenance is not None:
             out["provenance"] = provenance
         return json.dumps(out, indent=2) + "\n"

@@ -28,6 +28,17 @@ def rotz(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+def rotations_about(axis: int, a: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotations by the angles a (N,) about the x (0), y (1) or z (2) axis: the
+    matrices of :func:`rotx`, :func:`roty`, :func:`rotz`, one per angle."""
+    c, s = np.cos(a), np.sin(a)
+    j, k = (axis + 1) % 3, (axis + 2) % 3
+    R = np.zeros((len(a), 3, 3))
+    R[:, axis, axis] = 1.0
+    R[:, j, j], R[:, k, k], R[:, j, k], R[:, k, j] = c, c, -s, s
+    return R
+
+
 def transform(R: np.ndarray | None = None, p=None) -> np.ndarray:
     """4x4 homogeneous transform from rotation R (3x3) and translation p (3,) [m]."""
     T = np.eye(4)

@@ -101,18 +101,39 @@ def gate(result, accept_implausible: bool = False, accept_unconverged: bool = Fa
 def corrected_urdf(result, readable: bool = True, add_frames: bool = False):
     """(text, export notes) of the corrected URDF: the original file with only the chains'
     joint origins changed (plus fixed frames for the measurement frame and tool points
-    with ``add_frames``)."""
-    from kincal.export.readable_export import corrected_text
+    with ``add_frames``; a flush contact face's tilt in the fixed joint above the tip,
+    :mod:`kincal.export.contact_fold`)."""
+    text, notes, _ = _corrected(result, readable, add_frames)
+    return text, notes
+
+
+def _corrected(result, readable: bool = True, add_frames: bool = False):
+    """(text, export notes, the contact folds made)."""
+    from kincal.export.contact_fold import folds
+    from kincal.export.readable_export import Regauged, corrected_text
 
     edits, moved = corrected_text(result.robot, result.corrected, readable,
                                   source=str(result.robot.source),
                                   joints=tuple(result.error_model.joint_names))
     text = edits.text
+    made: tuple = ()
+    said: tuple[str, ...] = ()
     if add_frames:
         from kincal.export.urdf_export import add_frames_of
 
         text = add_frames_of(result, text)
-    return text, tuple(m.describe() for m in moved)
+        said = tuple(f"the contact face's tilt on {f.tip!r} stays in FRAMES.json only: "
+                     "--add-frames hangs the frames on the tip as identified"
+                     for f in folds(result)[0])
+    else:  # the added frames hang tool points on the tip as identified: no fold under them
+        from kincal.export.urdf_export import edit_joint_origins
+
+        regauged = {n for m in moved if isinstance(m, Regauged) for n in (m.joint, *m.children)}
+        made, said = folds(result, exclude=regauged)
+        if made:
+            text = edit_joint_origins(text, {f.joint: f.origin for f in made},
+                                      source=str(result.robot.source)).text
+    return text, tuple(m.describe() for m in moved) + tuple(f.describe() for f in made) + said, made
 
 
 def corrected_urdf_text(result, readable: bool = True) -> str:
@@ -187,15 +208,19 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     prov = Provenance.of(result, command=command, xacro_args=xacro_args, more_data=held)
     files: list = []
     notes: tuple[str, ...] = ()
+    made: tuple = ()  # the contact folds of the URDF (FRAMES.json then holds zero tilts)
     if o.urdf is not None:
         from kincal.export.readback import check_readback
 
-        text, notes = corrected_urdf(result, add_frames=o.add_frames)
-        check_readback(result, text, o.add_frames)  # only the origins changed, and to
-        # the calibrated model as a URDF reader reads them
+        text, notes, made = _corrected(result, add_frames=o.add_frames)
+        check_readback(result, text, o.add_frames, made)  # only the origins changed, and
+        # to the calibrated model as a URDF reader reads them
         files.append((o.urdf, stamp_urdf(text, prov)))
     if o.frames is not None:
-        files.append((o.frames, result.frames().dumps(provenance=prov.as_dict())))
+        from kincal.export.contact_fold import folded_frames, record
+
+        files.append((o.frames, folded_frames(result.frames(), made).dumps(
+            provenance=prov.as_dict(), folds=record(made))))
     if o.yaml is not None or o.mdh is not None:
         from kincal.export.cell_exports import (kinematics_yaml, mdh_table_csv,
                                                 ur_kinematics_yaml)

@@ -161,19 +161,23 @@ def _regauged(result) -> set[str]:
     return {n for m in moved if isinstance(m, Regauged) for n in (m.joint, *m.children)}
 
 
-def check_readback(result, text: str, add_frames: bool = False) -> None:
+def check_readback(result, text: str, add_frames: bool = False, folds=()) -> None:
     """ExportError unless ``text`` is the original URDF of ``result`` with only its
     calibrated joint origins changed, to the corrected placements, and Pinocchio's reading
-    of it gives every chain of ``result`` its calibrated forward kinematics (module notes)."""
+    of it gives every chain of ``result`` its calibrated forward kinematics (module notes).
+    folds: the contact folds (:mod:`kincal.export.contact_fold`): those fixed joints'
+    origins too, and those chains' tip frames turned by the fold's change."""
     from kincal.errors import UrdfError
     from kincal.robot import Robot, _build_model
     from kincal.rotations import rpy_to_matrix, transform
 
     joints = tuple(result.error_model.joint_names)
-    want = result.corrected.urdf_origins(joints)
+    want = {**result.corrected.urdf_origins(joints), **{f.joint: f.origin for f in folds}}
     exempt = _regauged(result)
     children = {c for j in exempt for c in result.corrected.child_joint_origins(j)}
-    origins = written_origins(result.robot.urdf_text, text, set(joints) | children, add_frames)
+    origins = written_origins(result.robot.urdf_text, text,
+                              set(joints) | children | {f.joint for f in folds}, add_frames)
+    change = {f.tip: f.change for f in folds}
     for name, T in want.items():
         if name in exempt:
             continue
@@ -195,7 +199,10 @@ def check_readback(result, text: str, add_frames: bool = False) -> None:
         q = np.vstack([np.zeros(g.n), rng.uniform(lo, hi, size=(N_CONFIGURATIONS - 1, g.n))])
         read = Robot(model, text, robot.name, robot.base, robot.tip, robot.source,
                      dict(robot.off_chain))
-        diff = np.abs(read.tip_poses(q) - robot.tip_poses(q))[:, :3, :].max(axis=(1, 2))
+        expected = robot.tip_poses(q)
+        if robot.tip in change:
+            expected = expected @ change[robot.tip]
+        diff = np.abs(read.tip_poses(q) - expected)[:, :3, :].max(axis=(1, 2))
         where = int(np.argmax(diff))
         if not (math.isfinite(diff[where]) and diff[where] <= TOLERANCE_M):
             raise _refuse(f"(loaded by Pinocchio) differs from the calibrated model of "

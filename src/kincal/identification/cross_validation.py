@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from kincal.errors import OptionError
+from kincal.identification.layout import MM
 
 
 @dataclass(frozen=True)
@@ -88,15 +89,25 @@ def remembering(residual: Callable, keep: int = 2) -> Callable:
     streamed path (``blocks``, ``rows``, ``n_blocks``) are passed on."""
     seen: list = []  # (u, (r, J), {free columns: triangle of [J_free | -r]})
 
+    def recall(u):
+        """The remembered (r, J) at u, or None."""
+        for v, out, _ in seen:
+            if np.array_equal(v, u):
+                return out
+        return None
+
+    def keep_(u, out):
+        seen.insert(0, (np.array(u, dtype=float), out, {}))
+        del seen[keep:]
+
     def remembered(u, with_jacobian):
         if with_jacobian:
-            for v, out, _ in seen:
-                if np.array_equal(v, u):
-                    return out
+            out = recall(u)
+            if out is not None:
+                return out
         out = residual(u, with_jacobian)
         if with_jacobian:
-            seen.insert(0, (np.array(u, dtype=float), out, {}))
-            del seen[keep:]
+            keep_(u, out)
         return out
 
     def factor(J, columns, make):
@@ -110,6 +121,8 @@ def remembering(residual: Callable, keep: int = 2) -> Callable:
         return make()
 
     setattr(remembered, "factor", factor)  # the solver looks for it (solver._data_triangle)
+    setattr(remembered, "recall", recall)  # the folds evaluated together (fold_fitter)
+    setattr(remembered, "keep", keep_)
     for name in ("blocks", "rows", "n_blocks"):
         if hasattr(residual, name):
             setattr(remembered, name, getattr(residual, name))
@@ -137,7 +150,105 @@ def fold_fitter(problem, free: np.ndarray, samples: np.ndarray | None = None) ->
         return problem.fit(lam, train, free=free, residual=cache[key], options=options,
                            start_u=None if start is None else start.u)
 
+    if together_possible(problem, samples):
+        setattr(fit, "together", _together(problem, free, samples, options))
     return fit
+
+
+def validation_error(problem, samples: np.ndarray) -> Callable:
+    """``error(solution, val)`` for :func:`cross_validate` on a calibration ``problem``: the
+    mean sample error [mm] (weighted by the sets' sigmas with several) on the rows
+    ``samples[val]``; with ``together(solutions, vals)``, the folds' errors in one pass
+    (one parameter vector per row) where :func:`together_possible`."""
+    weighted = len(problem.kinds) > 1
+
+    def error(sol, val):
+        e = problem.sample_errors(sol.u * problem.scale, samples[val], weighted)
+        return float(np.mean(np.concatenate([v for _, v in e])) / MM)
+
+    def together(sols, vals):
+        rows = [samples[v] for v in vals]
+        X = np.repeat(np.stack([s.u * problem.scale for s in sols]), [len(r) for r in rows],
+                      axis=0)
+        e = np.concatenate([v for _, v in problem.sample_errors(X, np.concatenate(rows))])
+        edges = np.cumsum([0] + [len(r) for r in rows])
+        return [float(np.mean(e[a:b]) / MM) for a, b in zip(edges[:-1], edges[1:])]
+
+    if together_possible(problem, samples):
+        setattr(error, "together", together)
+    return error
+
+
+def together_possible(problem, samples: np.ndarray | None) -> bool:
+    """Whether the folds' fits on the rows ``samples`` can be evaluated together
+    (:func:`_together`): one set of measured points on an MD-H-family chain (whose
+    evaluation takes one parameter vector per pose), without joint terms, and few enough
+    samples that no fold's rows are streamed in blocks (the solver's dense path). samples:
+    the problem's rows (None: all)."""
+    kinds = problem.kinds
+    return (len(kinds) == 1 and getattr(kinds[0], "kind", "") == "point"
+            and problem.layout.n_terms == 0 and hasattr(kinds[0].error_model, "unpack")
+            and getattr(problem.residual_function(samples), "n_blocks", 1) == 1)
+
+
+def _together(problem, free: np.ndarray, samples: np.ndarray | None, options) -> Callable:
+    """``together(trains, lam, starts) -> [solution per fold]``: the k folds' fits at one
+    lambda run side by side, each its own solver (:func:`kincal.identification.solver.steps`,
+    the same iterations and arithmetic as one at a time), their linearisations evaluated
+    in one vectorised pass over the folds' training rows, one parameter vector per row,
+    instead of one pass per fold: the per-call overhead of the evaluation (about 200 numpy
+    calls, most of a 60-pose fold fit's time) is paid once per step. Its numbers differ
+    from a fold's own pass at rounding level (products of other shapes); each fold
+    remembers its linearisations as :func:`remembering` does."""
+    folds: dict[bytes, Callable] = {}  # training rows: the fold's remembering residual
+    joint: dict[bytes, Callable] = {}  # the rows of several folds: their residual
+
+    def rows_of(train):
+        return train if samples is None else samples[train]
+
+    def evaluate(trains, us):
+        rows = [rows_of(t) for t in trains]
+        allrows = np.concatenate(rows)
+        key = allrows.tobytes()
+        if key not in joint:
+            joint[key] = problem.residual_function(allrows)
+        U = np.repeat(np.stack(us), [len(r) for r in rows], axis=0)
+        r, J = joint[key](U, True)
+        out, at = [], 0
+        for part in rows:
+            n = part.size * (r.size // allrows.size)
+            out.append((r[at:at + n], J[at:at + n]))
+            at += n
+        return out
+
+    def together(trains, lam, starts):
+        runs, pending, done = [], {}, [None] * len(trains)
+        for f, train in enumerate(trains):
+            key = rows_of(train).tobytes()
+            if key not in folds:
+                folds[key] = remembering(problem.residual_function(rows_of(train)))
+            rem = folds[key]  # not streamed (together_possible): the solver yields
+            run = problem.fit(lam, rows_of(train), free=free, residual=rem, options=options,
+                              start_u=None if starts[f] is None else starts[f].u, driven=True)
+            runs.append((run, rem))
+            pending[f] = next(run)
+        while pending:
+            outs = {f: runs[f][1].recall(u) for f, u in pending.items()}
+            missing = [f for f, out in outs.items() if out is None]
+            if missing:
+                for f, out in zip(missing, evaluate([trains[f] for f in missing],
+                                                    [pending[f] for f in missing])):
+                    runs[f][1].keep(pending[f], out)
+                    outs[f] = out
+            pending = {}
+            for f, out in outs.items():
+                try:
+                    pending[f] = runs[f][0].send(out)
+                except StopIteration as end:
+                    done[f] = end.value
+        return done
+
+    return together
 
 
 def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.ndarray,
@@ -153,13 +264,31 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
         previous solution (same minimiser, far fewer iterations); False starts every fit
         from the nominal parameters, as the paper writes it.
     groups: (n_samples,) pose of each sample; strata: set of each sample (see make_folds).
+    When ``fit`` has ``together(trains, lam, starts) -> solutions`` and ``error`` has
+    ``together(solutions, vals) -> errors`` (:func:`fold_fitter`, :func:`validation_error`),
+    the folds' fits at each lambda run side by side, each on its own path, evaluated
+    together.
     """
     lambdas = np.asarray(lambdas, dtype=float)
     folds = make_folds(n_samples, k, seed, groups, strata)
     errors = np.empty((lambdas.size, k))
     order = np.argsort(-lambdas)
     total, done = lambdas.size * k, 0
-    for f, val in enumerate(folds):
+    together = getattr(fit, "together", None)
+    errors_together = getattr(error, "together", None)
+    one_by_one = together is None or errors_together is None
+    if together is not None and errors_together is not None:
+        # the folds side by side, lambda after lambda (each fold's own path as below)
+        trains = [np.setdiff1d(np.arange(n_samples), val) for val in folds]
+        sols: list = [None] * k
+        for m in order:
+            sols = together(trains, float(lambdas[m]), sols if warm_start else [None] * k)
+            errors[m] = errors_together(sols, folds)
+            for _ in range(k):
+                done += 1
+                if progress is not None:
+                    progress(done, total)
+    for f, val in enumerate(folds if one_by_one else ()):
         train = np.setdiff1d(np.arange(n_samples), val)
         start = None
         for m in order:

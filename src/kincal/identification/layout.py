@@ -252,17 +252,18 @@ class ParameterLayout:
 
     # ----------------------------------------------------------- vectors
     def kinematic(self, x: np.ndarray) -> np.ndarray:
-        return x[:self.n_kinematic]
+        return x[..., :self.n_kinematic]
 
     def frames(self, x: np.ndarray, i: int) -> np.ndarray:
         """Set i's frame parameters (a view; a copy for a set sharing some)."""
-        return x[self.frame_slices[i]]
+        return x[..., self.frame_slices[i]]
 
     def backlash_values(self, x: np.ndarray) -> np.ndarray:
-        return x[self.backlash_slice]
+        return x[..., self.backlash_slice]
 
     def split(self, x: np.ndarray, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(kinematic, set i's frames, backlash) views of a parameter vector."""
+        """(kinematic, set i's frames, backlash) views of a parameter vector (or of (N, p)
+        vectors, one per sample)."""
         return self.kinematic(x), self.frames(x, i), self.backlash_values(x)
 
     # ------------------------------------------- one set of points (the common case)

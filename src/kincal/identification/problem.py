@@ -33,7 +33,8 @@ from kincal.identification import blas_threads, model_choice, penalty_choice
 from kincal.identification import prior as fleet_prior
 from kincal.identification.chains import Chains
 from kincal.identification.cross_validation import (CrossValidation, cross_validate,
-                                                    fold_fitter, lambda_grid)
+                                                    fold_fitter, lambda_grid,
+                                                    validation_error)
 from kincal.identification.layout import MM, ParameterLayout
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.plausibility import gather, judge
@@ -41,7 +42,7 @@ from kincal.identification.reduction import analyze_rows, residual_function
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze, identifiable
-from kincal.identification.solver import SolverOptions, SolveSummary, solve
+from kincal.identification.solver import SolverOptions, SolveSummary, solve, steps
 from kincal.measurements.checks import distinct_poses, set_warnings, unit_warnings
 from kincal.measurements.kind import DEFAULT_SIGMA
 from kincal.measurements.sets import as_sets
@@ -385,19 +386,20 @@ class CalibrationProblem:
     def fit(self, lam, rows=None, start: np.ndarray | None = None,
             free: np.ndarray | None = None, residual: Callable | None = None,
             options: SolverOptions | None = None,
-            start_u: np.ndarray | None = None) -> SolveSummary:
+            start_u: np.ndarray | None = None, driven: bool = False) -> SolveSummary:
         """One solve with penalty weight ``lam`` (one, or per parameter) on the samples
         ``rows`` (default all); residual: a prebuilt :meth:`residual_function` for rows;
         start_u: the start in the solver's units u = x / scale, as is (instead of start,
-        e.g. a previous solve's u: a warm start at exactly its end)."""
+        e.g. a previous solve's u: a warm start at exactly its end). driven: the solve as
+        a generator whose caller evaluates its points (:func:`solver.steps`)."""
         u0 = (self.start() if start is None else start) / self.scale if start_u is None \
             else start_u
         free = self.free_mask() if free is None else free
         residual = self.residual_function(rows) if residual is None else residual
-        return solve(residual, u0, free,
-                     lam=lam if self.prior is None else self.prior.penalty(lam),
-                     penalised=self.layout.is_penalised, prior=self.start() / self.scale,
-                     options=options or self.options.solver)
+        return (steps if driven else solve)(
+            residual, u0, free, lam=lam if self.prior is None else self.prior.penalty(lam),
+            penalised=self.layout.is_penalised, prior=self.start() / self.scale,
+            options=options or self.options.solver)
 
     def cross_validate(self) -> CrossValidation:
         """The CV curve over the lambda grid: folds of poses, each set split on its own;
@@ -414,13 +416,7 @@ class CalibrationProblem:
             keep = np.random.default_rng(o.seed).choice(poses, o.cv_max_poses, replace=False)
             samples = np.flatnonzero(np.isin(groups, keep))
             subsample = (int(o.cv_max_poses), self.n_poses)
-        fit = fold_fitter(self, free, samples)
-        weighted = len(self.kinds) > 1
-
-        def error(sol, val):
-            e = self.sample_errors(sol.u * self.scale, samples[val], weighted)
-            return float(np.mean(np.concatenate([v for _, v in e])) / MM)
-
+        fit, error = fold_fitter(self, free, samples), validation_error(self, samples)
         cv = cross_validate(fit, error, len(samples), grid, o.folds, o.seed, o.warm_start,
                             o.progress, groups=groups[samples], strata=strata[samples])
         if subsample is None:

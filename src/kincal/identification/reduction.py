@@ -108,7 +108,8 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True,
                row_scale=None) -> Callable:
     """blocks(u, with_jacobian=True, out=None): the one traversal of the residual's rows
     (sets in order, each in its blocks of samples), yielding (rows, r_b [mm], J_b) per block
-    at u = x / scale: the rows' weighted residuals and their Jacobian (None without
+    at u = x / scale (or u (samples, p), one vector per sample: the folds of Algorithm 1
+    together): the rows' weighted residuals and their Jacobian (None without
     with_jacobian). J_b is a view of ``out[rows]`` when ``out`` (m, p) is given (the dense
     Jacobian, :func:`residual_function`), else a buffer that the next block overwrites.
     parts: [(set index, kind model, global rows, [(local slice, block kind model)])];
@@ -120,11 +121,14 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True,
 
     def blocks(u, with_jacobian: bool = True, out: np.ndarray | None = None):
         x = u * scale
-        at = 0
+        at = first = 0
         for i, km, g, blocks_i in parts:
-            kin, fr, b = layout.split(x, i)
+            if x.ndim == 1:
+                kin, fr, b = layout.split(x, i)
             fs = layout.frame_slices[i]
             for sl, block in blocks_i:
+                if x.ndim == 2:  # one vector per sample (u (samples, p))
+                    kin, fr, b = layout.split(x[first + sl.start:first + sl.stop], i)
                 w = weights[g[sl]][:, None] * (1.0 if row_scale is None else row_scale[i])
                 span = slice(at + km.dim * sl.start, at + km.dim * sl.stop)
                 if not with_jacobian:
@@ -147,6 +151,7 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True,
                 J *= scale / MM
                 yield span, (rr * w).ravel() / MM, J
             at += km.N * km.dim
+            first += km.N
 
     return blocks
 

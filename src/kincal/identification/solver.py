@@ -242,7 +242,8 @@ def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.ndarray = 0.0,
           penalised: np.ndarray | None = None, prior: np.ndarray | None = None,
           options: SolverOptions = SolverOptions()) -> SolveSummary:
-    """Minimise F from ``u0`` over the parameters where ``free`` is True.
+    """Minimise F from ``u0`` over the parameters where ``free`` is True (:func:`steps`
+    driven by ``residual``).
 
     residual(u, with_jacobian) -> (r (m,), J (m, p) or None): weighted residuals [mm]
         and their Jacobian with respect to u (measured minus predicted has J = -dP/du;
@@ -255,6 +256,26 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         kincal.identification.prior); its entries between free and fixed parameters must
         be zero (the fixed ones' offsets would otherwise pull the free ones).
     """
+    run = steps(residual, u0, free, lam, penalised, prior, options)
+    memo = getattr(residual, "memo", None)  # the analysis's pass at a point, if any
+    try:
+        u = next(run)
+        while True:
+            kept = memo.pop(u.tobytes(), None) if memo else None
+            u = run.send(residual(u, True) if kept is None else kept)
+    except StopIteration as done:
+        return done.value
+
+
+def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.ndarray = 0.0,
+          penalised: np.ndarray | None = None, prior: np.ndarray | None = None,
+          options: SolverOptions = SolverOptions()):
+    """:func:`solve` as a generator: it yields each point u where it needs the dense
+    linearisation and is sent (r, J) there; it returns the SolveSummary. Whoever drives it
+    evaluates the points, so several solves can be evaluated together (the folds of
+    Algorithm 1 in one vectorised pass, kincal.identification.cross_validation); a residual
+    streamed in blocks (``n_blocks`` > 1) is linearised here and nothing is yielded. The
+    residual's ``factor`` (a remembered triangle) is used as by :func:`solve`."""
     p = u0.size
     free_idx = np.flatnonzero(free)
     pen = np.zeros(p, dtype=bool) if penalised is None else np.asarray(penalised, dtype=bool)
@@ -282,13 +303,8 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     streamed = getattr(residual, "n_blocks", 1) > 1
 
     def linearise(u):
-        """(r, J or None, G or None, Rz or None): streamed in blocks for many poses
-        (:mod:`kincal.identification.reduction`), else the dense J factored below."""
-        if not streamed:
-            memo = getattr(residual, "memo", None)
-            kept = memo.pop(u.tobytes(), None) if memo else None  # the analysis's pass at u
-            r, J = residual(u, True) if kept is None else kept
-            return r, J, None, None
+        """(r, None, G, Rz): streamed in blocks for many poses
+        (:mod:`kincal.identification.reduction`)."""
         from kincal.identification.reduction import linearise as reduce
 
         r, G, Rz = reduce(residual.blocks, u, residual.rows, p, free_idx,
@@ -296,7 +312,10 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         return r, None, G, Rz
 
     u = u0.astype(float).copy()
-    r, J, G, Rz = linearise(u)
+    if streamed:
+        r, J, G, Rz = linearise(u)
+    else:
+        (r, J), G, Rz = (yield u), None, None
     data, penalty = objective(u, r)
     costs, damps = [data + penalty], []
     # Levenberg-Marquardt with Nielsen's damping update: mu scales diag(J^T J); a step
@@ -352,7 +371,10 @@ def solve(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             u_new = u.copy()
             u_new[free_idx] += step
             # with the Jacobian at once: most steps are accepted, and then it is needed
-            r_new, J_new, G_new, Rz_new = linearise(u_new)
+            if streamed:
+                r_new, J_new, G_new, Rz_new = linearise(u_new)
+            else:
+                (r_new, J_new), G_new, Rz_new = (yield u_new), None, None
             d_new, p_new = objective(u_new, r_new)
             lin = A0 @ step - b0
             predicted = costs[-1] - float(lin @ lin) - rho2

@@ -23,7 +23,7 @@ from kincal.errors import DataError
 from kincal.measurements.point_space import BASE, TOOL, ParameterSpace
 from kincal.models.base import ErrorModel
 from kincal.models.chain import Chain, axis_cross
-from kincal.rotations import base_rotation, rotx, roty, rotz
+from kincal.rotations import base_rotation, rotations_about, rotx, roty, rotz
 
 
 _EYE3 = np.eye(3)  # the base translation's columns (read only)
@@ -78,6 +78,11 @@ class MeasurementModel:
     def _measured_points(self, x: np.ndarray, R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
         """(N, 3) each sample's measured point in the base frame."""
         tools = self.space.tools(x)
+        if tools.ndim == 3:  # one vector per sample (the products of R_tip @ tools[0])
+            t = tools[np.arange(self.N), self.points]
+            if tools.shape[1] == 1:
+                return p_tip + np.matmul(R_tip, t[:, :, None])[:, :, 0]
+            return p_tip + np.einsum("nij,nj->ni", R_tip, t)
         if len(tools) == 1:
             return p_tip + R_tip @ tools[0]
         return p_tip + np.einsum("nij,nj->ni", R_tip, tools[self.points])
@@ -92,6 +97,8 @@ class MeasurementModel:
         kin, base, _ = self.space.split(x)
         s = self.chain.state(kin, self.space.backlash_values(x), keep=False)
         P = self._measured_points(x, s.R_tip, s.p_tip)
+        if x.ndim == 2:  # one vector per sample
+            return _rotate(_base_rotations(base), P) + base[:, :3]
         return P @ base_rotation(*base[3:]).T + base[:3]
 
     def jacobian(self, x: np.ndarray, kinematic: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -115,17 +122,19 @@ class MeasurementModel:
     def _frame_columns(self, J, P, R_tip, base, rotate_kinematic=False):
         """Fill the base and tool columns (and turn the kinematic ones into the measurement frame)."""
         N, k, f = self.N, self.space.n_kinematic, self.space.n_frames
-        rx, ry, rz = base[3:]
-        Rx, Ry, Rz = rotx(rx), roty(ry), rotz(rz)
+        if base.ndim == 2:  # one vector per sample: one rotation per sample
+            Rx, Ry, Rz = (rotations_about(c, base[:, 3 + c]) for c in range(3))
+        else:
+            Rx, Ry, Rz = rotx(base[3]), roty(base[4]), rotz(base[5])
         Rb = Rx @ Ry @ Rz
         if rotate_kinematic:
             J[:, :, :k] = np.matmul(Rb, J[:, :, :k])
             J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
-        Pm = P @ Rb.T + base[:3]
+        Pm = _rotate(Rb, P) + base[..., :3]
         J[:, :, k:k + 3] = _EYE3
-        J[:, :, k + 3] = axis_cross(0, Pm - base[:3])
-        J[:, :, k + 4] = axis_cross(1, P @ (Ry @ Rz).T) @ Rx.T
-        J[:, :, k + 5] = axis_cross(2, P @ Rz.T) @ (Rx @ Ry).T
+        J[:, :, k + 3] = axis_cross(0, Pm - base[..., :3])
+        J[:, :, k + 4] = _rotate(Rx, axis_cross(1, _rotate(Ry @ Rz, P)))
+        J[:, :, k + 5] = _rotate(Rx @ Ry, axis_cross(2, _rotate(Rz, P)))
         # a sample moves with its own point only: its block gets R_b R_tip, the others 0
         if self.space.n_points == 1:  # one point: its columns are whole slices
             for c in range(3):
@@ -136,6 +145,23 @@ class MeasurementModel:
         for c in range(3):
             J[rows, :, first + c] = np.matmul(Rb, R_tip[:, :, c, None])[:, :, 0]
         return Pm, J
+
+
+def _rotate(R: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(N, 3) rows v (N, 3) turned by R: one (3, 3) rotation, or (N, 3, 3) one per row. The
+    latter as (1, 3) x (3, 3) products of R's contiguous transposes, which give the bits of
+    v @ R.T for equal R (checked for 2 to 300 rows; an einsum or a product with the
+    transposed view rounds otherwise), so the folds of Algorithm 1 evaluated together
+    follow the path of each fold on its own."""
+    if R.ndim == 2:
+        return v @ R.T
+    return np.matmul(v[:, None, :], np.ascontiguousarray(R.transpose(0, 2, 1)))[:, 0, :]
+
+
+def _base_rotations(base: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) the measurement frames' rotations Rx Ry Rz of (N, 6) frame vectors."""
+    Rx, Ry, Rz = (rotations_about(c, base[:, 3 + c]) for c in range(3))
+    return Rx @ Ry @ Rz
 
 
 # samples from which the closed-form first guess of the frames is made, at most: it is
@@ -184,12 +210,12 @@ class PointKind:
         return other
 
     def residuals(self, kin, frames, backlash, jacobian=False, kinematic=True):
-        x = np.concatenate([kin, frames, backlash])
+        x = np.concatenate([kin, frames, backlash], axis=-1)
         P = self.data.positions
         if not jacobian:
             return P - self.model.predict(x)
         pred, J = self.model.jacobian(x, kinematic)
-        k, f = len(kin), len(frames)
+        k, f = kin.shape[-1], frames.shape[-1]
         return P - pred, -J[:, :, :k], -J[:, :, k:k + f], -J[:, :, k + f:]
 
     def start(self, kin, tool_guess=None, base_guess=None) -> np.ndarray:

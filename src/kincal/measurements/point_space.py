@@ -233,16 +233,16 @@ class ParameterSpace:
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(kinematic (p_k,), base (6,), tool (3,) of point 1) views of a parameter vector."""
         k = self.n_kinematic
-        return x[:k], x[k:k + 6], x[k + 6:k + 9]
+        return x[..., :k], x[..., k:k + 6], x[..., k + 6:k + 9]
 
     def tools(self, x: np.ndarray) -> np.ndarray:
         """(n_points, 3) view of the measured points in the tip frame."""
         k = self.n_kinematic + 6
-        return x[k:k + 3 * self.n_points].reshape(self.n_points, 3)
+        return x[..., k:k + 3 * self.n_points].reshape(x.shape[:-1] + (self.n_points, 3))
 
     def backlash_values(self, x: np.ndarray) -> np.ndarray:
         """(n_terms,) view of the joint terms (backlash, then compliance) of a vector."""
-        return x[self.n_kinematic + self.n_frames:]
+        return x[..., self.n_kinematic + self.n_frames:]
 
     @property
     def classes(self) -> tuple[str, ...]:

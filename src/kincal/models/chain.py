@@ -55,6 +55,16 @@ def axis_cross(i: int, v: np.ndarray) -> np.ndarray:
     return out
 
 
+def equal_runs(x: np.ndarray) -> list[tuple[int, int]]:
+    """[(start, stop)] of the runs of equal consecutive rows of x (N, p): one parameter
+    vector per pose, as the folds of Algorithm 1 evaluated together give it (a few
+    vectors, each over many poses), is evaluated once per run where that is cheaper."""
+    first = np.ones(len(x), dtype=bool)
+    np.any(x[1:] != x[:-1], axis=1, out=first[1:])
+    starts = np.flatnonzero(first).tolist()
+    return list(zip(starts, starts[1:] + [len(x)]))
+
+
 def motion_basis(w: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(4, 12): the top rows [R | c - R c] of a turn by q about the unit axis w (3,) through
     the point c (3,), flattened, are (cos q, sin q, 1 - cos q, 1) times this matrix
@@ -197,7 +207,8 @@ class Chain:
     def state(self, x: np.ndarray, backlash: np.ndarray | None = None,
               keep: bool = True) -> "ChainState":
         """Evaluate kinematic parameters x (and the joint terms' values: backlash, then
-        compliance) on every pose.
+        compliance) on every pose; x (N, p): one kinematic vector per pose (the folds of
+        Algorithm 1 evaluated together, :mod:`kincal.identification.cross_validation`).
 
         keep=False keeps only the tip (cheaper when no derivative is wanted)."""
         m, N = self.model, self.N
@@ -220,6 +231,9 @@ class Chain:
                 H = G @ P[i]
                 if placed is not None:
                     placed[i] = H
+            elif P.ndim == 4:  # one placement per pose
+                H = placed[i] if placed is not None else np.empty((N, 4, 4))
+                np.matmul(G, P[i], out=H)
             else:
                 H = placed[i] if placed is not None else np.empty((N, 4, 4))
                 np.matmul(G.reshape(-1, 4), P[i], out=H.reshape(-1, 4))

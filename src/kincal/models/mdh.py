@@ -59,7 +59,7 @@ import numpy as np
 
 from kincal.errors import OptionError
 from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
-from kincal.models.chain import cross_rows
+from kincal.models.chain import cross_rows, equal_runs
 from kincal.rotations import inverse, transform
 
 PARALLEL_TOL = 1e-6  # |sin| of the angle between axes below which they count as parallel
@@ -169,8 +169,15 @@ class MdhModel(ErrorModel):
 
     def unpack(self, x) -> tuple[np.ndarray, np.ndarray]:
         """(table (n, 4), beta (n,)) of a kinematic vector x (or of a (n, 4) table when the
-        model has no beta)."""
-        x = np.asarray(x, dtype=float).ravel()
+        model has no beta); (tables (N, n, 4), betas (N, n)) of one vector per pose (N, p)."""
+        x = np.asarray(x, dtype=float)
+        if x.ndim == 2:
+            if x.shape[1] != self.size:
+                raise ValueError(f"{self.size} kinematic parameters expected, got {x.shape[1]}")
+            betas = np.zeros((len(x), self.n))
+            betas[:, self.has_beta] = x[:, self._field_index[2]]
+            return x[:, self._table_index], betas
+        x = x.ravel()
         if x.size != self.size:
             raise ValueError(f"{self.size} kinematic parameters expected, got {x.size}")
         if not self.has_beta.any():
@@ -189,23 +196,31 @@ class MdhModel(ErrorModel):
         return np.array(out)
 
     def placements(self, x) -> np.ndarray:
-        """(n, 4, 4) A_i = Tx(a) Rx(alpha) Ry(beta) Rz(theta) Tz(d), vectorised over joints."""
+        """(n, 4, 4) A_i = Tx(a) Rx(alpha) Ry(beta) Rz(theta) Tz(d), vectorised over joints;
+        (n, N, 4, 4) for one vector per pose x (N, p), made once per run of equal rows (the
+        folds of Algorithm 1 evaluated together: a few vectors over many poses)."""
+        if np.ndim(x) == 2 and len(x) > 1:
+            runs = equal_runs(np.asarray(x, dtype=float))
+            if len(runs) < len(x):
+                A = self.placements(np.asarray(x)[[a for a, _ in runs]])
+                return np.repeat(A, [b - a for a, b in runs], axis=1)
         table, beta = self.unpack(x)
-        a, alpha, d, theta = table.T
+        a, alpha, d, theta = table.T  # (n,) each, or (n, N) per pose
+        beta = beta.T
         ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
         ct, st = np.cos(theta), np.sin(theta)
-        A = np.zeros((self.n, 4, 4))
+        A = np.zeros(a.shape + (4, 4))
         # R = Rx(alpha) Ry(beta) Rz(theta), written out
-        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2] = cb * ct, -cb * st, sb
-        A[:, 1, 0] = ca * st + sa * sb * ct
-        A[:, 1, 1] = ca * ct - sa * sb * st
-        A[:, 1, 2] = -sa * cb
-        A[:, 2, 0] = sa * st - ca * sb * ct
-        A[:, 2, 1] = sa * ct + ca * sb * st
-        A[:, 2, 2] = ca * cb
-        A[:, :3, 3] = A[:, :3, 2] * d[:, None]
-        A[:, 0, 3] += a
-        A[:, 3, 3] = 1.0
+        A[..., 0, 0], A[..., 0, 1], A[..., 0, 2] = cb * ct, -cb * st, sb
+        A[..., 1, 0] = ca * st + sa * sb * ct
+        A[..., 1, 1] = ca * ct - sa * sb * st
+        A[..., 1, 2] = -sa * cb
+        A[..., 2, 0] = sa * st - ca * sb * ct
+        A[..., 2, 1] = sa * ct + ca * sb * st
+        A[..., 2, 2] = ca * cb
+        A[..., :3, 3] = A[..., :3, 2] * d[..., None]
+        A[..., 0, 3] += a
+        A[..., 3, 3] = 1.0
         return A
 
     def twists(self, x) -> tuple[np.ndarray, np.ndarray]:
@@ -247,11 +262,11 @@ class MdhModel(ErrorModel):
         if ib.size:
             hb = self.has_beta
             table, _ = self.unpack(x)
-            a, alpha = table[hb, 0], table[hb, 1]
+            a, alpha = table.T[0][hb], table.T[1][hb]  # (n_beta,), or (n_beta, N) per pose
+            a, alpha = a.reshape(len(a), -1, 1), alpha.reshape(len(alpha), -1, 1)
             Gb = G[hb]
-            y1 = (np.cos(alpha)[:, None, None] * Gb[:, :, :3, 1]
-                  + np.sin(alpha)[:, None, None] * Gb[:, :, :3, 2])
-            c = Gb[:, :, :3, 3] + a[:, None, None] * Gb[:, :, :3, 0]
+            y1 = (np.cos(alpha) * Gb[:, :, :3, 1] + np.sin(alpha) * Gb[:, :, :3, 2])
+            c = Gb[:, :, :3, 3] + a * Gb[:, :, :3, 0]
             K[ib] = cross_rows(y1, P - c)
         return K.transpose(1, 2, 0)
 

@@ -1,0 +1,156 @@
+"""A flush contact face's tilt carried by the corrected URDF, not by FRAMES.json alone.
+
+A flush calibration identifies the contact frame on the tip: the contact point ``t`` and
+the face's two tilts ``R_c = Rx(tool.rx) Ry(tool.ry)`` (:mod:`kincal.measurements.flush`).
+The data can barely tell those tilts from the last joints' placement turns, so the split
+is the prior's; a reader who takes the tip frame from the URDF and the contact point from
+FRAMES.json (as a robot's stack does, and FIGAROH's validation) would lose the tilt and
+judge the face off by it (TALOS: pitch 0.267 -> 0.490 deg held out, docs/results.md).
+
+So when a URDF is written, the tilt goes into the origin of the fixed joint above the tip
+link (``gripper_left_base_link_joint`` on TALOS), turned about the contact point:
+``origin' = origin @ D``, ``D = [R_c, t - R_c t]``, so the new tip frame is the contact
+frame's orientation and the contact point keeps its coordinates ``t`` (the user's
+``--tool-offset``); FRAMES.json then holds the same point with zero tilts. The contact
+point and face normal are the same as before to first order (kincal's flush height moves
+by ``(R_c^T d - d) . t`` for a residual tilt ``d``: micrometres).
+
+It is folded only where that is exact and harmless: the tip is a link whose parent joint
+is fixed and on the chain (the tip below the chain's last joint, not an ancestor of the
+base), every set on that tip is a flush set with the same contact frame, the readable
+export did not already move another offset into that joint, and the tilt is at most
+:data:`MAX_FOLD_DEG` (a larger one is the face's design, not an error: turning the tip
+link's meshes by it would mislead; FRAMES.json keeps it, with a note).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from kincal.rotations import base_rotation, inverse, transform
+
+MAX_FOLD_DEG = 5.0  # [deg] largest face tilt written into a URDF joint origin
+TILTS = ("tool.rx", "tool.ry")
+
+
+@dataclass(frozen=True)
+class Fold:
+    """One tip's face tilt written into the fixed joint above it.
+
+    joint: the fixed URDF joint; tip: the tip link; tilts: (rx, ry) [rad]; change: (4, 4)
+    D, the tip frame's change in itself; origin: (4, 4) the joint's new URDF origin [m];
+    sets: the indices of the result's sets on that tip."""
+
+    joint: str
+    tip: str
+    tilts: tuple[float, float]
+    change: np.ndarray
+    origin: np.ndarray
+    sets: tuple[int, ...]
+
+    def describe(self) -> str:
+        rx, ry = (math.degrees(v) for v in self.tilts)
+        return (f"the contact face's tilt (rx {rx:+.4f} deg, ry {ry:+.4f} deg against "
+                f"{self.tip}) is written into the origin of the fixed joint {self.joint}, "
+                "turned about the contact point: the URDF's tip frame is the contact frame "
+                "and FRAMES.json holds the contact point with zero tilts")
+
+
+def _mat(M) -> np.ndarray:
+    return transform(np.array(M.rotation), np.array(M.translation))
+
+
+def _fixed_joint_above(robot, tip: str):
+    """(joint name, its URDF origin (4, 4)) of the fixed joint above the link ``tip`` when
+    it lies between the chain's last joint and the tip; else (None, why)."""
+    import pinocchio as pin
+
+    m = robot.model
+    if not m.existFrame(tip):
+        return None, f"{tip!r} is not a frame"
+    f = m.frames[m.getFrameId(tip)]
+    if f.type != pin.FrameType.BODY:
+        return None, f"the tip {tip!r} is not a link"
+    fj = m.frames[f.parentFrame]
+    if fj.type != pin.FrameType.FIXED_JOINT:
+        return None, f"the tip link {tip!r} hangs on a moving joint"
+    rev = robot.geometry.is_reversed
+    names = robot.joint_names
+    if not names or m.names[f.parentJoint] != names[-1] or (rev is not None and rev[-1]):
+        return None, f"the tip link {tip!r} is not below the chain's last joint"
+    parent = m.frames[fj.parentFrame]
+    return fj.name, inverse(_mat(parent.placement)) @ _mat(fj.placement)
+
+
+def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
+    """(the folds the corrected URDF makes, notes of face tilts left in FRAMES.json only).
+
+    exclude: joints whose origins the export already rewrites otherwise (regauged)."""
+    by_tip: dict[str, list[int]] = {}
+    for i, s in enumerate(result.sets):
+        by_tip.setdefault(s.tip_frame or result.robot.tip, []).append(i)
+    out, notes = [], []
+    for tip, idx in by_tip.items():
+        flush = [i for i in idx if result.sets[i].kind == "flush"]
+        if not flush:
+            continue
+        sets = [result.sets[i] for i in idx]
+        tools = {tuple(float(s.frame(n)) for n in (*TILTS, "tool.x", "tool.y", "tool.z"))
+                 for s in sets if s.kind == "flush"}
+        rx, ry, *t = next(iter(tools))
+        if rx == 0.0 and ry == 0.0:
+            continue
+        said = (f"the contact face's tilt on {tip!r} (rx {math.degrees(rx):+.4f} deg, ry "
+                f"{math.degrees(ry):+.4f} deg) is in FRAMES.json only")
+        if len(flush) != len(idx) or len(tools) != 1:
+            notes.append(f"{said}: other sets on that tip, or several contact frames")
+            continue
+        if max(abs(rx), abs(ry)) > math.radians(MAX_FOLD_DEG):
+            notes.append(f"{said}: more than {MAX_FOLD_DEG:g} deg is the face's design, not "
+                         "written into a URDF joint; a reader of the URDF alone must apply it")
+            continue
+        joint, origin = _fixed_joint_above(_robot_on(result, tip), tip)
+        if joint is None or joint in exclude:
+            why = origin if joint is None else f"{joint} already carries another change"
+            notes.append(f"{said}: {why}, so no URDF joint can carry it")
+            continue
+        R = base_rotation(rx, ry, 0.0)
+        tv = np.array(t)
+        D = transform(R, tv - R @ tv)
+        out.append(Fold(joint, tip, (rx, ry), D, origin @ D, tuple(idx)))
+    return tuple(out), tuple(notes)
+
+
+def _robot_on(result, tip: str):
+    """The corrected robot on the chain that ends at ``tip``."""
+    from kincal.robot import Robot
+
+    c = result.corrected
+    if tip == c.tip:
+        return c
+    base = next((s.base_frame for s in result.sets if (s.tip_frame or c.tip) == tip), c.base)
+    return Robot(c.model, c.urdf_text, c.name, base or c.base, tip, c.source, c.off_chain)
+
+
+def folded_frames(frames, made: tuple[Fold, ...]):
+    """The CellFrames ``frames`` with the folded sets' tilts set to zero."""
+    if not made:
+        return frames
+    zero = {i for f in made for i in f.sets}
+    sets = []
+    for i, s in enumerate(frames.sets):
+        if i in zero:
+            s = replace(s, values=tuple(0.0 if n in TILTS else v
+                                        for n, v in zip(s.names, s.values)))
+        sets.append(s)
+    return replace(frames, sets=tuple(sets))
+
+
+def record(made: tuple[Fold, ...]) -> list[dict]:
+    """What FRAMES.json says about the folds (readers ignore it)."""
+    return [{"tip_frame": f.tip, "joint": f.joint, "tool.rx": f.tilts[0], "tool.ry": f.tilts[1],
+             "note": "written into the joint's origin, turned about the contact point; the "
+                     "tilts here are zero"} for f in made]

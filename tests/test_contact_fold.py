@@ -1,0 +1,119 @@
+"""A flush contact face's tilt goes into the URDF written beside FRAMES.json
+(kincal.export.contact_fold): a reader of the URDF's tip frame and the contact point alone
+sees the identified contact frame."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import random_joint_values
+
+import kincal
+from kincal import models
+from kincal.errors import ExportError
+from kincal.export import Outputs, write_calibration
+from kincal.export.contact_fold import MAX_FOLD_DEG, folds
+from kincal.export.outputs import _corrected
+from kincal.export.readback import check_readback
+from kincal.planning.kind_simulation import simulate_flush
+from kincal.robot import Robot
+from kincal.rotations import base_rotation, transform
+
+TABLE = np.array([[0.1, -0.15, 0.25]])  # rx, ry [rad], d [m]
+
+
+def _result(rng, tip="flange", contact=(0.01, -0.02, 0.1, 0.03, -0.02)):
+    robot = Robot.load("ec66", tip=tip)
+    em = models.build("complete", robot.geometry)
+    contact = np.array(contact)
+    truth = em.nominal + np.where(em.is_length, 0.3e-3, np.radians(0.03)) * rng.normal(size=em.size)
+    data = simulate_flush(em, truth, contact, TABLE, random_joint_values(robot.geometry, rng, 3000),
+                          40, 2e-5, 0.01, rng,
+                          limits=(robot.geometry.lower, robot.geometry.upper))
+    return kincal.calibrate(robot, [data], method="l2", lam=1e-3, tool_guess=tuple(contact[:3]))
+
+
+def _contact(robot, q, frames):
+    """(N, 4, 4) the contact frame: the tip turned by the tilts, at the contact point."""
+    R = base_rotation(frames["tool.rx"], frames["tool.ry"], 0.0)
+    return robot.tip_poses(q) @ transform(R, [frames["tool." + c] for c in "xyz"])
+
+
+def test_the_urdf_alone_gives_the_identified_contact_frame(tmp_path, rng):
+    result = _result(rng)
+    identified = dict(zip(result.sets[0].frame_names, result.sets[0].frames))
+    assert abs(identified["tool.rx"]) > 0.01  # a tilt to carry
+    written = write_calibration(result, Outputs(urdf=tmp_path / "cal.urdf",
+                                                frames=tmp_path / "frames.json"))
+    assert any("flange_joint" in n and "turned about the contact point" in n
+               for n in written.notes)
+    data = json.loads((tmp_path / "frames.json").read_text())
+    frames = data["sets"][0]["frames"]
+    assert frames["tool.rx"] == 0.0 and frames["tool.ry"] == 0.0
+    assert [frames["tool." + c] for c in "xyz"] == [identified["tool." + c] for c in "xyz"]
+    (fold,) = data["tilts_in_urdf"]
+    assert fold["joint"] == "flange_joint" and fold["tool.rx"] == identified["tool.rx"]
+    # what a URDF reader composes: the written tip frame with the file's contact point
+    read = Robot.load(tmp_path / "cal.urdf", tip="flange")
+    q = random_joint_values(read.geometry, rng, 50)
+    want = _contact(result.corrected, q, identified)
+    got = _contact(read, q, frames)
+    assert np.abs(got - want).max() < 1e-9
+    # the other joints' origins are the calibration's, untouched by the fold
+    joints = tuple(result.error_model.joint_names)
+    for name, T in result.corrected.urdf_origins(joints).items():
+        assert np.abs(read.urdf_origins((name,))[name] - T).max() < 1e-12
+
+
+def test_the_readback_checks_the_folded_joint(rng):
+    result = _result(rng)
+    text, _, made = _corrected(result)
+    assert [f.joint for f in made] == ["flange_joint"]
+    check_readback(result, text, False, made)  # as written: accepted
+    with pytest.raises(ExportError, match="flange_joint"):  # the fold's origin not written
+        check_readback(result, _without_fold(result), False, made)
+    with pytest.raises(ExportError):  # a fold written but not declared
+        check_readback(result, text, False, ())
+
+
+def _without_fold(result):
+    from kincal.export.readable_export import corrected_text
+
+    edits, _ = corrected_text(result.robot, result.corrected, True,
+                              joints=tuple(result.error_model.joint_names))
+    return edits.text
+
+
+@pytest.mark.parametrize("tip, contact, why", [
+    ("link_6", (0.01, -0.02, 0.2, 0.03, -0.02), "hangs on a moving joint"),
+    ("flange", (0.01, -0.02, 0.1, np.radians(MAX_FOLD_DEG + 3), -0.02), "the face's design"),
+])
+def test_a_tilt_no_urdf_joint_should_carry_stays_in_frames_json(tip, contact, why, tmp_path, rng):
+    result = _result(rng, tip, contact)
+    made, notes = folds(result)
+    assert made == () and any(why in n for n in notes), notes
+    written = write_calibration(result, Outputs(urdf=tmp_path / "cal.urdf",
+                                                frames=tmp_path / "frames.json"))
+    assert any(why in n for n in written.notes)
+    frames = json.loads((tmp_path / "frames.json").read_text())["sets"][0]["frames"]
+    identified = dict(zip(result.sets[0].frame_names, result.sets[0].frames))
+    assert frames["tool.rx"] == identified["tool.rx"] != 0.0
+
+
+def test_frames_json_alone_keeps_the_tilts(tmp_path, rng):
+    """Without a URDF written beside it, FRAMES.json is the only carrier."""
+    result = _result(rng)
+    write_calibration(result, Outputs(frames=tmp_path / "frames.json"))
+    data = json.loads((tmp_path / "frames.json").read_text())
+    identified = dict(zip(result.sets[0].frame_names, result.sets[0].frames))
+    assert data["sets"][0]["frames"]["tool.ry"] == identified["tool.ry"]
+    assert "tilts_in_urdf" not in data
+
+
+def test_added_frames_leave_the_tilt_in_frames_json_and_say_so(rng):
+    result = _result(rng)
+    text, notes, made = _corrected(result, add_frames=True)
+    assert made == () and any("--add-frames" in n for n in notes), notes
+    check_readback(result, text, True, made)
