@@ -140,17 +140,17 @@ def test_a_urdf_the_second_parser_reads_otherwise_is_not_written(rtest, tmp_path
 
     robot, data, _ = rtest
     result = _quiet(calibrate, robot, data)
-    honest = outputs.corrected_urdf
+    honest = outputs._corrected  # what write_calibration writes (text, notes, folds)
 
     def nudged(result, readable=True, add_frames=False):
-        text, notes = honest(result, readable, add_frames)
+        text, notes, made = honest(result, readable, add_frames)
         m = re.search(r'(<joint name="joint_3".*?<origin[^>]*xyz=")([-0-9.e]+)', text, re.S)
-        return text[:m.start(2)] + repr(float(m.group(2)) + 1e-6) + text[m.end(2):], notes
+        return text[:m.start(2)] + repr(float(m.group(2)) + 1e-6) + text[m.end(2):], notes, made
 
     out = tmp_path / "c.urdf"
     write_calibration(result, Outputs(urdf=out))  # the honest text passes
     assert out.is_file()
-    monkeypatch.setattr(outputs, "corrected_urdf", nudged)
+    monkeypatch.setattr(outputs, "_corrected", nudged)
     with pytest.raises(ExportError, match="read back before writing.*joint_3"):
         write_calibration(result, Outputs(urdf=tmp_path / "d.urdf", frames=tmp_path / "f.json"))
     assert not (tmp_path / "d.urdf").exists() and not (tmp_path / "f.json").exists()
