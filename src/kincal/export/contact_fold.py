@@ -30,7 +30,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from kincal.rotations import base_rotation, inverse, transform
+from kincal.rotations import base_rotation, rpy_to_matrix, transform
 
 MAX_FOLD_DEG = 5.0  # [deg] largest face tilt written into a URDF joint origin
 TILTS = ("tool.rx", "tool.ry")
@@ -59,30 +59,39 @@ class Fold:
                 "and FRAMES.json holds the contact point with zero tilts")
 
 
-def _mat(M) -> np.ndarray:
-    return transform(np.array(M.rotation), np.array(M.translation))
-
-
 def _fixed_joint_above(robot, tip: str):
     """(joint name, its URDF origin (4, 4)) of the fixed joint above the link ``tip`` when
-    it lies between the chain's last joint and the tip; else (None, why)."""
-    import pinocchio as pin
+    it lies between the chain's last joint and the tip; else (None, why). Read from the
+    URDF text (the tree as written), not the model in memory."""
+    import xml.etree.ElementTree as ET
 
-    m = robot.model
-    if not m.existFrame(tip):
-        return None, f"{tip!r} is not a frame"
-    f = m.frames[m.getFrameId(tip)]
-    if f.type != pin.FrameType.BODY:
-        return None, f"the tip {tip!r} is not a link"
-    fj = m.frames[f.parentFrame]
-    if fj.type != pin.FrameType.FIXED_JOINT:
+    root = ET.fromstring(robot.urdf_text.encode("utf-8"))
+    joints = {}
+    for e in root.findall("joint"):
+        child = e.find("child")
+        if child is not None:
+            joints[child.get("link", "")] = e
+    above = joints.get(tip)
+    if above is None:
+        return None, f"the tip {tip!r} is not a link below a joint"
+    if above.get("type") != "fixed":
         return None, f"the tip link {tip!r} hangs on a moving joint"
     rev = robot.geometry.is_reversed
     names = robot.joint_names
-    if not names or m.names[f.parentJoint] != names[-1] or (rev is not None and rev[-1]):
+    link, seen = tip, set()
+    j: ET.Element | None = above
+    while j is not None and j.get("type") == "fixed" and link not in seen:
+        seen.add(link)
+        parent = j.find("parent")
+        link = "" if parent is None else parent.get("link", "")
+        j = joints.get(link)
+    if (j is None or not names or j.get("name") != names[-1]
+            or (rev is not None and bool(rev[-1]))):
         return None, f"the tip link {tip!r} is not below the chain's last joint"
-    parent = m.frames[fj.parentFrame]
-    return fj.name, inverse(_mat(parent.placement)) @ _mat(fj.placement)
+    o = above.find("origin")
+    xyz, rpy = ((np.array([float(v) for v in (o.get(k) or "0 0 0").split()]) if o is not None
+                 else np.zeros(3)) for k in ("xyz", "rpy"))
+    return str(above.get("name")), transform(rpy_to_matrix(rpy), xyz)
 
 
 def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
