@@ -106,3 +106,23 @@ def _branch(rng, lines, parent, prefix, n, cases, prismatic_at=None):
         parent = f"{prefix}l{i}"
         prev_axis = axis
     return parent, used
+
+
+def sample_robots(tmp_path, named=("ec66",)):
+    """Robots of every shape the fast paths must match: the named ones, two random chains
+    (prismatic, parallel, gimbal and general joints) and a tree path (base on one branch,
+    tip on another), their URDFs written under ``tmp_path``."""
+    from kincal.robot import Robot
+
+    out = [Robot.load(name) for name in named]
+    for seed in (3, 4):
+        text, _ = random_chain(np.random.default_rng(seed), cases=("prismatic", "parallel",
+                                                                   "gimbal", "general"))
+        path = tmp_path / f"chain_{seed}.urdf"
+        path.write_text(text)
+        out.append(Robot.load(path, tip="tip"))
+    text, _ = random_tree(np.random.default_rng(5))
+    path = tmp_path / "tree.urdf"
+    path.write_text(text)
+    out.append(Robot.load(path, base="atip", tip="btip"))
+    return out

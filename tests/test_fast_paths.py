@@ -6,25 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from chains import random_chain, random_tree
+from chains import random_chain, random_tree, sample_robots
 
 from kincal.identification import plausibility
 from kincal.robot import Robot
 
 
 def _robots(tmp_path):
-    out = [Robot.load("ec66")]
-    for seed in (3, 4):
-        text, _ = random_chain(np.random.default_rng(seed), cases=("prismatic", "parallel",
-                                                                   "gimbal", "general"))
-        path = tmp_path / f"chain_{seed}.urdf"
-        path.write_text(text)
-        out.append(Robot.load(path, tip="tip"))
-    text, _ = random_tree(np.random.default_rng(5))
-    path = tmp_path / "tree.urdf"
-    path.write_text(text)
-    out.append(Robot.load(path, base="atip", tip="btip"))
-    return out
+    return sample_robots(tmp_path, ("ec66",))
 
 
 def test_gate_tool_points_match_pinocchio(tmp_path):

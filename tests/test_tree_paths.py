@@ -352,16 +352,10 @@ def test_talos_study_script_improves_every_held_out_figure():
     """scripts/talos_contact.py on the shared real data: the calibration written by the
     command line improves the held-out height and both tilts over the nominal model (the
     README table's figures come from this script)."""
-    import importlib.util
+    import tempfile
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("talos_contact", root / "scripts" / "talos_contact.py")
-    study = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(study)
-    if not study.DATA.is_dir():
-        pytest.skip("../shared/data/talos_contact is not present")
-    import tempfile
+    study = _talos_study()
 
     names, q_train = study.joint_rows(study.DATA / "left_train.csv")
     _, q_valid = study.joint_rows(study.DATA / "left_validation.csv")
@@ -376,15 +370,9 @@ def test_talos_study_script_improves_every_held_out_figure():
         assert now < 0.6 * before, (what, before, now)
 
 
-def test_talos_study_day_planes_and_urdf_alone():
-    """scripts/talos_contact.py's decomposition of the held-out error (docs/results.md,
-    TALOS): both days fitted with a plane per day keep far less roll on the second day
-    than with one plane for both (the table moved against the sole between the days), and
-    the default's files judged on the URDF's tip frame and the contact point alone (the
-    face tilt in FRAMES.json not applied) hold out as well as with it: the URDF carries the
-    face tilt (kincal.export.contact_fold; before, pitch 0.490 against 0.267 deg)."""
+def _talos_study():
+    """scripts/talos_contact.py as a module (skips when the shared TALOS data is absent)."""
     import importlib.util
-    import tempfile
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
@@ -393,6 +381,20 @@ def test_talos_study_day_planes_and_urdf_alone():
     spec.loader.exec_module(study)
     if not study.DATA.is_dir():
         pytest.skip("../shared/data/talos_contact is not present")
+    return study
+
+
+def test_talos_study_day_planes_and_urdf_alone():
+    """scripts/talos_contact.py's decomposition of the held-out error (docs/results.md,
+    TALOS): both days fitted with a plane per day keep far less roll on the second day
+    than with one plane for both (the table moved against the sole between the days), and
+    the default's files judged on the URDF's tip frame and the contact point alone (the
+    face tilt in FRAMES.json not applied) hold out as well as with it: the URDF carries the
+    face tilt (kincal.export.contact_fold; before, pitch 0.490 against 0.267 deg)."""
+    import tempfile
+    from pathlib import Path
+
+    study = _talos_study()
     names, q_train = study.joint_rows(study.DATA / "left_train.csv")
     _, q_valid = study.joint_rows(study.DATA / "left_validation.csv")
     q_both = np.vstack([q_train, q_valid])
