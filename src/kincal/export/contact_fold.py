@@ -122,7 +122,7 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
                          "written into a URDF joint; a reader of the URDF alone must apply it")
             continue
         joint, origin = _fixed_joint_above(_robot_on(result, tip), tip)
-        if joint is None or joint in exclude:
+        if joint is None or joint in exclude or joint in result.error_model.joint_names:
             why = origin if joint is None else f"{joint} already carries another change"
             notes.append(f"{said}: {why}, so no URDF joint can carry it")
             continue
