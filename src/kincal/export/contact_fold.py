@@ -98,6 +98,9 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
     """(the folds the corrected URDF makes, notes of face tilts left in FRAMES.json only).
 
     exclude: joints whose origins the export already rewrites otherwise (regauged)."""
+    from kincal.export.readback import chain_robots
+
+    robots: dict = {}  # the chains' robots by tip, made when a flush tip needs them
     by_tip: dict[str, list[int]] = {}
     for i, s in enumerate(result.sets):
         by_tip.setdefault(s.tip_frame or result.robot.tip, []).append(i)
@@ -106,9 +109,8 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
         flush = [i for i in idx if result.sets[i].kind == "flush"]
         if not flush:
             continue
-        sets = [result.sets[i] for i in idx]
-        tools = {tuple(float(s.frame(n)) for n in (*TILTS, "tool.x", "tool.y", "tool.z"))
-                 for s in sets if s.kind == "flush"}
+        tools = {tuple(float(result.sets[i].frame(n))
+                       for n in (*TILTS, "tool.x", "tool.y", "tool.z")) for i in flush}
         rx, ry, *t = next(iter(tools))
         if rx == 0.0 and ry == 0.0:
             continue
@@ -121,7 +123,8 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
             notes.append(f"{said}: more than {MAX_FOLD_DEG:g} deg is the face's design, not "
                          "written into a URDF joint; a reader of the URDF alone must apply it")
             continue
-        joint, origin = _fixed_joint_above(_robot_on(result, tip), tip)
+        robots = robots or {r.tip: r for r in chain_robots(result)}
+        joint, origin = _fixed_joint_above(robots[tip], tip)
         if joint is None or joint in exclude or joint in result.error_model.joint_names:
             why = origin if joint is None else f"{joint} already carries another change"
             notes.append(f"{said}: {why}, so no URDF joint can carry it")
@@ -131,17 +134,6 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
         D = transform(R, tv - R @ tv)
         out.append(Fold(joint, tip, (rx, ry), D, origin @ D, tuple(idx)))
     return tuple(out), tuple(notes)
-
-
-def _robot_on(result, tip: str):
-    """The corrected robot on the chain that ends at ``tip``."""
-    from kincal.robot import Robot
-
-    c = result.corrected
-    if tip == c.tip:
-        return c
-    base = next((s.base_frame for s in result.sets if (s.tip_frame or c.tip) == tip), c.base)
-    return Robot(c.model, c.urdf_text, c.name, base or c.base, tip, c.source, c.off_chain)
 
 
 def folded_frames(frames, made: tuple[Fold, ...]):

@@ -110,7 +110,7 @@ def corrected_urdf(result, readable: bool = True, add_frames: bool = False):
 def _corrected(result, readable: bool = True, add_frames: bool = False):
     """(text, export notes, the contact folds made)."""
     from kincal.export.contact_fold import folds
-    from kincal.export.readable_export import Regauged, corrected_text
+    from kincal.export.readable_export import corrected_text, regauged_joints
 
     edits, moved = corrected_text(result.robot, result.corrected, readable,
                                   source=str(result.robot.source),
@@ -128,8 +128,7 @@ def _corrected(result, readable: bool = True, add_frames: bool = False):
     else:  # the added frames hang tool points on the tip as identified: no fold under them
         from kincal.export.urdf_export import edit_joint_origins
 
-        regauged = {n for m in moved if isinstance(m, Regauged) for n in (m.joint, *m.children)}
-        made, said = folds(result, exclude=regauged)
+        made, said = folds(result, exclude=regauged_joints(moved))
         if made:
             text = edit_joint_origins(text, {f.joint: f.origin for f in made},
                                       source=str(result.robot.source)).text

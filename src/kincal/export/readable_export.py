@@ -42,6 +42,12 @@ class Regauged:
                 "readable (pitch near +-90 deg); its link frame turns by that angle")
 
 
+def regauged_joints(moved) -> set[str]:
+    """The joints whose origins :func:`corrected_text` re-expressed (its ``moved``: a joint
+    offset moved into its child joints): those joints and their children."""
+    return {n for m in moved if isinstance(m, Regauged) for n in (m.joint, *m.children)}
+
+
 @dataclass(frozen=True)
 class RpySwing:
     """A corrected origin whose exact rpy moved much more than its rotation did."""

@@ -39,7 +39,7 @@ N_CONFIGURATIONS = 12
 ADDED_PREFIX = "kincal_"  # the names of the fixed frames add_frames writes
 
 
-def _chains(result):
+def chain_robots(result):
     """The calibrated robots of every distinct chain of ``result`` (Pinocchio models)."""
     from kincal.robot import Robot
 
@@ -154,11 +154,11 @@ def written_origins(original: str, text: str, movable, add_frames: bool
 def _regauged(result) -> set[str]:
     """The joints whose origins the readable export re-expressed (a joint offset moved into
     its child joints, :mod:`kincal.export.readable_export`): those and their children."""
-    from kincal.export.readable_export import Regauged, corrected_text
+    from kincal.export.readable_export import corrected_text, regauged_joints
 
     _, moved = corrected_text(result.robot, result.corrected, True,
                               joints=tuple(result.error_model.joint_names))
-    return {n for m in moved if isinstance(m, Regauged) for n in (m.joint, *m.children)}
+    return regauged_joints(moved)
 
 
 def check_readback(result, text: str, add_frames: bool = False, folds=()) -> None:
@@ -192,7 +192,7 @@ def check_readback(result, text: str, add_frames: bool = False, folds=()) -> Non
     except UrdfError as exc:
         raise _refuse(f"is not read by Pinocchio ({exc})") from None
     rng = np.random.default_rng(0)
-    for robot in _chains(result):
+    for robot in chain_robots(result):
         g = robot.geometry
         lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
         hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
