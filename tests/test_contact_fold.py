@@ -17,6 +17,7 @@ from kincal.export import Outputs, write_calibration
 from kincal.export.contact_fold import MAX_FOLD_DEG, folds
 from kincal.export.outputs import _corrected
 from kincal.export.readback import check_readback
+from kincal.frames_file import CellFrames
 from kincal.planning.kind_simulation import simulate_flush
 from kincal.robot import Robot
 from kincal.rotations import base_rotation, transform
@@ -53,6 +54,8 @@ def test_the_urdf_alone_gives_the_identified_contact_frame(tmp_path, rng):
     frames = data["sets"][0]["frames"]
     assert frames["tool.rx"] == 0.0 and frames["tool.ry"] == 0.0
     assert [frames["tool." + c] for c in "xyz"] == [identified["tool." + c] for c in "xyz"]
+    read_back = CellFrames.read(tmp_path / "frames.json")  # the record is read past
+    assert read_back.sets[0].value("tool.ry") == 0.0
     (fold,) = data["tilts_in_urdf"]
     assert fold["joint"] == "flange_joint" and fold["tool.rx"] == identified["tool.rx"]
     # what a URDF reader composes: the written tip frame with the file's contact point
