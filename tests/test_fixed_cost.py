@@ -209,3 +209,89 @@ def test_kept_of_the_free_columns_alone_is_the_analysis_partition():
         assert identifiable(J, nm, nk, free) == whole
         seen += len(whole) < int(free.sum())
     assert seen >= 10 and robots == 4  # cases that drop some free column; the robots'
+
+
+def _projected_one_by_one(J, order, free, norms, rank_tol, scale):
+    """The ordered selection as it was before the blocked one: each free column in turn
+    projected off the kept ones' orthonormal basis (twice), kept when the rest is larger
+    than rank_tol of its norm."""
+    import math
+
+    basis, kept, dropped = np.zeros(J.shape), [], []
+    for c in order:
+        if not free[c]:
+            continue
+        if norms[c] <= rank_tol * scale:
+            dropped.append(c)
+            continue
+        r = J[:, c]
+        if kept:
+            Q = basis[:, :len(kept)]
+            r = r - Q @ (Q.T @ r)
+            r = r - Q @ (Q.T @ r)
+        size = math.sqrt(r @ r)
+        if size > rank_tol * norms[c]:
+            basis[:, len(kept)] = r / size
+            kept.append(c)
+        else:
+            dropped.append(c)
+    return sorted(kept), sorted(dropped)
+
+
+def test_blocked_selection_is_the_column_by_column_projection(tmp_path):
+    """The ordered selection by one QR per run of drops keeps and drops exactly what the
+    projection of one column at a time does: random columns with exact and near duplicates
+    (1e-9 to 1e-5 apart, across the tolerance), zero columns, runs of nearly parallel
+    columns, fewer rows than columns, held columns; and the Jacobians of the fits of several
+    robots (random chains, a tree path), with a tool point off and on the last axis."""
+    from kincal.errors import OptionError
+    from kincal.identification.selection import _ordered, preference_order
+    from kincal.measurements.point import MeasurementModel
+
+    rng = np.random.default_rng(8)
+    cases = []
+    for k in range(400):
+        p = int(rng.integers(3, 40))
+        m = int(rng.integers(max(1, p // 3), 3 * p))
+        J = rng.normal(size=(m, p)) * 10.0 ** rng.uniform(-3, 3, p)
+        for _ in range(int(rng.integers(0, 5))):
+            a, b, c = rng.choice(p, 3)
+            J[:, a] = J[:, b] * rng.normal() + J[:, c] * rng.normal()
+        if k % 3 == 0:
+            c = rng.integers(p)
+            J[:, c] += 10.0 ** rng.uniform(-9, -5) * rng.normal(size=m) * np.abs(J[:, c]).max()
+        if k % 7 == 0:
+            J[:, rng.integers(p)] = 0.0
+        if k % 5 == 0:
+            b = rng.integers(p)
+            for d in rng.choice(p, 4):
+                J[:, d] = J[:, b] + 1e-9 * rng.normal(size=m)
+        cases.append((J if m <= p else np.linalg.qr(J, mode="r"), list(rng.permutation(p)),
+                      rng.random(p) < 0.8))
+    for robot in sample_robots(tmp_path, ("ec66", "ur10")):
+        for name in ("mdh", "complete", "offsets"):
+            try:
+                model = models.build(name, robot.geometry)
+            except OptionError:  # MD-H cannot describe a tree path
+                continue
+            q = rng.uniform(-2.0, 2.0, (int(rng.integers(4, 40)), model.n))
+            for tool in (rng.normal(size=3) * 0.1, np.zeros(3)):
+                mm = MeasurementModel(model, q)
+                x = np.concatenate([model.nominal, rng.normal(size=6) * 0.1, tool])
+                _, Jm = mm.jacobian(x)
+                J = Jm.reshape(-1, x.size)
+                names = tuple(model.names) + tuple(f"base.{c}" for c in
+                                                   ("x", "y", "z", "rx", "ry", "rz")) + (
+                    "tool.x", "tool.y", "tool.z")
+                order = preference_order(names, model.size)
+                cases.append((np.linalg.qr(J, mode="r") if len(J) > x.size else J, order,
+                              np.ones(x.size, dtype=bool)))
+    assert len(cases) >= 400 + 20  # every robot: three models, or offsets alone (a tree)
+    dropping = []
+    for J, order, free in cases:
+        norms = np.linalg.norm(J, axis=0).tolist()
+        scale = max(norms)
+        old = _projected_one_by_one(J, order, free.tolist(), norms, 1e-7, scale)
+        assert _ordered(J, order, free.tolist(), norms, 1e-7, scale) == old
+        dropping.append(bool(old[1]))
+    assert sum(dropping[:400]) >= 250 and sum(dropping[400:]) >= 10  # rank-deficient ones

@@ -162,6 +162,51 @@ def _within_rank(J, norms, names, n_kinematic, free, floor) -> tuple[list, list]
     return sorted(kept), sorted(dropped)
 
 
+def _ordered(J: np.ndarray, order, free_of, norm_of, rank_tol: float, scale: float
+             ) -> tuple[list, list]:
+    """(kept, dropped) of the ordered selection (module notes): in the order of preference,
+    a free column is kept when its part outside the span of the columns kept before it is
+    larger than ``rank_tol`` of its own norm (Python numbers ``norm_of``), dropped when not
+    or when its norm is ``rank_tol * scale`` or less.
+
+    Blocked: one Householder QR of the candidates in that order gives each one's part
+    outside the span of all before it (the diagonal of R), which is its part outside the
+    kept ones' span up to the first column dropped; after a drop the rest go on from their
+    rows of R below the kept ones' (their coordinates outside that span), without the
+    dropped column, in a QR of that trailing block. So a factorisation per run of drops,
+    not a projection per column (the same partition as projecting each column in turn:
+    tests/test_fixed_cost.py compares the two)."""
+    kept: list = []
+    dropped = [c for c in order if free_of[c] and norm_of[c] <= rank_tol * scale]
+    cand = [c for c in order if free_of[c] and norm_of[c] > rank_tol * scale]
+    lim = [rank_tol * norm_of[c] for c in cand]
+    B, at = J[:, cand], 0  # the parts outside the kept span of cand[at:], in coordinates
+    while at < len(cand):
+        if B.shape[0] == 0:  # the kept columns span every row: nothing else is new
+            dropped += cand[at:]
+            break
+        first = B[:, 0]
+        if not math.sqrt(first @ first) > lim[at]:  # a run of drops needs no factorisation
+            dropped.append(cand[at])
+            B, at = B[:, 1:], at + 1
+            continue
+        R = np.asarray(np.linalg.qr(B, mode="r"))  # (typed as a QRResult: it is R)
+        d = np.abs(np.diagonal(R)).tolist()
+        j = next((t for t, v in enumerate(d) if not v > lim[at + t]), len(d))
+        kept += cand[at:at + j]
+        at += j
+        if at == len(cand):
+            break
+        if j == len(d):  # as many kept as rows: none left (the loop's first test)
+            B = R[j:, j:]
+            continue
+        dropped.append(cand[at])
+        B, at = R[j:, j + 1:], at + 1
+    kept.sort()
+    dropped.sort()
+    return kept, dropped
+
+
 def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: int | None,
             scale: float | None = None):
     """The partition of :func:`analyze`: (J or its triangle, names, free, m, column norms,
@@ -178,29 +223,8 @@ def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: in
     norms = np.linalg.norm(J, axis=0)
     if scale is None:
         scale = float(norms.max()) if norms.size else 1.0
-    basis = np.zeros((J.shape[0], J.shape[1]))  # the kept columns' orthonormal basis
-    kept: list[int] = []
-    dropped: list[int] = []
-    free_of, norm_of = free.tolist(), norms.tolist()  # Python numbers: the same comparisons
-    for c in preference_order(names, n_kinematic):
-        if not free_of[c]:
-            continue
-        if norm_of[c] <= rank_tol * scale:
-            dropped.append(c)
-            continue
-        r = J[:, c]
-        if kept:  # (with none kept yet, the projections below are zero)
-            Q = basis[:, :len(kept)]
-            r = r - Q @ (Q.T @ r)
-            r = r - Q @ (Q.T @ r)  # second pass keeps the basis orthogonal to working precision
-        size = math.sqrt(r @ r)  # np.linalg.norm's own arithmetic
-        if size > rank_tol * norm_of[c]:
-            basis[:, len(kept)] = r / size
-            kept.append(c)
-        else:
-            dropped.append(c)
-    kept.sort()
-    dropped.sort()
+    kept, dropped = _ordered(J, preference_order(names, n_kinematic), free.tolist(),
+                             norms.tolist(), rank_tol, scale)
     free_idx = np.flatnonzero(free)
     Jn = J[:, free_idx] / np.where(norms[free_idx] > 0, norms[free_idx], 1.0)
     sv = np.linalg.svd(Jn, compute_uv=False) if free_idx.size else np.zeros(0)
