@@ -121,10 +121,12 @@ def test_frame_start_rotation_is_kabsch_with_its_diagonal():
     assert seen == {1.0, -1.0}
 
 
-def test_chain_keeps_its_last_tip_only_for_the_same_values():
-    """A chain of few poses serves a tip at the values of its last evaluation (a frame fit's
-    evaluations are all at one kinematics) with the numbers a new chain gives, read-only;
-    other kinematic or joint-term values, or another model, are evaluated anew."""
+def test_chain_keeps_its_first_and_last_states_only_for_the_same_values():
+    """A chain of few poses serves the state at the values of its first evaluation and of
+    its last (a frame fit's evaluations are all at one kinematics; the start's come back for
+    the residuals before calibration, and at every fit on a robot's seeded poses) with the
+    numbers a new chain gives, tip and kept frames alike, read-only; other kinematic or
+    joint-term values, or another model, are evaluated anew."""
     from kincal.models.chain import Chain
 
     robot = Robot.load("ec66")
@@ -135,16 +137,26 @@ def test_chain_keeps_its_last_tip_only_for_the_same_values():
     x = model.nominal + rng.normal(size=model.size) * 1e-3
     b = np.array([1e-3])
     chain = Chain(model, q, approach, (2,))
-    for values, terms in ((x, None), (x, b), (x + 1e-9, b), (x, np.zeros(1)), (x, None)):
-        for keep in (True, False, False):
+    P = rng.normal(size=(40, 3))
+    for values, terms in ((x, None), (x, b), (x + 1e-9, b), (x, np.zeros(1)), (x, None),
+                          (x + 1e-9, b), (x, None), (x - 1e-9, None)):
+        for keep in (False, True, False, True):
             s = chain.state(values, terms, keep=keep)
-            fresh = Chain(model, q, approach, (2,)).state(values, terms, keep=False)
+            fresh = Chain(model, q, approach, (2,)).state(values, terms, keep=True)
             assert np.array_equal(s.R_tip, fresh.R_tip) and np.array_equal(s.p_tip, fresh.p_tip)
-            if not keep:
-                assert not s.R_tip.flags.writeable and not s.p_tip.flags.writeable
-    served = chain.state(x, None, keep=False)
-    assert chain.state(x, None, keep=False).R_tip is not None
+            assert not s.R_tip.flags.writeable and not s.p_tip.flags.writeable
+            if keep:
+                assert np.array_equal(s.before, fresh.before)
+                assert np.array_equal(s.placed, fresh.placed)
+                assert not s.before.flags.writeable and not s.placed.flags.writeable
+                for a, c in zip(s.point_columns(P), fresh.point_columns(P)):
+                    assert np.array_equal(a, c)
+    assert len(chain._kept) == 2 and chain._kept[0][0][0] == x.tobytes()  # first and last
+    served = chain.state(x, None, keep=True)
     assert np.shares_memory(served.R_tip, chain.state(x, None, keep=False).R_tip)
+    assert np.shares_memory(served.before, chain.state(x, None, keep=True).before)
+    other = chain.state(x + 2e-9, None, keep=False)
+    assert not np.shares_memory(other.R_tip, served.R_tip)
     from dataclasses import replace
 
     nominal = Chain(models.build("offsets", robot.geometry), q)
@@ -153,7 +165,7 @@ def test_chain_keeps_its_last_tip_only_for_the_same_values():
     origins = nominal.model.origins.copy()
     origins[2, 0, 3] += 1e-3
     moved = nominal.with_model(replace(nominal.model, origins=origins))
-    assert moved._motion is nominal._motion and moved._tip is None
+    assert moved._motion is nominal._motion and moved._kept == []
     after = moved.state(zero, keep=False).p_tip
     assert not np.array_equal(after, before)
     assert np.array_equal(after, Chain(moved.model, q).state(zero, keep=False).p_tip)
@@ -295,3 +307,57 @@ def test_blocked_selection_is_the_column_by_column_projection(tmp_path):
         assert _ordered(J, order, free.tolist(), norms, 1e-7, scale) == old
         dropping.append(bool(old[1]))
     assert sum(dropping[:400]) >= 250 and sum(dropping[400:]) >= 10  # rank-deficient ones
+
+
+def test_start_pass_is_what_the_analysis_and_the_fits_made_apart(monkeypatch):
+    """The start's one pass (reduction.one_pass: the whole Jacobian at the start, its frame
+    columns for the frame fit) changes nothing: every kind's frame columns are the same
+    numbers with or without the kinematic ones, and a calibration with it equals one that
+    makes the frame fit's and the analysis's passes apart (parameters, start, partition,
+    notes, the gate's verdict), for point, pose, distance, plane and flush sets, one set or
+    two, noisy (the frame fit moving or not) or not."""
+    from kincal.identification import problem as problem_module
+    from kincal.planning import kind_simulation as ks
+
+    robot = Robot.load("ur10")
+    em = models.build("complete", robot.geometry)
+    rng = np.random.default_rng(11)
+    g = robot.geometry
+    lo, hi = np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi)
+    q = rng.uniform(lo, hi, (40, g.n))
+    cand = rng.uniform(lo, hi, (1500, g.n))
+    kin = em.nominal + rng.normal(size=em.size) * np.where(em.is_length, 2e-4, 2e-4)
+    base, tool = np.array([1.0, 0.5, 0.2, 0.1, -0.2, 0.3]), np.array([0.03, 0.02, 0.12])
+    planes = np.array([[0.0, 0.0, 0.3], [np.pi / 2, 0.0, 0.2], [0.3, 1.2, 0.3]])
+    cases = []
+    for noise in (0.0, 5e-5):
+        point = ks.simulate_points(em, kin, base, tool, q, noise, rng)
+        cases += [[point],
+                  [ks.simulate_poses(em, kin, base, np.r_[tool, 0.1, 0.2, -0.3], q, noise,
+                                     0.01, rng)],
+                  [ks.simulate_distances(em, kin, np.array([0.4, 0.3, 0.1]), tool, q, noise,
+                                         rng)],
+                  [ks.simulate_contacts(em, kin, tool, planes, cand, 25, noise, rng)],
+                  [ks.simulate_flush(em, kin, np.r_[tool, 0.1, -0.1], planes, cand, 25, noise,
+                                     0.01, rng)],
+                  [point, ks.simulate_distances(em, kin, np.array([0.4, 0.3, 0.1]), tool, q,
+                                                noise, rng)]]
+    apart = lambda whole, frames_only, u, is_frame: None  # noqa: E731 (the passes apart)
+    for sets in cases:
+        options = CalibrationOptions(method="ls", model="complete")
+        problem = CalibrationProblem(robot, sets, options)
+        u = problem.start() / problem.scale + 1e-7
+        r0, J0 = problem.residual_function(kinematic=False)(u, True)
+        r1, J1 = problem.residual_function()(u, True)
+        frame = problem.layout.is_frame
+        assert np.array_equal(r0, r1) and np.array_equal(J0[:, frame], J1[:, frame])
+        assert not J0[:, ~frame].any()
+        results = []
+        for one_pass in (problem_module.one_pass, apart):
+            monkeypatch.setattr(problem_module, "one_pass", one_pass)
+            results.append(CalibrationProblem(robot, sets, options).solve())
+        a, b = results
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.x_start, b.x_start)
+        assert a.identifiability.kept == b.identifiability.kept
+        assert a.identifiability.notes == b.identifiability.notes
+        assert repr(a.plausibility) == repr(b.plausibility)  # (NaN evidence: not ==)

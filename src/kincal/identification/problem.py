@@ -38,7 +38,7 @@ from kincal.identification.cross_validation import (CrossValidation, cross_valid
 from kincal.identification.layout import MM, ParameterLayout
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.plausibility import gather, judge
-from kincal.identification.reduction import analyze_rows, residual_function
+from kincal.identification.reduction import analyze_rows, one_pass, residual_function
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze, identifiable
@@ -264,6 +264,7 @@ class CalibrationProblem:
                         x[lay.index(name)] = v
         if free.any():
             residual = self.residual_function(kinematic=False)
+            one_pass(self.residual_function(), residual, x / self.scale, lay.is_frame)
             # only what the data can fix moves (an unseen flush contact point stays put)
             kept = analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
                                 lay.names, lay.n_kinematic, free, o.rank_tol, kept_only=True)

@@ -190,6 +190,27 @@ def residual_function(parts, layout, weights, scale, kinematic: bool = True,
     return out
 
 
+def one_pass(whole: Callable, frames_only: Callable, u: np.ndarray, is_frame: np.ndarray
+             ) -> None:
+    """The start's one pass, for few samples (one block): the whole Jacobian at the start
+    u, left in the memos of ``whole`` (for :func:`analyze_rows` there, then the fit's first
+    linearisation) and of ``frames_only`` (its frame columns ``is_frame``, the rest zero:
+    the frame fit's own Jacobian, for its analysis and first linearisation). The frame fit
+    rarely moves from a point set's closed-form start (the frames' least-squares solution at
+    the nominal kinematics), and then the analysis reads this pass instead of making its
+    own; every kind's frame columns are the same numbers with or without the kinematic ones
+    (tests/test_fixed_cost.py)."""
+    if getattr(whole, "n_blocks", 1) > 1 or getattr(frames_only, "n_blocks", 1) > 1:
+        return
+    r, J = whole(u, True)
+    Jf = J.copy()
+    Jf[:, ~is_frame] = 0.0
+    for f, rJ in ((whole, (r, J)), (frames_only, (r, Jf))):
+        memo = cast(BlockedResidual, f).memo
+        memo.clear()
+        memo[u.tobytes()] = rJ
+
+
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
                  n_kinematic: int, free: np.ndarray, rank_tol: float, kept_only: bool = False):
     """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
@@ -203,8 +224,9 @@ def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, na
     select = identifiable if kept_only else analyze  # the same partition, without the report
 
     if getattr(residual, "n_blocks", 1) <= 1:
-        r, J = residual(u, True)
         memo = getattr(residual, "memo", None)
+        kept = memo.get(u.tobytes()) if memo else None  # a pass made at u already
+        r, J = residual(u, True) if kept is None else kept
         if memo is not None:  # the fit that starts at u takes (r, J) from here (linearise)
             memo.clear()
             memo[u.tobytes()] = (r, J)

@@ -190,18 +190,21 @@ def _ordered(J: np.ndarray, order, free_of, norm_of, rank_tol: float, scale: flo
             dropped.append(cand[at])
             B, at = B[:, 1:], at + 1
             continue
-        R = np.asarray(np.linalg.qr(B, mode="r"))  # (typed as a QRResult: it is R)
-        d = np.abs(np.diagonal(R)).tolist()
+        # R on and above the diagonal of LAPACK's factor (mode "raw": np.linalg.qr's R
+        # without zeroing the Householder vectors below it, which only the block taken on
+        # needs)
+        H = np.linalg.qr(B, mode="raw")[0].T
+        d = np.abs(np.diagonal(H)).tolist()
         j = next((t for t, v in enumerate(d) if not v > lim[at + t]), len(d))
         kept += cand[at:at + j]
         at += j
         if at == len(cand):
             break
         if j == len(d):  # as many kept as rows: none left (the loop's first test)
-            B = R[j:, j:]
+            B = H[j:j, j:]
             continue
         dropped.append(cand[at])
-        B, at = R[j:, j + 1:], at + 1
+        B, at = np.triu(H[j:len(d), j + 1:], -1), at + 1  # R's rows j.. (Hessenberg)
     kept.sort()
     dropped.sort()
     return kept, dropped

@@ -76,11 +76,15 @@ _FLIP = np.array([1.0, 1.0, -1.0])
 def _rotation(H: np.ndarray) -> np.ndarray:
     """Kabsch's rotation from the cross-covariance H (:func:`kincal.rotations.kabsch`):
     V U^T, or V diag(1, 1, -1) U^T where that is a reflection (the products with the
-    diagonal's ones and zeros are exact: the same numbers as forming V D U^T always)."""
+    diagonal's ones and zeros are exact: the same numbers as forming V D U^T always). The
+    sign of det R (+-1 to rounding: the same sign however it is summed) from its cofactors
+    in Python numbers: a sixth of np.linalg.det's cost, and this runs up to 16 times a fit."""
     U, _, Vt = np.linalg.svd(H)
     V = Vt.T
     R = V @ U.T
-    return R if np.linalg.det(R) >= 0 else (V * _FLIP) @ U.T
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    return R if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) >= 0 \
+        else (V * _FLIP) @ U.T
 
 
 def _finish(R_tip, p_tip, P, t):

@@ -128,7 +128,9 @@ class Chain:
         # evaluation: 128 bytes per pose and joint would otherwise stay for the whole fit
         self._motion = ([self.joint_motion(i, self.q[:, i]) for i in range(model.n)]
                         if self.N <= MOTION_CACHE_POSES else None)
-        self._tip: tuple | None = None  # (values' bytes, R_tip, p_tip) of the last state
+        # few poses: [(values' bytes, R_tip, p_tip, (before, placed) or None)] of the first
+        # state evaluated and of the last (Chain.state)
+        self._kept: list = []
         # each joint's parameters are contiguous in the vector: slices keep the writes cheap
         edges = np.searchsorted(model.joint_of, np.arange(model.n + 1))
         if np.any(np.diff(model.joint_of) < 0):
@@ -147,7 +149,7 @@ class Chain:
                 or not np.array_equal(model.joint_of, m.joint_of)):
             return Chain(model, self.q, self.approach, self.backlash, self.torque, self.compliance)
         out = object.__new__(Chain)
-        out.__dict__.update(self.__dict__, model=model, _tip=None)  # not this model's tip
+        out.__dict__.update(self.__dict__, model=model, _kept=[])  # not this model's states
         return out
 
     def subset(self, rows) -> "Chain":
@@ -212,13 +214,17 @@ class Chain:
 
         keep=False keeps only the tip (cheaper when no derivative is wanted)."""
         m, N = self.model, self.N
-        # few poses: the last tip is kept, for the next evaluation at the same values without
-        # derivatives (a frame fit moves only the frames: its every evaluation is at the same
-        # kinematics); the same numbers, whether the frames were kept or not
+        # few poses: the first state and the last are kept (read-only), for evaluations at the
+        # same values: a frame fit moves only the frames (its every evaluation is at the same
+        # kinematics), and the start's kinematics come back for the result's residuals before
+        # calibration and, on a robot's seeded poses, at every fit (the structural analysis);
+        # the same numbers, whether the frames were kept or not
         key = (np.asarray(x, float).tobytes(), None if backlash is None or not np.any(backlash)
                else np.asarray(backlash, float).tobytes()) if self._motion is not None else None
-        if not keep and key is not None and self._tip is not None and self._tip[0] == key:
-            return ChainState(self, x, self._tip[1], self._tip[2], [], [])
+        if key is not None:
+            for values, R_tip, p_tip, frames in self._kept:
+                if values == key and (frames is not None or not keep):
+                    return ChainState(self, x, R_tip, p_tip, *(frames if keep else ([], [])))
         P = m.placements(x)
         # the frames before and after each placement, written in place when kept (one
         # (n, N, 4, 4) array each, so the columns need no stacking); a constant frame times
@@ -255,7 +261,14 @@ class Chain:
             T = np.broadcast_to(T, (N, 4, 4))
         if key is not None:  # read-only: shared by the states it serves
             T.flags.writeable = False
-            self._tip = (key, T[:, :3, :3], T[:, :3, 3])
+            frames = None
+            if before is not None and placed is not None:
+                before.flags.writeable = placed.flags.writeable = False
+                frames = (before, placed)
+            entry = (key, T[:, :3, :3], T[:, :3, 3], frames)
+            first = self._kept[:1]
+            self._kept = [entry] + self._kept[1:] if first and first[0][0] == key else \
+                first + [entry]
         return ChainState(self, x, T[:, :3, :3], T[:, :3, 3],
                           [] if before is None else before, [] if placed is None else placed)
 
