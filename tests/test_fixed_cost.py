@@ -107,8 +107,9 @@ def test_structural_kept_is_the_structural_analysis():
 
 def test_frame_start_rotation_is_kabsch_with_its_diagonal():
     """The frame start's rotation V U^T (or with the last column of V negated) is Kabsch's
-    V diag(1, 1, det) U^T to the bit, proper rotations and reflections alike."""
-    from kincal.measurements.frames_init import _rotation
+    V diag(1, 1, det) U^T to the bit, proper rotations and reflections alike (kabsch's own
+    rotation, as it was made before it took this one)."""
+    from kincal.rotations import kabsch_rotation as _rotation
 
     rng = np.random.default_rng(2)
     seen = set()

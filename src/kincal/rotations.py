@@ -135,11 +135,26 @@ def base_angles(R: np.ndarray) -> np.ndarray:
 def kabsch(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rigid (R, t) minimising sum ||y_k - (R x_k + t)||^2 for (N, 3) point sets."""
     xm, ym = x.mean(axis=0), y.mean(axis=0)
-    H = (x - xm).T @ (y - ym)
-    U, _, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
+    R = kabsch_rotation((x - xm).T @ (y - ym))
     return R, ym - R @ xm
+
+
+_FLIP = np.array([1.0, 1.0, -1.0])
+
+
+def kabsch_rotation(H: np.ndarray) -> np.ndarray:
+    """Kabsch's rotation V diag(1, 1, det(V U^T)) U^T from the cross-covariance H = U S V^T:
+    V U^T, or V diag(1, 1, -1) U^T where that is a reflection (the products with the
+    diagonal's ones and zeros are exact: the same numbers as forming V D U^T always). The
+    sign of det(V U^T) (+-1 to rounding: the same sign however it is summed) from its
+    cofactors in Python numbers, a sixth of np.linalg.det's cost: the closed-form frame
+    start runs this up to 18 times a fit."""
+    U, _, Vt = np.linalg.svd(H)
+    V = Vt.T
+    R = V @ U.T
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    return R if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) >= 0 \
+        else (V * _FLIP) @ U.T
 
 
 def quaternion_to_matrix(q) -> np.ndarray:

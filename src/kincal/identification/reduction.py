@@ -118,6 +118,9 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True,
     row, :mod:`kincal.identification.evidence`), on top of the samples' weights."""
     buffers: dict = {}
     k, bl = layout.n_kinematic, layout.backlash_slice
+    # every weight 1 (no sigmas, no noise levels): the products by the weights are left
+    # out (a product by 1.0 changes no number)
+    unit = row_scale is None and bool(np.all(weights == 1.0))
 
     def blocks(u, with_jacobian: bool = True, out: np.ndarray | None = None):
         x = u * scale
@@ -129,10 +132,12 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True,
             for sl, block in blocks_i:
                 if x.ndim == 2:  # one vector per sample (u (samples, p))
                     kin, fr, b = layout.split(x[first + sl.start:first + sl.stop], i)
-                w = weights[g[sl]][:, None] * (1.0 if row_scale is None else row_scale[i])
+                w = None if unit else weights[g[sl]][:, None] * (
+                    1.0 if row_scale is None else row_scale[i])
                 span = slice(at + km.dim * sl.start, at + km.dim * sl.stop)
                 if not with_jacobian:
-                    yield span, (block.residuals(kin, fr, b) * w).ravel() / MM, None
+                    rr = block.residuals(kin, fr, b)
+                    yield span, (rr if w is None else rr * w).ravel() / MM, None
                     continue
                 n = block.N * km.dim
                 if out is not None:
@@ -143,13 +148,15 @@ def row_blocks(parts, layout, weights, scale, kinematic: bool = True,
                     J = buffers[n]
                 J[:] = 0.0
                 rr, Jk, Jf, Jb = block.residuals(kin, fr, b, jacobian=True, kinematic=kinematic)
-                w3 = w[:, :, None]
-                J[:, :k] = (Jk * w3).reshape(n, -1)
-                J[:, fs] = (Jf * w3).reshape(n, -1)
+                if w is not None:
+                    w3 = w[:, :, None]
+                    rr, Jk, Jf, Jb = rr * w, Jk * w3, Jf * w3, Jb * w3
+                J[:, :k] = Jk.reshape(n, -1)
+                J[:, fs] = Jf.reshape(n, -1)
                 if Jb.shape[2]:
-                    J[:, bl] = (Jb * w3).reshape(n, -1)
+                    J[:, bl] = Jb.reshape(n, -1)
                 J *= scale / MM
-                yield span, (rr * w).ravel() / MM, J
+                yield span, rr.ravel() / MM, J
             at += km.N * km.dim
             first += km.N
 

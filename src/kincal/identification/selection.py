@@ -18,8 +18,8 @@ pivoting among equals) and, being greedy in a fixed order, stable as poses are a
 
 from __future__ import annotations
 
+import functools
 import math
-
 import re
 from dataclasses import dataclass
 
@@ -128,7 +128,13 @@ def preference_order(names, n_kinematic: int) -> list[int]:
 
     The first n_kinematic names are ``<joint>.<field>``, grouped by joint in chain order;
     whatever the error model's fields, joints are taken from the last back to the first,
-    each joint's fields in the model's order."""
+    each joint's fields in the model's order. Made once per layout (three analyses a fit
+    ask for it)."""
+    return list(_preference_order(tuple(names), int(n_kinematic)))
+
+
+@functools.lru_cache(maxsize=64)
+def _preference_order(names: tuple, n_kinematic: int) -> tuple[int, ...]:
     frames_end = n_kinematic
     while frames_end < len(names) and _FRAME.match(names[frames_end]):
         frames_end += 1
@@ -138,7 +144,7 @@ def preference_order(names, n_kinematic: int) -> list[int]:
         groups.setdefault(names[c].rsplit(".", 1)[0], []).append(c)
     for cols in reversed(list(groups.values())):
         order += cols
-    return order + list(range(frames_end, len(names)))
+    return tuple(order + list(range(frames_end, len(names))))
 
 
 def _within_rank(J, norms, names, n_kinematic, free, floor) -> tuple[list, list]:
@@ -280,15 +286,19 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     svk = np.linalg.svd(Jkn, compute_uv=False)
     cond = float(svk[0] / svk[-1]) if svk.size and svk[-1] > 0 else float("inf")
     duplicates = []
-    seen = [c for c in dropped if norms[c] > rank_tol * scale]
-    # every dropped column against the kept ones in one solve (one SVD of Jk)
-    coefs = dict(zip(seen, np.linalg.lstsq(Jk, J[:, seen], rcond=None)[0].T)) if seen else {}
+    norm_of = norms.tolist()
+    seen = [c for c in dropped if norm_of[c] > rank_tol * scale]
+    # every dropped column against the kept ones in one solve (one SVD of Jk), the four
+    # largest of each row in one argsort (row by row: the order each row's own gives)
+    coefs: dict = {}
+    if seen:
+        C = np.linalg.lstsq(Jk, J[:, seen], rcond=None)[0].T
+        coefs = dict(zip(seen, zip(C.tolist(), np.argsort(-np.abs(C), axis=1)[:, :4].tolist())))
     for c in dropped:  # Python numbers read once (the same values: float of each element)
         if c not in coefs:
             duplicates.append(Duplicate(names[c], ()))
             continue
-        coef = coefs[c].tolist()
-        big = np.argsort(-np.abs(coefs[c]))[:4].tolist()
+        coef, big = coefs[c]
         top = [(names[kept[i]], coef[i]) for i in big if abs(coef[i]) >= 0.05 * abs(coef[big[0]])]
         duplicates.append(Duplicate(names[c], tuple(top)))
     weak = []

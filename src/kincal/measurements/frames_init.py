@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kincal.rotations import kabsch
+from kincal.rotations import kabsch, kabsch_rotation
 
 
 def pivot_tool(R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
@@ -57,7 +57,7 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
     c0 = np.einsum("kji,kj->i", R_tip, p_tip)
     P_sum, p_sum = P.sum(axis=0), p_tip.sum(axis=0)
     for _ in range(rounds):
-        Rb = _rotation(H0 + (t @ HT).reshape(3, 3))
+        Rb = kabsch_rotation(H0 + (t @ HT).reshape(3, 3))
         r2 = P_sum - Rb @ p_sum
         r1 = np.einsum("ijl,lj->i", W, Rb) - c0
         sol = V @ ((V.T @ (r1 - S.T @ (Rb.T @ r2) / N)) / w)
@@ -68,23 +68,6 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
             break
         t = sol
     return _finish(R_tip, p_tip, P, t)
-
-
-_FLIP = np.array([1.0, 1.0, -1.0])
-
-
-def _rotation(H: np.ndarray) -> np.ndarray:
-    """Kabsch's rotation from the cross-covariance H (:func:`kincal.rotations.kabsch`):
-    V U^T, or V diag(1, 1, -1) U^T where that is a reflection (the products with the
-    diagonal's ones and zeros are exact: the same numbers as forming V D U^T always). The
-    sign of det R (+-1 to rounding: the same sign however it is summed) from its cofactors
-    in Python numbers: a sixth of np.linalg.det's cost, and this runs up to 16 times a fit."""
-    U, _, Vt = np.linalg.svd(H)
-    V = Vt.T
-    R = V @ U.T
-    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
-    return R if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) >= 0 \
-        else (V * _FLIP) @ U.T
 
 
 def _finish(R_tip, p_tip, P, t):
