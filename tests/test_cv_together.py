@@ -108,3 +108,23 @@ def test_folds_streamed_in_blocks_are_fitted_one_at_a_time():
     problem = CalibrationProblem(ROBOT, _data(9, None, n), CalibrationOptions(method="l2"))
     assert together_possible(problem, np.arange(100))
     assert not together_possible(problem, np.arange(n))
+
+
+@pytest.mark.parametrize("n", [7, 8])
+def test_folds_with_fewer_rows_than_parameters(n):
+    """Few poses: each fold's training rows (3 per pose) are fewer than the free parameters,
+    so the data's triangle is shorter than the linear problem (a regression: the solver
+    wrote it into a square block and failed). Algorithm 1 runs, the folds together give the
+    folds one at a time, and each fold fit lowers its penalised objective."""
+    problem = CalibrationProblem(ROBOT, _data(10 + n, 0.4, n),
+                                 CalibrationOptions(method="l2", lam="cv"))
+    assert 3 * n * 4 // 5 < int(problem.free_mask().sum())
+    fast, slow = _both(problem)
+    assert fast.best_index == slow.best_index
+    assert np.all(np.isfinite(fast.mean_error))
+    assert np.abs(fast.mean_error / slow.mean_error - 1).max() < 1e-9
+    rows = np.arange(3 * (n - 2))  # the first n - 2 poses' rows
+    sol = problem.fit(1e-2, rows)
+    assert sol.cost[-1] < sol.cost[0]
+    result = problem.solve()
+    assert result.cv is not None and np.isfinite(result.cv.best_lambda)

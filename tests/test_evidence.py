@@ -378,3 +378,45 @@ def test_variance_components_recover_two_planted_noise_levels_and_the_direct_evi
     _, kept, _, _ = maximise(problem, 3, np.ones(3), np.array([4.0, 1.0]),
                              beta_fixed=np.array([True, False]))
     assert kept[0] == 4.0 and 1 / math.sqrt(kept[1]) == pytest.approx(2.0, rel=0.15)
+
+
+def _few_poses(n, seed=1):
+    robot = Robot.load("ec66")
+    rng = np.random.default_rng(seed)
+    model = mdh.extract(robot.geometry)
+    g = robot.geometry
+    q = rng.uniform(np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi), size=(n, g.n))
+    truth = Truth(planted_table(model, rng), np.array([0.8, 0.3, -0.2, 0.02, -0.03, 1.2]),
+                  np.array([0.02, 0.01, 0.12]))
+    return robot, measure(model, truth, q, 5e-5, rng)
+
+
+@pytest.mark.parametrize("n, how", [(7, "evidence"), (9, "evidence"), (10, "cv")])
+def test_auto_penalty_needs_two_poses_per_fold_for_cv(n, how):
+    """Lambda "auto" on positions from a large volume chooses CV only with at least two poses
+    per fold (5 folds: 10 poses); fewer, the evidence, and the summary says why."""
+    from kincal.identification.penalty_choice import automatic
+
+    robot, data = _few_poses(n)
+    problem = CalibrationProblem(robot, data, CalibrationOptions(method="l2", model="complete"))
+    chosen, why = automatic(problem)
+    assert chosen == how
+    assert ("too few for 5-fold cross-validation" in why) is (how == "evidence")
+
+
+def test_evidence_refuses_a_fit_through_every_point(tmp_path, capsys):
+    """Four simulated poses (12 equations) for 12 identifiable parameters, where the
+    evidence puts the noise near zero (3e-6 mm) and the fit through every point: refused
+    with both counts, nothing written; with the noise stated, calibrated."""
+    from kincal.cli.main import main
+
+    data, out = tmp_path / "four.csv", tmp_path / "cal.urdf"
+    assert main(["simulate", "ec66", "--poses", "4", "--seed", "1", "--out", str(data)]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert ("kincal: error: 4 poses give 12 equations for 12 identifiable parameters and the "
+            "fit passes through every one") in err
+    assert not out.exists()
+    assert main(["calibrate", "ec66", str(data), "--out", str(out), "--noise-mm", "0.05"]) == 0
+    assert out.exists()

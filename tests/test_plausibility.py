@@ -426,3 +426,35 @@ def test_every_output_for_several_sets_of_other_kinds_and_the_frames_serve_the_c
     assert joints.is_file()
 
 
+
+
+@pytest.mark.parametrize("method, equations, identified, named", [
+    ("ls", 51, 48, True), ("ls", 143, 48, True), ("ls", 144, 48, False),
+    ("l2", 51, 48, False), ("ls", 0, 48, False)])
+def test_plain_least_squares_on_few_equations_is_named_first(method, equations, identified,
+                                                             named):
+    """Corrections far off with method ls and fewer than 3 equations per identified
+    parameter: the likely cause named first is the over-fit, with both counts."""
+    f = next(f for f in judge(_evidence(change_rms_mm=500.0, method=method, equations=equations,
+                                        identified=identified)).findings
+             if f.kind == "corrections")
+    assert ("plain least squares on" in f.causes[0]) is named
+    if named:
+        assert f"{equations} equations for {identified} identified" in f.causes[0]
+
+
+def test_talos_least_squares_on_few_touches_names_the_over_fit(tmp_path, capsys):
+    """Seventeen real TALOS touches with --method ls: refused, nothing written, the over-fit
+    named with the numbers of equations and identified parameters."""
+    from test_tree_paths import _talos_study
+
+    study = _talos_study()
+    lines = (study.DATA / "left_train.csv").read_text().splitlines()
+    part = tmp_path / "few.csv"
+    part.write_text("\n".join(lines[:18]) + "\n")
+    out = tmp_path / "cal.urdf"
+    code = main(["calibrate", str(study.talos_urdf()), str(part), "--base", "left_sole_link",
+                 "--tip", "gripper_left_base_link", "--on-plane", "--flush", "--tool-offset",
+                 "0", "0", "-0.12", "--method", "ls", "--out", str(out)])
+    assert code != 0 and not out.exists()
+    assert "Likely cause: plain least squares on 51 equations for" in _error_line(capsys)

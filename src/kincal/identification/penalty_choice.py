@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from kincal.errors import IdentifiabilityError
 from kincal.identification import evidence
 from kincal.identification.cross_validation import (SMALL_VOLUME, CrossValidation,
                                                     free_fraction, small_volume_warning)
@@ -100,6 +101,10 @@ def _noise_in_units(problem: CalibrationProblem, rows: np.ndarray, keys, row_noi
                  for g, ((label, unit), s) in enumerate(zip(keys, row_noise)))
 
 
+INTERPOLATED = 1e-3  # estimated noise / RMS error at the start below which, with no more
+#                      equations than parameters, the evidence fit is said to interpolate
+
+
 def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.EvidenceFit]:
     """Per-class priors and the noise of each noise group (:func:`noise_groups`) by maximum
     evidence over every set's residuals (weighted by the sets' stated noise), iterated with
@@ -110,7 +115,8 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
     problem.row_scale = None
     residual = problem.residual_function()
     u_prior = problem.start() / problem.scale
-    rows, per_set, keys = noise_groups(problem, residual(u_prior, True)[1][:, free])
+    r0, J0 = residual(u_prior, True)
+    rows, per_set, keys = noise_groups(problem, J0[:, free])
     given = {} if o.prior_mm is None else {"length": o.prior_mm}
     if o.prior_deg is not None:
         given.update(twist=o.prior_deg, offset=o.prior_deg)
@@ -126,6 +132,14 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
         fit, lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,
         o.noise_mm, shape=None if problem.prior is None else problem.prior.precision,
         rows=rows)
+    m, k = r0.size, int(free.sum())
+    if o.noise_mm is None and m <= k and ev.noise_mm < INTERPOLATED * math.sqrt(np.mean(r0 ** 2)):
+        raise IdentifiabilityError(
+            f"{problem.n_poses} poses give {m} equations for {k} identifiable parameters and "
+            f"the fit passes through every one (the noise estimated at {ev.noise_mm:.2g} mm): "
+            "nothing is left to estimate the instrument's noise or how far to pull toward "
+            "nominal. Measure more poses, or state the noise (--noise-mm) and the "
+            "tolerances (--prior-mm, --prior-deg)")
     return sol, replace(ev, noise_groups=_noise_in_units(problem, rows, keys, ev.row_noise))
 
 
@@ -184,13 +198,17 @@ def automatic(problem: CalibrationProblem) -> tuple[str, str]:
     errors no model carries, such as backlash), and evidence when no set measures
     positions: distances and contacts see only part of the motion, as a small volume does
     (on simulated EC66 flush touches on one table, CV let the fit drift along what the
-    touches cannot see in 3 of 6 seeds, refused by the gate; evidence in none)."""
+    touches cannot see in 3 of 6 seeds, refused by the gate; evidence in none); and evidence
+    for fewer than two poses per fold, which CV cannot split usefully."""
     o = problem.options
     if any(v is not None for v in (o.prior_mm, o.prior_deg, o.noise_mm)):
         return "evidence", "tolerances or noise given"
     if measured_positions(problem) is None:
         return "evidence", ("no set measures positions: distances and contacts see only part "
                             "of the motion, as a small volume does")
+    if problem.n_poses < 2 * o.folds:
+        return "evidence", (f"{problem.n_poses} poses: too few for {o.folds}-fold "
+                            f"cross-validation (at least {2 * o.folds}, two per fold)")
     extent, r, ratio = extent_ratio(problem)
     where = (f"the data span {extent * 1e3:.0f} mm from their centre, {100 * ratio:.1f} % of "
              f"the arm's reach")

@@ -3,9 +3,8 @@
 Plain numpy. :func:`gather` collects the evidence of a calibration (sizes, residuals, how
 far the corrections move the tool, unit clues) into an :class:`Evidence`; :func:`judge`
 turns it into a frozen :class:`Plausibility` whose findings say what broke which
-threshold, by how much, and the likely causes. ``kincal calibrate`` and
-``kincal.export.write_calibration`` (the one writer) refuse an implausible or unconverged result unless the
-user accepts it knowingly.
+threshold, by how much, and the likely causes. The one writer refuses an implausible or
+unconverged result unless the user accepts it knowingly.
 
 The yardstick is the arm's **reach** L: the length of the chain at zero joint values
 (first joint origin -> ... -> tip frame origin, summed) plus the distance of the measured
@@ -76,6 +75,7 @@ if TYPE_CHECKING:
 
 N_CONFIGURATIONS = 300  # joint configurations for the workspace comparison (seeded)
 MAX_UNIT_POSES = 500  # poses for the unit clue (forward kinematics through the robot)
+OVERFIT_RATIO = 3  # plain LS with fewer equations per identified parameter: a likely cause
 
 
 @dataclass(frozen=True)
@@ -133,6 +133,8 @@ class Evidence:
     converged: bool = True
     iterations: int = 0
     method: str = "l2"
+    equations: int = 0  # rows of the fit (3 per point, 3 per flush touch, ...); identified:
+    identified: int = 0  # parameters the fit moved (plain LS on few equations per one: a cause)
 
     @property
     def explained(self) -> float:
@@ -311,8 +313,9 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             f"RMS (max {ev.change_max_mm:.4g} mm) over the joint range, above {th.change:.0%} of "
             f"the reach ({th.change * L_mm:.3g} mm); largest: {big}", ev.change_rms_mm,
             th.change * L_mm, "mm", names,
-            causes=tuple(_unit_causes(ev)) + ("a URDF that does not describe the measured robot "
-                                              "or a tip frame that does not match the data",)))
+            causes=tuple(_unit_causes(ev)) + _overfit_cause(ev) + (
+                "a URDF that does not describe the measured robot or a tip frame that does "
+                "not match the data",)))
     lengths = [(n, v) for n, v, u in ev.corrections if u == "mm"]
     if lengths and abs(lengths[0][1]) > th.length_correction * L_mm:
         n, v = lengths[0]
@@ -337,6 +340,13 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                  f"({', '.join(ev.off_chain_columns[:6])}), ignored: if they move the "
                  "measured point, the tip frame does not match the data (check --tip)",)
     return Plausibility(ev, tuple(out), th, notes)
+
+
+def _overfit_cause(ev: Evidence) -> tuple[str, ...]:  # plain LS on few equations: named first
+    return (f"plain least squares on {ev.equations} equations for {ev.identified} identified "
+            "parameters, which fits the noise (measure more, or use the default --method l2, "
+            "which pulls what the data barely determine toward nominal)",) if (
+        ev.method == "ls" and 0 < ev.equations < OVERFIT_RATIO * ev.identified) else ()
 
 
 # ------------------------------------------------------------------ gather
@@ -420,7 +430,9 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
         off_chain_columns=off_chain, converged=bool(result.converged),
-        iterations=int(result.solve.iterations), method=problem.options.method)
+        iterations=int(result.solve.iterations), method=problem.options.method,
+        equations=int(sum(km.N * km.dim for km in problem.kinds)),
+        identified=sum(p.status == "identified" for p in result.parameters))
 
 
 def _n_chains(problem: CalibrationProblem) -> int:
@@ -430,10 +442,9 @@ def _n_chains(problem: CalibrationProblem) -> int:
 
 def _change(problem: CalibrationProblem, result: CalibrationResult,
             chain: int) -> tuple[float, np.ndarray]:
-    """(reach [m], (M,) distances [mm]) of chain ``chain``: how far the corrected model
-    moves its tool point (from the chain's first set; none: the tip) from the nominal one's
-    at seeded configurations over the joint limits (unbounded revolute: a turn). Each chain
-    of a several-chain calibration is judged, so that no chain's correction goes unseen."""
+    """(reach [m], (M,) distances [mm]) of chain ``chain``: how far the corrected model moves
+    its tool point (the chain's first set's; none: the tip) from the nominal one's at seeded
+    configurations over the joint limits (unbounded revolute: a turn); every chain judged."""
     lay = result.layout
     if _n_chains(problem) == 1:
         robot, corrected, first = problem.robot, result.corrected, 0
@@ -470,8 +481,7 @@ def _configurations(robot):
     lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
     hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
     q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
-    model = ChainKinematics.of(g).model
-    chain = Chain(model, q)
+    chain = Chain(model := ChainKinematics.of(g).model, q)
     state = chain.state(np.zeros(model.n), keep=False)
     for a in [q, state.R_tip, state.p_tip] + list(chain._motion or ()):
         a.flags.writeable = False

@@ -329,7 +329,7 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     # iteration, are written once
     k = free_idx.size
     n_pen = int(pen_f.sum()) if np.any(sq_f > 0) and root.size else 0
-    A0, b0 = np.zeros((k + n_pen, k)), np.empty(k + n_pen)
+    A0, b0 = np.zeros((k + n_pen, k)), np.zeros(k + n_pen)
     if n_pen:
         A0[k:, np.flatnonzero(pen_f)] = root
     it = 0
@@ -340,7 +340,8 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         # small system whatever the number of poses.
         if not streamed:
             Rz = _data_triangle(residual, r, J, free_idx)
-        A0[:k], b0[:k] = Rz[:k, :k], Rz[:k, k]
+        h = min(Rz.shape[0], k)  # fewer data rows than free parameters: a shorter triangle
+        A0[:h], b0[:h] = Rz[:h, :k], Rz[:h, k]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
         if n_pen:
             b0[k:] = -root @ (u - prior)[free_idx][pen_f]
