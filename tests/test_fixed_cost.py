@@ -123,8 +123,8 @@ def test_frame_start_rotation_is_kabsch_with_its_diagonal():
 
 
 def test_chain_keeps_its_first_and_last_states_only_for_the_same_values():
-    """A chain of few poses serves the state at the values of its first evaluation and of
-    its last (a frame fit's evaluations are all at one kinematics; the start's come back for
+    """A chain of few poses serves the state at the values of its first two evaluations and
+    of its last (a frame fit's evaluations are all at one kinematics; the start's come back for
     the residuals before calibration, and at every fit on a robot's seeded poses) with the
     numbers a new chain gives, tip and kept frames alike, read-only; other kinematic or
     joint-term values, or another model, are evaluated anew."""
@@ -152,7 +152,9 @@ def test_chain_keeps_its_first_and_last_states_only_for_the_same_values():
                 assert not s.before.flags.writeable and not s.placed.flags.writeable
                 for a, c in zip(s.point_columns(P), fresh.point_columns(P)):
                     assert np.array_equal(a, c)
-    assert len(chain._kept) == 2 and chain._kept[0][0][0] == x.tobytes()  # first and last
+    # the first two values and the last: (x, no terms), (x, b), then (x - 1e-9, no terms)
+    assert [e[0] for e in chain._kept] == [(x.tobytes(), None), (x.tobytes(), b.tobytes()),
+                                           ((x - 1e-9).tobytes(), None)]
     served = chain.state(x, None, keep=True)
     assert np.shares_memory(served.R_tip, chain.state(x, None, keep=False).R_tip)
     assert np.shares_memory(served.before, chain.state(x, None, keep=True).before)

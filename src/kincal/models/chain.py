@@ -86,6 +86,7 @@ _BASES: dict = {}  # (axis, point) bytes: motion_basis
 
 
 MOTION_CACHE_POSES = 1024  # poses up to which a chain keeps its joint motions
+KEPT_FIRST = 2  # a chain of so few poses keeps its first states (and its last)
 TIP_BLOCK_POSES = 4096  # poses evaluated together by Chain.tip
 _GATHER_BUDGET = 4_000_000  # floats gathered at once for the kinematic columns (32 MB)
 
@@ -129,7 +130,7 @@ class Chain:
         self._motion = ([self.joint_motion(i, self.q[:, i]) for i in range(model.n)]
                         if self.N <= MOTION_CACHE_POSES else None)
         # few poses: [(values' bytes, R_tip, p_tip, (before, placed) or None)] of the first
-        # state evaluated and of the last (Chain.state)
+        # KEPT_FIRST states evaluated (at distinct values), then of the last (Chain.state)
         self._kept: list = []
         # each joint's parameters are contiguous in the vector: slices keep the writes cheap
         edges = np.searchsorted(model.joint_of, np.arange(model.n + 1))
@@ -214,11 +215,13 @@ class Chain:
 
         keep=False keeps only the tip (cheaper when no derivative is wanted)."""
         m, N = self.model, self.N
-        # few poses: the first state and the last are kept (read-only), for evaluations at the
-        # same values: a frame fit moves only the frames (its every evaluation is at the same
-        # kinematics), and the start's kinematics come back for the result's residuals before
-        # calibration and, on a robot's seeded poses, at every fit (the structural analysis);
-        # the same numbers, whether the frames were kept or not
+        # few poses: the first states (KEPT_FIRST) and the last are kept (read-only), for
+        # evaluations at the same values: a frame fit moves only the frames (its every
+        # evaluation is at the same kinematics), and the start's kinematics come back for the
+        # result's residuals before calibration and, on a robot's seeded poses, at every fit
+        # (the structural analysis); the nominal values and the start's (u = x / scale, whose
+        # product back may differ in the last bit) are two. The same numbers, whether the
+        # frames were kept or not
         key = (np.asarray(x, float).tobytes(), None if backlash is None or not np.any(backlash)
                else np.asarray(backlash, float).tobytes()) if self._motion is not None else None
         if key is not None:
@@ -266,9 +269,10 @@ class Chain:
                 before.flags.writeable = placed.flags.writeable = False
                 frames = (before, placed)
             entry = (key, T[:, :3, :3], T[:, :3, 3], frames)
-            first = self._kept[:1]
-            self._kept = [entry] + self._kept[1:] if first and first[0][0] == key else \
-                first + [entry]
+            kept = self._kept
+            at = next((i for i, e in enumerate(kept[:KEPT_FIRST]) if e[0] == key),
+                      min(len(kept), KEPT_FIRST))  # a first one again (now with its frames),
+            self._kept = kept[:at] + [entry] + kept[at + 1:KEPT_FIRST + 1]  # or the last
         return ChainState(self, x, T[:, :3, :3], T[:, :3, 3],
                           [] if before is None else before, [] if placed is None else placed)
 
