@@ -256,17 +256,10 @@ class Robot:
         return tuple(self.model.names[j] for j in self._chain)
 
     def _parent_link(self, j: int) -> np.ndarray:
-        """Pose of joint j's URDF parent link frame in its parent joint's frame (read-only),
-        read once per model's frames: the corrected copies (:meth:`with_joint_frames`),
-        whose joint placements alone differ, share them."""
-        links = self.__dict__.setdefault("_links", {})
-        link = links.get(j)
-        if link is None:
-            m = self.model
-            fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
-            link = links[j] = _mat(m.frames[m.frames[fid].parentFrame].placement)
-            link.flags.writeable = False
-        return link
+        """Pose of joint j's URDF parent link frame in its parent joint's frame."""
+        m = self.model
+        fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
+        return _mat(m.frames[m.frames[fid].parentFrame].placement)
 
     def _compute_geometry(self, same: ChainGeometry | None = None) -> ChainGeometry:
         """The chain's geometry from the model; ``same``: that of a model with other joint
