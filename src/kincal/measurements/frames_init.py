@@ -29,10 +29,11 @@ def pivot_tool(R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
     return sol[:3]
 
 
-def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
+def alternate(R_tip, p_tip, P, tool, rounds: int = 8, sums: tuple | None = None):
     """Alternate Kabsch for (R_b, t_b) and a linear solve for (t, t_b) from ``tool``.
 
-    Returns (R_b (3, 3), t_b (3,), tool (3,), rms [m]).
+    Returns (R_b (3, 3), t_b (3,), tool (3,), rms [m]). sums: :func:`round_sums` of these
+    poses, made once for several starts (default: made here).
 
     Each round's work is 3 x 3 arithmetic on sums over the poses made once (a round costs
     the same whatever the number of poses): Kabsch's cross-covariance of the predicted
@@ -44,18 +45,10 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
     separable) the rounds take numpy's least squares of the stacked rows (3N, 6) instead,
     whose minimum-norm answer the normal equations cannot give."""
     t = np.asarray(tool, dtype=float).copy()
-    N = len(P)
-    S = R_tip.sum(axis=0)
-    C = N * np.eye(3) - S.T @ S / N
-    w, V = np.linalg.eigh(C)
-    if w[0] <= 1e-6 * max(w[-1], 1e-300):
+    sums = round_sums(R_tip, p_tip, P) if sums is None else sums
+    if not sums:
         return _alternate_rows(R_tip, p_tip, P, t, rounds)
-    Pc = P - P.mean(axis=0)
-    H0 = p_tip.T @ Pc  # sum p_k Pc_k^T
-    HT = np.einsum("kaj,kb->jab", R_tip, Pc).reshape(3, 9)  # [j] = sum R_k e_j Pc_k^T
-    W = np.einsum("kji,kl->ijl", R_tip, P)  # r_1 = W : R_b - sum R_k^T p_k
-    c0 = np.einsum("kji,kj->i", R_tip, p_tip)
-    P_sum, p_sum = P.sum(axis=0), p_tip.sum(axis=0)
+    N, S, w, V, H0, HT, W, c0, P_sum, p_sum = sums
     for _ in range(rounds):
         Rb = kabsch_rotation(H0 + (t @ HT).reshape(3, 3))
         r2 = P_sum - Rb @ p_sum
@@ -68,6 +61,25 @@ def alternate(R_tip, p_tip, P, tool, rounds: int = 8):
             break
         t = sol
     return _finish(R_tip, p_tip, P, t)
+
+
+def round_sums(R_tip, p_tip, P) -> tuple:
+    """The sums over the poses that :func:`alternate`'s rounds work on (its notes), the
+    same from every start: (N, S, the eigenpairs (w, V) of N I - S^T S / N, H0, HT, W, c0,
+    the sums of P and p); () when that matrix is ill-conditioned (the rounds then take the
+    stacked rows)."""
+    N = len(P)
+    S = R_tip.sum(axis=0)
+    C = N * np.eye(3) - S.T @ S / N
+    w, V = np.linalg.eigh(C)
+    if w[0] <= 1e-6 * max(w[-1], 1e-300):
+        return ()
+    Pc = P - P.mean(axis=0)
+    H0 = p_tip.T @ Pc  # sum p_k Pc_k^T
+    HT = np.einsum("kaj,kb->jab", R_tip, Pc).reshape(3, 9)  # [j] = sum R_k e_j Pc_k^T
+    W = np.einsum("kji,kl->ijl", R_tip, P)  # r_1 = W : R_b - sum R_k^T p_k
+    c0 = np.einsum("kji,kj->i", R_tip, p_tip)
+    return N, S, w, V, H0, HT, W, c0, P.sum(axis=0), p_tip.sum(axis=0)
 
 
 def _finish(R_tip, p_tip, P, t):
@@ -97,9 +109,9 @@ def initial_frames(R_tip, p_tip, P, tool_guess=None):
     """Best of the pivot and given starts: (R_b, t_b, tool, rms [m], start name)."""
     starts = {"given": np.zeros(3) if tool_guess is None else np.asarray(tool_guess, float),
               "pivot": pivot_tool(R_tip, p_tip)}
-    best = None
+    best, sums = None, round_sums(R_tip, p_tip, P)  # the same sums for both starts
     for name, t0 in starts.items():
-        Rb, tb, t, rms = alternate(R_tip, p_tip, P, t0)
+        Rb, tb, t, rms = alternate(R_tip, p_tip, P, t0, sums=sums)
         if best is None or rms < best[3]:
             best = (Rb, tb, t, rms, name)
     return best
