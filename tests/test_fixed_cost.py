@@ -149,15 +149,19 @@ def test_chain_keeps_its_first_and_last_states_only_for_the_same_values():
             if keep:
                 assert np.array_equal(s.before, fresh.before)
                 assert np.array_equal(s.placed, fresh.placed)
-                assert not s.before.flags.writeable and not s.placed.flags.writeable
                 for a, c in zip(s.point_columns(P), fresh.point_columns(P)):
                     assert np.array_equal(a, c)
-    # the first two values and the last: (x, no terms), (x, b), then (x - 1e-9, no terms)
+    # the first two values and the last: (x, no terms), (x, b), then (x - 1e-9, no terms);
+    # the frames of the first only
     assert [e[0] for e in chain._kept] == [(x.tobytes(), None), (x.tobytes(), b.tobytes()),
                                            ((x - 1e-9).tobytes(), None)]
+    assert [e[3] is not None for e in chain._kept] == [True, False, False]
     served = chain.state(x, None, keep=True)
+    assert not served.before.flags.writeable and not served.placed.flags.writeable
     assert np.shares_memory(served.R_tip, chain.state(x, None, keep=False).R_tip)
     assert np.shares_memory(served.before, chain.state(x, None, keep=True).before)
+    assert not np.shares_memory(chain.state(x, b, keep=True).before,
+                                chain.state(x, b, keep=True).before)  # made anew each time
     other = chain.state(x + 2e-9, None, keep=False)
     assert not np.shares_memory(other.R_tip, served.R_tip)
     from dataclasses import replace

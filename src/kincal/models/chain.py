@@ -87,6 +87,8 @@ _BASES: dict = {}  # (axis, point) bytes: motion_basis
 
 MOTION_CACHE_POSES = 1024  # poses up to which a chain keeps its joint motions
 KEPT_FIRST = 2  # a chain of so few poses keeps its first states (and its last)
+FRAMES_POSES = 256  # and the frames of its first state, up to this many poses (230 kB at 7
+#                     joints: a few of the CV folds' chains are kept at once)
 TIP_BLOCK_POSES = 4096  # poses evaluated together by Chain.tip
 _GATHER_BUDGET = 4_000_000  # floats gathered at once for the kinematic columns (32 MB)
 
@@ -130,7 +132,8 @@ class Chain:
         self._motion = ([self.joint_motion(i, self.q[:, i]) for i in range(model.n)]
                         if self.N <= MOTION_CACHE_POSES else None)
         # few poses: [(values' bytes, R_tip, p_tip, (before, placed) or None)] of the first
-        # KEPT_FIRST states evaluated (at distinct values), then of the last (Chain.state)
+        # KEPT_FIRST states evaluated (at distinct values), then of the last (Chain.state);
+        # the frames of the very first only
         self._kept: list = []
         # each joint's parameters are contiguous in the vector: slices keep the writes cheap
         edges = np.searchsorted(model.joint_of, np.arange(model.n + 1))
@@ -264,15 +267,18 @@ class Chain:
             T = np.broadcast_to(T, (N, 4, 4))
         if key is not None:  # read-only: shared by the states it serves
             T.flags.writeable = False
+            kept = self._kept
+            # a first one again (now with its frames), or the last; frames are kept for the
+            # very first state only (the one a robot's seeded poses come back to: the
+            # structural analysis evaluates them with derivatives at the start)
+            at = next((i for i, e in enumerate(kept[:KEPT_FIRST]) if e[0] == key),
+                      min(len(kept), KEPT_FIRST))
             frames = None
-            if before is not None and placed is not None:
+            if at == 0 and before is not None and placed is not None and N <= FRAMES_POSES:
                 before.flags.writeable = placed.flags.writeable = False
                 frames = (before, placed)
             entry = (key, T[:, :3, :3], T[:, :3, 3], frames)
-            kept = self._kept
-            at = next((i for i, e in enumerate(kept[:KEPT_FIRST]) if e[0] == key),
-                      min(len(kept), KEPT_FIRST))  # a first one again (now with its frames),
-            self._kept = kept[:at] + [entry] + kept[at + 1:KEPT_FIRST + 1]  # or the last
+            self._kept = kept[:at] + [entry] + kept[at + 1:KEPT_FIRST + 1]
         return ChainState(self, x, T[:, :3, :3], T[:, :3, 3],
                           [] if before is None else before, [] if placed is None else placed)
 
