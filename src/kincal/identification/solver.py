@@ -129,11 +129,22 @@ _BELOW: dict = {}  # (rows, columns): indices below the diagonal
 
 
 def _qr_r(A: np.ndarray) -> np.ndarray:
-    """np.linalg.qr(A, mode="r"), the same numbers: its LAPACK factorisation (mode "raw"),
-    the part below the diagonal zeroed through cached indices rather than np.triu's mask,
-    which costs more than the factorisation of a fold fit's 150 x 46 matrix."""
-    h, _ = np.linalg.qr(A, mode="raw")
-    R = h.T[:min(A.shape)].copy()
+    """np.linalg.qr(A, mode="r"), the same numbers: LAPACK's dgeqrf with its optimal work
+    size, as numpy calls it, but through scipy's wrapper (:func:`lapack`), which costs half
+    of numpy's (its checks and the copy of the result cost as much as the factorisation of
+    a fold fit's 150 x 46 matrix); the part below the diagonal zeroed through cached
+    indices rather than np.triu's mask."""
+    _, _, geqrf, geqrf_lwork = _ROUTINES or lapack()
+    m, n = A.shape
+    if (m, n) not in _QR_LWORK:
+        work, info = geqrf_lwork(m, n)
+        if info != 0:
+            raise ValueError(f"geqrf's work size query failed: {info}")
+        _QR_LWORK[m, n] = max(1, int(work.real))
+    h, _, _, info = geqrf(A, _QR_LWORK[m, n])
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of geqrf")
+    R = np.ascontiguousarray(h[:min(m, n)])
     if R.shape not in _BELOW:
         _BELOW[R.shape] = np.tril_indices(R.shape[0], -1, R.shape[1])
     R[_BELOW[R.shape]] = 0.0
@@ -174,14 +185,17 @@ def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,
     return make() if kept is None else kept(J, free_idx, make)
 
 
-def _gelsy() -> tuple:
-    """(dgelsy, dgelsy_lwork): scipy's compiled LAPACK wrappers, the very functions
-    ``scipy.linalg.lapack.get_lapack_funcs`` returns for float64. Before anything imports
-    ``scipy.linalg``, its extension module (``_flapack``) is loaded from scipy's own file
-    without the package import, which costs a command's start-up about 0.15 s (its
-    array-API layer imports numpy.f2py and numpy.testing) for one LAPACK routine. Where
-    scipy keeps that file elsewhere (another release's layout), the public import gives
-    the same functions: only the start-up differs."""
+NAMES = ("gelsy", "gelsy_lwork", "geqrf", "geqrf_lwork")  # the LAPACK routines used
+
+
+def _routines() -> tuple:
+    """(dgelsy, dgelsy_lwork, dgeqrf, dgeqrf_lwork): scipy's compiled LAPACK wrappers, the
+    very functions ``scipy.linalg.lapack.get_lapack_funcs`` returns for float64. Before
+    anything imports ``scipy.linalg``, its extension module (``_flapack``) is loaded from
+    scipy's own file without the package import, which costs a command's start-up about
+    0.15 s (its array-API layer imports numpy.f2py and numpy.testing) for a few LAPACK
+    routines. Where scipy keeps that file elsewhere (another release's layout), the public
+    import gives the same functions: only the start-up differs."""
     import importlib.util
     import os
     import sys
@@ -198,23 +212,24 @@ def _gelsy() -> tuple:
         if spec is not None and spec.loader is not None:
             module = importlib.util.module_from_spec(spec)
             spec.loader.exec_module(module)
-            if hasattr(module, "dgelsy") and hasattr(module, "dgelsy_lwork"):
-                return module.dgelsy, module.dgelsy_lwork
+            if all(hasattr(module, "d" + name) for name in NAMES):
+                return tuple(getattr(module, "d" + name) for name in NAMES)
     from scipy.linalg.lapack import get_lapack_funcs
 
-    return tuple(get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)), np.zeros(1))))
+    return tuple(get_lapack_funcs(NAMES, (np.zeros((1, 1)), np.zeros(1))))
 
 
-_GELSY: tuple = ()  # (dgelsy, dgelsy_lwork), loaded at the first solve
+_ROUTINES: tuple = ()  # (dgelsy, dgelsy_lwork, dgeqrf, dgeqrf_lwork), loaded at the first solve
 _LWORK: dict = {}  # (m, n): LAPACK's optimal work size for gelsy
+_QR_LWORK: dict = {}  # (m, n): the same for geqrf
 
 
 def lapack() -> tuple:
-    """(dgelsy, dgelsy_lwork), loaded once (:func:`_gelsy`)."""
-    global _GELSY
-    if not _GELSY:
-        _GELSY = _gelsy()
-    return _GELSY
+    """(dgelsy, dgelsy_lwork, dgeqrf, dgeqrf_lwork), loaded once (:func:`_routines`)."""
+    global _ROUTINES
+    if not _ROUTINES:
+        _ROUTINES = _routines()
+    return _ROUTINES
 
 
 def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -223,7 +238,7 @@ def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     ``scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy", check_finite=False)``
     makes, without its checks and dispatch (a fold fit of Algorithm 1 solves a 45 x 45
     system, where they cost as much as the solve)."""
-    gelsy, gelsy_lwork = _GELSY or lapack()
+    gelsy, gelsy_lwork, _, _ = _ROUTINES or lapack()
     m, n = A.shape
     if m < n:
         b = np.concatenate([b, np.zeros(n - m)])
