@@ -87,17 +87,18 @@ def remembering(residual: Callable, keep: int = 2) -> Callable:
     is the previous fit's last one, not evaluated again (the same numbers), and so is the
     solver's QR triangle of it (``factor(J, columns, make)``). The attributes of the
     streamed path (``blocks``, ``rows``, ``n_blocks``) are passed on."""
-    seen: list = []  # (u, (r, J), {free columns: triangle of [J_free | -r]})
+    seen: list = []  # (bytes of u, (r, J), {free columns: triangle of [J_free | -r]})
 
     def recall(u):
-        """The remembered (r, J) at u, or None."""
+        """The remembered (r, J) at u (the same bits), or None."""
+        key = np.asarray(u, dtype=float).tobytes()
         for v, out, _ in seen:
-            if np.array_equal(v, u):
+            if v == key:
                 return out
         return None
 
     def keep_(u, out):
-        seen.insert(0, (np.array(u, dtype=float), out, {}))
+        seen.insert(0, (np.asarray(u, dtype=float).tobytes(), out, {}))
         del seen[keep:]
 
     def remembered(u, with_jacobian):

@@ -128,12 +128,13 @@ class SolveSummary:
 _BELOW: dict = {}  # (rows, columns): indices below the diagonal
 
 
-def _qr_r(A: np.ndarray) -> np.ndarray:
+def _qr_r(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """np.linalg.qr(A, mode="r"), the same numbers: LAPACK's dgeqrf with its optimal work
     size, as numpy calls it, but through scipy's wrapper (:func:`lapack`), which costs half
     of numpy's (its checks and the copy of the result cost as much as the factorisation of
     a fold fit's 150 x 46 matrix); the part below the diagonal zeroed through cached
-    indices rather than np.triu's mask."""
+    indices rather than np.triu's mask. overwrite: A (Fortran order) may be overwritten,
+    which saves its copy."""
     _, _, geqrf, geqrf_lwork = _ROUTINES or lapack()
     m, n = A.shape
     if (m, n) not in _QR_LWORK:
@@ -141,7 +142,7 @@ def _qr_r(A: np.ndarray) -> np.ndarray:
         if info != 0:
             raise ValueError(f"geqrf's work size query failed: {info}")
         _QR_LWORK[m, n] = max(1, int(work.real))
-    h, _, _, info = geqrf(A, _QR_LWORK[m, n])
+    h, _, _, info = geqrf(A, _QR_LWORK[m, n], overwrite)
     if info < 0:
         raise ValueError(f"illegal value in argument {-info} of geqrf")
     R = np.ascontiguousarray(h[:min(m, n)])
@@ -151,16 +152,20 @@ def _qr_r(A: np.ndarray) -> np.ndarray:
     return R
 
 
-def triangular_factor(A: np.ndarray) -> np.ndarray:
+TALL = 50  # rows per column from which triangular_factor uses CholeskyQR2
+
+
+def triangular_factor(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """R of A = Q R (upper triangular, n x n) for a tall A (m x n).
 
     Householder QR, except for very tall A (many poses), where CholeskyQR2 (two Cholesky
     passes, the second on A R1^-1) costs two Gram products instead; it is as accurate as
-    QR while cond(A) stays below ~1e7, and falls back to QR beyond that.
+    QR while cond(A) stays below ~1e7, and falls back to QR beyond that. overwrite: A is
+    a temporary QR may overwrite (in Fortran order, its copy is saved).
     """
     m, n = A.shape
-    if m <= 50 * n:
-        return _qr_r(A)
+    if m <= TALL * n:
+        return _qr_r(A, overwrite)
     try:
         R1 = np.linalg.cholesky(A.T @ A).T
         d = np.abs(np.diag(R1))
@@ -179,7 +184,11 @@ def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,
     remembering) kept for this J: a warm start's first iteration factors the matrix the
     previous fit's last iteration did."""
     def make():
-        return triangular_factor(np.column_stack([J[:, free_idx], -r]))
+        m, n = len(r), free_idx.size + 1  # QR's in Fortran order: factored in place
+        A = np.empty((m, n), order="F" if m <= TALL * n else "C")
+        A[:, :-1] = J[:, free_idx]
+        np.negative(r, out=A[:, -1])
+        return triangular_factor(A, overwrite=True)
 
     kept = getattr(residual, "factor", None)
     return make() if kept is None else kept(J, free_idx, make)
@@ -306,14 +315,20 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         lam_p = np.broadcast_to(np.asarray(lam, dtype=float), (p,))
         root = np.diag(np.sqrt(np.maximum(lam_p[free_idx][pen_f], 0.0)))
     sq_f = np.diag(root) if np.ndim(lam) != 2 else np.ones(root.shape[0])
+    # what every iteration uses, made once: the penalised entries' indices (gathers by
+    # index rather than by mask: the same numbers, a fold fit's iterations are short)
+    ndim, pen_idx, fp_idx = np.ndim(lam), np.flatnonzero(pen), free_idx[pen_f]
+    prior_pen, prior_fp = prior[pen_idx], prior[fp_idx]
+    weight = (Lam[np.ix_(pen, pen)] if ndim == 2 else lam_p[pen] if ndim == 1 else
+              float(lam))
 
     def objective(u, r):
-        d = (u - prior)[pen]
-        if np.ndim(lam) == 0:  # the paper's single weight: the original arithmetic
-            return float(r @ r), float(lam * (d @ d))
-        if np.ndim(lam) == 2:
-            return float(r @ r), float(d @ Lam[np.ix_(pen, pen)] @ d)
-        return float(r @ r), float(lam_p[pen] @ (d * d))
+        d = u[pen_idx] - prior_pen
+        if ndim == 0:  # the paper's single weight: the original arithmetic
+            return float(r @ r), float(weight * (d @ d))
+        if ndim == 2:
+            return float(r @ r), float(d @ weight @ d)
+        return float(r @ r), float(weight @ (d * d))
 
     streamed = getattr(residual, "n_blocks", 1) > 1
 
@@ -347,6 +362,7 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     A0, b0 = np.zeros((k + n_pen, k)), np.zeros(k + n_pen)
     if n_pen:
         A0[k:, np.flatnonzero(pen_f)] = root
+    minus_root = -root
     it = 0
     while it < options.max_iterations:
         it += 1
@@ -359,12 +375,13 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         A0[:h], b0[:h] = Rz[:h, :k], Rz[:h, k]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
         if n_pen:
-            b0[k:] = -root @ (u - prior)[free_idx][pen_f]
+            b0[k:] = minus_root @ (u[fp_idx] - prior_fp)
         colnorm2 = None  # Marquardt's scaling, made when a step is damped
         if options.rule == "relative":
             # the Gauss-Newton decrement ||A0 d||^2 = F(u) - min of the linear model
             gn = lstsq(A0, b0)
-            decrement = float(np.sum((A0 @ gn) ** 2))
+            a_gn = A0 @ gn
+            decrement = float(np.sum(a_gn ** 2))
             if decrement <= options.rel_tol * costs[-1]:
                 it -= 1  # no step taken
                 reason, converged = (f"predicted decrease below {options.rel_tol:g} of the "
@@ -392,10 +409,10 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             else:
                 (r_new, J_new), G_new, Rz_new = (yield u_new), None, None
             d_new, p_new = objective(u_new, r_new)
-            lin = A0 @ step - b0
+            lin = (a_gn if step is gn else A0 @ step) - b0
             predicted = costs[-1] - float(lin @ lin) - rho2
             actual = costs[-1] - (d_new + p_new)
-            if actual >= 0 and np.isfinite(d_new):
+            if actual >= 0 and math.isfinite(d_new):
                 accepted = True
                 rho = actual / predicted if predicted > 0 else 1.0
                 if mu > 0:
@@ -422,11 +439,11 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             options.progress(it, options.max_iterations)
         if options.rule == "paper":
             small = small + 1 if actual < options.cost_tol else 0
-            what = f"{options.cost_tol:g} mm^2"
         else:  # the same test relative to the objective, so it does not depend on N
             small = small + 1 if actual <= options.cost_rtol * costs[-1] else 0
-            what = f"{options.cost_rtol:g} of the objective"
         if small >= options.cost_window:
+            what = (f"{options.cost_tol:g} mm^2" if options.rule == "paper" else
+                    f"{options.cost_rtol:g} of the objective")
             reason, converged = (f"objective change below {what} over "
                                  f"{options.cost_window} iterations"), True
             break
