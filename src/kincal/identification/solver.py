@@ -381,7 +381,7 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             # the Gauss-Newton decrement ||A0 d||^2 = F(u) - min of the linear model
             gn = lstsq(A0, b0)
             a_gn = A0 @ gn
-            decrement = float(np.sum(a_gn ** 2))
+            decrement = float(np.add.reduce(a_gn ** 2))  # np.sum's own sum, without its wrapper
             if decrement <= options.rel_tol * costs[-1]:
                 it -= 1  # no step taken
                 reason, converged = (f"predicted decrease below {options.rel_tol:g} of the "
@@ -432,7 +432,7 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         u, r, J, G, Rz = u_new, r_new, J_new, G_new, Rz_new
         data, penalty = d_new, p_new
         costs.append(data + penalty)
-        if np.max(np.abs(step)) < options.step_tol:
+        if np.abs(step).max() < options.step_tol:
             reason, converged = "step below step_tol", True
             break
         if options.progress is not None:
