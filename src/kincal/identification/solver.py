@@ -305,20 +305,20 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     pen = np.zeros(p, dtype=bool) if penalised is None else np.asarray(penalised, dtype=bool)
     prior = u0.copy() if prior is None else np.asarray(prior, dtype=float)
     pen_f = pen[free_idx]
-    if np.ndim(lam) == 2:  # a matrix (a fleet prior's precision): its root on the free rows
-        Lam = np.asarray(lam, dtype=float)
-        fp = free_idx[pen_f]
-        w, V = np.linalg.eigh(Lam[np.ix_(fp, fp)])
-        root = np.sqrt(np.maximum(w, 0.0))[:, None] * V.T  # root^T root = Lam_ff
-        lam_p = np.zeros(p)
-    else:
-        lam_p = np.broadcast_to(np.asarray(lam, dtype=float), (p,))
-        root = np.diag(np.sqrt(np.maximum(lam_p[free_idx][pen_f], 0.0)))
-    sq_f = np.diag(root) if np.ndim(lam) != 2 else np.ones(root.shape[0])
     # what every iteration uses, made once: the penalised entries' indices (gathers by
     # index rather than by mask: the same numbers, a fold fit's iterations are short)
     ndim, pen_idx, fp_idx = np.ndim(lam), np.flatnonzero(pen), free_idx[pen_f]
     prior_pen, prior_fp = prior[pen_idx], prior[fp_idx]
+    if ndim == 2:  # a matrix (a fleet prior's precision): its root on the free rows
+        Lam = np.asarray(lam, dtype=float)
+        w, V = np.linalg.eigh(Lam[np.ix_(fp_idx, fp_idx)])
+        root = np.sqrt(np.maximum(w, 0.0))[:, None] * V.T  # root^T root = Lam_ff
+        lam_p = np.zeros(p)
+        sq_f = np.ones(root.shape[0])
+    else:
+        lam_p = np.broadcast_to(np.asarray(lam, dtype=float), (p,))
+        sq_f = np.sqrt(np.maximum(lam_p[fp_idx], 0.0))
+        root = np.diag(sq_f)
     weight = (Lam[np.ix_(pen, pen)] if ndim == 2 else lam_p[pen] if ndim == 1 else
               float(lam))
 
