@@ -129,12 +129,13 @@ _BELOW: dict = {}  # (rows, columns): indices below the diagonal
 
 
 def _qr_r(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
-    """np.linalg.qr(A, mode="r"), the same numbers: LAPACK's dgeqrf with its optimal work
-    size, as numpy calls it, but through scipy's wrapper (:func:`lapack`), which costs half
-    of numpy's (its checks and the copy of the result cost as much as the factorisation of
-    a fold fit's 150 x 46 matrix); the part below the diagonal zeroed through cached
-    indices rather than np.triu's mask. overwrite: A (Fortran order) may be overwritten,
-    which saves its copy."""
+    """np.linalg.qr(A, mode="r"): LAPACK's dgeqrf with its optimal work size, as numpy
+    and scipy.linalg.qr call it, through scipy's wrapper (:func:`lapack`), which costs half
+    of numpy's call (its checks and the copy of the result cost as much as the
+    factorisation of a fold fit's 144 x 28 matrix); scipy.linalg.qr's numbers to the bit,
+    numpy's to rounding (with this project's numpy and scipy wheels the same bits). The part
+    below the diagonal is zeroed through cached indices rather than np.triu's mask.
+    overwrite: A (Fortran order) may be overwritten, which saves its copy."""
     _, _, geqrf, geqrf_lwork = _ROUTINES or lapack()
     m, n = A.shape
     if (m, n) not in _QR_LWORK:
