@@ -310,18 +310,19 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     # index rather than by mask: the same numbers, a fold fit's iterations are short)
     ndim, pen_idx, fp_idx = np.ndim(lam), np.flatnonzero(pen), free_idx[pen_f]
     prior_pen, prior_fp = prior[pen_idx], prior[fp_idx]
-    if ndim == 2:  # a matrix (a fleet prior's precision): its root on the free rows
+    root: np.ndarray | None = None  # the penalty's root on the free rows, if not diagonal
+    if ndim == 2:  # a matrix (a fleet prior's precision)
         Lam = np.asarray(lam, dtype=float)
         w, V = np.linalg.eigh(Lam[np.ix_(fp_idx, fp_idx)])
         root = np.sqrt(np.maximum(w, 0.0))[:, None] * V.T  # root^T root = Lam_ff
-        lam_p = np.zeros(p)
         sq_f = np.ones(root.shape[0])
-    else:
+        weight: float | np.ndarray = Lam[np.ix_(pen, pen)]
+    elif ndim == 1:  # one weight per parameter: the root's diagonal
         lam_p = np.broadcast_to(np.asarray(lam, dtype=float), (p,))
-        sq_f = np.sqrt(np.maximum(lam_p[fp_idx], 0.0))
-        root = np.diag(sq_f)
-    weight = (Lam[np.ix_(pen, pen)] if ndim == 2 else lam_p[pen] if ndim == 1 else
-              float(lam))
+        sq_f, weight = np.sqrt(np.maximum(lam_p[fp_idx], 0.0)), lam_p[pen]
+    else:
+        sq_f = np.full(fp_idx.size, math.sqrt(max(float(lam), 0.0)))
+        weight = float(lam)
 
     def objective(u, r):
         d = u[pen_idx] - prior_pen
@@ -359,11 +360,14 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     # prior)], filled in place at each iteration: the penalty's rows P, the same at every
     # iteration, are written once
     k = free_idx.size
-    n_pen = int(pen_f.sum()) if np.any(sq_f > 0) and root.size else 0
+    n_pen = int(pen_f.sum()) if np.any(sq_f > 0) and sq_f.size else 0
     A0, b0 = np.zeros((k + n_pen, k)), np.zeros(k + n_pen)
-    if n_pen:
+    if n_pen and root is None:
+        A0[k + np.arange(n_pen), np.flatnonzero(pen_f)] = sq_f
+    elif n_pen:
         A0[k:, np.flatnonzero(pen_f)] = root
-    minus_root = -root
+    # -root (u - prior): a diagonal root's product is the elementwise one, the same bits
+    minus = -sq_f if root is None else -root
     it = 0
     while it < options.max_iterations:
         it += 1
@@ -376,7 +380,8 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         A0[:h], b0[:h] = Rz[:h, :k], Rz[:h, k]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
         if n_pen:
-            b0[k:] = minus_root @ (u[fp_idx] - prior_fp)
+            b0[k:] = (minus * (u[fp_idx] - prior_fp) if root is None else
+                      minus @ (u[fp_idx] - prior_fp))
         colnorm2 = None  # Marquardt's scaling, made when a step is damped
         if options.rule == "relative":
             # the Gauss-Newton decrement ||A0 d||^2 = F(u) - min of the linear model
