@@ -214,25 +214,37 @@ def test_first_guess_from_spread_samples_reaches_the_same_start(monkeypatch):
     assert np.abs(spread - full).max() < 1e-9
 
 
-def test_gelsy_from_scipys_file_is_the_public_routine():
+def test_lapack_from_scipys_file_is_the_public_routine():
     """Loaded from scipy's extension file (no scipy.linalg package import) or by the public
-    get_lapack_funcs, the solver's gelsy gives the same answer to the bit."""
+    get_lapack_funcs, the solver's gelsy gives the same answer to the bit, and its QR
+    triangle (dgeqrf through the same wrappers) is scipy.linalg.qr's to the bit and numpy's
+    np.linalg.qr(A, mode="r") to rounding (the same routine in another build of LAPACK; on
+    this project's machine the same bits)."""
     import subprocess
     import sys
 
     code = (
         "import sys, numpy as np\n"
-        "from kincal.identification.solver import _gelsy, lstsq\n"
+        "from kincal.identification.solver import _routines, _qr_r, lstsq\n"
         "rng = np.random.default_rng(3); A = rng.normal(size=(50, 9)); b = rng.normal(size=50)\n"
         "fast = lstsq(A, b)\n"
+        "B = rng.normal(size=(150, 46)) * np.logspace(0, 8, 46)\n"
+        "tri = [_qr_r(M) for M in (B, B[:40], np.asfortranarray(B), B[:, :9].T)]\n"
         "print('LINALG:', 'scipy.linalg' in sys.modules)\n"
         "import scipy.linalg\n"
         "want = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver='gelsy', check_finite=False)[0]\n"
-        "public = _gelsy()\n"
-        "print('SAME:', np.array_equal(fast, want), public[0].__name__)\n")
+        "public = _routines()\n"
+        "mats = (B, B[:40], B, B[:, :9].T)\n"
+        "qr = all(np.array_equal(t, scipy.linalg.qr(M, mode='r', check_finite=False)[0][\n"
+        "                                       :min(M.shape)]) for t, M in zip(tri, mats))\n"
+        "near = max(np.abs(t - np.linalg.qr(M, mode='r')).max() / np.abs(t).max()\n"
+        "           for t, M in zip(tri, mats))\n"
+        "print('SAME:', np.array_equal(fast, want), qr, near < 1e-13, public[0].__name__,\n"
+        "      public[2].__name__)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120, check=True).stdout.split("\n")
-    assert out[0] == "LINALG: False" and out[1].startswith("SAME: True") and "dgelsy" in out[1], out
+    assert out[0] == "LINALG: False" and out[1].startswith("SAME: True True True"), out
+    assert "dgelsy" in out[1] and "dgeqrf" in out[1], out
 
 
 @pytest.mark.parametrize("spread", [1.0, 0.1, 0.0])

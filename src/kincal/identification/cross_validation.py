@@ -87,17 +87,18 @@ def remembering(residual: Callable, keep: int = 2) -> Callable:
     is the previous fit's last one, not evaluated again (the same numbers), and so is the
     solver's QR triangle of it (``factor(J, columns, make)``). The attributes of the
     streamed path (``blocks``, ``rows``, ``n_blocks``) are passed on."""
-    seen: list = []  # (u, (r, J), {free columns: triangle of [J_free | -r]})
+    seen: list = []  # (bytes of u, (r, J), {free columns: triangle of [J_free | -r]})
 
     def recall(u):
-        """The remembered (r, J) at u, or None."""
+        """The remembered (r, J) at u (the same bits), or None."""
+        key = np.asarray(u, dtype=float).tobytes()
         for v, out, _ in seen:
-            if np.array_equal(v, u):
+            if v == key:
                 return out
         return None
 
     def keep_(u, out):
-        seen.insert(0, (np.array(u, dtype=float), out, {}))
+        seen.insert(0, (np.asarray(u, dtype=float).tobytes(), out, {}))
         del seen[keep:]
 
     def remembered(u, with_jacobian):
@@ -192,14 +193,18 @@ def together_possible(problem, samples: np.ndarray | None) -> bool:
 
 
 def _together(problem, free: np.ndarray, samples: np.ndarray | None, options) -> Callable:
-    """``together(trains, lam, starts) -> [solution per fold]``: the k folds' fits at one
-    lambda run side by side, each its own solver (:func:`kincal.identification.solver.steps`,
-    the same iterations and arithmetic as one at a time), their linearisations evaluated
-    in one vectorised pass over the folds' training rows, one parameter vector per row,
-    instead of one pass per fold: the per-call overhead of the evaluation (about 200 numpy
-    calls, most of a 60-pose fold fit's time) is paid once per step. Its numbers differ
-    from a fold's own pass at rounding level (products of other shapes); each fold
-    remembers its linearisations as :func:`remembering` does."""
+    """``together(trains, lams, warm_start, finished) -> solutions[m][f]``: the k folds'
+    paths along the lambdas ``lams`` (in the order given) run side by side, each fold's fit
+    its own solver (:func:`kincal.identification.solver.steps`, the same iterations and
+    arithmetic as one at a time), warm-started from that fold's previous fit; at each step
+    the linearisations every fold waits for are evaluated in one vectorised pass over their
+    training rows, one parameter vector per row, instead of one pass per fold: the per-call
+    overhead of the evaluation (about 200 numpy calls, most of a 60-pose fold fit's time) is
+    paid once per step. A fold goes on to its next lambda as soon as its fit ends, without
+    waiting for the others, so the passes are as many as the longest fold's path needs,
+    not the sum over lambdas of the slowest fold's. The pass gives each row what the fold's
+    own pass gives it (the rows do not mix). Each fold remembers its linearisations as
+    :func:`remembering` does. finished(): called after each fold fit."""
     folds: dict[bytes, Callable] = {}  # training rows: the fold's remembering residual
     joint: dict[bytes, Callable] = {}  # the rows of several folds: their residual
 
@@ -221,32 +226,67 @@ def _together(problem, free: np.ndarray, samples: np.ndarray | None, options) ->
             at += n
         return out
 
-    def together(trains, lam, starts):
-        runs, pending, done = [], {}, [None] * len(trains)
-        for f, train in enumerate(trains):
+    def together(trains, lams, warm_start=True, finished=None):
+        k = len(trains)
+        sols: list[list] = [[None] * k for _ in lams]
+        at = [0] * k  # each fold's place on the lambda path
+        rems = []
+        for train in trains:
             key = rows_of(train).tobytes()
             if key not in folds:
                 folds[key] = remembering(problem.residual_function(rows_of(train)))
-            rem = folds[key]  # not streamed (together_possible): the solver yields
-            run = problem.fit(lam, rows_of(train), free=free, residual=rem, options=options,
-                              start_u=None if starts[f] is None else starts[f].u, driven=True)
-            runs.append((run, rem))
-            pending[f] = next(run)
-        while pending:
-            outs = {f: runs[f][1].recall(u) for f, u in pending.items()}
-            missing = [f for f, out in outs.items() if out is None]
-            if missing:
-                for f, out in zip(missing, evaluate([trains[f] for f in missing],
-                                                    [pending[f] for f in missing])):
-                    runs[f][1].keep(pending[f], out)
-                    outs[f] = out
-            pending = {}
-            for f, out in outs.items():
+            rems.append(folds[key])  # not streamed (together_possible): the solver yields
+
+        def start(f):
+            """Fold f's fit at its next lambda, as a generator, and its first point."""
+            m = at[f]
+            before = sols[m - 1][f] if m and warm_start else None
+            run = problem.fit(lams[m], rows_of(trains[f]), free=free, residual=rems[f],
+                              options=options, start_u=None if before is None else before.u,
+                              driven=True)
+            return run, next(run)
+
+        def advance(f, out):
+            """Send fold f's linearisation; go on while the next point is remembered (a
+            warm start's first) and the next fit once one ends; its next point to
+            evaluate, or None at the end of its path."""
+            run = runs[f]
+            while True:
                 try:
-                    pending[f] = runs[f][0].send(out)
+                    u = run.send(out)
                 except StopIteration as end:
-                    done[f] = end.value
-        return done
+                    sols[at[f]][f] = end.value
+                    at[f] += 1
+                    if finished is not None:
+                        finished()
+                    if at[f] == len(lams):
+                        return None
+                    run, u = start(f)
+                    runs[f] = run
+                out = rems[f].recall(u)
+                if out is None:
+                    return u
+
+        runs: list = [None] * k
+        pending = {}
+        for f in range(k):
+            runs[f], u = start(f)
+            out = rems[f].recall(u)
+            if out is None:
+                pending[f] = u
+            else:
+                u = advance(f, out)
+                if u is not None:
+                    pending[f] = u
+        while pending:
+            outs = evaluate([trains[f] for f in pending], list(pending.values()))
+            now, pending = pending, {}
+            for (f, u), out in zip(now.items(), outs):
+                rems[f].keep(u, out)
+                nxt = advance(f, out)
+                if nxt is not None:
+                    pending[f] = nxt
+        return sols
 
     return together
 
@@ -264,10 +304,9 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
         previous solution (same minimiser, far fewer iterations); False starts every fit
         from the nominal parameters, as the paper writes it.
     groups: (n_samples,) pose of each sample; strata: set of each sample (see make_folds).
-    When ``fit`` has ``together(trains, lam, starts) -> solutions`` and ``error`` has
-    ``together(solutions, vals) -> errors`` (:func:`fold_fitter`, :func:`validation_error`),
-    the folds' fits at each lambda run side by side, each on its own path, evaluated
-    together.
+    When ``fit`` has ``together(trains, lams, warm_start, finished) -> solutions[m][f]``
+    and ``error`` has ``together(solutions, vals) -> errors`` (:func:`fold_fitter`,
+    :func:`validation_error`), the folds' paths run side by side, evaluated together.
     """
     lambdas = np.asarray(lambdas, dtype=float)
     folds = make_folds(n_samples, k, seed, groups, strata)
@@ -278,16 +317,19 @@ def cross_validate(fit: Callable, error: Callable, n_samples: int, lambdas: np.n
     errors_together = getattr(error, "together", None)
     one_by_one = together is None or errors_together is None
     if together is not None and errors_together is not None:
-        # the folds side by side, lambda after lambda (each fold's own path as below)
+        # the folds side by side, each on its own path as below; the validation errors of
+        # all the fits in one pass at the end
         trains = [np.setdiff1d(np.arange(n_samples), val) for val in folds]
-        sols: list = [None] * k
-        for m in order:
-            sols = together(trains, float(lambdas[m]), sols if warm_start else [None] * k)
-            errors[m] = errors_together(sols, folds)
-            for _ in range(k):
-                done += 1
-                if progress is not None:
-                    progress(done, total)
+
+        def finished():
+            nonlocal done
+            done += 1
+            if progress is not None:
+                progress(done, total)
+
+        sols = together(trains, [float(lambdas[m]) for m in order], warm_start, finished)
+        errors[order] = np.reshape(errors_together([s for row in sols for s in row],
+                                                   list(folds) * len(order)), (len(order), k))
     for f, val in enumerate(folds if one_by_one else ()):
         train = np.setdiff1d(np.arange(n_samples), val)
         start = None

@@ -128,28 +128,45 @@ class SolveSummary:
 _BELOW: dict = {}  # (rows, columns): indices below the diagonal
 
 
-def _qr_r(A: np.ndarray) -> np.ndarray:
-    """np.linalg.qr(A, mode="r"), the same numbers: its LAPACK factorisation (mode "raw"),
-    the part below the diagonal zeroed through cached indices rather than np.triu's mask,
-    which costs more than the factorisation of a fold fit's 150 x 46 matrix."""
-    h, _ = np.linalg.qr(A, mode="raw")
-    R = h.T[:min(A.shape)].copy()
+def _qr_r(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
+    """np.linalg.qr(A, mode="r"): LAPACK's dgeqrf with its optimal work size, as numpy
+    and scipy.linalg.qr call it, through scipy's wrapper (:func:`lapack`), which costs half
+    of numpy's call (its checks and the copy of the result cost as much as the
+    factorisation of a fold fit's 144 x 28 matrix); scipy.linalg.qr's numbers to the bit,
+    numpy's to rounding (with this project's numpy and scipy wheels the same bits). The part
+    below the diagonal is zeroed through cached indices rather than np.triu's mask.
+    overwrite: A (Fortran order) may be overwritten, which saves its copy."""
+    _, _, geqrf, geqrf_lwork = _ROUTINES or lapack()
+    m, n = A.shape
+    if (m, n) not in _QR_LWORK:
+        work, info = geqrf_lwork(m, n)
+        if info != 0:
+            raise ValueError(f"geqrf's work size query failed: {info}")
+        _QR_LWORK[m, n] = max(1, int(work.real))
+    h, _, _, info = geqrf(A, _QR_LWORK[m, n], overwrite)
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of geqrf")
+    R = np.ascontiguousarray(h[:min(m, n)])
     if R.shape not in _BELOW:
         _BELOW[R.shape] = np.tril_indices(R.shape[0], -1, R.shape[1])
     R[_BELOW[R.shape]] = 0.0
     return R
 
 
-def triangular_factor(A: np.ndarray) -> np.ndarray:
+TALL = 50  # rows per column from which triangular_factor uses CholeskyQR2
+
+
+def triangular_factor(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """R of A = Q R (upper triangular, n x n) for a tall A (m x n).
 
     Householder QR, except for very tall A (many poses), where CholeskyQR2 (two Cholesky
     passes, the second on A R1^-1) costs two Gram products instead; it is as accurate as
-    QR while cond(A) stays below ~1e7, and falls back to QR beyond that.
+    QR while cond(A) stays below ~1e7, and falls back to QR beyond that. overwrite: A is
+    a temporary QR may overwrite (in Fortran order, its copy is saved).
     """
     m, n = A.shape
-    if m <= 50 * n:
-        return _qr_r(A)
+    if m <= TALL * n:
+        return _qr_r(A, overwrite)
     try:
         R1 = np.linalg.cholesky(A.T @ A).T
         d = np.abs(np.diag(R1))
@@ -168,20 +185,27 @@ def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,
     remembering) kept for this J: a warm start's first iteration factors the matrix the
     previous fit's last iteration did."""
     def make():
-        return triangular_factor(np.column_stack([J[:, free_idx], -r]))
+        m, n = len(r), free_idx.size + 1  # QR's in Fortran order: factored in place
+        A = np.empty((m, n), order="F" if m <= TALL * n else "C")
+        A[:, :-1] = J[:, free_idx]
+        np.negative(r, out=A[:, -1])
+        return triangular_factor(A, overwrite=True)
 
     kept = getattr(residual, "factor", None)
     return make() if kept is None else kept(J, free_idx, make)
 
 
-def _gelsy() -> tuple:
-    """(dgelsy, dgelsy_lwork): scipy's compiled LAPACK wrappers, the very functions
-    ``scipy.linalg.lapack.get_lapack_funcs`` returns for float64. Before anything imports
-    ``scipy.linalg``, its extension module (``_flapack``) is loaded from scipy's own file
-    without the package import, which costs a command's start-up about 0.15 s (its
-    array-API layer imports numpy.f2py and numpy.testing) for one LAPACK routine. Where
-    scipy keeps that file elsewhere (another release's layout), the public import gives
-    the same functions: only the start-up differs."""
+NAMES = ("gelsy", "gelsy_lwork", "geqrf", "geqrf_lwork")  # the LAPACK routines used
+
+
+def _routines() -> tuple:
+    """(dgelsy, dgelsy_lwork, dgeqrf, dgeqrf_lwork): scipy's compiled LAPACK wrappers, the
+    very functions ``scipy.linalg.lapack.get_lapack_funcs`` returns for float64. Before
+    anything imports ``scipy.linalg``, its extension module (``_flapack``) is loaded from
+    scipy's own file without the package import, which costs a command's start-up about
+    0.15 s (its array-API layer imports numpy.f2py and numpy.testing) for a few LAPACK
+    routines. Where scipy keeps that file elsewhere (another release's layout), the public
+    import gives the same functions: only the start-up differs."""
     import importlib.util
     import os
     import sys
@@ -198,23 +222,24 @@ def _gelsy() -> tuple:
         if spec is not None and spec.loader is not None:
             module = importlib.util.module_from_spec(spec)
             spec.loader.exec_module(module)
-            if hasattr(module, "dgelsy") and hasattr(module, "dgelsy_lwork"):
-                return module.dgelsy, module.dgelsy_lwork
+            if all(hasattr(module, "d" + name) for name in NAMES):
+                return tuple(getattr(module, "d" + name) for name in NAMES)
     from scipy.linalg.lapack import get_lapack_funcs
 
-    return tuple(get_lapack_funcs(("gelsy", "gelsy_lwork"), (np.zeros((1, 1)), np.zeros(1))))
+    return tuple(get_lapack_funcs(NAMES, (np.zeros((1, 1)), np.zeros(1))))
 
 
-_GELSY: tuple = ()  # (dgelsy, dgelsy_lwork), loaded at the first solve
+_ROUTINES: tuple = ()  # (dgelsy, dgelsy_lwork, dgeqrf, dgeqrf_lwork), loaded at the first solve
 _LWORK: dict = {}  # (m, n): LAPACK's optimal work size for gelsy
+_QR_LWORK: dict = {}  # (m, n): the same for geqrf
 
 
 def lapack() -> tuple:
-    """(dgelsy, dgelsy_lwork), loaded once (:func:`_gelsy`)."""
-    global _GELSY
-    if not _GELSY:
-        _GELSY = _gelsy()
-    return _GELSY
+    """(dgelsy, dgelsy_lwork, dgeqrf, dgeqrf_lwork), loaded once (:func:`_routines`)."""
+    global _ROUTINES
+    if not _ROUTINES:
+        _ROUTINES = _routines()
+    return _ROUTINES
 
 
 def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -223,7 +248,7 @@ def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     ``scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver="gelsy", check_finite=False)``
     makes, without its checks and dispatch (a fold fit of Algorithm 1 solves a 45 x 45
     system, where they cost as much as the solve)."""
-    gelsy, gelsy_lwork = _GELSY or lapack()
+    gelsy, gelsy_lwork, _, _ = _ROUTINES or lapack()
     m, n = A.shape
     if m < n:
         b = np.concatenate([b, np.zeros(n - m)])
@@ -281,24 +306,31 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     pen = np.zeros(p, dtype=bool) if penalised is None else np.asarray(penalised, dtype=bool)
     prior = u0.copy() if prior is None else np.asarray(prior, dtype=float)
     pen_f = pen[free_idx]
-    if np.ndim(lam) == 2:  # a matrix (a fleet prior's precision): its root on the free rows
+    # what every iteration uses, made once: the penalised entries' indices (gathers by
+    # index rather than by mask: the same numbers, a fold fit's iterations are short)
+    ndim, pen_idx, fp_idx = np.ndim(lam), np.flatnonzero(pen), free_idx[pen_f]
+    prior_pen, prior_fp = prior[pen_idx], prior[fp_idx]
+    root: np.ndarray | None = None  # the penalty's root on the free rows, if not diagonal
+    if ndim == 2:  # a matrix (a fleet prior's precision)
         Lam = np.asarray(lam, dtype=float)
-        fp = free_idx[pen_f]
-        w, V = np.linalg.eigh(Lam[np.ix_(fp, fp)])
+        w, V = np.linalg.eigh(Lam[np.ix_(fp_idx, fp_idx)])
         root = np.sqrt(np.maximum(w, 0.0))[:, None] * V.T  # root^T root = Lam_ff
-        lam_p = np.zeros(p)
-    else:
+        sq_f = np.ones(root.shape[0])
+        weight: float | np.ndarray = Lam[np.ix_(pen, pen)]
+    elif ndim == 1:  # one weight per parameter: the root's diagonal
         lam_p = np.broadcast_to(np.asarray(lam, dtype=float), (p,))
-        root = np.diag(np.sqrt(np.maximum(lam_p[free_idx][pen_f], 0.0)))
-    sq_f = np.diag(root) if np.ndim(lam) != 2 else np.ones(root.shape[0])
+        sq_f, weight = np.sqrt(np.maximum(lam_p[fp_idx], 0.0)), lam_p[pen]
+    else:
+        sq_f = np.full(fp_idx.size, math.sqrt(max(float(lam), 0.0)))
+        weight = float(lam)
 
     def objective(u, r):
-        d = (u - prior)[pen]
-        if np.ndim(lam) == 0:  # the paper's single weight: the original arithmetic
-            return float(r @ r), float(lam * (d @ d))
-        if np.ndim(lam) == 2:
-            return float(r @ r), float(d @ Lam[np.ix_(pen, pen)] @ d)
-        return float(r @ r), float(lam_p[pen] @ (d * d))
+        d = u[pen_idx] - prior_pen
+        if ndim == 0:  # the paper's single weight: the original arithmetic
+            return float(r @ r), float(weight * (d @ d))
+        if ndim == 2:
+            return float(r @ r), float(d @ weight @ d)
+        return float(r @ r), float(weight @ (d * d))
 
     streamed = getattr(residual, "n_blocks", 1) > 1
 
@@ -328,10 +360,14 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     # prior)], filled in place at each iteration: the penalty's rows P, the same at every
     # iteration, are written once
     k = free_idx.size
-    n_pen = int(pen_f.sum()) if np.any(sq_f > 0) and root.size else 0
+    n_pen = int(pen_f.sum()) if np.any(sq_f > 0) and sq_f.size else 0
     A0, b0 = np.zeros((k + n_pen, k)), np.zeros(k + n_pen)
-    if n_pen:
+    if n_pen and root is None:
+        A0[k + np.arange(n_pen), np.flatnonzero(pen_f)] = sq_f
+    elif n_pen:
         A0[k:, np.flatnonzero(pen_f)] = root
+    # -root (u - prior): a diagonal root's product is the elementwise one, the same bits
+    minus = -sq_f if root is None else -root
     it = 0
     while it < options.max_iterations:
         it += 1
@@ -344,12 +380,14 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         A0[:h], b0[:h] = Rz[:h, :k], Rz[:h, k]
         rho2 = float(Rz[k, k] ** 2) if Rz.shape[0] > k else 0.0
         if n_pen:
-            b0[k:] = -root @ (u - prior)[free_idx][pen_f]
+            b0[k:] = (minus * (u[fp_idx] - prior_fp) if root is None else
+                      minus @ (u[fp_idx] - prior_fp))
         colnorm2 = None  # Marquardt's scaling, made when a step is damped
         if options.rule == "relative":
             # the Gauss-Newton decrement ||A0 d||^2 = F(u) - min of the linear model
             gn = lstsq(A0, b0)
-            decrement = float(np.sum((A0 @ gn) ** 2))
+            a_gn = A0 @ gn
+            decrement = float(np.add.reduce(a_gn ** 2))  # np.sum's own sum, without its wrapper
             if decrement <= options.rel_tol * costs[-1]:
                 it -= 1  # no step taken
                 reason, converged = (f"predicted decrease below {options.rel_tol:g} of the "
@@ -377,10 +415,10 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
             else:
                 (r_new, J_new), G_new, Rz_new = (yield u_new), None, None
             d_new, p_new = objective(u_new, r_new)
-            lin = A0 @ step - b0
+            lin = (a_gn if step is gn else A0 @ step) - b0
             predicted = costs[-1] - float(lin @ lin) - rho2
             actual = costs[-1] - (d_new + p_new)
-            if actual >= 0 and np.isfinite(d_new):
+            if actual >= 0 and math.isfinite(d_new):
                 accepted = True
                 rho = actual / predicted if predicted > 0 else 1.0
                 if mu > 0:
@@ -400,18 +438,18 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
         u, r, J, G, Rz = u_new, r_new, J_new, G_new, Rz_new
         data, penalty = d_new, p_new
         costs.append(data + penalty)
-        if np.max(np.abs(step)) < options.step_tol:
+        if np.abs(step).max() < options.step_tol:
             reason, converged = "step below step_tol", True
             break
         if options.progress is not None:
             options.progress(it, options.max_iterations)
         if options.rule == "paper":
             small = small + 1 if actual < options.cost_tol else 0
-            what = f"{options.cost_tol:g} mm^2"
         else:  # the same test relative to the objective, so it does not depend on N
             small = small + 1 if actual <= options.cost_rtol * costs[-1] else 0
-            what = f"{options.cost_rtol:g} of the objective"
         if small >= options.cost_window:
+            what = (f"{options.cost_tol:g} mm^2" if options.rule == "paper" else
+                    f"{options.cost_rtol:g} of the objective")
             reason, converged = (f"objective change below {what} over "
                                  f"{options.cost_window} iterations"), True
             break

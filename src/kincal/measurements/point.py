@@ -22,7 +22,7 @@ import numpy as np
 from kincal.errors import DataError
 from kincal.measurements.point_space import BASE, TOOL, ParameterSpace
 from kincal.models.base import ErrorModel
-from kincal.models.chain import Chain, axis_cross
+from kincal.models.chain import Chain, axis_cross, equal_runs
 from kincal.rotations import base_rotation, rotations_about, rotx, roty, rotz
 
 
@@ -123,18 +123,19 @@ class MeasurementModel:
         """Fill the base and tool columns (and turn the kinematic ones into the measurement frame)."""
         N, k, f = self.N, self.space.n_kinematic, self.space.n_frames
         if base.ndim == 2:  # one vector per sample: one rotation per sample
-            Rx, Ry, Rz = (rotations_about(c, base[:, 3 + c]) for c in range(3))
+            Rx, Rz, RxRy, Rb, RyRz = _sample_rotations(base)
         else:
             Rx, Ry, Rz = rotx(base[3]), roty(base[4]), rotz(base[5])
-        Rb = Rx @ Ry @ Rz
+            RxRy, RyRz = Rx @ Ry, Ry @ Rz
+            Rb = RxRy @ Rz
         if rotate_kinematic:
             J[:, :, :k] = np.matmul(Rb, J[:, :, :k])
             J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
         Pm = _rotate(Rb, P) + base[..., :3]
         J[:, :, k:k + 3] = _EYE3
         J[:, :, k + 3] = axis_cross(0, Pm - base[..., :3])
-        J[:, :, k + 4] = _rotate(Rx, axis_cross(1, _rotate(Ry @ Rz, P)))
-        J[:, :, k + 5] = _rotate(Rx @ Ry, axis_cross(2, _rotate(Rz, P)))
+        J[:, :, k + 4] = _rotate(Rx, axis_cross(1, _rotate(RyRz, P)))
+        J[:, :, k + 5] = _rotate(RxRy, axis_cross(2, _rotate(Rz, P)))
         # a sample moves with its own point only: its block gets R_b R_tip, the others 0
         if self.space.n_points == 1:  # one point: its columns are whole slices
             for c in range(3):
@@ -158,10 +159,24 @@ def _rotate(R: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.matmul(v[:, None, :], np.ascontiguousarray(R.transpose(0, 2, 1)))[:, 0, :]
 
 
+def _sample_rotations(base: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(Rx, Rz, Rx Ry, Rx Ry Rz, Ry Rz), each (N, 3, 3), of (N, 6) frame vectors, one
+    per sample: made once per run of equal rows and repeated (the folds of Algorithm 1
+    evaluated together: a few frames over many samples), each matrix the product the rows
+    would give one by one, so the same numbers."""
+    runs = equal_runs(base)
+    rep = None
+    if len(runs) < len(base):
+        base, rep = base[[a for a, _ in runs]], [b - a for a, b in runs]
+    Rx, Ry, Rz = (rotations_about(c, base[:, 3 + c]) for c in range(3))
+    RxRy = Rx @ Ry
+    out = (Rx, Rz, RxRy, RxRy @ Rz, Ry @ Rz)
+    return out if rep is None else tuple(np.repeat(R, rep, axis=0) for R in out)
+
+
 def _base_rotations(base: np.ndarray) -> np.ndarray:
     """(N, 3, 3) the measurement frames' rotations Rx Ry Rz of (N, 6) frame vectors."""
-    Rx, Ry, Rz = (rotations_about(c, base[:, 3 + c]) for c in range(3))
-    return Rx @ Ry @ Rz
+    return _sample_rotations(base)[3]
 
 
 # samples from which the closed-form first guess of the frames is made, at most: it is
