@@ -420,3 +420,18 @@ def test_evidence_refuses_a_fit_through_every_point(tmp_path, capsys):
     assert not out.exists()
     assert main(["calibrate", "ec66", str(data), "--out", str(out), "--noise-mm", "0.05"]) == 0
     assert out.exists()
+
+
+def test_cv_on_fewer_poses_than_folds_names_the_options(tmp_path, capsys):
+    """--lambda cv on 4 poses with the default 5 folds: one error line naming the options
+    that would run (fewer folds, or the evidence); nothing written."""
+    from kincal.cli.main import main
+
+    data, out = tmp_path / "four.csv", tmp_path / "cal.urdf"
+    assert main(["simulate", "ec66", "--poses", "4", "--seed", "1", "--out", str(data)]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data), "--out", str(out), "--lambda", "cv"]) == 1
+    err = capsys.readouterr().err
+    assert ("kincal: error: cross-validation needs 2 <= folds <= number of poses (4), got "
+            "folds=5 (--folds 4 or fewer, or --lambda evidence)") in err
+    assert not out.exists()

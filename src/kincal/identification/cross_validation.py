@@ -76,7 +76,9 @@ def make_folds(n_samples: int, k: int, seed: int, groups=None,
     poses, inverse = np.unique(groups, return_inverse=True)
     if not 2 <= k <= len(poses):
         raise OptionError(f"cross-validation needs 2 <= folds <= number of poses "
-                          f"({len(poses)}), got folds={k}")
+                          f"({len(poses)}), got folds={k}" + (
+                              f" (--folds {len(poses)} or fewer, or --lambda evidence)"
+                              if len(poses) >= 2 and k > len(poses) else ""))
     perm = np.random.default_rng(seed).permutation(len(poses))
     return tuple(np.flatnonzero(np.isin(inverse, f)) for f in np.array_split(perm, k))
 
