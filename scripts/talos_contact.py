@@ -35,6 +35,9 @@ calibrations per seed: each chain alone (the first command of issue 18), both to
 (the second), and both together with one noise for all rows (the same sigma stated for
 both files, as kincal weighed them before it estimated a noise per file and kind of row).
 
+The default row is judged again after one tilt of the table (two angles) fitted to the
+held-out touches themselves: what the table's turn between the days leaves.
+
 --variants adds other penalty and model choices (among them compliance terms on the stance
 leg, whose joints carry the robot's weight: FRAMES.json's compliance is applied to the
 held-out touches, with the gravity torques of the chain at each touch, the joints off the
@@ -99,13 +102,16 @@ def write_joint_csv(path: Path, names, values, planes=None) -> None:
 def held_out(urdf: Path, frames_path: Path, q_train: np.ndarray, q_valid: np.ndarray,
              names, base: str = BASE, tip: str = TIP, k: int = 0,
              compliance: bool = True, face_tilt: bool = True,
-             plane: str | None = None) -> tuple[float, float, float]:
+             plane: str | None = None, table_tilt: bool = False) -> tuple[float, float, float]:
     """(height [mm], roll [deg], pitch [deg]) RMS on the validation touches, from the files
     a calibration wrote (see the module notes): the chain base -> tip, set k of FRAMES.json;
     compliance False: FRAMES.json's compliance terms not applied (the URDF alone);
     face_tilt False: FRAMES.json's contact frame tilts (tool.rx .ry) not applied either (the
     URDF's tip frame and the contact point alone); plane: judged against FRAMES.json's
-    plane of that label (``plane<label>.*``) instead of the plane fitted to q_train."""
+    plane of that label (``plane<label>.*``) instead of the plane fitted to q_train;
+    table_tilt: the validation touches' tilts after one tilt of the plane (two angles)
+    fitted to themselves: what is left when the table's turn between the days is taken
+    out (height: NaN)."""
     from kincal.frames_file import CellFrames
     from kincal.measurements.flush import tilt_angles
     from kincal.measurements.plane import fit_plane, normal
@@ -140,6 +146,16 @@ def held_out(urdf: Path, frames_path: Path, q_train: np.ndarray, q_valid: np.nda
         d = s.value(f"plane{plane}.d")
     P, A = contact(q_valid)
     roll, pitch = tilt_angles(np.einsum("nji,j->ni", A, n))
+    if table_tilt:  # n + a u + b w, the two angles by linear least squares on the tilts
+        u = np.cross(n, [1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.cross(n, [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+        w = np.cross(n, u)
+        M = np.stack([np.einsum("nji,j->ni", A, e)[:, :2].ravel() for e in (u, w)], axis=1)
+        v = np.einsum("nji,j->ni", A, n)[:, :2].ravel()
+        ab = np.linalg.lstsq(M, -v, rcond=None)[0]
+        n = n + ab[0] * u + ab[1] * w
+        roll, pitch = tilt_angles(np.einsum("nji,j->ni", A, n / np.linalg.norm(n)))
+        P = np.full(P.shape, np.nan)
 
     def rms(x):
         return float(np.sqrt(np.mean(np.square(x))))
@@ -421,6 +437,11 @@ def main(argv=None) -> int:
                          LOG_EVIDENCE[f"v{k}"]))
             if args.loo:
                 LOO[label] = leave_one_out(folder, urdf, names, q_train, extra, f"v{k}")
+            if k == 0:
+                rows.append(("  the same, after one tilt of the table fitted to the held-out "
+                             "touches themselves (the table's turn between the days out)",
+                             *held_out(cal, frames, q_train, q_valid, names, table_tilt=True),
+                             math.nan))
             if k == 0 or "--fix" in extra:
                 rows.append(("  the same, the URDF's tip frame and the contact point alone "
                              "(FRAMES.json's face tilt not applied)",
