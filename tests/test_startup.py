@@ -60,3 +60,34 @@ def test_help_of_every_command_loads_no_numpy():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60, check=True).stdout
     assert out.strip().splitlines()[-1] == "NUMPY: False"
+
+
+BLAS_PROBE = """
+import os
+import kincal.cli  # the command line's entry, before anything loads numpy
+import numpy
+import threadpoolctl
+
+threads = [i["num_threads"] for i in threadpoolctl.threadpool_info()
+           if i["internal_api"] == "openblas"]
+print("BLAS:", os.environ["OPENBLAS_NUM_THREADS"], max(threads) if threads else "none")
+"""
+
+
+def _blas(env_value=None):
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if env_value is not None:
+        env["OPENBLAS_NUM_THREADS"] = env_value
+    out = subprocess.run([sys.executable, "-c", BLAS_PROBE], capture_output=True, text=True,
+                         timeout=60, check=True, env=env).stdout.split()
+    return out[1], out[2]
+
+
+def test_the_command_line_runs_blas_with_one_thread_unless_told():
+    """The command line sets OPENBLAS_NUM_THREADS=1 before numpy loads (no spinning worker
+    pools: docs/results.md "Speed"); a value the user set is kept."""
+    value, threads = _blas()
+    assert value == "1" and threads in ("1", "none")
+    assert _blas("2")[0] == "2"
