@@ -192,3 +192,25 @@ def test_an_interrupted_engine_leaves_its_loggers_quiet():
     finally:
         for n, level in before.items():
             logging.getLogger(n).setLevel(level)
+
+
+def _worker_error():
+    import logging
+
+    logging.getLogger("distributed.worker").error("kincal-probe: scheduler gone")  # as the
+    return True  # worker's heartbeat logs it when the command has closed the scheduler
+
+
+def test_local_workers_print_no_engine_errors(capfd):
+    """A local worker's own error logs (the heartbeat's "Failed to communicate with the
+    scheduler", with its traceback, when Ctrl-C closed the scheduler under a busy worker)
+    are not printed after the command's one line: failures reach the command through the
+    tasks' results, which it reports itself."""
+    import time
+
+    from kincal.fleet.engine import Engine
+
+    with Engine(1) as engine:
+        assert all(engine.client.run(_worker_error).values())
+        time.sleep(0.5)
+    assert "kincal-probe" not in capfd.readouterr().err

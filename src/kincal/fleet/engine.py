@@ -47,10 +47,13 @@ def _client(workers: int, scheduler: str | None):
         except OSError as e:
             raise OptionError(f"--scheduler {scheduler}: no Dask scheduler answers there "
                               f"({e}); start one (dask scheduler) or use --workers N") from None
+    # the workers print nothing of the engine's own: a failure reaches the command through
+    # the tasks' results, which it reports itself, and after Ctrl-C a busy worker's heartbeat
+    # logged the closed scheduler with a traceback below the command's one line
     with _workers_ignore_sigint():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=":0", memory_limit=WORKER_MEMORY,
-                               silence_logs=logging.ERROR)
+                               silence_logs=logging.CRITICAL)
     return Client(cluster), cluster
 
 
