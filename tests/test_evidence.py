@@ -380,25 +380,16 @@ def test_variance_components_recover_two_planted_noise_levels_and_the_direct_evi
     assert kept[0] == 4.0 and 1 / math.sqrt(kept[1]) == pytest.approx(2.0, rel=0.15)
 
 
-def _few_poses(n, seed=1):
-    robot = Robot.load("ec66")
-    rng = np.random.default_rng(seed)
-    model = mdh.extract(robot.geometry)
-    g = robot.geometry
-    q = rng.uniform(np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi), size=(n, g.n))
-    truth = Truth(planted_table(model, rng), np.array([0.8, 0.3, -0.2, 0.02, -0.03, 1.2]),
-                  np.array([0.02, 0.01, 0.12]))
-    return robot, measure(model, truth, q, 5e-5, rng)
-
-
 @pytest.mark.parametrize("n, how", [(7, "evidence"), (9, "evidence"), (10, "cv")])
 def test_auto_penalty_needs_two_poses_per_fold_for_cv(n, how):
     """Lambda "auto" on positions from a large volume chooses CV only with at least two poses
     per fold (5 folds: 10 poses); fewer, the evidence, and the summary says why."""
+    from test_cv_together import ROBOT, _data  # random joint values: a large volume
+
     from kincal.identification.penalty_choice import automatic
 
-    robot, data = _few_poses(n)
-    problem = CalibrationProblem(robot, data, CalibrationOptions(method="l2", model="complete"))
+    problem = CalibrationProblem(ROBOT, _data(1, None, n),
+                                 CalibrationOptions(method="l2", model="complete"))
     chosen, why = automatic(problem)
     assert chosen == how
     assert ("too few for 5-fold cross-validation" in why) is (how == "evidence")
