@@ -68,6 +68,7 @@ import numpy as np
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.measurements.checks import UNIT_RATIO, spread
 from kincal.models import per_geometry
+from kincal.rotations import kabsch_rotation
 
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
@@ -353,9 +354,7 @@ def _overfit_cause(ev: Evidence) -> tuple[str, ...]:  # plain LS on few equation
 def _aligned_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """(M,) distances between point sets A and B after the best rigid motion of B onto A."""
     a, b = A - A.mean(axis=0), B - B.mean(axis=0)
-    U, _, Vt = np.linalg.svd(b.T @ a)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    return np.linalg.norm(a - b @ (U @ D @ Vt), axis=1)
+    return np.linalg.norm(a - b @ kabsch_rotation(b.T @ a).T, axis=1)  # a = R b, as rows
 
 
 def chain_length(joint_frames: np.ndarray, T_base_tip: np.ndarray) -> float:
@@ -460,20 +459,19 @@ def _change(problem: CalibrationProblem, result: CalibrationResult,
         k = lay.index(name)
         tool_start, tool = result.x_start[k:k + 3], result.x[k:k + 3]
     L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
-    # the configurations and the nominal robot's tip poses there depend on the robot alone:
-    # kept per robot (models.per_geometry); the same arithmetic as _tool_points after
-    q, R_tip, p_tip, chain = per_geometry(("gate configurations", N_CONFIGURATIONS), g,
-                                          lambda: _configurations(robot))
-    return L, _aligned_distances(p_tip + R_tip @ tool_start,
-                                 _tool_points(corrected, q, tool, chain)) * 1e3
+    # the configurations and their joint motions' coefficients depend on the robot alone:
+    # kept per robot (models.per_geometry); both robots' points by the same arithmetic
+    q, motions = per_geometry(("gate configurations", N_CONFIGURATIONS), g,
+                              lambda: _configurations(robot))
+    return L, _aligned_distances(_tool_points(robot, q, tool_start, motions),
+                                 _tool_points(corrected, q, tool, motions)) * 1e3
 
 
-def _configurations(robot):
-    """(q (M, n), R_tip (M, 3, 3), p_tip (M, 3), chain), read-only: the gate's seeded joint
-    values over the robot's limits (unbounded revolute: a turn), its tip frame there, in the
-    base frame (:func:`_tool_points`' chain), and that chain over q, whose joint motions the
-    corrected robot's chain takes (its placements alone differ: Chain.with_model)."""
-    from kincal.models.chain import Chain
+def _configurations(robot) -> tuple[np.ndarray, np.ndarray]:
+    """(q (M, n), motions), read-only: the gate's seeded joint values over the robot's
+    limits (unbounded revolute: a turn) and their joint motions' coefficients
+    (:meth:`kincal.models.kinematics.ChainKinematics.motions`), which the corrected robot's
+    chain shares (its placements alone differ)."""
     from kincal.models.kinematics import ChainKinematics
 
     g = robot.geometry
@@ -481,20 +479,19 @@ def _configurations(robot):
     lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
     hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
     q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
-    chain = Chain(model := ChainKinematics.of(g).model, q)
-    state = chain.state(np.zeros(model.n), keep=False)
-    for a in [q, state.R_tip, state.p_tip] + list(chain._motion or ()):
-        a.flags.writeable = False
-    return q, state.R_tip, state.p_tip, chain
+    motions = ChainKinematics.of(g).motions(q)
+    q.flags.writeable = motions.flags.writeable = False
+    return q, motions
 
 
-def _tool_points(robot, q: np.ndarray, tool: np.ndarray, like=None) -> np.ndarray:
-    """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q.
+def _tool_points(robot, q: np.ndarray, tool: np.ndarray, motions=None) -> np.ndarray:
+    """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q
+    (``motions``: their coefficients, if made before).
 
     Through the vectorised chain of the robot's own geometry (read from its Pinocchio
-    model, so the corrected robot's is what the URDF export writes): one batched product
-    per joint instead of a Pinocchio call per configuration; tests check it against
-    :meth:`kincal.robot.Robot.tip_poses`."""
+    model, so the corrected robot's is what the URDF export writes): a few products over
+    all configurations per joint instead of a Pinocchio call per configuration; tests
+    check it against :meth:`kincal.robot.Robot.tip_poses`."""
     from kincal.models.kinematics import ChainKinematics
 
-    return ChainKinematics.of(robot.geometry).tip_points(q, tool, like)
+    return ChainKinematics.of(robot.geometry).tip_points(q, tool, motions)
