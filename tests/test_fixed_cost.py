@@ -365,3 +365,32 @@ def test_start_pass_is_what_the_analysis_and_the_fits_made_apart(monkeypatch):
         assert a.identifiability.kept == b.identifiability.kept
         assert a.identifiability.notes == b.identifiability.notes
         assert repr(a.plausibility) == repr(b.plausibility)  # (NaN evidence: not ==)
+
+
+def test_error_statistics_are_numpys_to_the_bit():
+    """The statistics of a set's errors (mean, max, std with ddof 1, RMS, median) by the
+    reductions themselves equal numpy's functions to the bit: odd and even counts, one and
+    two values, ties, scales from um to km, a NaN (all NaN but n); the rows' norms are
+    np.linalg.norm's."""
+    import warnings
+
+    from kincal.identification.statistics import ErrorStats, _summary
+
+    def numpys(d):
+        return (d.size, float(d.mean()), float(d.max()),
+                float(d.std(ddof=1)) if d.size > 1 else 0.0, float(np.sqrt(np.mean(d ** 2))),
+                float(np.median(d)))
+
+    rng = np.random.default_rng(7)
+    for k in range(3000):
+        n = (1, 2, 3)[k] if k < 3 else int(rng.integers(1, 300))
+        d = np.abs(rng.normal(size=n)) * 10.0 ** rng.uniform(-6, 3)
+        if k % 5 == 0:
+            d = np.round(d, 1)  # ties
+        assert _summary(d) == numpys(d)
+        e = rng.normal(size=(n, 3))
+        assert ErrorStats.from_errors(e) == ErrorStats(*numpys(np.linalg.norm(e, axis=1) * 1e3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        d = np.array([0.2, np.nan, 0.1, 0.3])
+        assert str(_summary(d)) == str(numpys(d)) == str((4,) + (float("nan"),) * 5)

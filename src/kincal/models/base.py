@@ -99,12 +99,11 @@ class ErrorModel:
         """(n, 4, 4) URDF joint frames T_B_Ji at zero joint values for parameters x
         (default: nominal, which gives back the URDF's own joint frames)."""
         P = self.placements(self.nominal if x is None else np.asarray(x, dtype=float).ravel())
-        out = np.empty((self.n, 4, 4))
+        placed = np.empty((self.n, 4, 4))  # the placed frames, then all offsets at once
         G = self.T_first
         for i in range(self.n):
-            G = G @ P[i]
-            out[i] = G @ self.joint_offsets[i]
-        return out
+            G = placed[i] = G @ P[i]
+        return placed @ self.joint_offsets
 
     def last_axis_distance(self, tool) -> float | None:
         """Distance [m] of a tool point (tip frame) from the last joint's axis line, or None
