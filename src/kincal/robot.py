@@ -17,6 +17,7 @@ joint's unit: radians for revolute and continuous joints, metres for prismatic o
 
 from __future__ import annotations
 
+import functools
 import re
 import warnings
 from dataclasses import dataclass, replace
@@ -126,13 +127,8 @@ class Robot:
 
     def __init__(self, model: pin.Model, urdf_text: str, name: str, base: str, tip: str,
                  source: Path | None = None, joint_values: dict | None = None):
-        self.model = model
-        self.urdf_text = urdf_text
-        self.name = name
-        self.source = source
-        self._data = model.createData()
-        self.base = base
-        self.tip = tip
+        self.model, self.urdf_text, self.name, self.source = model, urdf_text, name, source
+        self.base, self.tip = base, tip
         self._base_id = self._frame_id(base, "base")
         self._tip_id = self._frame_id(tip, "tip")
         self._chain, self._reversed = self._find_chain()
@@ -142,6 +138,10 @@ class Robot:
                        _mat(model.frames[self._tip_id].placement))
         self.geometry = self._compute_geometry()
         self.off_chain = self._check_off_chain(joint_values or {})
+
+    @functools.cached_property
+    def _data(self) -> pin.Data:  # Pinocchio's workspace, when first used (not every copy is)
+        return self.model.createData()
 
     @property
     def model_name(self) -> str:
@@ -334,9 +334,7 @@ class Robot:
         out = np.empty((len(Q), 4, 4))
         for k, qk in enumerate(Q):
             pin.framesForwardKinematics(self.model, self._data, self.configuration(qk))
-            oMb = self._data.oMf[self._base_id]
-            oMe = self._data.oMf[self._tip_id]
-            out[k] = _mat(oMb.actInv(oMe))
+            out[k] = _mat(self._data.oMf[self._base_id].actInv(self._data.oMf[self._tip_id]))
         return out
 
     gravity_torques = _gravity_torques  # (N, n) per chain joint [N m]: kincal.gravity
@@ -399,9 +397,9 @@ class Robot:
         for j, X in zip(self._chain, P):
             m.jointPlacements[j] = _se3(X)
         out = object.__new__(Robot)  # the chain, its axes, kinds, limits and links are this
-        out.__dict__.update(self.__dict__, model=m, _data=m.createData())  # robot's, the
-        out.geometry = out._compute_geometry(self.geometry, P)  # frames m's (= Robot(m, ...))
-        return out
+        out.__dict__.update({k: v for k, v in self.__dict__.items() if k != "_data"}, model=m)
+        out.geometry = out._compute_geometry(self.geometry, P)  # robot's, the frames m's:
+        return out  # Robot(m, ...)'s geometry to the bit (tests compare)
 
     def _is_offset(self, i: int, D: np.ndarray, tol: float = 1e-10) -> bool:
         """Whether the rigid change D (in joint i's frame) changes only joint i's zero: a

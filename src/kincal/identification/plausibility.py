@@ -353,7 +353,7 @@ def _overfit_cause(ev: Evidence) -> tuple[str, ...]:  # plain LS on few equation
 # ------------------------------------------------------------------ gather
 def _aligned_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """(M,) distances between point sets A and B after the best rigid motion of B onto A."""
-    a, b = A - A.mean(axis=0), B - B.mean(axis=0)
+    a, b = A - np.add.reduce(A) / len(A), B - np.add.reduce(B) / len(B)  # np.mean's sums
     return np.linalg.norm(a - b @ kabsch_rotation(b.T @ a).T, axis=1)  # a = R b, as rows
 
 
@@ -376,8 +376,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     residual is the worst set's (median and RMS of its sample errors); the spread and the
     unit clue come from the first set that measures positions."""
     lay = result.layout
-    L, d = max((_change(problem, result, k) for k in range(_n_chains(problem))),
-               key=lambda c: float(np.sqrt(np.mean(c[1] ** 2))) / c[0])  # the worst chain's
+    L, d, rms = max((_change(problem, result, k) for k in range(_n_chains(problem))),
+                    key=lambda c: c[2] / c[0])  # the worst chain's
     corrections = []
     for p, kinematic in zip(result.parameters, lay.is_kinematic.tolist(), strict=True):
         if p.status == "identified" and kinematic:
@@ -385,8 +385,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             corrections.append((p.name, p.deviation * factor, unit))
     # largest first, lengths against the reach and angles in degrees on one footing
     corrections.sort(key=lambda c: -abs(c[1]) / (L * 1e3 if c[2] == "mm" else 180.0))
-    worst = max(result.sets, key=lambda s: float(np.median(s.errors_after)))
-    errors = worst.errors_after * 1e3
+    worst = result.sets[0] if len(result.sets) == 1 else max(
+        result.sets, key=lambda s: float(np.median(s.errors_after)))
     datas = [km.data for km in problem.kinds]
     # unit clue: the measured spread against the nominal tip's with the tool guess, on at
     # most MAX_UNIT_POSES poses spread through the file (a reference forward kinematics)
@@ -400,8 +400,10 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
             problem.options.tool_guess, float)
         s_pred = spread(_tool_points(problem.robot, dt.joint_values[first], guess))
-        ratio = spread(dt.positions[first]) / s_pred if s_pred >= 1e-3 else float("nan")
-        spread_mm = spread(dt.positions) * 1e3
+        s_all = spread(dt.positions)  # = the subset's when that is every row (in order)
+        s_meas = s_all if len(first) == len(dt) else spread(dt.positions[first])
+        ratio = s_meas / s_pred if s_pred >= 1e-3 else float("nan")
+        spread_mm = s_all * 1e3
     angle_max, outside = 0.0, False
     for dt, robot in zip(datas, problem.robots):  # each set against its own chain
         gi = robot.geometry
@@ -421,10 +423,10 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     off_chain = tuple(dict.fromkeys(c for dt in datas for c in dt.ignored_columns
                                     if c in frames and c not in problem.error_model.joint_names))
     return Evidence(
-        reach_m=L, residual_median_mm=float(np.median(errors)), residual_rms_mm=worst.after.rms,
+        reach_m=L, residual_median_mm=worst.after.median, residual_rms_mm=worst.after.rms,
         before_rms_mm=worst.before.rms,
         spread_mm=spread_mm if positioned and worst.data is unit_set else float("nan"),
-        change_rms_mm=float(np.sqrt(np.mean(d ** 2))), change_max_mm=float(d.max()),
+        change_rms_mm=rms, change_max_mm=float(d.max()),
         corrections=tuple(corrections), length_ratio=float(ratio),
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
@@ -440,10 +442,10 @@ def _n_chains(problem: CalibrationProblem) -> int:
 
 
 def _change(problem: CalibrationProblem, result: CalibrationResult,
-            chain: int) -> tuple[float, np.ndarray]:
-    """(reach [m], (M,) distances [mm]) of chain ``chain``: how far the corrected model moves
-    its tool point (the chain's first set's; none: the tip) from the nominal one's at seeded
-    configurations over the joint limits (unbounded revolute: a turn); every chain judged."""
+            chain: int) -> tuple[float, np.ndarray, float]:
+    """(reach [m], (M,) distances [mm], their RMS) of chain ``chain`` (each is judged): how
+    far the corrected model moves its tool point (the chain's first set's; none: the tip)
+    from the nominal one's at seeded configurations over the joint limits (a turn if none)."""
     lay = result.layout
     if _n_chains(problem) == 1:
         robot, corrected, first = problem.robot, result.corrected, 0
@@ -463,8 +465,9 @@ def _change(problem: CalibrationProblem, result: CalibrationResult,
     # kept per robot (models.per_geometry); both robots' points by the same arithmetic
     q, motions = per_geometry(("gate configurations", N_CONFIGURATIONS), g,
                               lambda: _configurations(robot))
-    return L, _aligned_distances(_tool_points(robot, q, tool_start, motions),
-                                 _tool_points(corrected, q, tool, motions)) * 1e3
+    d = _aligned_distances(_tool_points(robot, q, tool_start, motions),
+                           _tool_points(corrected, q, tool, motions)) * 1e3
+    return L, d, math.sqrt(float(np.add.reduce(d * d)) / d.size)  # np.sqrt(np.mean(d ** 2))
 
 
 def _configurations(robot) -> tuple[np.ndarray, np.ndarray]:
