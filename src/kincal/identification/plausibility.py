@@ -68,6 +68,7 @@ import numpy as np
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.measurements.checks import UNIT_RATIO, spread
 from kincal.models import per_geometry
+from kincal.models.kinematics import ChainKinematics
 from kincal.rotations import kabsch_rotation
 
 if TYPE_CHECKING:
@@ -396,7 +397,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         unit_set = dt = positioned[0]
         points = getattr(dt, "points", None)
         first = np.arange(len(dt)) if points is None else np.flatnonzero(points == 0)
-        first = first[np.linspace(0, len(first) - 1, min(len(first), MAX_UNIT_POSES)).astype(int)]
+        if len(first) > MAX_UNIT_POSES:
+            first = first[np.linspace(0, len(first) - 1, MAX_UNIT_POSES).astype(int)]
         guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
             problem.options.tool_guess, float)
         s_pred = spread(_tool_points(problem.robot, dt.joint_values[first], guess))
@@ -475,8 +477,6 @@ def _configurations(robot) -> tuple[np.ndarray, np.ndarray]:
     limits (unbounded revolute: a turn) and their joint motions' coefficients
     (:meth:`kincal.models.kinematics.ChainKinematics.motions`), which the corrected robot's
     chain shares (its placements alone differ)."""
-    from kincal.models.kinematics import ChainKinematics
-
     g = robot.geometry
     span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
     lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
@@ -495,6 +495,4 @@ def _tool_points(robot, q: np.ndarray, tool: np.ndarray, motions=None) -> np.nda
     model, so the corrected robot's is what the URDF export writes): a few products over
     all configurations per joint instead of a Pinocchio call per configuration; tests
     check it against :meth:`kincal.robot.Robot.tip_poses`."""
-    from kincal.models.kinematics import ChainKinematics
-
     return ChainKinematics.of(robot.geometry).tip_points(q, tool, motions)

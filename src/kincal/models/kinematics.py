@@ -95,7 +95,9 @@ class ChainKinematics:
         weighted sum along them; no product per configuration (numpy hands a stack of 4 x 4
         products to BLAS one matrix at a time)."""
         A = self.motions(q) if motions is None else motions
-        x = (self.geometry.T_base_tip @ np.r_[np.asarray(tool, dtype=float), 1.0])[:, None]
+        x = np.ones((4, 1))
+        x[:3, 0] = tool
+        x = self.geometry.T_base_tip @ x
         out = np.ones((4, A.shape[-1]))  # columns [point; 1], one per configuration
         for i in range(self.n - 1, -1, -1):
             Y = (self._screws[i] @ x).reshape(3, 3, -1)  # the three parts of S_i x ...
