@@ -394,3 +394,17 @@ def test_error_statistics_are_numpys_to_the_bit():
         warnings.simplefilter("ignore", RuntimeWarning)
         d = np.array([0.2, np.nan, 0.1, 0.3])
         assert str(_summary(d)) == str(numpys(d)) == str((4,) + (float("nan"),) * 5)
+
+
+def test_last_axis_distance_is_np_cross_to_the_bit():
+    """The tool point's distance from the last axis (the fit's tool-axis note), its cross
+    product in Python numbers, equals np.cross's to the bit, on every error model."""
+    rng = np.random.default_rng(8)
+    for name in ("ec66", "ur10"):
+        g = Robot.load(name).geometry
+        for model in (models.build(m, g) for m in models.MODELS):
+            for _ in range(200):
+                tool = rng.normal(size=3) * 10.0 ** rng.uniform(-4, 0)
+                p = model.T_last_tip[:3, :3] @ tool + model.T_last_tip[:3, 3]
+                want = np.linalg.norm(np.cross(p - model.screw_points[-1], model.screw_axes[-1]))
+                assert model.last_axis_distance(tool) == float(want)

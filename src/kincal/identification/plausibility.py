@@ -462,11 +462,12 @@ def _change(problem: CalibrationProblem, result: CalibrationResult,
     if name in lay.frame_names(first):
         k = lay.index(name)
         tool_start, tool = result.x_start[k:k + 3], result.x[k:k + 3]
-    L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
-    # the configurations and their joint motions' coefficients depend on the robot alone:
-    # kept per robot (models.per_geometry); both robots' points by the same arithmetic
-    q, motions = per_geometry(("gate configurations", N_CONFIGURATIONS), g,
-                              lambda: _configurations(robot))
+    # the chain's length, the configurations and their joint motions' coefficients depend
+    # on the robot alone: kept per robot (models.per_geometry); both robots' points by the
+    # same arithmetic
+    q, motions, length = per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
+        *_configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))
+    L = reach(length, float(np.linalg.norm(tool_start)))
     d = _aligned_distances(_tool_points(robot, q, tool_start, motions),
                            _tool_points(corrected, q, tool, motions)) * 1e3
     return L, d, math.sqrt(float(np.add.reduce(d * d)) / d.size)  # np.sqrt(np.mean(d ** 2))
