@@ -112,8 +112,9 @@ class ErrorModel:
         if self.kinds[-1] != "revolute":
             return None
         p = self.T_last_tip[:3, :3] @ np.asarray(tool, float) + self.T_last_tip[:3, 3]
-        (a0, a1, a2), (b0, b1, b2) = (p - self.screw_points[-1]).tolist(), self.screw_axes[-1].tolist()
         # np.cross's products and differences in Python numbers (its wrapper costs more)
+        (a0, a1, a2), (b0, b1, b2) = (p - self.screw_points[-1]).tolist(), \
+            self.screw_axes[-1].tolist()
         return float(np.linalg.norm(np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2,
                                               a0 * b1 - a1 * b0])))
 
