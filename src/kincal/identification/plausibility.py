@@ -68,7 +68,7 @@ import numpy as np
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.measurements.checks import UNIT_RATIO, spread
 from kincal.models import per_geometry
-from kincal.models.kinematics import ChainKinematics, tip_points
+from kincal.models.kinematics import ChainKinematics
 from kincal.rotations import kabsch_rotation
 
 if TYPE_CHECKING:
@@ -463,13 +463,13 @@ def _change(problem: CalibrationProblem, result: CalibrationResult,
         k = lay.index(name)
         tool_start, tool = result.x_start[k:k + 3], result.x[k:k + 3]
     # the chain's length, the configurations and their joint motions' coefficients depend
-    # on the robot alone: kept per robot (models.per_geometry); both robots' tool points
-    # evaluated together, each as _tool_points evaluates it (the same numbers)
+    # on the robot alone: kept per robot (models.per_geometry); both robots' points by the
+    # same arithmetic
     q, motions, length = per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
         *_configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))
     L = reach(length, float(np.linalg.norm(tool_start)))
-    d = _aligned_distances(*tip_points((ChainKinematics.of(g), ChainKinematics.of(
-        corrected.geometry)), q, (tool_start, tool), motions)) * 1e3
+    d = _aligned_distances(_tool_points(robot, q, tool_start, motions),
+                           _tool_points(corrected, q, tool, motions)) * 1e3
     return L, d, math.sqrt(float(np.add.reduce(d * d)) / d.size)  # np.sqrt(np.mean(d ** 2))
 
 

@@ -86,8 +86,26 @@ class ChainKinematics:
                    motions: np.ndarray | None = None) -> np.ndarray:
         """(N, 3) the point ``tool`` (3,) of the tip frame [m], in B, for joint values q
         (N, n) [rad or m]; the point only, no frame, no Jacobian. motions: :meth:`motions`
-        of these q, if made before. :func:`tip_points` of this chain alone."""
-        return tip_points((self,), q, (tool,), motions)[0]
+        of these q, if made before.
+
+        The chain as a product of joint motions in B, S_1(q_1) ... S_n(q_n) T_B_tip(0) (each
+        a turn about, or slide along, its axis line through the joint frame at zero), carried
+        from the tip to the base: each S_i x is three fixed linear maps of x (:attr:`_screws`)
+        weighted by joint i's coefficients, one product over all configurations and a
+        weighted sum along them; no product per configuration (numpy hands a stack of 4 x 4
+        products to BLAS one matrix at a time)."""
+        A = self.motions(q) if motions is None else motions
+        x = np.ones((4, 1))
+        x[:3, 0] = tool
+        x = self.geometry.T_base_tip @ x
+        out = np.ones((4, A.shape[-1]))  # columns [point; 1], one per configuration
+        for i in range(self.n - 1, -1, -1):
+            Y = (self._screws[i] @ x).reshape(3, 3, -1)  # the three parts of S_i x ...
+            Y = Y * A[i]  # ... weighted by joint i's coefficients,
+            np.add(Y[0], Y[1], out=out[:3])  # and summed
+            out[:3] += Y[2]
+            x = out  # (the first joint's parts are of one point: x is (4, 1) until then)
+        return out[:3].T.copy()
 
     @functools.cached_property
     def _screws(self) -> np.ndarray:
@@ -224,34 +242,6 @@ class ChainKinematics:
             A = np.concatenate([J_point, J_rot], axis=1)
         dq = damped_least_squares(A, e, 1e-8)
         return np.linalg.norm(e, axis=1), np.clip(q + dq, lower, upper)
-
-
-def tip_points(chains, q: np.ndarray, tools, motions: np.ndarray | None = None) -> np.ndarray:
-    """(k, N, 3) the point ``tools[j]`` (3,) of chain j's tip frame [m], in its base frame,
-    for joint values q (N, n) [rad or m], of k chains whose joints move alike (the same
-    kinds: a robot and its corrected copy, evaluated together); the points only, no frame,
-    no Jacobian. motions: :meth:`ChainKinematics.motions` of these q, if made before.
-
-    Each chain as a product of joint motions in B, S_1(q_1) ... S_n(q_n) T_B_tip(0) (each a
-    turn about, or slide along, its axis line through the joint frame at zero), carried from
-    the tip to the base: each S_i x is three fixed linear maps of x (``_screws``) weighted
-    by joint i's coefficients, one product over all configurations (per chain) and a
-    weighted sum along them; no product per configuration (numpy hands a stack of 4 x 4
-    products to BLAS one matrix at a time). The chains together: the same numbers as each
-    alone, in half the numpy calls for two."""
-    A = chains[0].motions(q) if motions is None else motions
-    H = np.stack([c._screws for c in chains])  # (k, n, 9, 4)
-    x = np.ones((len(chains), 4, 1))
-    x[:, :3, 0] = tools
-    x = np.stack([c.geometry.T_base_tip for c in chains]) @ x
-    out = np.ones((len(chains), 4, A.shape[-1]))  # columns [point; 1], one per configuration
-    for i in range(H.shape[1] - 1, -1, -1):
-        Y = (H[:, i] @ x).reshape(len(chains), 3, 3, -1)  # the three parts of S_i x ...
-        Y = Y * A[i]  # ... weighted by joint i's coefficients,
-        np.add(Y[:, 0], Y[:, 1], out=out[:, :3])  # and summed
-        out[:, :3] += Y[:, 2]
-        x = out  # (the first joint's parts are of one point: x is (k, 4, 1) until then)
-    return out[:, :3].transpose(0, 2, 1).copy()
 
 
 def damped_least_squares(A: np.ndarray, e: np.ndarray, d2: float) -> np.ndarray:
