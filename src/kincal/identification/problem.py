@@ -65,8 +65,9 @@ class CalibrationProblem:
                               "; for one field use calibrate(robot, data, method=...)")
         self.options = o = (options or CalibrationOptions()).validated()
         sets = as_sets(sets)
-        # model "auto": the candidate structures compared by CV, the best used (model_choice)
-        with blas_threads.limited(o.blas_threads):  # its fits, as solve's (blas_threads)
+        # model "auto": the candidate structures compared by CV, the best used (model_choice);
+        # BLAS limited for its fits, as in solve (blas_threads), only then (nothing else to fit)
+        with blas_threads.limited(o.blas_threads if o.model == "auto" else None):
             self._model_choice, o = model_choice.resolve(type(self), robots, sets, o)
         self.options = o
         self.chains = ch = Chains(robots, len(sets), o.model)
