@@ -267,9 +267,9 @@ class CalibrationProblem:
             residual = self.residual_function(kinematic=False)
             one_pass(self.residual_function(), residual, x / self.scale, lay.is_frame)
             # only what the data can fix moves (an unseen flush contact point stays put)
-            kept = analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
-                                lay.names, lay.n_kinematic, free, o.rank_tol, kept_only=True)
-            free = free & np.isin(np.array(lay.names), kept)
+            kept = set(analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
+                                    lay.names, lay.n_kinematic, free, o.rank_tol, kept_only=True))
+            free = free & np.array([n in kept for n in lay.names])  # (np.isin sorts strings)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = sol.u * self.scale
         self._x_start = x

@@ -16,9 +16,10 @@ UNIT_RATIO = 30.0  # measured spread this many times the robot's: probably mm re
 def limit_warnings(joint_names, kinds, lower, upper, q, rows) -> list[str]:
     """Joint values outside the URDF limits (1e-6 of slack for rounding)."""
     out = []
-    for j, name in enumerate(joint_names):
-        lo, hi = lower[j], upper[j]
-        bad = np.flatnonzero((q[:, j] < lo - 1e-6) | (q[:, j] > hi + 1e-6))
+    outside = (q < np.asarray(lower) - 1e-6) | (q > np.asarray(upper) + 1e-6)
+    for j in np.flatnonzero(outside.any(axis=0)).tolist():  # every joint in one test first
+        name, lo, hi = joint_names[j], lower[j], upper[j]
+        bad = np.flatnonzero(outside[:, j])
         if bad.size:
             excess = np.maximum(lo - q[bad, j], q[bad, j] - hi)
             k = bad[np.argmax(excess)]
