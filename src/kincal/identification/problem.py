@@ -268,7 +268,7 @@ class CalibrationProblem:
             one_pass(self.residual_function(), residual, x / self.scale, lay.is_frame)
             # only what the data can fix moves (an unseen flush contact point stays put)
             kept = set(analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
-                                    lay.names, lay.n_kinematic, free, o.rank_tol, kept_only=True))
+                                    lay.names, lay.n_kinematic, free, o.rank_tol, identifiable))
             free = free & np.array([n in kept for n in lay.names])  # (np.isin sorts strings)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = sol.u * self.scale
@@ -293,7 +293,7 @@ class CalibrationProblem:
             lay, u = self.layout, self.start() / self.scale  # J in mm per mm or per deg
             ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
                                  lay.names, lay.n_kinematic, self._unfixed(),
-                                 self.options.rank_tol)
+                                 self.options.rank_tol, analyze)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):
