@@ -70,7 +70,7 @@ def alternate(R_tip, p_tip, P, tools, rounds: int = 8, sums: tuple | None = None
                  if max(abs(u - v) for u, v in zip(a, b)) > 1e-9]
         if not going:
             break
-    return [_finish(R_tip, p_tip, P, t) for t in T]
+    return _finish(R_tip, p_tip, P, T)
 
 
 def round_sums(R_tip, p_tip, P) -> tuple:
@@ -92,11 +92,19 @@ def round_sums(R_tip, p_tip, P) -> tuple:
     return N, S, w, V, H0, HT, W, c0, P.sum(axis=0), p_tip.sum(axis=0)
 
 
-def _finish(R_tip, p_tip, P, t):
-    x = p_tip + R_tip @ t
-    Rb, tb = kabsch(x, P)
-    rms = float(np.sqrt(np.mean(np.sum((P - (x @ Rb.T + tb)) ** 2, axis=1))))
-    return Rb, tb, t, rms
+def _finish(R_tip, p_tip, P, tools) -> list:
+    """Per tool point of ``tools`` (S, 3): (R_b, t_b) by Kabsch of its predicted points onto
+    P, it, and the rms [m] of the fit. The starts together, each one's numbers those of
+    :func:`kincal.rotations.kabsch` on its own (products of stacks of matrices, the same
+    per-matrix products; means over the same axis)."""
+    T = np.asarray(tools, dtype=float).reshape(-1, 3)
+    x = p_tip + np.matmul(R_tip, T[:, None, :, None])[..., 0]  # (S, N, 3)
+    xm, ym = x.mean(axis=1), P.mean(axis=0)
+    Rb = kabsch_rotation(np.matmul(np.swapaxes(x - xm[:, None], 1, 2), P - ym))
+    tb = ym - np.matmul(Rb, xm[:, :, None])[:, :, 0]
+    fit = np.matmul(x, np.swapaxes(Rb, 1, 2)) + tb[:, None]
+    rms = np.sqrt(np.mean(np.sum((P - fit) ** 2, axis=2), axis=1)).tolist()
+    return list(zip(Rb, tb, T, rms))
 
 
 def _alternate_rows(R_tip, p_tip, P, t, rounds):
@@ -112,7 +120,7 @@ def _alternate_rows(R_tip, p_tip, P, t, rounds):
             t = sol[:3]
             break
         t = sol[:3]
-    return _finish(R_tip, p_tip, P, t)
+    return _finish(R_tip, p_tip, P, [t])[0]
 
 
 def initial_frames(R_tip, p_tip, P, tool_guess=None):

@@ -130,7 +130,8 @@ class MeasurementModel:
             Rb = RxRy @ Rz
         if rotate_kinematic:
             J[:, :, :k] = np.matmul(Rb, J[:, :, :k])
-            J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
+            if k + f < J.shape[2]:  # joint terms (backlash, compliance)
+                J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
         Pm = _rotate(Rb, P) + base[..., :3]
         J[:, :, k:k + 3] = _EYE3
         J[:, :, k + 3] = axis_cross(0, Pm - base[..., :3])

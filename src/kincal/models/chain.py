@@ -271,7 +271,7 @@ class Chain:
             else:
                 H = placed[i] if placed is not None else np.empty((N, 4, 4))
                 np.matmul(G.reshape(-1, 4), P[i], out=H.reshape(-1, 4))
-            if before is not None:
+            if before is not None and i == 0:  # the others were made in place (below)
                 before[i] = G
             ks = [k for k in self._terms_of.get(i, ()) if backlash is not None
                   and backlash[k] != 0.0]
@@ -282,7 +282,9 @@ class Chain:
                 assert backlash is not None  # ks is empty without the terms' values
                 qi = self.q[:, i] + sum(backlash[k] * self.factors[:, k] for k in ks)
                 M = self.joint_motion(i, qi)
-            G = np.matmul(H, M)
+            # kept frames: the product made where the next joint's "before" is kept
+            G = (np.matmul(H, M, out=before[i + 1]) if before is not None and i + 1 < m.n
+                 else np.matmul(H, M))
         T = G @ m.T_last_tip if G.ndim == 2 else np.matmul(G.reshape(-1, 4), m.T_last_tip
                                                            ).reshape(N, 4, 4)
         if T.ndim == 2:
