@@ -46,12 +46,16 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def axis_cross(i: int, v: np.ndarray) -> np.ndarray:
+def axis_cross(i: int, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """e_i x v for rows v (N, 3): cross_rows(e_i, v) without its multiplications by 0 and 1
-    (the same numbers, up to the sign of a zero)."""
-    out = np.zeros(v.shape)
+    (the same numbers, up to the sign of a zero), into ``out`` (N, 3) if given (a
+    Jacobian's column block)."""
     j, k = (i + 1) % 3, (i + 2) % 3
-    out[:, k], out[:, j] = v[:, j], -v[:, k]
+    if out is None:
+        out = np.empty(v.shape)
+    out[:, i] = 0.0
+    out[:, k] = v[:, j]
+    np.negative(v[:, k], out=out[:, j])
     return out
 
 
