@@ -38,8 +38,10 @@ def angle_unit_warnings(joint_names, kinds, q, angle_unit: str) -> list[str]:
     if angle_unit == "rad" and biggest > 2 * np.pi + 0.5:
         return [f"revolute joint values reach {biggest:.4g} rad ({biggest / np.pi:.1f} pi): were "
                 "they degrees? Read them with --angle-unit deg (Python: angle_unit='deg')"]
+    if angle_unit != "deg" or len(q) <= 3:
+        return []
     spans = np.ptp(q[:, rev], axis=0)
-    if angle_unit == "deg" and len(q) > 3 and float(spans.max()) < np.radians(3.0):
+    if float(spans.max()) < np.radians(3.0):
         return [f"revolute joint values span at most {np.degrees(spans.max()):.3g} deg: were they "
                 "radians read as degrees? Drop --angle-unit deg"]
     return []
