@@ -37,7 +37,7 @@ _active: list[int] = []  # the limits in force in this process, innermost last
 def limited(threads: int | None):
     """A context in which BLAS uses at most ``threads`` threads (None: unchanged). Inside
     one of the same limit (solve's, around the analysis's) it changes nothing: threadpoolctl's
-    limit queries and sets every library each time (~1 % of a small fit)."""
+    limit queries, sets and restores every library each time (~0.4 % of a 60-pose fit)."""
     if threads is None or (_active and _active[-1] == int(threads)):
         yield
         return

@@ -20,12 +20,11 @@ def limit_warnings(joint_names, kinds, lower, upper, q, rows) -> list[str]:
     for j in np.flatnonzero(outside.any(axis=0)).tolist():  # every joint in one test first
         name, lo, hi = joint_names[j], lower[j], upper[j]
         bad = np.flatnonzero(outside[:, j])
-        if bad.size:
-            excess = np.maximum(lo - q[bad, j], q[bad, j] - hi)
-            k = bad[np.argmax(excess)]
-            unit = "m" if kinds[j] == "prismatic" else "rad"
-            out.append(f"{name}: {bad.size} of {len(q)} values outside its URDF limits "
-                       f"[{lo:.4g}, {hi:.4g}] {unit} (worst {q[k, j]:.4g} at line {rows[k]})")
+        excess = np.maximum(lo - q[bad, j], q[bad, j] - hi)
+        k = bad[np.argmax(excess)]
+        unit = "m" if kinds[j] == "prismatic" else "rad"
+        out.append(f"{name}: {bad.size} of {len(q)} values outside its URDF limits "
+                   f"[{lo:.4g}, {hi:.4g}] {unit} (worst {q[k, j]:.4g} at line {rows[k]})")
     return out
 
 
