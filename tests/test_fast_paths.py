@@ -251,7 +251,8 @@ def test_lapack_from_scipys_file_is_the_public_routine():
 def test_frame_start_from_sums_equals_the_stacked_rows(spread):
     """The closed-form start's rounds on 3 x 3 sums give the frame and tool point of the
     rounds on the stacked (3N, 6) rows; tip orientations all alike (spread 0) take the
-    stacked rows themselves (their minimum-norm answer)."""
+    stacked rows themselves (their minimum-norm answer). Starts run together give each
+    start's numbers alone, to the bit."""
     from kincal.measurements import frames_init
     from kincal.rotations import base_rotation
 
@@ -261,8 +262,11 @@ def test_frame_start_from_sums_equals_the_stacked_rows(spread):
     tool = np.array([0.02, 0.01, 0.12])
     P = (p + R @ tool) @ base_rotation(0.1, 0.2, 0.3).T + [1.0, 2.0, 3.0]
     P += 1e-5 * rng.normal(size=P.shape)
-    for t0 in (np.zeros(3), frames_init.pivot_tool(R, p)):
-        got = frames_init.alternate(R, p, P, t0)
+    starts = (np.zeros(3), frames_init.pivot_tool(R, p))
+    together = frames_init.alternate(R, p, P, starts)  # the starts' rounds stacked
+    for t0, both in zip(starts, together):
+        got = frames_init.alternate(R, p, P, [t0])[0]
+        assert all(np.array_equal(a, b) for a, b in zip(got, both))  # each start's own bits
         want = frames_init._alternate_rows(R, p, P, np.array(t0, float), 8)
         for a, b in zip(got, want):
             assert np.abs(np.asarray(a) - np.asarray(b)).max() < 1e-9

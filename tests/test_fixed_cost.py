@@ -408,3 +408,62 @@ def test_last_axis_distance_is_np_cross_to_the_bit():
                 p = model.T_last_tip[:3, :3] @ tool + model.T_last_tip[:3, 3]
                 want = np.linalg.norm(np.cross(p - model.screw_points[-1], model.screw_axes[-1]))
                 assert model.last_axis_distance(tool) == float(want)
+
+
+def test_chain_motions_and_placements_of_one_vector_are_the_per_joint_numbers(tmp_path):
+    """A chain's kept joint motions (the revolute joints' in one stacked product) are
+    joint_motion's per joint, and MD-H placements of one vector (entry by entry in Python
+    numbers) are those of the array path, to the bit (signs of zeros too), on robots with
+    prismatic, parallel and gimbal joints and a tree path."""
+    from kincal.models.chain import Chain
+
+    rng = np.random.default_rng(6)
+    seen = 0
+    for robot in sample_robots(tmp_path):
+        for name in ("mdh", "complete"):
+            try:
+                model = models.build(name, robot.geometry)
+            except Exception:  # a model that cannot describe this chain (a tree path)
+                continue
+            q = rng.uniform(-3.0, 3.0, (7, model.n))
+            chain = Chain(model, q)
+            for i in range(model.n):
+                assert np.array_equal(chain._motion[i], chain.joint_motion(i, q[:, i]))
+            for _ in range(20):
+                x = model.nominal + rng.normal(size=model.size) * 10.0 ** rng.uniform(-8, 0)
+                one = model.placements(x)
+                rows = model.placements(np.stack([x, x + 1e-3]))[:, 0]  # the array path
+                assert np.array_equal(one, rows) and np.array_equal(np.signbit(one),
+                                                                    np.signbit(rows))
+            seen += 1
+    assert seen >= 4
+
+
+def test_blas_is_limited_once_per_fit(monkeypatch):
+    """A fit limits BLAS's threads once (solve's limit; the analysis inside it and a build
+    without model auto do not enter threadpoolctl again), and the limit is in force in the
+    analysis."""
+    from threadpoolctl import threadpool_info
+
+    from kincal.identification import blas_threads, problem
+    from kincal.planning.kind_simulation import simulate_points
+
+    robot = Robot.load("ec66")
+    model = models.build("mdh", robot.geometry)
+    rng = np.random.default_rng(2)
+    q = rng.uniform(-2.0, 2.0, (40, model.n))
+    base, tool = np.array([1.0, 0.5, 0.2, 0.1, -0.2, 0.3]), np.array([0.03, 0.02, 0.12])
+    data = simulate_points(model, model.nominal, base, tool, q, 5e-5, rng)
+    controller = blas_threads._controller()
+    entered, threads = [], []
+    limit, analyze = controller.limit, problem.analyze
+    monkeypatch.setattr(controller, "limit", lambda **kw: entered.append(kw) or limit(**kw))
+
+    def seen(*args, **kw):
+        threads.append({lib["num_threads"] for lib in threadpool_info()
+                        if lib["user_api"] == "blas"})
+        return analyze(*args, **kw)
+
+    monkeypatch.setattr(problem, "analyze", seen)
+    CalibrationProblem(robot, data, CalibrationOptions(method="ls")).solve()
+    assert len(entered) == 1 and threads == [{1}]

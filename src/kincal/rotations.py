@@ -148,13 +148,24 @@ def kabsch_rotation(H: np.ndarray) -> np.ndarray:
     diagonal's ones and zeros are exact: the same numbers as forming V D U^T always). The
     sign of det(V U^T) (+-1 to rounding: the same sign however it is summed) from its
     cofactors in Python numbers, a sixth of np.linalg.det's cost: the closed-form frame
-    start runs this up to 18 times a fit."""
+    start runs this up to 18 times a fit. H (..., 3, 3): one rotation per matrix, each the
+    numbers of its own call (numpy's SVD and products go matrix by matrix)."""
     U, _, Vt = np.linalg.svd(H)
-    V = Vt.T
-    R = V @ U.T
-    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
-    return R if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) >= 0 \
-        else (V * _FLIP) @ U.T
+    V = np.swapaxes(Vt, -1, -2)
+    R = V @ np.swapaxes(U, -1, -2)
+    if R.ndim == 2:
+        return R if _proper(R.tolist()) else (V * _FLIP) @ U.T
+    flat = R.reshape(-1, 3, 3)
+    for k, Rk in enumerate(flat.tolist()):
+        if not _proper(Rk):
+            flat[k] = (V.reshape(-1, 3, 3)[k] * _FLIP) @ U.reshape(-1, 3, 3)[k].T
+    return R
+
+
+def _proper(R) -> bool:
+    """Whether the 3 x 3 rows R (Python numbers) have a determinant >= 0 (by cofactors)."""
+    (a, b, c), (d, e, f), (g, h, i) = R
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) >= 0
 
 
 def quaternion_to_matrix(q) -> np.ndarray:

@@ -30,8 +30,20 @@ def _controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
+_active: list[int] = []  # the limits in force in this process, innermost last
+
+
+@contextlib.contextmanager
 def limited(threads: int | None):
-    """A context in which BLAS uses at most ``threads`` threads (None: unchanged)."""
-    if threads is None:
-        return contextlib.nullcontext()
-    return _controller().limit(limits=int(threads), user_api="blas")
+    """A context in which BLAS uses at most ``threads`` threads (None: unchanged). Inside
+    one of the same limit (solve's, around the analysis's) it changes nothing: threadpoolctl's
+    limit queries, sets and restores every library each time (~0.4 % of a 60-pose fit)."""
+    if threads is None or (_active and _active[-1] == int(threads)):
+        yield
+        return
+    with _controller().limit(limits=int(threads), user_api="blas"):
+        _active.append(int(threads))
+        try:
+            yield
+        finally:
+            _active.pop()

@@ -48,11 +48,17 @@ class CrossValidation:
 
 def lambda_grid(lo: float = 1e-6, hi: float = 1e3, count: int = 50) -> np.ndarray:
     """``count`` candidates log-spaced from ``lo`` to ``hi`` (the paper's default)."""
+    check_grid(lo, hi, count)
+    return np.logspace(np.log10(lo), np.log10(hi), int(count))
+
+
+def check_grid(lo: float, hi: float, count: int) -> None:
+    """OptionError unless :func:`lambda_grid` can make this grid (options are checked
+    without making it: most fits never use it)."""
     if not (np.isfinite(lo) and np.isfinite(hi) and 0 < lo < hi):
         raise OptionError(f"lambda grid needs 0 < min < max, got min={lo:g}, max={hi:g}")
     if not 2 <= int(count) <= 10000:
         raise OptionError(f"lambda grid needs 2 to 10000 candidates, got {count}")
-    return np.logspace(np.log10(lo), np.log10(hi), int(count))
 
 
 def make_folds(n_samples: int, k: int, seed: int, groups=None,

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from kincal.errors import OptionError
-from kincal.identification.cross_validation import lambda_grid
+from kincal.identification.cross_validation import check_grid
 from kincal.measurements.point_space import DEG, MM
 from kincal.identification.robust import LOSSES
 from kincal.identification.selection import RANK_TOL
@@ -171,7 +171,7 @@ class CalibrationOptions:
             raise OptionError("tool_guess needs 3 numbers (x, y, z in the tip frame) [m]")
         if o.base_guess is not None and np.shape(o.base_guess) != (6,):
             raise OptionError("base_guess needs 6 numbers (x, y, z [m], rx, ry, rz [rad])")
-        lambda_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
+        check_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
         if o.cv_max_poses is not None and not (
                 isinstance(o.cv_max_poses, (int, np.integer)) and not isinstance(
                     o.cv_max_poses, bool) and o.cv_max_poses >= max(2, o.folds)):

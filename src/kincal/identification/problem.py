@@ -65,8 +65,9 @@ class CalibrationProblem:
                               "; for one field use calibrate(robot, data, method=...)")
         self.options = o = (options or CalibrationOptions()).validated()
         sets = as_sets(sets)
-        # model "auto": the candidate structures compared by CV, the best used (model_choice)
-        with blas_threads.limited(o.blas_threads):  # its fits, as solve's (blas_threads)
+        # model "auto": the candidate structures compared by CV, the best used (model_choice);
+        # BLAS limited for its fits, as in solve (blas_threads), only then (nothing else to fit)
+        with blas_threads.limited(o.blas_threads if o.model == "auto" else None):
             self._model_choice, o = model_choice.resolve(type(self), robots, sets, o)
         self.options = o
         self.chains = ch = Chains(robots, len(sets), o.model)
@@ -266,9 +267,9 @@ class CalibrationProblem:
             residual = self.residual_function(kinematic=False)
             one_pass(self.residual_function(), residual, x / self.scale, lay.is_frame)
             # only what the data can fix moves (an unseen flush contact point stays put)
-            kept = analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
-                                lay.names, lay.n_kinematic, free, o.rank_tol, kept_only=True)
-            free = free & np.isin(np.array(lay.names), kept)
+            kept = set(analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
+                                    lay.names, lay.n_kinematic, free, o.rank_tol, identifiable))
+            free = free & np.array([n in kept for n in lay.names])  # (np.isin sorts strings)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = sol.u * self.scale
         self._x_start = x
@@ -292,7 +293,7 @@ class CalibrationProblem:
             lay, u = self.layout, self.start() / self.scale  # J in mm per mm or per deg
             ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
                                  lay.names, lay.n_kinematic, self._unfixed(),
-                                 self.options.rank_tol)
+                                 self.options.rank_tol, analyze)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):

@@ -219,17 +219,14 @@ def one_pass(whole: Callable, frames_only: Callable, u: np.ndarray, is_frame: np
 
 
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
-                 n_kinematic: int, free: np.ndarray, rank_tol: float, kept_only: bool = False):
-    """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
-    scaled by ``column_scale``; for rows streamed in blocks (many poses), of its QR triangle
-    (the same column norms, projections and singular values), built without the whole J,
-    in a pass that also sums the normal equations at u and leaves them in the residual's
-    ``memo`` for the fit's first linearisation (:func:`linearise`), which starts there.
-    kept_only: only the names it keeps (:func:`kincal.identification.selection.identifiable`)."""
-    from kincal.identification.selection import analyze, identifiable
-
-    select = identifiable if kept_only else analyze  # the same partition, without the report
-
+                 n_kinematic: int, free: np.ndarray, rank_tol: float, select: Callable):
+    """``select`` (:func:`kincal.identification.selection.analyze`, or its ``identifiable``
+    for the kept names only) of the Jacobian at u with its columns scaled by
+    ``column_scale``; for rows streamed in blocks (many poses), of its QR triangle (the same
+    column norms, projections and singular values), built without the whole J, in a pass
+    that also sums the normal equations at u and leaves them in the residual's ``memo`` for
+    the fit's first linearisation (:func:`linearise`), which starts there. (The caller
+    passes ``select``: the selection takes its QR from the solver, which takes this module.)"""
     if getattr(residual, "n_blocks", 1) <= 1:
         memo = getattr(residual, "memo", None)
         kept = memo.get(u.tobytes()) if memo else None  # a pass made at u already

@@ -25,6 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# Householder R of np.linalg.qr(A, mode="r") (dgeqrf, its numbers) at half numpy's call cost
+from kincal.identification.solver import _qr_r
+
 # measurement frame and tool point names; pivot and planes of other measurement kinds, and
 # those of further measurement sets (set2.base.x, ...)
 _FRAME = re.compile(r"(set\d+\.)?(base|tool\d*|pivot|plane\w*)\.")
@@ -196,21 +199,18 @@ def _ordered(J: np.ndarray, order, free_of, norm_of, rank_tol: float, scale: flo
             dropped.append(cand[at])
             B, at = B[:, 1:], at + 1
             continue
-        # R on and above the diagonal of LAPACK's factor (mode "raw": np.linalg.qr's R
-        # without zeroing the Householder vectors below it, which only the block taken on
-        # needs)
-        H = np.linalg.qr(B, mode="raw")[0].T
-        d = np.abs(np.diagonal(H)).tolist()
+        R = _qr_r(B)
+        d = np.abs(np.diagonal(R)).tolist()
         j = next((t for t, v in enumerate(d) if not v > lim[at + t]), len(d))
         kept += cand[at:at + j]
         at += j
         if at == len(cand):
             break
         if j == len(d):  # as many kept as rows: none left (the loop's first test)
-            B = H[j:j, j:]
+            B = R[j:j, j:]
             continue
         dropped.append(cand[at])
-        B, at = np.triu(H[j:len(d), j + 1:], -1), at + 1  # R's rows j.. (Hessenberg)
+        B, at = R[j:, j + 1:], at + 1  # R's rows j.. (Hessenberg: the dropped column left out)
     kept.sort()
     dropped.sort()
     return kept, dropped
@@ -228,7 +228,7 @@ def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: in
     # J = Q R: R has the same column norms, projections and singular values, so all
     # that follows works on p x p numbers whatever the number of poses
     if J.shape[0] > J.shape[1]:
-        J = np.asarray(np.linalg.qr(J, mode="r"))  # Householder: the rank decision needs full accuracy
+        J = _qr_r(J)  # Householder: the rank decision needs full accuracy
     norms = np.linalg.norm(J, axis=0)
     if scale is None:
         scale = float(norms.max()) if norms.size else 1.0

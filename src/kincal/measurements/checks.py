@@ -16,15 +16,15 @@ UNIT_RATIO = 30.0  # measured spread this many times the robot's: probably mm re
 def limit_warnings(joint_names, kinds, lower, upper, q, rows) -> list[str]:
     """Joint values outside the URDF limits (1e-6 of slack for rounding)."""
     out = []
-    for j, name in enumerate(joint_names):
-        lo, hi = lower[j], upper[j]
-        bad = np.flatnonzero((q[:, j] < lo - 1e-6) | (q[:, j] > hi + 1e-6))
-        if bad.size:
-            excess = np.maximum(lo - q[bad, j], q[bad, j] - hi)
-            k = bad[np.argmax(excess)]
-            unit = "m" if kinds[j] == "prismatic" else "rad"
-            out.append(f"{name}: {bad.size} of {len(q)} values outside its URDF limits "
-                       f"[{lo:.4g}, {hi:.4g}] {unit} (worst {q[k, j]:.4g} at line {rows[k]})")
+    outside = (q < np.asarray(lower) - 1e-6) | (q > np.asarray(upper) + 1e-6)
+    for j in np.flatnonzero(outside.any(axis=0)).tolist():  # every joint in one test first
+        name, lo, hi = joint_names[j], lower[j], upper[j]
+        bad = np.flatnonzero(outside[:, j])
+        excess = np.maximum(lo - q[bad, j], q[bad, j] - hi)
+        k = bad[np.argmax(excess)]
+        unit = "m" if kinds[j] == "prismatic" else "rad"
+        out.append(f"{name}: {bad.size} of {len(q)} values outside its URDF limits "
+                   f"[{lo:.4g}, {hi:.4g}] {unit} (worst {q[k, j]:.4g} at line {rows[k]})")
     return out
 
 
@@ -37,8 +37,10 @@ def angle_unit_warnings(joint_names, kinds, q, angle_unit: str) -> list[str]:
     if angle_unit == "rad" and biggest > 2 * np.pi + 0.5:
         return [f"revolute joint values reach {biggest:.4g} rad ({biggest / np.pi:.1f} pi): were "
                 "they degrees? Read them with --angle-unit deg (Python: angle_unit='deg')"]
+    if angle_unit != "deg" or len(q) <= 3:
+        return []
     spans = np.ptp(q[:, rev], axis=0)
-    if angle_unit == "deg" and len(q) > 3 and float(spans.max()) < np.radians(3.0):
+    if float(spans.max()) < np.radians(3.0):
         return [f"revolute joint values span at most {np.degrees(spans.max()):.3g} deg: were they "
                 "radians read as degrees? Drop --angle-unit deg"]
     return []

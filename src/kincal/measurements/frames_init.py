@@ -29,38 +29,48 @@ def pivot_tool(R_tip: np.ndarray, p_tip: np.ndarray) -> np.ndarray:
     return sol[:3]
 
 
-def alternate(R_tip, p_tip, P, tool, rounds: int = 8, sums: tuple | None = None):
-    """Alternate Kabsch for (R_b, t_b) and a linear solve for (t, t_b) from ``tool``.
+def alternate(R_tip, p_tip, P, tools, rounds: int = 8, sums: tuple | None = None) -> list:
+    """Alternate Kabsch for (R_b, t_b) and a linear solve for (t, t_b) from each start of
+    ``tools`` (S, 3), the starts' rounds together.
 
-    Returns (R_b (3, 3), t_b (3,), tool (3,), rms [m]). sums: :func:`round_sums` of these
-    poses, made once for several starts (default: made here).
+    Returns per start (R_b (3, 3), t_b (3,), tool (3,), rms [m]). sums: :func:`round_sums`
+    of these poses (default: made here).
 
     Each round's work is 3 x 3 arithmetic on sums over the poses made once (a round costs
     the same whatever the number of poses): Kabsch's cross-covariance of the predicted
     points x_k = p_k + R_k t with the centred measured ones is H = sum p_k Pc_k^T +
     sum_j t_j sum_k R_k e_j Pc_k^T, and the linear solve's normal equations
     [[N I, (R_b S)^T], [R_b S, N I]] (S = sum R_k) reduce by the Schur complement to
-    (N I - S^T S / N) t = r_1 - S^T R_b^T r_2 / N, a matrix the same in every round. When
-    that matrix is ill-conditioned (tip orientations nearly all alike: t and t_b barely
-    separable) the rounds take numpy's least squares of the stacked rows (3N, 6) instead,
-    whose minimum-norm answer the normal equations cannot give."""
-    t = np.asarray(tool, dtype=float).copy()
+    (N I - S^T S / N) t = r_1 - S^T R_b^T r_2 / N, a matrix the same in every round. The
+    starts still going are stacked, so a round is a few numpy calls (one SVD) for all of
+    them, each start's numbers those of its rounds alone. When that matrix is
+    ill-conditioned (tip orientations nearly all alike: t and t_b barely separable) the
+    rounds take numpy's least squares of the stacked rows (3N, 6) instead, whose
+    minimum-norm answer the normal equations cannot give."""
+    T = np.array(tools, dtype=float).reshape(-1, 3)
     sums = round_sums(R_tip, p_tip, P) if sums is None else sums
     if not sums:
-        return _alternate_rows(R_tip, p_tip, P, t, rounds)
+        return [_alternate_rows(R_tip, p_tip, P, t, rounds) for t in T]
     N, S, w, V, H0, HT, W, c0, P_sum, p_sum = sums
+    going = list(range(len(T)))
     for _ in range(rounds):
-        Rb = kabsch_rotation(H0 + (t @ HT).reshape(3, 3))
+        t = T[going]
+        # products of stacks of one matrix by one vector each (matmul's per-matrix
+        # products: the bits of one start's own, which products of t (L, 3) by a matrix
+        # at once round otherwise)
+        Rb = kabsch_rotation(H0 + np.matmul(t[:, None, :], HT).reshape(-1, 3, 3))
         r2 = P_sum - Rb @ p_sum
-        r1 = np.einsum("ijl,lj->i", W, Rb) - c0
-        sol = V @ ((V.T @ (r1 - S.T @ (Rb.T @ r2) / N)) / w)
+        r1 = np.einsum("ijl,blj->bi", W, Rb) - c0
+        y = r1 - np.matmul(S.T, np.swapaxes(Rb, 1, 2) @ r2[:, :, None])[:, :, 0] / N
+        sol = np.matmul(V, np.matmul(V.T, y[:, :, None]) / w[:, None])[:, :, 0]
+        T[going] = sol
         # Gauss-Newton refines it after; the largest change in Python numbers (the same
-        # differences, fewer numpy calls: this runs up to 16 times per fit)
-        if max(abs(a - b) for a, b in zip(sol.tolist(), t.tolist())) <= 1e-9:
-            t = sol
+        # differences, fewer numpy calls)
+        going = [k for k, a, b in zip(going, sol.tolist(), t.tolist())
+                 if max(abs(u - v) for u, v in zip(a, b)) > 1e-9]
+        if not going:
             break
-        t = sol
-    return _finish(R_tip, p_tip, P, t)
+    return _finish(R_tip, p_tip, P, T)
 
 
 def round_sums(R_tip, p_tip, P) -> tuple:
@@ -82,11 +92,19 @@ def round_sums(R_tip, p_tip, P) -> tuple:
     return N, S, w, V, H0, HT, W, c0, P.sum(axis=0), p_tip.sum(axis=0)
 
 
-def _finish(R_tip, p_tip, P, t):
-    x = p_tip + R_tip @ t
-    Rb, tb = kabsch(x, P)
-    rms = float(np.sqrt(np.mean(np.sum((P - (x @ Rb.T + tb)) ** 2, axis=1))))
-    return Rb, tb, t, rms
+def _finish(R_tip, p_tip, P, tools) -> list:
+    """Per tool point of ``tools`` (S, 3): (R_b, t_b) by Kabsch of its predicted points onto
+    P, it, and the rms [m] of the fit. The starts together, each one's numbers those of
+    :func:`kincal.rotations.kabsch` on its own (products of stacks of matrices, the same
+    per-matrix products; means over the same axis)."""
+    T = np.asarray(tools, dtype=float).reshape(-1, 3)
+    x = p_tip + np.matmul(R_tip, T[:, None, :, None])[..., 0]  # (S, N, 3)
+    xm, ym = x.mean(axis=1), P.mean(axis=0)
+    Rb = kabsch_rotation(np.matmul(np.swapaxes(x - xm[:, None], 1, 2), P - ym))
+    tb = ym - np.matmul(Rb, xm[:, :, None])[:, :, 0]
+    fit = np.matmul(x, np.swapaxes(Rb, 1, 2)) + tb[:, None]
+    rms = np.sqrt(np.mean(np.sum((P - fit) ** 2, axis=2), axis=1)).tolist()
+    return list(zip(Rb, tb, T, rms))
 
 
 def _alternate_rows(R_tip, p_tip, P, t, rounds):
@@ -102,18 +120,17 @@ def _alternate_rows(R_tip, p_tip, P, t, rounds):
             t = sol[:3]
             break
         t = sol[:3]
-    return _finish(R_tip, p_tip, P, t)
+    return _finish(R_tip, p_tip, P, [t])[0]
 
 
 def initial_frames(R_tip, p_tip, P, tool_guess=None):
     """Best of the pivot and given starts: (R_b, t_b, tool, rms [m], start name)."""
     starts = {"given": np.zeros(3) if tool_guess is None else np.asarray(tool_guess, float),
               "pivot": pivot_tool(R_tip, p_tip)}
-    best, sums = None, round_sums(R_tip, p_tip, P)  # the same sums for both starts
-    for name, t0 in starts.items():
-        Rb, tb, t, rms = alternate(R_tip, p_tip, P, t0, sums=sums)
-        if best is None or rms < best[3]:
-            best = (Rb, tb, t, rms, name)
+    best = None
+    for name, found in zip(starts, alternate(R_tip, p_tip, P, list(starts.values()))):
+        if best is None or found[3] < best[3]:
+            best = (*found, name)
     return best
 
 

@@ -130,10 +130,11 @@ class MeasurementModel:
             Rb = RxRy @ Rz
         if rotate_kinematic:
             J[:, :, :k] = np.matmul(Rb, J[:, :, :k])
-            J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
+            if k + f < J.shape[2]:  # joint terms (backlash, compliance)
+                J[:, :, k + f:] = np.matmul(Rb, J[:, :, k + f:])
         Pm = _rotate(Rb, P) + base[..., :3]
         J[:, :, k:k + 3] = _EYE3
-        J[:, :, k + 3] = axis_cross(0, Pm - base[..., :3])
+        axis_cross(0, Pm - base[..., :3], out=J[:, :, k + 3])
         J[:, :, k + 4] = _rotate(Rx, axis_cross(1, _rotate(RyRz, P)))
         J[:, :, k + 5] = _rotate(RxRy, axis_cross(2, _rotate(Rz, P)))
         # a sample moves with its own point only: its block gets R_b R_tip, the others 0

@@ -46,12 +46,16 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def axis_cross(i: int, v: np.ndarray) -> np.ndarray:
+def axis_cross(i: int, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """e_i x v for rows v (N, 3): cross_rows(e_i, v) without its multiplications by 0 and 1
-    (the same numbers, up to the sign of a zero)."""
-    out = np.zeros(v.shape)
+    (the same numbers, up to the sign of a zero), into ``out`` (N, 3) if given (a
+    Jacobian's column block)."""
     j, k = (i + 1) % 3, (i + 2) % 3
-    out[:, k], out[:, j] = v[:, j], -v[:, k]
+    if out is None:
+        out = np.empty(v.shape)
+    out[:, i] = 0.0
+    out[:, k] = v[:, j]
+    np.negative(v[:, k], out=out[:, j])
     return out
 
 
@@ -129,8 +133,7 @@ class Chain:
         # the joint motions, (N, 4, 4) per joint, are kept for few poses (cheap to reuse
         # across evaluations); for many (MOTION_CACHE_POSES) they are made anew at each
         # evaluation: 128 bytes per pose and joint would otherwise stay for the whole fit
-        self._motion = ([self.joint_motion(i, self.q[:, i]) for i in range(model.n)]
-                        if self.N <= MOTION_CACHE_POSES else None)
+        self._motion = self._motions() if self.N <= MOTION_CACHE_POSES else None
         # few poses: [(values' bytes, R_tip, p_tip, (before, placed) or None)] of the first
         # KEPT_FIRST states evaluated (at distinct values), then of the last (Chain.state);
         # the frames of the very first only
@@ -160,6 +163,29 @@ class Chain:
         return Chain(self.model, self.q[rows],
                      None if self.approach is None else self.approach[rows], self.backlash,
                      None if self.torque is None else self.torque[rows], self.compliance)
+
+    def _motions(self) -> list:
+        """[(N, 4, 4)] every joint's motion at its joint values, :meth:`joint_motion`'s
+        numbers: the revolute joints' together (one cos, one sin, one stacked product of
+        (cos, sin, 1 - cos, 1) with their bases: the per-joint products of joint_motion),
+        ~6 numpy calls per chain instead of per joint."""
+        m, N = self.model, self.N
+        rev = [i for i in range(m.n) if m.kinds[i] != "prismatic"]
+        out = [None if i in rev else self.joint_motion(i, self.q[:, i]) for i in range(m.n)]
+        if rev:
+            A = np.empty((len(rev), N, 4))
+            qr = self.q.T[rev]
+            np.cos(qr, out=A[:, :, 0])
+            np.sin(qr, out=A[:, :, 1])
+            np.subtract(1.0, A[:, :, 0], out=A[:, :, 2])
+            A[:, :, 3] = 1.0
+            B = np.stack([motion_basis(m.screw_axes[i], m.screw_points[i]) for i in rev])
+            M = np.empty((len(rev), N, 4, 4))
+            M[:, :, 3] = (0.0, 0.0, 0.0, 1.0)
+            M[:, :, :3] = np.matmul(A, B).reshape(len(rev), N, 3, 4)
+            for k, i in enumerate(rev):
+                out[i] = M[k]
+        return out
 
     def joint_motion(self, i: int, qi: np.ndarray) -> np.ndarray:
         """(N, 4, 4) motion of joint i by qi (N,), in its placed frame."""
@@ -249,7 +275,7 @@ class Chain:
             else:
                 H = placed[i] if placed is not None else np.empty((N, 4, 4))
                 np.matmul(G.reshape(-1, 4), P[i], out=H.reshape(-1, 4))
-            if before is not None:
+            if before is not None and i == 0:  # the others were made in place (below)
                 before[i] = G
             ks = [k for k in self._terms_of.get(i, ()) if backlash is not None
                   and backlash[k] != 0.0]
@@ -260,7 +286,9 @@ class Chain:
                 assert backlash is not None  # ks is empty without the terms' values
                 qi = self.q[:, i] + sum(backlash[k] * self.factors[:, k] for k in ks)
                 M = self.joint_motion(i, qi)
-            G = np.matmul(H, M)
+            # kept frames: the product made where the next joint's "before" is kept
+            G = (np.matmul(H, M, out=before[i + 1]) if before is not None and i + 1 < m.n
+                 else np.matmul(H, M))
         T = G @ m.T_last_tip if G.ndim == 2 else np.matmul(G.reshape(-1, 4), m.T_last_tip
                                                            ).reshape(N, 4, 4)
         if T.ndim == 2:

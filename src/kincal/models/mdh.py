@@ -209,6 +209,8 @@ class MdhModel(ErrorModel):
         beta = beta.T
         ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
         ct, st = np.cos(theta), np.sin(theta)
+        if a.ndim == 1:  # one vector: entry by entry (below), not ~40 calls on n-element arrays
+            return _placements_of(a, d, ca, sa, cb, sb, ct, st)
         A = np.zeros(a.shape + (4, 4))
         # R = Rx(alpha) Ry(beta) Rz(theta), written out
         A[..., 0, 0], A[..., 0, 1], A[..., 0, 2] = cb * ct, -cb * st, sb
@@ -291,6 +293,20 @@ class MdhModel(ErrorModel):
             F = F @ P[i]
             out[i] = F
         return out
+
+
+def _placements_of(*columns) -> np.ndarray:
+    """(n, 4, 4) :meth:`MdhModel.placements` of one vector from its columns (a, d, cos and
+    sin of alpha, beta, theta; (n,) each) in Python numbers: the same products and sums in
+    the same order as the arrays' (elementwise IEEE operations), so the same numbers."""
+    rows: list = []
+    for a, d, ca, sa, cb, sb, ct, st in zip(*(c.tolist() for c in columns)):
+        r12, r22 = -sa * cb, ca * cb
+        rows += (cb * ct, -cb * st, sb, sb * d + a,
+                 ca * st + sa * sb * ct, ca * ct - sa * sb * st, r12, r12 * d,
+                 sa * st - ca * sb * ct, sa * ct + ca * sb * st, r22, r22 * d,
+                 0.0, 0.0, 0.0, 1.0)
+    return np.array(rows).reshape(-1, 4, 4)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
