@@ -49,26 +49,23 @@ def test_corrected_robot_equals_a_rebuild(tmp_path):
         assert fast.off_chain == slow.off_chain and fast._data is not robot._data
 
 
-def test_gate_chain_on_the_nominal_motions_equals_a_new_chain(tmp_path):
-    """The gate's corrected tool points on the nominal chain's joint motions (kept per robot)
-    equal those of a chain made anew, to the bit, and equal Pinocchio's (1e-12); a model
-    whose joints turn otherwise gets a chain of its own."""
+def test_gate_points_on_the_kept_motions_equal_points_made_anew(tmp_path):
+    """The gate's tool points on its seeded configurations' motion coefficients (kept per
+    robot, read-only) equal those of a chain made anew with its own, to the bit, for the
+    nominal robot and a corrected one, and equal Pinocchio's (1e-12)."""
     from kincal.models.kinematics import ChainKinematics
 
     rng = np.random.default_rng(1)
     for robot in _robots(tmp_path):
-        q, _, _, chain = plausibility._configurations(robot)
-        corrected = _corrected(robot, rng)
+        q, motions = plausibility._configurations(robot)
+        assert not q.flags.writeable and not motions.flags.writeable
         tool = rng.normal(size=3) * 0.1
-        fast = plausibility._tool_points(corrected, q, tool, chain)
-        assert np.array_equal(fast, plausibility._tool_points(corrected, q, tool))
-        T = corrected.tip_poses(q[:20])
-        assert np.abs(fast[:20] - (T[:, :3, 3] + T[:, :3, :3] @ tool)).max() < 1e-12
-        model = ChainKinematics.of(corrected.geometry).model
-        assert chain.with_model(model)._motion is chain._motion
-        other = models.build("offsets", robot.geometry)
-        tilted = type(other)(**{**other.__dict__, "screw_axes": -other.screw_axes})
-        assert chain.with_model(tilted)._motion is not chain._motion
+        for r in (robot, _corrected(robot, rng)):
+            fast = plausibility._tool_points(r, q, tool, motions)
+            assert np.array_equal(fast, ChainKinematics(r.geometry).tip_points(q, tool))
+            T = r.tip_poses(q[:20])
+            assert np.abs(fast[:20] - (T[:, :3, 3] + T[:, :3, :3] @ tool)).max() < 1e-12
+        assert ChainKinematics.of(robot.geometry) is ChainKinematics.of(robot.geometry)
 
 
 def test_structural_kept_is_the_structural_analysis():
@@ -368,6 +365,49 @@ def test_start_pass_is_what_the_analysis_and_the_fits_made_apart(monkeypatch):
         assert a.identifiability.kept == b.identifiability.kept
         assert a.identifiability.notes == b.identifiability.notes
         assert repr(a.plausibility) == repr(b.plausibility)  # (NaN evidence: not ==)
+
+
+def test_error_statistics_are_numpys_to_the_bit():
+    """The statistics of a set's errors (mean, max, std with ddof 1, RMS, median) by the
+    reductions themselves equal numpy's functions to the bit: odd and even counts, one and
+    two values, ties, scales from um to km, a NaN (all NaN but n); the rows' norms are
+    np.linalg.norm's."""
+    import warnings
+
+    from kincal.identification.statistics import ErrorStats, _summary
+
+    def numpys(d):
+        return (d.size, float(d.mean()), float(d.max()),
+                float(d.std(ddof=1)) if d.size > 1 else 0.0, float(np.sqrt(np.mean(d ** 2))),
+                float(np.median(d)))
+
+    rng = np.random.default_rng(7)
+    for k in range(3000):
+        n = (1, 2, 3)[k] if k < 3 else int(rng.integers(1, 300))
+        d = np.abs(rng.normal(size=n)) * 10.0 ** rng.uniform(-6, 3)
+        if k % 5 == 0:
+            d = np.round(d, 1)  # ties
+        assert _summary(d) == numpys(d)
+        e = rng.normal(size=(n, 3))
+        assert ErrorStats.from_errors(e) == ErrorStats(*numpys(np.linalg.norm(e, axis=1) * 1e3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        d = np.array([0.2, np.nan, 0.1, 0.3])
+        assert str(_summary(d)) == str(numpys(d)) == str((4,) + (float("nan"),) * 5)
+
+
+def test_last_axis_distance_is_np_cross_to_the_bit():
+    """The tool point's distance from the last axis (the fit's tool-axis note), its cross
+    product in Python numbers, equals np.cross's to the bit, on every error model."""
+    rng = np.random.default_rng(8)
+    for name in ("ec66", "ur10"):
+        g = Robot.load(name).geometry
+        for model in (models.build(m, g) for m in models.MODELS):
+            for _ in range(200):
+                tool = rng.normal(size=3) * 10.0 ** rng.uniform(-4, 0)
+                p = model.T_last_tip[:3, :3] @ tool + model.T_last_tip[:3, 3]
+                want = np.linalg.norm(np.cross(p - model.screw_points[-1], model.screw_axes[-1]))
+                assert model.last_axis_distance(tool) == float(want)
 
 
 def test_chain_motions_and_placements_of_one_vector_are_the_per_joint_numbers(tmp_path):

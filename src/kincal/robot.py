@@ -17,6 +17,7 @@ joint's unit: radians for revolute and continuous joints, metres for prismatic o
 
 from __future__ import annotations
 
+import functools
 import re
 import warnings
 from dataclasses import dataclass, replace
@@ -109,7 +110,7 @@ def _build_model(text: str, path) -> pin.Model:
 
 
 def _se3(T: np.ndarray) -> pin.SE3:
-    return pin.SE3(np.array(T[:3, :3]), np.array(T[:3, 3]))
+    return pin.SE3(np.ascontiguousarray(T, dtype=float))  # its [R | t] as given, to the bit
 
 
 def _mat(M: pin.SE3) -> np.ndarray:
@@ -126,18 +127,21 @@ class Robot:
 
     def __init__(self, model: pin.Model, urdf_text: str, name: str, base: str, tip: str,
                  source: Path | None = None, joint_values: dict | None = None):
-        self.model = model
-        self.urdf_text = urdf_text
-        self.name = name
-        self.source = source
-        self._data = model.createData()
-        self.base = base
-        self.tip = tip
+        self.model, self.urdf_text, self.name, self.source = model, urdf_text, name, source
+        self.base, self.tip = base, tip
         self._base_id = self._frame_id(base, "base")
         self._tip_id = self._frame_id(tip, "tip")
         self._chain, self._reversed = self._find_chain()
+        # (base joint frame in B, (n, 4, 4) parent links, tip frame): corrected copies share it
+        self._links = (inverse(_mat(model.frames[self._base_id].placement)),
+                       np.array([self._parent_link(j) for j in self._chain]),
+                       _mat(model.frames[self._tip_id].placement))
         self.geometry = self._compute_geometry()
         self.off_chain = self._check_off_chain(joint_values or {})
+
+    @functools.cached_property
+    def _data(self) -> pin.Data:  # Pinocchio's workspace, when first used (not every copy is)
+        return self.model.createData()
 
     @property
     def model_name(self) -> str:
@@ -261,24 +265,24 @@ class Robot:
         fid = m.getFrameId(m.names[j], pin.FrameType.JOINT)
         return _mat(m.frames[m.frames[fid].parentFrame].placement)
 
-    def _compute_geometry(self, same: ChainGeometry | None = None) -> ChainGeometry:
+    def _compute_geometry(self, same: ChainGeometry | None = None, placements=None) -> ChainGeometry:
         """The chain's geometry from the model; ``same``: that of a model with other joint
-        placements only, whose axes (in their own frames), kinds and limits are kept."""
+        placements only (its axes, kinds and limits kept); ``placements``: (n, 4, 4) those
+        of the chain joints just written into the model (it gives them back to the bit)."""
         m = self.model
-        T = inverse(_mat(m.frames[self._base_id].placement))  # base joint frame expressed in B
-        frames, parents = [], []
-        for j, rev in zip(self._chain, self._reversed):
-            if rev:  # climbing: joint j's frame is where we stand; its parent joint is next
-                frames.append(T.copy())
-                T = T @ inverse(_mat(m.jointPlacements[j]))
-                parents.append(T @ self._parent_link(j))
+        T, links, tip = self._links
+        P = [_mat(m.jointPlacements[j]) for j in self._chain] if placements is None else placements
+        frames, at = np.empty((len(P), 4, 4)), np.empty((len(P), 4, 4))  # at: before links
+        for i, rev in enumerate(self._reversed):
+            if rev:  # climbing: joint i's frame is where we stand; its parent joint is next
+                frames[i] = T
+                T = at[i] = T @ inverse(P[i])
             else:
-                parents.append(T @ self._parent_link(j))
-                T = T @ _mat(m.jointPlacements[j])
-                frames.append(T.copy())
-        T_tip = T @ _mat(m.frames[self._tip_id].placement)
+                at[i] = T
+                T = frames[i] = T @ P[i]
+        parents = at @ links
         if same is not None:  # the placements alone differ
-            return replace(same, joint_frames=np.array(frames), T_base_tip=T_tip, parent_frames=np.array(parents))
+            return replace(same, joint_frames=frames, T_base_tip=T @ tip, parent_frames=parents)
         axes, kinds = zip(*[self._axis(j) for j in self._chain])  # each in its own frame
         axes = [-a if rev else a for a, rev in zip(axes, self._reversed)]
         # Pinocchio stores "no limit" as +-max double; a continuous joint (nq = 2) has none
@@ -289,9 +293,8 @@ class Robot:
         upper = np.where(free | (hi >= 1e300), np.inf, hi)
         flips = np.array(self._reversed, dtype=bool)
         flips.flags.writeable = False
-        return ChainGeometry(self.joint_names, tuple(kinds), np.array(frames), np.array(axes),
-                             T_tip, lower, upper, np.array(parents),
-                             flips if flips.any() else None)
+        return ChainGeometry(self.joint_names, tuple(kinds), frames, np.array(axes), T @ tip,
+                             lower, upper, parents, flips if flips.any() else None)
 
     def _axis(self, j: int) -> tuple[np.ndarray, str]:
         """Unit axis of joint j in its own frame, read from its motion subspace."""
@@ -331,9 +334,7 @@ class Robot:
         out = np.empty((len(Q), 4, 4))
         for k, qk in enumerate(Q):
             pin.framesForwardKinematics(self.model, self._data, self.configuration(qk))
-            oMb = self._data.oMf[self._base_id]
-            oMe = self._data.oMf[self._tip_id]
-            out[k] = _mat(oMb.actInv(oMe))
+            out[k] = _mat(self._data.oMf[self._base_id].actInv(self._data.oMf[self._tip_id]))
         return out
 
     gravity_torques = _gravity_torques  # (N, n) per chain joint [N m]: kincal.gravity
@@ -373,8 +374,7 @@ class Robot:
         """
         m = pin.Model(self.model)
         C = np.array(joint_frames, dtype=float)
-        N, rev = self.geometry.joint_frames, self.geometry.is_reversed
-        r = int(rev.sum())
+        N, r = self.geometry.joint_frames, int(self.geometry.is_reversed.sum())
         G = C.copy()  # the chain links' frames after moving own-axis parts up (reversed joints)
         for i in range(r):
             P_nom = N[i] if i == 0 else inverse(N[i - 1]) @ N[i]
@@ -387,21 +387,19 @@ class Robot:
                                  f"frame {self.base!r} within its link, which no URDF joint origin "
                                  "holds; an error model must leave the link of a reversed first "
                                  "joint in place")
-        for i in range(r - 1):
-            m.jointPlacements[self._chain[i]] = _se3(inverse(G[i + 1]) @ G[i])
+        P = np.empty_like(C)  # the chain joints' new placements, in chain order
+        T_prev = self._links[0]  # the base joint frame, or (r > 0) the common ancestor joint's
         if r:
-            top = self._chain[r - 1]
-            T_prev = C[r - 1] @ inverse(_mat(self.model.jointPlacements[top]))  # ancestor joint
-            m.jointPlacements[top] = _se3(inverse(T_prev) @ G[r - 1])
-        else:
-            T_prev = inverse(_mat(m.frames[self._base_id].placement))
-        for j, T in zip(self._chain[r:], C[r:]):
-            m.jointPlacements[j] = _se3(inverse(T_prev) @ T)
-            T_prev = T
-        out = object.__new__(Robot)  # the chain, its axes, kinds and limits are this robot's,
-        out.__dict__.update(self.__dict__, model=m, _data=m.createData())  # the frames m's
-        out.geometry = out._compute_geometry(self.geometry)  # (= Robot(m, ...): tests compare)
-        return out
+            P[:r - 1] = inverse(G[1:r]) @ G[:r - 1]
+            T_prev = C[r - 1] @ inverse(_mat(self.model.jointPlacements[self._chain[r - 1]]))
+            P[r - 1] = inverse(T_prev) @ G[r - 1]
+        P[r:] = inverse(np.concatenate([T_prev[None], C[r:-1]])) @ C[r:]
+        for j, X in zip(self._chain, P):
+            m.jointPlacements[j] = _se3(X)
+        out = object.__new__(Robot)  # the chain, its axes, kinds, limits and links are this
+        out.__dict__.update({k: v for k, v in self.__dict__.items() if k != "_data"}, model=m)
+        out.geometry = out._compute_geometry(self.geometry, P)  # robot's, the frames m's:
+        return out  # Robot(m, ...)'s geometry to the bit (tests compare)
 
     def _is_offset(self, i: int, D: np.ndarray, tol: float = 1e-10) -> bool:
         """Whether the rigid change D (in joint i's frame) changes only joint i's zero: a

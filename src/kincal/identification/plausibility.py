@@ -68,6 +68,8 @@ import numpy as np
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.measurements.checks import UNIT_RATIO, spread
 from kincal.models import per_geometry
+from kincal.models.kinematics import ChainKinematics
+from kincal.rotations import kabsch_rotation
 
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
@@ -352,10 +354,8 @@ def _overfit_cause(ev: Evidence) -> tuple[str, ...]:  # plain LS on few equation
 # ------------------------------------------------------------------ gather
 def _aligned_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """(M,) distances between point sets A and B after the best rigid motion of B onto A."""
-    a, b = A - A.mean(axis=0), B - B.mean(axis=0)
-    U, _, Vt = np.linalg.svd(b.T @ a)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    return np.linalg.norm(a - b @ (U @ D @ Vt), axis=1)
+    a, b = A - np.add.reduce(A) / len(A), B - np.add.reduce(B) / len(B)  # np.mean's sums
+    return np.linalg.norm(a - b @ kabsch_rotation(b.T @ a).T, axis=1)  # a = R b, as rows
 
 
 def chain_length(joint_frames: np.ndarray, T_base_tip: np.ndarray) -> float:
@@ -377,8 +377,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     residual is the worst set's (median and RMS of its sample errors); the spread and the
     unit clue come from the first set that measures positions."""
     lay = result.layout
-    L, d = max((_change(problem, result, k) for k in range(_n_chains(problem))),
-               key=lambda c: float(np.sqrt(np.mean(c[1] ** 2))) / c[0])  # the worst chain's
+    L, d, rms = max((_change(problem, result, k) for k in range(_n_chains(problem))),
+                    key=lambda c: c[2] / c[0])  # the worst chain's
     corrections = []
     for p, kinematic in zip(result.parameters, lay.is_kinematic.tolist(), strict=True):
         if p.status == "identified" and kinematic:
@@ -386,8 +386,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             corrections.append((p.name, p.deviation * factor, unit))
     # largest first, lengths against the reach and angles in degrees on one footing
     corrections.sort(key=lambda c: -abs(c[1]) / (L * 1e3 if c[2] == "mm" else 180.0))
-    worst = max(result.sets, key=lambda s: float(np.median(s.errors_after)))
-    errors = worst.errors_after * 1e3
+    worst = result.sets[0] if len(result.sets) == 1 else max(
+        result.sets, key=lambda s: float(np.median(s.errors_after)))
     datas = [km.data for km in problem.kinds]
     # unit clue: the measured spread against the nominal tip's with the tool guess, on at
     # most MAX_UNIT_POSES poses spread through the file (a reference forward kinematics)
@@ -397,12 +397,15 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         unit_set = dt = positioned[0]
         points = getattr(dt, "points", None)
         first = np.arange(len(dt)) if points is None else np.flatnonzero(points == 0)
-        first = first[np.linspace(0, len(first) - 1, min(len(first), MAX_UNIT_POSES)).astype(int)]
+        if len(first) > MAX_UNIT_POSES:
+            first = first[np.linspace(0, len(first) - 1, MAX_UNIT_POSES).astype(int)]
         guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
             problem.options.tool_guess, float)
         s_pred = spread(_tool_points(problem.robot, dt.joint_values[first], guess))
-        ratio = spread(dt.positions[first]) / s_pred if s_pred >= 1e-3 else float("nan")
-        spread_mm = spread(dt.positions) * 1e3
+        s_all = spread(dt.positions)  # = the subset's when that is every row (in order)
+        s_meas = s_all if len(first) == len(dt) else spread(dt.positions[first])
+        ratio = s_meas / s_pred if s_pred >= 1e-3 else float("nan")
+        spread_mm = s_all * 1e3
     angle_max, outside = 0.0, False
     for dt, robot in zip(datas, problem.robots):  # each set against its own chain
         gi = robot.geometry
@@ -422,10 +425,10 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     off_chain = tuple(dict.fromkeys(c for dt in datas for c in dt.ignored_columns
                                     if c in frames and c not in problem.error_model.joint_names))
     return Evidence(
-        reach_m=L, residual_median_mm=float(np.median(errors)), residual_rms_mm=worst.after.rms,
+        reach_m=L, residual_median_mm=worst.after.median, residual_rms_mm=worst.after.rms,
         before_rms_mm=worst.before.rms,
         spread_mm=spread_mm if positioned and worst.data is unit_set else float("nan"),
-        change_rms_mm=float(np.sqrt(np.mean(d ** 2))), change_max_mm=float(d.max()),
+        change_rms_mm=rms, change_max_mm=float(d.max()),
         corrections=tuple(corrections), length_ratio=float(ratio),
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
@@ -441,10 +444,10 @@ def _n_chains(problem: CalibrationProblem) -> int:
 
 
 def _change(problem: CalibrationProblem, result: CalibrationResult,
-            chain: int) -> tuple[float, np.ndarray]:
-    """(reach [m], (M,) distances [mm]) of chain ``chain``: how far the corrected model moves
-    its tool point (the chain's first set's; none: the tip) from the nominal one's at seeded
-    configurations over the joint limits (unbounded revolute: a turn); every chain judged."""
+            chain: int) -> tuple[float, np.ndarray, float]:
+    """(reach [m], (M,) distances [mm], their RMS) of chain ``chain`` (each is judged): how
+    far the corrected model moves its tool point (the chain's first set's; none: the tip)
+    from the nominal one's at seeded configurations over the joint limits (a turn if none)."""
     lay = result.layout
     if _n_chains(problem) == 1:
         robot, corrected, first = problem.robot, result.corrected, 0
@@ -459,42 +462,38 @@ def _change(problem: CalibrationProblem, result: CalibrationResult,
     if name in lay.frame_names(first):
         k = lay.index(name)
         tool_start, tool = result.x_start[k:k + 3], result.x[k:k + 3]
-    L = reach(chain_length(g.joint_frames, g.T_base_tip), float(np.linalg.norm(tool_start)))
-    # the configurations and the nominal robot's tip poses there depend on the robot alone:
-    # kept per robot (models.per_geometry); the same arithmetic as _tool_points after
-    q, R_tip, p_tip, chain = per_geometry(("gate configurations", N_CONFIGURATIONS), g,
-                                          lambda: _configurations(robot))
-    return L, _aligned_distances(p_tip + R_tip @ tool_start,
-                                 _tool_points(corrected, q, tool, chain)) * 1e3
+    # the chain's length, the configurations and their joint motions' coefficients depend
+    # on the robot alone: kept per robot (models.per_geometry); both robots' points by the
+    # same arithmetic
+    q, motions, length = per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
+        *_configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))
+    L = reach(length, float(np.linalg.norm(tool_start)))
+    d = _aligned_distances(_tool_points(robot, q, tool_start, motions),
+                           _tool_points(corrected, q, tool, motions)) * 1e3
+    return L, d, math.sqrt(float(np.add.reduce(d * d)) / d.size)  # np.sqrt(np.mean(d ** 2))
 
 
-def _configurations(robot):
-    """(q (M, n), R_tip (M, 3, 3), p_tip (M, 3), chain), read-only: the gate's seeded joint
-    values over the robot's limits (unbounded revolute: a turn), its tip frame there, in the
-    base frame (:func:`_tool_points`' chain), and that chain over q, whose joint motions the
-    corrected robot's chain takes (its placements alone differ: Chain.with_model)."""
-    from kincal.models.chain import Chain
-    from kincal.models.kinematics import ChainKinematics
-
+def _configurations(robot) -> tuple[np.ndarray, np.ndarray]:
+    """(q (M, n), motions), read-only: the gate's seeded joint values over the robot's
+    limits (unbounded revolute: a turn) and their joint motions' coefficients
+    (:meth:`kincal.models.kinematics.ChainKinematics.motions`), which the corrected robot's
+    chain shares (its placements alone differ)."""
     g = robot.geometry
     span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
     lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
     hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
     q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
-    chain = Chain(model := ChainKinematics.of(g).model, q)
-    state = chain.state(np.zeros(model.n), keep=False)
-    for a in [q, state.R_tip, state.p_tip] + list(chain._motion or ()):
-        a.flags.writeable = False
-    return q, state.R_tip, state.p_tip, chain
+    motions = ChainKinematics.of(g).motions(q)
+    q.flags.writeable = motions.flags.writeable = False
+    return q, motions
 
 
-def _tool_points(robot, q: np.ndarray, tool: np.ndarray, like=None) -> np.ndarray:
-    """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q.
+def _tool_points(robot, q: np.ndarray, tool: np.ndarray, motions=None) -> np.ndarray:
+    """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q
+    (``motions``: their coefficients, if made before).
 
     Through the vectorised chain of the robot's own geometry (read from its Pinocchio
-    model, so the corrected robot's is what the URDF export writes): one batched product
-    per joint instead of a Pinocchio call per configuration; tests check it against
-    :meth:`kincal.robot.Robot.tip_poses`."""
-    from kincal.models.kinematics import ChainKinematics
-
-    return ChainKinematics.of(robot.geometry).tip_points(q, tool, like)
+    model, so the corrected robot's is what the URDF export writes): a few products over
+    all configurations per joint instead of a Pinocchio call per configuration; tests
+    check it against :meth:`kincal.robot.Robot.tip_poses`."""
+    return ChainKinematics.of(robot.geometry).tip_points(q, tool, motions)

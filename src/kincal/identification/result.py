@@ -108,14 +108,14 @@ def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam,
     JtJ = sol.normal_matrix(free)
     if np.ndim(lam) == 2:  # a fleet prior's penalty matrix
         H = JtJ + np.asarray(lam)[np.ix_(free, free)]
-    else:
-        H = JtJ + np.diag((np.broadcast_to(lam, penalised.shape) * penalised)[free])
+    else:  # lam times the mask: the products of lam broadcast to it
+        H = JtJ + np.diag((np.asarray(lam, dtype=float) * penalised)[free])
     out = np.full(scale.size, np.nan)
     try:
         Hi = np.linalg.inv(H)
     except np.linalg.LinAlgError:
         return out, None
-    dof = float(np.trace(Hi @ JtJ))  # effective number of parameters, trace of the hat matrix
+    dof = float((Hi @ JtJ).trace())  # effective number of parameters, trace of the hat matrix
     m = sol.residual.shape[0]
     if m - dof <= 0.5:
         return out, None
@@ -124,7 +124,8 @@ def _std_errors(sol: SolveSummary, free: np.ndarray, penalised: np.ndarray, lam,
     out[free] = np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale[free]
     # cov is of u = x / scale (the solver's variables): the SI one is S cov S, S = diag(scale)
     full = np.zeros((scale.size, scale.size))
-    full[np.ix_(free, free)] = cov * np.outer(scale[free], scale[free])
+    s = scale[free]
+    full[np.ix_(free, free)] = cov * (s[:, None] * s)  # np.outer's products
     full.flags.writeable = False
     return out, full
 
@@ -200,11 +201,10 @@ class CalibrationResult:
             o0 = None if a0 is None else AngleStats.from_angles(a0)
             o = None if a is None else AngleStats.from_angles(a)
             ori = None if o is None else o.mean
-            e0, e = km.sample_errors(r0), km.sample_errors(r)
+            e0, e = km.sample_errors(r0), km.sample_errors(r)  # points: the rows' norms,
             sets.append(SetResult(km.kind, km.data.source, km.data, tuple(km.frame_names),
-                                  np.array(lay.frames(x, i)), r, r0, e0, e,
-                                  ErrorStats.from_errors(r0 if km.kind == "point" else e0),
-                                  ErrorStats.from_errors(r if km.kind == "point" else e), ori,
+                                  np.array(lay.frames(x, i)), r, r0, e0, e,  # as from_errors'
+                                  ErrorStats.from_errors(e0), ErrorStats.from_errors(e), ori,
                                   problem.robots[i].base, problem.robots[i].tip, o0, o))
         return cls(problem.robot, corrected, problem.options, lay, rows, x_nom, x_start, x,
                    float(lam) if evidence is None else math.nan, cv, tuple(sets), sol, ident,

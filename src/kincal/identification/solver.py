@@ -360,7 +360,7 @@ def steps(residual: Callable, u0: np.ndarray, free: np.ndarray, lam: float | np.
     # prior)], filled in place at each iteration: the penalty's rows P, the same at every
     # iteration, are written once
     k = free_idx.size
-    n_pen = int(pen_f.sum()) if np.any(sq_f > 0) and sq_f.size else 0
+    n_pen = int(pen_f.sum()) if sq_f.size and (sq_f > 0).any() else 0
     A0, b0 = np.zeros((k + n_pen, k)), np.zeros(k + n_pen)
     if n_pen and root is None:
         A0[k + np.arange(n_pen), np.flatnonzero(pen_f)] = sq_f

@@ -5,21 +5,26 @@ The inverse kinematics of many targets needs the tip pose and the joint Jacobian
 configurations at once (Pinocchio's Python API takes one configuration per call). kincal
 has one vectorised chain (:mod:`kincal.models.chain`); its ``offsets`` error model at zero
 offsets is the URDF chain itself, and the column of a joint's offset is exactly that
-joint's motion, so the joint Jacobians are that model's columns. Tests check them against
-:meth:`kincal.robot.Robot.tip_poses` / :meth:`kincal.robot.Robot.tip_jacobian`
-(Pinocchio) and against central differences.
+joint's motion, so the joint Jacobians are that model's columns. A tool point alone (the
+plausibility gate's, at hundreds of configurations per fit) is carried through the joints'
+motions written in the base frame instead, with no frame kept (:meth:`ChainKinematics.
+tip_points`). Tests check them against :meth:`kincal.robot.Robot.tip_poses` /
+:meth:`kincal.robot.Robot.tip_jacobian` (Pinocchio) and against central differences.
 """
 
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kincal.models import offsets
-from kincal.models.chain import Chain
 from kincal.rotations import rotation_log
+
+if TYPE_CHECKING:
+    from kincal.robot import ChainGeometry
 
 
 BLOCK = 4096  # configurations (targets) its users take at once
@@ -28,19 +33,26 @@ _ROWS = 1024  # configurations evaluated at once: products small enough for one 
 
 @dataclass(frozen=True)
 class ChainKinematics:
-    """The chain of a ChainGeometry, ready for batched evaluation (its offsets model)."""
+    """The chain of a ChainGeometry, ready for batched evaluation (its offsets model, made
+    when first needed). One per geometry (:meth:`of`): what it prepares is kept."""
 
-    model: offsets.OffsetsModel
+    geometry: ChainGeometry
 
     @classmethod
     def of(cls, geometry) -> "ChainKinematics":
+        from kincal.models import per_geometry
+
+        return per_geometry("chain kinematics", geometry, lambda: cls(geometry))
+
+    @functools.cached_property
+    def model(self) -> offsets.OffsetsModel:
         from kincal.models import build
 
-        return cls(build("offsets", geometry))
+        return build("offsets", self.geometry)
 
     @property
     def n(self) -> int:
-        return self.model.n
+        return self.geometry.n
 
     @property
     def placements(self) -> np.ndarray:
@@ -49,22 +61,79 @@ class ChainKinematics:
 
     @property
     def prismatic(self) -> np.ndarray:
-        return np.array([k == "prismatic" for k in self.model.kinds])
+        return np.array([k == "prismatic" for k in self.geometry.kinds])
 
     @property
     def T_last_tip(self) -> np.ndarray:
         return self.model.T_last_tip
 
-    def tip_points(self, q: np.ndarray, tool=(0.0, 0.0, 0.0), like: Chain | None = None
-                   ) -> np.ndarray:
+    def motions(self, q: np.ndarray) -> np.ndarray:
+        """(n, 3, 1, N) the coefficients of each joint's motion at joint values q (N, n)
+        [rad or m] in :meth:`tip_points`: (cos, sin, 1 - cos) of a revolute joint's value,
+        (1, value, 0) of a prismatic one's; made once for joint values evaluated often (the
+        plausibility gate's seeded configurations)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float)).T  # (n, N): each joint's row
+        A = np.empty((len(q), 3, 1, q.shape[1]))
+        np.cos(q, out=A[:, 0, 0])
+        np.sin(q, out=A[:, 1, 0])
+        np.subtract(1.0, A[:, 0, 0], out=A[:, 2, 0])
+        slide = self.prismatic
+        if slide.any():
+            A[slide, 0, 0], A[slide, 1, 0], A[slide, 2, 0] = 1.0, q[slide], 0.0
+        return A
+
+    def tip_points(self, q: np.ndarray, tool=(0.0, 0.0, 0.0),
+                   motions: np.ndarray | None = None) -> np.ndarray:
         """(N, 3) the point ``tool`` (3,) of the tip frame [m], in B, for joint values q
-        (N, n) [rad or m]; the tip pose only, no Jacobian. like: a chain over these q whose
-        joint motions are taken where they are this chain's (:meth:`Chain.with_model`)."""
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        chain = Chain(self.model, q) if like is None or like.q is not q else like.with_model(
-            self.model)
-        state = chain.state(np.zeros(self.model.n), keep=False)
-        return state.p_tip + state.R_tip @ np.asarray(tool, dtype=float)
+        (N, n) [rad or m]; the point only, no frame, no Jacobian. motions: :meth:`motions`
+        of these q, if made before.
+
+        The chain as a product of joint motions in B, S_1(q_1) ... S_n(q_n) T_B_tip(0) (each
+        a turn about, or slide along, its axis line through the joint frame at zero), carried
+        from the tip to the base: each S_i x is three fixed linear maps of x (:attr:`_screws`)
+        weighted by joint i's coefficients, one product over all configurations and a
+        weighted sum along them; no product per configuration (numpy hands a stack of 4 x 4
+        products to BLAS one matrix at a time)."""
+        A = self.motions(q) if motions is None else motions
+        x = np.ones((4, 1))
+        x[:3, 0] = tool
+        x = self.geometry.T_base_tip @ x
+        out = np.ones((4, A.shape[-1]))  # columns [point; 1], one per configuration
+        for i in range(self.n - 1, -1, -1):
+            Y = (self._screws[i] @ x).reshape(3, 3, -1)  # the three parts of S_i x ...
+            Y = Y * A[i]  # ... weighted by joint i's coefficients,
+            np.add(Y[0], Y[1], out=out[:3])  # and summed
+            out[:3] += Y[2]
+            x = out  # (the first joint's parts are of one point: x is (4, 1) until then)
+        return out[:3].T.copy()
+
+    @functools.cached_property
+    def _screws(self) -> np.ndarray:
+        """(n, 9, 4): H_i @ x, for a point x = [p; 1] (a column) in B, gives three parts of
+        joint i's motion S_i p whose sum weighted by :meth:`motions` is S_i p. A turn about
+        the unit axis a through the point c (the joint frame's origin at zero), K the cross
+        product matrix of a: S p = cos p + sin (K p - K c) + (1 - cos) (a a.p + c - a a.c)
+        (Rodrigues' formula); a slide along a: S p = p + q a."""
+        g = self.geometry
+        F = g.joint_frames
+        n = len(F)
+        a = np.einsum("nij,nj->ni", F[:, :3, :3], g.axes)  # the axes in B
+        c = F[:, :3, 3]
+        H = np.zeros((n, 3, 3, 4))  # joint, part, output, input (x, y, z, 1)
+        H[:, 0, :, :3] = np.eye(3)
+        K = H[:, 1, :, :3]
+        K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -a[:, 2], a[:, 1], -a[:, 0]
+        K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = a[:, 2], -a[:, 1], a[:, 0]
+        H[:, 1, :, 3] = -np.einsum("nij,nj->ni", K, c)
+        H[:, 2, :, :3] = a[:, :, None] * a[:, None, :]
+        H[:, 2, :, 3] = c - a * np.einsum("ni,ni->n", a, c)[:, None]
+        slide = self.prismatic
+        if slide.any():
+            H[slide, 1], H[slide, 2] = 0.0, 0.0
+            H[slide, 1, :, 3] = a[slide]
+        out = H.reshape(n, 9, 4)
+        out.flags.writeable = False
+        return out
 
     @functools.cached_property
     def _joints(self) -> list:
