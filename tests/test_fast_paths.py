@@ -225,11 +225,11 @@ def test_lapack_from_scipys_file_is_the_public_routine():
 
     code = (
         "import sys, numpy as np\n"
-        "from kincal.identification.solver import _routines, _qr_r, lstsq\n"
+        "from kincal.identification.solver import _routines, qr_r, lstsq\n"
         "rng = np.random.default_rng(3); A = rng.normal(size=(50, 9)); b = rng.normal(size=50)\n"
         "fast = lstsq(A, b)\n"
         "B = rng.normal(size=(150, 46)) * np.logspace(0, 8, 46)\n"
-        "tri = [_qr_r(M) for M in (B, B[:40], np.asfortranarray(B), B[:, :9].T)]\n"
+        "tri = [qr_r(M) for M in (B, B[:40], np.asfortranarray(B), B[:, :9].T)]\n"
         "print('LINALG:', 'scipy.linalg' in sys.modules)\n"
         "import scipy.linalg\n"
         "want = scipy.linalg.lstsq(A, b, cond=1e-15, lapack_driver='gelsy', check_finite=False)[0]\n"

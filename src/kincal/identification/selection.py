@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 # Householder R of np.linalg.qr(A, mode="r") (dgeqrf, its numbers) at half numpy's call cost
-from kincal.identification.solver import _qr_r
+from kincal.identification.solver import qr_r
 
 # measurement frame and tool point names; pivot and planes of other measurement kinds, and
 # those of further measurement sets (set2.base.x, ...)
@@ -199,7 +199,7 @@ def _ordered(J: np.ndarray, order, free_of, norm_of, rank_tol: float, scale: flo
             dropped.append(cand[at])
             B, at = B[:, 1:], at + 1
             continue
-        R = _qr_r(B)
+        R = qr_r(B)
         d = np.abs(np.diagonal(R)).tolist()
         j = next((t for t, v in enumerate(d) if not v > lim[at + t]), len(d))
         kept += cand[at:at + j]
@@ -228,7 +228,7 @@ def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: in
     # J = Q R: R has the same column norms, projections and singular values, so all
     # that follows works on p x p numbers whatever the number of poses
     if J.shape[0] > J.shape[1]:
-        J = _qr_r(J)  # Householder: the rank decision needs full accuracy
+        J = qr_r(J)  # Householder: the rank decision needs full accuracy
     norms = np.linalg.norm(J, axis=0)
     if scale is None:
         scale = float(norms.max()) if norms.size else 1.0

@@ -128,7 +128,7 @@ class SolveSummary:
 _BELOW: dict = {}  # (rows, columns): indices below the diagonal
 
 
-def _qr_r(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
+def qr_r(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """np.linalg.qr(A, mode="r"): LAPACK's dgeqrf with its optimal work size, as numpy
     and scipy.linalg.qr call it, through scipy's wrapper (:func:`lapack`), which costs half
     of numpy's call (its checks and the copy of the result cost as much as the
@@ -166,7 +166,7 @@ def triangular_factor(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """
     m, n = A.shape
     if m <= TALL * n:
-        return _qr_r(A, overwrite)
+        return qr_r(A, overwrite)
     try:
         R1 = np.linalg.cholesky(A.T @ A).T
         d = np.abs(np.diag(R1))
@@ -175,7 +175,7 @@ def triangular_factor(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
         A1 = A @ np.linalg.inv(R1)  # small n x n inverse: much faster than a wide trsm
         return np.linalg.cholesky(A1.T @ A1).T @ R1
     except np.linalg.LinAlgError:
-        return _qr_r(A)
+        return qr_r(A)
 
 
 def _data_triangle(residual: Callable, r: np.ndarray, J: np.ndarray,

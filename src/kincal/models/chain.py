@@ -144,21 +144,6 @@ class Chain:
             raise ValueError("an error model must list its parameters joint by joint")
         self._by_joint = [slice(int(edges[i]), int(edges[i + 1])) for i in range(model.n)]
 
-    def with_model(self, model: ErrorModel) -> "Chain":
-        """This chain's poses with another error model: its joint motions reused when the
-        model's joints turn (slide) alike (the same kinds, screw axes and screw points, which
-        are all a joint motion reads; e.g. a corrected robot's URDF chain, whose placements
-        alone differ), else a chain made anew."""
-        m = self.model
-        if (self._motion is None or self.terms or model.kinds != m.kinds
-                or not np.array_equal(model.screw_axes, m.screw_axes)
-                or not np.array_equal(model.screw_points, m.screw_points)
-                or not np.array_equal(model.joint_of, m.joint_of)):
-            return Chain(model, self.q, self.approach, self.backlash, self.torque, self.compliance)
-        out = object.__new__(Chain)
-        out.__dict__.update(self.__dict__, model=model, _kept=[])  # not this model's states
-        return out
-
     def subset(self, rows) -> "Chain":
         return Chain(self.model, self.q[rows],
                      None if self.approach is None else self.approach[rows], self.backlash,
