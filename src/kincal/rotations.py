@@ -133,10 +133,16 @@ def base_angles(R: np.ndarray) -> np.ndarray:
 
 
 def kabsch(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rigid (R, t) minimising sum ||y_k - (R x_k + t)||^2 for (N, 3) point sets."""
-    xm, ym = x.mean(axis=0), y.mean(axis=0)
-    R = kabsch_rotation((x - xm).T @ (y - ym))
-    return R, ym - R @ xm
+    """Rigid (R, t) minimising sum ||y_k - (R x_k + t)||^2 for (N, 3) point sets; x a stack
+    (S, N, 3) of sets against the one y: (R (S, 3, 3), t (S, 3)), each set's numbers those
+    of its own call (products of stacks go matrix by matrix; means over the same axis)."""
+    if x.ndim == 2:
+        xm, ym = x.mean(axis=0), y.mean(axis=0)
+        R = kabsch_rotation((x - xm).T @ (y - ym))
+        return R, ym - R @ xm
+    xm, ym = x.mean(axis=1), y.mean(axis=0)
+    R = kabsch_rotation(np.matmul(np.swapaxes(x - xm[:, None], 1, 2), y - ym))
+    return R, ym - np.matmul(R, xm[:, :, None])[:, :, 0]
 
 
 _FLIP = np.array([1.0, 1.0, -1.0])

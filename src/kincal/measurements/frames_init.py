@@ -94,14 +94,11 @@ def round_sums(R_tip, p_tip, P) -> tuple:
 
 def _finish(R_tip, p_tip, P, tools) -> list:
     """Per tool point of ``tools`` (S, 3): (R_b, t_b) by Kabsch of its predicted points onto
-    P, it, and the rms [m] of the fit. The starts together, each one's numbers those of
-    :func:`kincal.rotations.kabsch` on its own (products of stacks of matrices, the same
-    per-matrix products; means over the same axis)."""
+    P, it, and the rms [m] of the fit; the starts together (:func:`kincal.rotations.kabsch`
+    of a stack: each one's numbers those of its own call)."""
     T = np.asarray(tools, dtype=float).reshape(-1, 3)
     x = p_tip + np.matmul(R_tip, T[:, None, :, None])[..., 0]  # (S, N, 3)
-    xm, ym = x.mean(axis=1), P.mean(axis=0)
-    Rb = kabsch_rotation(np.matmul(np.swapaxes(x - xm[:, None], 1, 2), P - ym))
-    tb = ym - np.matmul(Rb, xm[:, :, None])[:, :, 0]
+    Rb, tb = kabsch(x, P)
     fit = np.matmul(x, np.swapaxes(Rb, 1, 2)) + tb[:, None]
     rms = np.sqrt(np.mean(np.sum((P - fit) ** 2, axis=2), axis=1)).tolist()
     return list(zip(Rb, tb, T, rms))

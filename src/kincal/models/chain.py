@@ -150,47 +150,44 @@ class Chain:
                      None if self.torque is None else self.torque[rows], self.compliance)
 
     def _motions(self) -> list:
-        """[(N, 4, 4)] every joint's motion at its joint values, :meth:`joint_motion`'s
-        numbers: the revolute joints' together (one cos, one sin, one stacked product of
-        (cos, sin, 1 - cos, 1) with their bases: the per-joint products of joint_motion),
-        ~6 numpy calls per chain instead of per joint."""
-        m, N = self.model, self.N
+        """[(N, 4, 4)] every joint's motion at its joint values: the revolute joints'
+        together (:meth:`_turns`), ~6 numpy calls per chain instead of per joint."""
+        m = self.model
         rev = [i for i in range(m.n) if m.kinds[i] != "prismatic"]
         out = [None if i in rev else self.joint_motion(i, self.q[:, i]) for i in range(m.n)]
         if rev:
-            A = np.empty((len(rev), N, 4))
-            qr = self.q.T[rev]
-            np.cos(qr, out=A[:, :, 0])
-            np.sin(qr, out=A[:, :, 1])
-            np.subtract(1.0, A[:, :, 0], out=A[:, :, 2])
-            A[:, :, 3] = 1.0
-            B = np.stack([motion_basis(m.screw_axes[i], m.screw_points[i]) for i in rev])
-            M = np.empty((len(rev), N, 4, 4))
-            M[:, :, 3] = (0.0, 0.0, 0.0, 1.0)
-            M[:, :, :3] = np.matmul(A, B).reshape(len(rev), N, 3, 4)
-            for k, i in enumerate(rev):
-                out[i] = M[k]
+            for i, M in zip(rev, self._turns(rev, self.q.T[rev])):
+                out[i] = M
         return out
 
     def joint_motion(self, i: int, qi: np.ndarray) -> np.ndarray:
         """(N, 4, 4) motion of joint i by qi (N,), in its placed frame."""
         m = self.model
-        w = m.screw_axes[i]
+        if m.kinds[i] != "prismatic":
+            return self._turns([i], qi[None])[0]
         M = np.empty((len(qi), 4, 4))
         M[:, 3] = (0.0, 0.0, 0.0, 1.0)
-        if m.kinds[i] == "prismatic":
-            M[:, :3, :3] = np.eye(3)
-            M[:, :3, 3] = qi[:, None] * w
-        else:  # a turn about the axis line through the screw point c: x -> R (x - c) + c
-            # R = c I + s K + (1 - c) w w^T and R c, all twelve entries of [R | c - R c]
-            # as one product of (cos, sin, 1 - cos, 1) with the joint's constant basis
-            # (:func:`motion_basis`): a few numpy calls instead of a dozen per joint
-            A = np.empty((len(qi), 4))
-            np.cos(qi, out=A[:, 0])
-            np.sin(qi, out=A[:, 1])
-            np.subtract(1.0, A[:, 0], out=A[:, 2])
-            A[:, 3] = 1.0
-            M[:, :3] = (A @ motion_basis(w, m.screw_points[i])).reshape(len(qi), 3, 4)
+        M[:, :3, :3] = np.eye(3)
+        M[:, :3, 3] = qi[:, None] * m.screw_axes[i]
+        return M
+
+    def _turns(self, joints: list, Q: np.ndarray) -> np.ndarray:
+        """(len(joints), N, 4, 4) the motions of the revolute ``joints`` by values Q
+        (len(joints), N): a turn about the axis line through the screw point c, x -> R (x - c)
+        + c, with R = c I + s K + (1 - c) w w^T; all twelve entries of [R | c - R c] as one
+        product of (cos, sin, 1 - cos, 1) with each joint's constant basis
+        (:func:`motion_basis`), stacked over the joints (a product per joint, the same
+        numbers whether one joint or many)."""
+        m, (k, N) = self.model, Q.shape
+        A = np.empty((k, N, 4))
+        np.cos(Q, out=A[:, :, 0])
+        np.sin(Q, out=A[:, :, 1])
+        np.subtract(1.0, A[:, :, 0], out=A[:, :, 2])
+        A[:, :, 3] = 1.0
+        B = np.stack([motion_basis(m.screw_axes[i], m.screw_points[i]) for i in joints])
+        M = np.empty((k, N, 4, 4))
+        M[:, :, 3] = (0.0, 0.0, 0.0, 1.0)
+        M[:, :, :3] = np.matmul(A, B).reshape(k, N, 3, 4)
         return M
 
     def tip(self, x: np.ndarray, backlash: np.ndarray | None = None

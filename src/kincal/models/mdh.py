@@ -212,16 +212,9 @@ class MdhModel(ErrorModel):
         if a.ndim == 1:  # one vector: entry by entry (below), not ~40 calls on n-element arrays
             return _placements_of(a, d, ca, sa, cb, sb, ct, st)
         A = np.zeros(a.shape + (4, 4))
-        # R = Rx(alpha) Ry(beta) Rz(theta), written out
-        A[..., 0, 0], A[..., 0, 1], A[..., 0, 2] = cb * ct, -cb * st, sb
-        A[..., 1, 0] = ca * st + sa * sb * ct
-        A[..., 1, 1] = ca * ct - sa * sb * st
-        A[..., 1, 2] = -sa * cb
-        A[..., 2, 0] = sa * st - ca * sb * ct
-        A[..., 2, 1] = sa * ct + ca * sb * st
-        A[..., 2, 2] = ca * cb
-        A[..., :3, 3] = A[..., :3, 2] * d[..., None]
-        A[..., 0, 3] += a
+        for r, row in enumerate(_rows(a, d, ca, sa, cb, sb, ct, st)):
+            for c, v in enumerate(row):
+                A[..., r, c] = v
         A[..., 3, 3] = 1.0
         return A
 
@@ -295,18 +288,26 @@ class MdhModel(ErrorModel):
         return out
 
 
+def _rows(a, d, ca, sa, cb, sb, ct, st) -> tuple:
+    """The top three rows of A = Tx(a) Rx(alpha) Ry(beta) Rz(theta) Tz(d), written out, from
+    a, d and the cosines and sines of alpha, beta, theta: numbers or arrays alike (the same
+    elementwise IEEE operations in the same order, so the same numbers)."""
+    r12, r22 = -sa * cb, ca * cb
+    return ((cb * ct, -cb * st, sb, sb * d + a),
+            (ca * st + sa * sb * ct, ca * ct - sa * sb * st, r12, r12 * d),
+            (sa * st - ca * sb * ct, sa * ct + ca * sb * st, r22, r22 * d))
+
+
 def _placements_of(*columns) -> np.ndarray:
     """(n, 4, 4) :meth:`MdhModel.placements` of one vector from its columns (a, d, cos and
-    sin of alpha, beta, theta; (n,) each) in Python numbers: the same products and sums in
-    the same order as the arrays' (elementwise IEEE operations), so the same numbers."""
-    rows: list = []
-    for a, d, ca, sa, cb, sb, ct, st in zip(*(c.tolist() for c in columns)):
-        r12, r22 = -sa * cb, ca * cb
-        rows += (cb * ct, -cb * st, sb, sb * d + a,
-                 ca * st + sa * sb * ct, ca * ct - sa * sb * st, r12, r12 * d,
-                 sa * st - ca * sb * ct, sa * ct + ca * sb * st, r22, r22 * d,
-                 0.0, 0.0, 0.0, 1.0)
-    return np.array(rows).reshape(-1, 4, 4)
+    sin of alpha, beta, theta; (n,) each) in Python numbers (:func:`_rows`): fewer calls
+    than ~40 numpy operations on n-element arrays."""
+    out: list = []
+    for values in zip(*(c.tolist() for c in columns)):
+        for row in _rows(*values):
+            out += row
+        out += (0.0, 0.0, 0.0, 1.0)
+    return np.array(out).reshape(-1, 4, 4)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
