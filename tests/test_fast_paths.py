@@ -115,18 +115,36 @@ def test_chain_without_cached_motions_is_the_same(monkeypatch):
     assert np.array_equal(state.p_tip, cached.p_tip) and np.array_equal(state.R_tip, cached.R_tip)
 
 
-def test_rodrigues_is_the_old_sum_to_the_bit():
-    """The rotations with fewer temporaries are c I + s K + (1 - c) w w^T exactly."""
-    from kincal.models.chain import rodrigues
+def test_axis_rotations_are_rotation_vectors():
+    """kincal's one Rodrigues formula (rotations.axis_rotations, one axis or one per angle)
+    against scipy's rotation vectors, and the turn about an axis line (turn_parts) against
+    R (x - c) + c; skew(v) u = v x u."""
+    from scipy.spatial.transform import Rotation
+
+    from kincal.rotations import axis_rotation, axis_rotations, skew, turn_parts
 
     rng = np.random.default_rng(4)
     for _ in range(5):
         w = rng.normal(size=3)
         w /= np.linalg.norm(w)
         q = np.concatenate([[0.0, np.pi, -np.pi / 2], rng.uniform(-7, 7, 500)])
-        c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
-        K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-        assert np.array_equal(rodrigues(w, q), c * np.eye(3) + s * K + (1.0 - c) * np.outer(w, w))
+        want = Rotation.from_rotvec(q[:, None] * w).as_matrix()
+        assert np.abs(axis_rotations(w, q) - want).max() < 1e-14
+        W = rng.normal(size=(len(q), 3))
+        W /= np.linalg.norm(W, axis=1)[:, None]
+        want = Rotation.from_rotvec(q[:, None] * W).as_matrix()
+        assert np.abs(axis_rotations(W, q) - want).max() < 1e-14
+        assert np.abs(axis_rotation(w, q[7]) - Rotation.from_rotvec(q[7] * w).as_matrix()
+                      ).max() < 1e-14
+        u = rng.normal(size=(4, 3))
+        assert np.abs(np.einsum("ij,nj->ni", skew(w), u) - np.cross(w, u)).max() < 1e-15
+        assert np.abs(skew(u) @ w - np.cross(u, w)).max() < 1e-15
+        c, x = rng.normal(size=3), rng.normal(size=3)
+        P = turn_parts(w, c)
+        for a in q[:20]:
+            T = np.cos(a) * P[0] + np.sin(a) * P[1] + (1 - np.cos(a)) * P[2]
+            R = Rotation.from_rotvec(a * w).as_matrix()
+            assert np.abs(T[:, :3] @ x + T[:, 3] - (R @ (x - c) + c)).max() < 1e-14
 
 
 def test_cv_path_equals_fold_fits_from_scratch():

@@ -19,9 +19,10 @@ from kincal.export.readable_export import corrected_text
 from kincal.export.urdf_export import edit_joint_origins
 from kincal.models import build as build_model
 from kincal.models import mdh, offsets, placement
-from kincal.models.chain import Chain, rodrigues
+from kincal.models.chain import Chain
 from kincal.models.kinematics import ChainKinematics
 from kincal.robot import Robot
+from kincal.rotations import axis_rotation
 
 TOOL = np.array([0.03, -0.02, 0.05])
 STEP = 1e-6  # central differences: errors O(STEP^2) ~ 1e-12 plus roundoff / STEP ~ 1e-10
@@ -195,7 +196,7 @@ def test_offset_of_a_reversed_joint_is_written_into_its_own_origin(tmp_path):
             assert np.abs(D[:3, :3] - np.eye(3)).max() < 1e-13
         else:
             assert np.abs(D[:3, 3]).max() < 1e-13
-            assert np.abs(D[:3, :3] - rodrigues(axis, np.array([0.01]))[0]).max() < 1e-13
+            assert np.abs(D[:3, :3] - axis_rotation(axis, 0.01)).max() < 1e-13
 
 
 def test_placement_names_are_the_origins_it_writes(tmp_path):

@@ -4,6 +4,11 @@ Conventions:
 - URDF ``rpy`` = (roll, pitch, yaw) means R = Rz(yaw) @ Ry(pitch) @ Rx(roll) [rad].
 - The measurement frame of the paper uses R = Rx(rx) @ Ry(ry) @ Rz(rz) [rad].
 - Homogeneous transforms are 4x4 arrays; batches are (..., 4, 4).
+
+The one home of the small pieces every module needs: cross products (:func:`skew`,
+:func:`cross_rows`), Rodrigues' formula (:func:`axis_rotations`, its turn about an axis
+line as fixed parts, :func:`turn_parts`, and the exponential and logarithm of rotation
+vectors, :func:`rotation_exp`, :func:`rotation_log`), Kabsch's fit and quaternions.
 """
 
 from __future__ import annotations
@@ -112,9 +117,64 @@ def base_rotation(rx: float, ry: float, rz: float) -> np.ndarray:
     return rotx(rx) @ roty(ry) @ rotz(rz)
 
 
-def skew(v: np.ndarray) -> np.ndarray:
-    x, y, z = v
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+def skew(v) -> np.ndarray:
+    """(..., 3, 3) the cross-product matrices K of vectors v (..., 3): K u = v x u."""
+    v = np.asarray(v, dtype=float)
+    K = np.zeros(v.shape + (3,))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return K
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis, broadcasting (np.cross is slow on small batches)."""
+    if a.shape != b.shape:
+        a, b = np.broadcast_arrays(a, b)
+    out = np.empty(a.shape)
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+def axis_rotations(w, angles) -> np.ndarray:
+    """(N, 3, 3) rotations by the angles (N,) [rad] about the unit axis w (3,), or about
+    one unit axis per angle (N, 3): Rodrigues' formula R = c I + s K + (1 - c) w w^T, kincal's
+    one writing of it (c, s the angle's cosine and sine, K = :func:`skew` (w))."""
+    w, q = np.asarray(w, dtype=float), np.asarray(angles, dtype=float)
+    c = np.cos(q)
+    if w.ndim == 1:  # one axis: two (N, 3, 3) arrays made, no more
+        R = np.multiply.outer(np.sin(q), skew(w))
+        R += np.multiply.outer(1.0 - c, np.outer(w, w))
+    else:
+        R = np.sin(q)[:, None, None] * skew(w)
+        R += (1.0 - c)[:, None, None] * (w[:, :, None] * w[:, None, :])
+    R.reshape(len(R), 9)[:, ::4] += c[:, None]  # the diagonal, as a view (no gather)
+    return R
+
+
+def axis_rotation(w, angle: float) -> np.ndarray:
+    """(3, 3) the rotation by ``angle`` [rad] about the unit axis w (3,): one
+    :func:`axis_rotations`."""
+    return axis_rotations(w, np.array([float(angle)]))[0]
+
+
+def turn_parts(w, c) -> np.ndarray:
+    """(..., 3, 3, 4): the turn by q about the axis line of unit direction w (..., 3)
+    through the point c (..., 3), x -> R (x - c) + c, as [R | c - R c] = cos q P_0 + sin q
+    P_1 + (1 - cos q) P_2 with these fixed parts (:func:`axis_rotations`' formula): P_0 =
+    [I | 0], P_1 = [K | -K c], P_2 = [w w^T | c - w (w . c)], one set per axis line. The
+    chains' motions are sums of them (:mod:`kincal.models.chain`,
+    :mod:`kincal.models.kinematics`)."""
+    w, c = np.asarray(w, dtype=float), np.asarray(c, dtype=float)
+    K = skew(w)
+    P = np.zeros(w.shape[:-1] + (3, 3, 4))
+    P[..., 0, :, :3] = np.eye(3)
+    P[..., 1, :, :3] = K
+    P[..., 1, :, 3] = -np.einsum("...ij,...j->...i", K, c)
+    P[..., 2, :, :3] = w[..., :, None] * w[..., None, :]
+    P[..., 2, :, 3] = c - w * np.einsum("...i,...i->...", w, c)[..., None]
+    return P
 
 
 def rotation_angle(R: np.ndarray) -> float:
@@ -207,6 +267,18 @@ def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
         q[3] = (R[m, j] - R[j, m]) / s
     v = np.array(q)
     return v if v[3] >= 0 else -v
+
+
+def rotation_exp(phi: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotations of rotation vectors phi (N, 3) [rad]: :func:`axis_rotations` about
+    phi / |phi| by |phi|, the inverse of :func:`rotation_log` (series where |phi| < 1e-8)."""
+    theta = np.linalg.norm(phi, axis=1)
+    small = theta < 1e-8
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta ** 2 / 6.0, np.sin(t) / t)
+    b = np.where(small, 0.5 - theta ** 2 / 24.0, (1.0 - np.cos(t)) / t ** 2)
+    K = skew(phi)
+    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
 
 
 def rotation_log(R: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ import numpy as np
 
 from kincal.export.urdf_export import EditResult, edit_joint_origins
 from kincal.robot import Robot
-from kincal.rotations import rotation_angle
+from kincal.rotations import axis_rotation, rotation_angle, transform
 
 SWING = 0.05  # [rad] an rpy component moving this much more than the rotation itself
 
@@ -72,10 +72,7 @@ def _swing(edit, R_old: np.ndarray, R_new: np.ndarray) -> float:
 
 
 def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    T = np.eye(4)
-    T[:3, :3] = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
-    return T
+    return transform(axis_rotation(axis, angle))
 
 
 def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,

@@ -45,8 +45,7 @@ import numpy as np
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.kind import DEFAULT_SIGMA, KindModel, SampleSet, read_set, readonly
 from kincal.measurements.plane import MIN_SPREAD, fit_plane, normal, plane_indices, plane_labels
-from kincal.models.chain import cross_rows
-from kincal.rotations import rotx, roty
+from kincal.rotations import cross_rows, rotx, roty, skew
 
 DEFAULT_TILT_SIGMA_DEG = 0.05  # [deg] tilt noise assumed when a set states none
 MIN_TOUCHES = 3  # per plane: its tilt and offset need three touches not on a line
@@ -223,7 +222,7 @@ class FlushKind(KindModel):
         N = self.N
         G = -c[:, None, None] * tilt_gradient(m)                  # d(tilt rows)/dm
         # a small turn w (base frame) of the contact frame changes m by A^T [n]x w
-        S = G @ np.einsum("nji,njk->nik", A, cross_matrices(n))   # d(tilt rows)/d(turn)
+        S = G @ np.einsum("nji,njk->nik", A, skew(n))   # d(tilt rows)/d(turn)
         if kinematic:
             Kp, Bp = s.point_columns(s.p_tip)
             Kr, Br = s.rotation_columns()
@@ -332,14 +331,6 @@ class FlushKind(KindModel):
                 "(--tool-offset; its offset along the face normal is the plane's offset's), "
                 "what moves the tip within the plane or about its normal is not identified, "
                 "and the planes are in the base frame",)
-
-
-def cross_matrices(v: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) [v]x of rows v (N, 3)."""
-    K = np.zeros((len(v), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return K
 
 
 def planning_set(error_model, q, tool, planes=None) -> tuple[FlushData, np.ndarray]:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.errors import DataError
+from kincal.rotations import rotation_exp, rotations_about
 
 FORMATS = ("quat-xyzw", "quat-wxyz", "rpy-zyx", "rpy-xyz", "rotvec", "matrix")
 DEFAULT_FORMAT = "quat-xyzw"
@@ -127,8 +128,8 @@ def rotations(values: np.ndarray, fmt: str, angle_scale: float = 1.0, source: st
         return U @ Vt
     a = v * angle_scale
     if fmt == "rotvec":
-        return _exp(a)
-    Rx, Ry, Rz = (_axis_rotation(a[:, k], k) for k in range(3))
+        return rotation_exp(a)
+    Rx, Ry, Rz = (rotations_about(k, a[:, k]) for k in range(3))
     return Rz @ Ry @ Rx if fmt == "rpy-zyx" else Rx @ Ry @ Rz
 
 
@@ -140,29 +141,6 @@ def _refuse(bad_amount, source, rows, columns, what, verb, shown, expected) -> N
                         f"{shown[bad[0]]:.6g}, {expected} ({bad.size} of {len(rows)} rows are "
                         f"off by more than {UNIT_TOL:g}; worst line {rows[k]}); or is the "
                         "orientation format another? (--orientation-format, --orientation-columns)")
-
-
-def _axis_rotation(angle: np.ndarray, axis: int) -> np.ndarray:
-    """(N, 3, 3) rotations by ``angle`` [rad] about the x (0), y (1) or z (2) axis."""
-    c, s = np.cos(angle), np.sin(angle)
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    R = np.zeros((len(angle), 3, 3))
-    R[:, axis, axis] = 1.0
-    R[:, i, i], R[:, j, j], R[:, i, j], R[:, j, i] = c, c, -s, s
-    return R
-
-
-def _exp(phi: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) exp of rotation vectors (N, 3) [rad] (Rodrigues)."""
-    theta = np.linalg.norm(phi, axis=1)
-    small = theta < 1e-8
-    t = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - theta ** 2 / 6.0, np.sin(t) / t)
-    b = np.where(small, 0.5 - theta ** 2 / 24.0, (1.0 - np.cos(t)) / t ** 2)
-    K = np.zeros((len(phi), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -phi[:, 2], phi[:, 1], -phi[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = phi[:, 2], -phi[:, 1], phi[:, 0]
-    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
 
 
 def written_columns(fmt: str, position_columns=None) -> tuple[str, ...]:
@@ -194,12 +172,12 @@ def orientation_values(R: np.ndarray, fmt: str, angle_scale: float = 1.0) -> np.
         a = q[:, :3] * k[:, None]
     elif fmt == "rpy-zyx":  # R = Rz(c) Ry(b) Rx(a): a, then b and c from R Rx(a)^T
         x = np.arctan2(R[:, 2, 1], R[:, 2, 2])  # so that the angles give R back to
-        M = R @ np.transpose(_axis_rotation(x, 0), (0, 2, 1))  # rounding even at gimbal lock
+        M = R @ np.transpose(rotations_about(0, x), (0, 2, 1))  # rounding even at gimbal lock
         a = np.column_stack([x, np.arctan2(-M[:, 2, 0], M[:, 2, 2]),
                              np.arctan2(-M[:, 0, 1], M[:, 1, 1])])
     else:  # rpy-xyz: R = Rx(a) Ry(b) Rz(c): a, then b and c from Rx(a)^T R
         x = np.arctan2(-R[:, 1, 2], R[:, 2, 2])
-        M = np.transpose(_axis_rotation(x, 0), (0, 2, 1)) @ R
+        M = np.transpose(rotations_about(0, x), (0, 2, 1)) @ R
         a = np.column_stack([x, np.arctan2(M[:, 0, 2], M[:, 2, 2]),
                              np.arctan2(M[:, 1, 0], M[:, 1, 1])])
     return a / angle_scale

@@ -21,8 +21,7 @@ import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.kind import KindModel, SampleSet, read_set, readonly
-from kincal.models.chain import cross_rows
-from kincal.rotations import rotx, roty
+from kincal.rotations import cross_rows, rotx, roty
 
 MIN_SPREAD = 1e-3  # [m] RMS spread of a plane's contacts across their best line
 

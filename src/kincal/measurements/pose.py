@@ -38,8 +38,8 @@ from kincal.measurements.kind import (
     read_set,
     readonly,
 )
-from kincal.models.chain import cross_rows
-from kincal.rotations import base_angles, base_rotation, rotx, roty, rotz
+from kincal.rotations import (base_angles, base_rotation, cross_rows, rotation_log, rotx, roty,
+                              rotz, skew)
 
 DEFAULT_ORIENTATION_SIGMA_DEG = 0.01  # [deg], a 6-DoF laser-tracker probe's order
 QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
@@ -138,18 +138,6 @@ class PoseData(SampleSet):
                    rows=c.rows, source=c.source, approach=c.approach, ignored_columns=c.ignored)
 
 
-def log_so3(R: np.ndarray) -> np.ndarray:
-    """(N, 3) rotation vectors of rotations R (N, 3, 3) (angles below pi)."""
-    vee = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]],
-                   axis=1)
-    s = np.linalg.norm(vee, axis=1) / 2.0
-    c = (np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0
-    theta = np.arctan2(s, c)
-    small = s < 1e-9
-    k = np.where(small, 0.5, theta / (2.0 * np.where(small, 1.0, s)))
-    return vee * k[:, None]
-
-
 def right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
     """(N, 3, 3) J_r^{-1}(phi): log(exp(phi) exp(e)) = phi + J_r^{-1}(phi) e + O(e^2)."""
     theta = np.linalg.norm(phi, axis=1)
@@ -157,9 +145,7 @@ def right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
     t = np.where(small, 1.0, theta)
     coef = np.where(small, 1.0 / 12.0,
                     1.0 / t ** 2 - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
-    K = np.zeros((len(phi), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -phi[:, 2], phi[:, 1], -phi[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = phi[:, 2], -phi[:, 1], phi[:, 0]
+    K = skew(phi)
     return np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
 
 
@@ -197,7 +183,7 @@ class PoseKind(KindModel):
         P_base = s.p_tip + s.R_tip @ t
         p = P_base @ Rb.T + base[:3]
         R = Rb @ s.R_tip @ Rt
-        phi = log_so3(d.rotations @ np.transpose(R, (0, 2, 1)))
+        phi = rotation_log(d.rotations @ np.transpose(R, (0, 2, 1)))
         c = d.ratio()[:, None]
         r = np.concatenate([d.positions - p, c * phi], axis=1)
         if not jacobian:

@@ -21,29 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from kincal.models.base import ErrorModel
-
-
-def rodrigues(w: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotations by angles q (N,) about the unit axis w (3,)."""
-    c = np.cos(q)
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    # s K + (1 - c) w w^T, then c on the diagonal: the same sums as c I + s K + (1 - c) w w^T
-    # (adding the zeros changes no bit) with two (N, 3, 3) arrays made instead of six
-    R = np.multiply.outer(np.sin(q), K)
-    R += np.multiply.outer(1.0 - c, np.outer(w, w))
-    R.reshape(len(R), 9)[:, ::4] += c[:, None]  # the diagonal, as a view (no gather)
-    return R
-
-
-def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis, broadcasting (np.cross is slow on small batches)."""
-    if a.shape != b.shape:
-        a, b = np.broadcast_arrays(a, b)
-    out = np.empty(a.shape)
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
+from kincal.rotations import cross_rows, turn_parts
 
 
 def axis_cross(i: int, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -70,19 +48,15 @@ def equal_runs(x: np.ndarray) -> list[tuple[int, int]]:
 
 
 def motion_basis(w: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """(4, 12): the top rows [R | c - R c] of a turn by q about the unit axis w (3,) through
-    the point c (3,), flattened, are (cos q, sin q, 1 - cos q, 1) times this matrix
-    (:func:`rodrigues`: R = cos I + sin K + (1 - cos) w w^T)."""
+    """(3, 12): the top rows [R | c - R c] of a turn by q about the unit axis w (3,) through
+    the point c (3,), flattened, are (cos q, sin q, 1 - cos q) times this matrix
+    (:func:`kincal.rotations.turn_parts`), kept per axis line."""
     key = (w.tobytes(), np.asarray(c, float).tobytes())
     B = _BASES.get(key)
     if B is None:
-        K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-        B = np.zeros((4, 3, 4))
-        B[0, :, :3], B[1, :, :3], B[2, :, :3] = np.eye(3), K, np.outer(w, w)
-        B[0, :, 3], B[1, :, 3], B[2, :, 3], B[3, :, 3] = -c, -K @ c, -w * (w @ c), c
         if len(_BASES) > 256:
             _BASES.clear()
-        B = _BASES[key] = B.reshape(4, 12)
+        B = _BASES[key] = turn_parts(w, c).reshape(3, 12)
     return B
 
 
@@ -175,15 +149,14 @@ class Chain:
         """(len(joints), N, 4, 4) the motions of the revolute ``joints`` by values Q
         (len(joints), N): a turn about the axis line through the screw point c, x -> R (x - c)
         + c, with R = c I + s K + (1 - c) w w^T; all twelve entries of [R | c - R c] as one
-        product of (cos, sin, 1 - cos, 1) with each joint's constant basis
+        product of (cos, sin, 1 - cos) with each joint's constant basis
         (:func:`motion_basis`), stacked over the joints (a product per joint, the same
         numbers whether one joint or many)."""
         m, (k, N) = self.model, Q.shape
-        A = np.empty((k, N, 4))
+        A = np.empty((k, N, 3))
         np.cos(Q, out=A[:, :, 0])
         np.sin(Q, out=A[:, :, 1])
         np.subtract(1.0, A[:, :, 0], out=A[:, :, 2])
-        A[:, :, 3] = 1.0
         B = np.stack([motion_basis(m.screw_axes[i], m.screw_points[i]) for i in joints])
         M = np.empty((k, N, 4, 4))
         M[:, :, 3] = (0.0, 0.0, 0.0, 1.0)

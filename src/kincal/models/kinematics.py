@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kincal.models import offsets
-from kincal.rotations import rotation_log
+from kincal.rotations import rotation_log, turn_parts
 
 if TYPE_CHECKING:
     from kincal.robot import ChainGeometry
@@ -113,20 +113,14 @@ class ChainKinematics:
         joint i's motion S_i p whose sum weighted by :meth:`motions` is S_i p. A turn about
         the unit axis a through the point c (the joint frame's origin at zero), K the cross
         product matrix of a: S p = cos p + sin (K p - K c) + (1 - cos) (a a.p + c - a a.c)
-        (Rodrigues' formula); a slide along a: S p = p + q a."""
+        (:func:`kincal.rotations.turn_parts`); a slide along a: S p = p + q a."""
         g = self.geometry
         F = g.joint_frames
         n = len(F)
         a = np.einsum("nij,nj->ni", F[:, :3, :3], g.axes)  # the axes in B
         c = F[:, :3, 3]
-        H = np.zeros((n, 3, 3, 4))  # joint, part, output, input (x, y, z, 1)
-        H[:, 0, :, :3] = np.eye(3)
-        K = H[:, 1, :, :3]
-        K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -a[:, 2], a[:, 1], -a[:, 0]
-        K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = a[:, 2], -a[:, 1], a[:, 0]
-        H[:, 1, :, 3] = -np.einsum("nij,nj->ni", K, c)
-        H[:, 2, :, :3] = a[:, :, None] * a[:, None, :]
-        H[:, 2, :, 3] = c - a * np.einsum("ni,ni->n", a, c)[:, None]
+        # joint, part, output, input (x, y, z, 1): the turn's parts about its line in B
+        H = turn_parts(a, c)
         slide = self.prismatic
         if slide.any():
             H[slide, 1], H[slide, 2] = 0.0, 0.0
@@ -140,10 +134,10 @@ class ChainKinematics:
         """Per joint a fixed (4, 18) matrix G = P [E_cos E_sin E_(1-cos) E_1 | w | c]: the
         frame T = [R | t] (3, 4) before joint i's placement P times G gives at once the
         four parts of the frame after its motion M(q) = E_cos cos q + E_sin sin q +
-        E_(1-cos) (1 - cos q) + E_1 (Rodrigues' formula about the line through c: [w]x,
-        w w^T, and u = c - w (w . c), v = w x c for the translation), the axis a = R P w and
-        the point R P c + t of the axis line. A prismatic joint: E_cos = I, E_sin = 0,
-        E_(1-cos) = 0, and the slide a q added to the translation."""
+        E_(1-cos) (1 - cos q) + E_1 (the turn about the line through c,
+        :func:`kincal.rotations.turn_parts`, and E_1 the homogeneous row), the axis a =
+        R P w and the point R P c + t of the axis line. A prismatic joint: E_cos = I,
+        E_sin = 0, E_(1-cos) = 0, and the slide a q added to the translation."""
         m, out = self.model, []
         for i in range(m.n):
             w, c = m.screw_axes[i], m.screw_points[i]
@@ -151,9 +145,7 @@ class ChainKinematics:
             E[0, :3, :3] = np.eye(3)
             E[3, 3, 3] = 1.0
             if m.kinds[i] != "prismatic":
-                K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-                E[1, :3, :3], E[1, :3, 3] = K, -(K @ c)
-                E[2, :3, :3], E[2, :3, 3] = np.outer(w, w), c - w * (w @ c)
+                E[:3, :3] = turn_parts(w, c)
             cols = np.hstack([E[0], E[1], E[2], E[3], np.r_[w, 0.0][:, None],
                               np.r_[c, 1.0][:, None]])
             out.append((m.origins[i] @ cols, m.kinds[i] == "prismatic"))

@@ -59,8 +59,8 @@ import numpy as np
 
 from kincal.errors import OptionError
 from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
-from kincal.models.chain import cross_rows, equal_runs
-from kincal.rotations import inverse, transform
+from kincal.models.chain import equal_runs
+from kincal.rotations import cross_rows, inverse, transform
 
 PARALLEL_TOL = 1e-6  # |sin| of the angle between axes below which they count as parallel
 TOOL_AXIS_WARNING = 5e-3  # [m] a tool point nearer the last joint axis: warn (last_axis_distance)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.models.base import OFFSET, ErrorModel
-from kincal.rotations import inverse, transform
+from kincal.rotations import axis_rotation, inverse, transform
 
 
 @dataclass(frozen=True)
@@ -50,8 +50,7 @@ class OffsetsModel(ErrorModel):
             if self.kinds[i] == "prismatic":
                 M = transform(None, w * x[i])
             else:
-                K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-                M = transform(np.eye(3) + np.sin(x[i]) * K + (1 - np.cos(x[i])) * K @ K, None)
+                M = transform(axis_rotation(w, x[i]), None)
             out[name] = self.urdf[i] @ M
         return out
 
@@ -59,8 +58,7 @@ class OffsetsModel(ErrorModel):
         w = self.screw_axes[i]
         if self.kinds[i] == "prismatic":
             return transform(None, w * value)
-        K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-        return transform(np.eye(3) + np.sin(value) * K + (1 - np.cos(value)) * K @ K, None)
+        return transform(axis_rotation(w, value), None)
 
     def placements(self, x) -> np.ndarray:
         x = np.asarray(x, float).ravel()

@@ -24,7 +24,7 @@ from kincal.measurements.plane import PlaneData, normal
 from kincal.measurements.pose import PoseData
 from kincal.models.base import ErrorModel
 from kincal.models.chain import Chain
-from kincal.rotations import base_rotation, rotx, roty
+from kincal.rotations import base_rotation, rotation_exp, rotx, roty
 
 
 def tool_points(model: ErrorModel, kin, q, tool) -> np.ndarray:
@@ -42,13 +42,11 @@ def simulate_points(model, kin, base, tool, q, noise, rng, source="<simulated po
 def simulate_poses(model, kin, base, tool6, q, noise, noise_deg, rng,
                    source="<simulated poses>") -> PoseData:
     """tool6: (x, y, z [m], rx, ry, rz [rad]) of the tool frame in the tip frame."""
-    from scipy.spatial.transform import Rotation
-
     s = Chain(model, q).state(np.asarray(kin, float), None, keep=False)
     Rb = base_rotation(*base[3:])
     P = (s.p_tip + s.R_tip @ tool6[:3]) @ Rb.T + base[:3]
     R = Rb @ s.R_tip @ base_rotation(*tool6[3:])
-    turn = Rotation.from_rotvec(rng.normal(size=(len(q), 3)) * np.radians(noise_deg)).as_matrix()
+    turn = rotation_exp(rng.normal(size=(len(q), 3)) * np.radians(noise_deg))
     return PoseData(joint_names=model.joint_names, joint_values=q,
                     positions=P + rng.normal(size=P.shape) * noise, rotations=turn @ R,
                     orientation_sigma_deg=max(noise_deg, 1e-6),

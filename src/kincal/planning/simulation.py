@@ -21,7 +21,7 @@ from kincal.models.backlash import approach_directions
 from kincal.models.kinematics import ChainKinematics
 from kincal.models.base import ErrorModel
 from kincal.robot import Robot
-from kincal.rotations import rotx
+from kincal.rotations import axis_rotations, rotx
 
 
 @dataclass(frozen=True)
@@ -91,12 +91,7 @@ def _rotations_near(R0: np.ndarray, max_angle: float, rng, count: int,
         axes[k] = rng.normal(size=3)
         angles[k] = rng.uniform(0, max_angle)
     axes /= np.linalg.norm(axes, axis=1)[:, None]
-    K = np.zeros((count, 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axes[:, 2], axes[:, 1], -axes[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = axes[:, 2], -axes[:, 1], axes[:, 0]
-    turn = np.eye(3) + np.sin(angles)[:, None, None] * K + (
-        1 - np.cos(angles))[:, None, None] * (K @ K)
-    return turn @ R0
+    return axis_rotations(axes, angles) @ R0
 
 
 def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.Generator,
