@@ -89,3 +89,18 @@ def test_right_jacobian_inverse_near_zero_and_large(rng):
             up = rotation_log((E @ Rotation.from_rotvec(e).as_matrix())[None])[0]
             dn = rotation_log((E @ Rotation.from_rotvec(-e).as_matrix())[None])[0]
             assert np.allclose((up - dn) / (2 * h), Ji[n, :, c], atol=1e-6)
+
+
+def test_pose_residual_sees_a_frame_turned_half_round(rng):
+    """A measured orientation 180 deg from the model's (a flipped frame) is an orientation
+    residual of pi (times the rows' weight ratio), not of nearly nothing: the pose kind's
+    logarithm is rotation_log, whose axis near pi comes from the symmetric part."""
+    robot = Robot.load("ec66", tip="flange")
+    model = models.build("complete", robot.geometry)
+    q = random_joint_values(robot.geometry, rng, 4)
+    flipped = robot.tip_poses(q)[:, :3, :3] @ base_rotation(np.pi, 0.0, 0.0)
+    data = PoseData(joint_names=robot.joint_names, joint_values=q,
+                    positions=np.zeros((4, 3)), rotations=flipped, sigma_deg=np.full(4, 0.05))
+    kind = PoseKind(model, data)
+    r = kind.residuals(model.nominal, np.zeros(kind.n_frames), None)  # base and tool: identity
+    assert np.allclose(np.linalg.norm(r[:, 3:], axis=1), np.pi * data.ratio(), rtol=1e-9)
