@@ -160,14 +160,10 @@ def calibration_options(c: Calibrate):
     from kincal.identification.prior import read_prior
     from kincal.identification.solver import SolverOptions
 
-    lam: str | float = c.lam
-    if lam not in ("auto", "cv", "evidence"):
-        try:
-            lam = float(c.lam)
-        except ValueError:
-            raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
-                              f"{lam!r}") from None
-    return CalibrationOptions(model=c.model, method=c.method, lam=lam, folds=c.folds,
+    from kincal.cli.checks import lambda_value
+
+    return CalibrationOptions(model=c.model, method=c.method, lam=lambda_value(c.lam),
+                              folds=c.folds,
                               seed=c.seed, prior_mm=c.prior_mm, prior_deg=c.prior_deg,
                               noise_mm=c.noise_mm, fix=c.fix, free=c.free, backlash=c.backlash,
                               compliance=c.compliance,
