@@ -126,3 +126,54 @@ def test_orientation_sigma_is_refused_alike_for_poses_and_flush_contacts(cell, v
         lines.append(line)
     assert lines[0] == lines[1]
     assert "orientation sigma must be between 1e-06 and 90 deg" in lines[0]
+
+
+def test_analyze_refuses_its_accuracy_plot_before_the_work(cell, tmp_path, capsys):
+    """Every output was checked before the work (nothing said, nothing computed) except
+    analyze's --accuracy-plot, refused only after the analysis was printed."""
+    taken = tmp_path / "map.png"
+    taken.write_bytes(b"mine")
+    capsys.readouterr()
+    assert main(["analyze", "ec66", str(cell / "points.csv"), "--accuracy-map", "0.4", "0", "0.3",
+                 "0.2", "--grid", "2", "--accuracy-plot", str(taken)]) == 1
+    captured = capsys.readouterr()
+    (line,) = _errors(captured.err)
+    assert "already exists" in line and captured.out == ""
+    assert taken.read_bytes() == b"mine"
+
+
+def test_a_frames_file_with_a_byte_order_mark_is_read_as_a_csv_file_is(cell, tmp_path, capsys):
+    """A data CSV saved with a UTF-8 byte-order mark (Windows editors) was read; the same
+    editor's FRAMES.json was refused as invalid JSON."""
+    bom = tmp_path / "frames_bom.json"
+    bom.write_bytes(b"\xef\xbb\xbf" + (cell / "frames.json").read_bytes())
+    capsys.readouterr()
+    assert main(["evaluate", "ec66", str(cell / "points.csv"), "--frames", str(bom)]) == 0
+    with_bom = capsys.readouterr().out
+    assert main(["evaluate", "ec66", str(cell / "points.csv"), "--frames",
+                 str(cell / "frames.json")]) == 0
+    assert capsys.readouterr().out.split(":", 1)[1] == with_bom.split(":", 1)[1]
+
+
+def test_fleet_workers_load_the_robot_the_command_loaded(cell, tmp_path, monkeypatch, capsys):
+    """The robot argument is resolved once, by kincal.descriptions: a name first, then a
+    path. kincal fleet made it absolute for its workers whenever a file of that name
+    existed, so a file 'ec66' in the working folder sent the workers to it while the
+    command itself loaded the bundled EC66."""
+    import kincal.fleet
+    from kincal.errors import KincalError
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "ec66").write_text("not a URDF")
+    seen = []
+
+    def first_unit_only(robot, jobs, *args, **kwargs):
+        seen.append((robot.source, jobs[0].load().source))
+        raise KincalError("stopped by the test")
+
+    monkeypatch.setattr(kincal.fleet, "calibrate_fleet", first_unit_only)
+    capsys.readouterr()
+    assert main(["fleet", "ec66", str(cell / "points.csv"), "--out-dir", "fleet"]) == 1
+    (line,) = _errors(capsys.readouterr().err)
+    assert "stopped by the test" in line, line
+    assert seen and seen[0][0] == seen[0][1]

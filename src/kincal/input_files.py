@@ -53,7 +53,8 @@ def read_json(path, kind: str, what: str, error=InputFileError, expected: str = 
     the file it should be, for "<path>: not <what> (...)" ("a kincal frames file");
     expected: what an empty file should have held. Refused as :func:`check_regular_file`
     refuses (a FIFO, a device, a directory, over ``max_bytes``), then with ``error``: text
-    that is not UTF-8, an empty file, invalid JSON, JSON nested too deeply to parse."""
+    that is not UTF-8 (a byte-order mark is accepted, as in a CSV file), an empty file,
+    invalid JSON, JSON nested too deeply to parse."""
     import json
 
     p = Path(path)
@@ -61,7 +62,7 @@ def read_json(path, kind: str, what: str, error=InputFileError, expected: str = 
         raise InputFileError(f"{kind} file not found: {p}")
     check_regular_file(p, kind, max_bytes)  # no FIFO, device or huge file
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark, as CSV files may have
     except (OSError, UnicodeDecodeError) as exc:
         raise error(f"{p}: not {what} ({exc})") from None
     if not text.strip():

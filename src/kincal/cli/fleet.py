@@ -106,9 +106,9 @@ def run(args) -> int:
                           "--overwrite to replace them")
     out.mkdir(parents=True, exist_ok=True)
     # absolute paths: a worker of a running scheduler (--scheduler) has a cwd of its own
-    chain = c.chain
-    if Path(chain.robot).exists():
-        chain = replace(chain, robot=os.path.abspath(chain.robot))
+    from kincal.descriptions import portable
+
+    chain = replace(c.chain, robot=portable(c.chain.robot))
     jobs = [UnitJob(n, os.path.abspath(f), chain.load,
                     replace(inputs, files=(os.path.abspath(f),)).read_sets, options,
                     os.path.abspath(out), c.accept_implausible, c.accept_unconverged,

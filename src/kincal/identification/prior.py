@@ -19,7 +19,6 @@ Plain numpy: no pinocchio, no file writing (the fleet's writer writes ``dumps()`
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -116,9 +115,6 @@ class FleetPrior:
                 "parameters": [{"name": n, "unit": u, "mean": float(m), "std": float(s)}
                                for n, u, m, s in zip(self.names, unit, self.mean, self.std)],
                 "covariance": self.covariance.tolist()}
-
-    def dumps(self) -> str:
-        return json.dumps(self.as_dict(), indent=1) + "\n"
 
     @classmethod
     def read(cls, path) -> "FleetPrior":

@@ -116,7 +116,7 @@ class PoseData(SampleSet):
         L, A = unit_factors(length_unit, angle_unit)  # a bad unit before the header is read
         with warnings.catch_warnings():  # the reading below gives the notes
             warnings.simplefilter("ignore", KincalNote)
-            header = read_columns(path, []).header
+            header = read_columns(path, [], header_only=True).header
         orientation_columns = fmt.resolve(header, position_columns, str(path))
         c = read_set(path, joint_names, position_columns + orientation_columns,
                      ("sigma", "sigma_deg"), prismatic, angle_unit, length_unit, joint_columns,
