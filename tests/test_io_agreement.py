@@ -177,3 +177,22 @@ def test_fleet_workers_load_the_robot_the_command_loaded(cell, tmp_path, monkeyp
     (line,) = _errors(capsys.readouterr().err)
     assert "stopped by the test" in line, line
     assert seen and seen[0][0] == seen[0][1]
+
+
+@pytest.mark.parametrize("value", ["1e-300", "1e9"])
+def test_noise_mm_takes_one_range_in_calibrate_analyze_and_plan(cell, tmp_path, value, capsys):
+    """--noise-mm is the measurement noise per axis in calibrate (evidence), analyze and
+    plan (the predicted errors): calibrate refused 1e-300 mm and 1e9 mm, analyze and plan
+    took them."""
+    capsys.readouterr()
+    lines = []
+    for argv in (["calibrate", "ec66", str(cell / "points.csv"), "--lambda", "evidence",
+                  "--out", str(tmp_path / "c.urdf")],
+                 ["analyze", "ec66", str(cell / "points.csv")],
+                 ["plan", "ec66", "--random", "50", "--poses", "5",
+                  "--out", str(tmp_path / "chosen.csv")]):
+        assert main([*argv, "--noise-mm", value, "-q"]) == 1
+        (line,) = _errors(capsys.readouterr().err)
+        lines.append(line)
+    assert all("--noise-mm" in line and "1e-06" in line and "10000" in line for line in lines), lines
+    assert not list(tmp_path.iterdir())

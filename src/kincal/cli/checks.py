@@ -79,6 +79,15 @@ def _orientation_sigma(value) -> None:
           f"{hi:g} deg (a standard deviation of the measurement)")
 
 
+def _measurement_noise(value) -> None:
+    """--noise-mm of analyze and plan (the noise of the predicted errors): the range of
+    calibrate's --noise-mm, the same measurement noise per axis [mm]
+    (:data:`kincal.identification.options.EVIDENCE_RANGE`)."""
+    from kincal.identification.options import EVIDENCE_RANGE
+
+    _finite("--noise-mm", value, *EVIDENCE_RANGE)
+
+
 def _check_calibrate(args) -> None:
     m = args.method
     if args.lam is not None:
@@ -185,7 +194,7 @@ def check_args(args) -> None:
         _need(args.tool_offset is None or not args.frames, "--tool-offset is a starting guess "
               "for --fit-frames; with --frames the tool point comes from FRAMES.json")
     elif c == "analyze":
-        _finite("--noise-mm", args.noise_mm, 0, low_open=True)
+        _measurement_noise(args.noise_mm)
     elif c == "simulate":
         _need(args.tool_offset is None, "simulate does not use --tool-offset (a starting guess "
               "for calibration); the simulated tool point is --tool-m X Y Z [m]")
@@ -204,7 +213,7 @@ def check_args(args) -> None:
             if getattr(args, option) is not None:  # -0.0 -> 0.0: numpy's checks test the sign bit
                 setattr(args, option, getattr(args, option) + 0.0)
     elif c == "plan":
-        _finite("--noise-mm", args.noise_mm, 0, low_open=True)  # as analyze's
+        _measurement_noise(args.noise_mm)
         _count("--poses", args.poses, 1)
         _count("--random", args.random, 1, MAX_POSES)
         volume = getattr(args, "in_cube", None) is not None or \
