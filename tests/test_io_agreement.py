@@ -196,3 +196,29 @@ def test_noise_mm_takes_one_range_in_calibrate_analyze_and_plan(cell, tmp_path, 
         lines.append(line)
     assert all("--noise-mm" in line and "1e-06" in line and "10000" in line for line in lines), lines
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("name, extra", [
+    ("residuals_set2.png", ["points.csv"]),  # a second data file: its residual figure
+    ("accuracy_map.png", ["--accuracy-map", "0.4", "0", "0.3", "0.2", "--grid", "2"])])
+def test_every_plot_calibrate_may_write_is_checked_before_the_work(cell, tmp_path, monkeypatch,
+                                                                  capsys, name, extra):
+    """calibrate --plots checked cv_curve, residuals and parameters before the work; the
+    residual figure of a second file and the accuracy map were refused only at the end."""
+    from kincal.identification.problem import CalibrationProblem
+
+    monkeypatch.chdir(cell)
+    plots = tmp_path / "plots"
+    plots.mkdir()
+    (plots / name).write_bytes(b"mine")
+
+    def no_work(self):
+        raise AssertionError("the calibration ran before the outputs were checked")
+
+    monkeypatch.setattr(CalibrationProblem, "solve", no_work)
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", "points.csv", *extra, "--method", "ls",
+                 "--out", str(tmp_path / "c.urdf"), "--plots", str(plots)]) == 1
+    (line,) = _errors(capsys.readouterr().err)
+    assert f"{name}: already exists" in line, line
+    assert (plots / name).read_bytes() == b"mine"

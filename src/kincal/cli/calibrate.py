@@ -150,7 +150,9 @@ class Calibrate:
     def outputs(self) -> list:
         """Every file this run writes, for the check before the work."""
         return [self.out, self.frames_out, self.report, self.yaml_out, self.mdh_out,
-                self.html, self.residuals_out] + plot_paths(self.plots)
+                self.html, self.residuals_out] + plot_paths(
+                    self.plots, len(self.inputs.files),
+                    accuracy=self.accuracy.asked or self.html is not None)  # a map may go there
 
 
 def calibration_options(c: Calibrate):

@@ -18,7 +18,6 @@ from kincal.errors import OptionError
 # Every option is checked here, before a file is read: a value that is not finite or out
 # of range, and a flag that would be silently ignored, is an error. Defaults of options
 # that only some settings use are None, so that "given but unused" can be told apart.
-PLOT_NAMES = ("cv_curve.png", "residuals.png", "parameters.png")  # kincal.export.plots
 MAX_POSES = 1_000_000  # simulate --poses, plan --random: beyond any real measurement campaign
 DEFAULT_LAMBDA = "auto"  # --lambda when not given (None in the parser: "given" can be told)
 
@@ -261,6 +260,12 @@ def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=()) -> list:
     return protect
 
 
-def plot_paths(folder) -> list:
-    """The files ``kincal calibrate --plots FOLDER`` writes (for the check before the work)."""
-    return [] if not folder else [Path(folder) / n for n in PLOT_NAMES]
+def plot_paths(folder, n_sets: int = 1, accuracy: bool = False) -> list:
+    """The files ``kincal calibrate --plots FOLDER`` may write, for the check before the
+    work: a residual figure per data file, the accuracy map's with ``accuracy``
+    (:func:`kincal.export.plots.calibration_figure_names`)."""
+    if not folder:
+        return []
+    from kincal.export.plots import calibration_figure_names
+
+    return [Path(folder) / n for n in calibration_figure_names(n_sets, accuracy)]

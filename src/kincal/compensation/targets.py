@@ -18,9 +18,13 @@ from kincal.errors import DataError, KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import read_columns
 from kincal.measurements.data import LENGTH_UNITS, unit_factors
+from kincal.measurements.orientation_columns import UNIT_TOL
+from kincal.measurements.pose import QUATERNION_COLUMNS
 
-QUATERNION = ("qx", "qy", "qz", "qw")
-UNIT_QUATERNION_TOL = 1e-3  # |norm - 1| accepted (and normalised) for rounded quaternions
+# the columns and the tolerance of a pose file's quaternions: |norm - 1| accepted (and
+# normalised) for rounded quaternions, as a pose file's are
+QUATERNION = QUATERNION_COLUMNS
+UNIT_QUATERNION_TOL = UNIT_TOL
 
 
 @dataclass(frozen=True)
