@@ -222,3 +222,18 @@ def test_every_plot_calibrate_may_write_is_checked_before_the_work(cell, tmp_pat
     (line,) = _errors(capsys.readouterr().err)
     assert f"{name}: already exists" in line, line
     assert (plots / name).read_bytes() == b"mine"
+
+
+@pytest.mark.parametrize("extra, named", [
+    (["--accuracy-map", "nan", "0", "0.3", "0.2"], "--accuracy-map must be a finite number"),
+    (["--accuracy-map", "0.4", "0", "0.3", "-1"], "--accuracy-map EDGE must be a finite number > 0"),
+    (["--accuracy-map", "0.4", "0", "0.3", "0.2", "--grid", "0"], "--grid must be an integer")])
+def test_accuracy_cube_options_are_named_in_their_refusal(cell, tmp_path, capsys, extra, named):
+    """The cube's own checks refused these after the data were read, naming no option
+    ("the cube centre must be 3 finite numbers, got array([nan, 0. , 0.3])")."""
+    capsys.readouterr()
+    for argv in (["analyze", "ec66", str(cell / "points.csv")],
+                 ["calibrate", "ec66", str(cell / "points.csv"), "--out", str(tmp_path / "c.urdf")]):
+        assert main([*argv, *extra, "-q"]) == 1
+        (line,) = _errors(capsys.readouterr().err)
+        assert named in line, line

@@ -185,6 +185,12 @@ def check_args(args) -> None:
         _need(args.grid is None or args.accuracy_map is not None,
               "--grid is the number of grid points per edge of the --accuracy-map cube: it "
               "needs --accuracy-map")
+        from kincal.planning.accuracy_map import MAX_GRID  # the cube's own checks, named
+
+        _finite("--accuracy-map", args.accuracy_map)
+        _finite("--accuracy-map EDGE", None if args.accuracy_map is None else args.accuracy_map[3],
+                0, low_open=True)
+        _count("--grid", args.grid, 1, MAX_GRID)
         args.grid = 5 if args.grid is None else args.grid
     _orientation_sigma(getattr(args, "orientation_sigma_deg", None))
     if c == "calibrate":
