@@ -100,6 +100,19 @@ def resolve(robot: str | Path) -> Description:
     )
 
 
+def portable(robot: str | Path) -> str:
+    """``robot`` as a process with another working folder (a fleet's worker) resolves it
+    to the same description: a bundled or example-robot-data name unchanged (names come
+    first in :func:`resolve`, whatever files the folder holds), a user's path absolute."""
+    text = str(robot)
+    if text in _BUNDLED or text in _ERD:
+        return text
+    import os
+
+    path = Path(text).expanduser()
+    return os.path.abspath(path) if path.exists() else text
+
+
 def default_center(name: str) -> tuple[float, float, float]:
     """A reachable measurement-cube centre [m] for a known robot name."""
     from kincal.errors import OptionError

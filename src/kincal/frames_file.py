@@ -217,26 +217,11 @@ class CellFrames:
     @classmethod
     def read(cls, path) -> "CellFrames":
         """From a FRAMES.json file (any version); DataError naming what is wrong."""
-        from kincal.input_files import MAX_JSON_BYTES, check_regular_file
+        from kincal.input_files import read_json
 
-        path = Path(path)
-        if not path.exists():
-            raise InputFileError(f"frames file not found: {path}")
-        check_regular_file(path, "frames", MAX_JSON_BYTES)  # no FIFO, device or huge file
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise DataError(f"{path}: not a kincal frames file ({exc})") from None
-        if not text.strip():
-            raise DataError(f"{path}: the frames file is empty; expected the FRAMES.json that "
-                            "kincal calibrate --frames-out wrote")
-        try:
-            data = json.loads(text)
-        except RecursionError:
-            raise DataError(f"{path}: not a kincal frames file (JSON nested too deeply)") from None
-        except ValueError as exc:
-            raise DataError(f"{path}: not a kincal frames file (invalid JSON: {exc})") from None
-        return cls.from_dict(data, str(path))
+        data = read_json(path, "frames", "a kincal frames file", DataError,
+                         expected="the FRAMES.json that kincal calibrate --frames-out wrote")
+        return cls.from_dict(data, str(Path(path)))
 
     @classmethod
     def from_dict(cls, data, source: str = "<frames>") -> "CellFrames":

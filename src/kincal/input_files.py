@@ -43,3 +43,33 @@ def check_regular_file(path, kind: str, max_bytes: int) -> int:
         raise InputFileError(f"{p}: {st.st_size / 2**20:.0f} MB; kincal reads {kind} files of "
                              f"at most {max_bytes // 2**20} MB")
     return st.st_size
+
+
+def read_json(path, kind: str, what: str, error=InputFileError, expected: str = "",
+              max_bytes: int = MAX_JSON_BYTES):
+    """The JSON value of the file ``path``, read as every JSON input of kincal is read.
+
+    kind: what the file is, for "<kind> file not found" ("frames", "fleet prior"); what:
+    the file it should be, for "<path>: not <what> (...)" ("a kincal frames file");
+    expected: what an empty file should have held. Refused as :func:`check_regular_file`
+    refuses (a FIFO, a device, a directory, over ``max_bytes``), then with ``error``: text
+    that is not UTF-8 (a byte-order mark is accepted, as in a CSV file), an empty file,
+    invalid JSON, JSON nested too deeply to parse."""
+    import json
+
+    p = Path(path)
+    if not p.exists():
+        raise InputFileError(f"{kind} file not found: {p}")
+    check_regular_file(p, kind, max_bytes)  # no FIFO, device or huge file
+    try:
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark, as CSV files may have
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{p}: not {what} ({exc})") from None
+    if not text.strip():
+        raise error(f"{p}: the {kind} file is empty; expected {expected or what}")
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise error(f"{p}: not {what} (JSON nested too deeply)") from None
+    except ValueError as exc:
+        raise error(f"{p}: not {what} (invalid JSON: {exc})") from None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from kincal.cli.checks import check_outputs
@@ -59,10 +58,10 @@ def run(args) -> int:
     a = typed(Analyze, args, chain=Chain.of(args), inputs=Inputs.of(args),
               accuracy=AccuracyRequest.of(args))
     with quiet_stdout(a.json):  # with --json, stdout holds the JSON alone
-        robot, summary, files = _analyze(a)
+        robot, summary, files, protect = _analyze(a)
     say_and_write(files, lambda written: summary_lines(a.json, [], summary, written, wrote=None),
                   provenance=a.chain.provenance(robot, a.inputs.files, a.command_line),
-                  overwrite=a.overwrite, protect=[robot.source, *a.inputs.files])
+                  overwrite=a.overwrite, protect=protect)
     return 0
 
 
@@ -74,13 +73,12 @@ def _design_accuracy(a: Analyze, robot, problem):
         return None
     from kincal.planning.accuracy_map import design_accuracy_map
 
-    if not (math.isfinite(a.noise_mm) and a.noise_mm > 0):
-        raise OptionError(f"--noise-mm must be a positive number, got {a.noise_mm}")
     return design_accuracy_map(problem, a.noise_mm * 1e-3, **a.accuracy.targets(robot))
 
 
 def _analyze(a: Analyze):
-    """Print the analysis; return (robot, the --json summary, the File values to write)."""
+    """Print the analysis; return (robot, the --json summary, the File values to write,
+    the paths they must not replace)."""
     import numpy as np
 
     from kincal.export import report
@@ -89,7 +87,8 @@ def _analyze(a: Analyze):
     from kincal.models import MODELS, default_for
 
     robot = a.chain.load()
-    check_outputs(robot, [a.report], overwrite=a.overwrite, inputs=a.inputs.files)
+    protect = check_outputs(robot, [a.report, a.accuracy_plot], overwrite=a.overwrite,
+                            inputs=a.inputs.files)
     sets = a.inputs.read_sets(robot)
     if a.model == "all":  # every model that can describe this chain
         tree = default_for(robot.geometry) != "complete"
@@ -148,7 +147,7 @@ def _analyze(a: Analyze):
                "data": [str(f) for f in a.inputs.files], "model": problem.model_name,
                **({"identifiability": as_json} if len(names) == 1 else {"models": as_json}),
                "accuracy_map": None if amap is None else amap.as_dict()}
-    return robot, summary, files
+    return robot, summary, files, protect
 
 
 def _print_comparison(names, problems, idents) -> None:

@@ -150,7 +150,9 @@ class Calibrate:
     def outputs(self) -> list:
         """Every file this run writes, for the check before the work."""
         return [self.out, self.frames_out, self.report, self.yaml_out, self.mdh_out,
-                self.html, self.residuals_out] + plot_paths(self.plots)
+                self.html, self.residuals_out] + plot_paths(
+                    self.plots, len(self.inputs.files),
+                    accuracy=self.accuracy.asked or self.html is not None)  # a map may go there
 
 
 def calibration_options(c: Calibrate):
@@ -160,14 +162,10 @@ def calibration_options(c: Calibrate):
     from kincal.identification.prior import read_prior
     from kincal.identification.solver import SolverOptions
 
-    lam: str | float = c.lam
-    if lam not in ("auto", "cv", "evidence"):
-        try:
-            lam = float(c.lam)
-        except ValueError:
-            raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
-                              f"{lam!r}") from None
-    return CalibrationOptions(model=c.model, method=c.method, lam=lam, folds=c.folds,
+    from kincal.cli.checks import lambda_value
+
+    return CalibrationOptions(model=c.model, method=c.method, lam=lambda_value(c.lam),
+                              folds=c.folds,
                               seed=c.seed, prior_mm=c.prior_mm, prior_deg=c.prior_deg,
                               noise_mm=c.noise_mm, fix=c.fix, free=c.free, backlash=c.backlash,
                               compliance=c.compliance,

@@ -18,9 +18,26 @@ from kincal.errors import OptionError
 # Every option is checked here, before a file is read: a value that is not finite or out
 # of range, and a flag that would be silently ignored, is an error. Defaults of options
 # that only some settings use are None, so that "given but unused" can be told apart.
-PLOT_NAMES = ("cv_curve.png", "residuals.png", "parameters.png")  # kincal.export.plots
 MAX_POSES = 1_000_000  # simulate --poses, plan --random: beyond any real measurement campaign
 DEFAULT_LAMBDA = "auto"  # --lambda when not given (None in the parser: "given" can be told)
+
+
+LAMBDA_WORDS = ("auto", "cv", "evidence")
+
+
+def lambda_value(text: str) -> str | float:
+    """--lambda as the fit takes it: one of :data:`LAMBDA_WORDS`, or a finite number >= 0
+    (calibrate and fleet); OptionError otherwise."""
+    if text in LAMBDA_WORDS:
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
+                          f"{text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise OptionError(f"--lambda must be a finite number >= 0, got {value:g}")
+    return value
 
 
 def _need(ok: bool, message: str) -> None:
@@ -48,17 +65,33 @@ def _count(option: str, value, low: int, high: int | None = None) -> None:
               + f", got {value}")
 
 
+def _orientation_sigma(value) -> None:
+    """--orientation-sigma-deg: within the range of every stated orientation sigma, the
+    same for pose files and flush tilts (:data:`kincal.measurements.checks.SIGMA_RANGE_DEG`)."""
+    if value is None:
+        return
+    from kincal.measurements.checks import SIGMA_RANGE_DEG
+
+    lo, hi = SIGMA_RANGE_DEG
+    _need(math.isfinite(value) and lo <= value <= hi,
+          f"--orientation-sigma-deg {value:g}: the orientation sigma must be between {lo:g} and "
+          f"{hi:g} deg (a standard deviation of the measurement)")
+
+
+def _measurement_noise(value) -> None:
+    """--noise-mm of analyze and plan (the noise of the predicted errors): the range of
+    calibrate's --noise-mm, the same measurement noise per axis [mm]
+    (:data:`kincal.identification.options.EVIDENCE_RANGE`)."""
+    from kincal.identification.options import EVIDENCE_RANGE
+
+    _finite("--noise-mm", value, *EVIDENCE_RANGE)
+
+
 def _check_calibrate(args) -> None:
     m = args.method
     if args.lam is not None:
         _need(m == "l2", f"--lambda applies to method l2 only; method {m} has no penalty")
-        if args.lam not in ("auto", "cv", "evidence"):
-            try:
-                value = float(args.lam)
-            except ValueError:
-                raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
-                                  f"{args.lam!r}") from None
-            _finite("--lambda", value, 0)
+        lambda_value(args.lam)
     # a lambda given as a number, or no penalty at all: no cross-validation to fold or seed
     chosen = m == "l2" and (args.lam is None or args.lam in ("auto", "cv"))
     for option, value in (("--folds", args.folds), ("--seed", args.seed)):
@@ -71,8 +104,6 @@ def _check_calibrate(args) -> None:
     _finite("--robust-scale-mm", args.robust_scale_mm, 0, low_open=True)
     _need(not args.free or m == "l2", f"--free applies to method l2 (its penalty keeps "
           f"redundant parameters bounded); method {m} cannot fit them")
-    _need(args.order_column is None or bool(args.backlash),
-          "--order-column gives the approach directions of backlash terms: it needs --backlash")
     args.lam = DEFAULT_LAMBDA if args.lam is None else args.lam
     args.folds = 5 if args.folds is None else args.folds
     args.seed = 0 if args.seed is None else args.seed
@@ -139,27 +170,36 @@ def check_args(args) -> None:
     offset = getattr(args, "tool_offset", None)
     _finite("--tool-offset", offset)
     if offset is not None:
+        from kincal.cli.options import length_scale
+
         unit = getattr(args, "length_unit", "m")
-        _need(max(map(abs, offset)) * (1e-3 if unit == "mm" else 1.0) <= 1e3,
+        _need(max(map(abs, offset)) * length_scale(unit) <= 1e3,
               f"--tool-offset {' '.join(f'{v:g}' for v in offset)} [{unit}] is over 1000 m from "
               "the tip frame; check the unit (--length-unit)")
     c = args.command
+    if hasattr(args, "backlash"):  # calibrate, analyze (evaluate reads backlash from FRAMES.json)
+        _need(getattr(args, "order_column", None) is None or bool(args.backlash),
+              "--order-column gives the approach directions of backlash terms: it needs "
+              "--backlash")
     if hasattr(args, "grid"):
         _need(args.grid is None or args.accuracy_map is not None,
               "--grid is the number of grid points per edge of the --accuracy-map cube: it "
               "needs --accuracy-map")
+        from kincal.planning.accuracy_map import MAX_GRID  # the cube's own checks, named
+
+        _finite("--accuracy-map", args.accuracy_map)
+        _finite("--accuracy-map EDGE", None if args.accuracy_map is None else args.accuracy_map[3],
+                0, low_open=True)
+        _count("--grid", args.grid, 1, MAX_GRID)
         args.grid = 5 if args.grid is None else args.grid
-    _finite("--orientation-sigma-deg", getattr(args, "orientation_sigma_deg", None), 0,
-            low_open=True)
+    _orientation_sigma(getattr(args, "orientation_sigma_deg", None))
     if c == "calibrate":
         _check_calibrate(args)
     elif c == "evaluate":
         _need(args.tool_offset is None or not args.frames, "--tool-offset is a starting guess "
               "for --fit-frames; with --frames the tool point comes from FRAMES.json")
     elif c == "analyze":
-        _need(args.order_column is None or bool(args.backlash), "--order-column gives the "
-              "approach directions of backlash terms: it needs --backlash")
-        _finite("--noise-mm", args.noise_mm, 0, low_open=True)
+        _measurement_noise(args.noise_mm)
     elif c == "simulate":
         _need(args.tool_offset is None, "simulate does not use --tool-offset (a starting guess "
               "for calibration); the simulated tool point is --tool-m X Y Z [m]")
@@ -178,6 +218,7 @@ def check_args(args) -> None:
             if getattr(args, option) is not None:  # -0.0 -> 0.0: numpy's checks test the sign bit
                 setattr(args, option, getattr(args, option) + 0.0)
     elif c == "plan":
+        _measurement_noise(args.noise_mm)
         _count("--poses", args.poses, 1)
         _count("--random", args.random, 1, MAX_POSES)
         volume = getattr(args, "in_cube", None) is not None or \
@@ -188,6 +229,12 @@ def check_args(args) -> None:
         _count("--seed", args.seed, 0)
         args.seed = 0 if args.seed is None else args.seed
         _check_plan(args, volume)
+    elif c == "compensate":
+        _finite("--tolerance-mm", args.tolerance_mm, 0, low_open=True)
+    elif c == "fleet":
+        lambda_value(args.lam)
+        _count("--workers", args.workers, 1)
+        _count("--hierarchical", args.hierarchical, 0)
     elif c == "demo":
         out = Path(args.out).expanduser()
         if out.exists() or out.is_symlink():
@@ -204,19 +251,27 @@ def check_args(args) -> None:
                               "denied or a read-only file system); choose another --out")
 
 
-def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=()) -> None:
-    """Refuse now, before the work, what the final write would refuse.
+def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=()) -> list:
+    """Refuse now, before the work, what the final write would refuse; return the paths
+    to protect, for that write (the one list of what the command read).
 
     files: the output paths the command will write (None entries are skipped); inputs:
-    the files it reads (never overwritten without --overwrite); dirs: folders it may
-    create (a plots folder)."""
+    the files it reads (never overwritten without --overwrite; None skipped), the robot's
+    URDF added; dirs: folders it may create (a plots folder)."""
     from kincal.export.safe_write import check_outputs as check_targets
 
     protect = [robot.source] + [p for p in inputs if p]
     check_targets([f for f in files if f], overwrite=overwrite, protect=protect,
                   dirs=[d for d in dirs if d])
+    return protect
 
 
-def plot_paths(folder) -> list:
-    """The files ``kincal calibrate --plots FOLDER`` writes (for the check before the work)."""
-    return [] if not folder else [Path(folder) / n for n in PLOT_NAMES]
+def plot_paths(folder, n_sets: int = 1, accuracy: bool = False) -> list:
+    """The files ``kincal calibrate --plots FOLDER`` may write, for the check before the
+    work: a residual figure per data file, the accuracy map's with ``accuracy``
+    (:func:`kincal.export.plots.calibration_figure_names`)."""
+    if not folder:
+        return []
+    from kincal.export.plots import calibration_figure_names
+
+    return [Path(folder) / n for n in calibration_figure_names(n_sets, accuracy)]

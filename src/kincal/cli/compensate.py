@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -80,8 +79,6 @@ def run(args) -> int:
     if c.targets is not None and c.frames is None:
         raise OptionError("targets in the measurement frame need --frames FRAMES.json "
                           "(from 'kincal calibrate --frames-out')")
-    if not (math.isfinite(c.tolerance_mm) and c.tolerance_mm > 0):
-        raise OptionError(f"--tolerance-mm must be a positive number, got {c.tolerance_mm}")
     return _compensate(c)
 
 
@@ -97,7 +94,7 @@ def _compensate(c: Compensate) -> int:
         c = replace(c, chain=chain_from_frames(c.chain, frames))
     robot = c.chain.load()
     inputs: list[str | Path | None] = [c.targets, c.program, c.nominal, c.frames]
-    check_outputs(robot, [c.out], overwrite=c.overwrite, inputs=inputs)
+    protect = check_outputs(robot, [c.out], overwrite=c.overwrite, inputs=inputs)
     if frames is not None:
         frames.check_chain(robot)  # before reading targets: a wrong file is the likelier error
     if c.program is not None:
@@ -144,5 +141,5 @@ def _compensate(c: Compensate) -> int:
                       "the input)")),
                   provenance=c.chain.provenance(robot, (*inputs, c.frames), c.command_line),
                   overwrite=c.overwrite,
-                  protect=[robot.source, *inputs] + ([c.frames] if c.frames else []))
+                  protect=protect)
     return 0

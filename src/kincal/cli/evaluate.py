@@ -61,7 +61,8 @@ def run(args) -> int:
         frames = frames.for_chain(e.chain.base, e.chain.tip)  # a chain of several
         e = replace(e, chain=chain_from_frames(e.chain, frames))
     robot = e.chain.load()
-    check_outputs(robot, [e.report], overwrite=e.overwrite, inputs=(e.inputs.data, e.frames))
+    protect = check_outputs(robot, [e.report], overwrite=e.overwrite,
+                            inputs=(e.inputs.data, e.frames))
     if frames is not None:
         frames.check_chain(robot)
     sets = e.inputs.read_sets(robot)
@@ -114,7 +115,7 @@ def run(args) -> int:
                       lambda written: summary_lines(e.json, lines, summary, written),
                       provenance=e.chain.provenance(robot, (e.inputs.data, e.frames),
                                                     e.command_line),
-                      overwrite=e.overwrite, protect=[robot.source, e.inputs.data])
+                      overwrite=e.overwrite, protect=protect)
     return 0
 
 
@@ -125,9 +126,17 @@ def with_frames(robot, sets, frames, tool_guess=None):
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.problem import CalibrationProblem
 
+    import warnings
+
+    from kincal.errors import KincalWarning
+    from kincal.measurements.checks import unit_warnings
+
     backlash, compliance = tuple(frames.backlash), tuple(frames.compliance)
     problem = CalibrationProblem(robot, sets, CalibrationOptions(
         method="ls", tool_guess=tool_guess, backlash=backlash, compliance=compliance))
+    for km in problem.kinds:  # positions in another unit, as a fit's start says (nothing
+        for message in unit_warnings(km, tool_guess):  # is fitted here, so said here)
+            warnings.warn(message, KincalWarning)
     lay = problem.layout
     x = problem.x_nominal
     used: set[int] = set()

@@ -83,42 +83,32 @@ def unit_names(files) -> list[str]:
 
 def run(args) -> int:
     from kincal.cli.console import say_and_write, summary_lines
+    from kincal.cli.checks import lambda_value
     from kincal.cli.options import xacro_args
     from kincal.export.outputs import File
-    from kincal.export.safe_write import check_outputs
+    from kincal.cli.checks import check_outputs
     from kincal.fleet import UnitJob, calibrate_fleet
     from kincal.fleet.unit import STAGING, URDF
     from kincal.identification.options import CalibrationOptions
 
     inputs = typed(Inputs, args, files=tuple(args.data))
     c = typed(Fleet, args, chain=Chain.of(args), inputs=inputs)
-    if c.workers < 1:
-        raise OptionError(f"--workers must be >= 1, got {c.workers}")
-    if c.hierarchical < 0:
-        raise OptionError(f"--hierarchical must be >= 0 rounds, got {c.hierarchical}")
-    lam = c.lam
-    if lam not in ("auto", "cv", "evidence"):
-        try:
-            lam = float(lam)
-        except ValueError:
-            raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
-                              f"{lam!r}") from None
-    options = CalibrationOptions(model=c.model, lam=lam, fix=c.fix,
+    options = CalibrationOptions(model=c.model, lam=lambda_value(c.lam), fix=c.fix,
                                  tool_guess=inputs.tool_guess).validated()
     robot = c.chain.load()  # a bad robot or chain: one line, before any worker starts
     out = Path(c.out_dir)
     names = unit_names(inputs.files)
     fixed = [out / n for n in (PRIOR, SUMMARY_JSON, SUMMARY_HTML)]
-    check_outputs(fixed, overwrite=c.overwrite, protect=inputs.files, dirs=[out])
+    protect = check_outputs(robot, fixed, overwrite=c.overwrite, inputs=inputs.files, dirs=[out])
     taken = [n for n in names if (out / n).exists()]
     if taken and not c.overwrite:
         raise OptionError(f"{out}: unit folders exist ({', '.join(taken[:5])}); give "
                           "--overwrite to replace them")
     out.mkdir(parents=True, exist_ok=True)
     # absolute paths: a worker of a running scheduler (--scheduler) has a cwd of its own
-    chain = c.chain
-    if Path(chain.robot).exists():
-        chain = replace(chain, robot=os.path.abspath(chain.robot))
+    from kincal.descriptions import portable
+
+    chain = replace(c.chain, robot=portable(c.chain.robot))
     jobs = [UnitJob(n, os.path.abspath(f), chain.load,
                     replace(inputs, files=(os.path.abspath(f),)).read_sets, options,
                     os.path.abspath(out), c.accept_implausible, c.accept_unconverged,
@@ -159,7 +149,7 @@ def run(args) -> int:
         c.json, [summary.table()], {"command": "fleet", **summary.as_dict()}, written),
         provenance=c.chain.provenance(robot, inputs.files, c.command_line,
                                       verdict="per unit", gate=gate),
-        overwrite=c.overwrite, protect=inputs.files)
+        overwrite=c.overwrite, protect=protect)
     if summary.prior is None:
         raise OptionError(f"fewer than 2 of the {len(jobs)} units were calibrated: no fleet "
                           f"prior written (see {out / SUMMARY_JSON})")

@@ -216,8 +216,14 @@ def typed(cls, args: argparse.Namespace, **given):
 
 
 def length_scale(unit: str) -> float:
-    """Metres per ``unit`` ("m" or "mm")."""
+    """Metres per ``unit`` ("m" or "mm"; the parser's choices, as
+    :data:`kincal.measurements.data.LENGTH_UNITS` without numpy)."""
     return 1e-3 if unit == "mm" else 1.0
+
+
+def angle_scale(unit: str) -> float:
+    """Radians per ``unit`` ("rad" or "deg")."""
+    return math.pi / 180.0 if unit == "deg" else 1.0
 
 
 def tool_guess(offset, unit: str):
@@ -347,7 +353,7 @@ class Inputs:
             if name in out:
                 raise OptionError(f"--joint-value {name} given twice")
             scale = (length_scale(self.length_unit) if name in prismatic
-                     else (math.pi / 180.0 if self.angle_unit == "deg" else 1.0))
+                     else angle_scale(self.angle_unit))
             out[name] = value * scale
         return out
 

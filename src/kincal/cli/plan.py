@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 from kincal.cli.checks import check_outputs
 from kincal.cli.console import say_and_write, summary_lines
 from kincal.cli.options import (Chain, add_common, add_joint_columns, add_overwrite, add_units,
-                                group, joint_map, tool_guess, typed)
+                                group, joint_map, length_scale, tool_guess, typed)
 from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
 from kincal.errors import OptionError
 
@@ -107,23 +107,22 @@ def run(args) -> int:
         raise OptionError("give either CANDIDATES.csv or a volume (--in-cube/--in-sphere)")
     if not p.volume.given and (p.candidates is None) == (p.random is None):
         raise OptionError("give exactly one of CANDIDATES.csv, --random M or --in-cube/--in-sphere")
-    if not (math.isfinite(p.noise_mm) and p.noise_mm > 0):
-        raise OptionError(f"--noise-mm must be a positive number, got {p.noise_mm}")
     if p.target_cube is not None and p.criterion != "i":
         raise OptionError("--target-cube is the working volume of --criterion i; "
                           "--criterion d does not use it")
     robot = p.chain.load()
-    check_outputs(robot, [p.out], overwrite=p.overwrite, inputs=[p.candidates, p.measured])
-    return _plan(p, robot)
+    protect = check_outputs(robot, [p.out], overwrite=p.overwrite,
+                            inputs=[p.candidates, p.measured])
+    return _plan(p, robot, protect)
 
 
-def _plan(p: Plan, robot) -> int:
+def _plan(p: Plan, robot, protect: list) -> int:
     import numpy as np
 
     from kincal.planning.candidates import candidates_csv_text, random_candidates, read_candidates
     from kincal.planning.pose_selection import select_poses
 
-    unit = 1e-3 if p.length_unit == "mm" else 1.0
+    unit = length_scale(p.length_unit)
     tool = tool_guess(p.tool_offset, p.length_unit)
     tool = (0.0, 0.0, 0.0) if tool is None else tool
     columns = joint_map(p.joint_columns)
@@ -202,7 +201,6 @@ def _plan(p: Plan, robot) -> int:
                                  pivot=None if p.pivot is None else np.array(p.pivot) * unit,
                                  planes=planes)
     new = [i - k for i in selection.indices if i >= k]
-    protect = [robot.source] + [f for f in (p.candidates, p.measured) if f is not None]
     said = [f"{source}:", selection.summary(
         p.noise_mm, checked=None if spec is None else
         "candidates checked as above; line of sight is not checked")]

@@ -110,7 +110,8 @@ def run(args) -> int:
         raise OptionError(f"--orientation-format is how --kind pose writes its orientations; "
                           f"--kind {s.kind} writes none")
     robot = s.chain.load()
-    check_outputs(robot, [s.out, s.truth_out], overwrite=s.overwrite, inputs=[s.poses_file])
+    protect = check_outputs(robot, [s.out, s.truth_out], overwrite=s.overwrite,
+                            inputs=[s.poses_file])
     model = models.build(s.model, robot.geometry)
     rng = np.random.default_rng(s.seed)
     design = {"tracker": (0.4, 30.0), "rtest": (0.02, 15.0)}[s.design]
@@ -164,7 +165,7 @@ def run(args) -> int:
                           f"simulated {s.kind} measurements of {robot.name} at {len(q)} poses "
                           f"({s.design} design), noise {s.noise_mm} mm: "
                           + ", ".join(map(str, written))], summary, written, wrote=None),
-                      provenance=prov, overwrite=s.overwrite, protect=[robot.source])
+                      provenance=prov, overwrite=s.overwrite, protect=protect)
         return 0
     truth = simulation.Truth(table, base, tool)
     data = simulation.measure(model, truth, q, s.noise_mm * 1e-3, rng, source="simulated")
@@ -174,7 +175,7 @@ def run(args) -> int:
     say_and_write(files, lambda written: summary_lines(s.json, [
         f"simulated {len(q)} poses of {robot.name} ({where}, noise {s.noise_mm} mm): "
         + ", ".join(map(str, written))], summary, written, wrote=None),
-        provenance=prov, overwrite=s.overwrite, protect=[robot.source])
+        provenance=prov, overwrite=s.overwrite, protect=protect)
     return 0
 
 

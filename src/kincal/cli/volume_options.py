@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from kincal.cli.options import group, typed
+from kincal.cli.options import angle_scale, group, typed
 from kincal.errors import OptionError
 
 
@@ -54,7 +54,7 @@ def volume_spec(request: VolumeRequest, robot, unit: float, tool, default_tilt: 
     volume = make([v * unit for v in c[:3]], c[3] * unit)
     home = None
     if request.home is not None:
-        angle = math.radians(1.0) if request.angle_unit == "deg" else 1.0
+        angle = angle_scale(request.angle_unit)
         if len(request.home) != len(robot.joint_names):
             raise OptionError(f"--home needs {len(robot.joint_names)} values "
                               f"({', '.join(robot.joint_names)}), got {len(request.home)}")

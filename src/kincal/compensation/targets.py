@@ -17,10 +17,14 @@ import numpy as np
 from kincal.errors import DataError, KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import read_columns
-from kincal.measurements.data import ANGLE_UNITS, LENGTH_UNITS
+from kincal.measurements.data import LENGTH_UNITS, unit_factors
+from kincal.measurements.orientation_columns import UNIT_TOL
+from kincal.measurements.pose import QUATERNION_COLUMNS
 
-QUATERNION = ("qx", "qy", "qz", "qw")
-UNIT_QUATERNION_TOL = 1e-3  # |norm - 1| accepted (and normalised) for rounded quaternions
+# the columns and the tolerance of a pose file's quaternions: |norm - 1| accepted (and
+# normalised) for rounded quaternions, as a pose file's are
+QUATERNION = QUATERNION_COLUMNS
+UNIT_QUATERNION_TOL = UNIT_TOL
 
 
 @dataclass(frozen=True)
@@ -45,12 +49,8 @@ class Targets:
 
 def joint_scales(kinds, length_unit: str, angle_unit: str) -> np.ndarray:
     """(n,) factors from file units to SI for the joints of ``kinds``."""
-    if length_unit not in LENGTH_UNITS:
-        raise OptionError(f"unknown length unit {length_unit!r}; expected one of m, mm")
-    if angle_unit not in ANGLE_UNITS:
-        raise OptionError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
-    return np.array([LENGTH_UNITS[length_unit] if k == "prismatic" else ANGLE_UNITS[angle_unit]
-                     for k in kinds])
+    L, A = unit_factors(length_unit, angle_unit, OptionError)
+    return np.array([L if k == "prismatic" else A for k in kinds])
 
 
 def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",

@@ -316,12 +316,12 @@ def _write(result, o: Outputs, files, sources, before_commit, notes) -> Written:
 def _plots(result, out_dir: Path, accuracy=None, prov=None) -> list:
     """(path, png bytes) pairs of the calibration plots, so the PNGs go to ``out_dir`` in
     the same transaction as the other files; ``prov`` goes into each PNG's text fields."""
-    from kincal.export.plots import calibration_figures
+    from kincal.export.plots import ACCURACY_MAP_PNG, calibration_figures
 
     source = "kincal" if prov is None else prov.png_text()
     files = [(out_dir / name, png) for name, png in calibration_figures(result, source)]
     if accuracy is not None and len(accuracy.std):
         from kincal.export.diagnostic_plots import plot_accuracy_map
 
-        files.append((out_dir / "accuracy_map.png", plot_accuracy_map(accuracy, source=source)))
+        files.append((out_dir / ACCURACY_MAP_PNG, plot_accuracy_map(accuracy, source=source)))
     return files

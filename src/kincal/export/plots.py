@@ -243,6 +243,22 @@ def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
     return _save(fig, path, overwrite, source)
 
 
+ACCURACY_MAP_PNG = "accuracy_map.png"  # a calibration's accuracy map, in its plots folder
+
+
+def _residuals_png(i: int) -> str:
+    """The residual figure of set ``i`` (0-based)."""
+    return "residuals.png" if i == 0 else f"residuals_set{i + 1}.png"
+
+
+def calibration_figure_names(n_sets: int, accuracy: bool = False) -> list[str]:
+    """Every file name a calibration of ``n_sets`` sets may put in its plots folder
+    (:func:`calibration_figures`, and the accuracy map with ``accuracy``): what the
+    command line checks before the work."""
+    return (["cv_curve.png"] + [_residuals_png(i) for i in range(n_sets)] + ["parameters.png"]
+            + ([ACCURACY_MAP_PNG] if accuracy else []))
+
+
 def calibration_figures(result, source: str | dict[str, str] = "kincal") -> list[tuple[str, bytes]]:
     """(file name, PNG bytes) of the figures of one calibration; nothing is written (the
     files go out through :func:`kincal.export.outputs.write_calibration`, behind the gate).
@@ -264,8 +280,7 @@ def calibration_figures(result, source: str | dict[str, str] = "kincal") -> list
         what = "" if len(result.sets) == 1 else f" of set {i + 1} ({s.kind}, {s.source})"
         title = (f"Calibration residuals{what}, {len(after)} samples; before: mean "
                  f"{s.before.mean:.3f}, max {s.before.max:.3f} mm")
-        name = "residuals.png" if i == 0 else f"residuals_set{i + 1}.png"
-        out.append((name, png_bytes(plot_error_distributions(series, None, title=title,
+        out.append((_residuals_png(i), png_bytes(plot_error_distributions(series, None, title=title,
                                                         source=source))))
     kin = list(result.parameters[:result.layout.n_kinematic])
     if any(p.status == "identified" for p in kin):

@@ -19,7 +19,6 @@ Plain numpy: no pinocchio, no file writing (the fleet's writer writes ``dumps()`
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -117,19 +116,14 @@ class FleetPrior:
                                for n, u, m, s in zip(self.names, unit, self.mean, self.std)],
                 "covariance": self.covariance.tolist()}
 
-    def dumps(self) -> str:
-        return json.dumps(self.as_dict(), indent=1) + "\n"
-
     @classmethod
     def read(cls, path) -> "FleetPrior":
         """Read and check a FLEET.json (PriorError naming what is wrong)."""
-        path = Path(path)
-        try:
-            d = json.loads(path.read_text())
-        except OSError as e:
-            raise PriorError(f"{path}: cannot read the fleet prior ({e.strerror or e})") from None
-        except ValueError as e:
-            raise PriorError(f"{path}: not a JSON fleet prior ({e})") from None
+        from kincal.input_files import read_json
+
+        path = Path(path)  # read as FRAMES.json is (no FIFO or device, nesting, encoding)
+        d = read_json(path, "fleet prior", "a kincal fleet prior", PriorError,
+                      expected="the FLEET.json that kincal fleet wrote")
         if not isinstance(d, dict) or d.get("format") != FORMAT:
             raise PriorError(f"{path}: not a fleet prior (expected \"format\": \"{FORMAT}\", "
                              "as kincal fleet writes in DIR/FLEET.json)")

@@ -33,6 +33,7 @@ import numpy as np
 
 from kincal.errors import DataError, InputFileError, KincalNote, listing, suggest
 from kincal.input_files import MAX_DATA_BYTES, check_regular_file
+from kincal.measurements.checks import SIGMA_RANGE_DEG
 
 SEPARATORS = {",": "a comma", ";": "a semicolon", "\t": "a tab"}
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+(?:[eE][+-]?\d+)?$")
@@ -45,7 +46,7 @@ _DECIMAL_COMMA_HINT = ("kincal reads numbers with a decimal point only; if the f
 # the range spans both (1 nm to 1 km in metres, 1 pm to 1 m in millimetres); the set's
 # own check (kincal.measurements.kind.check_sigmas) narrows it in SI.
 COLUMN_RANGES = {"sigma": (1e-9, 1e3, "in the file's length unit"),
-                 "sigma_deg": (1e-6, 90.0, "deg")}
+                 "sigma_deg": (*SIGMA_RANGE_DEG, "deg")}  # a stated orientation sigma's range
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,17 @@ MAX_ABS_VALUE = 1e6
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 
 
+def unit_factors(length_unit: str, angle_unit: str, error=DataError) -> tuple[float, float]:
+    """(metres per length unit, radians per angle unit) of a file's units; ``error`` (a
+    KincalError class) for a unit that is not m/mm or rad/deg. The one check of every
+    reader of joint values and positions (data, kinds, candidates, targets)."""
+    if length_unit not in LENGTH_UNITS:
+        raise error(f"unknown length unit {length_unit!r}; expected one of m, mm")
+    if angle_unit not in ANGLE_UNITS:
+        raise error(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+    return LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
+
+
 def _readonly(a) -> np.ndarray:
     """A read-only float array of a: a itself when it is one already (a block's view of
     its set's arrays, :meth:`Measurements.subset` with a slice), else a copy."""
@@ -235,10 +246,7 @@ class Measurements:
                             f"point); got {len(position_columns)}: {', '.join(position_columns)}")
         if len(set(position_columns)) != len(position_columns):
             raise DataError(f"a position column is named twice: {', '.join(position_columns)}")
-        if length_unit not in LENGTH_UNITS:
-            raise DataError(f"unknown length unit {length_unit!r}; expected one of m, mm")
-        if angle_unit not in ANGLE_UNITS:
-            raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+        L, A = unit_factors(length_unit, angle_unit)
         columns = joint_column_names(joint_names, joint_columns)
         wanted = list(columns.values()) + list(position_columns)
         extra = [c for c in (sigma_column, order_column) if c is not None]
@@ -251,7 +259,6 @@ class Measurements:
                             + suggest(order_column, table.header)
                             + f" The header has {listing(table.header)}")
         rows = table.lines
-        L, A = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
         v = table.values
         q = np.column_stack([v[columns[j]] * (L if j in set(prismatic) else A)
                              for j in joint_names])

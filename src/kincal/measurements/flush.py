@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError
+from kincal.measurements.checks import SIGMA_RANGE_DEG
 from kincal.measurements.kind import DEFAULT_SIGMA, KindModel, SampleSet, read_set, readonly
 from kincal.measurements.plane import MIN_SPREAD, fit_plane, normal, plane_indices, plane_labels
 from kincal.rotations import cross_rows, rotx, roty, skew
@@ -83,9 +84,10 @@ class FlushData(SampleSet):
                                 "[deg]")
             object.__setattr__(self, "sigma_deg", s)
         o = self.orientation_sigma_deg
-        if o is not None and not (math.isfinite(o) and o > 0):
-            raise DataError(f"the tilt sigma of flush touches must be a finite value > 0 deg, "
-                            f"got {self.orientation_sigma_deg}")
+        lo, hi = SIGMA_RANGE_DEG  # as a pose set's orientation sigma
+        if o is not None and not (math.isfinite(o) and lo <= o <= hi):
+            raise DataError(f"the tilt sigma of flush touches must be a finite value between "
+                            f"{lo:g} and {hi:g} deg, got {self.orientation_sigma_deg}")
 
     def per_sample_fields(self):
         return super().per_sample_fields() + ("planes", "sigma_deg")

@@ -212,17 +212,13 @@ def read_set(path, joint_names, wanted, optional=(), prismatic=(), angle_unit="r
     """Read the chain joints and the ``wanted`` columns of a CSV file (shared by the kinds;
     the point kind has its own reader, :meth:`kincal.measurements.data.Measurements.from_csv`)."""
     from kincal.measurements.csv_table import read_columns
-    from kincal.measurements.data import ANGLE_UNITS, LENGTH_UNITS, joint_column_names
+    from kincal.measurements.data import joint_column_names, unit_factors
 
-    if length_unit not in LENGTH_UNITS:
-        raise DataError(f"unknown length unit {length_unit!r}; expected one of m, mm")
-    if angle_unit not in ANGLE_UNITS:
-        raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+    L, A = unit_factors(length_unit, angle_unit)
     columns = joint_column_names(joint_names, joint_columns)
     table = read_columns(path, list(columns.values()) + list(wanted), optional, kind="data",
                          expected=expected or "the chain joints",
                          aliases={c: j for j, c in columns.items() if c != j})
-    L, A = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
     q = np.column_stack([table.values[columns[j]] * (L if j in set(prismatic) else A)
                          for j in joint_names])
     return SetColumns(q, table.values, np.asarray(table.lines), approach_directions(q),

@@ -105,7 +105,7 @@ class PoseData(SampleSet):
         its columns in the format's order (default: the usual names, e.g. qx qy qz qw;
         roll pitch yaw or phix phiy phiz, suffixed like the position columns)."""
         from kincal.measurements.csv_table import read_columns
-        from kincal.measurements.data import ANGLE_UNITS
+        from kincal.measurements.data import unit_factors
         from kincal.measurements.orientation_columns import OrientationFormat, rotations
 
         position_columns = tuple(position_columns)
@@ -113,19 +113,17 @@ class PoseData(SampleSet):
                                 else tuple(orientation_columns))
         if len(position_columns) != 3:
             raise DataError(f"a pose needs 3 position columns, got {position_columns}")
-        if angle_unit not in ANGLE_UNITS:
-            raise DataError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+        L, A = unit_factors(length_unit, angle_unit)  # a bad unit before the header is read
         with warnings.catch_warnings():  # the reading below gives the notes
             warnings.simplefilter("ignore", KincalNote)
-            header = read_columns(path, []).header
+            header = read_columns(path, [], header_only=True).header
         orientation_columns = fmt.resolve(header, position_columns, str(path))
         c = read_set(path, joint_names, position_columns + orientation_columns,
                      ("sigma", "sigma_deg"), prismatic, angle_unit, length_unit, joint_columns,
                      expected=f"the chain joints, positions and orientations ({fmt.name})")
-        L = 1e-3 if length_unit == "mm" else 1.0
         v = c.values
         R = rotations(np.column_stack([v[k] for k in orientation_columns]), fmt.name,
-                      ANGLE_UNITS[angle_unit], c.source, c.rows, orientation_columns)
+                      A, c.source, c.rows, orientation_columns)
         P = np.column_stack([v[k] for k in position_columns]) * L
         for name in ("sigma", "sigma_deg"):
             if name in v and np.any(v[name] <= 0):

@@ -133,6 +133,9 @@ def tool_positions(chain, space: ParameterSpace, x: np.ndarray,
     return _measurement_model(chain, space, q).predict(x_base)
 
 
+MAX_GRID = 25  # grid points per edge of an accuracy cube: 25^3 inverse kinematics at most
+
+
 def cube_grid(center, edge: float, n: int = 5) -> np.ndarray:
     """(n^3, 3) points of an n x n x n grid filling a cube [m] (n = 1: the centre)."""
     c = np.asarray(center, float)
@@ -140,8 +143,8 @@ def cube_grid(center, edge: float, n: int = 5) -> np.ndarray:
         raise OptionError(f"the cube centre must be 3 finite numbers, got {center!r}")
     if not (np.isfinite(edge) and edge > 0):
         raise OptionError(f"the cube edge must be a positive length, got {edge!r}")
-    if isinstance(n, bool) or int(n) != n or not 1 <= n <= 25:
-        raise OptionError(f"the grid must have 1 to 25 points per edge, got {n!r}")
+    if isinstance(n, bool) or int(n) != n or not 1 <= n <= MAX_GRID:
+        raise OptionError(f"the grid must have 1 to {MAX_GRID} points per edge, got {n!r}")
     t = np.linspace(-edge / 2, edge / 2, int(n)) if n > 1 else np.zeros(1)
     g = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
     return c + g

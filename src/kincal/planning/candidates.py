@@ -16,7 +16,7 @@ import numpy as np
 from kincal.errors import KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import read_columns
-from kincal.measurements.data import ANGLE_UNITS, LENGTH_UNITS, joint_column_names
+from kincal.measurements.data import joint_column_names, unit_factors
 
 if TYPE_CHECKING:
     from kincal.robot import Robot
@@ -52,16 +52,12 @@ def read_candidates(path, robot: "Robot", length_unit: str = "m", angle_unit: st
     messages. joint_columns: {URDF joint: CSV column} for columns named otherwise (see
     :meth:`kincal.measurements.data.Measurements.from_csv`).
     """
-    if length_unit not in LENGTH_UNITS:
-        raise OptionError(f"unknown length unit {length_unit!r}; expected one of m, mm")
-    if angle_unit not in ANGLE_UNITS:
-        raise OptionError(f"unknown angle unit {angle_unit!r}; expected one of rad, deg")
+    L, A = unit_factors(length_unit, angle_unit, OptionError)
     g = robot.geometry
     columns = joint_column_names(robot.joint_names, joint_columns)
     table = read_columns(path, list(columns.values()), kind=kind, expected="the chain joints",
                          rows_name="poses", aliases={c: j for j, c in columns.items() if c != j})
-    unit = [LENGTH_UNITS[length_unit] if k == "prismatic" else ANGLE_UNITS[angle_unit]
-            for k in g.kinds]
+    unit = [L if k == "prismatic" else A for k in g.kinds]
     q = np.column_stack([table.values[columns[j]] * u for j, u in zip(robot.joint_names, unit)])
     for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, table.lines)
                     + angle_unit_warnings(g.joint_names, g.kinds, q, angle_unit)):
