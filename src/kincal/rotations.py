@@ -184,12 +184,29 @@ def rotation_angle(R: np.ndarray) -> float:
     return math.atan2(s, c)
 
 
+def tilt_angles(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rx, ry) [rad] of unit vectors m (..., 3) = Rx(rx) Ry(ry) e_z, ry in [-pi/2, pi/2]
+    (both by atan2: well conditioned also near ry = +-90 deg, where arcsin is not): the
+    tilts of a plane's normal (:mod:`kincal.measurements.plane`), a flush contact frame's
+    (:mod:`kincal.measurements.flush`), an axis (:func:`kincal.models.mdh.hayati_parameters`)
+    and the first two :func:`base_angles`; :func:`kincal.measurements.plane.normal` is its
+    inverse."""
+    m = np.asarray(m, dtype=float)
+    return (np.arctan2(-m[..., 1], m[..., 2]),
+            np.arctan2(m[..., 0], np.hypot(m[..., 1], m[..., 2])))
+
+
 def base_angles(R: np.ndarray) -> np.ndarray:
-    """(rx, ry, rz) [rad] with R = Rx(rx) Ry(ry) Rz(rz), ry in [-pi/2, pi/2]."""
-    ry = math.atan2(R[0, 2], math.hypot(R[1, 2], R[2, 2]))
-    rx = math.atan2(-R[1, 2], R[2, 2])
-    rz = math.atan2(-R[0, 1], R[0, 0])
-    return np.array([rx, ry, rz])
+    """(..., 3) the angles (rx, ry, rz) [rad] with R = Rx(rx) Ry(ry) Rz(rz) of rotations R
+    (..., 3, 3), ry in [-pi/2, pi/2]: rx and ry the :func:`tilt_angles` of R's last column,
+    rz from Rx(rx)^T R = Ry(ry) Rz(rz), whose middle row is (sin rz, cos rz, 0) whatever
+    ry, so the angles give R back to rounding also at gimbal lock (ry = +-90 deg, where
+    only rx + rz, or rx - rz, is defined)."""
+    R = np.asarray(R, dtype=float)
+    rx, ry = tilt_angles(R[..., :, 2])
+    c, s = np.cos(rx), np.sin(rx)
+    rz = np.arctan2(c * R[..., 1, 0] + s * R[..., 2, 0], c * R[..., 1, 1] + s * R[..., 2, 1])
+    return np.stack([rx, ry, rz], axis=-1)
 
 
 def kabsch(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

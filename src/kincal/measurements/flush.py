@@ -45,7 +45,7 @@ import numpy as np
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.kind import DEFAULT_SIGMA, KindModel, SampleSet, read_set, readonly
 from kincal.measurements.plane import MIN_SPREAD, fit_plane, normal, plane_indices, plane_labels
-from kincal.rotations import cross_rows, rotx, roty, skew
+from kincal.rotations import cross_rows, rotx, roty, skew, tilt_angles
 
 DEFAULT_TILT_SIGMA_DEG = 0.05  # [deg] tilt noise assumed when a set states none
 MIN_TOUCHES = 3  # per plane: its tilt and offset need three touches not on a line
@@ -157,13 +157,8 @@ def check_touch_counts(planes: np.ndarray, labels, source: str) -> None:
                 "and the heights of 3 touches not on a line fix the plane's tilt")
 
 
-def tilt_angles(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(alpha, beta) [rad] of unit vectors m (N, 3) = Rx(alpha) Ry(beta) e_z."""
-    return np.arctan2(-m[:, 1], m[:, 2]), np.arctan2(m[:, 0], np.hypot(m[:, 1], m[:, 2]))
-
-
 def tilt_gradient(m: np.ndarray) -> np.ndarray:
-    """(N, 2, 3) derivatives of (alpha, beta) of :func:`tilt_angles` w.r.t. m."""
+    """(N, 2, 3) derivatives of (alpha, beta) of :func:`kincal.rotations.tilt_angles` w.r.t. m."""
     mx, my, mz = m.T
     rho = np.hypot(my, mz)
     G = np.zeros((len(m), 2, 3))
@@ -178,8 +173,8 @@ def tilt_gradient(m: np.ndarray) -> np.ndarray:
 
 def angles_of(u: np.ndarray) -> tuple[float, float]:
     """(rx, ry) [rad] with Rx(rx) Ry(ry) e_z along the unit vector u."""
-    a, b = tilt_angles(np.asarray(u, float)[None])
-    return float(a[0]), float(b[0])
+    a, b = tilt_angles(u)
+    return float(a), float(b)
 
 
 class FlushKind(KindModel):
@@ -298,7 +293,7 @@ class FlushKind(KindModel):
         theirs, a, _ = self.split_frames(out)
         shared = [j for j in range(len(planes)) if not own[3 * j]]
         if shared and normal(*planes[shared[0], :2]) @ normal(*theirs[shared[0], :2]) < 0:
-            u = rotx(a[0]) @ roty(a[1]) @ np.array([0.0, 0.0, 1.0])
+            u = normal(*a)
             f = 3 * len(planes)
             out[f:f + 2] = angles_of(-u)
         return out

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.errors import DataError
-from kincal.rotations import rotation_exp, rotations_about
+from kincal.rotations import base_angles, rotation_exp, rotations_about
 
 FORMATS = ("quat-xyzw", "quat-wxyz", "rpy-zyx", "rpy-xyz", "rotvec", "matrix")
 DEFAULT_FORMAT = "quat-xyzw"
@@ -175,9 +175,6 @@ def orientation_values(R: np.ndarray, fmt: str, angle_scale: float = 1.0) -> np.
         M = R @ np.transpose(rotations_about(0, x), (0, 2, 1))  # rounding even at gimbal lock
         a = np.column_stack([x, np.arctan2(-M[:, 2, 0], M[:, 2, 2]),
                              np.arctan2(-M[:, 0, 1], M[:, 1, 1])])
-    else:  # rpy-xyz: R = Rx(a) Ry(b) Rz(c): a, then b and c from Rx(a)^T R
-        x = np.arctan2(-R[:, 1, 2], R[:, 2, 2])
-        M = np.transpose(rotations_about(0, x), (0, 2, 1)) @ R
-        a = np.column_stack([x, np.arctan2(M[:, 0, 2], M[:, 2, 2]),
-                             np.arctan2(M[:, 1, 0], M[:, 1, 1])])
+    else:  # rpy-xyz: R = Rx(a) Ry(b) Rz(c), the measurement frame's angles
+        a = base_angles(R)
     return a / angle_scale

@@ -21,7 +21,7 @@ import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.kind import KindModel, SampleSet, read_set, readonly
-from kincal.rotations import cross_rows, rotx, roty
+from kincal.rotations import cross_rows, rotx, roty, tilt_angles
 
 MIN_SPREAD = 1e-3  # [m] RMS spread of a plane's contacts across their best line
 
@@ -83,6 +83,8 @@ def plane_labels(raw: np.ndarray, source: str, rows, column: str = "plane"):
 
 
 def normal(rx: float, ry: float) -> np.ndarray:
+    """(3,) the unit normal Rx(rx) Ry(ry) e_z of a plane of tilts rx, ry [rad]: the inverse of
+    :func:`kincal.rotations.tilt_angles`."""
     return rotx(rx) @ roty(ry) @ np.array([0.0, 0.0, 1.0])
 
 
@@ -164,9 +166,7 @@ class PlaneKind(KindModel):
         out = [t]
         for j in range(len(self.data.labels)):
             n, d, _ = fit_plane(P[self.data.planes == j])
-            ry = float(np.arcsin(np.clip(n[0], -1.0, 1.0)))
-            rx = float(np.arctan2(-n[1], n[2]))
-            out.append([rx, ry, d])
+            out.append([*map(float, tilt_angles(n)), d])
         return np.concatenate([np.ravel(o) for o in out])
 
     def sample_errors(self, r):

@@ -38,8 +38,8 @@ from kincal.measurements.kind import (
     read_set,
     readonly,
 )
-from kincal.rotations import (base_angles, base_rotation, cross_rows, rotation_log, rotx, roty,
-                              rotz, skew)
+from kincal.rotations import (base_angles, base_rotation, cross_rows, kabsch_rotation, rotation_log,
+                              rotx, roty, rotz, skew)
 
 DEFAULT_ORIENTATION_SIGMA_DEG = 0.01  # [deg], a 6-DoF laser-tracker probe's order
 QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
@@ -215,10 +215,10 @@ class PoseKind(KindModel):
         d = self.data
         s = self.chain.state(kin, None, keep=False)
         Rb, tb, t, _, _ = initial_frames(s.R_tip, s.p_tip, d.positions, tool_guess)
-        # tool orientation: the mean of (R_b R_tip)^T R_measured, projected on SO(3)
+        # tool orientation: the rotation nearest the mean of (R_b R_tip)^T R_measured, the
+        # Kabsch rotation of its transpose (the rotation R maximising trace(R^T M))
         M = np.einsum("nji,njk->ik", Rb @ s.R_tip, d.rotations)
-        U, _, Vt = np.linalg.svd(M)
-        Rt = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0]) @ Vt
+        Rt = kabsch_rotation(M.T)
         return np.concatenate([tb, base_angles(Rb), t, base_angles(Rt)])
 
     def sample_errors(self, r):

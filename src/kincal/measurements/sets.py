@@ -200,6 +200,7 @@ def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
     from kincal.errors import OptionError
     from kincal.measurements.plane import fit_plane
     from kincal.models.chain import Chain
+    from kincal.rotations import tilt_angles
 
     q = np.asarray(q, float)
     t = np.asarray(tool, float)
@@ -225,7 +226,7 @@ def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
         fitted = []
         for j in range(len(labels)):
             n, d, _ = fit_plane(P[k == j])
-            fitted += [float(np.arctan2(-n[1], n[2])), float(np.arcsin(np.clip(n[0], -1, 1))), d]
+            fitted += [*map(float, tilt_angles(n)), d]
         frames = np.r_[t, fitted]
     elif kind == "flush":
         data, frames = planning_set(error_model, q, t, planes)
