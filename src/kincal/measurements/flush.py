@@ -44,7 +44,8 @@ import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.kind import DEFAULT_SIGMA, KindModel, SampleSet, read_set, readonly
-from kincal.measurements.plane import MIN_SPREAD, fit_plane, normal, plane_indices, plane_labels
+from kincal.measurements.plane import (MIN_SPREAD, fit_plane, normal, normal_by_ry, plane_indices,
+                                      plane_labels)
 from kincal.rotations import cross_rows, rotx, roty, skew, tilt_angles
 
 DEFAULT_TILT_SIGMA_DEG = 0.05  # [deg] tilt noise assumed when a set states none
@@ -227,9 +228,9 @@ class FlushKind(KindModel):
             Jk, Jb = self._zero_chain_columns(3)
         Jf = np.zeros((N, 3, self.n_frames))
         rows = np.arange(N)
-        ex, ey, ez = np.eye(3)
+        ex, ey = np.eye(3)[:2]
         dn_rx = cross_rows(ex, n)
-        dn_ry = np.stack([rotx(x) @ np.cross(ey, roty(y) @ ez) for x, y, _ in pl])[k]
+        dn_ry = np.stack([normal_by_ry(x, y) for x, y, _ in pl])[k]
         GA = np.einsum("nrj,nij->nri", G, A)                      # d(tilt rows)/dn
         for col, dn in ((3 * k, dn_rx), (3 * k + 1, dn_ry)):
             Jf[rows, 0, col] = -np.sum(dn * s.p_tip, axis=1)

@@ -88,6 +88,13 @@ def normal(rx: float, ry: float) -> np.ndarray:
     return rotx(rx) @ roty(ry) @ np.array([0.0, 0.0, 1.0])
 
 
+def normal_by_ry(rx: float, ry: float) -> np.ndarray:
+    """(3,) the derivative of :func:`normal` by ry: Rx(rx) (e_y x Ry(ry) e_z) (its derivative
+    by rx is e_x x normal)."""
+    ey, ez = np.eye(3)[1:]
+    return rotx(rx) @ np.cross(ey, roty(ry) @ ez)
+
+
 def fit_plane(P: np.ndarray) -> tuple[np.ndarray, float, float]:
     """(unit normal, offset d [m], RMS spread across the best line [m]) of points P."""
     m = P.mean(axis=0)
@@ -132,9 +139,9 @@ class PlaneKind(KindModel):
         Jf = np.zeros((self.N, 1, self.n_frames))
         Jf[:, 0, :3] = -np.einsum("ni,nij->nj", n, s.R_tip)
         rows = np.arange(self.N)
-        ex, ey, ez = np.eye(3)
+        ex = np.eye(3)[0]
         dn_rx = cross_rows(ex, n)
-        dn_ry = np.stack([rotx(a) @ np.cross(ey, roty(b) @ ez) for a, b, _ in pl])[k]
+        dn_ry = np.stack([normal_by_ry(a, b) for a, b, _ in pl])[k]
         Jf[rows, 0, 3 + 3 * k] = -np.sum(dn_rx * P, axis=1)
         Jf[rows, 0, 4 + 3 * k] = -np.sum(dn_ry * P, axis=1)
         Jf[rows, 0, 5 + 3 * k] = 1.0

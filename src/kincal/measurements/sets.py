@@ -168,7 +168,9 @@ class KindSpace:
     def reporting_scale(self):
         import numpy as np
 
-        return np.where(self.is_length, 1e-3, np.pi / 180.0)
+        from kincal.measurements.point_space import DEG, MM
+
+        return np.where(self.is_length, MM, DEG)
 
     def indices(self, patterns):
         import fnmatch
