@@ -117,6 +117,15 @@ def base_rotation(rx: float, ry: float, rz: float) -> np.ndarray:
     return rotx(rx) @ roty(ry) @ rotz(rz)
 
 
+def base_turns(rx: float, ry: float) -> np.ndarray:
+    """(3, 3) columns: the axes about which the angles rx, ry, rz of R = Rx(rx) Ry(ry) Rz(rz)
+    turn R, in the frame R maps into (e_x, Rx e_y, Rx Ry e_z): a small change d of the angles
+    turns R by the rotation vector W d (the angles' Jacobian of the measurement frame, a
+    tool frame, a flush contact frame (rx, ry only) and a placement error's turn)."""
+    Rx = rotx(rx)
+    return np.column_stack([np.eye(3)[0], Rx[:, 1], Rx @ roty(ry)[:, 2]])
+
+
 def skew(v) -> np.ndarray:
     """(..., 3, 3) the cross-product matrices K of vectors v (..., 3): K u = v x u."""
     v = np.asarray(v, dtype=float)

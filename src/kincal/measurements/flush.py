@@ -46,7 +46,7 @@ from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.kind import DEFAULT_SIGMA, KindModel, SampleSet, read_set, readonly
 from kincal.measurements.plane import (MIN_SPREAD, fit_plane, normal, normal_by_ry, plane_indices,
                                       plane_labels)
-from kincal.rotations import cross_rows, rotx, roty, skew, tilt_angles
+from kincal.rotations import base_turns, cross_rows, rotx, roty, skew, tilt_angles
 
 DEFAULT_TILT_SIGMA_DEG = 0.05  # [deg] tilt noise assumed when a set states none
 MIN_TOUCHES = 3  # per plane: its tilt and offset need three touches not on a line
@@ -228,7 +228,7 @@ class FlushKind(KindModel):
             Jk, Jb = self._zero_chain_columns(3)
         Jf = np.zeros((N, 3, self.n_frames))
         rows = np.arange(N)
-        ex, ey = np.eye(3)[:2]
+        ex = np.eye(3)[0]
         dn_rx = cross_rows(ex, n)
         dn_ry = np.stack([normal_by_ry(x, y) for x, y, _ in pl])[k]
         GA = np.einsum("nrj,nij->nri", G, A)                      # d(tilt rows)/dn
@@ -237,7 +237,7 @@ class FlushKind(KindModel):
             Jf[rows, 1:, col] = np.einsum("nri,ni->nr", GA, dn)
         Jf[rows, 0, 3 * k + 2] = 1.0
         f = 3 * len(self.data.labels)
-        W = np.column_stack([ex, Rx @ ey])                        # tool turns, tip frame
+        W = base_turns(a[0], a[1])[:, :2]                         # tool turns, tip frame
         Jf[:, 0, f:f + 2] = -(np.cross(W.T, u) @ t)               # d(u . t): turns of u
         Jf[:, 1:, f:f + 2] = S @ (s.R_tip @ W)
         Jf[:, 0, f + 2:f + 5] = -u
