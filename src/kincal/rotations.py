@@ -308,7 +308,11 @@ def rotation_exp(phi: np.ndarray) -> np.ndarray:
 
 
 def rotation_log(R: np.ndarray) -> np.ndarray:
-    """(N, 3) rotation vectors [rad] of rotations (N, 3, 3) (angle in [0, pi])."""
+    """(N, 3) rotation vectors [rad] of rotations (N, 3, 3) (angle in [0, pi]), to rounding at
+    every angle: the axis from the antisymmetric part R - R^T = 2 sin(angle) [axis]x up to
+    90 deg; beyond, where sin(angle) shrinks toward pi, from the symmetric part,
+    (R + R^T) / 2 - cos(angle) I = (1 - cos(angle)) axis axis^T (its row of largest
+    diagonal, the sign from the antisymmetric part's)."""
     w = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1)
     s = np.linalg.norm(w, axis=1) / 2.0
     c = (np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0
@@ -316,10 +320,14 @@ def rotation_log(R: np.ndarray) -> np.ndarray:
     small = s < 1e-9
     scale = np.where(small, 0.5, angle / (2.0 * np.where(small, 1.0, s)))
     out = w * scale[:, None]
-    # near pi the antisymmetric part vanishes: take the axis from the symmetric part
-    flip = small & (c < 0)
-    for k in np.flatnonzero(flip):
-        B = (R[k] + np.eye(3)) / 2.0
-        axis = B[np.argmax(np.diag(B))]
-        out[k] = np.pi * axis / np.linalg.norm(axis)
+    wide = np.flatnonzero(c < 0.0)  # beyond 90 deg
+    if wide.size:
+        Rw, cw = R[wide], c[wide]
+        B = (Rw + np.swapaxes(Rw, 1, 2)) / 2.0
+        B.reshape(-1, 9)[:, ::4] -= cw[:, None]  # (1 - c) axis axis^T
+        k = np.argmax(np.diagonal(B, axis1=1, axis2=2), axis=1)
+        row = B[np.arange(wide.size), k]  # (1 - c) axis_k axis
+        axis = row / np.linalg.norm(row, axis=1)[:, None]
+        axis *= np.where(np.sum(axis * w[wide], axis=1) < 0.0, -1.0, 1.0)[:, None]
+        out[wide] = axis * angle[wide, None]
     return out
