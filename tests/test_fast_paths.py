@@ -189,7 +189,7 @@ def test_solver_lstsq_is_scipys_to_the_bit():
     square, wide and rank-deficient systems."""
     import scipy.linalg
 
-    from kincal.identification.solver import lstsq
+    from kincal.identification.linalg import lstsq
 
     rng = np.random.default_rng(6)
     for m, n in ((190, 45), (45, 45), (20, 45), (60, 7)):
@@ -243,7 +243,7 @@ def test_lapack_from_scipys_file_is_the_public_routine():
 
     code = (
         "import sys, numpy as np\n"
-        "from kincal.identification.solver import _routines, qr_r, lstsq\n"
+        "from kincal.identification.linalg import _routines, qr_r, lstsq\n"
         "rng = np.random.default_rng(3); A = rng.normal(size=(50, 9)); b = rng.normal(size=50)\n"
         "fast = lstsq(A, b)\n"
         "B = rng.normal(size=(150, 46)) * np.logspace(0, 8, 46)\n"

@@ -433,7 +433,7 @@ def test_blas_is_limited_once_per_fit(monkeypatch):
     analysis."""
     from threadpoolctl import threadpool_info
 
-    from kincal.identification import blas_threads, problem
+    from kincal.identification import blas_threads, reduction
     from kincal.planning.kind_simulation import simulate_points
 
     robot = Robot.load("ec66")
@@ -444,7 +444,7 @@ def test_blas_is_limited_once_per_fit(monkeypatch):
     data = simulate_points(model, model.nominal, base, tool, q, 5e-5, rng)
     controller = blas_threads._controller()
     entered, threads = [], []
-    limit, analyze = controller.limit, problem.analyze
+    limit, analyze = controller.limit, reduction.analyze
     monkeypatch.setattr(controller, "limit", lambda **kw: entered.append(kw) or limit(**kw))
 
     def seen(*args, **kw):
@@ -452,6 +452,6 @@ def test_blas_is_limited_once_per_fit(monkeypatch):
                         if lib["user_api"] == "blas"})
         return analyze(*args, **kw)
 
-    monkeypatch.setattr(problem, "analyze", seen)
+    monkeypatch.setattr(reduction, "analyze", seen)
     CalibrationProblem(robot, data, CalibrationOptions(method="ls")).solve()
     assert len(entered) == 1 and threads == [{1}]

@@ -81,7 +81,7 @@ def test_iteration_limit_is_reported_not_hidden():
 
 @pytest.mark.parametrize("m,deficient", [(100, False), (5000, False), (5000, True)])
 def test_triangular_factor_matches_householder(m, deficient):
-    from kincal.identification.solver import triangular_factor
+    from kincal.identification.linalg import triangular_factor
 
     rng = np.random.default_rng(m)
     A = rng.normal(size=(m, 20)) * np.logspace(0, 3, 20)  # columns of very different size

@@ -24,9 +24,9 @@ def _controller() -> ThreadpoolController:
     beside numpy's) is loaded first: loaded later, at a fit's first step, it was not among
     them, so it ran with its default threads whatever the limit, and the new worker thread
     it started busy-waited ~0.1 s after the process's first fit (counted as CPU time)."""
-    from kincal.identification import solver
+    from kincal.identification import linalg
 
-    solver.lapack()
+    linalg.lapack()
     return ThreadpoolController()
 
 

@@ -30,7 +30,7 @@ from typing import cast
 
 import numpy as np
 
-from kincal.identification.solver import triangular_factor
+from kincal.identification.linalg import triangular_factor
 
 # suffix of a parameter name -> its prior class (kinematic error models of every kind)
 _SUFFIX_CLASS = {"a": "length", "d": "length", "tx": "length", "ty": "length",

@@ -38,7 +38,8 @@ from kincal.identification.cross_validation import (CrossValidation, cross_valid
 from kincal.identification.layout import MM, ParameterLayout
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.plausibility import gather, judge
-from kincal.identification.reduction import analyze_rows, one_pass, residual_function
+from kincal.identification.reduction import (analyze_rows, identifiable_rows, one_pass,
+                                             residual_function)
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze, identifiable
@@ -267,8 +268,9 @@ class CalibrationProblem:
             residual = self.residual_function(kinematic=False)
             one_pass(self.residual_function(), residual, x / self.scale, lay.is_frame)
             # only what the data can fix moves (an unseen flush contact point stays put)
-            kept = set(analyze_rows(residual, x / self.scale, lay.reporting_scale() / self.scale,
-                                    lay.names, lay.n_kinematic, free, o.rank_tol, identifiable))
+            kept = set(identifiable_rows(residual, x / self.scale,
+                                         lay.reporting_scale() / self.scale, lay.names,
+                                         lay.n_kinematic, free, o.rank_tol))
             free = free & np.array([n in kept for n in lay.names])  # (np.isin sorts strings)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = sol.u * self.scale
@@ -293,7 +295,7 @@ class CalibrationProblem:
             lay, u = self.layout, self.start() / self.scale  # J in mm per mm or per deg
             ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
                                  lay.names, lay.n_kinematic, self._unfixed(),
-                                 self.options.rank_tol, analyze)
+                                 self.options.rank_tol)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):

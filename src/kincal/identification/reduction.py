@@ -26,6 +26,7 @@ from typing import Any, Callable, Iterable, Protocol, cast
 import numpy as np
 
 from kincal.identification.layout import MM
+from kincal.identification.selection import Identifiability, analyze, identifiable
 
 CHOLESKY_MIN_RATIO = 1e-7  # smallest diag(R) / largest diag(R) accepted from the Gram
 
@@ -219,14 +220,27 @@ def one_pass(whole: Callable, frames_only: Callable, u: np.ndarray, is_frame: np
 
 
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
-                 n_kinematic: int, free: np.ndarray, rank_tol: float, select: Callable):
-    """``select`` (:func:`kincal.identification.selection.analyze`, or its ``identifiable``
-    for the kept names only) of the Jacobian at u with its columns scaled by
-    ``column_scale``; for rows streamed in blocks (many poses), of its QR triangle (the same
-    column norms, projections and singular values), built without the whole J, in a pass
-    that also sums the normal equations at u and leaves them in the residual's ``memo`` for
-    the fit's first linearisation (:func:`linearise`), which starts there. (The caller
-    passes ``select``: the selection takes its QR from the solver, which takes this module.)"""
+                 n_kinematic: int, free: np.ndarray, rank_tol: float) -> Identifiability:
+    """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
+    scaled by ``column_scale`` (:func:`_analysed_matrix`)."""
+    A, m = _analysed_matrix(residual, u)
+    return analyze(A * column_scale, names, n_kinematic, free, rank_tol, m=m)
+
+
+def identifiable_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
+                      n_kinematic: int, free: np.ndarray, rank_tol: float) -> tuple[str, ...]:
+    """The names :func:`analyze_rows` keeps, without its report
+    (:func:`kincal.identification.selection.identifiable`)."""
+    A, m = _analysed_matrix(residual, u)
+    return identifiable(A * column_scale, names, n_kinematic, free, rank_tol, m=m)
+
+
+def _analysed_matrix(residual: Callable, u: np.ndarray) -> tuple[np.ndarray, int | None]:
+    """(the Jacobian at u, None); for rows streamed in blocks (many poses), (its QR triangle
+    (the same column norms, projections and singular values), built without the whole J,
+    the number of rows), in a pass that also sums the normal equations at u and leaves them
+    in the residual's ``memo`` for the fit's first linearisation (:func:`linearise`), which
+    starts there."""
     if getattr(residual, "n_blocks", 1) <= 1:
         memo = getattr(residual, "memo", None)
         kept = memo.get(u.tobytes()) if memo else None  # a pass made at u already
@@ -234,11 +248,11 @@ def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, na
         if memo is not None:  # the fit that starts at u takes (r, J) from here (linearise)
             memo.clear()
             memo[u.tobytes()] = (r, J)
-        return select(J * column_scale, names, n_kinematic, free, rank_tol)
+        return J, None
     blocked = cast(BlockedResidual, residual)
     p = u.size
     normal = np.empty(blocked.rows), np.zeros((p, p)), np.zeros(p)
     R, m = stacked_triangle(blocked.blocks(u), normal=normal)
     blocked.memo.clear()
     blocked.memo[u.tobytes()] = normal
-    return select(R * column_scale, names, n_kinematic, free, rank_tol, m=m)
+    return R, m

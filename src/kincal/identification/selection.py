@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 # Householder R of np.linalg.qr(A, mode="r") (dgeqrf, its numbers) at half numpy's call cost
-from kincal.identification.solver import qr_r
+from kincal.identification.linalg import qr_r
 
 # measurement frame and tool point names; pivot and planes of other measurement kinds, and
 # those of further measurement sets (set2.base.x, ...)
