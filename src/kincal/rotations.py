@@ -207,14 +207,27 @@ def tilt_angles(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def base_angles(R: np.ndarray) -> np.ndarray:
     """(..., 3) the angles (rx, ry, rz) [rad] with R = Rx(rx) Ry(ry) Rz(rz) of rotations R
-    (..., 3, 3), ry in [-pi/2, pi/2]: rx and ry the :func:`tilt_angles` of R's last column,
-    rz from Rx(rx)^T R = Ry(ry) Rz(rz), whose middle row is (sin rz, cos rz, 0) whatever
-    ry, so the angles give R back to rounding also at gimbal lock (ry = +-90 deg, where
-    only rx + rz, or rx - rz, is defined)."""
+    (..., 3, 3), ry in [-pi/2, pi/2], giving R back to rounding also at gimbal lock (ry =
+    +-90 deg, where only rx + rz, or rx - rz, is defined): rx and ry the
+    :func:`tilt_angles` of R's last column; rz from R's first row, cos(ry) (cos rz,
+    -sin rz, .), where cos(ry) >= 1/8 (to rounding there), and nearer the lock from
+    Rx(rx)^T R = Ry(ry) Rz(rz), whose middle row is (sin rz, cos rz, 0) whatever ry. One
+    rotation (3, 3) in Python numbers (math's atan2 and hypot: the bits of the frame starts,
+    one or two a fit, and a sixth of the cost)."""
     R = np.asarray(R, dtype=float)
+    if R.ndim == 2:
+        (a, b, _), (d, e, f), (g, h, i) = R.tolist()
+        cy = math.hypot(f, i)
+        rx = math.atan2(-f, i)
+        if cy >= 0.125:
+            return np.array([rx, math.atan2(R[0, 2], cy), math.atan2(-b, a)])
+        c, s = math.cos(rx), math.sin(rx)
+        return np.array([rx, math.atan2(R[0, 2], cy), math.atan2(c * d + s * g, c * e + s * h)])
     rx, ry = tilt_angles(R[..., :, 2])
     c, s = np.cos(rx), np.sin(rx)
-    rz = np.arctan2(c * R[..., 1, 0] + s * R[..., 2, 0], c * R[..., 1, 1] + s * R[..., 2, 1])
+    rz = np.where(np.hypot(R[..., 1, 2], R[..., 2, 2]) >= 0.125,
+                  np.arctan2(-R[..., 0, 1], R[..., 0, 0]),
+                  np.arctan2(c * R[..., 1, 0] + s * R[..., 2, 0], c * R[..., 1, 1] + s * R[..., 2, 1]))
     return np.stack([rx, ry, rz], axis=-1)
 
 
