@@ -216,18 +216,18 @@ def base_angles(R: np.ndarray) -> np.ndarray:
     one or two a fit, and a sixth of the cost)."""
     R = np.asarray(R, dtype=float)
     if R.ndim == 2:
-        (a, b, _), (d, e, f), (g, h, i) = R.tolist()
-        cy = math.hypot(f, i)
-        rx = math.atan2(-f, i)
+        (a, b, p), (d, e, f), (g, h, i) = R.tolist()
+        cy, x = math.hypot(f, i), math.atan2(-f, i)
         if cy >= 0.125:
-            return np.array([rx, math.atan2(R[0, 2], cy), math.atan2(-b, a)])
-        c, s = math.cos(rx), math.sin(rx)
-        return np.array([rx, math.atan2(R[0, 2], cy), math.atan2(c * d + s * g, c * e + s * h)])
+            return np.array([x, math.atan2(p, cy), math.atan2(-b, a)])
+        cx, sx = math.cos(x), math.sin(x)
+        return np.array([x, math.atan2(p, cy), math.atan2(cx * d + sx * g, cx * e + sx * h)])
     rx, ry = tilt_angles(R[..., :, 2])
     c, s = np.cos(rx), np.sin(rx)
     rz = np.where(np.hypot(R[..., 1, 2], R[..., 2, 2]) >= 0.125,
                   np.arctan2(-R[..., 0, 1], R[..., 0, 0]),
-                  np.arctan2(c * R[..., 1, 0] + s * R[..., 2, 0], c * R[..., 1, 1] + s * R[..., 2, 1]))
+                  np.arctan2(c * R[..., 1, 0] + s * R[..., 2, 0],
+                             c * R[..., 1, 1] + s * R[..., 2, 1]))
     return np.stack([rx, ry, rz], axis=-1)
 
 
