@@ -83,6 +83,30 @@ def test_rotation_log_and_quaternions_near_pi_and_identity(rng):
         np.testing.assert_allclose(quaternion_to_matrix(matrix_to_quaternion(R)), R, atol=1e-15)
 
 
+def test_rotation_log_is_exact_up_to_half_a_turn():
+    """rotation_log to rounding at every angle, also within 1e-3..1e-9 rad of pi, where its
+    axis from the antisymmetric part (of size sin(angle)) lost sig. digits (2e-7 rad off at
+    pi - 1e-9), while the rotation-vector columns a pose file is written with
+    (orientation_values, by quaternions) were exact: now one logarithm for both."""
+    from scipy.spatial.transform import Rotation
+
+    from kincal.measurements.orientation_columns import orientation_values
+    from kincal.rotations import axis_rotations
+
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(400, 3))
+    w /= np.linalg.norm(w, axis=1)[:, None]
+    eps = 10.0 ** -rng.uniform(0, 11, 400)
+    eps[:4] = 0.0, 1e-9, 2e-9, 0.0
+    angle = np.where(np.arange(400) % 2, np.pi - eps, eps)  # near pi and near 0
+    R = axis_rotations(w, angle)
+    want = Rotation.from_matrix(R).as_rotvec()
+    for got in (rotation_log(R), orientation_values(R, "rotvec")):
+        sign = np.where(np.sum(got * want, axis=1) < 0, -1.0, 1.0)  # +-axis at exactly pi
+        assert np.abs(got - sign[:, None] * want).max() < 1e-14
+        assert np.abs(np.linalg.norm(got, axis=1) - angle).max() < 1e-14
+
+
 # ------------------------------------------------------------- a calibrated EC66
 @pytest.fixture(scope="module")
 def cell():

@@ -63,3 +63,20 @@ def test_measurement_refit_needs_frames_and_a_measurement_frame(tmp_path, capsys
     assert main(["evaluate", "ec66", str(data), "--fit-frames", "measurement"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "keeps the tool of --frames" in err
+
+
+def test_frame_move_is_the_rotation_angle_also_for_small_turns():
+    """The frame's move is rotations.rotation_angle of the relative rotation: its former own
+    arccos of the trace read a turn of 1e-8 rad as 0 and one of 1e-7 rad 1 % short."""
+    from types import SimpleNamespace
+
+    from scipy.spatial.transform import Rotation
+
+    from kincal.identification.frame_refit import moved
+
+    km = SimpleNamespace(frame_names=FRAMES)
+    for a in (1e-9, 1e-8, 1e-7, 1e-3, 3.0):
+        after = np.r_[0.001, 0.0, 0.0, np.array([a, -a, 2 * a]) / 3 ** 0.5, np.zeros(6)]
+        mm, deg = moved(np.zeros(12), after, km)
+        angle = np.degrees(Rotation.from_euler("XYZ", after[3:6]).magnitude())  # Rx Ry Rz
+        assert abs(mm - 1.0) < 1e-12 and abs(deg - angle) < 1e-12 * angle

@@ -83,3 +83,29 @@ def test_csv_round_trip_is_exact(tmp_path_factory, seed, n, with_sigma):
     assert (back.sigma is None) == (sigma is None)
     if sigma is not None:
         assert np.array_equal(back.sigma, sigma)
+
+
+@SETTINGS
+@given(rx=angles, ry=angles, rz=angles, lock=st.sampled_from([None, 1.0, -1.0]))
+def test_measurement_frame_angles_give_the_rotation_back(rx, ry, rz, lock):
+    """kincal.rotations.base_angles, the start of every measurement and tool frame (point and
+    pose sets) and the rpy-xyz orientation columns, gives the angles of R = Rx Ry Rz back,
+    also at exact gimbal lock (ry = +-90 deg: R's first row and last column (0 0 +-1)),
+    where its former yaw from R's first row read atan2(0, 0) = 0 whatever the rotation."""
+    from kincal.measurements.orientation_columns import orientation_values, rotations
+    from kincal.rotations import base_angles, base_rotation, rotx, rotz
+
+    R = base_rotation(rx, ry, rz)
+    if lock is not None:  # R = Rx(rx) Ry(+-90 deg) Rz(rz) with its exact zeros
+        R = rotx(rx) @ np.array([[0.0, 0.0, lock], [0.0, 1.0, 0.0], [-lock, 0.0, 0.0]]) @ rotz(rz)
+        R[0, :2] = R[1:, 2] = 0.0
+    a = base_angles(R)
+    assert np.abs(base_rotation(*a) - R).max() < 1e-14
+    assert -math.pi / 2 <= a[1] <= math.pi / 2
+    b = orientation_values(R[None], "rpy-xyz")  # the columns: these angles, for a stack
+    assert np.abs(b[0] - a).max() < 1e-14 and np.abs(rotations(b, "rpy-xyz")[0] - R).max() < 1e-14
+    if lock is None and abs(math.cos(a[1])) > 1e-3:  # intrinsic x-y-z, away from the lock
+        from scipy.spatial.transform import Rotation
+
+        d = Rotation.from_matrix(R).as_euler("XYZ") - a
+        assert np.abs((d + math.pi) % (2 * math.pi) - math.pi).max() < 1e-12  # up to 2 pi

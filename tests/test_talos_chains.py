@@ -66,7 +66,7 @@ def test_talos_two_arms_command_line_smoke(tmp_path, capsys):
     from pathlib import Path
 
     from kincal.descriptions import erd_robots_dir
-    from kincal.measurements.flush import tilt_angles
+    from kincal.rotations import tilt_angles
     from kincal.measurements.plane import fit_plane
     from kincal.rotations import rotx, roty
 

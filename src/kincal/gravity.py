@@ -15,8 +15,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from kincal.models.compliance import GRAVITY
 
-def gravity_torques(robot, joint_values, gravity: float = 9.81) -> np.ndarray:
+
+def gravity_torques(robot, joint_values, gravity: float = GRAVITY) -> np.ndarray:
     """(N, n) gravity torque of each chain joint of ``robot`` (a :class:`kincal.robot.Robot`)
     at (N, n) joint values [N m, or N for a prismatic joint]; zeros without inertials.
     Joints off the chain stay where the robot puts them (:meth:`Robot.configuration`)."""

@@ -117,6 +117,15 @@ def base_rotation(rx: float, ry: float, rz: float) -> np.ndarray:
     return rotx(rx) @ roty(ry) @ rotz(rz)
 
 
+def base_turns(rx: float, ry: float) -> np.ndarray:
+    """(3, 3) columns: the axes about which the angles rx, ry, rz of R = Rx(rx) Ry(ry) Rz(rz)
+    turn R, in the frame R maps into (e_x, Rx e_y, Rx Ry e_z): a small change d of the angles
+    turns R by the rotation vector W d (the angles' Jacobian of the measurement frame, a
+    tool frame, a flush contact frame (rx, ry only) and a placement error's turn)."""
+    Rx = rotx(rx)
+    return np.column_stack([np.eye(3)[0], Rx[:, 1], Rx @ roty(ry)[:, 2]])
+
+
 def skew(v) -> np.ndarray:
     """(..., 3, 3) the cross-product matrices K of vectors v (..., 3): K u = v x u."""
     v = np.asarray(v, dtype=float)
@@ -184,12 +193,42 @@ def rotation_angle(R: np.ndarray) -> float:
     return math.atan2(s, c)
 
 
+def tilt_angles(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rx, ry) [rad] of unit vectors m (..., 3) = Rx(rx) Ry(ry) e_z, ry in [-pi/2, pi/2]
+    (both by atan2: well conditioned also near ry = +-90 deg, where arcsin is not): the
+    tilts of a plane's normal (:mod:`kincal.measurements.plane`), a flush contact frame's
+    (:mod:`kincal.measurements.flush`), an axis (:func:`kincal.models.mdh.hayati_parameters`)
+    and the first two :func:`base_angles`; :func:`kincal.measurements.plane.normal` is its
+    inverse."""
+    m = np.asarray(m, dtype=float)
+    return (np.arctan2(-m[..., 1], m[..., 2]),
+            np.arctan2(m[..., 0], np.hypot(m[..., 1], m[..., 2])))
+
+
 def base_angles(R: np.ndarray) -> np.ndarray:
-    """(rx, ry, rz) [rad] with R = Rx(rx) Ry(ry) Rz(rz), ry in [-pi/2, pi/2]."""
-    ry = math.atan2(R[0, 2], math.hypot(R[1, 2], R[2, 2]))
-    rx = math.atan2(-R[1, 2], R[2, 2])
-    rz = math.atan2(-R[0, 1], R[0, 0])
-    return np.array([rx, ry, rz])
+    """(..., 3) the angles (rx, ry, rz) [rad] with R = Rx(rx) Ry(ry) Rz(rz) of rotations R
+    (..., 3, 3), ry in [-pi/2, pi/2], giving R back to rounding also at gimbal lock (ry =
+    +-90 deg, where only rx + rz, or rx - rz, is defined): rx and ry the
+    :func:`tilt_angles` of R's last column; rz from R's first row, cos(ry) (cos rz,
+    -sin rz, .), where cos(ry) >= 1/8 (to rounding there), and nearer the lock from
+    Rx(rx)^T R = Ry(ry) Rz(rz), whose middle row is (sin rz, cos rz, 0) whatever ry. One
+    rotation (3, 3) in Python numbers (math's atan2 and hypot: the bits of the frame starts,
+    one or two a fit, and a sixth of the cost)."""
+    R = np.asarray(R, dtype=float)
+    if R.ndim == 2:
+        (a, b, p), (d, e, f), (g, h, i) = R.tolist()
+        cy, x = math.hypot(f, i), math.atan2(-f, i)
+        if cy >= 0.125:
+            return np.array([x, math.atan2(p, cy), math.atan2(-b, a)])
+        cx, sx = math.cos(x), math.sin(x)
+        return np.array([x, math.atan2(p, cy), math.atan2(cx * d + sx * g, cx * e + sx * h)])
+    rx, ry = tilt_angles(R[..., :, 2])
+    c, s = np.cos(rx), np.sin(rx)
+    rz = np.where(np.hypot(R[..., 1, 2], R[..., 2, 2]) >= 0.125,
+                  np.arctan2(-R[..., 0, 1], R[..., 0, 0]),
+                  np.arctan2(c * R[..., 1, 0] + s * R[..., 2, 0],
+                             c * R[..., 1, 1] + s * R[..., 2, 1]))
+    return np.stack([rx, ry, rz], axis=-1)
 
 
 def kabsch(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -282,7 +321,11 @@ def rotation_exp(phi: np.ndarray) -> np.ndarray:
 
 
 def rotation_log(R: np.ndarray) -> np.ndarray:
-    """(N, 3) rotation vectors [rad] of rotations (N, 3, 3) (angle in [0, pi])."""
+    """(N, 3) rotation vectors [rad] of rotations (N, 3, 3) (angle in [0, pi]), to rounding at
+    every angle: the axis from the antisymmetric part R - R^T = 2 sin(angle) [axis]x up to
+    90 deg; beyond, where sin(angle) shrinks toward pi, from the symmetric part,
+    (R + R^T) / 2 - cos(angle) I = (1 - cos(angle)) axis axis^T (its row of largest
+    diagonal, the sign from the antisymmetric part's)."""
     w = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1)
     s = np.linalg.norm(w, axis=1) / 2.0
     c = (np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0
@@ -290,10 +333,14 @@ def rotation_log(R: np.ndarray) -> np.ndarray:
     small = s < 1e-9
     scale = np.where(small, 0.5, angle / (2.0 * np.where(small, 1.0, s)))
     out = w * scale[:, None]
-    # near pi the antisymmetric part vanishes: take the axis from the symmetric part
-    flip = small & (c < 0)
-    for k in np.flatnonzero(flip):
-        B = (R[k] + np.eye(3)) / 2.0
-        axis = B[np.argmax(np.diag(B))]
-        out[k] = np.pi * axis / np.linalg.norm(axis)
+    wide = np.flatnonzero(c < 0.0)  # beyond 90 deg
+    if wide.size:
+        Rw, cw = R[wide], c[wide]
+        B = (Rw + np.swapaxes(Rw, 1, 2)) / 2.0
+        B.reshape(-1, 9)[:, ::4] -= cw[:, None]  # (1 - c) axis axis^T
+        k = np.argmax(np.diagonal(B, axis1=1, axis2=2), axis=1)
+        row = B[np.arange(wide.size), k]  # (1 - c) axis_k axis
+        axis = row / np.linalg.norm(row, axis=1)[:, None]
+        axis *= np.where(np.sum(axis * w[wide], axis=1) < 0.0, -1.0, 1.0)[:, None]
+        out[wide] = axis * angle[wide, None]
     return out

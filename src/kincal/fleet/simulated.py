@@ -15,13 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.measurements.data import Measurements
-from kincal.measurements.point_space import ParameterSpace
+from kincal.measurements.point_space import DEG, MM, ParameterSpace
 from kincal.models import mdh as mdh_layer
 from kincal.planning.simulation import Truth, cube_poses, measure
 from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 
-MM, DEG = 1e-3, math.pi / 180
 
 
 @dataclass(frozen=True)

@@ -223,13 +223,13 @@ class Chains:
         """(k,) RMS gravity torque of each of ``joints`` (compliance joints) over the
         samples of ``kinds`` [N m]; OptionError for one that carries none (no inertials in
         the URDF beyond it, or an axis along gravity): its compliance is not identifiable."""
-        from kincal.models.compliance import MIN_TORQUE
+        from kincal.models.compliance import MIN_TORQUE, torque_rms
 
         out = []
         for j in joints:
             t = np.concatenate([km.chain.torque[:, km.error_model.joint_names.index(j)]
                                 for km in kinds if j in km.error_model.joint_names])
-            rms = float(np.sqrt(np.mean(t ** 2)))
+            rms = float(torque_rms(t))
             if not rms > MIN_TORQUE:
                 raise OptionError(
                     f"{j}.compliance: the joint carries no gravity torque in these samples "

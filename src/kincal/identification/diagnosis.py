@@ -74,6 +74,7 @@ def diagnose(result) -> Finding | None:
     """The strongest significant pattern in the first point set's residuals, or None (also
     for other kinds, several sets or chains)."""
     from kincal.measurements.point import MeasurementModel
+    from kincal.models.compliance import torque_rms
 
     if len(result.sets) != 1 or result.sets[0].kind != "point" or (
             result.chains is not None and result.chains.several):
@@ -135,16 +136,12 @@ def diagnose(result) -> Finding | None:
             N = len(q)
             size = (100 * coef[0] if cause == "scale" else
                     math.degrees(float(np.hypot(*coef))) if cause == "periodic"
-                    else math.degrees(coef[0] * _rms(fs[0])) if cause == "compliance"
+                    else math.degrees(coef[0] * torque_rms(fs[0])) if cause == "compliance"
                     else math.degrees(coef[0]))
             rms = (math.sqrt(float(r @ r) / N) * 1e3,
                    math.sqrt(max(float(r @ r) - gain, 0.0) / N) * 1e3)
             best = (F, Finding(name, cause, float(size), rms, p))
     return None if best is None else best[1]
-
-
-def _rms(v: np.ndarray) -> float:
-    return math.sqrt(float(np.mean(v ** 2)))
 
 
 def _torques(robot, q: np.ndarray, kinds) -> np.ndarray:

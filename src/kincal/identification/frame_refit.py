@@ -52,11 +52,10 @@ def refit_measurement_frame(km, kin: np.ndarray, frames: np.ndarray,
 
 def moved(before: np.ndarray, after: np.ndarray, km) -> tuple[float, float]:
     """How far the measurement frame moved: (translation [mm], rotation angle [deg])."""
-    from kincal.rotations import base_rotation
+    from kincal.rotations import base_rotation, rotation_angle
 
     names = tuple(km.frame_names)
     i = [names.index(n) for n in BASE]
     a, b = np.asarray(before)[i], np.asarray(after)[i]
-    R = base_rotation(*a[3:]).T @ base_rotation(*b[3:])
-    angle = np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
+    angle = rotation_angle(base_rotation(*a[3:]).T @ base_rotation(*b[3:]))
     return float(np.linalg.norm(b[:3] - a[:3]) * 1e3), float(np.degrees(angle))

@@ -22,17 +22,13 @@ penalised; the kinematic and backlash parameters are pulled toward nominal by L2
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 
 from kincal.errors import ParameterError, listing, suggest
-from kincal.measurements.point_space import expand_names, name_index
-
-MM = 1e-3  # [m]
-DEG = math.pi / 180.0  # [rad]
+from kincal.measurements.point_space import DEG, MM, expand_names, name_index
 
 
 @dataclass(frozen=True)

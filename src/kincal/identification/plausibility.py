@@ -66,7 +66,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kincal.errors import ImplausibleResultError, NotConvergedError
-from kincal.measurements.checks import UNIT_RATIO, spread
+from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, spread
 from kincal.models import per_geometry
 from kincal.models.kinematics import ChainKinematics
 from kincal.rotations import kabsch_rotation
@@ -249,7 +249,7 @@ def _unit_causes(ev: Evidence) -> list[str]:
                    "than the robot's tip moves)" if ev.length_unit == "mm" else
                    f"positions in the wrong unit (they spread {1 / r:.0f}x less than the "
                    "robot's tip moves)")
-    if ev.angle_unit == "rad" and ev.angle_max > 2 * math.pi + 0.5:
+    if ev.angle_unit == "rad" and ev.angle_max > DEGREES_AS_RADIANS:
         out.append(f"joint values in degrees read as radians (a revolute joint reaches "
                    f"{ev.angle_max:.4g} rad; --angle-unit deg)")
     return out
@@ -287,7 +287,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                            "the robot's tip moves", r, th.length_ratio, "ratio",
                            causes=tuple(_unit_causes(ev)[:1])))
     if ev.angle_unit == "rad" and (ev.angle_max > 4 * math.pi or (
-            ev.angle_max > 2 * math.pi + 0.5 and ev.angle_outside)):
+            ev.angle_max > DEGREES_AS_RADIANS and ev.angle_outside)):
         out.append(Finding("angle_unit", f"revolute joint values reach {ev.angle_max:.4g} rad"
                            + (", outside the URDF limits" if ev.angle_outside else ""),
                            ev.angle_max, 4 * math.pi, "rad",

@@ -11,6 +11,7 @@ import numpy as np
 from kincal.errors import DataError
 
 UNIT_RATIO = 30.0  # measured spread this many times the robot's: probably mm read as m
+DEGREES_AS_RADIANS = 2 * np.pi + 0.5  # [rad] a revolute value beyond: probably degrees
 
 
 def limit_warnings(joint_names, kinds, lower, upper, q, rows) -> list[str]:
@@ -34,7 +35,7 @@ def angle_unit_warnings(joint_names, kinds, q, angle_unit: str) -> list[str]:
     if not rev:
         return []
     biggest = float(np.max(np.abs(q[:, rev])))
-    if angle_unit == "rad" and biggest > 2 * np.pi + 0.5:
+    if angle_unit == "rad" and biggest > DEGREES_AS_RADIANS:
         return [f"revolute joint values reach {biggest:.4g} rad ({biggest / np.pi:.1f} pi): were "
                 "they degrees? Read them with --angle-unit deg (Python: angle_unit='deg')"]
     if angle_unit != "deg" or len(q) <= 3:

@@ -45,8 +45,9 @@ import numpy as np
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.checks import SIGMA_RANGE_DEG
 from kincal.measurements.kind import DEFAULT_SIGMA, KindModel, SampleSet, read_set, readonly
-from kincal.measurements.plane import MIN_SPREAD, fit_plane, normal, plane_indices, plane_labels
-from kincal.rotations import cross_rows, rotx, roty, skew
+from kincal.measurements.plane import (MIN_SPREAD, fit_plane, normal, normal_by_ry, plane_indices,
+                                      plane_labels)
+from kincal.rotations import base_turns, cross_rows, rotx, roty, skew, tilt_angles
 
 DEFAULT_TILT_SIGMA_DEG = 0.05  # [deg] tilt noise assumed when a set states none
 MIN_TOUCHES = 3  # per plane: its tilt and offset need three touches not on a line
@@ -159,13 +160,8 @@ def check_touch_counts(planes: np.ndarray, labels, source: str) -> None:
                 "and the heights of 3 touches not on a line fix the plane's tilt")
 
 
-def tilt_angles(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(alpha, beta) [rad] of unit vectors m (N, 3) = Rx(alpha) Ry(beta) e_z."""
-    return np.arctan2(-m[:, 1], m[:, 2]), np.arctan2(m[:, 0], np.hypot(m[:, 1], m[:, 2]))
-
-
 def tilt_gradient(m: np.ndarray) -> np.ndarray:
-    """(N, 2, 3) derivatives of (alpha, beta) of :func:`tilt_angles` w.r.t. m."""
+    """(N, 2, 3) derivatives of (alpha, beta) of :func:`kincal.rotations.tilt_angles` w.r.t. m."""
     mx, my, mz = m.T
     rho = np.hypot(my, mz)
     G = np.zeros((len(m), 2, 3))
@@ -180,8 +176,8 @@ def tilt_gradient(m: np.ndarray) -> np.ndarray:
 
 def angles_of(u: np.ndarray) -> tuple[float, float]:
     """(rx, ry) [rad] with Rx(rx) Ry(ry) e_z along the unit vector u."""
-    a, b = tilt_angles(np.asarray(u, float)[None])
-    return float(a[0]), float(b[0])
+    a, b = tilt_angles(u)
+    return float(a), float(b)
 
 
 class FlushKind(KindModel):
@@ -234,16 +230,16 @@ class FlushKind(KindModel):
             Jk, Jb = self._zero_chain_columns(3)
         Jf = np.zeros((N, 3, self.n_frames))
         rows = np.arange(N)
-        ex, ey, ez = np.eye(3)
+        ex = np.eye(3)[0]
         dn_rx = cross_rows(ex, n)
-        dn_ry = np.stack([rotx(x) @ np.cross(ey, roty(y) @ ez) for x, y, _ in pl])[k]
+        dn_ry = np.stack([normal_by_ry(x, y) for x, y, _ in pl])[k]
         GA = np.einsum("nrj,nij->nri", G, A)                      # d(tilt rows)/dn
         for col, dn in ((3 * k, dn_rx), (3 * k + 1, dn_ry)):
             Jf[rows, 0, col] = -np.sum(dn * s.p_tip, axis=1)
             Jf[rows, 1:, col] = np.einsum("nri,ni->nr", GA, dn)
         Jf[rows, 0, 3 * k + 2] = 1.0
         f = 3 * len(self.data.labels)
-        W = np.column_stack([ex, Rx @ ey])                        # tool turns, tip frame
+        W = base_turns(a[0], a[1])[:, :2]                         # tool turns, tip frame
         Jf[:, 0, f:f + 2] = -(np.cross(W.T, u) @ t)               # d(u . t): turns of u
         Jf[:, 1:, f:f + 2] = S @ (s.R_tip @ W)
         Jf[:, 0, f + 2:f + 5] = -u
@@ -300,7 +296,7 @@ class FlushKind(KindModel):
         theirs, a, _ = self.split_frames(out)
         shared = [j for j in range(len(planes)) if not own[3 * j]]
         if shared and normal(*planes[shared[0], :2]) @ normal(*theirs[shared[0], :2]) < 0:
-            u = rotx(a[0]) @ roty(a[1]) @ np.array([0.0, 0.0, 1.0])
+            u = normal(*a)
             f = 3 * len(planes)
             out[f:f + 2] = angles_of(-u)
         return out

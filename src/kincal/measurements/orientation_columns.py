@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.errors import DataError
-from kincal.rotations import rotation_exp, rotations_about
+from kincal.rotations import base_angles, rotation_exp, rotation_log, rotations_about
 
 FORMATS = ("quat-xyzw", "quat-wxyz", "rpy-zyx", "rpy-xyz", "rotvec", "matrix")
 DEFAULT_FORMAT = "quat-xyzw"
@@ -159,25 +159,18 @@ def orientation_values(R: np.ndarray, fmt: str, angle_scale: float = 1.0) -> np.
                         f"{', '.join(FORMATS)}")
     if fmt == "matrix":
         return R.reshape(-1, 9)
-    if fmt in ("quat-xyzw", "quat-wxyz", "rotvec"):
+    if fmt in ("quat-xyzw", "quat-wxyz"):
         from kincal.rotations import matrix_to_quaternion
 
         q = np.array([matrix_to_quaternion(r) for r in R]).reshape(-1, 4)  # qw >= 0
-        if fmt != "rotvec":
-            return q if fmt == "quat-xyzw" else q[:, [3, 0, 1, 2]]
-        s = np.linalg.norm(q[:, :3], axis=1)  # sin(angle / 2), the angle in [0, pi]
-        big = s > 1e-12  # else the small-angle limit of angle / sin(angle / 2): 2 / qw
-        k = np.where(big, 2.0 * np.arctan2(s, q[:, 3]) / np.where(big, s, 1.0),
-                     2.0 / np.maximum(q[:, 3], 0.5))
-        a = q[:, :3] * k[:, None]
+        return q if fmt == "quat-xyzw" else q[:, [3, 0, 1, 2]]
+    if fmt == "rotvec":
+        a = rotation_log(R)
     elif fmt == "rpy-zyx":  # R = Rz(c) Ry(b) Rx(a): a, then b and c from R Rx(a)^T
         x = np.arctan2(R[:, 2, 1], R[:, 2, 2])  # so that the angles give R back to
         M = R @ np.transpose(rotations_about(0, x), (0, 2, 1))  # rounding even at gimbal lock
         a = np.column_stack([x, np.arctan2(-M[:, 2, 0], M[:, 2, 2]),
                              np.arctan2(-M[:, 0, 1], M[:, 1, 1])])
-    else:  # rpy-xyz: R = Rx(a) Ry(b) Rz(c): a, then b and c from Rx(a)^T R
-        x = np.arctan2(-R[:, 1, 2], R[:, 2, 2])
-        M = np.transpose(rotations_about(0, x), (0, 2, 1)) @ R
-        a = np.column_stack([x, np.arctan2(M[:, 0, 2], M[:, 2, 2]),
-                             np.arctan2(M[:, 1, 0], M[:, 1, 1])])
+    else:  # rpy-xyz: R = Rx(a) Ry(b) Rz(c), the measurement frame's angles
+        a = base_angles(R)
     return a / angle_scale

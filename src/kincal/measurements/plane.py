@@ -21,7 +21,7 @@ import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.kind import KindModel, SampleSet, read_set, readonly
-from kincal.rotations import cross_rows, rotx, roty
+from kincal.rotations import cross_rows, rotx, roty, tilt_angles
 
 MIN_SPREAD = 1e-3  # [m] RMS spread of a plane's contacts across their best line
 
@@ -83,7 +83,16 @@ def plane_labels(raw: np.ndarray, source: str, rows, column: str = "plane"):
 
 
 def normal(rx: float, ry: float) -> np.ndarray:
+    """(3,) the unit normal Rx(rx) Ry(ry) e_z of a plane of tilts rx, ry [rad]: the inverse of
+    :func:`kincal.rotations.tilt_angles`."""
     return rotx(rx) @ roty(ry) @ np.array([0.0, 0.0, 1.0])
+
+
+def normal_by_ry(rx: float, ry: float) -> np.ndarray:
+    """(3,) the derivative of :func:`normal` by ry: Rx(rx) (e_y x Ry(ry) e_z) (its derivative
+    by rx is e_x x normal)."""
+    ey, ez = np.eye(3)[1:]
+    return rotx(rx) @ np.cross(ey, roty(ry) @ ez)
 
 
 def fit_plane(P: np.ndarray) -> tuple[np.ndarray, float, float]:
@@ -130,9 +139,9 @@ class PlaneKind(KindModel):
         Jf = np.zeros((self.N, 1, self.n_frames))
         Jf[:, 0, :3] = -np.einsum("ni,nij->nj", n, s.R_tip)
         rows = np.arange(self.N)
-        ex, ey, ez = np.eye(3)
+        ex = np.eye(3)[0]
         dn_rx = cross_rows(ex, n)
-        dn_ry = np.stack([rotx(a) @ np.cross(ey, roty(b) @ ez) for a, b, _ in pl])[k]
+        dn_ry = np.stack([normal_by_ry(a, b) for a, b, _ in pl])[k]
         Jf[rows, 0, 3 + 3 * k] = -np.sum(dn_rx * P, axis=1)
         Jf[rows, 0, 4 + 3 * k] = -np.sum(dn_ry * P, axis=1)
         Jf[rows, 0, 5 + 3 * k] = 1.0
@@ -164,9 +173,7 @@ class PlaneKind(KindModel):
         out = [t]
         for j in range(len(self.data.labels)):
             n, d, _ = fit_plane(P[self.data.planes == j])
-            ry = float(np.arcsin(np.clip(n[0], -1.0, 1.0)))
-            rx = float(np.arctan2(-n[1], n[2]))
-            out.append([rx, ry, d])
+            out.append([*map(float, tilt_angles(n)), d])
         return np.concatenate([np.ravel(o) for o in out])
 
     def sample_errors(self, r):

@@ -38,8 +38,8 @@ from kincal.measurements.kind import (
     read_set,
     readonly,
 )
-from kincal.rotations import (base_angles, base_rotation, cross_rows, rotation_log, rotx, roty,
-                              rotz, skew)
+from kincal.rotations import (base_angles, base_rotation, base_turns, cross_rows, kabsch_rotation, rotation_log,
+                              rotx, roty, rotz, skew)
 
 DEFAULT_ORIENTATION_SIGMA_DEG = 0.01  # [deg], a 6-DoF laser-tracker probe's order
 QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
@@ -159,8 +159,7 @@ def base_columns(P_base: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.n
     J[:, :, 3] = cross_rows(ex, P_base @ (Rx @ Ry @ Rz).T)
     J[:, :, 4] = cross_rows(ey, P_base @ (Ry @ Rz).T) @ Rx.T
     J[:, :, 5] = cross_rows(ez, P_base @ Rz.T) @ (Rx @ Ry).T
-    W = np.column_stack([ex, Rx @ ey, Rx @ Ry @ ez])
-    return J, W
+    return J, base_turns(base[3], base[4])
 
 
 class PoseKind(KindModel):
@@ -201,9 +200,7 @@ class PoseKind(KindModel):
         Jf[:, 3:, 3:6] = Ji @ W
         RbRtip = Rb @ s.R_tip                                    # (N, 3, 3)
         Jf[:, :3, 6:9] = -RbRtip
-        Rx, Ry = rotx(a[0]), roty(a[1])
-        ex, ey, ez = np.eye(3)
-        Wt = np.column_stack([ex, Rx @ ey, Rx @ Ry @ ez])        # tool turns, tip frame
+        Wt = base_turns(a[0], a[1])                              # tool turns, tip frame
         Jf[:, 3:, 9:12] = Ji @ (RbRtip @ Wt)
         return r, Jk, Jf, Jb
 
@@ -213,10 +210,10 @@ class PoseKind(KindModel):
         d = self.data
         s = self.chain.state(kin, None, keep=False)
         Rb, tb, t, _, _ = initial_frames(s.R_tip, s.p_tip, d.positions, tool_guess)
-        # tool orientation: the mean of (R_b R_tip)^T R_measured, projected on SO(3)
+        # tool orientation: the rotation nearest the mean of (R_b R_tip)^T R_measured, the
+        # Kabsch rotation of its transpose (the rotation R maximising trace(R^T M))
         M = np.einsum("nji,njk->ik", Rb @ s.R_tip, d.rotations)
-        U, _, Vt = np.linalg.svd(M)
-        Rt = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0]) @ Vt
+        Rt = kabsch_rotation(M.T)
         return np.concatenate([tb, base_angles(Rb), t, base_angles(Rt)])
 
     def sample_errors(self, r):

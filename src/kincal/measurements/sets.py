@@ -168,7 +168,9 @@ class KindSpace:
     def reporting_scale(self):
         import numpy as np
 
-        return np.where(self.is_length, 1e-3, np.pi / 180.0)
+        from kincal.measurements.point_space import DEG, MM
+
+        return np.where(self.is_length, MM, DEG)
 
     def indices(self, patterns):
         import fnmatch
@@ -200,6 +202,7 @@ def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
     from kincal.errors import OptionError
     from kincal.measurements.plane import fit_plane
     from kincal.models.chain import Chain
+    from kincal.rotations import tilt_angles
 
     q = np.asarray(q, float)
     t = np.asarray(tool, float)
@@ -225,7 +228,7 @@ def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
         fitted = []
         for j in range(len(labels)):
             n, d, _ = fit_plane(P[k == j])
-            fitted += [float(np.arctan2(-n[1], n[2])), float(np.arcsin(np.clip(n[0], -1, 1))), d]
+            fitted += [*map(float, tilt_angles(n)), d]
         frames = np.r_[t, fitted]
     elif kind == "flush":
         data, frames = planning_set(error_model, q, t, planes)

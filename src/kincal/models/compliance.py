@@ -32,8 +32,13 @@ def loaded(kinds, tau) -> np.ndarray:
     torques are ``tau`` (N, n) [N m]: revolute, carrying an RMS torque above MIN_TORQUE
     (a joint with no inertials beyond it in the URDF, or an axis along gravity, carries
     none). The model choice's candidates and the residual diagnosis's patterns."""
-    rms = np.sqrt(np.mean(np.asarray(tau, dtype=float) ** 2, axis=0))
-    return np.array([k == "revolute" for k in kinds], dtype=bool) & (rms > MIN_TORQUE)
+    return np.array([k == "revolute" for k in kinds], dtype=bool) & (torque_rms(tau) > MIN_TORQUE)
+
+
+def torque_rms(tau) -> np.ndarray:
+    """(n,) RMS over the samples of gravity torques ``tau`` (N, n) [N m]: what a joint carries
+    (above :data:`MIN_TORQUE`, a compliance term's reporting unit)."""
+    return np.sqrt(np.mean(np.asarray(tau, dtype=float) ** 2, axis=0))
 
 
 CONVENTION = ("q_effective = q + compliance * tau, tau the gravity torque the joint "

@@ -60,7 +60,7 @@ import numpy as np
 from kincal.errors import OptionError
 from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
 from kincal.models.chain import equal_runs
-from kincal.rotations import cross_rows, inverse, transform
+from kincal.rotations import cross_rows, inverse, tilt_angles, transform
 
 PARALLEL_TOL = 1e-6  # |sin| of the angle between axes below which they count as parallel
 TOOL_AXIS_WARNING = 5e-3  # [m] a tool point nearer the last joint axis: warn (last_axis_distance)
@@ -102,8 +102,7 @@ def hayati_parameters(T: np.ndarray) -> tuple[float, float, float, float, float]
     whose origin lies on the line through (a, 0, 0) along its z axis."""
     R, p = T[:3, :3], T[:3, 3]
     z = R[:, 2]
-    beta = float(np.arcsin(np.clip(z[0], -1.0, 1.0)))
-    alpha = float(np.arctan2(-z[1], z[2]))
+    alpha, beta = map(float, tilt_angles(z))
     ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
     Rxy = np.array([[cb, 0.0, sb], [sa * sb, ca, -sa * cb], [-ca * sb, sa, ca * cb]])
     Rz = Rxy.T @ R

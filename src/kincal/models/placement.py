@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.models.base import LENGTH, OFFSET, TWIST, ErrorModel
-from kincal.rotations import inverse, rotx, roty, rotz, transform
+from kincal.rotations import base_rotation, base_turns, inverse, transform
 
 FIELDS = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -63,7 +63,7 @@ class PlacementModel(ErrorModel):
     has_errors: np.ndarray
 
     def _origin(self, i: int | np.integer, e: np.ndarray) -> np.ndarray:
-        R = rotx(e[3]) @ roty(e[4]) @ rotz(e[5]) @ self.origins[i][:3, :3]
+        R = base_rotation(e[3], e[4], e[5]) @ self.origins[i][:3, :3]
         return transform(R, self.origins[i][:3, 3] + e[:3])
 
     def _errors(self, x) -> np.ndarray:
@@ -91,8 +91,7 @@ class PlacementModel(ErrorModel):
         e = self._errors(x)
         w, v = np.zeros((self.size, 3)), np.zeros((self.size, 3))
         for k, i in enumerate(np.flatnonzero(self.has_errors)):
-            Rx, Ry = rotx(e[i, 3]), roty(e[i, 4])
-            turn = [np.eye(3)[:, 0], Rx[:, 1], Rx @ Ry[:, 2]]  # rx, ry, rz axes in the link
+            W = base_turns(e[i, 3], e[i, 4])  # columns: the rx, ry, rz axes in the link
             rows = slice(6 * k, 6 * k + 6)
             if self.reversed[i]:
                 # inverse(origin) is the first factor: a change dO = d O moves a point X of
@@ -100,7 +99,7 @@ class PlacementModel(ErrorModel):
                 # joint origin p, which is that frame's origin
                 Rt = self._origin(i, e[i])[:3, :3].T
                 v[rows][:3] = -Rt.T  # rows tx, ty, tz: -R^T e_k
-                w[rows][3:] = -(Rt @ np.column_stack(turn)).T
+                w[rows][3:] = -(Rt @ W).T
             else:
                 L = self.mid[i]  # the parent link frame in the frame before
                 if i and self.reversed[i - 1] and self.has_errors[i - 1]:
@@ -108,7 +107,7 @@ class PlacementModel(ErrorModel):
                     L = inverse(self._origin(i - 1, e[i - 1])) @ L
                 R, o = L[:3, :3], L[:3, 3]
                 c = o + R @ (self.origins[i][:3, 3] + e[i, :3])  # the joint origin, frame before
-                axes = [R @ t for t in turn]
+                axes = [R @ t for t in W.T]
                 v[rows][:3] = R.T
                 w[rows][3:] = axes
                 v[rows][3:] = [np.cross(c, a) for a in axes]

@@ -19,12 +19,12 @@ import numpy as np
 from kincal.errors import OptionError
 from kincal.measurements.data import Measurements
 from kincal.measurements.distance import DistanceData
-from kincal.measurements.flush import FlushData, tilt_angles
+from kincal.measurements.flush import FlushData
 from kincal.measurements.plane import PlaneData, normal
 from kincal.measurements.pose import PoseData
 from kincal.models.base import ErrorModel
 from kincal.models.chain import Chain
-from kincal.rotations import base_rotation, rotation_exp, rotx, roty
+from kincal.rotations import base_rotation, rotation_exp, rotx, roty, tilt_angles
 
 
 def tool_points(model: ErrorModel, kin, q, tool) -> np.ndarray:
