@@ -11,7 +11,7 @@ from conftest import TIAGO_URDF, random_joint_values
 
 from kincal.cli.main import main
 from kincal.compensation import CellFrames, IkOptions, Targets, compensate, filter_program
-from kincal.rotations import rotation_log
+from kincal.rotations import quaternion_to_matrix, rotation_log
 from kincal.models.kinematics import ChainKinematics
 from kincal.descriptions import default_center
 from kincal.errors import DataError
@@ -155,7 +155,7 @@ def test_full_pose_targets_give_back_the_joint_values(cell):
     robot, result, frames, q = cell
     P, quats = _targets_from(result, q, quaternions=True)
     seeds = q + np.radians(1.0) * np.random.default_rng(2).normal(size=q.shape)
-    comp = compensate(result.corrected, frames, Targets(seeds, P, quats, np.arange(len(q)) + 2))
+    comp = compensate(result.corrected, frames, Targets(seeds, P, quaternion_to_matrix(quats), np.arange(len(q)) + 2))
     assert comp.reached.all() and comp.orientation_required.all()
     np.testing.assert_allclose(comp.joint_values, q, atol=1e-8)
 
@@ -195,7 +195,7 @@ def test_a_pose_beyond_a_joint_limit_is_flagged_not_clipped(cell):
     q_out[:, 1] = g.upper[1] + 0.3  # joint_2 beyond its upper limit
     P, quats = _targets_from(result, q_out, quaternions=True)
     seeds = np.clip(q_out, g.lower, g.upper)
-    comp = compensate(result.corrected, frames, Targets(seeds, P, quats, np.array([5, 6, 7])))
+    comp = compensate(result.corrected, frames, Targets(seeds, P, quaternion_to_matrix(quats), np.array([5, 6, 7])))
     assert not comp.reached.any()
     assert comp.at_limit[:, 1].all()
     assert (comp.joint_values <= g.upper).all() and (comp.joint_values >= g.lower).all()
@@ -354,13 +354,43 @@ def test_cli_full_pose_targets_and_bad_quaternions(cli_cell, capsys):
     for cols, rows, message in ((["qx", "qy", "qz"], np.hstack([seeds, P, quats[:, :3]]),
                                  "without qw"),
                                 (["qx", "qy", "qz", "qw"], np.hstack([seeds, P, 2 * quats]),
-                                 "expected a unit quaternion")):
+                                 "has norm 2, not 1: give unit quaternions")):
         write(cols, rows)
         out.unlink(missing_ok=True)
         assert main(["compensate", str(urdf), str(t), "--tip", "flange", "--frames", str(fj),
                      "--out", str(out)]) == 1
         err = capsys.readouterr().err
         assert message in err and not out.exists()
+
+
+def test_cli_targets_take_the_orientation_formats_of_pose_files(cli_cell, capsys):
+    """Orientation targets written as rpy-zyx angles in degrees (joints in degrees too)
+    give the joint values the quaternion targets give; angle columns without their format
+    are refused, not dropped (a position-only solution would move the tool's orientation);
+    the format options do not go with --program."""
+    from kincal.measurements.orientation_columns import orientation_values
+
+    result, q, P, urdf, fj, tmp = cli_cell
+    _, quats = _targets_from(result, q, quaternions=True)
+    names = list(result.robot.joint_names)
+    rpy = orientation_values(quaternion_to_matrix(quats), "rpy-zyx", np.pi / 180)  # [deg]
+    seeds = np.degrees(q - 0.01 * np.sign(q))
+    t, out = tmp / "rpy.csv", tmp / "joints.csv"
+    t.write_text(",".join(names + ["x", "y", "z", "roll", "pitch", "yaw"]) + "\n" + "\n".join(
+        ",".join(repr(float(v)) for v in row) for row in np.hstack([seeds, P, rpy])) + "\n")
+    base = ["compensate", str(urdf), str(t), "--tip", "flange", "--frames", str(fj), "--out",
+            str(out), "--angle-unit", "deg"]
+    assert main(base) == 1
+    err = capsys.readouterr().err
+    assert "orientation columns roll, pitch, yaw would not be read" in err and not out.exists()
+    assert main(base + ["--orientation-format", "rpy-zyx"]) == 0
+    table = np.genfromtxt(_uncommented(out), delimiter=",", names=True)
+    np.testing.assert_allclose(np.radians(np.column_stack([table[j] for j in names])), q,
+                               atol=1e-8)
+    assert table["orientation_error_deg"].max() < 1e-6
+    assert main(["compensate", str(urdf), "--program", str(t), "--nominal", str(urdf), "--tip",
+                 "flange", "--out", str(tmp / "p.csv"), "--orientation-format", "rpy-zyx"]) == 1
+    assert "describe TARGETS.csv" in capsys.readouterr().err
 
 
 def test_the_second_measured_point_can_be_targeted(cell):

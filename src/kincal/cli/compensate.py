@@ -7,8 +7,8 @@ from pathlib import Path
 
 from kincal.cli.checks import check_outputs
 from kincal.cli.console import say_and_write, summary_lines
-from kincal.cli.options import (Chain, add_overwrite, add_units, add_xacro_args,
-                                chain_from_frames, group, typed)
+from kincal.cli.options import (ORIENTATION_FORMATS, Chain, add_overwrite, add_units,
+                                add_xacro_args, chain_from_frames, group, typed)
 from kincal.errors import DataError, OptionError
 
 
@@ -18,7 +18,7 @@ def register(subparsers) -> None:
         "(or a nominal program's poses)",
         description="Solve the calibrated model's inverse kinematics from seed joint values: "
         "TARGETS.csv has the chain joints (seeds) and x,y,z of the tool point in the "
-        "measurement frame (optionally qx,qy,qz,qw); or --program PROGRAM.csv with --nominal "
+        "measurement frame (optionally an orientation: qx,qy,qz,qw or --orientation-format); or --program PROGRAM.csv with --nominal "
         "NOMINAL.urdf corrects joint values planned on the nominal model.")
     i, c = group(p, "inputs"), group(p, "chain")
     i.add_argument("robot", help="the calibrated URDF (or any robot name, see calibrate)")
@@ -34,10 +34,17 @@ def register(subparsers) -> None:
                    help="the model the program was planned on")
     i.add_argument("--position-columns", nargs=3, default=("x", "y", "z"), metavar="COL",
                    help="names of the target position columns (default x y z)")
+    i.add_argument("--orientation-format", choices=ORIENTATION_FORMATS, metavar="FORMAT",
+                   help="how TARGETS.csv writes the wanted orientations, as a pose file "
+                        "(quat-xyzw, the default when qx qy qz qw are there; quat-wxyz, "
+                        "rpy-zyx, rpy-xyz, rotvec, matrix); angles in --angle-unit")
+    i.add_argument("--orientation-columns", nargs="+", metavar="COL",
+                   help="the targets' orientation columns, in the format's order (default: "
+                        "the format's usual names, as for pose files)")
     c.add_argument("--point", type=int, default=1,
                    help="which measured point of FRAMES.json is targeted (default 1)")
     add_units(p, length="positions and prismatic joints, in and out",
-              angle="revolute joints, in and out")
+              angle="revolute joints (in and out) and the targets' orientation angles")
     s = group(p, "inverse kinematics")
     s.add_argument("--tolerance-mm", type=float, default=0.001,
                    help="a target counts as reached within this distance (default 0.001 mm)")
@@ -58,6 +65,8 @@ class Compensate:
     program: str | None
     nominal: str | None
     position_columns: tuple[str, str, str]
+    orientation_format: str | None
+    orientation_columns: tuple[str, ...] | None
     point: int  # 1-based, as the user counts
     length_unit: str
     angle_unit: str
@@ -76,6 +85,9 @@ def run(args) -> int:
     if (c.program is None) != (c.nominal is None):
         raise OptionError("--program and --nominal go together: the program's joint values "
                           "were planned on the NOMINAL.urdf model")
+    if c.program is not None and (c.orientation_format or c.orientation_columns):
+        raise OptionError("--orientation-format and --orientation-columns describe TARGETS.csv; "
+                          "a --program has joint values only")
     if c.targets is not None and c.frames is None:
         raise OptionError("targets in the measurement frame need --frames FRAMES.json "
                           "(from 'kincal calibrate --frames-out')")
@@ -110,7 +122,7 @@ def _compensate(c: Compensate) -> int:
     else:
         assert frames is not None  # targets come with --frames (run)
         targets = read_targets(c.targets, robot, c.length_unit, c.angle_unit,
-                               c.position_columns)
+                               c.position_columns, c.orientation_format, c.orientation_columns)
         result = compensate(robot, frames, targets, c.point - 1, options, c.length_unit)
         inputs = [c.targets]
     failures = result.failures()

@@ -37,7 +37,7 @@ from kincal.models.kinematics import ChainKinematics
 from kincal.compensation.targets import Targets, joint_scales
 from kincal.errors import DataError, FrameError
 from kincal.measurements.checks import UNIT_RATIO, spread
-from kincal.rotations import base_rotation, quaternion_to_matrix
+from kincal.rotations import base_rotation
 
 COMPLIANCE_STEPS = 4  # fixed-point steps of the commanded joint values under compliance
 REACH_MARGIN = 1.05  # targets beyond this multiple of the chain's reach cannot be reached
@@ -238,12 +238,12 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     R_seed, p_seed = chain.tool_poses(targets.seeds, tool)
     _check_units(chain, tool, g.lower, g.upper, positions_B, targets.positions,
                  p_seed @ R_MB.T + t_MB, targets.source, length_unit)
-    if targets.quaternions is None:
+    if targets.rotations is None:
         rotations, required = R_seed, np.zeros(len(targets), bool)
         notes = ["position targets: the tool keeps the orientation it has at the seed"
                  + ("" if g.n >= 6 else f" as far as the {g.n} joints allow")]
     else:
-        rotations = R_MB.T @ quaternion_to_matrix(targets.quaternions)
+        rotations = R_MB.T @ targets.rotations
         required, notes = np.ones(len(targets), bool), []
     sol = solve(chain, tool, positions_B, rotations, required, targets.seeds, g.lower, g.upper,
                 options)

@@ -2,9 +2,12 @@
 
 A TARGETS.csv has the chain joints (named as in the URDF: the user's program, the seeds)
 and ``x,y,z``, the wanted position of the measured tool point in the measurement frame;
-optionally ``qx,qy,qz,qw`` (a unit quaternion, scalar last), the wanted orientation of
-the tip frame in the measurement frame. Revolute joints in ``angle_unit``, positions and
-prismatic joints in ``length_unit``; inside, SI.
+optionally the wanted orientation of the tip frame in the measurement frame, written as a
+pose file writes it (:mod:`kincal.measurements.orientation_columns`: ``qx,qy,qz,qw`` by
+default, a unit quaternion, scalar last; any other format when it is named). Revolute
+joints and orientation angles in ``angle_unit``, positions and prismatic joints in
+``length_unit``; inside, SI. Orientation columns that would not be read are refused, as a
+pose file's are: an orientation is never dropped silently.
 """
 
 from __future__ import annotations
@@ -14,17 +17,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.errors import DataError, KincalWarning, OptionError
+from kincal.errors import DataError, KincalNote, KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import read_columns
-from kincal.measurements.data import LENGTH_UNITS, unit_factors
-from kincal.measurements.orientation_columns import UNIT_TOL
-from kincal.measurements.pose import QUATERNION_COLUMNS
-
-# the columns and the tolerance of a pose file's quaternions: |norm - 1| accepted (and
-# normalised) for rounded quaternions, as a pose file's are
-QUATERNION = QUATERNION_COLUMNS
-UNIT_QUATERNION_TOL = UNIT_TOL
+from kincal.measurements.data import unit_factors
+from kincal.measurements.orientation_columns import (DEFAULT_FORMAT, OrientationFormat,
+                                                     found_columns, rotations)
+from kincal.measurements.pose import QUATERNION_COLUMNS as QUATERNION
 
 
 @dataclass(frozen=True)
@@ -32,14 +31,14 @@ class Targets:
     """N targets of one chain (SI).
 
     seeds: (N, n) joint values the solution starts from [rad or m]. positions: (N, 3)
-    wanted tool point in the measurement frame [m]. quaternions: (N, 4) wanted tip
-    orientation in the measurement frame (qx, qy, qz, qw), or None for positions only.
+    wanted tool point in the measurement frame [m]. rotations: (N, 3, 3) wanted tip
+    orientation in the measurement frame, or None for positions only.
     lines: (N,) line numbers in the source file. source: for messages.
     """
 
     seeds: np.ndarray
     positions: np.ndarray
-    quaternions: np.ndarray | None
+    rotations: np.ndarray | None
     lines: np.ndarray
     source: str = "<targets>"
 
@@ -54,41 +53,58 @@ def joint_scales(kinds, length_unit: str, angle_unit: str) -> np.ndarray:
 
 
 def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
-                 position_columns=("x", "y", "z")) -> Targets:
+                 position_columns=("x", "y", "z"), orientation_format: str | None = None,
+                 orientation_columns=None) -> Targets:
     """Targets from a CSV file (see the module notes); values outside the joint limits and
     angles that look like degrees are warned about, as for measurements.
-    position_columns: the names of the x, y, z columns."""
+    position_columns: the names of the x, y, z columns. orientation_format, orientation_columns:
+    how the wanted orientations are written (:class:`~kincal.measurements.orientation_columns.
+    OrientationFormat`); both None: ``qx qy qz qw`` if the file has them, else positions only
+    (other orientation columns refused)."""
     position_columns = tuple(position_columns)
     if len(position_columns) != 3:
         raise OptionError(f"a target has one position: give 3 position columns, got "
                           f"{len(position_columns)} ({', '.join(position_columns)})")
     g = robot.geometry
     scale = joint_scales(g.kinds, length_unit, angle_unit)
-    table = read_columns(path, list(robot.joint_names) + list(position_columns),
-                         optional=QUATERNION, kind="targets",
-                         expected=f"the chain joints (seeds) and {', '.join(position_columns)}",
+    L, A = unit_factors(length_unit, angle_unit, OptionError)
+    named = orientation_format is not None or orientation_columns is not None
+    fmt = OrientationFormat(orientation_format or DEFAULT_FORMAT,
+                            None if orientation_columns is None else tuple(orientation_columns))
+    required = list(robot.joint_names) + list(position_columns)
+    with warnings.catch_warnings():  # the reading below gives the notes
+        warnings.simplefilter("ignore", KincalNote)
+        header = read_columns(path, [], kind="targets", header_only=True).header
+    columns: tuple[str, ...] = ()
+    if named:
+        columns = fmt.resolve(header, position_columns, str(path))
+    elif any(c in header for c in QUATERNION):
+        columns = QUATERNION
+        missing = [c for c in QUATERNION if c not in header]
+        if missing:
+            given = [c for c in QUATERNION if c in header]
+            raise DataError(f"{path}: orientation columns {', '.join(given)} without "
+                            f"{', '.join(missing)}; give all of qx, qy, qz, qw (unit "
+                            "quaternion, scalar last) or none, or name the format "
+                            "(--orientation-format)")
+    else:
+        unused = found_columns(header, position_columns)
+        if unused:
+            raise DataError(f"{path}: orientation columns {', '.join(unused[0])} would not be "
+                            "read: give their format (--orientation-format quat-xyzw, "
+                            "quat-wxyz, rpy-zyx, rpy-xyz, rotvec or matrix) to reach the "
+                            "orientations too, or remove them to reach the positions alone")
+    table = read_columns(path, required + list(columns), kind="targets",
+                         expected=f"the chain joints (seeds) and {', '.join(position_columns)}"
+                         + (f" and {', '.join(columns)} ({fmt.name})" if columns else ""),
                          rows_name="targets")
-    given = [c for c in QUATERNION if c in table.values]
-    if given and len(given) < 4:
-        missing = [c for c in QUATERNION if c not in table.values]
-        raise DataError(f"{table.path}: orientation columns {', '.join(given)} without "
-                        f"{', '.join(missing)}; give all of qx, qy, qz, qw (unit quaternion, "
-                        "scalar last) or none")
     seeds = np.column_stack([table.values[j] for j in robot.joint_names]) * scale
-    positions = np.column_stack([table.values[c] for c in position_columns]) * LENGTH_UNITS[
-        length_unit]
-    quats = None
-    if given:
-        quats = np.column_stack([table.values[c] for c in QUATERNION])
-        norm = np.linalg.norm(quats, axis=1)
-        bad = np.flatnonzero(np.abs(norm - 1.0) > UNIT_QUATERNION_TOL)
-        if bad.size:
-            k = bad[0]
-            raise DataError(f"{table.path}, line {table.lines[k]}: the quaternion (qx, qy, qz, qw) "
-                            f"has norm {norm[k]:.6g}; expected a unit quaternion, scalar last "
-                            f"({bad.size} row(s) like this)")
-        quats = quats / norm[:, None]
+    positions = np.column_stack([table.values[c] for c in position_columns]) * L
+    R = None
+    if columns:
+        R = rotations(np.column_stack([table.values[c] for c in columns]), fmt.name, A,
+                      str(table.path), table.lines, columns)
     for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, seeds, table.lines)
                     + angle_unit_warnings(g.joint_names, g.kinds, seeds, angle_unit)):
         warnings.warn(f"{table.path}: {message}", KincalWarning)
-    return Targets(seeds, positions, quats, table.lines, str(table.path))
+    return Targets(seeds, positions, R, table.lines, str(table.path))
