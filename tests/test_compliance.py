@@ -142,9 +142,6 @@ def test_evaluate_and_compensate_apply_the_compliance(tmp_path, capsys):
     # joints the corrected model needs to reach the target
     from kincal.compensation.compensate import compensate
     from kincal.compensation.targets import Targets
-
-    from scipy.spatial.transform import Rotation
-
     from kincal.rotations import base_rotation
 
     corrected = Robot.load(out, tip="flange")
@@ -152,8 +149,8 @@ def test_evaluate_and_compensate_apply_the_compliance(tmp_path, capsys):
     want = true_positions(model, truth, q[:5])
     q_eff = q[:5] + np.array([0, 3e-5, -5e-5, 0, 0, 0]) * robot.gravity_torques(q[:5])
     R_tip, _ = MeasurementModel(model, q_eff).tip_poses(model.table)
-    quat = Rotation.from_matrix(base_rotation(*BASE[3:]) @ R_tip).as_quat()  # x, y, z, w
-    comp = compensate(corrected, cell, Targets(q[:5], want, quat, np.arange(2, 7), "<t>"))
+    comp = compensate(corrected, cell, Targets(q[:5], want, base_rotation(*BASE[3:]) @ R_tip,
+                                               np.arange(2, 7), "<t>"))
     cmd = comp.joint_values
     c = np.array([0, cell.compliance["joint_2"], cell.compliance["joint_3"], 0, 0, 0])
     q_real = cmd + c * corrected.gravity_torques(cmd)
