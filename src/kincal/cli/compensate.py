@@ -18,8 +18,9 @@ def register(subparsers) -> None:
         "(or a nominal program's poses)",
         description="Solve the calibrated model's inverse kinematics from seed joint values: "
         "TARGETS.csv has the chain joints (seeds) and x,y,z of the tool point in the "
-        "measurement frame (optionally an orientation: qx,qy,qz,qw or --orientation-format); or --program PROGRAM.csv with --nominal "
-        "NOMINAL.urdf corrects joint values planned on the nominal model.")
+        "measurement frame (optionally an orientation: qx,qy,qz,qw or --orientation-format); "
+        "or --program PROGRAM.csv with --nominal NOMINAL.urdf corrects joint values planned "
+        "on the nominal model.")
     i, c = group(p, "inputs"), group(p, "chain")
     i.add_argument("robot", help="the calibrated URDF (or any robot name, see calibrate)")
     i.add_argument("targets", nargs="?", metavar="TARGETS.csv",

@@ -38,8 +38,8 @@ from kincal.measurements.kind import (
     read_set,
     readonly,
 )
-from kincal.rotations import (base_angles, base_rotation, base_turns, cross_rows, kabsch_rotation, rotation_log,
-                              rotx, roty, rotz, skew)
+from kincal.rotations import (base_angles, base_rotation, base_turns, cross_rows,
+                              kabsch_rotation, rotation_log, rotx, roty, rotz, skew)
 
 DEFAULT_ORIENTATION_SIGMA_DEG = 0.01  # [deg], a 6-DoF laser-tracker probe's order
 QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
