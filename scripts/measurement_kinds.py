@@ -42,9 +42,7 @@ PLANES = np.array([[0.0, 0.0, 0.05], [np.pi / 2, 0.0, 0.25], [0.0, np.pi / 2, 0.
 
 def wide(robot, rng, n):
     g = robot.geometry
-    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
-    return rng.uniform(lo, hi, size=(n, g.n))
+    return rng.uniform(*g.ranges(), size=(n, g.n))
 
 
 def floor_and_score(result, em, truth, held, true_frames, set_index=0):

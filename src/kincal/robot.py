@@ -20,7 +20,7 @@ from __future__ import annotations
 import functools
 import re
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,7 @@ from kincal import descriptions
 from kincal.errors import (ChainError, DataError, FrameError, KincalWarning, UrdfError,
                            listing, suggest)
 from kincal.gravity import gravity_torques as _gravity_torques
+from kincal.models.geometry import ChainGeometry
 from kincal.rotations import inverse
 from kincal.urdf_source import read_urdf_text, stderr_captured
 
@@ -37,47 +38,6 @@ _REVOLUTE = {"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevolute
 _CONTINUOUS = {"JointModelRUBX", "JointModelRUBY", "JointModelRUBZ",
                "JointModelRevoluteUnboundedUnaligned"}
 _PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"}
-
-
-@dataclass(frozen=True)
-class ChainGeometry:
-    """The chain at zero joint values, expressed in the base frame B.
-
-    joint_names: the n movable chain joints in path order (from the base).
-    kinds: "revolute" (revolute or continuous) or "prismatic", per joint.
-    joint_frames: (n, 4, 4) T_B_Ji, pose of joint frame i (= its child link frame) [m].
-    axes: (n, 3) unit joint axis of joint i in its own frame, in the chain's direction:
-        the URDF axis, negated for a reversed joint. A positive joint value turns (slides)
-        the tip side about (along) it, whichever way the joint is traversed; joint values
-        keep the URDF's sign.
-    T_base_tip: (4, 4) pose of the tip frame at zero joint values [m].
-    lower, upper: (n,) joint limits [rad or m]; +-inf when the URDF gives none.
-    parent_frames: (n, 4, 4) pose of each joint's URDF parent link frame (the frame its
-        ``<origin>`` is written in) at zero joint values [m]. For a reversed joint that
-        link is on the tip side of it: origin_i = inverse(parent_frames[i]) @ joint_frames[i].
-    reversed: (n,) True for the joints traversed against their URDF direction (the path
-        from the base up to the common ancestor); None means none (a chain below its base).
-    """
-
-    joint_names: tuple[str, ...]
-    kinds: tuple[str, ...]
-    joint_frames: np.ndarray
-    axes: np.ndarray
-    T_base_tip: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    parent_frames: np.ndarray | None = None
-    reversed: np.ndarray | None = None
-
-    @property
-    def n(self) -> int:
-        return len(self.joint_names)
-
-    @property
-    def is_reversed(self) -> np.ndarray:
-        """(n,) bool: which joints are traversed against their URDF direction."""
-        return (np.zeros(self.n, dtype=bool) if self.reversed is None
-                else np.asarray(self.reversed, dtype=bool))
 
 
 def _build_model(text: str, path) -> pin.Model:
@@ -445,7 +405,7 @@ class Robot:
         clipped to the joint limits. Returns (q (n,), converged)."""
         from kincal.models.kinematics import damped_least_squares
         g = self.geometry
-        lo, hi = (np.where(np.isfinite(b), b, s * np.pi) for b, s in ((g.lower, -1), (g.upper, 1)))
+        lo, hi = g.ranges()
         q = np.clip(np.zeros(g.n) if start is None else np.asarray(start, float), lo, hi)
         target, tool = np.asarray(position, float), np.asarray(tool, float)
         for _ in range(max_iterations):

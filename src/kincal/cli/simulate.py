@@ -213,8 +213,7 @@ def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str
     elif s.kind == "flush":  # a table through the middle of the poses' tool points
         c = np.mean(ks.tool_points(model, table, q, tool), axis=0)
         g = robot.geometry
-        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        lo, hi = g.ranges()
         cand = np.vstack([q, rng.uniform(lo, hi, size=(40 * len(q), g.n))])
         data = ks.simulate_flush(model, table, np.r_[tool, 0.0, 0.0], [[0.0, 0.0, c[2]]],
                                  cand, len(q), noise, s.orientation_noise_deg, rng,
@@ -224,8 +223,7 @@ def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str
         planes = np.array([[0.0, 0.0, c[2]], [0.0, math.pi / 2, c[0]],
                            [-math.pi / 2, 0.0, c[1]]])
         g = robot.geometry
-        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        lo, hi = g.ranges()
         cand = np.vstack([q, rng.uniform(lo, hi, size=(40 * len(q), g.n))])
         per = max(3, len(q) // 3)
         data = ks.simulate_contacts(model, table, tool, planes, cand, per, noise, rng,

@@ -194,8 +194,7 @@ def check_readback(result, text: str, add_frames: bool = False, folds=()) -> Non
     rng = np.random.default_rng(0)
     for robot in chain_robots(result):
         g = robot.geometry
-        lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-        hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        lo, hi = g.ranges()
         q = np.vstack([np.zeros(g.n), rng.uniform(lo, hi, size=(N_CONFIGURATIONS - 1, g.n))])
         read = Robot(model, text, robot.name, robot.base, robot.tip, robot.source,
                      dict(robot.off_chain))

@@ -296,8 +296,7 @@ class Chains:
         g, lay = self.robot.geometry, layout
 
         def poses():
-            lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-            hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+            lo, hi = g.ranges()
             rng = np.random.default_rng(0)
             q = np.repeat(rng.uniform(lo, hi, size=(2 * lay.size, g.n)), K, axis=0)
             approach = np.repeat(rng.choice([-1.0, 1.0], size=(2 * lay.size, g.n)), K, axis=0)

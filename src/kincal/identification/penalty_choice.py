@@ -158,8 +158,7 @@ def reach(problem: CalibrationProblem, samples: int = 500) -> float:
     frame's origin over seeded random joint values within the limits (joints without
     limits: +-pi)."""
     g = problem.robot.geometry
-    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+    lo, hi = g.ranges()
     q = np.random.default_rng(0).uniform(lo, hi, size=(samples, g.n))
     em = problem.kinds[0].error_model  # the first set's chain (problem.robot's)
     s = Chain(em, q).state(em.nominal, None, keep=False)

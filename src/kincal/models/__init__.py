@@ -68,7 +68,7 @@ def per_geometry(what, geometry, make):
 
 
 def build(name: str, geometry):
-    """The error model ``name`` (one of MODELS) of a :class:`kincal.robot.ChainGeometry`.
+    """The error model ``name`` (one of MODELS) of a :class:`kincal.models.geometry.ChainGeometry`.
 
     Built once per geometry (:func:`per_geometry`): every fit of one robot shares its
     models (building the complete model costs ~1.3 ms, a tenth of a 60-pose fit). The

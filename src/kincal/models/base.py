@@ -24,7 +24,7 @@ Each model gives, for a parameter vector x (absolute values, SI: metres, radians
 - names, units and nominal values of its parameters.
 
 A model is plain numpy and never imports Pinocchio: it is built once from the robot's
-:class:`kincal.robot.ChainGeometry`.
+:class:`kincal.models.geometry.ChainGeometry`.
 
 Tree paths (a base anywhere in the URDF tree): a joint traversed against its URDF
 direction (on the way up from the base) is a joint like the others here, with its

@@ -32,6 +32,6 @@ NEARLY_PARALLEL_DEG = 10.0  # consecutive axes within this angle of parallel get
 
 
 def build(geometry) -> mdh.MdhModel:
-    """The complete model of a :class:`kincal.robot.ChainGeometry`."""
+    """The complete model of a :class:`kincal.models.geometry.ChainGeometry`."""
     return mdh.extract(geometry, beta_below=math.sin(math.radians(NEARLY_PARALLEL_DEG)),
                        name="complete")

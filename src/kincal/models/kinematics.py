@@ -16,15 +16,12 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kincal.models import offsets
+from kincal.models.geometry import ChainGeometry
 from kincal.rotations import rotation_log, turn_parts
-
-if TYPE_CHECKING:
-    from kincal.robot import ChainGeometry
 
 
 BLOCK = 4096  # configurations (targets) its users take at once

@@ -332,7 +332,7 @@ def _signed_toward(n: np.ndarray, hint: np.ndarray, fallback: np.ndarray) -> np.
 
 
 def extract(geometry, beta_below: float | None = None, name: str | None = None) -> MdhModel:
-    """The MD-H model of a :class:`kincal.robot.ChainGeometry` (see the module notes).
+    """The MD-H model of a :class:`kincal.models.geometry.ChainGeometry` (see the module notes).
 
     beta_below: None for plain MD-H; else the sine of the angle below which a pair of
     consecutive axes counts as nearly parallel and gets Hayati's beta.

@@ -79,7 +79,7 @@ class OffsetsModel(ErrorModel):
 
 
 def build(geometry) -> OffsetsModel:
-    """The offsets model of a :class:`kincal.robot.ChainGeometry`."""
+    """The offsets model of a :class:`kincal.models.geometry.ChainGeometry`."""
     J = np.asarray(geometry.joint_frames, float)
     n = len(J)
     before = np.concatenate([np.eye(4)[None], J[:-1]])

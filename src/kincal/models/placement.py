@@ -154,7 +154,7 @@ def _field_class(field: str, axis_in_parent: np.ndarray, kind: str) -> str:
 
 
 def build(geometry, every_origin: bool = False) -> PlacementModel:
-    """The placement model of a :class:`kincal.robot.ChainGeometry`; every_origin: the top
+    """The placement model of a :class:`kincal.models.geometry.ChainGeometry`; every_origin: the top
     reversed joint's origin keeps its errors when a joint down follows (module notes)."""
     J = np.asarray(geometry.joint_frames, float)
     n = len(J)

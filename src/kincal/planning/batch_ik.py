@@ -31,7 +31,7 @@ MAX_STEP = 0.3  # [rad or m] largest joint step per iteration (keeps the branch)
 class BatchKinematics:
     """Forward kinematics and Jacobians of the chain for N configurations at once.
 
-    Built from the robot's :class:`kincal.robot.ChainGeometry` (joint frames at zero in
+    Built from the robot's :class:`kincal.models.geometry.ChainGeometry` (joint frames at zero in
     the base frame B): the same product of joint placements and joint motions that
     Pinocchio evaluates, for many configurations per call. tool: (3,) the point of
     interest in the tip frame [m].
@@ -40,8 +40,7 @@ class BatchKinematics:
     def __init__(self, robot: "Robot", tool):
         g = robot.geometry
         self.n = g.n
-        self.lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-        self.hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+        self.lo, self.hi = g.ranges()
         self.tool = np.asarray(tool, float)
         J = np.asarray(g.joint_frames, float)
         self._chain = ChainKinematics.of(g)  # kincal's one vectorised chain (models.chain)

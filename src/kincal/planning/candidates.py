@@ -33,8 +33,7 @@ def random_candidates(robot: "Robot", m: int, rng) -> np.ndarray:
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
         raise OptionError(f"the seed must be an integer >= 0, got {rng}")
     g = robot.geometry
-    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+    lo, hi = g.ranges()
     try:
         generator = np.random.default_rng(rng)
     except (TypeError, ValueError):

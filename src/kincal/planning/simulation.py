@@ -119,8 +119,7 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     pts = center + (latin_hypercube(n, rng) if lhs else rng.random((n, 3)) - 0.0) * size - size / 2
     R0 = rotx(np.pi) if orientation is None else np.asarray(orientation, float)
     g = robot.geometry
-    lo = np.where(np.isfinite(g.lower), g.lower, -np.pi)
-    hi = np.where(np.isfinite(g.upper), g.upper, np.pi)
+    lo, hi = g.ranges()
     tool = np.asarray(tool, float)
     # One arm branch for every pose, whatever the seed: the solution at the centre, in the
     # mean orientation, comes from a fixed-seed search (so calibration and validation sets
