@@ -231,6 +231,9 @@ def check_args(args) -> None:
         _check_plan(args, volume)
     elif c == "compensate":
         _finite("--tolerance-mm", args.tolerance_mm, 0, low_open=True)
+        _need(args.program is None or not (args.orientation_format or args.orientation_columns),
+              "--orientation-format and --orientation-columns describe TARGETS.csv; a "
+              "--program has joint values only")
     elif c == "fleet":
         lambda_value(args.lam)
         _count("--workers", args.workers, 1)

@@ -86,9 +86,6 @@ def run(args) -> int:
     if (c.program is None) != (c.nominal is None):
         raise OptionError("--program and --nominal go together: the program's joint values "
                           "were planned on the NOMINAL.urdf model")
-    if c.program is not None and (c.orientation_format or c.orientation_columns):
-        raise OptionError("--orientation-format and --orientation-columns describe TARGETS.csv; "
-                          "a --program has joint values only")
     if c.targets is not None and c.frames is None:
         raise OptionError("targets in the measurement frame need --frames FRAMES.json "
                           "(from 'kincal calibrate --frames-out')")

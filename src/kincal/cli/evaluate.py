@@ -125,18 +125,12 @@ def with_frames(robot, sets, frames, tool_guess=None):
     the parameters. The one path of ``evaluate --frames`` and ``calibrate --validate``."""
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.problem import CalibrationProblem
-
-    import warnings
-
-    from kincal.errors import KincalWarning
-    from kincal.measurements.checks import unit_warnings
+    from kincal.measurements.checks import warn_units
 
     backlash, compliance = tuple(frames.backlash), tuple(frames.compliance)
     problem = CalibrationProblem(robot, sets, CalibrationOptions(
         method="ls", tool_guess=tool_guess, backlash=backlash, compliance=compliance))
-    for km in problem.kinds:  # positions in another unit, as a fit's start says (nothing
-        for message in unit_warnings(km, tool_guess):  # is fitted here, so said here)
-            warnings.warn(message, KincalWarning)
+    warn_units(problem.kinds, tool_guess)  # as a fit's start does (nothing is fitted here)
     lay = problem.layout
     x = problem.x_nominal
     used: set[int] = set()

@@ -71,7 +71,6 @@ def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
     named = orientation_format is not None or orientation_columns is not None
     fmt = OrientationFormat(orientation_format or DEFAULT_FORMAT,
                             None if orientation_columns is None else tuple(orientation_columns))
-    required = list(robot.joint_names) + list(position_columns)
     with warnings.catch_warnings():  # the reading below gives the notes
         warnings.simplefilter("ignore", KincalNote)
         header = read_columns(path, [], kind="targets", header_only=True).header
@@ -94,10 +93,10 @@ def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
                             "read: give their format (--orientation-format quat-xyzw, "
                             "quat-wxyz, rpy-zyx, rpy-xyz, rotvec or matrix) to reach the "
                             "orientations too, or remove them to reach the positions alone")
-    table = read_columns(path, required + list(columns), kind="targets",
-                         expected=f"the chain joints (seeds) and {', '.join(position_columns)}"
-                         + (f" and {', '.join(columns)} ({fmt.name})" if columns else ""),
-                         rows_name="targets")
+    expected = (f"the chain joints (seeds) and {', '.join(position_columns)}"
+                + (f" and {', '.join(columns)} ({fmt.name})" if columns else ""))
+    table = read_columns(path, [*robot.joint_names, *position_columns, *columns],
+                         kind="targets", expected=expected, rows_name="targets")
     seeds = np.column_stack([table.values[j] for j in robot.joint_names]) * scale
     positions = np.column_stack([table.values[c] for c in position_columns]) * L
     R = None

@@ -44,7 +44,7 @@ from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze, identifiable
 from kincal.identification.solver import SolverOptions, SolveSummary, solve, steps
-from kincal.measurements.checks import distinct_poses, set_warnings, unit_warnings
+from kincal.measurements.checks import distinct_poses, set_warnings, warn_units
 from kincal.measurements.kind import DEFAULT_SIGMA
 from kincal.measurements.sets import as_sets
 from kincal.models.mdh import TOOL_AXIS_WARNING
@@ -247,9 +247,8 @@ class CalibrationProblem:
         o, lay = self.options, self.layout
         x = self.x_nominal if self.prior is None else self.prior.centre.copy()
         nominal = self.layout.kinematic(x)  # a fleet prior starts from the fleet mean
+        warn_units(self.kinds, o.tool_guess)
         for i, km in enumerate(self.kinds):
-            for message in unit_warnings(km, o.tool_guess):
-                warnings.warn(message, KincalWarning)
             fs, own = lay.frame_slices[i], np.array(lay.own(i), dtype=bool)
             v = (km.start(nominal, o.tool_guess, o.base_guess if i == 0 else None)
                  if km.kind == "point" else km.start(nominal, o.tool_guess))

@@ -90,6 +90,18 @@ def distinct_poses(q: np.ndarray) -> int:
     return int(np.unique(np.round(q, 9), axis=0).shape[0])
 
 
+def warn_units(kinds, tool_guess=None) -> None:
+    """Warn (:class:`~kincal.errors.KincalWarning`) :func:`unit_warnings` of each kind model:
+    a fit's start does, and so does a problem evaluated without a fit (evaluate --frames)."""
+    import warnings
+
+    from kincal.errors import KincalWarning
+
+    for km in kinds:
+        for message in unit_warnings(km, tool_guess):
+            warnings.warn(message, KincalWarning)
+
+
 def set_warnings(data, geometry, backlash=()) -> list[str]:
     """The warnings of one measurement set against the chain: joint values outside the URDF
     limits or in the wrong angle unit (one sample per pose), and backlash joints whose
