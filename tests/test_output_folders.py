@@ -1,6 +1,7 @@
 """Output folders appear with the first file the one writer writes into them, never before
 the work: a run that fails leaves no empty folder behind, and a folder the user had stays
-as it was. (kincal fleet's own case is in tests/test_fleet_engine.py.)"""
+as it was; a file the user had is never replaced. (kincal fleet's own case is in
+tests/test_fleet_engine.py.)"""
 
 from __future__ import annotations
 
@@ -77,3 +78,22 @@ def test_a_failed_paper_report_leaves_no_parent_folders(tmp_path, monkeypatch):
     with pytest.raises(ExportError, match="No space left"):
         paper_report.write_report([Result()], tmp_path / "a" / "b" / "report")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_simulated_fleet_files_go_through_the_writer(tmp_path):
+    """FleetModel.tracker_files wrote with Path.write_text, replacing a file of the same
+    name; through the one writer it refuses and writes none of the units."""
+    import numpy as np
+
+    from kincal.fleet.simulated import FleetModel
+    from kincal.robot import Robot
+
+    fm = FleetModel.of(Robot.load("ec66", tip="flange"), 0)
+    (tmp_path / "u02.csv").write_text("the user's")
+    with pytest.raises(ExportError, match="u02.csv: already exists"):
+        fm.tracker_files(tmp_path, 3, np.random.default_rng(0), n=8)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["u02.csv"]
+    assert (tmp_path / "u02.csv").read_text() == "the user's"
+    files = fm.tracker_files(tmp_path, 1, np.random.default_rng(0), n=8)
+    assert [Path(f).name for f in files] == ["u01.csv"]
+    assert Path(files[0]).read_text().startswith("# made by kincal")

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from kincal.errors import ExportError
+from kincal.measurements.csv_table import csv_line
 from kincal.models.mdh import extract
 from kincal.rotations import matrix_to_rpy, rpy_to_matrix
 
@@ -219,5 +220,5 @@ def mdh_table_csv(corrected) -> str:
              "joint,type,a_m,alpha_rad,beta_rad,d_m,theta_rad"]
     for name, kind, row, beta in zip(m.joint_names, m.kinds, m.table, m.beta):
         a, alpha, d, theta = row
-        lines.append(",".join([name, kind, *(_num(v) for v in (a, alpha, beta, d, theta))]))
+        lines.append(csv_line([name, kind, *(_num(v) for v in (a, alpha, beta, d, theta))]))
     return "\n".join(lines) + "\n"

@@ -73,12 +73,16 @@ class FleetModel:
     def tracker_files(self, folder, units: int, rng, n: int = 60, width: int = 2) -> list[str]:
         """Write ``units`` units of the fleet, each a :meth:`tracker` calibration of n
         poses, as CSV files u01.csv, u02.csv, ... (numbers ``width`` digits wide) in
-        ``folder``; returns their paths (a fleet for the tests and benchmarks)."""
+        ``folder``; returns their paths (a fleet for the tests and benchmarks). Written
+        through the one writer, all or none, with their provenance; an existing file is
+        refused, never replaced."""
         from pathlib import Path
 
-        files = []
-        for u in range(units):
-            path = Path(folder) / f"u{u + 1:0{width}d}.csv"
-            path.write_text(self.tracker(self.unit(rng), rng, n=n).to_csv_text())
-            files.append(str(path))
-        return files
+        from kincal.export.outputs import File, write_files
+        from kincal.export.provenance import Provenance
+
+        files = [File(Path(folder) / f"u{u + 1:0{width}d}.csv", "csv",
+                      self.tracker(self.unit(rng), rng, n=n).to_csv_text())
+                 for u in range(units)]
+        write_files(files, Provenance.of_run(self.robot), overwrite=False)
+        return [str(f.path) for f in files]
