@@ -62,6 +62,20 @@ def test_csv_line_is_the_csv_modules_record(cells):
     assert csv_line(cells) + "\r\n" == out.getvalue()
 
 
+def test_the_reader_reads_quoted_names_back(tmp_path):
+    """Names with a comma, a quote, LF and CR (which an XML attribute can hold as &#10;
+    and &#13;) read back to themselves, after provenance-like # lines."""
+    from kincal.measurements.csv_table import read_columns
+
+    names = ["a,b", 'q"t', "line\nbreak", "cr\rx", "plain"]
+    path = tmp_path / "f.csv"
+    path.write_text("# made by kincal\n" + csv_line(names) + "\n"
+                    + csv_line(["1.0", "2.0", "3.0", "4.0", "5.0"]) + "\n", newline="")
+    got = read_columns(path, names)
+    assert got.header == tuple(names)
+    assert [float(got.values[n][0]) for n in names] == [1.0, 2.0, 3.0, 4.0, 5.0]
+
+
 def test_joint_names_with_commas_and_quotes_round_trip(tmp_path):
     robot = _robot(tmp_path)
     q = np.random.default_rng(0).uniform(-1.0, 1.0, size=(12, 3))
