@@ -255,4 +255,8 @@ def test_compensate_takes_the_xacro_arguments_of_its_nominal(tmp_path, capsys):
     assert main(["compensate", str(cal), "--program", str(prog), "--nominal-xacro-arg",
                  "upper:=0.5", "--tip", "flange", "--out", str(tmp_path / "x.csv")]) == 1
     assert "needs --nominal" in capsys.readouterr().err
-    assert not (tmp_path / "bad.csv").exists() and not (tmp_path / "x.csv").exists()
+    assert main(["compensate", str(cal), "--program", str(prog), "--nominal", str(cal),
+                 "--nominal-xacro-arg", "upper:=0.5", "--tip", "flange", "--out",
+                 str(tmp_path / "y.csv")]) == 1  # a plain nominal refuses them
+    assert f"{cal}: is plain URDF, not xacro" in capsys.readouterr().err
+    assert not any((tmp_path / n).exists() for n in ("bad.csv", "x.csv", "y.csv"))

@@ -156,10 +156,10 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     every file carries (:mod:`kincal.export.provenance`). validation: a
     :class:`~kincal.export.validation.Validation` (held-out errors) for the report and
     the HTML. dirs: folders the writing may make for the files, outermost first (one level
-    each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. a
-    fleet unit's staging folder and the fleet's folder. A result the gate refuses still gets the diagnosis asked for (report, HTML,
-    plots, marked REFUSED; never the URDF, frames or cell files), then the refusal is
-    raised naming where the diagnosis went.
+    each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. the
+    fleet's folder and a unit's staging folder. A result the gate refuses still gets the
+    diagnosis asked for (report, HTML, plots, marked REFUSED; never the URDF, frames or cell
+    files), then the refusal is raised naming where the diagnosis went.
     Returns :class:`Written`.
     """
     o = outputs
