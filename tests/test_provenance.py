@@ -35,7 +35,7 @@ def run(tmp_path_factory):
                 "--lambda", "0.01", "--out", str(d / "c.urdf"), "--frames-out",
                 str(d / "f.json"), "--report", str(d / "r.json"), "--html", str(d / "r.html"),
                 "--yaml-out", str(d / "k.yaml"), "--mdh-out", str(d / "m.csv"),
-                "--plots", str(d / "p"), "--quiet"]
+                "--plots", str(d / "p"), "--residuals-out", str(d / "res.csv"), "--quiet"]
         assert main(argv) == 0
     finally:
         mp.undo()
@@ -83,9 +83,15 @@ def test_json_files(run):
 
 def test_yaml_csv_html_and_plots(run):
     d, argv = run
-    for name in ("k.yaml", "m.csv"):
+    from kincal.measurements.csv_table import read_columns
+
+    for name in ("k.yaml", "m.csv", "res.csv"):
         head = [line for line in (d / name).read_text().splitlines() if line.startswith("#")]
         _lines_ok("\n".join(head), d, argv)
+    # the residual CSV under its # lines: kincal's one CSV reader reads its numbers
+    table = read_columns(d / "res.csv", ["row", "error_m", "r1", "r2", "r3"])
+    assert len(table.values["error_m"]) == 30 and table.lines[0] == 9  # title + 7 lines + header
+    assert table.header[:6] == ("split", "set", "source", "kind", "row", "error_m")
     html = (d / "r.html").read_text()
     assert 'id="provenance"' in html
     _lines_ok(html[html.index('id="provenance"'):], d, argv)
