@@ -203,7 +203,10 @@ def test_demo_writes_tables_and_plots_whose_numbers_hold(tmp_path, capsys):
     assert (out / "tables.md").read_text().startswith("<!-- made by kincal ")
     from PIL import Image
 
-    assert "command: kincal demo --out" in Image.open(out / "cv_curve.png").text["Comment"]
+    for name in ("cv_curve.png", "point_sets.png"):  # the same object in every PNG
+        text = Image.open(out / name).text
+        assert "command: kincal demo --out" in text["Comment"]
+        assert json.loads(text["kincal-provenance"]) == prov and text["Source"] == prov["command"]
 
 
 @pytest.mark.parametrize("robot", ["ec66", "panda", "ur3", "ur5", "ur10"])

@@ -395,6 +395,24 @@ def test_auto_penalty_needs_two_poses_per_fold_for_cv(n, how):
     assert ("too few for 5-fold cross-validation" in why) is (how == "evidence")
 
 
+def test_auto_penalty_keeps_the_folds_the_user_gave():
+    """Lambda "auto" with the folds given: the user's k is not a reason to choose the
+    evidence. A k the poses can meet (even one pose per fold) leaves the choice to the volume
+    (CV here); a k beyond the poses is an error naming the counts, as with --lambda cv."""
+    from test_cv_together import ROBOT, _data  # random joint values: a large volume
+
+    from kincal.identification.penalty_choice import automatic
+
+    def choice(n, k):
+        return automatic(CalibrationProblem(ROBOT, _data(1, None, n), CalibrationOptions(
+            method="l2", model="complete", folds=k)))[0]
+
+    assert choice(9, 9) == "cv"
+    assert choice(9, None) == "evidence"
+    with pytest.raises(OptionError, match=r"number of poses \(9\), got folds=10 \(--folds 9"):
+        choice(9, 10)
+
+
 def test_evidence_refuses_a_fit_through_every_point(tmp_path, capsys):
     """Four simulated poses (12 equations) for 12 identifiable parameters, where the
     evidence puts the noise near zero (3e-6 mm) and the fit through every point: refused

@@ -409,10 +409,12 @@ def test_api_bad_arrays_and_paths_raise_kincal_errors(robot_and_data, tmp_path):
 
 
 # -------------------------------------------------------------------- sweep
-def test_bad_input_sweep_runs_reduced():
-    """scripts/bad_input_sweep.py at every 25th case: the script cannot rot."""
+def test_bad_input_sweep():
+    """scripts/bad_input_sweep.py, every case but the signals (about 30 s): a sample of every
+    25th case let `calibrate --folds 1000` pass for days after the evidence took over from
+    CV on few poses."""
     script = Path(__file__).resolve().parents[1] / "scripts" / "bad_input_sweep.py"
-    run = subprocess.run([sys.executable, str(script), "--sample", "25", "--no-signals"],
+    run = subprocess.run([sys.executable, str(script), "--no-signals"],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "cases held the promise" in run.stdout and "FAILED" not in run.stdout

@@ -35,7 +35,7 @@ def run(tmp_path_factory):
                 "--lambda", "0.01", "--out", str(d / "c.urdf"), "--frames-out",
                 str(d / "f.json"), "--report", str(d / "r.json"), "--html", str(d / "r.html"),
                 "--yaml-out", str(d / "k.yaml"), "--mdh-out", str(d / "m.csv"),
-                "--plots", str(d / "p"), "--quiet"]
+                "--plots", str(d / "p"), "--residuals-out", str(d / "res.csv"), "--quiet"]
         assert main(argv) == 0
     finally:
         mp.undo()
@@ -83,19 +83,31 @@ def test_json_files(run):
 
 def test_yaml_csv_html_and_plots(run):
     d, argv = run
-    for name in ("k.yaml", "m.csv"):
+    from kincal.measurements.csv_table import read_columns
+
+    for name in ("k.yaml", "m.csv", "res.csv"):
         head = [line for line in (d / name).read_text().splitlines() if line.startswith("#")]
         _lines_ok("\n".join(head), d, argv)
+    # the residual CSV under its # lines: kincal's one CSV reader reads its numbers
+    table = read_columns(d / "res.csv", ["row", "error_m", "r1", "r2", "r3"])
+    assert len(table.values["error_m"]) == 30 and table.lines[0] == 9  # title + 7 lines + header
+    assert table.header[:6] == ("split", "set", "source", "kind", "row", "error_m")
     html = (d / "r.html").read_text()
     assert 'id="provenance"' in html
     _lines_ok(html[html.index('id="provenance"'):], d, argv)
     pngs = sorted((d / "p").glob("*.png"))
     assert pngs
+    report = json.loads((d / "r.json").read_text())["provenance"]
     for png in pngs:
         info = Image.open(png).text
         assert info["Software"] == f"kincal {__version__}"
         assert info["Creation Time"] == STAMP
         _lines_ok(info["Comment"], d, argv)
+        # the PNG keywords and the JSON object the JSON files carry, for programs
+        assert info["Source"] == report["command"] and "--plots" in info["Source"]
+        assert info["Description"] == (f"made by kincal {__version__} from robot {EC66} "
+                                       f"and data {d / 'cal.csv'}; plausibility gate: plausible")
+        assert json.loads(info["kincal-provenance"]) == report
 
 
 def test_banner_of_a_generator_is_dropped_and_the_rest_kept():
@@ -253,6 +265,9 @@ def test_evaluate_analyze_and_compensate_files_carry_it(run, tmp_path, epoch):
     info = Image.open(tmp_path / "a.png").text
     assert info["Software"] == f"kincal {__version__}" and info["Creation Time"] == STAMP
     _no_gate_lines(info["Comment"], robot=EC66, data=[cal], command=f"analyze {EC66}")
+    png = json.loads(info["kincal-provenance"])
+    assert png == prov and png["command"] == info["Source"]  # the JSON report's own
+    assert png["data"] == [{"path": str(cal), "sha256": _sha(cal)}]
     out = tmp_path / "j.csv"
     assert main(["compensate", str(urdf), "--program", str(cal), "--nominal", str(EC66),
                  "--frames", str(frames), "--tip", "flange", "--out", str(out)]) == 0
@@ -297,3 +312,83 @@ def test_a_format_without_a_stamp_is_refused():
         prov.stamp("html", "<p>no body</p>")
     with pytest.raises(ExportError, match="given as a dict"):
         prov.stamp("json", "[1, 2]")
+
+
+# ------------------------------------------------ the public plot functions' PNG files
+def _png_provenance(path: Path) -> dict:
+    info = Image.open(path).text
+    prov = json.loads(info["kincal-provenance"])
+    assert info["Software"] == f"kincal {prov['kincal_version']}"
+    assert info["Creation Time"] == prov["created_utc"]
+    return prov
+
+
+def test_plot_functions_write_their_provenance(run, tmp_path, epoch):
+    from kincal.errors import ExportError
+    from kincal.export import plots
+    from kincal.export.diagnostic_plots import plot_residuals_by_joint, plot_residuals_per_pose
+    from kincal.identification.problem import calibrate
+    from kincal.measurements.data import Measurements
+    from kincal.robot import Robot
+
+    d, _ = run
+    cal = d / "cal.csv"
+    curve = ([1e-3, 1e-2, 1e-1], [0.3, 0.2, 0.25], 1e-2)
+    # plain arrays: this kincal and the Python API, no input file named
+    plain = plots.plot_cv_curve(*curve, tmp_path / "cv.png")
+    prov = _png_provenance(plain)
+    assert prov["kincal_version"] == __version__ and prov["created_utc"] == STAMP
+    assert prov["command"] is None and prov["data"] == []
+    assert prov["robot"]["sha256"] is None and prov["gate"]["verdict"] == "no gate"
+    assert Image.open(plain).text["Source"] == "kincal (Python API)"
+    # a Provenance given: its inputs and their hashes
+    robot = Robot.load(str(EC66), tip="flange")
+    given = Provenance.of_run(robot, [cal], command=["my_script.py", "--fast"])
+    plots.plot_error_distributions([("after", [0.1, 0.2, 0.15])], tmp_path / "e.png",
+                                   source=given)
+    prov = _png_provenance(tmp_path / "e.png")
+    assert prov == given.as_dict() and prov["command"] == "my_script.py --fast"
+    assert prov["robot"]["sha256"] == _sha(EC66)
+    assert prov["data"] == [{"path": str(cal), "sha256": _sha(cal)}]
+    # a result's figures: its robot and data files, read by hash
+    result = calibrate(robot, Measurements.from_csv(cal, robot.joint_names), lam=0.01)
+    for plot, name in ((plot_residuals_per_pose, "pose.png"), (plot_residuals_by_joint, "j.png")):
+        assert plot(result, tmp_path / name) == (tmp_path / name).resolve()
+        prov = _png_provenance(tmp_path / name)
+        assert prov["robot"]["path"] == str(EC66) and prov["robot"]["sha256"] == _sha(EC66)
+        assert prov["data"] == [{"path": str(cal), "sha256": _sha(cal)}]
+        assert prov["gate"]["verdict"] == "no gate"  # no gate stands before a plot function
+    # a file never goes out with bare text fields instead of a provenance; bytes may
+    with pytest.raises(ExportError, match="carries a Provenance"):
+        plots.plot_cv_curve(*curve, tmp_path / "x.png", source="my tool")
+    assert not (tmp_path / "x.png").exists()
+    png = plots.plot_cv_curve(*curve, None, source="my tool")
+    (tmp_path / "bytes.png").write_bytes(png)
+    assert Image.open(tmp_path / "bytes.png").text == {"Software": "my tool"}
+
+
+def test_simulated_fleet_files_carry_it_and_read_back(tmp_path, epoch):
+    import numpy as np
+
+    from kincal.errors import ExportError
+    from kincal.fleet.simulated import FleetModel
+    from kincal.measurements.data import Measurements
+    from kincal.robot import Robot
+
+    robot = Robot.load("ec66", tip="flange")
+    fm = FleetModel.of(robot, 0)
+    paths = fm.tracker_files(tmp_path, 2, np.random.default_rng(1), n=12)
+    rng = np.random.default_rng(1)  # the same units, made again in memory
+    for path in map(Path, paths):
+        head = _comments(path)
+        assert f"made by kincal {__version__} at {STAMP}" in head
+        assert f"robot: {robot.source} sha256 {_sha(robot.source)}" in head
+        assert "command: (Python API)" in head and "plausibility gate: no gate" in head
+        made = fm.tracker(fm.unit(rng), rng, n=12)
+        read = Measurements.from_csv(path, robot.joint_names)  # kincal's reader skips them
+        assert np.array_equal(read.joint_values, made.joint_values)
+        assert np.array_equal(read.positions, made.positions)
+    before = [Path(p).read_bytes() for p in paths]
+    with pytest.raises(ExportError, match="already exists"):
+        fm.tracker_files(tmp_path, 2, np.random.default_rng(5), n=12)
+    assert [Path(p).read_bytes() for p in paths] == before  # all or none, never replaced

@@ -117,7 +117,7 @@ class Calibrate:
     prior_deg: float | None
     noise_mm: float | None
     prior: str | None
-    folds: int
+    folds: int | None  # None: the default, DEFAULT_FOLDS
     seed: int
     fix: tuple[str, ...]
     free: tuple[str, ...]

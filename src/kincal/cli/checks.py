@@ -105,7 +105,6 @@ def _check_calibrate(args) -> None:
     _need(not args.free or m == "l2", f"--free applies to method l2 (its penalty keeps "
           f"redundant parameters bounded); method {m} cannot fit them")
     args.lam = DEFAULT_LAMBDA if args.lam is None else args.lam
-    args.folds = 5 if args.folds is None else args.folds
     args.seed = 0 if args.seed is None else args.seed
 
 

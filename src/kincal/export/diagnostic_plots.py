@@ -2,8 +2,11 @@
 and the predicted accuracy map.
 
 Same conventions as :mod:`kincal.export.plots` (one ``Figure`` each, Agg canvas, no
-pyplot; mm and deg in every label): with ``path`` a PNG file is written and its path
-returned, with ``path=None`` the PNG bytes are returned (for the HTML report).
+pyplot; mm and deg in every label): with ``path`` a PNG file is written through the one
+writer and its path returned, with ``path=None`` the PNG bytes are returned (for the HTML
+report). A written figure of a result carries, unless ``source`` gives a Provenance,
+``Provenance.of_run`` of the result's robot and data files (verdict "no gate": no
+plausibility gate stands in front of a plot function).
 """
 
 from __future__ import annotations
@@ -13,11 +16,11 @@ import math
 import numpy as np
 
 # the figure and save helpers are shared with the other plots on purpose: one look
-from kincal.export.plots import _COLORS, _figure, _save, equal_axes_mm
+from kincal.export.plots import _COLORS, PngText, _figure, _save, equal_axes_mm
 
 
 def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
-                            source: str = "kincal", set_index: int = 0):
+                            source: PngText = "kincal", set_index: int = 0):
     """Error [mm] of every sample of set ``set_index`` before (frames fitted) and after
     calibration, in file order, x = the sample's line in the data file."""
     s = result.sets[set_index]
@@ -39,11 +42,11 @@ def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
     ax.set_title(f"Residuals per sample{what}, before and after calibration", fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, path, overwrite, source)
+    return _save(fig, path, overwrite, source, _made_from(result))
 
 
 def plot_residuals_by_joint(result, path=None, *, overwrite: bool = False,
-                            source: str = "kincal"):
+                            source: PngText = "kincal"):
     """Position error after calibration [mm] against each chain joint's value (deg, or mm
     for prismatic joints). With backlash terms in the model, each sample is coloured by
     the direction the joint last moved in (its approach), which separates the two flanks
@@ -84,10 +87,10 @@ def plot_residuals_by_joint(result, path=None, *, overwrite: bool = False,
         handles, labels = axes[0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=8)
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path, overwrite, source)
+    return _save(fig, path, overwrite, source, _made_from(result))
 
 
-def plot_accuracy_map(amap, path=None, *, overwrite: bool = False, source: str = "kincal"):
+def plot_accuracy_map(amap, path=None, *, overwrite: bool = False, source: PngText = "kincal"):
     """The target points in 3-D [mm, base frame], coloured by the predicted 3-D standard
     deviation of the tool point [mm]; skipped (unreachable) grid points as grey x."""
     P = np.asarray(amap.positions) * 1e3
@@ -107,3 +110,13 @@ def plot_accuracy_map(amap, path=None, *, overwrite: bool = False, source: str =
     equal_axes_mm(ax, both, min_half=1.0)
     ax.set_title(f"Predicted accuracy, {len(P)} targets (base frame)", fontsize=10)
     return _save(fig, path, overwrite, source)
+
+
+def _made_from(result):
+    """The provenance of a written figure of ``result`` given none, made when needed: its
+    robot and data files."""
+    def made():
+        from kincal.export.provenance import Provenance
+
+        return Provenance.of_run(result.robot, [s.source for s in result.sets])
+    return made

@@ -7,9 +7,10 @@ calibration produced. It refuses an implausible or unconverged result (one Kinca
 naming the evidence) unless accepted, then composes every output, reads the corrected URDF
 back strictly (:mod:`kincal.export.readback`), and writes them as one
 transaction: all of them, or none (:func:`kincal.export.safe_write.write_all`).
-``write_files(files, provenance, ...)`` does the same for the other commands' files
-(simulate, plan, evaluate, ...): each carries the run's provenance
-(:mod:`kincal.export.provenance`), the one way it gets there.
+``write_files(files, provenance, ...)`` (defined in :mod:`kincal.export.writer`, below
+the figure modules, so that the plot functions write through it too) does the same for
+every other file (simulate, plan, evaluate, ..., the public plot functions' PNGs): each
+carries the run's provenance (:mod:`kincal.export.provenance`), the one way it gets there.
 """
 
 from __future__ import annotations
@@ -20,6 +21,9 @@ from pathlib import Path
 
 from kincal.errors import (ExportError, ImplausibleResultError, KincalWarning,
                            NotConvergedError)
+# re-exported: the one writer's general form (every file but a calibration's), whose face
+# this module is
+from kincal.export.writer import File, write_files
 
 
 @dataclass(frozen=True)
@@ -51,30 +55,6 @@ class Outputs:
         """The files and folders asked for, in writing order."""
         return [Path(p) for p in (self.urdf, self.frames, self.report, self.yaml, self.mdh,
                                   self.residuals, self.html, self.plots) if p is not None]
-
-
-@dataclass(frozen=True)
-class File:
-    """One file of a command other than calibrate, for :func:`write_files`: where it goes,
-    its format (the kinds of :meth:`kincal.export.provenance.Provenance.stamp`: json, csv,
-    yaml, urdf, html, md, png) and its content in that kind's form."""
-
-    path: Path | str
-    kind: str
-    content: object
-
-
-def write_files(files, provenance, *, overwrite: bool, protect=(), dirs=(),
-                before_commit=None) -> list[Path]:
-    """The one writer of every command's files other than a calibration's: each
-    :class:`File` stamped with ``provenance`` (a Provenance) in its format, then all written
-    or none (:func:`kincal.export.safe_write.write_all`; before_commit as there). Returns
-    the written paths."""
-    from kincal.export.safe_write import write_all
-
-    staged = [(f.path, provenance.stamp(f.kind, f.content)) for f in files]
-    return write_all(staged, overwrite=overwrite, protect=protect, dirs=dirs,
-                     before_commit=before_commit)
 
 
 @dataclass(frozen=True)

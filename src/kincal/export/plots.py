@@ -2,26 +2,42 @@
 
 Each function takes plain arrays (or a :class:`~kincal.calibration.CalibrationResult`),
 draws one figure on its own ``Figure`` (no pyplot, so no global state and no backend
-switching) and writes it through :func:`kincal.safe_write.write_bytes_atomic`; it returns
-the path written. Units are in every axis label: positions and errors in mm, angles in
-deg. ``source`` goes into the PNG's "Software" text field.
+switching) and, given a path, writes it through the one writer
+(:func:`kincal.export.writer.write_files`) with its provenance in the PNG's text fields
+(:meth:`kincal.export.provenance.Provenance.png_text`); it returns the path written
+(with path None, the PNG bytes, e.g. to embed in HTML). Units are in every axis label:
+positions and errors in mm, angles in deg.
+
+``source``: what the PNG's text fields say. A written file carries a
+:class:`~kincal.export.provenance.Provenance`: the one given as ``source``, else
+``Provenance.of_run()`` (this kincal, its version and the time; the Python API, no input
+file: plain arrays do not say where they came from); the figures of a result
+(:mod:`kincal.export.diagnostic_plots`) name the result's robot and data files and their
+SHA-256. PNG bytes (path None) may also be given a dict of text fields or a "Software"
+string.
 
 - :func:`plot_cv_curve`: mean CV error against lambda, chosen lambda marked (paper Fig. 3);
 - :func:`plot_point_sets`: calibration and validation points in 3-D (Fig. 4);
 - :func:`plot_error_distributions`: per-method error distributions (Fig. 5);
 - :func:`plot_parameter_deviations`: identified minus nominal per method (Table 4);
-- :func:`plot_calibration`: the figures of one calibration, for ``kincal calibrate --plots``.
+- :func:`calibration_figures`: the figures of one calibration, for ``kincal calibrate --plots``.
 """
 
 from __future__ import annotations
 
 import io
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence, Union
 
 import numpy as np
 
-from kincal.export.safe_write import write_bytes_atomic
+from kincal.errors import ExportError
+
+if TYPE_CHECKING:
+    from kincal.export.provenance import Provenance
+
+# what a PNG's text fields say (see the module docstring)
+PngText = Union[str, dict[str, str], "Provenance"]
 
 _COLORS = ("#7f7f7f", "#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd")
 
@@ -55,11 +71,32 @@ def equal_axes_mm(ax, points: np.ndarray, min_half: float = 0.0) -> None:
     ax.set_zlabel("z (mm)")
 
 
-def _save(fig, path, overwrite: bool, source) -> Path | bytes:
-    """Write the PNG to ``path``; with path None return its bytes (to embed, e.g. in HTML).
-    source: the "Software" text, or a dict of PNG text fields (a calibration's provenance,
-    :meth:`kincal.export.provenance.Provenance.png_text`); a refused run's figures say so
-    on their face."""
+def _save(fig, path, overwrite: bool, source: PngText, made_from=None) -> Path | bytes:
+    """Write the PNG to ``path`` through the one writer with its provenance; with path
+    None return its bytes (to embed, e.g. in HTML). source: see the module docstring.
+    made_from: a function making the Provenance of a file written without one given
+    (default ``Provenance.of_run()``). A refused run's figures say so on their face."""
+    from kincal.export.provenance import Provenance
+
+    if path is None:
+        return _png(fig, source.png_text() if isinstance(source, Provenance) else source)
+    if isinstance(source, Provenance):
+        prov = source
+    elif isinstance(source, str) and source == "kincal":  # the default: none given
+        prov = made_from() if made_from is not None else Provenance.of_run()
+    else:
+        raise ExportError(f"a plot written to {path} carries a Provenance "
+                          "(kincal.export.provenance) as its source, or none; got "
+                          f"{type(source).__name__}: text fields are for PNG bytes (path None)")
+    from kincal.export.writer import File, write_files
+
+    return write_files([File(path, "png", lambda fields: _png(fig, fields))], prov,
+                       overwrite=overwrite)[0]
+
+
+def _png(fig, source) -> bytes:
+    """The PNG bytes of ``fig`` with the text fields ``source`` (a dict, or the "Software"
+    string)."""
     metadata = dict(source) if isinstance(source, dict) else {"Software": source}
     if "plausibility gate: REFUSED" in metadata.get("Comment", ""):
         mark = "REFUSED by the plausibility gate: diagnosis only"
@@ -68,14 +105,12 @@ def _save(fig, path, overwrite: bool, source) -> Path | bytes:
                      color="#b00020" if not old else None)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", metadata=metadata)
-    if path is None:
-        return buf.getvalue()
-    return write_bytes_atomic(path, buf.getvalue(), overwrite=overwrite)
+    return buf.getvalue()
 
 
 def plot_cv_curve(lambdas, mean_error_mm, best_lambda: float, path, *, fold_errors_mm=None,
                   title: str = "Cross-validation error against lambda",
-                  overwrite: bool = False, source: str | dict[str, str] = "kincal") -> Path | bytes:
+                  overwrite: bool = False, source: PngText = "kincal") -> Path | bytes:
     """Mean validation error [mm] of each lambda candidate, log x, best lambda marked.
 
     lambdas: (M,); mean_error_mm: (M,); fold_errors_mm: optional (M, k), drawn faintly.
@@ -105,7 +140,7 @@ def plot_cv_curve(lambdas, mean_error_mm, best_lambda: float, path, *, fold_erro
 
 def plot_point_sets(calibration_mm, validation_mm, path, *, highlight_index=None,
                     labels=("R-test calibration points", "laser-tracker validation points"),
-                    overwrite: bool = False, source: str | dict[str, str] = "kincal") -> Path | bytes:
+                    overwrite: bool = False, source: PngText = "kincal") -> Path | bytes:
     """Two point sets [mm] in one 3-D view (paper Fig. 4), equal axis scales.
 
     calibration_mm: (N, 3); validation_mm: (M, 3), both in the same frame.
@@ -129,7 +164,7 @@ def plot_point_sets(calibration_mm, validation_mm, path, *, highlight_index=None
 
 def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
                              title: str = "Position error distribution",
-                             overwrite: bool = False, source: str | dict[str, str] = "kincal") -> Path | bytes:
+                             overwrite: bool = False, source: PngText = "kincal") -> Path | bytes:
     """Box plots (with the points) of per-pose position errors [mm], one per method.
 
     series: (label, (N,) errors [mm]) pairs, drawn left to right. A log axis is used
@@ -160,7 +195,7 @@ def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
 
 def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
                               title: str = "Kinematic parameter deviations from nominal",
-                              overwrite: bool = False, source: str | dict[str, str] = "kincal") -> Path | bytes:
+                              overwrite: bool = False, source: PngText = "kincal") -> Path | bytes:
     """Grouped bars of identified minus nominal parameters: lengths [mm] and angles [deg].
 
     names: (P,) parameter names; is_length: (P,) bool.
@@ -259,7 +294,7 @@ def calibration_figure_names(n_sets: int, accuracy: bool = False) -> list[str]:
             + ([ACCURACY_MAP_PNG] if accuracy else []))
 
 
-def calibration_figures(result, source: str | dict[str, str] = "kincal") -> list[tuple[str, bytes]]:
+def calibration_figures(result, source: PngText = "kincal") -> list[tuple[str, bytes]]:
     """(file name, PNG bytes) of the figures of one calibration; nothing is written (the
     files go out through :func:`kincal.export.outputs.write_calibration`, behind the gate).
 

@@ -193,10 +193,23 @@ class Provenance:
                 "XML comments cannot hold) -->")
 
     def png_text(self) -> dict[str, str]:
-        """Text fields of a PNG (matplotlib's savefig metadata)."""
+        """Text fields of a PNG (matplotlib's savefig metadata; tEXt chunks, iTXt where a
+        value is not Latin-1): the PNG keywords Software (kincal and its version), Source
+        (the command line), Creation Time, Description (one line: the robot, the data
+        files, the verdict) and Comment (:meth:`lines`), and "kincal-provenance": the
+        JSON object the JSON files carry (:meth:`as_dict`), for programs."""
+        import json
+
+        robot = ("no robot description" if self.robot.path == "(no robot)"
+                 else f"robot {self.robot.path}")
+        data = ("data " + ", ".join(d.path for d in self.data)) if self.data else "no data file"
         return {"Software": f"kincal {self.kincal_version}",
+                "Source": self.command if self.command is not None else "kincal (Python API)",
                 "Creation Time": self.created_utc,
-                "Comment": "\n".join(self.lines())}
+                "Description": " ".join(f"made by kincal {self.kincal_version} from {robot} and "
+                                        f"{data}; plausibility gate: {self.verdict}".split()),
+                "Comment": "\n".join(self.lines()),
+                "kincal-provenance": json.dumps(self.as_dict())}
 
 
 def utc_now() -> str:

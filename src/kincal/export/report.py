@@ -115,7 +115,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                  "points_per_pose": int(getattr(first.data, "n_points", 1)),
                  "acquisition_order": result.order_source},
         "sets": [set_dict(s) for s in result.sets],
-        "options": {"method": o.method, "lambda": o.lam, "folds": o.folds, "seed": o.seed,
+        "options": {"method": o.method, "lambda": o.lam, "folds": o.fold_count, "seed": o.seed,
                     "prior_mm": o.prior_mm, "prior_deg": o.prior_deg, "noise_mm": o.noise_mm,
                     "lambda_grid": [o.lambda_min, o.lambda_max, o.n_lambdas],
                     "penalty_length_scale_m": o.length_scale,

@@ -70,12 +70,13 @@ class FleetModel:
         """A small-volume calibration: n poses in a 20 mm cube, 50 um noise."""
         return self.measure(table, rng, n, (0.4, 0.0, 0.25), 0.02, tool, 5e-5, 15, source)
 
-    def tracker_files(self, folder, units: int, rng, n: int = 60, width: int = 2) -> list[str]:
+    def tracker_files(self, folder, units: int, rng, n: int = 60, width: int = 2,
+                      overwrite: bool = False) -> list[str]:
         """Write ``units`` units of the fleet, each a :meth:`tracker` calibration of n
         poses, as CSV files u01.csv, u02.csv, ... (numbers ``width`` digits wide) in
-        ``folder``; returns their paths (a fleet for the tests and benchmarks). Written
-        through the one writer, all or none, with their provenance; an existing file is
-        refused, never replaced."""
+        ``folder``, all or none through the one writer (provenance ``#`` lines: the
+        nominal robot, the Python API); returns their paths (a fleet for the tests and
+        benchmarks)."""
         from pathlib import Path
 
         from kincal.export.outputs import File, write_files
@@ -84,5 +85,5 @@ class FleetModel:
         files = [File(Path(folder) / f"u{u + 1:0{width}d}.csv", "csv",
                       self.tracker(self.unit(rng), rng, n=n).to_csv_text())
                  for u in range(units)]
-        write_files(files, Provenance.of_run(self.robot), overwrite=False)
+        write_files(files, Provenance.of_run(self.robot), overwrite=overwrite)
         return [str(f.path) for f in files]

@@ -61,6 +61,15 @@ def check_grid(lo: float, hi: float, count: int) -> None:
         raise OptionError(f"lambda grid needs 2 to 10000 candidates, got {count}")
 
 
+def check_fold_count(n_poses: int, k: int) -> None:
+    """Raises OptionError unless k folds can split n_poses poses (2 <= k <= n_poses)."""
+    if not 2 <= k <= n_poses:
+        raise OptionError(f"cross-validation needs 2 <= folds <= number of poses "
+                          f"({n_poses}), got folds={k}" + (
+                              f" (--folds {n_poses} or fewer, or --lambda evidence)"
+                              if n_poses >= 2 and k > n_poses else ""))
+
+
 def make_folds(n_samples: int, k: int, seed: int, groups=None,
                strata=None) -> tuple[np.ndarray, ...]:
     """k folds of a seeded permutation of range(n_samples) (sorted within each fold).
@@ -80,11 +89,7 @@ def make_folds(n_samples: int, k: int, seed: int, groups=None,
         return tuple(np.sort(np.concatenate([p[f] for p in parts])) for f in range(k))
     groups = np.arange(n_samples) if groups is None else np.asarray(groups)
     poses, inverse = np.unique(groups, return_inverse=True)
-    if not 2 <= k <= len(poses):
-        raise OptionError(f"cross-validation needs 2 <= folds <= number of poses "
-                          f"({len(poses)}), got folds={k}" + (
-                              f" (--folds {len(poses)} or fewer, or --lambda evidence)"
-                              if len(poses) >= 2 and k > len(poses) else ""))
+    check_fold_count(len(poses), k)
     perm = np.random.default_rng(seed).permutation(len(poses))
     return tuple(np.flatnonzero(np.isin(inverse, f)) for f in np.array_split(perm, k))
 

@@ -238,7 +238,7 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
             return CalibrationProblem(robots, sets, replace(o, model=model, backlash=backlash,
                                                             compliance=compliance, **grid))
 
-    k = o.folds
+    k = o.fold_count
 
     def keep(default, reason):
         # its free parameters are counted by the problem that uses it (:func:`counted`):

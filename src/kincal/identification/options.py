@@ -22,6 +22,7 @@ METHODS = ("l2", "ls", "frames")
 # accepted given prior scales [mm or deg] and noise [mm] of the evidence estimator: beyond,
 # 1 / value^2 under- or overflows; the estimator's own scales stay within a decade inside
 EVIDENCE_RANGE = (1e-6, 1e4)
+DEFAULT_FOLDS = 5  # k of the k-fold cross-validation when none is given
 
 
 @dataclass(frozen=True)
@@ -48,7 +49,10 @@ class CalibrationOptions:
         instead of estimated; None: estimated. noise_mm: likewise the measurement noise,
         standard deviation per axis of a unit-weight sample [mm]. Each within
         EVIDENCE_RANGE (1e-6 to 1e4).
-    folds, seed: k and the seed of the fold split.
+    folds, seed: k and the seed of the fold split. folds None: DEFAULT_FOLDS
+        (:attr:`fold_count`), and lam "auto" takes the evidence where that many folds
+        cannot split the poses two each; a k given is the user's: too few poses for it is
+        an error, not a reason to choose otherwise.
     lambda_min, lambda_max, n_lambdas: the CV grid (log-spaced; paper: 1e-6, 1e3, 50).
     length_scale [m], angle_scale [rad]: the unit s of the penalty
         lambda * sum(((x - x0) / s)^2); 1 mm and 1 deg by default, the paper's units.
@@ -101,7 +105,7 @@ class CalibrationOptions:
     prior_mm: float | None = None
     prior_deg: float | None = None
     noise_mm: float | None = None
-    folds: int = 5
+    folds: int | None = None
     seed: int = 0
     lambda_min: float = 1e-6
     lambda_max: float = 1e3
@@ -126,6 +130,11 @@ class CalibrationOptions:
     shared_planes: bool = False
     prior: FleetPrior | None = None
     prior_scale: float | None = None
+
+    @property
+    def fold_count(self) -> int:
+        """k of the k-fold cross-validation: ``folds``, or DEFAULT_FOLDS."""
+        return DEFAULT_FOLDS if self.folds is None else self.folds
 
     def validated(self) -> "CalibrationOptions":
         """These options checked, with sequences made tuples (``fix=[...]`` works as well as
@@ -174,9 +183,9 @@ class CalibrationOptions:
         check_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
         if o.cv_max_poses is not None and not (
                 isinstance(o.cv_max_poses, (int, np.integer)) and not isinstance(
-                    o.cv_max_poses, bool) and o.cv_max_poses >= max(2, o.folds)):
+                    o.cv_max_poses, bool) and o.cv_max_poses >= max(2, o.fold_count)):
             raise OptionError(f"cv_max_poses must be an integer >= the number of folds "
-                              f"({o.folds}) or None, got {o.cv_max_poses!r}")
+                              f"({o.fold_count}) or None, got {o.cv_max_poses!r}")
         if o.robust is not None and o.robust not in LOSSES:
             raise OptionError(f"unknown robust loss {o.robust!r}; expected one of "
                               f"{', '.join(LOSSES)} (or none)")
@@ -231,6 +240,8 @@ class CalibrationOptions:
             changes[name] = tuple(float(x) for x in v)
         for name, low in (("folds", 2), ("seed", 0), ("n_lambdas", 2)):
             value = getattr(self, name)
+            if name == "folds" and value is None:
+                continue
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
                 raise OptionError(f"{name} must be an integer >= {low}, got {value!r}")
             changes[name] = int(value)

@@ -17,7 +17,8 @@ import numpy as np
 from kincal.errors import IdentifiabilityError
 from kincal.identification import evidence
 from kincal.identification.cross_validation import (SMALL_VOLUME, CrossValidation,
-                                                    free_fraction, small_volume_warning)
+                                                    check_fold_count, free_fraction,
+                                                    small_volume_warning)
 from kincal.identification.layout import MM
 from kincal.identification.solver import SolveSummary
 from kincal.models.chain import Chain
@@ -198,16 +199,19 @@ def automatic(problem: CalibrationProblem) -> tuple[str, str]:
     positions: distances and contacts see only part of the motion, as a small volume does
     (on simulated EC66 flush touches on one table, CV let the fit drift along what the
     touches cannot see in 3 of 6 seeds, refused by the gate; evidence in none); and evidence
-    for fewer than two poses per fold, which CV cannot split usefully."""
+    for fewer than two poses per fold, which CV cannot split usefully (the default k; a k
+    the user gave that the poses cannot meet is an error)."""
     o = problem.options
     if any(v is not None for v in (o.prior_mm, o.prior_deg, o.noise_mm)):
         return "evidence", "tolerances or noise given"
     if measured_positions(problem) is None:
         return "evidence", ("no set measures positions: distances and contacts see only part "
                             "of the motion, as a small volume does")
-    if problem.n_poses < 2 * o.folds:
-        return "evidence", (f"{problem.n_poses} poses: too few for {o.folds}-fold "
-                            f"cross-validation (at least {2 * o.folds}, two per fold)")
+    if o.folds is not None:  # the user's k: an impossible one is an error, whatever is chosen
+        check_fold_count(problem.n_poses, o.folds)
+    elif problem.n_poses < 2 * o.fold_count:
+        return "evidence", (f"{problem.n_poses} poses: too few for {o.fold_count}-fold "
+                            f"cross-validation (at least {2 * o.fold_count}, two per fold)")
     extent, r, ratio = extent_ratio(problem)
     where = (f"the data span {extent * 1e3:.0f} mm from their centre, {100 * ratio:.1f} % of "
              f"the arm's reach")

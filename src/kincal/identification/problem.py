@@ -168,7 +168,7 @@ class CalibrationProblem:
             if mine.size:
                 out.append((i, km.subset(mine - self.offsets[i]), mine))
         if rows.size <= SUBSET_MEMO_SAMPLES:  # a large selection is not kept: its memory
-            if len(self._subsets) >= 2 * self.options.folds + 2:
+            if len(self._subsets) >= 2 * self.options.fold_count + 2:
                 self._subsets.pop(next(iter(self._subsets)))
             self._subsets[key] = out
         return out
@@ -420,7 +420,7 @@ class CalibrationProblem:
             samples = np.flatnonzero(np.isin(groups, keep))
             subsample = (int(o.cv_max_poses), self.n_poses)
         fit, error = fold_fitter(self, free, samples), validation_error(self, samples)
-        cv = cross_validate(fit, error, len(samples), grid, o.folds, o.seed, o.warm_start,
+        cv = cross_validate(fit, error, len(samples), grid, o.fold_count, o.seed, o.warm_start,
                             o.progress, groups=groups[samples], strata=strata[samples])
         if subsample is None:
             return cv

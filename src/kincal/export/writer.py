@@ -1,0 +1,41 @@
+"""The one writer's general form: files each stamped with their run's provenance, written
+as one transaction.
+
+:func:`write_files` is how every file outside a calibration's (behind the gate,
+:func:`kincal.export.outputs.write_calibration`) is written: the commands' files, the
+demo's, the PNGs of the public plot functions. Each :class:`File` gets the provenance in
+its format (:meth:`kincal.export.provenance.Provenance.stamp`), then all are written or
+none (:func:`kincal.export.safe_write.write_all`). It sits under the figure modules so
+that :mod:`kincal.export.plots` writes through it without an import cycle
+(:mod:`kincal.export.outputs` draws the calibration's figures); outputs re-exports it and
+is its face.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class File:
+    """One file of a command other than calibrate, for :func:`write_files`: where it goes,
+    its format (the kinds of :meth:`kincal.export.provenance.Provenance.stamp`: json, csv,
+    yaml, urdf, html, md, png) and its content in that kind's form."""
+
+    path: Path | str
+    kind: str
+    content: object
+
+
+def write_files(files, provenance, *, overwrite: bool, protect=(), dirs=(),
+                before_commit=None) -> list[Path]:
+    """The one writer of every file other than a calibration's: each :class:`File`
+    stamped with ``provenance`` (a Provenance) in its format, then all written or none
+    (:func:`kincal.export.safe_write.write_all`; before_commit as there). Returns the
+    written paths."""
+    from kincal.export.safe_write import write_all
+
+    staged = [(f.path, provenance.stamp(f.kind, f.content)) for f in files]
+    return write_all(staged, overwrite=overwrite, protect=protect, dirs=dirs,
+                     before_commit=before_commit)
