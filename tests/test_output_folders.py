@@ -97,3 +97,35 @@ def test_simulated_fleet_files_go_through_the_writer(tmp_path):
     files = fm.tracker_files(tmp_path, 1, np.random.default_rng(0), n=8)
     assert [Path(f).name for f in files] == ["u01.csv"]
     assert Path(files[0]).read_text().startswith("# made by kincal")
+
+
+@pytest.mark.parametrize("existed", [False, True])
+def test_fleet_interrupted_before_any_unit_leaves_no_folder_it_made(tmp_path, monkeypatch,
+                                                                    capsys, existed):
+    """Ctrl-C while the first unit is being written (its staging folder made, nothing
+    finished): the folder the run made goes again, a folder the user had stays."""
+    pytest.importorskip("distributed")
+    import kincal.fleet as fleet
+    from kincal.cli import main
+    from kincal.fleet.unit import STAGING
+
+    data = tmp_path / "u1.csv"
+    assert main(["simulate", "ec66", "--poses", "12", "--seed", "1", "--out", str(data)]) == 0
+    out = tmp_path / "D"
+    if existed:
+        out.mkdir()
+
+    def interrupted(robot, jobs, *args, **kwargs):
+        stage = Path(jobs[0].out_dir) / f"{STAGING}{jobs[0].name}"
+        stage.mkdir(parents=True)  # as the writer makes them for the first unit
+        (stage / "corrected.urdf").write_text("<robot/>")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fleet, "calibrate_fleet", interrupted)
+    capsys.readouterr()
+    assert main(["fleet", "ec66", str(data), str(data), "--tip", "flange",
+                 "--out-dir", str(out)]) == 130
+    assert "0 of the 2 units are complete" in capsys.readouterr().err
+    assert out.is_dir() is existed
+    if existed:
+        assert list(out.iterdir()) == []
