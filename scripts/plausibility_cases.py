@@ -12,7 +12,9 @@ Usage: python scripts/plausibility_cases.py [--quick] [--convergence]   (quick: 
 
 --convergence: instead, the simulated ls runs' convergence alone: how many of them stop at the
 iteration limit, with the error models complete (the API's default) and mdh, each under the
-relative stopping rule (the default) and the paper's absolute one (SolverOptions(rule="paper")).
+relative stopping rule (the default) and the paper's absolute one (SolverOptions(rule="paper")),
+and the largest single kinematic correction [mm, deg] against the RMS movement of the tool
+point by the corrections [mm] over those runs.
 """
 
 from __future__ import annotations
@@ -75,6 +77,7 @@ def convergence(seeds) -> None:
     stopping rule."""
     cases = [(model, rule) for model in ("complete", "mdh") for rule in ("relative", "paper")]
     stopped = dict.fromkeys(cases, 0)
+    largest = {c: [0.0, 0.0, 0.0] for c in cases}  # [mm], [deg], tool moved RMS [mm]
     n = 0
     with tempfile.TemporaryDirectory() as tmp:
         for X in ("ec66", "ur10", "panda", "ur3"):
@@ -88,8 +91,17 @@ def convergence(seeds) -> None:
                         result = calibrate(robot, data, method="ls", model=model,
                                            solver=SolverOptions(rule=rule))
                         stopped[model, rule] += not result.converged
+                        big = largest[model, rule]
+                        for q in result.parameters[:result.layout.n_kinematic]:
+                            if q.status == "identified":
+                                i, f = (0, 1e3) if q.is_length else (1, 180.0 / np.pi)
+                                big[i] = max(big[i], abs(q.deviation) * f)
+                        big[2] = max(big[2], result.plausibility.evidence.change_rms_mm)
     for (model, rule), k in stopped.items():
-        print(f"ls, model {model}, {rule} stopping rule: {k} of {n} runs not converged")
+        mm, deg, moved = largest[model, rule]
+        print(f"ls, model {model}, {rule} stopping rule: {k} of {n} runs not converged; "
+              f"largest correction {mm:.3g} mm, {deg:.3g} deg; tool moved at most {moved:.3g} "
+              "mm RMS")
 
 
 def main(argv=None):
