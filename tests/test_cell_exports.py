@@ -183,3 +183,32 @@ def test_yaml_numbers_are_exact_doubles(seed, tmp_path):
     origins = read_kinematics_yaml(kinematics_yaml(robot, corrected))
     for name, T in corrected.urdf_origins().items():
         np.testing.assert_allclose(origins[name], T, atol=2e-16 * 4, rtol=0)
+
+
+def test_yaml_keys_read_back_as_the_joint_names(tmp_path):
+    """Joint names YAML would misread as plain keys (a colon and a hash, quotes, YAML 1.1's
+    "on", which reads back as True) are written in double quotes: PyYAML and kincal's own
+    reader give the same names back, and the plain names stay plain."""
+    import yaml
+
+    names = ("on", "a: b #c", 'say "hi"', "j_4.x")
+    esc = [n.replace('"', "&quot;") for n in names]
+    links = "".join(f'<link name="l{i}"/>' for i in range(len(names) + 1))
+    joints = "".join(
+        f'<joint name="{n}" type="revolute"><parent link="l{i}"/><child link="l{i + 1}"/>'
+        f'<origin xyz="0 0.1 0.2" rpy="0.1 0 0"/><axis xyz="0 {i % 2} {1 - i % 2}"/>'
+        '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>'
+        for i, n in enumerate(esc))
+    path = tmp_path / "odd.urdf"
+    path.write_text(f'<robot name="odd">{links}{joints}</robot>')
+    robot = Robot.load(path, tip=f"l{len(names)}")
+    assert robot.joint_names == names
+    text = kinematics_yaml(robot, robot)
+    assert "\n  j_4.x:\n" in text and '\n  "on":\n' in text
+    loaded = yaml.safe_load(text)["kinematics"]
+    assert list(loaded) == list(names)
+    origins = read_kinematics_yaml(text)
+    assert list(origins) == list(names)
+    for name, T in robot.urdf_origins().items():
+        np.testing.assert_allclose(origins[name], T, atol=1e-15)
+        np.testing.assert_allclose([loaded[name][k] for k in ("x", "y", "z")], T[:3, 3])

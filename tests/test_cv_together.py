@@ -49,7 +49,7 @@ def _both(problem):
         assert hasattr(fit, "together") and hasattr(error, "together")
         if not together:
             del fit.together  # cross_validate then fits each fold on its own
-        out.append(cross_validate(fit, error, len(samples), grid, o.folds, o.seed,
+        out.append(cross_validate(fit, error, len(samples), grid, o.fold_count, o.seed,
                                   groups=groups))
     return out
 

@@ -170,7 +170,7 @@ def test_cv_path_equals_fold_fits_from_scratch():
         (_, e), = problem.sample_errors(sol.u * problem.scale, val)
         return float(np.mean(e)) * 1e3
 
-    slow = cross_validate(plain, error, problem.n_samples, fast.lambdas, o.folds, o.seed,
+    slow = cross_validate(plain, error, problem.n_samples, fast.lambdas, o.fold_count, o.seed,
                           groups=data.poses)
     assert fast.best_lambda == slow.best_lambda
     # 1e-7: a fold fit whose stop is borderline (seed 3, lambda 1.5e-6: 0 iterations or 1)

@@ -132,12 +132,22 @@ def test_a_running_scheduler_gives_the_local_results(units, local_run, tmp_path)
         assert "<joint" in got
 
 
-def test_no_scheduler_at_the_address_is_one_line(units, tmp_path, capsys):
-    assert main(_fleet_argv(units[:2], tmp_path / "D", "--scheduler",
-                            "tcp://127.0.0.1:9")) == 1
+@pytest.mark.parametrize("existing", [False, True])
+def test_no_scheduler_at_the_address_is_one_line(units, tmp_path, capsys, existing):
+    """A fleet that fails before any file is written leaves no folder behind (the one
+    writer makes DIR with its first file), and a folder the user had as it was."""
+    out = tmp_path / "D"
+    if existing:
+        out.mkdir()
+        (out / "notes.txt").write_text("the user's")
+    assert main(_fleet_argv(units[:2], out, "--scheduler", "tcp://127.0.0.1:9")) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("kincal: error: --scheduler tcp://127.0.0.1:9")
-    assert not (tmp_path / "D" / "FLEET.json").exists()
+    if existing:
+        assert [p.name for p in out.iterdir()] == ["notes.txt"]
+        assert (out / "notes.txt").read_text() == "the user's"
+    else:
+        assert not out.exists()
 
 
 def _half(x):

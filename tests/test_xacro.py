@@ -197,3 +197,66 @@ def test_xacro_arguments_on_ur_description(tmp_path, capsys):
     assert main(["simulate", str(xacro_file), "--xacro-arg", "ur_type", "--out",
                  str(tmp_path / "e.csv")]) == 1
     assert "expects NAME:=VALUE" in capsys.readouterr().err
+
+
+ARG_XACRO = """<?xml version="1.0"?>
+<robot name="arm" xmlns:xacro="http://www.ros.org/wiki/xacro">
+  <xacro:arg name="upper" default="0.4"/>
+  <link name="base_link"/><link name="link_1"/><link name="link_2"/><link name="flange"/>
+  <joint name="joint_1" type="revolute"><parent link="base_link"/><child link="link_1"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
+  <joint name="joint_2" type="revolute"><parent link="link_1"/><child link="link_2"/>
+    <origin xyz="0 0.05 $(arg upper)"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
+  <joint name="flange_joint" type="revolute"><parent link="link_2"/><child link="flange"/>
+    <origin xyz="0.3 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
+</robot>
+"""
+
+
+def test_compensate_takes_the_xacro_arguments_of_its_nominal(tmp_path, capsys):
+    """--nominal-xacro-arg NAME:=VALUE reaches compensate's --nominal as --xacro-arg reaches
+    ROBOT (the calibrated URDF kincal writes is plain URDF, which refuses --xacro-arg):
+    a program planned on the nominal with upper:=0.5, compensated onto that same model,
+    comes back unchanged; with the xacro's default (0.4) it does not."""
+    xacro_file = tmp_path / "arm.urdf.xacro"
+    xacro_file.write_text(ARG_XACRO)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        nominal = Robot.load(xacro_file, tip="flange", xacro_args={"upper": "0.5"})
+    cal = tmp_path / "cal.urdf"
+    cal.write_text(nominal.urdf_text)  # the "calibrated" robot: the nominal itself, plain
+    q = np.random.default_rng(3).uniform(-1.0, 1.0, size=(6, 3))
+    prog = tmp_path / "program.csv"
+    prog.write_text("joint_1,joint_2,flange_joint\n" + "".join(
+        ",".join(repr(float(v)) for v in row) + "\n" for row in q))
+
+    def run(*extra, out="j.csv"):
+        return main(["compensate", str(cal), "--program", str(prog), "--nominal",
+                     str(xacro_file), "--tip", "flange", "--out", str(tmp_path / out),
+                     "--quiet", *extra])
+
+    def joints(out):
+        lines = [s for s in (tmp_path / out).read_text().splitlines() if not s.startswith("#")]
+        table = np.array([[float(v) for v in s.split(",")] for s in lines[1:]])
+        return table[:, 1:4]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert run("--nominal-xacro-arg", "upper:=0.5") == 0
+        np.testing.assert_allclose(joints("j.csv"), q, atol=1e-6)
+        assert run("--flag-unreachable", out="default.csv") == 0
+        assert np.abs(joints("default.csv") - q).max() > 1e-3  # upper 0.4: another model
+    capsys.readouterr()
+    assert run("--nominal-xacro-arg", "upper", out="bad.csv") == 1
+    assert "--nominal-xacro-arg expects NAME:=VALUE" in capsys.readouterr().err
+    assert main(["compensate", str(cal), "--program", str(prog), "--nominal-xacro-arg",
+                 "upper:=0.5", "--tip", "flange", "--out", str(tmp_path / "x.csv")]) == 1
+    assert "needs --nominal" in capsys.readouterr().err
+    assert main(["compensate", str(cal), "--program", str(prog), "--nominal", str(cal),
+                 "--nominal-xacro-arg", "upper:=0.5", "--tip", "flange", "--out",
+                 str(tmp_path / "y.csv")]) == 1  # a plain nominal refuses them
+    assert f"{cal}: is plain URDF, not xacro" in capsys.readouterr().err
+    assert not any((tmp_path / n).exists() for n in ("bad.csv", "x.csv", "y.csv"))

@@ -113,9 +113,9 @@ def read_urdf_text(path, xacro_args=None) -> str:
     else:
         if p.suffix != ".xacro":
             if xacro_args:
-                raise UrdfError(f"{p}: is plain URDF, not xacro: --xacro-arg "
+                raise UrdfError(f"{p}: is plain URDF, not xacro: the xacro arguments "
                                 f"{' '.join(f'{k}:={v}' for k, v in xacro_args.items())} would "
-                                "be ignored; drop it, or give the .xacro file")
+                                "be ignored; drop them, or give the .xacro file")
             return text
     from kincal.xacro_source import expand_xacro
 

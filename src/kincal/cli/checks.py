@@ -233,6 +233,9 @@ def check_args(args) -> None:
         _need(args.program is None or not (args.orientation_format or args.orientation_columns),
               "--orientation-format and --orientation-columns describe TARGETS.csv; a "
               "--program has joint values only")
+        _need(not args.nominal_xacro_arg or args.nominal is not None,
+              "--nominal-xacro-arg is an argument of the --nominal description: it needs "
+              "--nominal (ROBOT's xacro arguments are --xacro-arg)")
     elif c == "fleet":
         lambda_value(args.lam)
         _count("--workers", args.workers, 1)

@@ -8,7 +8,7 @@ from pathlib import Path
 from kincal.cli.checks import check_outputs
 from kincal.cli.console import say_and_write, summary_lines
 from kincal.cli.options import (ORIENTATION_FORMATS, Chain, add_overwrite, add_units,
-                                add_xacro_args, chain_from_frames, group, typed)
+                                add_xacro_args, chain_from_frames, group, typed, xacro_args)
 from kincal.errors import DataError, OptionError
 
 
@@ -32,7 +32,9 @@ def register(subparsers) -> None:
     i.add_argument("--program", metavar="PROGRAM.csv",
                    help="joint values planned on the nominal model (chain joint columns)")
     i.add_argument("--nominal", metavar="NOMINAL.urdf",
-                   help="the model the program was planned on")
+                   help="the model the program was planned on (URDF, xacro or a robot name)")
+    add_xacro_args(i, "--nominal-xacro-arg", "a xacro --nominal description (ROBOT's are "
+                   "--xacro-arg)")
     i.add_argument("--position-columns", nargs=3, default=("x", "y", "z"), metavar="COL",
                    help="names of the target position columns (default x y z)")
     i.add_argument("--orientation-format", choices=ORIENTATION_FORMATS, metavar="FORMAT",
@@ -65,6 +67,7 @@ class Compensate:
     frames: str | None
     program: str | None
     nominal: str | None
+    nominal_xacro_arg: tuple[str, ...]  # NAME:=VALUE of a xacro --nominal
     position_columns: tuple[str, str, str]
     orientation_format: str | None
     orientation_columns: tuple[str, ...] | None
@@ -111,7 +114,8 @@ def _compensate(c: Compensate) -> int:
         from kincal.robot import Robot
 
         assert c.nominal is not None  # --program comes with --nominal (run)
-        nominal = Robot.load(c.nominal, tip=c.chain.tip, base=c.chain.base)
+        nominal = Robot.load(c.nominal, tip=c.chain.tip, base=c.chain.base,
+                             xacro_args=xacro_args(c.nominal_xacro_arg, "--nominal-xacro-arg"))
         q, lines = read_candidates(c.program, nominal, c.length_unit, c.angle_unit,
                                    kind="program")
         result = filter_program(nominal, robot, q, frames, lines, c.point - 1, options,

@@ -4,6 +4,7 @@ prior DIR/FLEET.json (:mod:`kincal.fleet`)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import sys
@@ -104,7 +105,9 @@ def run(args) -> int:
     if taken and not c.overwrite:
         raise OptionError(f"{out}: unit folders exist ({', '.join(taken[:5])}); give "
                           "--overwrite to replace them")
-    out.mkdir(parents=True, exist_ok=True)
+    # no folder made here: the one writer makes DIR with the first file written into it (a
+    # unit's, or the summary's), so a run that fails before leaves nothing behind
+    made = not out.exists()
     # absolute paths: a worker of a running scheduler (--scheduler) has a cwd of its own
     from kincal.descriptions import portable
 
@@ -126,6 +129,9 @@ def run(args) -> int:
     except BaseException as exc:  # Ctrl-C, SIGTERM: the workers are stopped by now
         for stage in out.glob(f"{STAGING}*"):  # no half-written unit is left behind
             shutil.rmtree(stage, ignore_errors=True)
+        if made and out.is_dir() and not any(out.iterdir()):
+            with contextlib.suppress(OSError):  # made by a unit stopped midway: no empty
+                out.rmdir()                     # folder is left either
         from kincal.cli.console import Terminated
 
         if not isinstance(exc, (KeyboardInterrupt, Terminated)):
@@ -149,7 +155,7 @@ def run(args) -> int:
         c.json, [summary.table()], {"command": "fleet", **summary.as_dict()}, written),
         provenance=c.chain.provenance(robot, inputs.files, c.command_line,
                                       verdict="per unit", gate=gate),
-        overwrite=c.overwrite, protect=protect)
+        overwrite=c.overwrite, protect=protect, dirs=[out])
     if summary.prior is None:
         raise OptionError(f"fewer than 2 of the {len(jobs)} units were calibrated: no fleet "
                           f"prior written (see {out / SUMMARY_JSON})")

@@ -54,22 +54,25 @@ def add_units(p, length="positions and prismatic joints in DATA",
                    help=f"unit of {angle} (default rad)")
 
 
-def add_xacro_args(group_) -> None:
-    group_.add_argument("--xacro-arg", action="append", default=[], metavar="NAME:=VALUE",
-                        help="an argument of a xacro robot description (repeatable), e.g. "
-                             "ur_type:=ur5e name:=ur5e")
+def add_xacro_args(group_, flag: str = "--xacro-arg",
+                   of: str = "a xacro robot description") -> None:
+    """The xacro arguments of a robot description, NAME:=VALUE, repeatable: --xacro-arg for
+    ROBOT; ``flag`` another description's (compensate's --nominal-xacro-arg), parsed by
+    :func:`xacro_args` with the same flag."""
+    group_.add_argument(flag, action="append", default=[], metavar="NAME:=VALUE",
+                        help=f"an argument of {of} (repeatable), e.g. ur_type:=ur5e name:=ur5e")
 
 
-def xacro_args(given) -> dict[str, str] | None:
-    """{name: value} of --xacro-arg NAME:=VALUE ..., or None; OptionError for a bad one."""
+def xacro_args(given, flag: str = "--xacro-arg") -> dict[str, str] | None:
+    """{name: value} of ``flag`` NAME:=VALUE ..., or None; OptionError for a bad one."""
     out: dict[str, str] = {}
     for item in given or ():
         name, sep, value = item.partition(":=")
         if not sep or not name.strip() or any(c.isspace() for c in name.strip()):
-            raise OptionError(f"--xacro-arg expects NAME:=VALUE (as xacro and ros2 launch "
+            raise OptionError(f"{flag} expects NAME:=VALUE (as xacro and ros2 launch "
                               f"write it), got {item!r}")
         if name.strip() in out:
-            raise OptionError(f"--xacro-arg {name.strip()} given twice")
+            raise OptionError(f"{flag} {name.strip()} given twice")
         out[name.strip()] = value
     return out or None
 

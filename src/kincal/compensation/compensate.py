@@ -37,6 +37,7 @@ from kincal.models.kinematics import ChainKinematics
 from kincal.compensation.targets import Targets, joint_scales
 from kincal.errors import DataError, FrameError
 from kincal.measurements.checks import UNIT_RATIO, spread
+from kincal.measurements.csv_table import csv_line
 from kincal.rotations import base_rotation
 
 COMPLIANCE_STEPS = 4  # fixed-point steps of the commanded joint values under compliance
@@ -118,8 +119,10 @@ class Compensation:
         """The text of :meth:`to_csv_text` in pieces of ``rows`` rows (the header first),
         made as they are written: a large file is never held as one string."""
         scale = joint_scales(self.kinds, length_unit, angle_unit)
-        yield ",".join(["target_line", *self.joint_names, "position_error_mm",
+        yield csv_line(["target_line", *self.joint_names, "position_error_mm",
                         "orientation_error_deg", "reached"]) + "\n"
+        # the rows: numbers only, whose text never needs quoting (csv_line would give it
+        # unchanged)
         # one %-format of a whole block (its values row after row): %r is repr, %.6g and
         # %d the f-string's formats, so the text is the per-row f-strings' to the byte
         # (tests/test_compensate_blocks.py), formatted in C instead of row by row

@@ -156,9 +156,10 @@ def write_report(results: Sequence[ExperimentResult], out_dir, summary: dict | N
                  provenance=None) -> list[Path]:
     """tables.md (all seeds), results.json (all numbers) and the plots of the first seed.
 
-    ``out_dir`` is created if missing. Only the names in REPORT_FILES are written, and
-    an existing file of that name is replaced only if this module wrote it (its marker
-    is checked first, so nothing is written when one of them belongs to someone else).
+    ``out_dir`` is created if missing (its parents too), with the files. Only the names in
+    REPORT_FILES are written, and an existing file of that name is replaced only if this
+    module wrote it (its marker is checked first, so nothing is written when one of them
+    belongs to someone else).
     summary: key numbers stored under "summary" in results.json. provenance: the run's
     :class:`~kincal.export.provenance.Provenance` every file carries (default: the Python
     API's, no robot file, no command line).
@@ -185,9 +186,11 @@ def write_report(results: Sequence[ExperimentResult], out_dir, summary: dict | N
                "results": [r.as_dict() for r in results]}
     files = [File(out_dir / name, "png", png(name)) for name in PLOT_FILES]
     files += [File(out_dir / "tables.md", "md", md), File(out_dir / "results.json", "json", payload)]
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    # all files in one transaction: an interrupted or failed run leaves the folder as it was
-    return write_files(files, prov, overwrite=True, dirs=[out_dir])
+    from kincal.export.safe_write import missing_folders
+
+    # all files in one transaction: an interrupted or failed run leaves the folder as it was,
+    # and the folders it would have made (out_dir and its missing parents) not made
+    return write_files(files, prov, overwrite=True, dirs=missing_folders(out_dir))
 
 
 @dataclass(frozen=True)

@@ -17,12 +17,14 @@ YAML is written by hand: the file is flat, and PyYAML is not a dependency.
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
 import numpy as np
 
 from kincal.errors import ExportError
+from kincal.measurements.csv_table import csv_line
 from kincal.models.mdh import extract
 from kincal.rotations import matrix_to_rpy, rpy_to_matrix
 
@@ -32,6 +34,21 @@ EXACT = 1e-12  # [m] or [rad]: how far an MD-H screw may leave the z axis and st
 def _num(v: float) -> str:
     v = float(v)
     return repr(0.0 if v == 0.0 else v)  # no "-0.0"
+
+
+# a key YAML reads back as this very string when written plain: a letter or underscore,
+# then letters, digits, _ . / -, and none of YAML 1.1's booleans and nulls (a joint named
+# "on" would read back as True); any other name goes in double quotes (JSON's escapes, which
+# YAML's double-quoted style shares)
+_PLAIN_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_./-]*")
+_YAML_WORDS = {"y", "n", "yes", "no", "true", "false", "on", "off", "null"}
+
+
+def _key(name: str) -> str:
+    """``name`` as a YAML mapping key that reads back as itself."""
+    if _PLAIN_KEY.fullmatch(name) and name.lower() not in _YAML_WORDS:
+        return name
+    return json.dumps(name)
 
 
 def kinematics_yaml(nominal, corrected, joints=None, chains: str | None = None) -> str:
@@ -54,7 +71,7 @@ def kinematics_yaml(nominal, corrected, joints=None, chains: str | None = None) 
     for name in names:
         T = new[name]
         rpy = matrix_to_rpy(T[:3, :3], near=matrix_to_rpy(old[name][:3, :3]))
-        lines.append(f"  {name}:")
+        lines.append(f"  {_key(name)}:")
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("x", "y", "z"), T[:3, 3])]
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("roll", "pitch", "yaw"), rpy)]
     return "\n".join(lines) + "\n"
@@ -150,10 +167,15 @@ def read_kinematics_yaml(text: str) -> dict[str, np.ndarray]:
     values: dict[str, dict[str, float]] = {}
     joint = None
     for raw in text.splitlines():
-        line = raw.split("#", 1)[0].rstrip()
-        if not line.strip() or line.strip() == "kinematics:":
+        line = raw.strip()
+        if line.startswith('"'):  # a quoted joint name (:func:`_key`), then its colon
+            joint = json.JSONDecoder().raw_decode(line)[0]
+            values[joint] = {}
             continue
-        key, _, value = line.strip().partition(":")
+        line = line.split("#", 1)[0].rstrip()
+        if not line or line == "kinematics:":
+            continue
+        key, _, value = line.partition(":")
         if not value.strip():
             joint = key
             values[joint] = {}
@@ -219,5 +241,5 @@ def mdh_table_csv(corrected) -> str:
              "joint,type,a_m,alpha_rad,beta_rad,d_m,theta_rad"]
     for name, kind, row, beta in zip(m.joint_names, m.kinds, m.table, m.beta):
         a, alpha, d, theta = row
-        lines.append(",".join([name, kind, *(_num(v) for v in (a, alpha, beta, d, theta))]))
+        lines.append(csv_line([name, kind, *(_num(v) for v in (a, alpha, beta, d, theta))]))
     return "\n".join(lines) + "\n"

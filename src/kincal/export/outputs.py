@@ -125,7 +125,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                       accept_unconverged: bool = False, accuracy=None,
                       warnings_seen=(), data_source: str | None = None,
                       before_commit=None, command=None, xacro_args=None,
-                      validation=None) -> Written:
+                      validation=None, dirs=()) -> Written:
     """Check the gate, then write every output of ``outputs`` all-or-none.
 
     accuracy: a predicted accuracy map to add to the report, the HTML and the plots.
@@ -135,9 +135,11 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     command / xacro_args: the command line and the xacro arguments, for the provenance
     every file carries (:mod:`kincal.export.provenance`). validation: a
     :class:`~kincal.export.validation.Validation` (held-out errors) for the report and
-    the HTML. A result the gate refuses still gets the diagnosis asked for (report, HTML,
-    plots, marked REFUSED; never the URDF, frames or cell files), then the refusal is
-    raised naming where the diagnosis went.
+    the HTML. dirs: folders the writing may make for the files, outermost first (one level
+    each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. the
+    fleet's folder and a unit's staging folder. A result the gate refuses still gets the
+    diagnosis asked for (report, HTML, plots, marked REFUSED; never the URDF, frames or cell
+    files), then the refusal is raised naming where the diagnosis went.
     Returns :class:`Written`.
     """
     o = outputs
@@ -176,7 +178,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                              more_data=held)
         staged = _diagnosis(result, diagnosis, prov, None, warnings_seen,
                             data_source or ", ".join(sources), (), validation, refused=why)
-        written = _write(result, diagnosis, staged, sources, before_commit, ())
+        written = _write(result, diagnosis, staged, sources, before_commit, (), dirs)
         result.plausibility.check(  # raises again, saying where the diagnosis went
             accept_implausible, accept_unconverged,
             refused="no URDF, frames or cell file is written; the diagnosis (marked REFUSED) "
@@ -216,7 +218,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
             files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,
                         data_source or ", ".join(sources), notes, validation)
-    return _write(result, o, files, sources, before_commit, notes)
+    return _write(result, o, files, sources, before_commit, notes, dirs)
 
 
 def _chains_title(result) -> str:
@@ -279,7 +281,7 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
     return files
 
 
-def _write(result, o: Outputs, files, sources, before_commit, notes) -> Written:
+def _write(result, o: Outputs, files, sources, before_commit, notes, dirs=()) -> Written:
     from kincal.export.safe_write import write_all
 
     if not files:
@@ -289,7 +291,8 @@ def _write(result, o: Outputs, files, sources, before_commit, notes) -> Written:
     protect = [p for p in (result.robot.source, *sources) if p and not str(p).startswith("<")]
     hook = None if before_commit is None else (lambda targets: before_commit(targets, notes))
     written = write_all(files, overwrite=o.overwrite, protect=[*protect, *o.protect],
-                        dirs=[o.plots] if o.plots is not None else [], before_commit=hook)
+                        dirs=[*dirs, *([o.plots] if o.plots is not None else [])],
+                        before_commit=hook)
     return Written(tuple(written), notes)
 
 

@@ -154,6 +154,18 @@ def _check_target_os(path, overwrite: bool, protect, new_dirs) -> Path:
     return target
 
 
+def missing_folders(path) -> list[Path]:
+    """The folders of ``path`` that do not exist yet, outermost first, ``path`` included
+    if missing: the ``dirs`` of :func:`write_all` for a folder that may be nested in new
+    ones (made with the files, removed again if the writing fails)."""
+    d = Path(path).expanduser().resolve()
+    out: list[Path] = []
+    while not d.exists() and d != d.parent:
+        out.append(d)
+        d = d.parent
+    return out[::-1]
+
+
 def check_outputs(paths, *, overwrite: bool = False, protect=(), dirs=()) -> list[Path]:
     """Check, before any work, that :func:`write_all` could write ``paths``; return them resolved.
 
@@ -273,7 +285,12 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
         for d in dirs:
             d = Path(d).expanduser().resolve()
             if not d.exists():
-                d.mkdir()
+                try:
+                    d.mkdir()
+                except FileExistsError:  # made meanwhile (another unit of a fleet writing
+                    if not d.is_dir():   # into the same folder): not ours to remove
+                        raise
+                    continue
                 made_dirs.append(d)
         for (path, data), target in zip(files, targets):
             current = path

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.identification.statistics import ErrorStats
+from kincal.measurements.csv_table import csv_line
 
 AXES = ("x", "y", "z")
 
@@ -109,17 +110,13 @@ def residuals_csv(result, validation: Validation | None, header: str = "") -> st
     width = max(np.asarray(p[5]).reshape(len(p[4]), -1).shape[1] for p in parts)
     lines = [f"# residual vectors per sample after calibration, measured minus predicted [m]"]
     lines += [line for line in header.splitlines() if line]
-    lines.append(",".join(["split", "set", "source", "kind", "row", "error_m"]
+    lines.append(csv_line(["split", "set", "source", "kind", "row", "error_m"]
                           + [f"r{k + 1}" for k in range(width)]))
     for split, k, source, kind, rows, res, err in parts:
         res = np.asarray(res).reshape(len(rows), -1)
         for row, r, e in zip(rows, res, err):
-            cells = [split, str(k), _csv(source), kind, str(int(row)), repr(float(e))]
+            cells = [split, str(k), str(source), kind, str(int(row)), repr(float(e))]
             cells += [repr(float(v)) for v in r] + [""] * (width - len(r))
-            lines.append(",".join(cells))
+            lines.append(csv_line(cells))
     return "\n".join(lines) + "\n"
 
-
-def _csv(text: str) -> str:
-    text = str(text)
-    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text

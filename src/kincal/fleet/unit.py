@@ -153,7 +153,9 @@ def _line(e: BaseException) -> str:
 
 
 def _write(job: UnitJob, result) -> tuple[str, ...]:
-    """The unit's files through the one writer into the staging folder, then one rename."""
+    """The unit's files through the one writer into the staging folder, then one rename.
+    The writer makes the staging folder, and the fleet's folder if no unit made it yet: a
+    fleet whose units all fail leaves no folder behind."""
     from kincal.export.outputs import Outputs, write_calibration
 
     assert job.out_dir is not None  # only a job with an out_dir writes
@@ -161,7 +163,6 @@ def _write(job: UnitJob, result) -> tuple[str, ...]:
     stage = Path(job.out_dir) / f"{STAGING}{job.name}"
     if stage.exists():
         shutil.rmtree(stage)
-    stage.mkdir(parents=True)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", KincalWarning)  # collected in the outcome
@@ -170,7 +171,7 @@ def _write(job: UnitJob, result) -> tuple[str, ...]:
                               accept_implausible=job.accept_implausible,
                               accept_unconverged=job.accept_unconverged,
                               data_source=job.source, command=job.command,
-                              xacro_args=job.xacro_args)
+                              xacro_args=job.xacro_args, dirs=(job.out_dir, stage))
         old = None
         if final.exists():
             if not job.overwrite:

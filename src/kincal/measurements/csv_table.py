@@ -1,4 +1,5 @@
-"""Numeric columns of a CSV file, with errors that name the file, line and column.
+"""Numeric columns of a CSV file, with errors that name the file, line and column; and
+:func:`csv_line`, the one way kincal writes a CSV line.
 
 The one CSV reader behind :class:`kincal.measurements.Measurements` and the candidate
 poses of :mod:`kincal.candidates`. A header row names the columns; blank lines and lines
@@ -15,6 +16,8 @@ text (metadata) or a leading unnamed column (an index, as pandas writes it) is s
 read; an unnamed column holding numbers elsewhere, or a row with more cells than the header
 has names, means the header does not fit its rows (shifted names read the wrong values):
 refused with the column positions (counted from 1) and the shift that would fit, if any.
+Cells in double quotes (RFC 4180: a column name holding a comma, a quote or a line end, as
+:func:`csv_line` writes it) are read as the csv module reads them.
 """
 
 from __future__ import annotations
@@ -67,6 +70,25 @@ class Columns:
     def ignored(self) -> tuple[str, ...]:
         """The columns of the file that were not read."""
         return tuple(h for h in self.header if h and h not in self.values)
+
+
+_QUOTE_IF = (",", '"', "\n", "\r")  # a cell holding one of these is quoted (RFC 4180)
+
+
+def csv_line(cells) -> str:
+    """One CSV record, without its line end, as every CSV file kincal writes has its lines:
+    the cells (str) joined by commas, a cell holding a comma, a double quote, CR or LF in
+    double quotes with its quotes doubled (RFC 4180, as the csv module's QUOTE_MINIMAL
+    writes it), any other cell as it is. A record without such a cell is the plain comma
+    join, byte for byte; :func:`read_columns` reads a quoted one back to the same names
+    (a URDF joint named ``a,b`` is one column)."""
+    cells = list(cells)
+    line = ",".join(cells)
+    if line.count(",") == len(cells) - 1 and '"' not in line and "\n" not in line \
+            and "\r" not in line:
+        return line if line or len(cells) != 1 else '""'  # one empty cell: not a blank line
+    return ",".join('"' + c.replace('"', '""') + '"' if any(q in c for q in _QUOTE_IF) else c
+                    for c in cells)
 
 
 def _content_lines(fh):

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from kincal.errors import DataError, listing, suggest
-from kincal.measurements.csv_table import read_columns
+from kincal.measurements.csv_table import csv_line, read_columns
 from kincal.models.backlash import approach_directions
 
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
@@ -313,4 +313,4 @@ class Measurements:
         if self.sigma is not None:
             table.append(self.sigma[groups[:, 0], None])
         rows = np.hstack(table).tolist()  # Python floats: repr gives the shortest exact text
-        return "\n".join([",".join(cols)] + [",".join(map(repr, r)) for r in rows]) + "\n"
+        return "\n".join([csv_line(cols)] + [csv_line(map(repr, r)) for r in rows]) + "\n"

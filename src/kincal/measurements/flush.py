@@ -44,6 +44,7 @@ import numpy as np
 
 from kincal.errors import DataError, IdentifiabilityError
 from kincal.measurements.checks import SIGMA_RANGE_DEG
+from kincal.measurements.csv_table import csv_line
 from kincal.measurements.kind import DEFAULT_SIGMA, KindModel, SampleSet, read_set, readonly
 from kincal.measurements.plane import (MIN_SPREAD, fit_plane, normal, normal_by_ry, plane_indices,
                                       plane_labels)
@@ -143,7 +144,7 @@ class FlushData(SampleSet):
                 cols.append(name)
                 table.append(getattr(self, name)[:, None])
         rows = np.hstack(table)
-        lines = [",".join(cols)] + [",".join(repr(float(x)) for x in row) for row in rows]
+        lines = [csv_line(cols)] + [csv_line(repr(float(x)) for x in row) for row in rows]
         return "\n".join(lines) + "\n"
 
 

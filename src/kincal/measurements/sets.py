@@ -14,6 +14,7 @@ samples; :func:`read_set_file` reads a CSV file and tells its kind from its colu
 from __future__ import annotations
 
 from kincal.errors import DataError
+from kincal.measurements.csv_table import csv_line
 from kincal.measurements.data import Measurements
 from kincal.measurements.distance import DistanceData, DistanceKind
 from kincal.measurements.flush import FlushData, FlushKind, planning_set
@@ -148,7 +149,7 @@ def to_csv_text(data, orientation_format: str = "quat-xyzw") -> str:
     if data.sigma is not None:
         cols.append("sigma")
         table = np.hstack([table, data.sigma[:, None]])
-    lines = [",".join(cols)] + [",".join(repr(float(v)) for v in row) for row in table]
+    lines = [csv_line(cols)] + [csv_line(repr(float(v)) for v in row) for row in table]
     return "\n".join(lines) + "\n"
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from kincal.errors import KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
-from kincal.measurements.csv_table import read_columns
+from kincal.measurements.csv_table import csv_line, read_columns
 from kincal.measurements.data import joint_column_names, unit_factors
 
 if TYPE_CHECKING:
@@ -72,10 +72,10 @@ def candidates_csv_text(joint_names, joint_values, source_lines=None) -> str:
     """
     q = np.asarray(joint_values, float)
     header = list(joint_names) + (["candidate_line"] if source_lines is not None else [])
-    lines = [",".join(header)]
+    lines = [csv_line(header)]
     for k, row in enumerate(q):
         cells = [repr(float(v)) for v in row]
         if source_lines is not None:
             cells.append(str(int(source_lines[k])))
-        lines.append(",".join(cells))
+        lines.append(csv_line(cells))
     return "\n".join(lines) + "\n"
