@@ -8,7 +8,13 @@ against the joint rows, 100 mm noise, a tip frame one or three links short, and 
 URDF for UR10 data. Per run: the median error after calibration and the RMS movement of
 the tool point by the corrections, both as % of the reach; the findings; the convergence.
 
-Usage: python scripts/plausibility_cases.py [--quick]   (quick: seed 0 only)
+Usage: python scripts/plausibility_cases.py [--quick] [--convergence]   (quick: seed 0 only)
+
+--convergence: instead, the simulated ls runs' convergence alone: how many of them stop at the
+iteration limit, with the error models complete (the API's default) and mdh, each under the
+relative stopping rule (the default) and the paper's absolute one (SolverOptions(rule="paper")),
+and the largest single kinematic correction [mm, deg] against the RMS movement of the tool
+point by the corrections [mm] over those runs.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import numpy as np
 
 from kincal import Measurements, Robot, calibrate
 from kincal.cli.main import main as kincal
+from kincal.identification.solver import SolverOptions
 
 TIAGO = Path(__file__).resolve().parents[2] / "shared" / "data" / "tiago_mocap"
 
@@ -58,13 +65,57 @@ def _variant(src: Path, dst: Path, joints, how: str, rng) -> Path:
     return dst
 
 
+def _simulated(tmp: Path, X: str, design: str, s: int) -> Path:
+    f = tmp / f"{X}_{design}_{s}.csv"
+    with contextlib.redirect_stdout(io.StringIO()):
+        kincal(["simulate", X, "--out", str(f), "--seed", str(s), "--design", design])
+    return f
+
+
+def convergence(seeds) -> None:
+    """How many of the simulated ls runs stop at the iteration limit, per error model and
+    stopping rule."""
+    cases = [(model, rule) for model in ("complete", "mdh") for rule in ("relative", "paper")]
+    stopped = dict.fromkeys(cases, 0)
+    largest = {c: [0.0, 0.0, 0.0] for c in cases}  # [mm], [deg], tool moved RMS [mm]
+    n = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        for X in ("ec66", "ur10", "panda", "ur3"):
+            robot = Robot.load(X)
+            for design in ("tracker", "rtest"):
+                for s in seeds:
+                    data = Measurements.from_csv(_simulated(Path(tmp), X, design, s),
+                                                 robot.joint_names)
+                    n += 1
+                    for model, rule in cases:
+                        result = calibrate(robot, data, method="ls", model=model,
+                                           solver=SolverOptions(rule=rule))
+                        stopped[model, rule] += not result.converged
+                        big = largest[model, rule]
+                        for q in result.parameters[:result.layout.n_kinematic]:
+                            if q.status == "identified":
+                                i, f = (0, 1e3) if q.is_length else (1, 180.0 / np.pi)
+                                big[i] = max(big[i], abs(q.deviation) * f)
+                        big[2] = max(big[2], result.plausibility.evidence.change_rms_mm)
+    for (model, rule), k in stopped.items():
+        mm, deg, moved = largest[model, rule]
+        print(f"ls, model {model}, {rule} stopping rule: {k} of {n} runs not converged; "
+              f"largest correction {mm:.3g} mm, {deg:.3g} deg; tool moved at most {moved:.3g} "
+              "mm RMS")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="seed 0 only")
+    ap.add_argument("--convergence", action="store_true",
+                    help="the ls runs' convergence per error model and stopping rule")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
     seeds = (0,) if args.quick else (0, 1, 2)
+    if args.convergence:
+        convergence(seeds)
+        return
     print("| run | median error after [mm] (% of reach) | tool moved by corrections, RMS [mm] "
           "| findings | gate |")
     print("|---|---|---|---|---|")
@@ -75,11 +126,8 @@ def main(argv=None):
             robot = Robot.load(X)
             for design in ("tracker", "rtest"):
                 for s in seeds:
-                    f = tmp / f"{X}_{design}_{s}.csv"
-                    with contextlib.redirect_stdout(io.StringIO()):
-                        kincal(["simulate", X, "--out", str(f), "--seed", str(s),
-                                "--design", design])
-                    data = Measurements.from_csv(f, robot.joint_names)
+                    data = Measurements.from_csv(_simulated(tmp, X, design, s),
+                                                 robot.joint_names)
                     for m in ("l2", "ls"):
                         good += _row(f"{X} {design} seed {s} {m}", calibrate(robot, data, method=m))
         if TIAGO.is_dir():
