@@ -236,10 +236,12 @@ def test_frames_of_another_tip_or_robot_are_refused(cell):
 def test_backlash_in_the_frames_is_named_not_compensated(cell):
     robot, result, frames, q = cell
     d = result.frames_dict()
-    d["backlash"] = {"joint_6": np.radians(0.5)}
+    d["backlash"] = {"joint_6": np.radians(0.5), "joint_5": -np.radians(0.25)}
     P, _ = _targets_from(result, q)
     comp = compensate(result.corrected, CellFrames.from_dict(d), Targets(q, P, None, np.arange(len(q)) + 2))
-    assert "backlash not compensated (joint_6 +-0.5 deg)" in comp.summary()
+    # half the play either way: a negative coefficient (the joint lags behind its reading)
+    # is the same play, not "+--0.25"
+    assert "backlash not compensated (joint_6 +-0.5 deg, joint_5 +-0.25 deg)" in comp.summary()
     np.testing.assert_allclose(comp.joint_values, q, atol=1e-9)  # middle of the play
 
 

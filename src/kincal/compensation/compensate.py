@@ -188,8 +188,9 @@ def _backlash_notes(frames: CellFrames | None, robot) -> list[str]:
     if frames is None or not frames.backlash:
         return []
     kinds = dict(zip(robot.joint_names, robot.geometry.kinds))
-    parts = [f"{j} +-{np.degrees(b):.3g} deg" if kinds[j] != "prismatic" else f"{j} +-{b * 1e3:.3g} mm"
-             for j, b in frames.backlash.items()]
+    # +- half the play, |b|: b's sign says which flank the joint sits on, not the play
+    parts = [f"{j} +-{np.degrees(abs(b)):.3g} deg" if kinds[j] != "prismatic"
+             else f"{j} +-{abs(b) * 1e3:.3g} mm" for j, b in frames.backlash.items()]
     return [f"backlash not compensated ({', '.join(parts)}): every joint is taken in the middle "
             "of its play, the side it is approached from moves the tool by up to that much"]
 
