@@ -22,6 +22,13 @@ Usage: python scripts/talos_contact.py [--variants] [--loo]   (about 3 s; --vari
        35 s; --loo: each row also by leave-one-out on the training day, about 17 min)
        python scripts/talos_contact.py --two-chains [SEEDS] [--urdf-alone]   (about 20 s per
        seed; --urdf-alone: FRAMES.json's face tilts not applied to the held-out touches)
+       python scripts/talos_contact.py --subsets 8,10,12,15,18 [--reps 4]   (about 1 min)
+
+--subsets: how many touches the default needs. For each size, --reps random subsets of
+the 21 training touches (seeded), each calibrated with the default command and judged on
+the held-out touches as above; per run the equations, the identifiable parameters, and
+whether kincal warned that none was left over (no more equations than identifiable
+parameters) or refused the result.
 
 --two-chains: the two arms together against each alone, on simulated touches (we have the
 left chain's real data only). The simulated TALOS is the nominal one with errors planted
@@ -388,6 +395,47 @@ def plane_change(frames: Path) -> tuple[float, float]:
             (s.value("plane2.d") - s.value("plane1.d")) * 1e3)
 
 
+def subsets(urdf: Path, sizes, reps: int) -> None:
+    """Print the --subsets table (see the module notes)."""
+    from kincal.cli.main import main as kincal
+
+    names, q_train = joint_rows(DATA / "left_train.csv")
+    _, q_valid = joint_rows(DATA / "left_validation.csv")
+    rng = np.random.default_rng(0)
+    print(f"TALOS, the default on random subsets of the {len(q_train)} training touches "
+          f"(seeded), held out on the {len(q_valid)} touches of the other day")
+    print("| touches | subset | equations | identifiable | no equation left over | "
+          "height [mm] | roll [deg] | pitch [deg] |")
+    print("|---|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory(prefix="kincal-talos-") as tmp:
+        folder = Path(tmp)
+        for n in sizes:
+            for rep in range(reps):
+                idx = np.sort(rng.choice(len(q_train), n, replace=False))
+                train = folder / f"t{n}_{rep}.csv"
+                write_joint_csv(train, names, q_train[idx])
+                out, frames = folder / f"c{n}_{rep}.urdf", folder / f"f{n}_{rep}.json"
+                argv = ["calibrate", str(urdf), str(train), "--base", BASE, "--tip", TIP,
+                        "--on-plane", "--flush", "--tool-offset", "0", "0", "-0.12", "--out",
+                        str(out), "--frames-out", str(frames), "--json"]
+                so, se = io.StringIO(), io.StringIO()
+                with warnings.catch_warnings(), redirect_stdout(so), redirect_stderr(se):
+                    code = kincal(argv)
+                err = se.getvalue()
+                spare = "no" if "identifiable parameters: none is left over" in err else "yes"
+                cells = f"| {n} | {' '.join(str(i + 1) for i in idx)} |"
+                if code != 0:
+                    line = next(x for x in err.splitlines() if x.startswith("kincal: error:"))
+                    print(f"{cells} | | | {line[len('kincal: error: '):][:60]}... | | |")
+                    continue
+                summary = json.loads(so.getvalue())
+                m = 3 * n
+                k = summary["identifiability"]["rank"]
+                h = held_out(out, frames, q_train[idx], q_valid, names)
+                print(f"{cells} {m} | {k} | {'warned' if spare == 'no' else 'no'} | "
+                      f"{h[0]:.2f} | {h[1]:.3f} | {h[2]:.3f} |")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", action="store_true",
@@ -403,10 +451,17 @@ def main(argv=None) -> int:
     parser.add_argument("--two-chains", type=int, nargs="?", const=5, default=0,
                         metavar="SEEDS", help="only the simulated two-chain study (left and "
                         "right arms together vs alone), over SEEDS seeds (default 5)")
+    parser.add_argument("--subsets", metavar="SIZES", help="only the subset study: the "
+                        "default on random subsets of these sizes of the training touches "
+                        "(comma-separated, e.g. 8,10,12,15,18)")
+    parser.add_argument("--reps", type=int, default=4, help="with --subsets: subsets per size")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
         sys.exit(f"talos_contact: {DATA} not found (the shared data sit beside the repository)")
     urdf = talos_urdf()
+    if args.subsets:
+        subsets(urdf, [int(v) for v in args.subsets.split(",")], args.reps)
+        return 0
     if args.two_chains:
         print_two_chains(two_chains(urdf, args.two_chains, not args.urdf_alone))
         return 0

@@ -429,6 +429,22 @@ def test_evidence_refuses_a_fit_through_every_point(tmp_path, capsys):
     assert not out.exists()
     assert main(["calibrate", "ec66", str(data), "--out", str(out), "--noise-mm", "0.05"]) == 0
     assert out.exists()
+    # written, with the warning that nothing is left over to judge the fit by
+    err = capsys.readouterr().err
+    assert ("kincal: warning: 4 poses give 12 equations for 12 identifiable parameters: none "
+            "is left over, so the errors after calibration say nothing of its accuracy") in err
+    assert "the noise, which sets the pull" not in err  # the noise was stated
+    assert main(["simulate", "ec66", "--poses", "5", "--seed", "1", "--out", str(data),
+                 "--overwrite"]) == 0  # 15 equations for 15 parameters: still none left
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data), "--out", str(out), "--overwrite"]) == 0
+    assert ("5 poses give 15 equations for 15 identifiable parameters: none is left over"
+            in capsys.readouterr().err)
+    assert main(["simulate", "ec66", "--poses", "12", "--seed", "1", "--out", str(data),
+                 "--overwrite"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data), "--out", str(out), "--overwrite"]) == 0
+    assert "equations for" not in capsys.readouterr().err  # 36 equations: some to spare
 
 
 def test_cv_on_fewer_poses_than_folds_names_the_options(tmp_path, capsys):
