@@ -741,8 +741,11 @@ def cli_demo(study: Study, shared: Path, model: Model) -> str:
         common = ["--tip", TIP, "--position-columns", "x1", "y1", "z1"]
         if joints:
             common += ["--order-column", ORDER_COLUMN]
+        # the model api_fit gives the API (an explicit one: the CLI's default, auto, would
+        # choose its own joint terms and no longer be "the same model")
         cal = ["calibrate", str(study.paths["urdf"]), str(study.paths["train"]), *common,
-               "--method", method, "--lambda", "cv", *(["--fix", *fix] if fix else []),
+               "--model", "mdh", "--method", method, "--lambda", "cv",
+               *(["--fix", *fix] if fix else []),
                *(["--backlash", *joints] if joints else []),
                "--out", str(tmp / "tiago_calibrated.urdf"),
                "--frames-out", str(tmp / "frames.json"), "--quiet"]
