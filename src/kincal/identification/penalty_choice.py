@@ -21,6 +21,7 @@ from kincal.identification.cross_validation import (SMALL_VOLUME, CrossValidatio
                                                     check_fold_count, free_fraction,
                                                     small_volume_warning)
 from kincal.identification.layout import MM
+from kincal.identification.selection import no_spare_note
 from kincal.identification.solver import SolveSummary
 from kincal.models.chain import Chain
 
@@ -142,15 +143,9 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
             "nothing is left to estimate the instrument's noise or how far to pull toward "
             "nominal. Measure more poses, or state the noise (--noise-mm) and the "
             "tolerances (--prior-mm, --prior-deg)")
-    if m <= k:  # no residual of its own is left: the errors after the fit judge nothing
-        warnings.warn(
-            f"{problem.n_poses} poses give {m} equations for {k} identifiable parameters: "
-            "none is left over, so the errors after calibration say nothing of its accuracy "
-            "(this many parameters can match any such data that closely)"
-            + ("" if o.noise_mm is not None else ", and the noise, which sets the pull "
-               "toward nominal, is not seen in the data") + "; judge the result on held-out "
-            "measurements (--validate, kincal evaluate) before using it, or measure more "
-            "poses", KincalWarning, stacklevel=2)
+    spare = no_spare_note(m, k)
+    if spare:  # no residual of its own is left: the errors after the fit judge nothing
+        warnings.warn(f"{problem.n_poses} poses give {spare}", KincalWarning, stacklevel=2)
     return sol, replace(ev, noise_groups=_noise_in_units(problem, rows, keys, ev.row_noise))
 
 

@@ -99,13 +99,15 @@ class Identifiability:
     weak: tuple[Weak, ...]
     rank_tol: float
     notes: tuple[str, ...] = ()
+    equations: int = 0  # rows of the Jacobian analysed (0: not known)
 
     def summary(self) -> str:
         lines = [f"identifiable: {len(self.kept)} of {len(self.free)} free parameters "
                  f"(rank {self.rank}, condition number {self.condition_number:.3g})"]
         if self.fixed:
             lines.append(f"fixed by the user: {', '.join(self.fixed)}")
-        lines += [f"note: {n}" for n in self.notes]
+        spare = no_spare_note(self.equations, len(self.kept)) if self.equations else None
+        lines += [f"note: {n}" for n in (*self.notes, *([spare] if spare else []))]
         if self.rank != len(self.kept):
             lines.append(f"note: the singular values give rank {self.rank}, the ordered "
                          f"selection kept {len(self.kept)}; parameters near the tolerance "
@@ -124,6 +126,17 @@ class Identifiability:
                          "method l2 they stay near nominal. Weakest: "
                          + "; ".join(w.describe() for w in worst))
         return "\n".join(lines)
+
+
+def no_spare_note(equations: int, identifiable: int) -> str | None:
+    """What data that spend every equation on an identifiable parameter mean for a fit
+    (None when some are left over): its errors after calibration judge nothing."""
+    if equations > identifiable:
+        return None
+    return (f"{equations} equations for {identifiable} identifiable parameters: none is left "
+            "over, so the errors after calibration say nothing of its accuracy (this many "
+            "parameters can match any such data that closely); judge the result on held-out "
+            "measurements (--validate, kincal evaluate) before using it, or measure more poses")
 
 
 def preference_order(names, n_kinematic: int) -> list[int]:
@@ -313,4 +326,4 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     return Identifiability(names, tuple(names[i] for i in free_idx), tuple(names[i] for i in kept),
                            tuple(names[i] for i in dropped),
                            tuple(names[i] for i in range(p) if not free[i]), rank, sv, cond,
-                           tuple(duplicates), tuple(weak), rank_tol)
+                           tuple(duplicates), tuple(weak), rank_tol, equations=m)
