@@ -433,6 +433,11 @@ def test_evidence_refuses_a_fit_through_every_point(tmp_path, capsys):
     err = capsys.readouterr().err
     assert ("kincal: warning: 4 poses give 12 equations for 12 identifiable parameters: none "
             "is left over, so the errors after calibration say nothing of its accuracy") in err
+    # whatever chooses the penalty: a lambda given
+    assert main(["calibrate", "ec66", str(data), "--out", str(out), "--overwrite",
+                 "--lambda", "0.1"]) == 0
+    assert ("4 poses give 12 equations for 12 identifiable parameters: none is left over"
+            in capsys.readouterr().err)
     # kincal analyze says it before any fit, as a note of the identifiability
     assert main(["analyze", "ec66", str(data)]) == 0
     assert ("note: 12 equations for 12 identifiable parameters: none is left over"

@@ -143,9 +143,6 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
             "nothing is left to estimate the instrument's noise or how far to pull toward "
             "nominal. Measure more poses, or state the noise (--noise-mm) and the "
             "tolerances (--prior-mm, --prior-deg)")
-    spare = no_spare_note(m, k)
-    if spare:  # no residual of its own is left: the errors after the fit judge nothing
-        warnings.warn(f"{problem.n_poses} poses give {spare}", KincalWarning, stacklevel=2)
     return sol, replace(ev, noise_groups=_noise_in_units(problem, rows, keys, ev.row_noise))
 
 
@@ -223,6 +220,19 @@ def automatic(problem: CalibrationProblem) -> tuple[str, str]:
     if ratio < SMALL_VOLUME:
         return "evidence", where + f" (< {100 * SMALL_VOLUME:.0f} %: a small measurement volume)"
     return "cv", where
+
+
+def warn_after_fit(problem: CalibrationProblem, ident, cv: CrossValidation | None,
+                   sol: SolveSummary, lam) -> None:
+    """The warnings on a penalised fit: no equation left over to judge it by (whatever
+    chose the penalty; ``ident`` the data's Identifiability), and CV's guard on a small
+    measurement volume (:func:`cv_warning`)."""
+    spare = no_spare_note(ident.equations, len(ident.kept))
+    if spare:
+        warnings.warn(f"{problem.n_poses} poses give {spare}", KincalWarning, stacklevel=3)
+    note = cv_warning(problem, cv, sol, lam) if cv is not None else ""
+    if note:
+        warnings.warn(f"{problem.kinds[0].data.source}: {note}", KincalWarning, stacklevel=3)
 
 
 def cv_warning(problem: CalibrationProblem, cv: CrossValidation, sol: SolveSummary,

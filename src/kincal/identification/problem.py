@@ -471,10 +471,8 @@ class CalibrationProblem:
             lam = 0.0
         if sol is None:
             sol = self.fit(lam)
-        if cv is not None:
-            note = penalty_choice.cv_warning(self, cv, sol, lam)
-            if note:
-                warnings.warn(f"{self.kinds[0].data.source}: {note}", KincalWarning)
+        if o.method == "l2":
+            penalty_choice.warn_after_fit(self, ident, cv, sol, lam)
         downweighted = ()
         if o.robust is not None:
             sol, downweighted = irls(self, sol, lam)
