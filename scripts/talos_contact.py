@@ -395,6 +395,25 @@ def plane_change(frames: Path) -> tuple[float, float]:
             (s.value("plane2.d") - s.value("plane1.d")) * 1e3)
 
 
+def subset_sizes(text: str) -> list[int]:
+    """--subsets SIZES: comma-separated touch counts, each 2 to 21 (the training file's)."""
+    try:
+        sizes = [int(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}")
+    if not all(2 <= n <= 21 for n in sizes):
+        raise argparse.ArgumentTypeError(f"each size must be 2 to 21 (the training touches), "
+                                         f"got {text!r}")
+    return sizes
+
+
+def repetitions(text: str) -> int:
+    """--reps N: 1 to 100."""
+    if not text.isdigit() or not 1 <= int(text) <= 100:
+        raise argparse.ArgumentTypeError(f"expected an integer from 1 to 100, got {text!r}")
+    return int(text)
+
+
 def subsets(urdf: Path, sizes, reps: int) -> None:
     """Print the --subsets table (see the module notes)."""
     from kincal.cli.main import main as kincal
@@ -451,16 +470,18 @@ def main(argv=None) -> int:
     parser.add_argument("--two-chains", type=int, nargs="?", const=5, default=0,
                         metavar="SEEDS", help="only the simulated two-chain study (left and "
                         "right arms together vs alone), over SEEDS seeds (default 5)")
-    parser.add_argument("--subsets", metavar="SIZES", help="only the subset study: the "
+    parser.add_argument("--subsets", metavar="SIZES", type=subset_sizes,
+                        help="only the subset study: the "
                         "default on random subsets of these sizes of the training touches "
                         "(comma-separated, e.g. 8,10,12,15,18)")
-    parser.add_argument("--reps", type=int, default=4, help="with --subsets: subsets per size")
+    parser.add_argument("--reps", type=repetitions, default=4, metavar="N",
+                        help="with --subsets: subsets per size (1 to 100)")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
         sys.exit(f"talos_contact: {DATA} not found (the shared data sit beside the repository)")
     urdf = talos_urdf()
     if args.subsets:
-        subsets(urdf, [int(v) for v in args.subsets.split(",")], args.reps)
+        subsets(urdf, args.subsets, args.reps)
         return 0
     if args.two_chains:
         print_two_chains(two_chains(urdf, args.two_chains, not args.urdf_alone))
