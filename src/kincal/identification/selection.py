@@ -135,8 +135,9 @@ def no_spare_note(equations: int, identifiable: int) -> str | None:
         return None
     return (f"{equations} equations for {identifiable} identifiable parameters: none is left "
             "over, so the errors after calibration say nothing of its accuracy (this many "
-            "parameters can match any such data that closely); judge the result on held-out "
-            "measurements (--validate, kincal evaluate) before using it, or measure more poses")
+            "parameters can match any such data that closely); only held-out measurements judge "
+            "it (calibrate --validate, kincal evaluate): use it after they do, or measure more "
+            "poses")
 
 
 def preference_order(names, n_kinematic: int) -> list[int]:
