@@ -45,6 +45,9 @@ both files, as kincal weighed them before it estimated a noise per file and kind
 The default row is judged again after one tilt of the table (two angles) fitted to the
 held-out touches themselves: what the table's turn between the days leaves.
 
+The last two lines: how well the log's leg joint values close the loop between the feet
+(both soles flat on the floor) on the nominal model, on each day's touches.
+
 --variants adds other penalty and model choices (among them compliance terms on the stance
 leg, whose joints carry the robot's weight: FRAMES.json's compliance is applied to the
 held-out touches, with the gravity torques of the chain at each touch, the joints off the
@@ -455,6 +458,25 @@ def subsets(urdf: Path, sizes, reps: int) -> None:
                       f"{h[0]:.2f} | {h[1]:.3f} | {h[2]:.3f} |")
 
 
+def feet_closure(urdf: Path, names, q: np.ndarray) -> tuple[float, float, float, float]:
+    """How well the log's leg joint values close the loop between the feet on the nominal
+    model: the right sole seen from the left through both legs at every touch, against its
+    median place: (median, max) distance [mm] and (median, max) turn [deg]. Both soles stand
+    flat on the floor; raw encoder readings of legs with real errors would not close it on
+    the nominal model to the encoders' resolution."""
+    from kincal.robot import Robot
+
+    robot = Robot.load(urdf, base=BASE, tip="right_sole_link")
+    T = robot.tip_poses(q[:, [list(names).index(j) for j in robot.joint_names]])
+    p = T[:, :3, 3]
+    dist = np.linalg.norm(p - np.median(p, axis=0), axis=1) * 1e3
+    R0 = T[np.argmin(dist), :3, :3]
+    cos = (np.einsum("ij,nij->n", R0, T[:, :3, :3]) - 1.0) / 2.0
+    turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return (float(np.median(dist)), float(dist.max()), float(np.median(turn)),
+            float(turn.max()))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", action="store_true",
@@ -581,6 +603,11 @@ def main(argv=None) -> int:
         print(f"| {label:<{width}} | " + (f"{h:11.2f}" if math.isfinite(h) else " " * 11)
               + f" | {r:10.3f} | {p:11.3f} | "
               + (f"{ev:12.1f}" if math.isfinite(ev) else " " * 12) + " |")
+    for day, q in (("training", q_train), ("held-out", q_valid)):
+        d50, dmax, t50, tmax = feet_closure(urdf, names, q)
+        print(f"The feet, {day} touches: both legs' joint values on the nominal model put the "
+              f"right sole within {d50:.3f} mm (median; max {dmax:.3f}) and {t50:.4f} deg "
+              f"(max {tmax:.4f}) of one place")
     return 0
 
 

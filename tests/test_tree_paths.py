@@ -424,3 +424,19 @@ def test_talos_study_day_planes_and_urdf_alone():
     assert 0.3 < tilt < 1.0 and 4.0 < abs(offset) < 12.0, (tilt, offset)
     assert alone == pytest.approx(with_tilt, abs=1e-6)  # the URDF holds the face tilt
     assert with_tilt[2] < 0.3, with_tilt  # results.md: 0.267 deg
+
+
+def test_talos_log_closes_the_feet_loop_on_the_nominal_model():
+    """docs/results.md, TALOS: the log's leg joint values put the right sole at one place
+    seen from the left through both legs on the nominal model (to hundredths of a mm), and
+    the check would see a leg that differs from its model: one hip pitch off by 1 deg moves
+    the closed loop by millimetres over these postures."""
+    study = _talos_study()
+    urdf = study.talos_urdf()
+    names, q_train = study.joint_rows(study.DATA / "left_train.csv")
+    d50, dmax, t50, tmax = study.feet_closure(urdf, names, q_train)
+    assert d50 < 0.05 and t50 < 0.01 and dmax < 1.0
+    q = q_train.copy()
+    q[:, names.index("leg_left_3_joint")] += np.radians(1.0)
+    d50_off, _, t50_off, _ = study.feet_closure(urdf, names, q)
+    assert d50_off > 1.0 and t50_off > 0.1
