@@ -1,6 +1,7 @@
 """Corrected URDF export: the written file is the corrected model, and nothing else changed."""
 
 import io
+import json
 import re
 
 import numpy as np
@@ -132,3 +133,74 @@ def test_a_tilt_next_to_gimbal_lock_is_exact_and_reported(tmp_path, rng):
     path.write_text(result.text)
     q = random_joint_values(robot.geometry, rng, 200)
     assert np.abs(Robot.load(path, tip=robot.tip).tip_poses(q) - corrected.tip_poses(q)).max() < 1e-12
+
+
+def test_offset_moved_into_children_that_are_off_the_chain(tmp_path, rng):
+    """The regauged joint's link also carries joints off the chain (a sensor's fixed frame, a
+    mimic finger): their origins take the offset too, the written URDF keeps every one of
+    their frames where the plain corrected URDF has them (a KeyError before: the lookup of
+    their nominal origins knew only the chain's joints)."""
+    from kincal.export.readable_export import Regauged, corrected_text
+
+    base = _load("tiago_file", "wrist_ft_tool_link")
+    extra = (
+        '<joint name="hunt_sensor_joint" type="fixed"><parent link="arm_6_link"/>'
+        '<child link="hunt_sensor"/><origin xyz="0.01 0.02 0.03" rpy="0.1 0.2 0.3"/></joint>'
+        '<link name="hunt_sensor"/>'
+        '<joint name="hunt_finger_joint" type="revolute"><parent link="arm_6_link"/>'
+        '<child link="hunt_finger"/><origin xyz="0.0 0.04 0.0" rpy="0 0 0.2"/>'
+        '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>'
+        '<mimic joint="arm_6_joint" multiplier="0.5" offset="0.1"/></joint>'
+        '<link name="hunt_finger"/></robot>')
+    src = tmp_path / "tiago_extra.urdf"
+    src.write_text(base.urdf_text.replace("</robot>", extra))
+    robot = Robot.load(src, tip="wrist_ft_tool_link")
+    model = mdh.extract(robot.geometry)
+    err = np.zeros_like(model.table)
+    err[:, 3] = 1e-3  # a joint offset on every joint: arm_6's is moved into its children
+    corrected = robot.with_joint_frames(model.joint_frames(model.table + err))
+    plain, _ = corrected_text(robot, corrected, readable=False)
+    result, moved = corrected_text(robot, corrected)
+    regauged = [m for m in moved if isinstance(m, Regauged)]
+    assert [m.joint for m in regauged] == ["arm_6_joint"]
+    assert set(regauged[0].children) == {"arm_7_joint", "hunt_sensor_joint", "hunt_finger_joint"}
+    for text, name in ((plain.text, "plain.urdf"), (result.text, "readable.urdf")):
+        (tmp_path / name).write_text(text)
+    for tip in ("hunt_sensor", "hunt_finger", "wrist_ft_tool_link"):
+        a, b = (Robot.load(tmp_path / name, tip=tip) for name in ("plain.urdf", "readable.urdf"))
+        q = random_joint_values(a.geometry, rng, 50)
+        assert np.abs(a.tip_poses(q) - b.tip_poses(q)).max() < 1e-12
+
+
+def test_calibration_writes_a_regauged_joint_whose_link_carries_a_fixed_frame(tmp_path, rng,
+                                                                              capsys):
+    """kincal calibrate end to end where the readable export moves arm_6's offset into its
+    children and one child is a fixed joint off the chain: the read-back check of the
+    written URDF looked for that fixed joint's own children and crashed (StopIteration)."""
+    from kincal.cli.main import main
+
+    base = _load("tiago_file", "wrist_ft_tool_link")
+    src = tmp_path / "tiago_sensor.urdf"
+    src.write_text(base.urdf_text.replace("</robot>", (
+        '<joint name="hunt_sensor_joint" type="fixed"><parent link="arm_6_link"/>'
+        '<child link="hunt_sensor"/><origin xyz="0.01 0.02 0.03" rpy="0.1 0.2 0.3"/></joint>'
+        '<link name="hunt_sensor"/></robot>')))
+    robot = Robot.load(src, tip="wrist_ft_tool_link")
+    model = mdh.extract(robot.geometry)
+    err = np.zeros_like(model.table)
+    err[:, 3] = 2e-3  # joint offsets: arm_6's (pitch -90 deg in its origin) is regauged
+    truth = robot.with_joint_frames(model.joint_frames(model.table + err))
+    q = random_joint_values(robot.geometry, rng, 40)
+    T = truth.tip_poses(q)
+    P = T[:, :3, 3] + T[:, :3, :3] @ np.array([0.05, 0.02, 0.1])
+    rows = [",".join(robot.joint_names) + ",x,y,z"]
+    rows += [",".join(repr(float(v)) for v in (*qi, *p)) for qi, p in zip(q, P)]
+    (tmp_path / "d.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "c.urdf"
+    assert main(["calibrate", str(src), str(tmp_path / "d.csv"), "--tip", "wrist_ft_tool_link",
+                 "--model", "offsets", "--tool-offset", "0.05", "0.02", "0.1",
+                 "--out", str(out), "--frames-out", str(tmp_path / "f.json"), "-q"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(out), str(tmp_path / "d.csv"), "--frames",
+                 str(tmp_path / "f.json"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["errors"]["max_mm"] < 1e-3  # noise-free data

@@ -102,12 +102,15 @@ def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,
         children = corrected.child_joint_origins(name)
         for child, T_child in children.items():
             trial[child] = _rot(axis, angle) @ trial.get(child, T_child)
+        # the children's nominal origins: those off the chain (a sensor's fixed frame, a
+        # gripper's joints) are not among the chain's, ``old``
+        was = {**nominal.child_joint_origins(name), **old}
         candidate = edit_joint_origins(nominal.urdf_text, trial, source=source)
         after = _swing(candidate.for_joint(name), old[name][:3, :3], trial[name][:3, :3])
-        child_ok = all(_swing(candidate.for_joint(c), (old.get(c, children[c]))[:3, :3],
-                              trial[c][:3, :3]) < SWING for c in children)
+        child_ok = all(_swing(candidate.for_joint(c), was[c][:3, :3], trial[c][:3, :3]) < SWING
+                       for c in children)
         if after < SWING and child_ok:  # only where it removes the swing altogether
-            origins, result = trial, candidate
+            origins, result, old = trial, candidate, was
             moved.append(Regauged(name, angle, tuple(children)))
     for name, T_new in origins.items():
         T_old = old[name]

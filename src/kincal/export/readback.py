@@ -173,10 +173,9 @@ def check_readback(result, text: str, add_frames: bool = False, folds=()) -> Non
 
     joints = tuple(result.error_model.joint_names)
     want = {**result.corrected.urdf_origins(joints), **{f.joint: f.origin for f in folds}}
-    exempt = _regauged(result)
-    children = {c for j in exempt for c in result.corrected.child_joint_origins(j)}
+    exempt = _regauged(result)  # the regauged joints and their children, on the chain or not
     origins = written_origins(result.robot.urdf_text, text,
-                              set(joints) | children | {f.joint for f in folds}, add_frames)
+                              set(joints) | exempt | {f.joint for f in folds}, add_frames)
     change = {f.tip: f.change for f in folds}
     for name, T in want.items():
         if name in exempt:
