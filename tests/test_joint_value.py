@@ -3,6 +3,7 @@ measurements; the same result as a file with its constant column, recorded in FR
 and the report, refused when the file has the column or the joint is not on the chain."""
 
 import json
+import re
 
 import numpy as np
 
@@ -80,3 +81,109 @@ def test_joint_value_refusals_are_one_line(tmp_path, capsys):
                         "given twice")):
         code, out, err = run(capsys, "analyze", "ec66", data, *argv)
         assert code == 1 and err.count("\n") == 1 and says in err, err
+
+
+MIMIC_ARM = """<?xml version="1.0"?>
+<robot name="mimic_arm">
+  <link name="base_link"/>
+  <joint name="j1" type="revolute"><parent link="base_link"/><child link="l1"/>
+    <origin xyz="0 0 0.3" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="l1"/>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0.05 0 0.1" rpy="0.3 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="l2"/>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/>
+    <origin xyz="0 0.02 0.4" rpy="0 0.2 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="l3"/>
+  <joint name="finger" type="revolute"><parent link="l3"/><child link="f"/>
+    <origin xyz="0.3 0.05 0.02" rpy="0.1 0 0.4"/><axis xyz="1 0 0"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+    <mimic joint="j3" multiplier="-0.5" offset="0.1"/></joint>
+  <link name="f"/>
+  <joint name="ftip_joint" type="fixed"><parent link="f"/><child link="ftip"/>
+    <origin xyz="0.02 0.1 0.05" rpy="0 0 0"/></joint>
+  <link name="ftip"/>
+  <joint name="side" type="revolute"><parent link="l2"/><child link="s"/>
+    <origin xyz="0 0.1 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="s"/>
+  <joint name="smimic" type="revolute"><parent link="s"/><child link="s2"/>
+    <origin xyz="0.1 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+    <mimic joint="side" multiplier="2" offset="0"/></joint>
+  <link name="s2"/>
+</robot>
+"""
+
+
+def _mimic_files(tmp_path):
+    """The arm's URDF, and its tool points (tip ftip, through the mimic finger) measured
+    at joint values where the finger follows j3 as its <mimic> says (Pinocchio with the
+    finger's values filled by the rule: what the URDF means)."""
+    from kincal.robot import Robot
+
+    urdf = tmp_path / "mimic_arm.urdf"
+    urdf.write_text(MIMIC_ARM)
+    robot = Robot.load(urdf, tip="ftip")
+    assert robot.joint_names == ("j1", "j2", "j3", "finger")
+    q = np.random.default_rng(1).uniform(-1.2, 1.2, (30, 4))
+    q[:, 3] = -0.5 * q[:, 2] + 0.1
+    T = robot.tip_poses(q)
+    P = T[:, :3, 3] + T[:, :3, :3] @ np.array([0.01, 0.02, 0.03])
+    full = write(tmp_path / "full.csv", ["j1", "j2", "j3", "finger", "x", "y", "z"],
+                 np.hstack([q, P]))
+    short = write(tmp_path / "short.csv", ["j1", "j2", "j3", "x", "y", "z"],
+                  np.hstack([q[:, :3], P]))
+    return urdf, q, P, full, short
+
+
+def test_mimic_joint_without_a_column_follows_its_master(tmp_path, capsys):
+    """A file without the mimic finger's column: its values come from j3 by the URDF's rule
+    (the same calibration as the file with the column); before, 'missing column finger'."""
+    urdf, q, P, full, short = _mimic_files(tmp_path)
+    common = ("--tip", "ftip", "--model", "placement", "--lambda", "0.001",
+              "--tool-offset", "0.01", "0.02", "0.03")
+    for name, data in (("a", full), ("b", short)):
+        code, out, err = run(capsys, "calibrate", urdf, data, *common, "--out",
+                             tmp_path / f"{name}.urdf", "--frames-out", tmp_path / f"{name}.json")
+        assert code == 0, err
+        assert "mimic" not in err  # consistent files: nothing to warn about
+    a, b = (json.loads((tmp_path / f).read_text())["sets"][0] for f in ("a.json", "b.json"))
+    np.testing.assert_allclose(list(a["frames"].values()), list(b["frames"].values()),
+                               atol=1e-12)
+    a_text, b_text = (re.sub(r"<!--.*?-->", "", (tmp_path / f).read_text(), flags=re.S)
+                      for f in ("a.urdf", "b.urdf"))  # less the provenance comments
+    assert a_text == b_text and a_text != re.sub(r"<!--.*?-->", "", MIMIC_ARM, flags=re.S)
+    code, out, err = run(capsys, "evaluate", tmp_path / "b.urdf", short, "--frames",
+                         tmp_path / "b.json", "--json")
+    assert code == 0, err
+    assert json.loads(out)["errors"]["max_mm"] < 1e-6  # noise-free, nominal robot
+
+
+def test_mimic_column_off_its_rule_is_warned_and_bad_uses_refused(tmp_path, capsys):
+    urdf, q, P, full, short = _mimic_files(tmp_path)
+    off = np.hstack([q, P])
+    off[4, 3] += 0.01  # the finger's column of sample 5 no longer follows j3
+    bent = write(tmp_path / "bent.csv", ["j1", "j2", "j3", "finger", "x", "y", "z"], off)
+    code, out, err = run(capsys, "evaluate", urdf, bent, "--tip", "ftip", "--fit-frames")
+    assert code == 0, err
+    assert ("column finger differs from what the URDF's <mimic> makes of j3 (finger = -0.5 j3 "
+            "+ 0.1) by up to 0.01 (rad or m, sample 5)") in err
+    # held while its master moves: refused, one line, nothing written
+    code, out, err = run(capsys, "calibrate", urdf, short, "--tip", "ftip", "--joint-value",
+                         "finger=0.3", "--out", tmp_path / "x.urdf")
+    assert code == 1 and not (tmp_path / "x.urdf").exists()
+    assert err.strip().splitlines() == [
+        "kincal: error: --joint-value finger: finger mimics j3 in the URDF (finger = -0.5 j3 "
+        f"+ 0.1), which moves in {short}: it cannot be held; drop --joint-value finger (kincal "
+        "gives it its value from its master's)"]
+    # a mimic joint on the chain whose master is off it, without a column: refused
+    side = write(tmp_path / "side.csv", ["side", "x", "y", "z"],
+                 np.random.default_rng(2).uniform(-1, 1, (10, 4)))
+    code, out, err = run(capsys, "analyze", urdf, side, "--base", "s", "--tip", "s2")
+    assert code == 1
+    assert "no column for chain joint smimic, which mimics side in the URDF (smimic = 2 side " \
+           "+ 0), a joint off the chain" in err

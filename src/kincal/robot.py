@@ -103,6 +103,26 @@ class Robot:
     def _data(self) -> pin.Data:  # Pinocchio's workspace, when first used (not every copy is)
         return self.model.createData()
 
+    @functools.cached_property
+    def mimics(self) -> dict[str, tuple[str, float, float]]:
+        """{joint: (master, multiplier, offset)} of the URDF's ``<mimic>`` tags: the joint's
+        value is multiplier * master + offset. Pinocchio reads such a joint as an independent
+        one; :mod:`kincal.measurements.fixed_joints` gives it its value when a file has no
+        column for it, and warns when its column says otherwise."""
+        import xml.etree.ElementTree as ET
+
+        out = {}
+        for joint in ET.fromstring(self.urdf_text.encode("utf-8")).findall("joint"):
+            m = joint.find("mimic")
+            if m is not None and m.get("joint"):
+                try:
+                    k, o = float(m.get("multiplier", 1.0)), float(m.get("offset", 0.0))
+                except ValueError:
+                    raise UrdfError(f"{self.source}: the <mimic> of joint {joint.get('name')!r}"
+                                    " needs numbers as multiplier and offset") from None
+                out[str(joint.get("name"))] = (str(m.get("joint")), k, o)
+        return out
+
     @property
     def model_name(self) -> str:
         """The robot's name in its URDF (``<robot name=...>``), whatever the file is called."""

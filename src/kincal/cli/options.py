@@ -388,17 +388,21 @@ class Inputs:
         held = self.held_joints(robots)
 
         def read(path, r, fmt):
-            from kincal.measurements.fixed_joints import check_absent, with_fixed_joints
+            from kincal.measurements import fixed_joints as fj
             from kincal.measurements.sets import header_of
 
             fixed = {j: v for j, v in held.items() if j in r.joint_names}
-            check_absent(path, header_of(path), fixed, self.joint_map())
-            d = read_set_file(path, [j for j in r.joint_names if j not in fixed], _prismatic(r),
-                              self.length_unit, self.angle_unit, pos, self.orientation_columns,
-                              self.on_plane, self.orientation_sigma_deg, self.joint_map(),
-                              self.order_column, flush=self.flush, orientation_format=fmt,
+            fj.check_absent(path, header_of(path), fixed, self.joint_map())
+            follow = fj.mimicked(path, header_of(path), r, fixed, self.joint_map())
+            d = read_set_file(path, [j for j in r.joint_names if j not in {*fixed, *follow}],
+                              _prismatic(r), self.length_unit, self.angle_unit, pos,
+                              self.orientation_columns, self.on_plane,
+                              self.orientation_sigma_deg, self.joint_map(), self.order_column,
+                              flush=self.flush, orientation_format=fmt,
                               positions_only=self.positions_only)
-            return with_fixed_joints(d, r.joint_names, fixed) if fixed else d
+            d = fj.with_fixed_joints(d, r.joint_names, fixed, follow) if fixed or follow else d
+            fj.check_mimics(d, r, path)
+            return d
 
         sets = [read(path, r, self.orientation_format) for path, r in zip(self.files, robots)]
         for path, r, d in zip(self.files, robots, sets):  # angles in the other convention?

@@ -1,4 +1,5 @@
-"""Chain joints absent from a data file, held at one value during the measurements.
+"""Chain joints absent from a data file: held at one value during the measurements, or
+following another joint by the URDF's ``<mimic>``.
 
 A tool changer's joint, a gripper's wrist roll that never moves: the URDF has the joint on
 the chain, the logger has no column for it. ``--joint-value NAME=VALUE`` gives its value
@@ -6,6 +7,13 @@ the chain, the logger has no column for it. ``--joint-value NAME=VALUE`` gives i
 and the set records it (``fixed_joints``), so FRAMES.json and the report say under which
 values the calibration holds. A joint the file has a column for is refused: two sources
 for one value.
+
+A mimic joint (``<mimic joint="M" multiplier="k" offset="o"/>``: its value is k M + o) is
+no degree of freedom of its own, but Pinocchio reads it as one, so the chain has it. A file
+without its column gets it from its master's column (the master on the chain); a file with
+its column is read as it is, and warned about where the column differs from k M + o (a
+reader of the corrected URDF computes it from M). Held with ``--joint-value`` while its
+master moves, or with neither column nor master on the chain: refused.
 """
 
 from __future__ import annotations
@@ -27,10 +35,66 @@ def check_absent(path, header, fixed: dict, joint_columns=None) -> None:
                         "file has no column for)")
 
 
-def with_fixed_joints(data, joint_names, fixed: dict):
-    """``data`` (read on the chain without the ``fixed`` joints) on the whole chain
-    ``joint_names``: each fixed joint a constant column {name: value [SI]}, approach
-    direction 0 (it never moved)."""
+MIMIC_TOLERANCE = 1e-6  # [rad or m] a mimic joint's column off k M + o by more is warned
+
+
+def mimicked(path, header, robot, fixed: dict, joint_columns=None) -> dict:
+    """{joint: (master, multiplier, offset)} of the mimic joints of ``robot``'s chain that
+    the file has no column for, each filled from its master (module notes); DataError for
+    one that cannot be (its master off the chain without a column, or held while its
+    master moves)."""
+    mapping, chain = dict(joint_columns or {}), robot.joint_names
+    out = {}
+    for j in chain:
+        if j not in robot.mimics:
+            continue
+        m, k, o = robot.mimics[j]
+        rule = f"{j} = {k:g} {m} {'+' if o >= 0 else '-'} {abs(o):g}"
+        if j in fixed and m in chain and m not in fixed:
+            raise DataError(f"--joint-value {j}: {j} mimics {m} in the URDF ({rule}), which "
+                            f"moves in {path}: it cannot be held; drop --joint-value {j} "
+                            "(kincal gives it its value from its master's)")
+        if j in fixed or mapping.get(j, j) in header:
+            continue
+        if m not in chain:
+            raise DataError(f"{path}: no column for chain joint {j}, which mimics {m} in the "
+                            f"URDF ({rule}), a joint off the chain: give {j}'s column (or "
+                            f"--joint-value {j}=VALUE if it did not move)")
+        out[j] = (m, k, o)
+    chained = [j for j, (m, _, _) in out.items() if m in out]
+    if chained:
+        raise DataError(f"{path}: no column for {chained[0]} nor for {out[chained[0]][0]}, the "
+                        f"joint it mimics in the URDF: give {chained[0]}'s column")
+    return out
+
+
+def check_mimics(data, robot, path) -> None:
+    """Warn where a mimic joint's column differs from its master's value by the URDF's rule
+    (both on the chain)."""
+    import warnings
+
+    from kincal.errors import KincalWarning
+
+    names = list(data.joint_names)
+    for j, (m, k, o) in robot.mimics.items():
+        if j in names and m in names and j not in dict(data.fixed_joints):
+            q = data.joint_values
+            off = np.abs(q[:, names.index(j)] - (k * q[:, names.index(m)] + o))
+            if off.size and off.max() > MIMIC_TOLERANCE:
+                warnings.warn(
+                    f"{path}: column {j} differs from what the URDF's <mimic> makes of {m} "
+                    f"({j} = {k:g} {m} + {o:g}) by up to {off.max():.3g} (rad or m, sample "
+                    f"{int(off.argmax()) + 1}): kincal calibrates with the column, a reader of "
+                    f"the corrected URDF computes {j} from {m}", KincalWarning)
+
+
+def with_fixed_joints(data, joint_names, fixed: dict, follow: dict | None = None):
+    """``data`` (read on the chain without the ``fixed`` and ``follow`` joints) on the whole
+    chain ``joint_names``: each fixed joint a constant column {name: value [SI]}, approach
+    direction 0 (it never moved); each joint of ``follow`` {name: (master, multiplier,
+    offset)} its master's value by that rule (its approach direction the master's, times
+    the multiplier's sign)."""
+    follow = follow or {}
     joint_names = tuple(joint_names)
     n = len(data.joint_values)
     q = np.zeros((n, len(joint_names)))
@@ -38,6 +102,14 @@ def with_fixed_joints(data, joint_names, fixed: dict):
     for k, j in enumerate(joint_names):
         if j in fixed:
             q[:, k] = fixed[j]
+        elif j in follow:
+            m, mult, off = follow[j]
+            if m in fixed:
+                q[:, k] = mult * fixed[m] + off
+            else:
+                i = data.joint_names.index(m)
+                q[:, k] = mult * data.joint_values[:, i] + off
+                g[:, k] = np.sign(mult) * data.approach[:, i]
         else:
             i = data.joint_names.index(j)
             q[:, k] = data.joint_values[:, i]
