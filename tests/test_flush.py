@@ -70,7 +70,7 @@ def test_jacobian_near_flush_on_ec66(rng):
     data = simulate_flush(em, em.nominal, CONTACT, TABLE, random_joint_values(
         robot.geometry, rng, 1500), 12, 1e-4, 0.1, rng)
     km = FlushKind(em, data, backlash=(0, 5))
-    frames = np.r_[TABLE[0], CONTACT[3:], CONTACT[:3]]
+    frames = np.r_[TABLE[0], CONTACT[3:], CONTACT[[2, 0, 1]]]  # the point stored z, x, y
     assert np.abs(km.residuals(em.nominal, frames, np.zeros(2))[:, 0]).max() < 1e-3
     central_differences_check(km, em.nominal + rng.normal(size=em.size) * 1e-4, frames,
                               np.array([1e-3, -2e-3]))
@@ -87,7 +87,7 @@ def test_start_is_exact_on_noise_free_touches_whatever_the_face(face, rng):
         robot.geometry, rng, 3000), 15, 0.0, 0.0, rng)
     km = FlushKind(em, data)
     x0 = km.start(em.nominal, contact[:3])
-    assert np.allclose(x0[-3:], contact[:3])  # the contact point stays at the guess
+    assert np.allclose(x0[-3:], contact[[2, 0, 1]])  # the contact point stays at the guess
     assert np.abs(km.residuals(em.nominal, x0, np.zeros(0))).max() < 1e-10
     rx, ry = x0[3:5]
     u = normal(rx, ry)
@@ -121,7 +121,7 @@ def test_reads_and_writes_flush_files(tmp_path, rng):
     assert np.allclose(got.ratio(), 0.05e-3 / np.radians(0.1))
     km = FlushKind(em, got)
     assert km.frame_names == ("plane2.rx", "plane2.ry", "plane2.d", "plane7.rx", "plane7.ry",
-                              "plane7.d", "tool.rx", "tool.ry", "tool.x", "tool.y", "tool.z")
+                              "plane7.d", "tool.rx", "tool.ry", "tool.z", "tool.x", "tool.y")
     again = tmp_path / "again.csv"
     again.write_text(to_csv_text(got))
     back = read_set_file(again, j, on_plane=True, flush=True)
@@ -191,7 +191,7 @@ def test_planted_errors_recovered_on_a_tilted_table(robot_name, tip, rng):
     # what the touches cannot see: the contact point (its offset is the plane's offset's)
     assert {"tool.x", "tool.y", "tool.z"} <= set(ident.dropped)
     assert {"plane1.rx", "plane1.ry", "plane1.d", "tool.rx", "tool.ry"} <= set(ident.kept)
-    assert any("held at their start: tool.x, tool.y, tool.z" in n for n in ident.notes)
+    assert any("held at their start: tool.z, tool.x, tool.y" in n for n in ident.notes)
     kept = [em.names.index(n) for n in ident.kept if n in em.names]
     assert len(kept) >= 15  # a flush touch sees three times what a plane contact sees
     truth = em.nominal.copy()
@@ -245,7 +245,7 @@ def test_held_out_height_and_tilts_drop_to_the_noise(rng):
 
     h0, a0 = rms(em.nominal, result.x_start[em.size:])
     h1, a1 = rms(result.kinematic, result.sets[0].frames)
-    h, a = rms(truth, np.r_[planes.ravel(), CONTACT[3:], CONTACT[:3]])  # the noise itself
+    h, a = rms(truth, np.r_[planes.ravel(), CONTACT[3:], CONTACT[[2, 0, 1]]])  # the noise
     assert h0 > 10 * h and a0 > 5 * a  # the planted errors show before
     assert h1 < 1.5 * h and a1 < 1.5 * a  # and after, only the noise is left
 

@@ -444,3 +444,40 @@ def test_gate_judges_every_chain_not_only_the_first(tmp_path):
 
     d = _aligned_distances(robots[0].tip_poses(q)[:, :3, 3], first.tip_poses(q)[:, :3, 3])
     assert np.sqrt(np.mean(d ** 2)) * 1e3 < 0.5 * ev.change_rms_mm
+
+
+def test_shared_flush_plane_moves_a_contact_point_only_along_its_face_normal(tmp_path,
+                                                                             capsys):
+    """Two flush files touching one table (--shared-plane): their contact heights along the
+    face normal differ by what the data see; the contact points' other components stay at
+    --tool-offset. The tool point's x came first in the selection, its column the face
+    normal's tiny x component times the heights' offset: kept in place of tool.z, it ran
+    off by half a metre (a false 'implausible' refusal here; with other data, a contact
+    point silently wrong in FRAMES.json)."""
+    from kincal import models
+    from kincal.frames_file import CellFrames
+    from kincal.measurements.sets import to_csv_text
+    from kincal.planning.kind_simulation import simulate_flush, tool_points
+
+    robot = Robot.load("ec66", tip="flange")
+    model = models.build("offsets", robot.geometry)
+    rng = np.random.default_rng(5)
+    lo, hi = robot.geometry.ranges()
+    contact = np.array([0.01, 0.02, 0.1, 0.0, 0.0])
+    q0 = rng.uniform(lo, hi, size=(200, robot.geometry.n))
+    table = [0.0, 0.0, float(np.mean(tool_points(model, model.nominal, q0, contact[:3])[:, 2]))]
+    paths = []
+    for k in range(2):  # two sessions on the one table, 0.01 mm / 0.01 deg of noise
+        cand = rng.uniform(lo, hi, size=(1500, robot.geometry.n))
+        data = simulate_flush(model, model.nominal, contact, [table], cand, 25, 1e-5, 0.01,
+                              rng, limits=(lo, hi))
+        paths.append(tmp_path / f"session{k + 1}.csv")
+        paths[-1].write_text(to_csv_text(data))
+    out = tmp_path / "frames.json"
+    assert main(["calibrate", "ec66", *map(str, paths), "--on-plane", "--flush",
+                 "--shared-plane", "--tool-offset", "0.01", "0.02", "0.1", "--model", "offsets",
+                 "--out", str(tmp_path / "c.urdf"), "--frames-out", str(out), "-q"]) == 0, \
+        capsys.readouterr().err
+    for s in CellFrames.read(out).sets:
+        assert s.value("tool.x") == 0.01 and s.value("tool.y") == 0.02
+        assert abs(s.value("tool.z") - 0.1) < 1e-4  # [m]: one table, one face

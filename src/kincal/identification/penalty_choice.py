@@ -152,8 +152,8 @@ def _tool_start(problem: CalibrationProblem) -> np.ndarray:
     names = lay.frame_names(0)
     if "tool.x" not in names:
         return np.zeros(3)
-    k = names.index("tool.x")
-    return np.array(lay.frames(problem.start(), 0)[k:k + 3], dtype=float)
+    k = [names.index("tool." + c) for c in "xyz"]  # by name: a flush set stores z, x, y
+    return np.array(lay.frames(problem.start(), 0)[k], dtype=float)
 
 
 def reach(problem: CalibrationProblem, samples: int = 500) -> float:

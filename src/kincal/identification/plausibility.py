@@ -458,10 +458,10 @@ def _change(problem: CalibrationProblem, result: CalibrationResult,
         first = problem.chains.of_set.index(chain)
     g = robot.geometry
     tool_start, tool = np.zeros(3), np.zeros(3)
-    name = lay.set_prefix(first) + "tool.x"
-    if name in lay.frame_names(first):
-        k = lay.index(name)
-        tool_start, tool = result.x_start[k:k + 3], result.x[k:k + 3]
+    name = lay.set_prefix(first) + "tool."
+    if name + "x" in lay.frame_names(first):  # by name: a flush set stores z, x, y
+        k = [lay.index(name + c) for c in "xyz"]
+        tool_start, tool = result.x_start[k], result.x[k]
     # the chain's length, the configurations and their joint motions' coefficients depend
     # on the robot alone: kept per robot (models.per_geometry); both robots' points by the
     # same arithmetic

@@ -27,10 +27,13 @@ height alike, as the plane's offset does. With the point's own height the column
 would move the point by the heights divided by the tilts; with this height they are
 exactly the offset's, so the rank-revealing selection drops them and holds the point at its
 start (``--tool-offset``). For that the plane names come first among the frames: the
-selection keeps the earlier of two equivalent frame columns.
+selection keeps the earlier of two equivalent frame columns. A plane several files share
+(``--shared-plane``) sees the difference of their contact heights: one contact point then
+moves, along its face normal, so the point's z (along u while the tilts are small) comes
+before its x and y.
 
 Frame names: ``plane.rx .ry .d`` with one plane, or ``plane<label>.*`` for each label of a
-``plane`` column, then ``tool.rx .ry .x .y .z`` (the contact frame: the pose kind's tool
+``plane`` column, then ``tool.rx .ry .z .x .y`` (the contact frame: the pose kind's tool
 frame, without the turn about the normal, ``tool.rz``, that flush touches cannot see).
 The tilts are singular for a normal along +-x (ry = +-90 deg), as the plane's.
 """
@@ -52,7 +55,12 @@ from kincal.rotations import base_turns, cross_rows, rotx, roty, skew, tilt_angl
 
 DEFAULT_TILT_SIGMA_DEG = 0.05  # [deg] tilt noise assumed when a set states none
 MIN_TOUCHES = 3  # per plane: its tilt and offset need three touches not on a line
-TOOL_FRAMES = ("tool.rx", "tool.ry", "tool.x", "tool.y", "tool.z")
+# the contact point's z first: along the face normal u (= R_c e_z, the tilts small), the one
+# component a height offset can move; the selection keeps the earlier of equivalent columns,
+# and x first (u_x tiny) once ran off by metres where shared planes make that offset seen
+TOOL_FRAMES = ("tool.rx", "tool.ry", "tool.z", "tool.x", "tool.y")
+_XYZ = [1, 2, 0]  # the stored (z, x, y) read as (x, y, z)
+_ZXY = [2, 0, 1]  # and (x, y, z) stored as (z, x, y)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -200,7 +208,7 @@ class FlushKind(KindModel):
         """(planes (k, 3) rows rx, ry [rad], d [m]; tool tilts (2,) [rad]; tool point (3,)
         [m])."""
         k = 3 * len(self.data.labels)
-        return frames[:k].reshape(-1, 3), frames[k:k + 2], frames[k + 2:k + 5]
+        return frames[:k].reshape(-1, 3), frames[k:k + 2], frames[k + 2:k + 5][_XYZ]
 
     def residuals(self, kin, frames, backlash, jacobian=False, kinematic=True):
         pl, a, t = self.split_frames(frames)
@@ -243,7 +251,7 @@ class FlushKind(KindModel):
         W = base_turns(a[0], a[1])[:, :2]                         # tool turns, tip frame
         Jf[:, 0, f:f + 2] = -(np.cross(W.T, u) @ t)               # d(u . t): turns of u
         Jf[:, 1:, f:f + 2] = S @ (s.R_tip @ W)
-        Jf[:, 0, f + 2:f + 5] = -u
+        Jf[:, 0, f + 2:f + 5] = -u[_ZXY]
         return r, Jk, Jf, Jb
 
     def check_fixable(self, kin, tool_guess=None) -> None:
@@ -286,7 +294,7 @@ class FlushKind(KindModel):
         u = u / np.linalg.norm(u)
         planes = [[*angles_of(n), float(np.mean(s.p_tip[self.data.planes == j] @ n) + u @ t)]
                   for j, n in enumerate(normals)]
-        return np.concatenate([np.ravel(planes), angles_of(u), t])
+        return np.concatenate([np.ravel(planes), angles_of(u), t[_ZXY]])
 
     def adopt(self, start, given, own) -> np.ndarray:
         """The start ``start`` (f,) with the shared planes' values ``given`` where ``own``
