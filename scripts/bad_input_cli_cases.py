@@ -269,3 +269,99 @@ def run_console_case(argv, how: str, code: int, folder: Path) -> str | None:
     if problems:
         return "; ".join(problems) + " | stderr: " + " / ".join(err[-3:])
     return None
+
+
+# ------------------------------------------------ chains: tree paths, several, mimic
+TREE_URDF = """<?xml version="1.0"?>
+<robot name="sweep_tree">
+  <link name="base_link"/>
+  <joint name="j1" type="revolute"><parent link="base_link"/><child link="l1"/>
+    <origin xyz="0 0 0.3" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="l1"/>
+  <joint name="j2" type="prismatic"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0.1 0 0.2" rpy="0.2 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="-0.2" upper="0.2" effort="1" velocity="1"/></joint>
+  <link name="l2"/>
+  <joint name="atip_joint" type="fixed"><parent link="l2"/><child link="atip"/>
+    <origin xyz="0 0.1 0" rpy="0 0.3 0"/></joint>
+  <link name="atip"/>
+  <joint name="k1" type="revolute"><parent link="base_link"/><child link="m1"/>
+    <origin xyz="0 0.2 0.3" rpy="0 0 0.4"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="m1"/>
+  <joint name="k2" type="continuous"><parent link="m1"/><child link="m2"/>
+    <origin xyz="0 0 0.4" rpy="0 0 0"/><axis xyz="0 1 0"/></joint>
+  <link name="m2"/>
+  <joint name="finger" type="revolute"><parent link="m2"/><child link="f"/>
+    <origin xyz="0.2 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+    <mimic joint="k2" multiplier="0.5" offset="0"/></joint>
+  <link name="f"/>
+  <joint name="btip_joint" type="fixed"><parent link="f"/><child link="btip"/>
+    <origin xyz="0.05 0 0" rpy="0 0 0"/></joint>
+  <link name="btip"/>
+  <joint name="p1" type="planar"><parent link="base_link"/><child link="pl"/>
+    <origin xyz="0 -0.3 0" rpy="0 0 0"/><axis xyz="0 0 1"/></joint>
+  <link name="pl"/>
+</robot>
+"""
+
+
+def tree_inputs(d: Path) -> dict:
+    """The tree URDF and its data files (good columns, arbitrary numbers: every case is
+    refused before a fit) written into ``d``; {name: path}."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    out = {"tree": d / "tree.urdf"}
+    out["tree"].write_text(TREE_URDF)
+    for name, cols in (("up", ["j2", "j1", "k1", "k2", "finger", "x", "y", "z"]),
+                       ("down", ["k1", "k2", "finger", "x", "y", "z"]),
+                       ("nofinger", ["k1", "k2", "x", "y", "z"]),
+                       ("touch_up", ["j2", "j1", "k1", "k2", "finger"]),
+                       ("touch_down", ["k1", "k2", "finger"])):
+        rows = rng.uniform(-0.1, 0.1, (12, len(cols)))
+        out[name] = d / f"tree_{name}.csv"
+        out[name].write_text(",".join(cols) + "\n" + "".join(
+            ",".join(repr(float(v)) for v in r) + "\n" for r in rows))
+    return out
+
+
+def chain_cases():
+    """(label, argv) of bad chains, several chains and mimic joints ({tree}, {up}, ...:
+    tree_inputs' paths; {d}: the case's folder)."""
+    cal = ["calibrate", "{tree}"]
+    out = ["--out", "{d}/o.urdf", "--frames-out", "{d}/f.json"]
+    two = cal + ["{up}", "{down}"]
+    yield "chains: 3 --base for 2 files", two + ["--base", "atip", "base_link", "atip",
+                                                  "--tip", "btip"] + out
+    yield "chains: 3 --tip for 2 files", two + ["--base", "atip", "base_link", "--tip", "btip",
+                                                 "btip", "atip"] + out
+    yield "chains: complete on two chains", two + ["--base", "atip", "base_link", "--tip",
+                                                   "btip", "--model", "complete"] + out
+    yield "chains: --validate with two chains", two + ["--base", "atip", "base_link", "--tip",
+                                                       "btip", "--validate", "{down}"] + out
+    yield "chains: --shared-plane, two bases", cal + [
+        "{touch_up}", "{touch_down}", "--base", "atip", "base_link", "--tip", "btip",
+        "--on-plane", "--flush", "--shared-plane"] + out
+    yield "chains: --shared-plane without --on-plane", two + [
+        "--base", "atip", "base_link", "--tip", "btip", "--shared-plane"] + out
+    yield "chains: base is the tip", cal + ["{up}", "--base", "btip", "--tip", "btip"] + out
+    yield "chains: unknown tip on a tree", cal + ["{up}", "--base", "atip", "--tip", "btipp"] + out
+    yield "chains: a planar joint on the path", cal + ["{up}", "--base", "pl", "--tip",
+                                                       "btip"] + out
+    yield "chains: file of the other chain", cal + ["{down}", "--base", "atip", "--tip",
+                                                    "btip"] + out
+    yield "chains: --backlash on no chain's joint", cal + ["{up}", "--base", "atip", "--tip",
+                                                           "btip", "--backlash", "p1"] + out
+    yield "chains: --joint-value on no chain's joint", cal + [
+        "{nofinger}", "--base", "base_link", "--tip", "btip", "--joint-value", "j1=0.1"] + out
+    yield "mimic: held while its master moves", cal + [
+        "{nofinger}", "--base", "base_link", "--tip", "btip", "--joint-value",
+        "finger=0.1"] + out
+    yield "mimic: its master off the chain", ["analyze", "{tree}", "{nofinger}", "--base", "m2",
+                                             "--tip", "btip"]
+    yield "mimic: evaluate, held while its master moves", [
+        "evaluate", "{tree}", "{nofinger}", "--base", "base_link", "--tip", "btip",
+        "--fit-frames", "--joint-value", "finger=0.1"]

@@ -29,9 +29,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from bad_input_cli_cases import (CaseSkipped, console_cases, ignored_option_cases,
-                                  message_cases, output_first_cases, run_console_case,
-                                  snapshot, undo_read_only)
+from bad_input_cli_cases import (CaseSkipped, chain_cases, console_cases,
+                                  ignored_option_cases, message_cases, output_first_cases,
+                                  run_console_case, snapshot, tree_inputs, undo_read_only)
 
 REPO = Path(__file__).resolve().parents[1]
 EC66 = REPO / "urdf" / "ec66.urdf"
@@ -50,7 +50,8 @@ def make_inputs(d: Path) -> dict:
         assert main(["simulate", "ec66", "--out", str(d / "poses.csv"), "--poses", "30",
                      "--kind", "pose", "--seed", "1"]) == 0
     return {"csv": (d / "good.csv").read_text(), "urdf": EC66.read_text(),
-            "frames": (d / "frames.json").read_text()}
+            "frames": (d / "frames.json").read_text(),
+            "tree": {k: str(v) for k, v in tree_inputs(d).items()}}
 
 
 def csv_cases(good: str):
@@ -416,6 +417,9 @@ def cases(inputs_dir: Path, inputs: dict):
         yield label, cli(argv, setup, codes=(1,))
     for label, argv, setup in special_file_cases():
         yield label, cli(argv, setup, codes=(1,))
+    for label, argv in chain_cases():  # tree paths, several chains, mimic joints
+        yield label, cli([a.replace("{d}", "{{d}}").format(**inputs["tree"]).replace(
+            "{{d}}", "{d}") if "{" in a else a for a in argv], codes=(1,))
     for label, argv in ignored_option_cases():  # 2: "-inf" reads as an option to argparse
         yield label, cli(argv, codes=(1, 2))
     for label, argv, setup in output_first_cases():
