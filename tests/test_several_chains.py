@@ -481,3 +481,32 @@ def test_shared_flush_plane_moves_a_contact_point_only_along_its_face_normal(tmp
     for s in CellFrames.read(out).sets:
         assert s.value("tool.x") == 0.01 and s.value("tool.y") == 0.02
         assert abs(s.value("tool.z") - 0.1) < 1e-4  # [m]: one table, one face
+
+
+def test_added_frames_hang_on_each_sets_own_chain(tmp_path, capsys):
+    """--add-frames with two chains of other bases and tips: set 2's measurement frame is a
+    child of its base link and its tool point of its tip link (both hung on set 1's before),
+    so that the written URDF alone, from one added frame to the other, predicts each set's
+    measured points."""
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(4)
+    ch, kin, true = _truth(robots, 1e-3, rng)
+    qs = [_q(robots[k], 40, rng) for k in range(2)]
+    sets = [_points(robots[k], true[k], qs[k], k) for k in range(2)]
+    files = [_csv(tmp_path / f"s{k}.csv", s) for k, s in enumerate(sets)]
+    out = tmp_path / "CAL.urdf"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["calibrate", str(robots[0].source), *files, "--base", "base_link", "ctip",
+                     "--tip", "atip", "btip", "--method", "ls", "--add-frames", "--out",
+                     str(out), "--quiet"]) == 0
+    text = out.read_text()
+    for suffix, base, tip in (("", "base_link", "atip"), ("_set2", "ctip", "btip")):
+        for name, link in (("kincal_measurement_frame", base), ("kincal_tool_point", tip)):
+            assert f'<joint name="{name}{suffix}_joint" type="fixed">\n    <parent link="{link}"/>' \
+                in text.replace("  <joint", "<joint")
+    for k, suffix in enumerate(("", "_set2")):
+        seen = Robot.load(out, base="kincal_measurement_frame" + suffix,
+                          tip="kincal_tool_point" + suffix)
+        predicted = seen.tip_poses(qs[k])[:, :3, 3]
+        assert np.abs(predicted - sets[k].positions).max() < 1e-6  # [m], noise-free points
