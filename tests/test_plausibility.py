@@ -458,3 +458,62 @@ def test_talos_least_squares_on_few_touches_names_the_over_fit(tmp_path, capsys)
                  "0", "0", "-0.12", "--method", "ls", "--out", str(out)])
     assert code != 0 and not out.exists()
     assert "Likely cause: plain least squares on 51 equations for" in _error_line(capsys)
+
+
+WHEEL_ARM = """<?xml version="1.0"?>
+<robot name="wheel_arm">
+  <link name="base_link"/>
+  <joint name="j1" type="revolute"><parent link="base_link"/><child link="l1"/>
+    <origin xyz="0 0 0.3" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="l1"/>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0.05 0 0.1" rpy="0.3 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="l2"/>
+  <joint name="spin" type="continuous"><parent link="l2"/><child link="l3"/>
+    <origin xyz="0 0.02 0.4" rpy="0 0.2 0"/><axis xyz="0 0 1"/></joint>
+  <link name="l3"/>
+  <joint name="tip_joint" type="fixed"><parent link="l3"/><child link="tip"/>
+    <origin xyz="0.1 0.05 0.02" rpy="0 0 0"/></joint>
+  <link name="tip"/>
+</robot>
+"""
+
+
+def test_a_continuous_joint_turning_many_times_is_no_unit_mistake(tmp_path, capsys):
+    """A continuous joint logged as its cumulative angle (three turns and more): the same
+    calibration as its values within one turn, no 'were they degrees?' warning; before, the
+    gate refused it (values beyond 4 pi). The same file in degrees read as radians is still
+    refused."""
+    urdf = tmp_path / "wheel_arm.urdf"
+    urdf.write_text(WHEEL_ARM)
+    robot = Robot.load(urdf, tip="tip")
+    q = np.random.default_rng(3).uniform(-1.5, 1.5, (30, 3))
+    T = robot.tip_poses(q)
+    P = T[:, :3, 3] + T[:, :3, :3] @ np.array([0.02, 0.01, 0.03])
+    turned = q.copy()
+    turned[:, 2] += 6 * np.pi
+    common = ["--tip", "tip", "--model", "offsets", "--lambda", "0.001", "--tool-offset",
+              "0.02", "0.01", "0.03", "-q"]
+    for name, values in (("within.csv", q), ("turned.csv", turned),
+                         ("degrees.csv", np.degrees(q))):
+        _write_rows(tmp_path / name, ["j1", "j2", "spin", "x", "y", "z"], np.hstack([values, P]))
+    for name in ("within", "turned"):
+        assert main(["calibrate", str(urdf), str(tmp_path / f"{name}.csv"), *common, "--out",
+                     str(tmp_path / f"{name}.urdf"), "--frames-out",
+                     str(tmp_path / f"{name}.json")]) == 0
+        assert "degrees" not in capsys.readouterr().err
+    a, b = (json.loads((tmp_path / f"{n}.json").read_text())["sets"][0]["frames"]
+            for n in ("within", "turned"))
+    assert max(abs(a[k] - b[k]) for k in a) < 1e-9
+    before = _snapshot(tmp_path)
+    assert main(["calibrate", str(urdf), str(tmp_path / "degrees.csv"), *common, "--out",
+                 str(tmp_path / "degrees.urdf")]) == 1
+    assert "degrees" in _error_line(capsys)
+    assert _snapshot(tmp_path) == before
+
+
+def _write_rows(path, header, rows):
+    path.write_text(",".join(header) + "\n" + "".join(
+        ",".join(repr(float(v)) for v in r) + "\n" for r in rows))

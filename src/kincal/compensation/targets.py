@@ -104,6 +104,7 @@ def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
         R = rotations(np.column_stack([table.values[c] for c in columns]), fmt.name, A,
                       str(table.path), table.lines, columns)
     for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, seeds, table.lines)
-                    + angle_unit_warnings(g.joint_names, g.kinds, seeds, angle_unit)):
+                    + angle_unit_warnings(g.joint_names, g.kinds, seeds, angle_unit,
+                                          g.lower, g.upper)):
         warnings.warn(f"{table.path}: {message}", KincalWarning)
     return Targets(seeds, positions, R, table.lines, str(table.path))

@@ -408,8 +408,9 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         spread_mm = s_all * 1e3
     angle_max, outside = 0.0, False
     for dt, robot in zip(datas, problem.robots):  # each set against its own chain
-        gi = robot.geometry
-        rev = [j for j, k in enumerate(gi.kinds) if k == "revolute"]
+        gi = robot.geometry  # continuous joints (no limits) may turn many times: no clue
+        rev = [j for j, k in enumerate(gi.kinds) if k == "revolute"
+               and (np.isfinite(gi.lower[j]) or np.isfinite(gi.upper[j]))]
         if not rev:
             continue
         # the first largest |value| in row-major order over the revolute columns, a column

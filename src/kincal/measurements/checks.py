@@ -29,12 +29,17 @@ def limit_warnings(joint_names, kinds, lower, upper, q, rows) -> list[str]:
     return out
 
 
-def angle_unit_warnings(joint_names, kinds, q, angle_unit: str) -> list[str]:
-    """Revolute values that look like degrees read as radians, or the reverse."""
+def angle_unit_warnings(joint_names, kinds, q, angle_unit: str, lower=None,
+                        upper=None) -> list[str]:
+    """Revolute values that look like degrees read as radians, or the reverse. With the
+    joints' limits (lower, upper), large values of a continuous joint (no limits: it may
+    turn many times) are no sign of degrees."""
     rev = [j for j, k in enumerate(kinds) if k == "revolute"]
     if not rev:
         return []
-    biggest = float(np.max(np.abs(q[:, rev])))
+    bounded = rev if lower is None or upper is None else [
+        j for j in rev if np.isfinite(lower[j]) or np.isfinite(upper[j])]
+    biggest = float(np.max(np.abs(q[:, bounded]))) if bounded else 0.0
     if angle_unit == "rad" and biggest > DEGREES_AS_RADIANS:
         return [f"revolute joint values reach {biggest:.4g} rad ({biggest / np.pi:.1f} pi): were "
                 "they degrees? Read them with --angle-unit deg (Python: angle_unit='deg')"]
@@ -112,7 +117,8 @@ def set_warnings(data, geometry, backlash=()) -> list[str]:
     q = data.joint_values[pose]
     g = geometry
     out = (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, data.rows[pose])
-           + angle_unit_warnings(g.joint_names, g.kinds, q, getattr(data, "angle_unit", "rad")))
+           + angle_unit_warnings(g.joint_names, g.kinds, q, getattr(data, "angle_unit", "rad"),
+                                 g.lower, g.upper))
     order = getattr(data, "order_source", "the order of the rows")
     timelike = [c for c in data.ignored_columns
                 if re.search(r"time|stamp|(^|_)t($|_)", c, re.IGNORECASE)]

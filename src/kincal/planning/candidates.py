@@ -59,7 +59,8 @@ def read_candidates(path, robot: "Robot", length_unit: str = "m", angle_unit: st
     unit = [L if k == "prismatic" else A for k in g.kinds]
     q = np.column_stack([table.values[columns[j]] * u for j, u in zip(robot.joint_names, unit)])
     for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, table.lines)
-                    + angle_unit_warnings(g.joint_names, g.kinds, q, angle_unit)):
+                    + angle_unit_warnings(g.joint_names, g.kinds, q, angle_unit, g.lower,
+                                          g.upper)):
         warnings.warn(f"{table.path}: {message}", KincalWarning)
     return q, table.lines
 
