@@ -510,3 +510,27 @@ def test_added_frames_hang_on_each_sets_own_chain(tmp_path, capsys):
                           tip="kincal_tool_point" + suffix)
         predicted = seen.tip_poses(qs[k])[:, :3, 3]
         assert np.abs(predicted - sets[k].positions).max() < 1e-6  # [m], noise-free points
+
+
+def test_analyze_takes_several_chains_as_calibrate_does(tmp_path, capsys):
+    """kincal analyze with one --base/--tip per file (an argparse usage error before): the
+    parameters it says the data identify are those the calibration identifies."""
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(4)
+    ch, kin, true = _truth(robots, 1e-3, rng)
+    files = [_csv(tmp_path / f"s{k}.csv", _points(robots[k], true[k], _q(robots[k], 40, rng),
+                                                  k, 10e-6, rng)) for k in range(2)]
+    chains = ["--base", "base_link", "ctip", "--tip", "atip", "btip"]
+    assert main(["analyze", str(robots[0].source), *files, *chains, "--model", "placement",
+                 "--json"]) == 0
+    kept = set(json.loads(capsys.readouterr().out)["identifiability"]["kept"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["calibrate", str(robots[0].source), *files, *chains, "--model",
+                     "placement", "--out", str(tmp_path / "c.urdf"), "--json"]) == 0
+    identified = {p["name"] for p in json.loads(capsys.readouterr().out)["parameters"]
+                  if p["status"] == "identified"}
+    assert kept == identified and any(n.startswith("set2.") for n in kept)
+    assert main(["analyze", str(robots[0].source), *files, *chains, "--accuracy-map", "0", "0",
+                 "0", "0.1"]) == 1
+    assert "describe one chain; this analysis has several" in capsys.readouterr().err

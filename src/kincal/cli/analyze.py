@@ -12,7 +12,7 @@ from kincal.errors import OptionError
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("analyze", help="what the data can identify, without solving")
-    add_common(p)
+    add_common(p, chains=True)
     add_kinds(p)
     add_model(p, allow_all=True, allow_auto=True)
     g = group(p, "model and penalty")
@@ -86,28 +86,33 @@ def _analyze(a: Analyze):
     from kincal.identification.problem import CalibrationProblem
     from kincal.models import MODELS, default_for
 
-    robot = a.chain.load()
+    robots = Chain.load_all(a.chain.per_file(len(a.inputs.files)))  # each file's chain
+    robot = robots[0]
+    several = len({(r.base, r.tip) for r in robots}) > 1
+    if several and a.accuracy.asked:
+        raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
+                          "analysis has several (one --base/--tip per file)")
     protect = check_outputs(robot, [a.report, a.accuracy_plot], overwrite=a.overwrite,
                             inputs=a.inputs.files)
-    sets = a.inputs.read_sets(robot)
-    if a.model == "all":  # every model that can describe this chain
-        tree = default_for(robot.geometry) != "complete"
+    sets = a.inputs.read_sets(robots)
+    if a.model == "all":  # every model that can describe this chain (these chains)
+        tree = several or default_for(robot.geometry) != "complete"
         names = tuple(m for m in MODELS if not (tree and m in ("complete", "mdh")))
     else:
         names = (a.model,)
     if a.model == "all" and a.fix:
         raise OptionError("--model all compares the models as they are: give --fix with one "
                           "model (the parameter names differ between models)")
-    problems = {m: CalibrationProblem(robot, sets, CalibrationOptions(
+    problems = {m: CalibrationProblem(robots, sets, CalibrationOptions(
         model=m, fix=a.fix, backlash=a.backlash, compliance=a.compliance,
         tool_guess=a.inputs.tool_guess))
         for m in names}
     problem = problems[names[0]]
+    chains = ", ".join(dict.fromkeys(f"{r.base} -> {r.tip}" for r in robots))
     if len(sets) == 1 and problem.kinds[0].kind == "point":
-        print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(sets[0])} poses from "
-              f"{a.inputs.data}")
+        print(f"{robot.name} ({chains}), {len(sets[0])} poses from {a.inputs.data}")
     else:
-        print(f"kincal analysis of {robot.name} ({robot.base} -> {robot.tip}), error model "
+        print(f"kincal analysis of {robot.name} ({chains}), error model "
               f"{problem.model_name}: " + ", ".join(
                   f"{km.kind} ({km.data.source}, {km.N} samples)" for km in problem.kinds))
     if problem.model_choice is not None:  # --model auto: the candidates compared, nothing written
