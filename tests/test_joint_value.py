@@ -187,3 +187,35 @@ def test_mimic_column_off_its_rule_is_warned_and_bad_uses_refused(tmp_path, caps
     assert code == 1
     assert "no column for chain joint smimic, which mimics side in the URDF (smimic = 2 side " \
            "+ 0), a joint off the chain" in err
+
+
+def test_commands_that_treat_chain_joints_as_free_refuse_a_coupled_mimic(tmp_path, capsys):
+    """compensate solves for every chain joint, simulate draws them: with the finger
+    mimicking j3 on the same chain, their joint values would break the URDF's rule (the
+    robot moves the finger with j3), so they refuse in one line, writing nothing (compensate
+    wrote joint values 'reached' whose finger was off its rule by up to 4 deg for targets
+    5 mm off the seeds); simulate at given poses still runs."""
+    urdf, q, P, full, short = _mimic_files(tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code, out, err = run(capsys, "simulate", urdf, "--tip", "ftip", "--out",
+                         tmp_path / "sim.csv", "--center-m", "0.3", "0.1", "0.6")
+    assert code == 1 and err.strip().splitlines() == [
+        "kincal: error: finger mimics j3 in the URDF (finger = -0.5 j3 + 0.1), both on the "
+        "chain base_link -> ftip: kincal simulate (its joint values drawn) treats every chain "
+        "joint as free and would break that rule; choose a chain without the mimic joint (e.g. "
+        "a tip before finger)"]
+    assert main(["calibrate", str(urdf), str(full), "--tip", "ftip", "--model", "placement",
+                 "--lambda", "0.001", "--tool-offset", "0.01", "0.02", "0.03", "--out",
+                 str(tmp_path / "c.urdf"), "--frames-out", str(tmp_path / "f.json"), "-q"]) == 0
+    capsys.readouterr()
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code, out, err = run(capsys, "compensate", tmp_path / "c.urdf", full, "--frames",
+                         tmp_path / "f.json", "--out", tmp_path / "j.csv")
+    assert code == 1 and "kincal compensate (its joint values solved for) treats every " \
+        "chain joint as free" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    # given poses are the file's own values (calibrate checks them): simulated at them
+    poses = write(tmp_path / "poses.csv", ["j1", "j2", "j3", "finger"], q)
+    code, out, err = run(capsys, "simulate", urdf, "--tip", "ftip", "--poses-file", poses,
+                         "--out", tmp_path / "sim.csv")
+    assert code == 0, err

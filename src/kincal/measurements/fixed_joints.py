@@ -68,6 +68,22 @@ def mimicked(path, header, robot, fixed: dict, joint_columns=None) -> dict:
     return out
 
 
+def refuse_coupled(robot, what: str) -> None:
+    """OptionError when ``robot``'s chain has a mimic joint whose master is on it too:
+    ``what`` (joint values solved for or drawn as independent ones) would break the
+    URDF's rule, which a reader of the URDF (and the robot) follows."""
+    from kincal.errors import OptionError
+
+    for j in robot.joint_names:
+        m = robot.mimics.get(j)
+        if m is not None and m[0] in robot.joint_names:
+            raise OptionError(f"{j} mimics {m[0]} in the URDF ({j} = {m[1]:g} {m[0]} + "
+                              f"{m[2]:g}), both on the chain {robot.base} -> {robot.tip}: "
+                              f"{what} treats every chain joint as free and would break that "
+                              "rule; choose a chain without the mimic joint (e.g. a tip "
+                              f"before {j})")
+
+
 def check_mimics(data, robot, path) -> None:
     """Warn where a mimic joint's column differs from its master's value by the URDF's rule
     (both on the chain)."""
