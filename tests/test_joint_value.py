@@ -214,6 +214,10 @@ def test_commands_that_treat_chain_joints_as_free_refuse_a_coupled_mimic(tmp_pat
     assert code == 1 and "kincal compensate (its joint values solved for) treats every " \
         "chain joint as free" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+    code, out, err = run(capsys, "plan", urdf, "--tip", "ftip", "--random", "50", "--poses",
+                         "5", "--out", tmp_path / "plan.csv")
+    assert code == 1 and "kincal plan (its candidates drawn) treats every chain joint" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
     # given poses are the file's own values (calibrate checks them): simulated at them
     poses = write(tmp_path / "poses.csv", ["j1", "j2", "j3", "finger"], q)
     code, out, err = run(capsys, "simulate", urdf, "--tip", "ftip", "--poses-file", poses,

@@ -111,6 +111,10 @@ def run(args) -> int:
         raise OptionError("--target-cube is the working volume of --criterion i; "
                           "--criterion d does not use it")
     robot = p.chain.load()
+    if p.candidates is None:  # candidates drawn (--random, a volume), not read
+        from kincal.measurements.fixed_joints import refuse_coupled
+
+        refuse_coupled(robot, "kincal plan (its candidates drawn)")
     protect = check_outputs(robot, [p.out], overwrite=p.overwrite,
                             inputs=[p.candidates, p.measured])
     return _plan(p, robot, protect)
