@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from kincal.cli.main import main
 
@@ -78,3 +79,27 @@ def test_flush_contacts_from_simulation_to_calibration_and_plan(tmp_path, capsys
                  "--tool-offset", "0.02", "0", "0.1", "--out", str(tmp_path / "p.csv")]) == 0
     assert main(["simulate", "ec66", "--kind", "point", "--orientation-noise-deg", "0.1",
                  "--out", str(tmp_path / "x.csv")]) == 1
+
+
+def test_evaluate_judges_each_file_with_the_frames_calibrated_on_it(tmp_path, capsys):
+    """Two flush files of one chain (two sessions, each its own table): kincal evaluate of
+    either file with FRAMES.json gives the error the calibration reported for it. Before,
+    the second file was judged with the first one's table (1.5 mm instead of 0.08)."""
+    files = []
+    for k in (1, 2):
+        files.append(str(tmp_path / f"session{k}.csv"))
+        assert main(["simulate", "ec66", "--kind", "flush", "--poses", "30", "--seed", str(k),
+                     "--truth-seed", "5", "--tool-m", "0.01", "0.02", "0.1", "--out",
+                     files[-1], "-q"]) == 0
+    frames, report = str(tmp_path / "f.json"), str(tmp_path / "r.json")
+    assert main(["calibrate", "ec66", *files, "--on-plane", "--flush", "--tool-offset", "0.01",
+                 "0.02", "0.1", "--model", "offsets", "--out", str(tmp_path / "c.urdf"),
+                 "--frames-out", frames, "--report", report, "-q"]) == 0
+    reported = [s["errors"]["after"]["mean_mm"]
+                for s in json.loads(open(report).read())["sets"]]
+    capsys.readouterr()
+    for path, after in zip(files, reported):
+        assert main(["evaluate", str(tmp_path / "c.urdf"), path, "--on-plane", "--flush",
+                     "--frames", frames, "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["errors"]["mean_mm"] == pytest.approx(
+            after, rel=1e-9)

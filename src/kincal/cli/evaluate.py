@@ -143,13 +143,16 @@ def with_frames(robot, sets, frames, tool_guess=None):
 
 
 def saved_frames(frames, km, used: set) -> list[float]:
-    """The frame values FRAMES.json holds for a set of ``km``'s kind (the first of that kind
-    not used yet); a point set may read fewer tool points than the file has."""
+    """The frame values FRAMES.json holds for a set of ``km``'s kind: of the sets of that
+    kind not used yet, the one calibrated on this very file (its recorded source), else the
+    first (another day's file); a point set may read fewer tool points than the file has."""
     names = tuple(km.frame_names)
-    for j, s in enumerate(frames.sets):
-        if j in used or s.kind != km.kind or not all(n in s.names for n in names):
-            continue
+    fits = [j for j, s in enumerate(frames.sets) if j not in used and s.kind == km.kind
+            and all(n in s.names for n in names)]
+    same = [j for j in fits if _same_file(frames.sets[j].source, km.data.source)]
+    for j in same[:1] or fits[:1]:
         used.add(j)
+        s = frames.sets[j]
         return [s.value(n) for n in names]
     if km.kind == "point":
         K = km.data.n_points
@@ -160,3 +163,16 @@ def saved_frames(frames, km, used: set) -> list[float]:
     have = "; ".join(f"{s.kind} ({', '.join(s.names[:9])})" for s in frames.sets)
     raise DataError(f"{frames.source} holds no {km.kind} set with frames {', '.join(names)} "
                     f"for {km.data.source} (it holds: {have})")
+
+
+def _same_file(recorded: str, read: str) -> bool:
+    """Whether FRAMES.json's recorded source of a set names the data file ``read`` (the same
+    path, or, when that file is not where it was, the same name)."""
+    import os
+
+    if not recorded or not read:
+        return False
+    try:
+        return os.path.samefile(recorded, read)
+    except OSError:
+        return os.path.basename(recorded) == os.path.basename(read)
