@@ -440,3 +440,32 @@ def test_talos_log_closes_the_feet_loop_on_the_nominal_model():
     q[:, names.index("leg_left_3_joint")] += np.radians(1.0)
     d50_off, _, t50_off, _ = study.feet_closure(urdf, names, q)
     assert d50_off > 1.0 and t50_off > 0.1
+
+
+def test_evaluate_gives_roll_and_pitch_as_the_study_computes_them(tmp_path, capsys):
+    """kincal evaluate on flush touches reports the RMS roll (about the contact frame's x
+    axis) and pitch (about its y axis) beside the tilt; on the real TALOS held-out touches
+    they equal what scripts/talos_contact.py computes from the written files on its own
+    (Pinocchio tip poses, FRAMES.json's plane), and roll^2 + pitch^2 is the tilt's RMS^2."""
+    import json
+
+    from kincal.cli.main import main
+
+    study = _talos_study()
+    names, q_train = study.joint_rows(study.DATA / "left_train.csv")
+    _, q_valid = study.joint_rows(study.DATA / "left_validation.csv")
+    urdf = study.talos_urdf()
+    cal, frames = study.calibrate(tmp_path, urdf, study.DATA / "left_train.csv", "cal")
+    valid = tmp_path / "valid.csv"
+    study.write_joint_csv(valid, names, q_valid)
+    capsys.readouterr()
+    assert main(["evaluate", str(cal), str(valid), "--frames", str(frames), "--base",
+                 study.BASE, "--tip", study.TIP, "--on-plane", "--flush", "--json"]) == 0
+    o = json.loads(capsys.readouterr().out)["orientation_errors"]
+    _, roll, pitch = study.held_out(cal, frames, q_train, q_valid, names, plane="")
+    assert o["roll_rms_deg"] == pytest.approx(roll, abs=1e-6)
+    assert o["pitch_rms_deg"] == pytest.approx(pitch, abs=1e-6)
+    assert o["roll_rms_deg"] ** 2 + o["pitch_rms_deg"] ** 2 == pytest.approx(o["rms_deg"] ** 2)
+    assert main(["evaluate", str(cal), str(valid), "--frames", str(frames), "--base",
+                 study.BASE, "--tip", study.TIP, "--on-plane", "--flush"]) == 0
+    assert f"RMS roll {roll:.4f}, pitch {pitch:.4f} deg" in capsys.readouterr().out
