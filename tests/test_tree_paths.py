@@ -469,3 +469,12 @@ def test_evaluate_gives_roll_and_pitch_as_the_study_computes_them(tmp_path, caps
     assert main(["evaluate", str(cal), str(valid), "--frames", str(frames), "--base",
                  study.BASE, "--tip", study.TIP, "--on-plane", "--flush"]) == 0
     assert f"RMS roll {roll:.4f}, pitch {pitch:.4f} deg" in capsys.readouterr().out
+    # calibrate --validate: the same held-out roll and pitch, before and after
+    assert main(["calibrate", str(urdf), str(study.DATA / "left_train.csv"), "--base",
+                 study.BASE, "--tip", study.TIP, "--on-plane", "--flush", "--tool-offset", "0",
+                 "0", "-0.12", "--validate", str(valid), "--out", str(tmp_path / "v.urdf"),
+                 "--json"]) == 0
+    v = json.loads(capsys.readouterr().out)["validation"]["orientation_errors"]
+    assert v["after"]["roll_rms_deg"] == pytest.approx(roll, abs=1e-6)
+    assert v["after"]["pitch_rms_deg"] == pytest.approx(pitch, abs=1e-6)
+    assert v["before"]["rms_deg"] > 3 * v["after"]["rms_deg"]

@@ -20,6 +20,7 @@ def held_out(result, inputs, path: str):
 
     from kincal.cli.evaluate import with_frames
     from kincal.export.validation import Validation
+    from kincal.identification.statistics import angle_stats
 
     if result.chains is not None and result.chains.several:
         raise OptionError("--validate evaluates one chain; this calibration has several "
@@ -40,9 +41,7 @@ def held_out(result, inputs, path: str):
         out.append((problem.residuals(x, 0), errors))
     km = problem.kinds[0]
     per_axis = km.kind == "pose" or (km.kind == "point" and getattr(km.data, "n_points", 1) == 1)
-    orientation: tuple[float, float] | None = None
-    if km.kind == "pose":  # mean orientation error [deg], before and after
-        before, after = (float(np.degrees(np.mean(km.orientation_errors(r)))) for r, _ in out)
-        orientation = (before, after)
+    before, after = (angle_stats(km, r) for r, _ in out)
+    angles = None if before is None or after is None else (before, after)
     return Validation(str(path), km.kind, np.asarray(km.data.rows), out[0][0], out[1][0],
-                      out[0][1], out[1][1], per_axis, orientation)
+                      out[0][1], out[1][1], per_axis, angles)

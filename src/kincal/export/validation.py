@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.identification.statistics import ErrorStats
+from kincal.identification.statistics import AngleStats, ErrorStats
 from kincal.measurements.csv_table import csv_line
 
 AXES = ("x", "y", "z")
@@ -25,7 +25,9 @@ class Validation:
     numbers. residuals_before / residuals_after: (N, dim) measured minus predicted [m];
     errors_before / errors_after: (N,) each sample's error [m]. Per-axis figures exist
     for point (one point per pose) and pose data, whose first three residual columns are
-    x, y, z of the position in the measurement frame."""
+    x, y, z of the position in the measurement frame. angles: (before, after) statistics
+    of the orientation errors [deg] (poses: the rotation angle; flush touches: the tilt
+    against the plane, with its roll and pitch), None for kinds without one."""
 
     source: str
     kind: str
@@ -35,7 +37,11 @@ class Validation:
     errors_before: np.ndarray
     errors_after: np.ndarray
     per_axis: bool
-    orientation_deg: tuple[float, float] | None = None  # poses: mean before, after [deg]
+    angles: tuple[AngleStats, AngleStats] | None = None
+
+    @property
+    def angle_label(self) -> str:
+        return "tilt against the plane" if self.kind == "flush" else "orientation"
 
     @property
     def before(self) -> ErrorStats:
@@ -58,14 +64,19 @@ class Validation:
             out += [(f"{axis} (rms)", float(rb[k]), float(ra[k])) for k, axis in enumerate(AXES)]
         out += [("norm: mean", b.mean, a.mean), ("norm: rms", b.rms, a.rms),
                 ("norm: max", b.max, a.max)]
-        if self.orientation_deg is not None:
-            out.append(("orientation: mean [deg]", *self.orientation_deg))
+        if self.angles is not None:
+            b0, a0 = self.angles
+            label = "tilt" if self.kind == "flush" else "orientation"
+            out += [(f"{label}: mean [deg]", b0.mean, a0.mean),
+                    (f"{label}: rms [deg]", b0.rms, a0.rms)]
+            out += [(f"{k}: rms [deg]", vb, va) for (k, vb), (_, va) in zip(b0.axes, a0.axes)]
         return out
 
     def headline(self) -> str:
         what = "" if self.kind == "point" else f" ({self.kind} errors)"
         return (f"held-out {self.source}{what}, {len(self.rows)} samples: mean "
-                f"{self.before.mean:.3f} -> {self.after.mean:.3f} mm, max "
+                f"{self.before.mean:.3f} -> {self.after.mean:.3f} mm, RMS "
+                f"{self.before.rms:.3f} -> {self.after.rms:.3f} mm, max "
                 f"{self.before.max:.3f} -> {self.after.max:.3f} mm")
 
     def lines(self) -> list[str]:
@@ -75,8 +86,12 @@ class Validation:
             rb, ra = self.axis_rms_mm(self.residuals_before), self.axis_rms_mm(self.residuals_after)
             out.append("  rms per axis [mm]: " + ", ".join(
                 f"{axis} {rb[k]:.3f} -> {ra[k]:.3f}" for k, axis in enumerate(AXES)))
-        if self.orientation_deg is not None:
-            out.append("  orientation mean [deg]: {:.4f} -> {:.4f}".format(*self.orientation_deg))
+        if self.angles is not None:
+            b0, a0 = self.angles
+            parts = "".join(f", {k} {vb:.4f} -> {va:.4f}"
+                            for (k, vb), (_, va) in zip(b0.axes, a0.axes))
+            out.append(f"  {self.angle_label} [deg]: mean {b0.mean:.4f} -> {a0.mean:.4f}, RMS "
+                       f"{b0.rms:.4f} -> {a0.rms:.4f}" + (f" ({parts[2:]})" if parts else ""))
         return out
 
     def as_dict(self) -> dict:
@@ -90,9 +105,11 @@ class Validation:
             out["rms_per_axis_mm"] = {
                 "before": dict(zip(AXES, self.axis_rms_mm(self.residuals_before).tolist())),
                 "after": dict(zip(AXES, self.axis_rms_mm(self.residuals_after).tolist()))}
-        if self.orientation_deg is not None:
-            out["orientation_mean_deg"] = {"before": self.orientation_deg[0],
-                                           "after": self.orientation_deg[1]}
+        if self.angles is not None:
+            from kincal.export.report import angle_dict
+
+            out["orientation_errors"] = {"before": angle_dict(self.angles[0]),
+                                         "after": angle_dict(self.angles[1])}
         return out
 
 
