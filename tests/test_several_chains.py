@@ -309,6 +309,12 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
                      "btip", *one_chain, "--out", str(out)]) == 1
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "describe one chain; this calibration has several" in err[0]
+    # --validate judges one chain: refused before any fit, saying how to judge each chain
+    assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
+                 "btip", "--validate", files[1], "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--validate evaluates one chain" in err[0]
+    assert "kincal evaluate CAL.urdf HELD.csv --frames FRAMES.json --base B --tip T" in err[0]
     assert {p: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

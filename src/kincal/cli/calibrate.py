@@ -240,9 +240,10 @@ def run(args) -> int:
                           "calibration has several (one --base/--tip per file)")
     inputs = c.inputs.files + ((c.validate,) if c.validate else ())
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots])
-    if c.validate and several:
-        raise OptionError("--validate evaluates one chain; this calibration has several "
-                          "(one --base/--tip per file)")
+    if c.validate:
+        from kincal.cli.validate import one_chain
+
+        one_chain(several)
     sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain
     options = calibration_options(c)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report

@@ -13,6 +13,15 @@ import dataclasses
 from kincal.errors import OptionError
 
 
+def one_chain(several: bool) -> None:
+    """Refuse --validate for a calibration of several chains, saying what to do instead."""
+    if several:
+        raise OptionError("--validate evaluates one chain; this calibration has several "
+                          "(one --base/--tip per file): judge each chain's held-out file with "
+                          "kincal evaluate CAL.urdf HELD.csv --frames FRAMES.json --base B "
+                          "--tip T (the frames of that chain's sets are taken)")
+
+
 def held_out(result, inputs, path: str):
     """The :class:`~kincal.export.validation.Validation` of ``result`` on ``path``, read as
     the training files are (``inputs``: their reading options)."""
@@ -22,9 +31,7 @@ def held_out(result, inputs, path: str):
     from kincal.export.validation import Validation
     from kincal.identification.statistics import angle_stats
 
-    if result.chains is not None and result.chains.several:
-        raise OptionError("--validate evaluates one chain; this calibration has several "
-                          "(one --base/--tip per file)")
+    one_chain(result.chains is not None and result.chains.several)
     reading = dataclasses.replace(inputs, files=(path,), set_sigma_mm=None)
     sets = reading.read_sets(result.robot)
     after_frames = result.frames()
