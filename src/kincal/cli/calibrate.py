@@ -66,10 +66,12 @@ def register(subparsers) -> None:
     g.add_argument("--robust-scale-mm", type=float, help="scale of the robust loss [mm] "
                    "(default 2.5 x the median pose error)")
     group(p, "inputs").add_argument(
-        "--validate", metavar="HELD.csv",
+        "--validate", metavar="HELD.csv", nargs="+", default=[],
         help="held-out data (read as DATA is, same kind as a training file): its errors "
              "before and after, per axis, with the frames from the calibration (as kincal "
-             "evaluate --frames), in the summary, --report and --html")
+             "evaluate --frames), in the summary, --report and --html. One file, or one per "
+             "data file, each judged on that file's chain with its set's frames (several "
+             "chains: one per data file)")
     g.add_argument("--cv-max-poses", type=int, default=2000, metavar="N",
                    help="choose lambda by CV on a random N of the poses when there are more "
                         "(default 2000; 0: all poses); the final fit uses every pose")
@@ -137,7 +139,7 @@ class Calibrate:
     mdh_out: str | None
     plots: str | None
     html: str | None
-    validate: str | None
+    validate: tuple[str, ...]  # held-out files: none, one, or one per data file
     residuals_out: str | None
     overwrite: bool
     accept_implausible: bool
@@ -195,10 +197,11 @@ def _ur_hash(c: Calibrate, robot) -> str:
     return found
 
 
-def json_summary(result, validation, refused: bool) -> dict:
+def json_summary(result, validations, refused: bool) -> dict:
     """The summary of ``--json``: the run's figures (REPORT.json's keys, without the
     per-sample residuals), given out by :func:`kincal.cli.console.summary_lines`."""
     from kincal.export import report
+    from kincal.export.validation import validation_dict
 
     full = report.result_dict(result)
     keep = ("robot", "data", "lambda", "penalty_choice", "evidence", "errors", "parameters",
@@ -207,7 +210,7 @@ def json_summary(result, validation, refused: bool) -> dict:
             **{k: full[k] for k in keep},
             "identifiability": {k: full["identifiability"][k] for k in
                                 ("rank", "condition_number", "kept", "fixed")},
-            "validation": None if validation is None else validation.as_dict()}
+            "validation": validation_dict(validations)}
 
 
 def run(args) -> int:
@@ -238,12 +241,12 @@ def run(args) -> int:
     if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
-    inputs = c.inputs.files + ((c.validate,) if c.validate else ())
+    inputs = c.inputs.files + c.validate
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots])
     if c.validate:
-        from kincal.cli.validate import one_chain
+        from kincal.cli.validate import check_count
 
-        one_chain(several)
+        check_count(len(c.validate), len(c.inputs.files), several)
     sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain
     options = calibration_options(c)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
@@ -256,11 +259,12 @@ def run(args) -> int:
                 options.solver.progress.close()
     for w in caught:  # and passed on to be printed as usual
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    validation = None
+    validations: tuple = ()
     if c.validate:
         from kincal.cli.validate import held_out
 
-        validation = held_out(result, c.inputs, c.validate)
+        validations = tuple(held_out(result, c.inputs, path, k if len(c.validate) > 1 else None)
+                            for k, path in enumerate(c.validate))
     refused = False
     try:  # the gate before any further work (write_calibration checks it again, quietly)
         accepted = gate(result, c.accept_implausible, c.accept_unconverged)
@@ -268,7 +272,7 @@ def run(args) -> int:
         if not (c.report or c.html or c.plots or c.residuals_out):  # no diagnosis asked
             if not c.quiet:
                 print("\n".join(summary_lines(c.json, [result.summary()],
-                                               json_summary(result, validation, True))))
+                                               json_summary(result, validations, True))))
             raise
         refused, accepted = True, []  # the writer writes the diagnosis, then raises
     for message in accepted:
@@ -284,11 +288,12 @@ def run(args) -> int:
         if c.quiet:
             return []
         if c.json:  # stdout holds the JSON alone; what was written goes to stderr
-            return summary_lines(True, (), json_summary(result, validation, refused), written)
+            return summary_lines(True, (), json_summary(result, validations, refused),
+                                 written)
         out = [result.summary()]
         out += [f"  {line}" for line in result.identifiability.summary().splitlines()[1:]
                 if c.verbose or line.startswith(("weak", "  the poses"))]
-        if validation is not None:
+        for validation in validations:
             out += [f"  {line}" for line in validation.lines()]
         out += [f"  export: {n}" for n in notes]
         if amap is not None:
@@ -310,7 +315,7 @@ def run(args) -> int:
             warnings_seen=[str(w.message) for w in caught
                            if issubclass(w.category, KincalWarning)],
             data_source=", ".join(c.inputs.files), command=c.command_line or None,
-            validation=validation,
+            validations=validations,
             xacro_args=xacro_args(c.chain.xacro_arg),
             before_commit=lambda written, notes: say(lines(written, notes)))
     return 0

@@ -125,7 +125,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                       accept_unconverged: bool = False, accuracy=None,
                       warnings_seen=(), data_source: str | None = None,
                       before_commit=None, command=None, xacro_args=None,
-                      validation=None, dirs=()) -> Written:
+                      validations=(), dirs=()) -> Written:
     """Check the gate, then write every output of ``outputs`` all-or-none.
 
     accuracy: a predicted accuracy map to add to the report, the HTML and the plots.
@@ -133,8 +133,8 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     (written paths, export notes) once every file is staged and before any takes its name
     (the command line prints there, so that a console that fails leaves nothing written).
     command / xacro_args: the command line and the xacro arguments, for the provenance
-    every file carries (:mod:`kincal.export.provenance`). validation: a
-    :class:`~kincal.export.validation.Validation` (held-out errors) for the report and
+    every file carries (:mod:`kincal.export.provenance`). validations: the
+    :class:`~kincal.export.validation.Validation` of each held-out file for the report and
     the HTML. dirs: folders the writing may make for the files, outermost first (one level
     each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. the
     fleet's folder and a unit's staging folder. A result the gate refuses still gets the
@@ -164,7 +164,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     from kincal.export.provenance import Provenance, stamp_urdf
 
     sources = [s.source for s in result.sets]
-    held = () if validation is None else (validation.source,)
+    held = tuple(v.source for v in validations)
     try:
         accepted = gate(result, accept_implausible, accept_unconverged)
     except (ImplausibleResultError, NotConvergedError) as exc:
@@ -177,7 +177,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         prov = Provenance.of(result, command=command, xacro_args=xacro_args, refused=why,
                              more_data=held)
         staged = _diagnosis(result, diagnosis, prov, None, warnings_seen,
-                            data_source or ", ".join(sources), (), validation, refused=why)
+                            data_source or ", ".join(sources), (), validations, refused=why)
         written = _write(result, diagnosis, staged, sources, before_commit, (), dirs)
         result.plausibility.check(  # raises again, saying where the diagnosis went
             accept_implausible, accept_unconverged,
@@ -217,7 +217,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         if o.mdh is not None:
             files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,
-                        data_source or ", ".join(sources), notes, validation)
+                        data_source or ", ".join(sources), notes, validations)
     return _write(result, o, files, sources, before_commit, notes, dirs)
 
 
@@ -249,7 +249,7 @@ def _shown(written, plots) -> list:
 
 
 def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, notes,
-               validation, refused: str | None = None) -> list:
+               validations, refused: str | None = None) -> list:
     """(path, content) of the report, the plots and the HTML: what a calibration's
     diagnosis is, written whether the gate accepted the result or refused it."""
     from kincal.export import report
@@ -259,8 +259,10 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
         content = report.result_dict(result, data_source)
         if accuracy is not None:
             content["accuracy_map"] = accuracy.as_dict()
-        if validation is not None:
-            content["validation"] = validation.as_dict()
+        if validations:
+            from kincal.export.validation import validation_dict
+
+            content["validation"] = validation_dict(validations)
         if refused is not None:
             content["refused"] = {"verdict": "REFUSED", "message": refused}
         content["provenance"] = prov.as_dict()
@@ -268,7 +270,7 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
     if o.residuals is not None:
         from kincal.export.validation import residuals_csv
 
-        files.append((o.residuals, residuals_csv(result, validation, prov.hash_comment())))
+        files.append((o.residuals, residuals_csv(result, validations, prov.hash_comment())))
     if o.plots is not None:
         files += _plots(result, Path(o.plots), accuracy, prov)
     if o.html is not None:
@@ -277,7 +279,7 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
         files.append((o.html, html_report(
             result, accuracy=accuracy, data_source=data_source,
             warnings=list(warnings_seen), notes=[f"export: {n}" for n in notes],
-            provenance=prov, refused=refused, validation=validation)))
+            provenance=prov, refused=refused, validations=validations)))
     return files
 
 

@@ -27,7 +27,8 @@ class Validation:
     for point (one point per pose) and pose data, whose first three residual columns are
     x, y, z of the position in the measurement frame. angles: (before, after) statistics
     of the orientation errors [deg] (poses: the rotation angle; flush touches: the tilt
-    against the plane, with its roll and pitch), None for kinds without one."""
+    against the plane, with its roll and pitch), None for kinds without one. chain: the
+    chain it was judged on ("base -> tip") in a calibration of several, else ""."""
 
     source: str
     kind: str
@@ -38,6 +39,7 @@ class Validation:
     errors_after: np.ndarray
     per_axis: bool
     angles: tuple[AngleStats, AngleStats] | None = None
+    chain: str = ""  # "base -> tip" when the calibration has several chains
 
     @property
     def angle_label(self) -> str:
@@ -74,6 +76,8 @@ class Validation:
 
     def headline(self) -> str:
         what = "" if self.kind == "point" else f" ({self.kind} errors)"
+        if self.chain:
+            what += f" on {self.chain}"
         return (f"held-out {self.source}{what}, {len(self.rows)} samples: mean "
                 f"{self.before.mean:.3f} -> {self.after.mean:.3f} mm, RMS "
                 f"{self.before.rms:.3f} -> {self.after.rms:.3f} mm, max "
@@ -99,6 +103,7 @@ class Validation:
         from kincal.export.report import stats_dict
 
         out = {"source": self.source, "kind": self.kind, "samples": len(self.rows),
+               **({"chain": self.chain} if self.chain else {}),
                "frames": "from the calibration (not refitted on the held-out data)",
                "errors": {"before": stats_dict(self.before), "after": stats_dict(self.after)}}
         if self.per_axis:
@@ -113,15 +118,22 @@ class Validation:
         return out
 
 
-def residuals_csv(result, validation: Validation | None, header: str = "") -> str:
+def validation_dict(validations) -> dict | list | None:
+    """REPORT.json's and the --json summary's ``validation``: None without held-out data,
+    one file's dict, or a list of them (one held-out file per data file)."""
+    dicts = [v.as_dict() for v in validations]
+    return None if not dicts else dicts[0] if len(dicts) == 1 else dicts
+
+
+def residuals_csv(result, validations=(), header: str = "") -> str:
     """Every sample's residual vector after calibration (training sets, then the held-out
-    set) as CSV: split, set, source, kind, row, error_m, r1..rD [m] (D the widest set's
+    sets) as CSV: split, set, source, kind, row, error_m, r1..rD [m] (D the widest set's
     residual size; point sets: dx dy dz per measured point; poses: position, then the
     orientation rows in metres through their sigma ratio). ``header``: ``#`` lines put
     first."""
     parts = [("training", k + 1, s.source, s.kind, s.rows, s.residuals, s.errors_after)
              for k, s in enumerate(result.sets)]
-    if validation is not None:
+    for validation in validations:
         parts.append(("held-out", len(parts) + 1, validation.source, validation.kind,
                       validation.rows, validation.residuals_after, validation.errors_after))
     width = max(np.asarray(p[5]).reshape(len(p[4]), -1).shape[1] for p in parts)
