@@ -252,8 +252,17 @@ def run(args) -> int:
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
         warnings.simplefilter("always", KincalWarning)
         targets = c.accuracy.targets(robot)  # bad values fail here, before solving
+        problem = CalibrationProblem(robots, sets, options)
+        if c.accuracy.asked:
+            from kincal.planning.accuracy_map import mappable
+
+            if not mappable(problem.kinds):
+                raise OptionError("--accuracy-map and --accuracy-poses predict positions of a "
+                                  "point or pose set (its measurement frame and tool point); "
+                                  "these data have none (" + ", ".join(
+                                      dict.fromkeys(km.kind for km in problem.kinds)) + ")")
         try:
-            result = CalibrationProblem(robots, sets, options).solve()
+            result = problem.solve()
         finally:
             if options.solver.progress is not None:
                 options.solver.progress.close()
@@ -279,9 +288,11 @@ def run(args) -> int:
         warnings.warn(message, KincalWarning)
     amap = None
     if (targets or c.html) and not refused:
-        from kincal.planning.accuracy_map import result_accuracy_map
+        from kincal.planning.accuracy_map import mappable, result_accuracy_map
 
-        if (result.covariance is not None or targets) and not result.chains.several:
+        # --html alone: the map where the data allow one (a point or pose set, one chain)
+        if ((result.covariance is not None or targets) and not result.chains.several
+                and mappable(result.sets)):
             amap = result_accuracy_map(result, **targets)
 
     def lines(written, notes):

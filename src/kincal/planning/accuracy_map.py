@@ -225,6 +225,13 @@ def point_view(layout, error_model, i: int, n_points: int):
     return ParameterSpace.of_model(error_model, layout.backlash, n_points), idx
 
 
+def mappable(sets) -> bool:
+    """Whether any set (kind models or set results) has base.* and tool.*: a measurement
+    frame and tool point an accuracy map can predict positions of (point and pose sets)."""
+    return any("base.x" in (names := tuple(s.frame_names)) and "tool.x" in names
+               for s in sets)
+
+
 def _located(sets) -> int:
     """Index of the first set (kind models or set results) with base.* and tool.*."""
     for i, s in enumerate(sets):
