@@ -475,6 +475,19 @@ def test_a_weak_parameter_that_moved_most_names_the_penalty(method, weak, named)
         assert "a URDF that does not describe" in f.causes[-1]
 
 
+
+def test_a_weak_parameter_under_one_lambda_names_that_lambda():
+    """With CV's one lambda (no evidence scales) the cause names the lambda and the remedy
+    that applies to it (the evidence or a larger lambda), not prior scales."""
+    f = next(f for f in judge(_evidence(
+        change_rms_mm=500.0, method="l2", corrections=(("joint_6.alpha", 62.6, "deg"),),
+        weak_corrections=("joint_6.alpha",),
+        weak_scales="lambda 1e-06 chosen by cross-validation")).findings
+        if f.kind == "corrections")
+    assert "(lambda 1e-06 chosen by cross-validation)" in f.causes[0]
+    assert "--lambda evidence" in f.causes[0] and "--prior-mm" not in f.causes[0]
+
+
 def test_talos_three_copies_of_a_day_name_the_penalty(tmp_path, capsys):
     """The real TALOS touches read three times (three files of one day, each with its own
     table plane): the evidence's offset scale runs away and a wrist turn trades against

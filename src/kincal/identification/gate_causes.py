@@ -73,10 +73,12 @@ def weak_cause(ev: Evidence) -> tuple[str, ...]:
     """The penalty too weak for a weak parameter that moved most (see the module notes)."""
     if ev.method == "ls" or not ev.weak_corrections:
         return ()
-    scales = f", whose scale the evidence estimated at {ev.weak_scales}" if ev.weak_scales \
-        else ""
+    one = ev.weak_scales.startswith("lambda")
+    scales = ("" if not ev.weak_scales else f" ({ev.weak_scales})" if one
+              else f", whose scale the evidence estimated at {ev.weak_scales}")
+    remedy = ("choose the penalty by the evidence (--lambda evidence) or a larger lambda"
+              if one else "state the prior scales (--prior-mm, --prior-deg)")
     return (f"a penalty too weak for what the data barely tell apart: the largest "
             f"corrections ({', '.join(ev.weak_corrections)}) are weak parameters (their "
-            f"effect is nearly that of others), held only by the prior toward nominal"
-            f"{scales}; state the prior scales (--prior-mm, --prior-deg) or measure more "
-            "varied poses",)
+            f"effect is nearly that of others), held only by the penalty toward nominal"
+            f"{scales}; {remedy}, or measure more varied poses",)

@@ -119,8 +119,8 @@ class Evidence:
     off_chain_columns: columns of the data file named after URDF joints not on the chain.
     weak_corrections: when the largest correction is a parameter the data barely tell
         apart (the identifiability report's weak ones), the weak ones among the largest
-        four; weak_scales: their prior classes' scales where the evidence estimated them
-        (:mod:`kincal.identification.gate_causes`).
+        four; weak_scales: their prior classes' scales where the evidence estimated them,
+        or the penalty's one lambda (:mod:`kincal.identification.gate_causes`).
     """
 
     reach_m: float
@@ -143,7 +143,8 @@ class Evidence:
     equations: int = 0  # rows of the fit (3 per point, 3 per flush touch, ...); identified:
     identified: int = 0  # parameters the fit moved (plain LS on few equations per one: a cause)
     weak_corrections: tuple[str, ...] = ()  # the largest corrections if the largest is weak
-    weak_scales: str = ""  # their classes' prior scales as the evidence estimated them
+    weak_scales: str = ""  # their classes' prior scales as the evidence estimated them, or
+    #                        the one penalty weight ("lambda 0.001 chosen by cross-validation")
 
     @property
     def explained(self) -> float:
@@ -409,8 +410,9 @@ def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str
         return (), ""
     names = tuple(n for n, _, _ in corrections[:4] if n in weak)
     fit, lay = result.evidence, result.layout
-    if fit is None:
-        return names, ""
+    if fit is None:  # one lambda for every parameter
+        how = " chosen by cross-validation" if result.cv is not None else ""
+        return names, (f"lambda {result.lam:.3g}{how}" if math.isfinite(result.lam) else "")
     classes = dict.fromkeys(c for n, c in zip(lay.names, lay.classes) if n in names)
     unit = {"length": "mm", "twist": "deg", "offset": "deg"}
     return names, ", ".join(f"{c} {fit.scale_of(c):.3g} {unit[c]}" for c in classes
