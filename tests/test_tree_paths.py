@@ -226,6 +226,28 @@ def test_mdh_models_refuse_tree_paths_in_one_line(tmp_path):
     assert mdh.extract(below.geometry).n == below.geometry.n
 
 
+def test_mdh_out_on_a_tree_path_refused_before_the_fit(tmp_path, capsys):
+    """--mdh-out on a chain from a base off the tip's branch: one line saying why (no MD-H
+    table describes it) before any fit, nothing written (before: the error model's message
+    after the fit, about a model the user had not chosen)."""
+    from kincal.cli.main import main
+
+    path, _ = _tree(tmp_path, 0)
+    robot = Robot.load(path, base="atip", tip="btip")
+    q = random_joint_values(robot.geometry, np.random.default_rng(0), 20)
+    T = robot.tip_poses(q)
+    data = tmp_path / "d.csv"
+    data.write_text(",".join([*robot.joint_names, "x", "y", "z"]) + "\n" + "\n".join(
+        ",".join(repr(float(v)) for v in [*row, *t[:3, 3]]) for row, t in zip(q, T)) + "\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main(["calibrate", str(path), str(data), "--base", "atip", "--tip", "btip",
+                 "--out", str(tmp_path / "c.urdf"), "--mdh-out", str(tmp_path / "m.csv")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--mdh-out writes the chain as an MD-H table" in err[0], err
+    assert "traversed upward" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
 def test_bad_base_and_tip_in_one_line(tmp_path):
     path, _ = _tree(tmp_path, 0)
     with pytest.raises(FrameError, match="unknown base frame 'nowhere'") as exc:
