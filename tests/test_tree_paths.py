@@ -500,3 +500,23 @@ def test_evaluate_gives_roll_and_pitch_as_the_study_computes_them(tmp_path, caps
     assert v["after"]["roll_rms_deg"] == pytest.approx(roll, abs=1e-6)
     assert v["after"]["pitch_rms_deg"] == pytest.approx(pitch, abs=1e-6)
     assert v["before"]["rms_deg"] > 3 * v["after"]["rms_deg"]
+
+
+def test_plan_on_a_tree_path_uses_the_placement_model(tmp_path, capsys):
+    """kincal plan on a chain from a base off the tip's branch plans for the chain's default
+    model (placement), as calibrate fits it (before: the complete model's refusal)."""
+    from kincal.cli.main import main
+    from kincal.planning.pose_selection import select_poses
+
+    path, _ = _tree(tmp_path, 0)
+    robot = Robot.load(path, base="atip", tip="btip")
+    q = random_joint_values(robot.geometry, np.random.default_rng(1), 300)
+    chosen = select_poses(robot, q, 40, tool=(0.0, 0.0, 0.05))
+    assert len(chosen.indices) == 40
+    with pytest.raises(OptionError, match="tree path"):
+        select_poses(robot, q, 40, tool=(0.0, 0.0, 0.05), model="complete")
+    out = tmp_path / "plan.csv"
+    assert main(["plan", str(path), "--base", "atip", "--tip", "btip", "--random", "300",
+                 "--poses", "40", "--tool-offset", "0", "0", "0.05", "--out", str(out)]) == 0, \
+        capsys.readouterr().err
+    assert len(out.read_text().strip().splitlines()) >= 41
