@@ -102,3 +102,6 @@ def test_html_report_for_kinds_without_positions(tmp_path, capsys):
         assert code == 1 and err.count("kincal: error:") == 1, err
         assert f"these data have none ({kind})" in err
         assert sorted(p.name for p in tmp_path.iterdir()) == before
+        code, out, err = run(capsys, "analyze", "ec66", data, *extra, "--accuracy-map", 0.4, 0,
+                             0.3, 0.2)
+        assert code == 1 and f"these data have none ({kind})" in err and not out, (out, err)

@@ -103,6 +103,10 @@ def _analyze(a: Analyze):
         tool_guess=a.inputs.tool_guess))
         for m in names}
     problem = problems[names[0]]
+    if a.accuracy.asked:  # before the analysis is printed
+        from kincal.planning.accuracy_map import require_mappable
+
+        require_mappable(problem.kinds)
     if len(sets) == 1 and problem.kinds[0].kind == "point":
         print(f"{robot.name} ({robot.base} -> {robot.tip}), {len(sets[0])} poses from "
               f"{a.inputs.data}")

@@ -259,14 +259,10 @@ def run(args) -> int:
         warnings.simplefilter("always", KincalWarning)
         targets = c.accuracy.targets(robot)  # bad values fail here, before solving
         problem = CalibrationProblem(robots, sets, options)
-        if c.accuracy.asked:
-            from kincal.planning.accuracy_map import mappable
+        if c.accuracy.asked:  # before the fit
+            from kincal.planning.accuracy_map import require_mappable
 
-            if not mappable(problem.kinds):
-                raise OptionError("--accuracy-map and --accuracy-poses predict positions of a "
-                                  "point or pose set (its measurement frame and tool point); "
-                                  "these data have none (" + ", ".join(
-                                      dict.fromkeys(km.kind for km in problem.kinds)) + ")")
+            require_mappable(problem.kinds)
         try:
             result = problem.solve()
         finally:
