@@ -125,3 +125,38 @@ def test_ordinary_files_are_written_as_before():
     data = Measurements(("j1", "j2"), np.array([[0.25, -0.5]]), np.array([[1.0, 2.0, 0.1]]))
     assert data.to_csv_text() == "j1,j2,x,y,z\n0.25,-0.5,1.0,2.0,0.1\n"
     assert csv_line(["joint_1", "", "0.1"]) == "joint_1,,0.1"
+
+
+def test_a_semicolon_file_with_a_quoted_comma_name_is_read_as_semicolons(tmp_path):
+    """The separator is sniffed outside the header's quoted names: a semicolon file (a
+    European spreadsheet's export) whose first name is ``"a,b"`` was read as a comma file
+    (the comma inside the quotes counted): one column ``a,b;say...`` and a missing-column
+    error, or with other names the wrong cells. A tab file likewise, and a quoted ';'
+    inside a comma file does not make it a semicolon file."""
+    import pytest
+
+    from kincal.errors import KincalNote
+    from kincal.measurements.csv_table import read_columns, sniff_separator
+
+    assert sniff_separator('"a,b";j2;x') == ";"
+    assert sniff_separator('"a,b"\tj2\tx') == "\t"
+    assert sniff_separator('"a;b",j2,x') == ","
+    assert sniff_separator('"say ""x,y""";j2') == ";"  # doubled quotes inside
+    assert sniff_separator("j1;j2") == ";" and sniff_separator("j1,j2;x") == ","
+    robot = _robot(tmp_path)
+    q = np.random.default_rng(2).uniform(-1.0, 1.0, size=(12, 3))
+    data = Measurements(robot.joint_names, q, robot.tip_poses(q)[:, :3, 3])
+    for sep in (";", "\t"):
+        records = _records(data.to_csv_text())
+        path = tmp_path / "semi.csv"
+        path.write_text("\n".join(sep.join('"' + c.replace('"', '""') + '"' if ("," in c or
+                                           '"' in c) else c for c in r) for r in records)
+                        + "\n")
+        assert path.read_text().startswith('"a,b"' + sep)
+        with pytest.warns(KincalNote, match="separated by a (semicolon|tab)"):
+            back = Measurements.from_csv(path, robot.joint_names)
+        np.testing.assert_array_equal(back.joint_values, data.joint_values)
+        np.testing.assert_array_equal(back.positions, data.positions)
+        with pytest.warns(KincalNote):
+            cols = read_columns(path, ["a,b", "x"])
+        assert cols.separator == sep and cols.header[:3] == NAMES

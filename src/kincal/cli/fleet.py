@@ -106,7 +106,8 @@ def run(args) -> int:
         raise OptionError(f"{out}: unit folders exist ({', '.join(taken[:5])}); give "
                           "--overwrite to replace them")
     # no folder made here: the one writer makes DIR with the first file written into it (a
-    # unit's, or the summary's), so a run that fails before leaves nothing behind
+    # unit's, or the summary's), so a run that fails before leaves nothing behind; the
+    # units share it and never remove it, the command does if the run leaves it empty
     made = not out.exists()
     # absolute paths: a worker of a running scheduler (--scheduler) has a cwd of its own
     from kincal.descriptions import portable
@@ -129,9 +130,7 @@ def run(args) -> int:
     except BaseException as exc:  # Ctrl-C, SIGTERM: the workers are stopped by now
         for stage in out.glob(f"{STAGING}*"):  # no half-written unit is left behind
             shutil.rmtree(stage, ignore_errors=True)
-        if made and out.is_dir() and not any(out.iterdir()):
-            with contextlib.suppress(OSError):  # made by a unit stopped midway: no empty
-                out.rmdir()                     # folder is left either
+        _remove_if_empty(out, made)  # made by a unit stopped midway
         from kincal.cli.console import Terminated
 
         if not isinstance(exc, (KeyboardInterrupt, Terminated)):
@@ -151,15 +150,28 @@ def run(args) -> int:
     gate = (f"each unit's own gate: {status.count('calibrated')} calibrated, "
             f"{status.count('refused')} refused, {status.count('failed')} failed of "
             f"{len(status)} units (the prior is learnt from the calibrated ones)")
-    say_and_write(files, lambda written: summary_lines(
-        c.json, [summary.table()], {"command": "fleet", **summary.as_dict()}, written),
-        provenance=c.chain.provenance(robot, inputs.files, c.command_line,
-                                      verdict="per unit", gate=gate),
-        overwrite=c.overwrite, protect=protect, dirs=[out])
+    try:
+        say_and_write(files, lambda written: summary_lines(
+            c.json, [summary.table()], {"command": "fleet", **summary.as_dict()}, written),
+            provenance=c.chain.provenance(robot, inputs.files, c.command_line,
+                                          verdict="per unit", gate=gate),
+            overwrite=c.overwrite, protect=protect, dirs=[out])
+    except BaseException:
+        _remove_if_empty(out, made)  # the units' shared folder, if no unit's files are in it
+        raise
     if summary.prior is None:
         raise OptionError(f"fewer than 2 of the {len(jobs)} units were calibrated: no fleet "
                           f"prior written (see {out / SUMMARY_JSON})")
     return 0
+
+
+def _remove_if_empty(out: Path, made: bool) -> None:
+    """Remove the fleet's folder if this run made it and it is empty: the units make it as
+    a shared folder, which none of them removes (another may be writing into it), so that a
+    run that ends without a file in it leaves no empty folder behind."""
+    if made and out.is_dir() and not any(out.iterdir()):
+        with contextlib.suppress(OSError):
+            out.rmdir()
 
 
 def _shown(names, at_most: int = 5) -> str:

@@ -261,13 +261,18 @@ def _backup(target: Path) -> str:
     return name
 
 
-def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
+def write_all(files, *, overwrite: bool = False, protect=(), dirs=(), shared_dirs=(),
               before_commit=None) -> list[Path]:
     """Write several files as one transaction: all of them, or none; return the resolved paths.
 
     files: (path, content) pairs, the content bytes, str, or an iterable of str pieces
     (staged piece by piece, never joined: a large file written in blocks). dirs: folders that may be created for them (see
-    :func:`check_outputs`). Every target is checked before the first byte is written,
+    :func:`check_outputs`). shared_dirs: folders, outermost first and before ``dirs``, made
+    if missing like those but never removed again, even when the writing fails: a folder
+    that other writers running at the same time make and fill too (a fleet's folder, which
+    one unit's failure must not pull from under another unit about to write into it; its
+    owner, the fleet command, removes it if the run leaves it empty). Every target is
+    checked before the first byte is written,
     all contents are staged next to their targets, then committed; a failure at any
     point (KeyboardInterrupt included) restores every target and removes what was made.
     before_commit: called with the resolved targets once everything is staged, before the
@@ -276,12 +281,15 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
     """
     files = [(p, d.encode("utf-8") if isinstance(d, str) else d) for p, d in files]
     files = [(p, d if isinstance(d, bytes) else _encoded(d)) for p, d in files]
-    targets = check_outputs([p for p, _ in files], overwrite=overwrite, protect=protect, dirs=dirs)
+    targets = check_outputs([p for p, _ in files], overwrite=overwrite, protect=protect,
+                            dirs=[*shared_dirs, *dirs])
     made_dirs: list[Path] = []
     staged: list[str] = []
     done: list[tuple[Path, str | None]] = []  # (target, backup or None for a new file)
     current = "the outputs"
     try:
+        for d in shared_dirs:  # made if missing, never ours to remove
+            Path(d).expanduser().resolve().mkdir(exist_ok=True)
         for d in dirs:
             d = Path(d).expanduser().resolve()
             if not d.exists():

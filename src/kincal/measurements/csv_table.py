@@ -5,8 +5,8 @@ The one CSV reader behind :class:`kincal.measurements.Measurements` and the cand
 poses of :mod:`kincal.candidates`. A header row names the columns; blank lines and lines
 starting with ``#`` are skipped (line numbers stay those of the file); a byte-order mark
 and CRLF or CR line ends are accepted. The separator is a comma, or a semicolon or a tab
-when the header has one of those and no comma (sniffed from the header, and said in a
-:class:`KincalNote`). Every cell of a wanted column must be a finite number with a
+when the header has one of those and no comma outside its double-quoted names (sniffed
+from the header, and said in a :class:`KincalNote`). Every cell of a wanted column must be a finite number with a
 decimal point: a decimal comma ("0,5") is refused with a message saying so, never read as
 two cells or as 5. The columns of stated standard deviations (``sigma``, ``sigma_deg``)
 must lie in :data:`COLUMN_RANGES`; a value outside is refused with its line.
@@ -166,9 +166,15 @@ def _check_fit(path, line: int, header, row, cols, separator: str) -> None:
                         f"{_shift_hint(header, row, cols)}; name every data column")
 
 
+_QUOTED = re.compile(r'"(?:[^"]|"")*(?:"|$)')  # a quoted cell (to the line end if open)
+
+
 def sniff_separator(header_line: str) -> str:
-    """The separator of a CSV file from its header line: a comma if there is one, else a
-    semicolon or a tab, whichever occurs (a one-column header: a comma)."""
+    """The separator of a CSV file from its header line, outside its quoted cells (a
+    quoted name may hold a comma: ``"a,b";joint_2`` is separated by semicolons): a comma
+    if there is one, else a semicolon or a tab, whichever occurs (a one-column header: a
+    comma)."""
+    header_line = _QUOTED.sub("", header_line)
     if "," in header_line:
         return ","
     counts = {sep: header_line.count(sep) for sep in (";", "\t")}
