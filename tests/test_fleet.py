@@ -193,6 +193,24 @@ def test_existing_unit_folders_need_overwrite(fleet_files, fleet_dir, capsys):
     assert "kincal: error:" in capsys.readouterr().err
 
 
+def test_unit_names_are_unique_folders():
+    """x/a.csv, y/a.csv and a-2.csv made the units a-1, a-2, a-2: the second a-2 found the
+    first one's folder (failed, or with --overwrite replaced it), and the summary listed
+    one outcome twice, the other lost. Names equal but for case are one folder on a
+    case-insensitive file system; the fleet's own file names are refused."""
+    from kincal.cli.fleet import unit_names
+
+    assert unit_names(["x/a.csv", "y/a.csv", "a-2.csv", "b.csv"]) == ["a-1", "a-2-2", "a-2",
+                                                                       "b"]
+    assert unit_names(["u1.csv", "u2.csv"]) == ["u1", "u2"]
+    assert unit_names(["x/a.csv", "y/a.csv", "a-2.csv", "a-2-2.csv"]) == [
+        "a-1", "a-2-3", "a-2", "a-2-2"]
+    assert unit_names(["U1.csv", "x/u1.csv"]) == ["U1-1", "u1-2"]
+    for bad in ("FLEET.json.csv", "fleet.html.csv", ".partial-u1.csv"):
+        with pytest.raises(OptionError, match="rename the data file"):
+            unit_names([bad, "u2.csv"])
+
+
 def test_hierarchical_e_step_keeps_the_prior_as_it_is_and_its_width_where_blind(fleet_dir):
     """A round of the hierarchical fit: the prior's scale held at 1 (the evidence estimates
     only the noise), and the unit's posterior covariance: narrower than the prior where the

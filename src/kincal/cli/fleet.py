@@ -77,9 +77,34 @@ class Fleet:
 
 
 def unit_names(files) -> list[str]:
-    """Each file's unit name: its stem, made unique with its position when stems repeat."""
+    """Each file's unit name (its folder under DIR): its stem, made unique with its
+    position when stems repeat (``x/a.csv y/a.csv`` -> ``a-1 a-2``), and further when that
+    is another file's stem (``a-2.csv`` beside them: ``a-2-2``); names equal but for case
+    count as one (a case-insensitive file system has one folder for both). Two units in one
+    folder would replace each other's files, and the summary would count one twice. A name
+    the fleet's own files or staging folders take is refused."""
+    from kincal.fleet.unit import STAGING
+
     stems = [Path(f).stem for f in files]
-    return [s if stems.count(s) == 1 else f"{s}-{i + 1}" for i, s in enumerate(stems)]
+    keys = [s.casefold() for s in stems]
+    unique = {k for k in keys if keys.count(k) == 1}
+    names: list[str] = []
+    taken = set(unique)
+    for i, (stem, key) in enumerate(zip(stems, keys)):
+        name = stem
+        if key not in unique:
+            name, n = f"{stem}-{i + 1}", 1
+            while name.casefold() in taken:
+                n += 1
+                name = f"{stem}-{i + 1}-{n}"
+            taken.add(name.casefold())
+        names.append(name)
+    reserved = {n.casefold() for n in (PRIOR, SUMMARY_JSON, SUMMARY_HTML)}
+    for f, name in zip(files, names):
+        if name.casefold() in reserved or name.startswith(STAGING) or name in ("", ".", ".."):
+            raise OptionError(f"{f}: its unit would be DIR/{name}, a name the fleet's own files "
+                              f"or staging folders ({STAGING}*) take; rename the data file")
+    return names
 
 
 def run(args) -> int:
