@@ -238,8 +238,10 @@ def run(args) -> int:
     if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
-    inputs = c.inputs.files + ((c.validate,) if c.validate else ())
-    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots])
+    inputs = c.inputs.files + tuple(p for p in (c.validate, c.prior, c.accuracy.accuracy_poses)
+                                    if p)
+    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots],
+                  urdf_out=c.out)
     if c.validate and several:
         raise OptionError("--validate evaluates one chain; this calibration has several "
                           "(one --base/--tip per file)")

@@ -293,7 +293,9 @@ def _write(result, o: Outputs, files, sources, before_commit, notes, dirs=(),
         return Written((), notes)
     protect = [p for p in (result.robot.source, *sources) if p and not str(p).startswith("<")]
     hook = None if before_commit is None else (lambda targets: before_commit(targets, notes))
+    in_place = [(o.urdf, result.robot.source)] if o.urdf is not None and protect else []
     written = write_all(files, overwrite=o.overwrite, protect=[*protect, *o.protect],
+                        in_place=in_place,
                         dirs=[*dirs, *([o.plots] if o.plots is not None else [])],
                         shared_dirs=shared_dirs, before_commit=hook)
     return Written(tuple(written), notes)
