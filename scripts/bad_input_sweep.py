@@ -261,6 +261,10 @@ def output_cases():
         "{csv}", "--overwrite"], nothing
     yield "analyze report is the data, --overwrite", [
         "analyze", "ec66", "{csv}", "--report", "{csv}", "--overwrite"], nothing
+    yield "ur yaml of a URDF in another layout", cal[:1] + ["ur10", "{d}/../inputs/good.csv",
+                                                           "--out", "{d}/o.urdf", "--yaml-out",
+                                                           "{d}/k.yaml", "--yaml-format", "ur",
+                                                           "--ur-hash", "calib_1"], nothing
     yield "fleet unit named as the fleet's own file", [
         "fleet", "ec66", "{csv}", "{d}/FLEET.json.csv", "--out-dir", "{d}/D"], fleet_named
     yield "analyze report exists", ["analyze", "ec66", "{csv}", "--report", "{d}/out.urdf"], existing

@@ -182,12 +182,16 @@ def calibration_options(c: Calibrate):
 def _ur_hash(c: Calibrate, robot) -> str:
     """The hash of --yaml-format ur: --ur-hash, else the xacro's kinematics_params file's."""
     from kincal.cli.options import xacro_args
-    from kincal.export.cell_exports import UR_SEGMENTS, ur_hash_of, ur_joints
+    from kincal.export.cell_exports import (UR_SEGMENTS, ur_hash_of, ur_joints,
+                                            ur_layout_problem)
 
     if ur_joints(robot.joint_names) is None:
         raise OptionError("--yaml-format ur needs a chain of the six UR joints ("
                           + ", ".join(j for _, j in UR_SEGMENTS) + "); this chain has "
                           + (", ".join(robot.joint_names) or "none"))
+    problem = ur_layout_problem(robot)  # before the work, as the writer would refuse it
+    if problem is not None:
+        raise OptionError(problem)
     found = c.ur_hash or ur_hash_of(robot.source, xacro_args(c.chain.xacro_arg))
     if not found:
         raise OptionError("--yaml-format ur: no hash found (no kinematics_params file with a "
