@@ -201,3 +201,45 @@ def test_a_fleet_units_failure_leaves_the_shared_folder_to_the_unit_about_to_wri
     assert sorted(p.name for p in out.iterdir()) == ["B"]  # no staging folder of A's left
     assert sorted(p.name for p in (out / "B").iterdir()) == [
         "FRAMES.json", "REPORT.json", "corrected.urdf"]
+
+
+def test_a_fleet_unit_that_cannot_take_its_name_keeps_the_earlier_files(tmp_path, monkeypatch):
+    """--overwrite: the earlier DIR/<unit> is moved aside, the new one renamed in. When that
+    rename failed, the earlier files stayed hidden as DIR/.partial-old-<unit> (which the
+    command's clean-up of staging folders then deletes) and the unit came back as an
+    internal error; now they are back under their name and the unit fails with one line."""
+    import functools
+    import warnings
+
+    import numpy as np
+
+    from kincal.errors import KincalWarning
+    from kincal.fleet import unit as fleet_unit
+    from kincal.fleet.simulated import FleetModel
+    from kincal.fleet.unit import STAGING, UnitJob, calibrate_unit
+    from kincal.identification.options import CalibrationOptions
+    from kincal.robot import Robot
+
+    fm = FleetModel.of(Robot.load("ec66", tip="flange"), 0)
+    rng = np.random.default_rng(1)
+    data = fm.rtest(fm.unit(rng), rng, n=30)
+    out = tmp_path / "D"
+    job = UnitJob("u1", "<u1>", functools.partial(Robot.load, "ec66", tip="flange"),
+                  functools.partial(lambda d, r: [d], data),
+                  CalibrationOptions(tool_guess=(0, 0, 0.11)), str(out), overwrite=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert calibrate_unit(job).status == "calibrated"
+        before = {p.name: p.read_bytes() for p in (out / "u1").iterdir()}
+        real = os.replace
+
+        def replace(src, dst):
+            if Path(src).name == f"{STAGING}u1":
+                raise OSError(28, "No space left on device")
+            return real(src, dst)
+
+        monkeypatch.setattr(fleet_unit.os, "replace", replace)
+        again = calibrate_unit(job)
+    assert again.status == "failed" and "the earlier ones are kept" in again.message
+    assert sorted(p.name for p in out.iterdir()) == ["u1"]
+    assert {p.name: p.read_bytes() for p in (out / "u1").iterdir()} == before

@@ -176,12 +176,19 @@ def _write(job: UnitJob, result) -> tuple[str, ...]:
                               xacro_args=job.xacro_args, dirs=(stage,),
                               shared_dirs=(job.out_dir,))
         old = None
-        if final.exists():
-            if not job.overwrite:
-                raise KincalError(f"{final} exists; give --overwrite to replace it")
-            old = final.with_name(f"{STAGING}old-{job.name}")
-            os.replace(final, old)
-        os.replace(stage, final)
+        try:
+            if final.exists():
+                if not job.overwrite:
+                    raise KincalError(f"{final} exists; give --overwrite to replace it")
+                old = final.with_name(f"{STAGING}old-{job.name}")
+                os.replace(final, old)
+            os.replace(stage, final)
+        except OSError as e:  # the earlier files back under their name, never left hidden
+            if old is not None and old.exists() and not final.exists():
+                os.replace(old, final)
+            kept = "the earlier ones are kept" if old is not None else "nothing written"
+            raise KincalError(f"{final}: could not put the unit's files in place "
+                              f"({e.strerror or e}); {kept}") from None
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
     finally:
