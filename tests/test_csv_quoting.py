@@ -160,3 +160,26 @@ def test_a_semicolon_file_with_a_quoted_comma_name_is_read_as_semicolons(tmp_pat
         with pytest.warns(KincalNote):
             cols = read_columns(path, ["a,b", "x"])
         assert cols.separator == sep and cols.header[:3] == NAMES
+
+
+def test_excels_sep_line_names_the_separator(tmp_path):
+    """Excel writes (and reads) a first line ``sep=;`` naming the separator; it was read as
+    the header (a missing-column error, or 'the header does not fit its rows'). Now it sets
+    the separator and the header follows, line numbers as in the file; a separator other
+    than a comma, semicolon or tab is refused."""
+    import pytest
+
+    from kincal.errors import DataError, KincalNote
+    from kincal.measurements.csv_table import read_columns
+
+    path = tmp_path / "excel.csv"
+    path.write_text("sep=;\nj1;j2;x\n0.5;1.5;2.5\n# a note\n1;2;3e-3\n")
+    with pytest.warns(KincalNote, match="semicolon"):
+        got = read_columns(path, ["j1", "x"])
+    assert got.header == ("j1", "j2", "x") and list(got.lines) == [3, 5]
+    assert got.values["x"].tolist() == [2.5, 3e-3]
+    path.write_text("sep=,\r\nj1,x\r\n0.5,1\r\n")
+    assert read_columns(path, ["j1", "x"]).values["j1"].tolist() == [0.5]
+    path.write_text("sep=|\nj1|x\n0.5|1\n")
+    with pytest.raises(DataError, match="names the separator '\\|'"):
+        read_columns(path, ["j1", "x"])

@@ -181,6 +181,8 @@ def _write(job: UnitJob, result) -> tuple[str, ...]:
                 if not job.overwrite:
                     raise KincalError(f"{final} exists; give --overwrite to replace it")
                 old = final.with_name(f"{STAGING}old-{job.name}")
+                if old.exists():  # left by a run that was killed here
+                    shutil.rmtree(old)
                 os.replace(final, old)
             os.replace(stage, final)
         except OSError as e:  # the earlier files back under their name, never left hidden

@@ -6,7 +6,8 @@ poses of :mod:`kincal.candidates`. A header row names the columns; blank lines a
 starting with ``#`` are skipped (line numbers stay those of the file); a byte-order mark
 and CRLF or CR line ends are accepted. The separator is a comma, or a semicolon or a tab
 when the header has one of those and no comma outside its double-quoted names (sniffed
-from the header, and said in a :class:`KincalNote`). Every cell of a wanted column must be a finite number with a
+from the header, and said in a :class:`KincalNote`), or the one a first line ``sep=;``
+names (as Excel writes it). Every cell of a wanted column must be a finite number with a
 decimal point: a decimal comma ("0,5") is refused with a message saying so, never read as
 two cells or as 5. The columns of stated standard deviations (``sigma``, ``sigma_deg``)
 must lie in :data:`COLUMN_RANGES`; a value outside is refused with its line.
@@ -166,6 +167,7 @@ def _check_fit(path, line: int, header, row, cols, separator: str) -> None:
                         f"{_shift_hint(header, row, cols)}; name every data column")
 
 
+_SEP_LINE = re.compile(r"^\s*sep=(.)\s*$")  # Excel's first line naming the separator
 _QUOTED = re.compile(r'"(?:[^"]|"")*(?:"|$)')  # a quoted cell (to the line end if open)
 
 
@@ -224,7 +226,19 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                 pending.append(ln)
                 if ln.strip():
                     break
-            separator = sniff_separator(pending[-1] if pending else "")
+            directive = _SEP_LINE.match(pending[-1] if pending else "")
+            if directive:  # Excel's "sep=;" line names the separator; the header follows
+                separator = directive.group(1)
+                if separator not in SEPARATORS:
+                    raise DataError(f"{path}: the first line names the separator "
+                                    f"{separator!r}; expected a comma, a semicolon or a tab")
+                pending[-1] = "\n"  # read as a blank line: the line numbers stay the file's
+                for ln in content:  # blank and comment lines before the header
+                    pending.append(ln)
+                    if ln.strip():
+                        break
+            else:
+                separator = sniff_separator(pending[-1] if pending else "")
             reader = csv.reader(itertools.chain(pending, content), delimiter=separator)
             rows = ((reader.line_num, row) for row in reader if any(c.strip() for c in row))
             first = next(rows, None)
@@ -321,7 +335,8 @@ def _read_fast(path: Path, required, optional, ranges) -> Columns | None:
         stop = len(raw)  # the rows: from the header's line end to the last non-blank
         while stop > start and raw[stop - 1] in b" \t\r\n":
             stop -= 1
-        if end < 0 or end >= stop or _BLANK_OR_COMMENT.search(raw, end, stop):
+        if end < 0 or end >= stop or _BLANK_OR_COMMENT.search(raw, end, stop) or \
+                _SEP_LINE.match(first):
             return None
         rows = raw.count(b"\n", end, stop)
         del raw
