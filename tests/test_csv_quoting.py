@@ -183,3 +183,20 @@ def test_excels_sep_line_names_the_separator(tmp_path):
     path.write_text("sep=|\nj1|x\n0.5|1\n")
     with pytest.raises(DataError, match="names the separator '\\|'"):
         read_columns(path, ["j1", "x"])
+
+
+def test_a_utf16_file_with_its_mark_is_read(tmp_path):
+    """A spreadsheet's "Unicode text" export (UTF-16 with a byte-order mark, tab-separated)
+    was refused ("'utf-8' codec can't decode byte 0xff"); it is read as UTF-16."""
+    import pytest
+
+    from kincal.errors import KincalNote
+    from kincal.measurements.csv_table import read_columns
+
+    path = tmp_path / "u16.csv"
+    for encoding in ("utf-16", "utf-16-be"):
+        data = "j1\tx\r\n0.5\t2.5\r\n1\t3\r\n".encode(encoding)
+        path.write_bytes(data if encoding == "utf-16" else b"\xfe\xff" + data)
+        with pytest.warns(KincalNote, match="tab"):
+            got = read_columns(path, ["j1", "x"])
+        assert got.values["x"].tolist() == [2.5, 3.0] and list(got.lines) == [2, 3]

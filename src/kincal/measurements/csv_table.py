@@ -4,7 +4,7 @@
 The one CSV reader behind :class:`kincal.measurements.Measurements` and the candidate
 poses of :mod:`kincal.candidates`. A header row names the columns; blank lines and lines
 starting with ``#`` are skipped (line numbers stay those of the file); a byte-order mark
-and CRLF or CR line ends are accepted. The separator is a comma, or a semicolon or a tab
+and CRLF or CR line ends are accepted, and UTF-16 with its byte-order mark. The separator is a comma, or a semicolon or a tab
 when the header has one of those and no comma outside its double-quoted names (sniffed
 from the header, and said in a :class:`KincalNote`), or the one a first line ``sep=;``
 names (as Excel writes it). Every cell of a wanted column must be a finite number with a
@@ -219,7 +219,7 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     # from the header line.
     flat, lines = array("d"), array("q")
     try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:
+        with open(path, newline="", encoding=_encoding(path)) as fh:
             content = _content_lines(fh)
             pending = []
             for ln in content:  # blank and comment lines before the header
@@ -302,10 +302,18 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
         raise DataError(f"{path}: a header but no {rows_name}")
     if separator != ",":
         warnings.warn(f"{path}: columns separated by {SEPARATORS[separator]} (read from the "
-                      "header line)", KincalNote)
+                      f"{'sep= line' if directive else 'header line'})", KincalNote)
     values = np.frombuffer(flat, dtype=float).reshape(len(lines), len(cols)).copy()
     return Columns(path, {c: values[:, k] for k, c in enumerate(wanted)},
                    np.array(lines, dtype=int), tuple(header), separator)
+
+
+def _encoding(path: Path) -> str:
+    """UTF-16 when the file starts with its byte-order mark (a spreadsheet's "Unicode
+    text"), else UTF-8 (a byte-order mark allowed)."""
+    with open(path, "rb") as fh:
+        head = fh.read(2)
+    return "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
 
 
 _BLANK_OR_COMMENT = re.compile(rb"\n[ \t]*(?:#|\r?\n)")
