@@ -193,6 +193,27 @@ def test_existing_unit_folders_need_overwrite(fleet_files, fleet_dir, capsys):
     assert "kincal: error:" in capsys.readouterr().err
 
 
+def test_overwrite_replaces_no_unit_folder_holding_other_files(fleet_files, tmp_path, capsys):
+    """--overwrite replaces a unit's folder whole: a note the user put there, or a data
+    file read from there (DIR/a/x.csv beside a unit named a), was deleted with it. A unit
+    folder holding more than a unit's three files is refused before the work."""
+    import shutil
+
+    out = tmp_path / "D"
+    (out / "u01").mkdir(parents=True)
+    (out / "u01" / "notes.txt").write_text("the user's")
+    shutil.copy(fleet_files / "u02.csv", out / "u01" / "x.csv")
+    for data in ([fleet_files / "u01.csv"], [out / "u01" / "x.csv", fleet_files / "u01.csv"]):
+        capsys.readouterr()
+        assert main(["fleet", "ec66", *map(str, data), str(fleet_files / "u02.csv"), "--tip",
+                     "flange", "--out-dir", str(out), "--overwrite"]) == 1
+        err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+        assert len(err) == 1 and "holds files a fleet unit does not write (notes.txt, x.csv)" \
+            in err[0], err
+    assert sorted(p.name for p in (out / "u01").iterdir()) == ["notes.txt", "x.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["u01"]
+
+
 def test_unit_names_are_unique_folders():
     """x/a.csv, y/a.csv and a-2.csv made the units a-1, a-2, a-2: the second a-2 found the
     first one's folder (failed, or with --overwrite replaced it), and the summary listed

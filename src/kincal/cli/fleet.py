@@ -114,7 +114,8 @@ def run(args) -> int:
     from kincal.export.outputs import File
     from kincal.cli.checks import check_outputs
     from kincal.fleet import UnitJob, calibrate_fleet
-    from kincal.fleet.unit import STAGING, URDF
+    from kincal.fleet.unit import FRAMES, REPORT, STAGING, URDF
+    unit_files = (URDF, FRAMES, REPORT)
     from kincal.identification.options import CalibrationOptions
 
     inputs = typed(Inputs, args, files=tuple(args.data))
@@ -130,6 +131,14 @@ def run(args) -> int:
     if taken and not c.overwrite:
         raise OptionError(f"{out}: unit folders exist ({', '.join(taken[:5])}); give "
                           "--overwrite to replace them")
+    for n in taken:  # --overwrite replaces a unit's folder whole: only if it holds no more
+        extra = sorted(p.name for p in (out / n).iterdir()) if (out / n).is_dir() else [n]
+        extra = [e for e in extra if e not in unit_files]  # than a unit's files
+        if extra:
+            raise OptionError(f"{out / n}: holds files a fleet unit does not write "
+                              f"({', '.join(extra[:3])}{', ...' if len(extra) > 3 else ''}), "
+                              "which replacing the unit's folder would delete; move them or "
+                              "choose another --out-dir")
     # no folder made here: the one writer makes DIR with the first file written into it (a
     # unit's, or the summary's), so a run that fails before leaves nothing behind; the
     # units share it and never remove it, the command does if the run leaves it empty
