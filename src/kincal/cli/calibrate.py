@@ -192,6 +192,9 @@ def _ur_hash(c: Calibrate, robot) -> str:
     problem = ur_layout_problem(robot)  # before the work, as the writer would refuse it
     if problem is not None:
         raise OptionError(problem)
+    if c.ur_hash is not None and not c.ur_hash.strip():
+        raise OptionError("--ur-hash is empty; give the hash of the robot's kinematics file "
+                          "(calib_...), or leave the option out to copy it from that file")
     found = c.ur_hash or ur_hash_of(robot.source, xacro_args(c.chain.xacro_arg))
     if not found:
         raise OptionError("--yaml-format ur: no hash found (no kinematics_params file with a "

@@ -45,7 +45,7 @@ _YAML_WORDS = {"y", "n", "yes", "no", "true", "false", "on", "off", "null"}
 
 
 def _key(name: str) -> str:
-    """``name`` as a YAML mapping key that reads back as itself."""
+    """``name`` as a YAML mapping key (or value) that reads back as this string."""
     if _PLAIN_KEY.fullmatch(name) and name.lower() not in _YAML_WORDS:
         return name
     return json.dumps(name)
@@ -191,7 +191,7 @@ def ur_kinematics_yaml(nominal, corrected, ur_hash: str) -> str:
         lines.append(f"  {segment}:")
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("x", "y", "z"), T[:3, 3])]
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("roll", "pitch", "yaw"), rpy)]
-    lines.append(f"  hash: {ur_hash}")
+    lines.append(f"  hash: {_key(ur_hash)}")  # "a: b", "12345", "on" read back as given
     return "\n".join(lines) + "\n"
 
 
