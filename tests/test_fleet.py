@@ -212,6 +212,22 @@ def test_overwrite_replaces_no_unit_folder_holding_other_files(fleet_files, tmp_
             in err[0], err
     assert sorted(p.name for p in (out / "u01").iterdir()) == ["notes.txt", "x.csv"]
     assert sorted(p.name for p in out.iterdir()) == ["u01"]
+    # a unit's folder holding the robot this run starts from (an earlier unit's URDF)
+    for name in ("notes.txt", "x.csv"):
+        (out / "u01" / name).unlink()
+    (out / "u01" / "corrected.urdf").write_text(_ec66_text())
+    capsys.readouterr()
+    assert main(["fleet", str(out / "u01" / "corrected.urdf"), str(fleet_files / "u01.csv"),
+                 str(fleet_files / "u02.csv"), "--tip", "flange", "--out-dir", str(out),
+                 "--overwrite"]) == 1
+    assert "(corrected.urdf)" in capsys.readouterr().err
+    assert (out / "u01" / "corrected.urdf").read_text() == _ec66_text()
+
+
+def _ec66_text() -> str:
+    from conftest import EC66
+
+    return EC66.read_text()
 
 
 def test_unit_names_are_unique_folders():

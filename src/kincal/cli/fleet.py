@@ -133,7 +133,10 @@ def run(args) -> int:
                           "--overwrite to replace them")
     for n in taken:  # --overwrite replaces a unit's folder whole: only if it holds no more
         extra = sorted(p.name for p in (out / n).iterdir()) if (out / n).is_dir() else [n]
-        extra = [e for e in extra if e not in unit_files]  # than a unit's files
+        extra = [e for e in extra if e not in unit_files]  # than a unit's files, none read
+        extra += [Path(f).name for f in (robot.source, *inputs.files) if f and
+                  Path(f).expanduser().resolve().parent == (out / n).resolve()
+                  and Path(f).name not in extra]
         if extra:
             raise OptionError(f"{out / n}: holds files a fleet unit does not write "
                               f"({', '.join(extra[:3])}{', ...' if len(extra) > 3 else ''}), "
