@@ -104,16 +104,12 @@ def ur_layout_problem(robot) -> str | None:
     does a file of the URDF's joint origins give the xacro the calibrated robot. Another
     layout (example-robot-data's and ROS 1's UR URDFs: shoulder_lift about y, the first
     joint under base_link) read by the xacro is another robot, metres off."""
-    import pinocchio as pin
-
     joints = ur_joints(robot.joint_names)
     if joints is None:
         return None  # refused as not the six UR joints
     tilted = [n for n in joints if not np.allclose(robot.joint_axis(n), (0.0, 0.0, 1.0),
                                                    atol=1e-9)]
-    m = robot.model
-    fid = m.getFrameId(joints[0], pin.FrameType.JOINT)
-    parent = m.frames[m.frames[fid].parentFrame].name
+    parent = robot.parent_link(joints[0])
     prefix = joints[0][: len(joints[0]) - len(UR_SEGMENTS[0][1])]
     if not tilted and parent == prefix + "base_link_inertia":
         return None
