@@ -230,6 +230,25 @@ def _ec66_text() -> str:
     return EC66.read_text()
 
 
+def test_a_run_without_a_prior_says_the_prior_left_is_an_earlier_runs(fleet_files, tmp_path,
+                                                                      capsys):
+    """--overwrite with fewer than 2 units calibrated replaces the summary but writes no
+    FLEET.json: the one there is the earlier run's, which the error line now says."""
+    out = tmp_path / "D"
+    good = [str(fleet_files / "u01.csv"), str(fleet_files / "u02.csv")]
+    argv = ["fleet", "ec66", "--tip", "flange", "--tool-offset", "0", "0", "0.045", "--quiet",
+            "--out-dir", str(out)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert main([*argv, *good]) == 0
+        prior = (out / "FLEET.json").read_bytes()
+        capsys.readouterr()
+        assert main([*argv, good[0], str(fleet_files / "bad.csv"), "--overwrite"]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(err) == 1 and "FLEET.json is an earlier run's, not this one's" in err[0], err
+    assert (out / "FLEET.json").read_bytes() == prior
+
+
 def test_unit_names_are_unique_folders():
     """x/a.csv, y/a.csv and a-2.csv made the units a-1, a-2, a-2: the second a-2 found the
     first one's folder (failed, or with --overwrite replaced it), and the summary listed
