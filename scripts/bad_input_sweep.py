@@ -265,6 +265,8 @@ def output_cases():
                                                            "--out", "{d}/o.urdf", "--yaml-out",
                                                            "{d}/k.yaml", "--yaml-format", "ur",
                                                            "--ur-hash", "calib_1"], nothing
+    yield "joint mapped onto a position column", cal + ["--out", "{d}/o.urdf", "--joint-columns",
+                                                       "joint_1=x"], nothing
     yield "fleet unit named as the fleet's own file", [
         "fleet", "ec66", "{csv}", "{d}/FLEET.json.csv", "--out-dir", "{d}/D"], fleet_named
     yield "analyze report exists", ["analyze", "ec66", "{csv}", "--report", "{d}/out.urdf"], existing

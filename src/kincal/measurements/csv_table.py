@@ -202,6 +202,12 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     path = Path(path)
     required, optional = list(required), list(optional)
     aliases = dict(aliases or {})
+    twice = [c for c in dict.fromkeys(required) if required.count(c) > 1]
+    if twice:  # one column for two things (a joint mapped onto a position column, ...)
+        c = twice[0]
+        what = f"{aliases[c]} and a measured value" if c in aliases else "two values"
+        raise DataError(f"{path}: column {c!r} would be read for {what}; give each its own "
+                        "column (--joint-columns, --position-columns, --orientation-columns)")
     if not path.exists():
         raise InputFileError(f"{kind} file not found: {path}")
     if path.is_dir():
