@@ -197,8 +197,10 @@ def run(args) -> int:
         _remove_if_empty(out, made)  # the units' shared folder, if no unit's files are in it
         raise
     if summary.prior is None:
+        stale = (f"; {out / PRIOR} is an earlier run's, not this one's (left as it was)"
+                 if (out / PRIOR).exists() else "")
         raise OptionError(f"fewer than 2 of the {len(jobs)} units were calibrated: no fleet "
-                          f"prior written (see {out / SUMMARY_JSON})")
+                          f"prior written (see {out / SUMMARY_JSON}){stale}")
     return 0
 
 

@@ -138,9 +138,10 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     the HTML. dirs: folders the writing may make for the files, outermost first (one level
     each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. a
     fleet unit's staging folder; shared_dirs: folders made if missing and never removed
-    (other writers fill them at the same time: the fleet's folder). A result the gate refuses still gets the
-    diagnosis asked for (report, HTML, plots, marked REFUSED; never the URDF, frames or cell
-    files), then the refusal is raised naming where the diagnosis went.
+    (other writers fill them at the same time: the fleet's folder). A result the gate
+    refuses still gets the diagnosis asked for (report, HTML, plots, marked REFUSED; never
+    the URDF, frames or cell files), then the refusal is raised naming where the diagnosis
+    went.
     Returns :class:`Written`.
     """
     o = outputs

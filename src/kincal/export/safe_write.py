@@ -281,14 +281,15 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=(), shared_dir
     """Write several files as one transaction: all of them, or none; return the resolved paths.
 
     files: (path, content) pairs, the content bytes, str, or an iterable of str pieces
-    (staged piece by piece, never joined: a large file written in blocks). dirs: folders that may be created for them (see
-    :func:`check_outputs`; protect and in_place as there). shared_dirs: folders, outermost first and before ``dirs``, made
-    if missing like those but never removed again, even when the writing fails: a folder
-    that other writers running at the same time make and fill too (a fleet's folder, which
-    one unit's failure must not pull from under another unit about to write into it; its
-    owner, the fleet command, removes it if the run leaves it empty). Every target is
-    checked before the first byte is written,
-    all contents are staged next to their targets, then committed; a failure at any
+    (staged piece by piece, never joined: a large file written in blocks). dirs: folders
+    that may be created for them (see :func:`check_outputs`; protect and in_place as
+    there). shared_dirs: folders, outermost first and before ``dirs``, made if missing like
+    those but never removed again, even when the writing fails: a folder that other
+    writers running at the same time make and fill too (a fleet's folder, which one unit's
+    failure must not pull from under another unit about to write into it; its owner, the
+    fleet command, removes it if the run leaves it empty). Every target is checked before
+    the first byte is written, all contents are staged next to their targets, then
+    committed; a failure at any
     point (KeyboardInterrupt included) restores every target and removes what was made.
     before_commit: called with the resolved targets once everything is staged, before the
     first target takes its name; if it raises, nothing is written (the CLI prints and

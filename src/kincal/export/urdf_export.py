@@ -351,18 +351,16 @@ def _line_indent(data: bytes, pos: int) -> bytes:
 
 def add_frames_of(result, text: str) -> str:
     """``text`` plus fixed frames for each measurement set of ``result`` that has them:
-    ``kincal_measurement_frame`` (child of the set's base link, the pose of the measurement
-    frame M in the base frame) and ``kincal_tool_point`` (child of the set's tip link, at the
-    tool point; ``kincal_tool_point_<k>`` for point k >= 2); sets k >= 2 add ``_set<k>`` to
-    the names."""
+    ``kincal_measurement_frame`` (child of the base link, the pose of the measurement frame
+    M in the base frame) and ``kincal_tool_point`` (child of the tip link, at the tool point;
+    ``kincal_tool_point_<k>`` for point k >= 2); sets k >= 2 add ``_set<k>`` to the names."""
     from kincal.rotations import base_rotation, inverse, transform
 
     robot = result.robot
+    base_link, T_bl = robot.link_of(robot.base)
+    tip_link, T_tl = robot.link_of(robot.tip)
     for i, s in enumerate(result.sets):
         suffix = "" if i == 0 else f"_set{i + 1}"
-        # each set's own chain: several chains have other bases and tips than the first's
-        base_link, T_bl = robot.link_of(getattr(s, "base_frame", "") or robot.base)
-        tip_link, T_tl = robot.link_of(getattr(s, "tip_frame", "") or robot.tip)
         names = s.frame_names
         if all(f"base.{c}" in names for c in ("x", "y", "z", "rx", "ry", "rz")):
             b = [s.frame(f"base.{c}") for c in ("x", "y", "z", "rx", "ry", "rz")]

@@ -430,7 +430,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         iterations=int(result.solve.iterations), method=problem.options.method,
         equations=int(sum(km.N * km.dim for km in problem.kinds)),
         identified=sum(p.status == "identified" for p in result.parameters),
-        convention_doubts=tuple(d for dt in datas if (d := getattr(dt, "convention_doubt", ""))))
+        convention_doubts=tuple(str(getattr(dt, "convention_doubt", "")) for dt in datas
+                                if getattr(dt, "convention_doubt", "")))
 
 
 def _n_chains(problem: CalibrationProblem) -> int:
