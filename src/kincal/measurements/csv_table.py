@@ -7,10 +7,12 @@ starting with ``#`` are skipped (line numbers stay those of the file); a byte-or
 and CRLF or CR line ends are accepted, and UTF-16 with its byte-order mark. The
 separator is a comma, or a semicolon or a tab when the header has one of those and no
 comma outside its double-quoted names (sniffed from the header, and said in a
-:class:`KincalNote`), or the one a first line ``sep=;`` names (as Excel writes it). Every cell of a wanted column must be a finite number with a
-decimal point: a decimal comma ("0,5") is refused with a message saying so, never read as
-two cells or as 5. The columns of stated standard deviations (``sigma``, ``sigma_deg``)
-must lie in :data:`COLUMN_RANGES`; a value outside is refused with its line.
+:class:`KincalNote`), or the one a first line ``sep=;`` names (as Excel writes it).
+Every cell of a wanted column must be a finite number with a decimal point: a decimal
+comma ("0,5") is refused with a message saying so, never read as two cells or as 5. The
+columns of stated standard deviations (``sigma``, ``sigma_deg``) must lie in
+:data:`COLUMN_RANGES`; a value outside is refused with its line. A column asked for twice
+(a joint mapped onto a position column) is refused.
 
 Robot logs often carry unnamed columns (empty names in the header). An unnamed column of
 text (metadata) or a leading unnamed column (an index, as pandas writes it) is simply not
