@@ -88,7 +88,7 @@ def _analyze(a: Analyze):
 
     robot = a.chain.load()
     protect = check_outputs(robot, [a.report, a.accuracy_plot], overwrite=a.overwrite,
-                            inputs=a.inputs.files)
+                            inputs=(*a.inputs.files, a.accuracy.accuracy_poses))
     sets = a.inputs.read_sets(robot)
     if a.model == "all":  # every model that can describe this chain
         tree = default_for(robot.geometry) != "complete"

@@ -184,12 +184,19 @@ def calibration_options(c: Calibrate):
 def _ur_hash(c: Calibrate, robot) -> str:
     """The hash of --yaml-format ur: --ur-hash, else the xacro's kinematics_params file's."""
     from kincal.cli.options import xacro_args
-    from kincal.export.cell_exports import UR_SEGMENTS, ur_hash_of, ur_joints
+    from kincal.export.cell_exports import (UR_SEGMENTS, ur_hash_of, ur_joints,
+                                            ur_layout_problem)
 
     if ur_joints(robot.joint_names) is None:
         raise OptionError("--yaml-format ur needs a chain of the six UR joints ("
                           + ", ".join(j for _, j in UR_SEGMENTS) + "); this chain has "
                           + (", ".join(robot.joint_names) or "none"))
+    problem = ur_layout_problem(robot)  # before the work, as the writer would refuse it
+    if problem is not None:
+        raise OptionError(problem)
+    if c.ur_hash is not None and not c.ur_hash.strip():
+        raise OptionError("--ur-hash is empty; give the hash of the robot's kinematics file "
+                          "(calib_...), or leave the option out to copy it from that file")
     found = c.ur_hash or ur_hash_of(robot.source, xacro_args(c.chain.xacro_arg))
     if not found:
         raise OptionError("--yaml-format ur: no hash found (no kinematics_params file with a "
@@ -247,8 +254,10 @@ def run(args) -> int:
     if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
-    inputs = c.inputs.files + c.validate
-    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots])
+    inputs = c.inputs.files + c.validate + tuple(
+        p for p in (c.prior, c.accuracy.accuracy_poses) if p)
+    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots],
+                  urdf_out=c.out)
     if c.validate:
         from kincal.cli.validate import check_count
 

@@ -125,7 +125,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                       accept_unconverged: bool = False, accuracy=None,
                       warnings_seen=(), data_source: str | None = None,
                       before_commit=None, command=None, xacro_args=None,
-                      validations=(), dirs=()) -> Written:
+                      validations=(), dirs=(), shared_dirs=()) -> Written:
     """Check the gate, then write every output of ``outputs`` all-or-none.
 
     accuracy: a predicted accuracy map to add to the report, the HTML and the plots.
@@ -136,10 +136,12 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     every file carries (:mod:`kincal.export.provenance`). validations: the
     :class:`~kincal.export.validation.Validation` of each held-out file for the report and
     the HTML. dirs: folders the writing may make for the files, outermost first (one level
-    each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. the
-    fleet's folder and a unit's staging folder. A result the gate refuses still gets the
-    diagnosis asked for (report, HTML, plots, marked REFUSED; never the URDF, frames or cell
-    files), then the refusal is raised naming where the diagnosis went.
+    each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. a
+    fleet unit's staging folder; shared_dirs: folders made if missing and never removed
+    (other writers fill them at the same time: the fleet's folder). A result the gate
+    refuses still gets the diagnosis asked for (report, HTML, plots, marked REFUSED; never
+    the URDF, frames or cell files), then the refusal is raised naming where the diagnosis
+    went.
     Returns :class:`Written`.
     """
     o = outputs
@@ -178,7 +180,8 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                              more_data=held)
         staged = _diagnosis(result, diagnosis, prov, None, warnings_seen,
                             data_source or ", ".join(sources), (), validations, refused=why)
-        written = _write(result, diagnosis, staged, sources, before_commit, (), dirs)
+        written = _write(result, diagnosis, staged, sources, before_commit, (), dirs,
+                         shared_dirs)
         result.plausibility.check(  # raises again, saying where the diagnosis went
             accept_implausible, accept_unconverged,
             refused="no URDF, frames or cell file is written; the diagnosis (marked REFUSED) "
@@ -218,7 +221,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
             files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,
                         data_source or ", ".join(sources), notes, validations)
-    return _write(result, o, files, sources, before_commit, notes, dirs)
+    return _write(result, o, files, sources, before_commit, notes, dirs, shared_dirs)
 
 
 def _chains_title(result) -> str:
@@ -283,7 +286,8 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
     return files
 
 
-def _write(result, o: Outputs, files, sources, before_commit, notes, dirs=()) -> Written:
+def _write(result, o: Outputs, files, sources, before_commit, notes, dirs=(),
+           shared_dirs=()) -> Written:
     from kincal.export.safe_write import write_all
 
     if not files:
@@ -292,9 +296,11 @@ def _write(result, o: Outputs, files, sources, before_commit, notes, dirs=()) ->
         return Written((), notes)
     protect = [p for p in (result.robot.source, *sources) if p and not str(p).startswith("<")]
     hook = None if before_commit is None else (lambda targets: before_commit(targets, notes))
+    in_place = [(o.urdf, result.robot.source)] if o.urdf is not None and protect else []
     written = write_all(files, overwrite=o.overwrite, protect=[*protect, *o.protect],
+                        in_place=in_place,
                         dirs=[*dirs, *([o.plots] if o.plots is not None else [])],
-                        before_commit=hook)
+                        shared_dirs=shared_dirs, before_commit=hook)
     return Written(tuple(written), notes)
 
 

@@ -71,7 +71,8 @@ from kincal.identification.gate_causes import (fit_causes, overfit_cause, unit_c
 from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, spread
 from kincal.models import per_geometry
 from kincal.models.kinematics import ChainKinematics
-from kincal.rotations import kabsch_rotation
+from kincal.models.geometry import chain_length  # the yardstick's chain part
+from kincal.rotations import aligned_distances as _aligned_distances
 
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
@@ -145,6 +146,7 @@ class Evidence:
     weak_corrections: tuple[str, ...] = ()  # the largest corrections if the largest is weak
     weak_scales: str = ""  # their classes' prior scales as the evidence estimated them, or
     #                        the one penalty weight ("lambda 0.001 chosen by cross-validation")
+    convention_doubts: tuple[str, ...] = ()  # pose files read in a convention in doubt
 
     @property
     def explained(self) -> float:
@@ -159,7 +161,8 @@ class Finding:
     """One broken criterion: what, how large, against which threshold, and why (likely).
 
     kind: "residual", "corrections", "length_correction", "length_unit", "angle_unit" or
-    "not_converged". value and threshold share ``unit``. parameters: the parameters the
+    "not_converged" (or "orientation_convention": a pose file's convention in doubt, its
+    message the evidence). value and threshold share ``unit``. parameters: the parameters the
     finding is about (largest first). causes: likely causes, most likely first.
     """
 
@@ -294,6 +297,9 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             "length_correction", f"{n} is corrected by {v:+.4g} mm, more than "
             f"{th.length_correction:.0%} of the reach ({L_mm:.0f} mm)", abs(v),
             th.length_correction * L_mm, "mm", (n,), causes=tuple(fit_causes(ev, th))))
+    for doubt in ev.convention_doubts:  # orientations in another convention: a wrong fit
+        out.append(Finding("orientation_convention", doubt, 0.0, 0.0, "", causes=(
+            "orientations read in another convention than the file's",)))
     if not ev.converged:
         out.append(Finding(
             "not_converged", f"the solver did not converge in {ev.iterations} iterations",
@@ -314,18 +320,6 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
 
 
 # ------------------------------------------------------------------ gather
-def _aligned_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """(M,) distances between point sets A and B after the best rigid motion of B onto A."""
-    a, b = A - np.add.reduce(A) / len(A), B - np.add.reduce(B) / len(B)  # np.mean's sums
-    return np.linalg.norm(a - b @ kabsch_rotation(b.T @ a).T, axis=1)  # a = R b, as rows
-
-
-def chain_length(joint_frames: np.ndarray, T_base_tip: np.ndarray) -> float:
-    """[m] summed distances first joint -> ... -> last joint -> tip frame, at zero values."""
-    pts = np.vstack([joint_frames[:, :3, 3], T_base_tip[:3, 3]])
-    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
-
-
 def reach(chain_m: float, tool_m: float) -> float:
     """[m] the gate's yardstick (module notes): the chain plus the capped tool distance."""
     return chain_m + min(tool_m, max(chain_m, 1.0))
@@ -399,7 +393,9 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         iterations=int(result.solve.iterations), method=problem.options.method,
         equations=int(sum(km.N * km.dim for km in problem.kinds)),
         identified=sum(p.status == "identified" for p in result.parameters),
-        weak_corrections=weak_top, weak_scales=weak_scales)
+        weak_corrections=weak_top, weak_scales=weak_scales,
+        convention_doubts=tuple(str(getattr(dt, "convention_doubt", "")) for dt in datas
+                                if getattr(dt, "convention_doubt", "")))
 
 
 def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str, ...], str]:
