@@ -217,6 +217,9 @@ def output_cases():
         (d / "demo").mkdir()
         (d / "demo" / "tables.md").write_text("an earlier demo")
 
+    def fleet_named(d):
+        (d / "FLEET.json.csv").write_text("joint_1,x\n1,2\n")
+
     nothing = None
     yield "out exists", cal + ["--out", "{d}/out.urdf"], existing
     yield "out is a directory", cal + ["--out", "{d}/out.urdf", "--overwrite"], folder
@@ -238,6 +241,35 @@ def output_cases():
     yield "simulate truth-out FIFO", ["simulate", "ec66", "--poses", "5", "--out", "{d}/s.csv",
                                       "--truth-out", "{d}/out.urdf"], fifo
     yield "plan out is the candidates", ["plan", "ec66", "{csv}", "--poses", "5", "--out", "{csv}"], nothing
+    # an input is never replaced, --overwrite or not (but the corrected URDF over its robot)
+    yield "out is the data, --overwrite", cal + ["--out", "{csv}", "--overwrite"], nothing
+    yield "report is the robot, --overwrite", ["calibrate", "{urdf}", "{csv}", "--tip", "flange",
+                                               "--out", "{d}/o.urdf", "--report", "{urdf}",
+                                               "--overwrite"], nothing
+    yield "evaluate report is the data, --overwrite", [
+        "evaluate", "ec66", "{csv}", "--fit-frames", "--report", "{csv}", "--overwrite"], nothing
+    yield "evaluate report is the frames, --overwrite", [
+        "evaluate", "ec66", "{csv}", "--frames", "{frames}", "--report", "{frames}",
+        "--overwrite"], nothing
+    for out in ("{csv}", "{frames}", "{urdf}"):
+        yield f"compensate out is an input ({out}), --overwrite", [
+            "compensate", "{urdf}", "{csv}", "--tip", "flange", "--frames", "{frames}",
+            "--out", out, "--overwrite"], nothing
+    yield "simulate out is its poses file, --overwrite", [
+        "simulate", "ec66", "--poses-file", "{csv}", "--out", "{csv}", "--overwrite"], nothing
+    yield "plan out is the measured data, --overwrite", [
+        "plan", "ec66", "--random", "50", "--measured", "{csv}", "--poses", "5", "--out",
+        "{csv}", "--overwrite"], nothing
+    yield "analyze report is the data, --overwrite", [
+        "analyze", "ec66", "{csv}", "--report", "{csv}", "--overwrite"], nothing
+    yield "ur yaml of a URDF in another layout", cal[:1] + ["ur10", "{d}/../inputs/good.csv",
+                                                           "--out", "{d}/o.urdf", "--yaml-out",
+                                                           "{d}/k.yaml", "--yaml-format", "ur",
+                                                           "--ur-hash", "calib_1"], nothing
+    yield "joint mapped onto a position column", cal + ["--out", "{d}/o.urdf", "--joint-columns",
+                                                       "joint_1=x"], nothing
+    yield "fleet unit named as the fleet's own file", [
+        "fleet", "ec66", "{csv}", "{d}/FLEET.json.csv", "--out-dir", "{d}/D"], fleet_named
     yield "analyze report exists", ["analyze", "ec66", "{csv}", "--report", "{d}/out.urdf"], existing
     yield "evaluate report is a dir", ["evaluate", "ec66", "{csv}", "--fit-frames", "--report",
                                        "{d}/out.urdf", "--overwrite"], folder

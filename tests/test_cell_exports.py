@@ -212,3 +212,28 @@ def test_yaml_keys_read_back_as_the_joint_names(tmp_path):
     for name, T in robot.urdf_origins().items():
         np.testing.assert_allclose(origins[name], T, atol=1e-15)
         np.testing.assert_allclose([loaded[name][k] for k in ("x", "y", "z")], T[:3, 3])
+
+
+def test_ur_format_refuses_a_urdf_not_in_ur_descriptions_layout(tmp_path, capsys):
+    """example-robot-data's UR10 (the ROS 1 layout: shoulder_lift about y, no
+    base_link_inertia) has the six UR joint names, so --yaml-format ur --ur-hash wrote its
+    joint origins under ur_description's segment keys: the xacro builds another robot from
+    them (its tool0 2.2 m off the corrected URDF's, measured with ur_description 2.4.5's
+    ur10 xacro and this file), without a word. Refused now, before the work and by the
+    writer; nothing is written."""
+    from kincal.cli import main
+    from kincal.errors import ExportError
+    from kincal.export.cell_exports import ur_kinematics_yaml
+
+    ur10 = Robot.load("ur10")
+    with pytest.raises(ExportError, match="not in ur_description's layout"):
+        ur_kinematics_yaml(ur10, ur10, "calib_1")
+    data = tmp_path / "d.csv"
+    assert main(["simulate", "ur10", "--poses", "20", "--out", str(data), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ur10", str(data), "--out", str(tmp_path / "c.urdf"),
+                 "--yaml-out", str(tmp_path / "k.yaml"), "--yaml-format", "ur",
+                 "--ur-hash", "calib_1"]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(err) == 1 and "shoulder_lift_joint" in err[0] and "layout" in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.csv"]

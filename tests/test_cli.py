@@ -143,6 +143,38 @@ def test_existing_output_and_input_urdf_are_protected(sim, tmp_path, capsys):
     assert src.read_bytes() != before  # asked for: the input is replaced
 
 
+def test_overwrite_never_replaces_what_a_command_read(sim, tmp_path, capsys):
+    """--overwrite replaced an input by another kind of file: the measurements by a
+    report (evaluate --report DATA.csv), the targets by joint values, FRAMES.json by a
+    URDF's report, the robot's URDF by a report. Only the corrected URDF may replace its
+    robot description (above); every other input is refused, with or without --overwrite."""
+    import shutil
+
+    data = tmp_path / "data.csv"
+    shutil.copy(sim / "cal.csv", data)
+    src = tmp_path / "robot.urdf"
+    src.write_text(EC66.read_text())
+    frames = tmp_path / "frames.json"
+    assert main(["calibrate", str(src), str(data), "--tip", "flange", "--quiet", "--out",
+                 str(tmp_path / "cal.urdf"), "--frames-out", str(frames)]) == 0
+    kept = {p: p.read_bytes() for p in (data, src, frames)}
+    for argv in (["evaluate", str(src), str(data), "--tip", "flange", "--fit-frames",
+                  "--report", str(data)],
+                 ["compensate", str(tmp_path / "cal.urdf"), str(data), "--tip", "flange",
+                  "--frames", str(frames), "--out", str(data), "--flag-unreachable"],
+                 ["compensate", str(tmp_path / "cal.urdf"), str(data), "--tip", "flange",
+                  "--frames", str(frames), "--out", str(frames), "--flag-unreachable"],
+                 ["calibrate", str(src), str(data), "--tip", "flange", "--out",
+                  str(tmp_path / "x.urdf"), "--report", str(src)],
+                 ["calibrate", str(src), str(data), "--tip", "flange", "--out", str(data)],
+                 ["simulate", "ec66", "--poses-file", str(data), "--out", str(data)]):
+        capsys.readouterr()
+        assert main([*argv, "--overwrite"]) == 1, argv
+        assert "with or without --overwrite" in _one_line_error(capsys)
+    assert {p: p.read_bytes() for p in kept} == kept
+    assert not (tmp_path / "x.urdf").exists()
+
+
 def test_evaluate_needs_a_frames_choice(sim, capsys):
     assert main(["evaluate", "ec66", str(sim / "val.csv")]) == 1
     assert "--fit-frames" in _one_line_error(capsys)

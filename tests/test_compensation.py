@@ -276,6 +276,8 @@ def test_cli_compensate_writes_joint_values_in_the_input_units(cli_cell, capsys)
     assert main(["compensate", str(urdf), str(t), "--tip", "flange", "--frames", str(fj),
                  "--out", str(out), "--angle-unit", "deg", "--length-unit", "mm"]) == 0
     table = np.genfromtxt(_uncommented(out), delimiter=",", names=True)
+    assert ("# joint values in deg (revolute) and mm (prismatic), as the input"
+            in out.read_text())  # labelled in the file, not only on the console
     q_out = np.radians(np.column_stack([table[j] for j in result.robot.joint_names]))
     np.testing.assert_allclose(result.predict(q_out), P, atol=1e-9)
     assert (table["reached"] == 1).all() and list(table["target_line"]) == list(range(2, len(q) + 2))

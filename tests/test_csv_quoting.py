@@ -125,3 +125,78 @@ def test_ordinary_files_are_written_as_before():
     data = Measurements(("j1", "j2"), np.array([[0.25, -0.5]]), np.array([[1.0, 2.0, 0.1]]))
     assert data.to_csv_text() == "j1,j2,x,y,z\n0.25,-0.5,1.0,2.0,0.1\n"
     assert csv_line(["joint_1", "", "0.1"]) == "joint_1,,0.1"
+
+
+def test_a_semicolon_file_with_a_quoted_comma_name_is_read_as_semicolons(tmp_path):
+    """The separator is sniffed outside the header's quoted names: a semicolon file (a
+    European spreadsheet's export) whose first name is ``"a,b"`` was read as a comma file
+    (the comma inside the quotes counted): one column ``a,b;say...`` and a missing-column
+    error, or with other names the wrong cells. A tab file likewise, and a quoted ';'
+    inside a comma file does not make it a semicolon file."""
+    import pytest
+
+    from kincal.errors import KincalNote
+    from kincal.measurements.csv_table import read_columns, sniff_separator
+
+    assert sniff_separator('"a,b";j2;x') == ";"
+    assert sniff_separator('"a,b"\tj2\tx') == "\t"
+    assert sniff_separator('"a;b",j2,x') == ","
+    assert sniff_separator('"say ""x,y""";j2') == ";"  # doubled quotes inside
+    assert sniff_separator("j1;j2") == ";" and sniff_separator("j1,j2;x") == ","
+    robot = _robot(tmp_path)
+    q = np.random.default_rng(2).uniform(-1.0, 1.0, size=(12, 3))
+    data = Measurements(robot.joint_names, q, robot.tip_poses(q)[:, :3, 3])
+    for sep in (";", "\t"):
+        records = _records(data.to_csv_text())
+        path = tmp_path / "semi.csv"
+        path.write_text("\n".join(sep.join('"' + c.replace('"', '""') + '"' if ("," in c or
+                                           '"' in c) else c for c in r) for r in records)
+                        + "\n")
+        assert path.read_text().startswith('"a,b"' + sep)
+        with pytest.warns(KincalNote, match="separated by a (semicolon|tab)"):
+            back = Measurements.from_csv(path, robot.joint_names)
+        np.testing.assert_array_equal(back.joint_values, data.joint_values)
+        np.testing.assert_array_equal(back.positions, data.positions)
+        with pytest.warns(KincalNote):
+            cols = read_columns(path, ["a,b", "x"])
+        assert cols.separator == sep and cols.header[:3] == NAMES
+
+
+def test_excels_sep_line_names_the_separator(tmp_path):
+    """Excel writes (and reads) a first line ``sep=;`` naming the separator; it was read as
+    the header (a missing-column error, or 'the header does not fit its rows'). Now it sets
+    the separator and the header follows, line numbers as in the file; a separator other
+    than a comma, semicolon or tab is refused."""
+    import pytest
+
+    from kincal.errors import DataError, KincalNote
+    from kincal.measurements.csv_table import read_columns
+
+    path = tmp_path / "excel.csv"
+    path.write_text("sep=;\nj1;j2;x\n0.5;1.5;2.5\n# a note\n1;2;3e-3\n")
+    with pytest.warns(KincalNote, match="semicolon"):
+        got = read_columns(path, ["j1", "x"])
+    assert got.header == ("j1", "j2", "x") and list(got.lines) == [3, 5]
+    assert got.values["x"].tolist() == [2.5, 3e-3]
+    path.write_text("sep=,\r\nj1,x\r\n0.5,1\r\n")
+    assert read_columns(path, ["j1", "x"]).values["j1"].tolist() == [0.5]
+    path.write_text("sep=|\nj1|x\n0.5|1\n")
+    with pytest.raises(DataError, match="names the separator '\\|'"):
+        read_columns(path, ["j1", "x"])
+
+
+def test_a_utf16_file_with_its_mark_is_read(tmp_path):
+    """A spreadsheet's "Unicode text" export (UTF-16 with a byte-order mark, tab-separated)
+    was refused ("'utf-8' codec can't decode byte 0xff"); it is read as UTF-16."""
+    import pytest
+
+    from kincal.errors import KincalNote
+    from kincal.measurements.csv_table import read_columns
+
+    path = tmp_path / "u16.csv"
+    for encoding in ("utf-16", "utf-16-be"):
+        data = "j1\tx\r\n0.5\t2.5\r\n1\t3\r\n".encode(encoding)
+        path.write_bytes(data if encoding == "utf-16" else b"\xfe\xff" + data)
+        with pytest.warns(KincalNote, match="tab"):
+            got = read_columns(path, ["j1", "x"])
+        assert got.values["x"].tolist() == [2.5, 3.0] and list(got.lines) == [2, 3]

@@ -193,6 +193,80 @@ def test_existing_unit_folders_need_overwrite(fleet_files, fleet_dir, capsys):
     assert "kincal: error:" in capsys.readouterr().err
 
 
+def test_overwrite_replaces_no_unit_folder_holding_other_files(fleet_files, tmp_path, capsys):
+    """--overwrite replaces a unit's folder whole: a note the user put there, or a data
+    file read from there (DIR/a/x.csv beside a unit named a), was deleted with it. A unit
+    folder holding more than a unit's three files is refused before the work."""
+    import shutil
+
+    out = tmp_path / "D"
+    (out / "u01").mkdir(parents=True)
+    (out / "u01" / "notes.txt").write_text("the user's")
+    shutil.copy(fleet_files / "u02.csv", out / "u01" / "x.csv")
+    for data in ([fleet_files / "u01.csv"], [out / "u01" / "x.csv", fleet_files / "u01.csv"]):
+        capsys.readouterr()
+        assert main(["fleet", "ec66", *map(str, data), str(fleet_files / "u02.csv"), "--tip",
+                     "flange", "--out-dir", str(out), "--overwrite"]) == 1
+        err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+        assert len(err) == 1 and "holds files a fleet unit does not write (notes.txt, x.csv)" \
+            in err[0], err
+    assert sorted(p.name for p in (out / "u01").iterdir()) == ["notes.txt", "x.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["u01"]
+    # a unit's folder holding the robot this run starts from (an earlier unit's URDF)
+    for name in ("notes.txt", "x.csv"):
+        (out / "u01" / name).unlink()
+    (out / "u01" / "corrected.urdf").write_text(_ec66_text())
+    capsys.readouterr()
+    assert main(["fleet", str(out / "u01" / "corrected.urdf"), str(fleet_files / "u01.csv"),
+                 str(fleet_files / "u02.csv"), "--tip", "flange", "--out-dir", str(out),
+                 "--overwrite"]) == 1
+    assert "(corrected.urdf)" in capsys.readouterr().err
+    assert (out / "u01" / "corrected.urdf").read_text() == _ec66_text()
+
+
+def _ec66_text() -> str:
+    from conftest import EC66
+
+    return EC66.read_text()
+
+
+def test_a_run_without_a_prior_says_the_prior_left_is_an_earlier_runs(fleet_files, tmp_path,
+                                                                      capsys):
+    """--overwrite with fewer than 2 units calibrated replaces the summary but writes no
+    FLEET.json: the one there is the earlier run's, which the error line now says."""
+    out = tmp_path / "D"
+    good = [str(fleet_files / "u01.csv"), str(fleet_files / "u02.csv")]
+    argv = ["fleet", "ec66", "--tip", "flange", "--tool-offset", "0", "0", "0.045", "--quiet",
+            "--out-dir", str(out)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert main([*argv, *good]) == 0
+        prior = (out / "FLEET.json").read_bytes()
+        capsys.readouterr()
+        assert main([*argv, good[0], str(fleet_files / "bad.csv"), "--overwrite"]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(err) == 1 and "FLEET.json is an earlier run's, not this one's" in err[0], err
+    assert (out / "FLEET.json").read_bytes() == prior
+
+
+def test_unit_names_are_unique_folders():
+    """x/a.csv, y/a.csv and a-2.csv made the units a-1, a-2, a-2: the second a-2 found the
+    first one's folder (failed, or with --overwrite replaced it), and the summary listed
+    one outcome twice, the other lost. Names equal but for case are one folder on a
+    case-insensitive file system; the fleet's own file names are refused."""
+    from kincal.cli.fleet import unit_names
+
+    assert unit_names(["x/a.csv", "y/a.csv", "a-2.csv", "b.csv"]) == ["a-1", "a-2-2", "a-2",
+                                                                       "b"]
+    assert unit_names(["u1.csv", "u2.csv"]) == ["u1", "u2"]
+    assert unit_names(["x/a.csv", "y/a.csv", "a-2.csv", "a-2-2.csv"]) == [
+        "a-1", "a-2-3", "a-2", "a-2-2"]
+    assert unit_names(["U1.csv", "x/u1.csv"]) == ["U1-1", "u1-2"]
+    for bad in ("FLEET.json.csv", "fleet.html.csv", ".partial-u1.csv"):
+        with pytest.raises(OptionError, match="rename the data file"):
+            unit_names([bad, "u2.csv"])
+
+
 def test_hierarchical_e_step_keeps_the_prior_as_it_is_and_its_width_where_blind(fleet_dir):
     """A round of the hierarchical fit: the prior's scale held at 1 (the evidence estimates
     only the noise), and the unit's posterior covariance: narrower than the prior where the

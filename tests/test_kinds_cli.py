@@ -103,3 +103,30 @@ def test_evaluate_judges_each_file_with_the_frames_calibrated_on_it(tmp_path, ca
                      "--frames", frames, "--json"]) == 0
         assert json.loads(capsys.readouterr().out)["errors"]["mean_mm"] == pytest.approx(
             after, rel=1e-9)
+
+
+def test_html_report_for_kinds_without_positions(tmp_path, capsys):
+    """--html on distances, plane and flush contacts: the report is written (no accuracy
+    map: no point or pose set to predict, said on the page); --accuracy-map on such data
+    is refused before any fit, nothing written. Before, --html failed after the fit with
+    the accuracy map's error and wrote nothing."""
+    for kind, extra in (("distance", ()), ("plane", ("--on-plane",)),
+                        ("flush", ("--on-plane", "--flush", "--tool-offset", 0, 0, 0.1))):
+        data = tmp_path / f"{kind}.csv"
+        code, _, err = run(capsys, "simulate", "ec66", "--kind", kind, "--poses", 40,
+                           "--out", data, "--seed", 3)
+        assert code == 0, err
+        page = tmp_path / f"{kind}.html"
+        code, out, err = run(capsys, "calibrate", "ec66", data, *extra, "--out",
+                             tmp_path / f"{kind}.urdf", "--html", page)
+        assert code == 0, err
+        assert "No accuracy map in this run." in page.read_text()
+        before = sorted(p.name for p in tmp_path.iterdir())
+        code, out, err = run(capsys, "calibrate", "ec66", data, *extra, "--out",
+                             tmp_path / f"{kind}2.urdf", "--accuracy-map", 0.4, 0, 0.3, 0.2)
+        assert code == 1 and err.count("kincal: error:") == 1, err
+        assert f"these data have none ({kind})" in err
+        assert sorted(p.name for p in tmp_path.iterdir()) == before
+        code, out, err = run(capsys, "analyze", "ec66", data, *extra, "--accuracy-map", 0.4, 0,
+                             0.3, 0.2)
+        assert code == 1 and f"these data have none ({kind})" in err and not out, (out, err)

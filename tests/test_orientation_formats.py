@@ -228,3 +228,34 @@ def test_simulate_writes_poses_in_the_format_named_and_they_read_back(tmp_path, 
     assert main(["simulate", "ur10", "--orientation-format", "rpy-zyx", "--out", str(out)]) == 1
     err = capsys.readouterr().err
     assert err.count("kincal: error:") == 1 and "--kind pose" in err and not out.exists()
+
+
+def test_a_calibration_of_a_convention_in_doubt_is_refused_by_the_gate(tmp_path, capsys):
+    """Scalar-first quaternions under generic names read scalar-last: the warning came, and
+    the URDF was written anyway (15 mm median after calibration, under the residual bound;
+    3 deg corrections: a wrong model). The gate now refuses it, --accept-implausible writes
+    it, the right reading calibrates, and analyze (which writes nothing) only warns."""
+    sim = tmp_path / "p.csv"
+    assert main(["simulate", "ec66", "--kind", "pose", "--orientation-format", "quat-wxyz",
+                 "--poses", "40", "--seed", "3", "--out", str(sim), "--quiet"]) == 0
+    text = sim.read_text().replace("qw,qx,qy,qz", "q1,q2,q3,q4")
+    data = tmp_path / "generic.csv"
+    data.write_text(text)
+    cols = ["--orientation-columns", "q1", "q2", "q3", "q4"]
+    out = tmp_path / "c.urdf"
+    capsys.readouterr()
+    code, _, err = run(capsys, "calibrate", "ec66", data, "--orientation-format", "quat-xyzw",
+                       *cols, "--out", out, "--model", "mdh")
+    errors = [line for line in err.splitlines() if line.startswith("kincal: error:")]
+    assert code == 1 and len(errors) == 1, err
+    assert "implausible" in errors[0] and "is the file's convention quat-wxyz?" in errors[0]
+    assert not out.exists()
+    code, _, err = run(capsys, "calibrate", "ec66", data, "--orientation-format", "quat-xyzw",
+                       *cols, "--out", out, "--model", "mdh", "--accept-implausible")
+    assert code == 0 and out.exists() and "convention" in err
+    code, _, err = run(capsys, "calibrate", "ec66", data, "--orientation-format", "quat-wxyz",
+                       *cols, "--out", tmp_path / "right.urdf", "--model", "mdh")
+    assert code == 0 and "convention" not in err
+    code, _, err = run(capsys, "analyze", "ec66", data, "--orientation-format", "quat-xyzw",
+                       *cols)
+    assert code == 0 and "is the file's convention quat-wxyz?" in err

@@ -129,3 +129,117 @@ def test_fleet_interrupted_before_any_unit_leaves_no_folder_it_made(tmp_path, mo
     assert out.is_dir() is existed
     if existed:
         assert list(out.iterdir()) == []
+
+
+def test_a_fleet_units_failure_leaves_the_shared_folder_to_the_unit_about_to_write(
+        tmp_path, monkeypatch):
+    """Two units of a fleet, the fleet's folder not there yet: unit A makes it with its
+    first file and then fails (a full disk, injected); unit B has checked its outputs and is
+    about to make its staging folder in it. A's rollback removed the folder it had made,
+    and B failed ("No such file or directory") although nothing was wrong with B; now the
+    fleet's folder is shared (kincal.export.safe_write.write_all's shared_dirs): A's
+    failure removes only A's staging folder, B writes. Deterministic: each step waits for
+    the other's."""
+    import functools
+    import threading
+    import warnings
+
+    from kincal.errors import KincalWarning
+    from kincal.fleet.unit import STAGING, UnitJob, calibrate_unit
+    from kincal.identification.options import CalibrationOptions
+    import numpy as np
+
+    from kincal.fleet.simulated import FleetModel
+    from kincal.robot import Robot
+
+    fm = FleetModel.of(Robot.load("ec66", tip="flange"), 0)
+    rng = np.random.default_rng(1)
+    data = fm.rtest(fm.unit(rng), rng, n=30)
+    out = tmp_path / "D"
+    a_made, b_checked, a_done = threading.Event(), threading.Event(), threading.Event()
+    real_stage, real_mkdir = safe_write._stage, Path.mkdir
+
+    def stage(target, content, path):
+        if f"{STAGING}A" in str(target):  # A: its folders are made; wait for B, then fail
+            a_made.set()
+            assert b_checked.wait(60)
+            raise OSError(28, "No space left on device")
+        return real_stage(target, content, path)
+
+    def mkdir(self, *args, **kwargs):
+        if self.name == f"{STAGING}B":  # B checked, its staging folder next: A fails first
+            b_checked.set()
+            assert a_done.wait(60)
+        return real_mkdir(self, *args, **kwargs)
+
+    monkeypatch.setattr(safe_write, "_stage", stage)
+    monkeypatch.setattr(Path, "mkdir", mkdir)
+
+    def job(name):
+        return UnitJob(name, f"<{name}>", functools.partial(Robot.load, "ec66", tip="flange"),
+                       functools.partial(lambda d, r: [d], data),
+                       CalibrationOptions(tool_guess=(0, 0, 0.11)),
+                       str(out), accept_implausible=True)
+
+    got = {}
+
+    def run_a():
+        try:
+            got["A"] = calibrate_unit(job("A"))
+        finally:
+            a_done.set()
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        thread = threading.Thread(target=run_a)
+        thread.start()
+        assert a_made.wait(120)
+        got["B"] = calibrate_unit(job("B"))
+        thread.join(60)
+    assert got["A"].status == "failed" and "No space left" in got["A"].message
+    assert got["B"].status == "calibrated", got["B"].message
+    assert sorted(p.name for p in out.iterdir()) == ["B"]  # no staging folder of A's left
+    assert sorted(p.name for p in (out / "B").iterdir()) == [
+        "FRAMES.json", "REPORT.json", "corrected.urdf"]
+
+
+def test_a_fleet_unit_that_cannot_take_its_name_keeps_the_earlier_files(tmp_path, monkeypatch):
+    """--overwrite: the earlier DIR/<unit> is moved aside, the new one renamed in. When that
+    rename failed, the earlier files stayed hidden as DIR/.partial-old-<unit> (which the
+    command's clean-up of staging folders then deletes) and the unit came back as an
+    internal error; now they are back under their name and the unit fails with one line."""
+    import functools
+    import warnings
+
+    import numpy as np
+
+    from kincal.errors import KincalWarning
+    from kincal.fleet import unit as fleet_unit
+    from kincal.fleet.simulated import FleetModel
+    from kincal.fleet.unit import STAGING, UnitJob, calibrate_unit
+    from kincal.identification.options import CalibrationOptions
+    from kincal.robot import Robot
+
+    fm = FleetModel.of(Robot.load("ec66", tip="flange"), 0)
+    rng = np.random.default_rng(1)
+    data = fm.rtest(fm.unit(rng), rng, n=30)
+    out = tmp_path / "D"
+    job = UnitJob("u1", "<u1>", functools.partial(Robot.load, "ec66", tip="flange"),
+                  functools.partial(lambda d, r: [d], data),
+                  CalibrationOptions(tool_guess=(0, 0, 0.11)), str(out), overwrite=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert calibrate_unit(job).status == "calibrated"
+        before = {p.name: p.read_bytes() for p in (out / "u1").iterdir()}
+        real = os.replace
+
+        def replace(src, dst):
+            if Path(src).name == f"{STAGING}u1":
+                raise OSError(28, "No space left on device")
+            return real(src, dst)
+
+        monkeypatch.setattr(fleet_unit.os, "replace", replace)
+        again = calibrate_unit(job)
+    assert again.status == "failed" and "the earlier ones are kept" in again.message
+    assert sorted(p.name for p in out.iterdir()) == ["u1"]
+    assert {p.name: p.read_bytes() for p in (out / "u1").iterdir()} == before

@@ -517,3 +517,50 @@ def test_a_continuous_joint_turning_many_times_is_no_unit_mistake(tmp_path, caps
 def _write_rows(path, header, rows):
     path.write_text(",".join(header) + "\n" + "".join(
         ",".join(repr(float(v)) for v in r) + "\n" for r in rows))
+
+
+@pytest.mark.parametrize("method, weak, named", [
+    ("l2", ("arm_7.ry",), True), ("l2", (), False), ("ls", ("arm_7.ry",), False)])
+def test_a_weak_parameter_that_moved_most_names_the_penalty(method, weak, named):
+    """Corrections far off whose largest is a weak parameter, with the penalty: the likely
+    cause names the penalty too weak for it, with the evidence's scale, before the URDF."""
+    f = next(f for f in judge(_evidence(
+        change_rms_mm=500.0, method=method, corrections=(("arm_7.ry", -78.7, "deg"),),
+        weak_corrections=weak, weak_scales="offset 45.8 deg" if weak else "")).findings
+        if f.kind == "corrections")
+    assert any("a penalty too weak" in c for c in f.causes) is named
+    if named:
+        assert "(arm_7.ry)" in f.causes[0] and "offset 45.8 deg" in f.causes[0]
+        assert "a URDF that does not describe" in f.causes[-1]
+
+
+
+def test_a_weak_parameter_under_one_lambda_names_that_lambda():
+    """With CV's one lambda (no evidence scales) the cause names the lambda and the remedy
+    that applies to it (the evidence or a larger lambda), not prior scales."""
+    f = next(f for f in judge(_evidence(
+        change_rms_mm=500.0, method="l2", corrections=(("joint_6.alpha", 62.6, "deg"),),
+        weak_corrections=("joint_6.alpha",),
+        weak_scales="lambda 1e-06 chosen by cross-validation")).findings
+        if f.kind == "corrections")
+    assert "(lambda 1e-06 chosen by cross-validation)" in f.causes[0]
+    assert "--lambda evidence" in f.causes[0] and "--prior-mm" not in f.causes[0]
+
+
+def test_talos_three_copies_of_a_day_name_the_penalty(tmp_path, capsys):
+    """The real TALOS touches read three times (three files of one day, each with its own
+    table plane): the evidence's offset scale runs away and a wrist turn trades against
+    the contact face's tilt; refused, nothing written, the weak penalty named as the cause
+    with the scale the evidence estimated (not only a wrong URDF or tip)."""
+    from test_tree_paths import _talos_study
+
+    study = _talos_study()
+    train = str(study.DATA / "left_train.csv")
+    out = tmp_path / "cal.urdf"
+    code = main(["calibrate", str(study.talos_urdf()), train, train, train, "--base",
+                 "left_sole_link", "--tip", "gripper_left_base_link", "--on-plane", "--flush",
+                 "--tool-offset", "0", "0", "-0.12", "--out", str(out)])
+    line = _error_line(capsys)
+    assert code != 0 and not out.exists()
+    assert "Likely cause: a penalty too weak for what the data barely tell apart" in line
+    assert "whose scale the evidence estimated at" in line and "--prior-deg" in line

@@ -138,6 +138,14 @@ def test_joint_column_mapping_errors(plain, tmp_path):
         Measurements.from_csv(path, JOINTS, joint_columns={"joint_2": "joint_1"})
     with pytest.raises(DataError, match="must be a mapping"):
         Measurements.from_csv(path, JOINTS, joint_columns=[("joint_1", "a")])
+    # a joint mapped onto a measured column read joint_1's values from x, silently (the gate
+    # refused it only after the fit, blaming the corrections); one column, one value
+    with pytest.raises(DataError, match="column 'x' would be read for joint_1 and a measured"):
+        Measurements.from_csv(path, JOINTS, joint_columns={"joint_1": "x"})
+    with pytest.raises(DataError, match="column 'J1 \\[rad\\]' would be read for joint_1 and"):
+        Measurements.from_csv(renamed, JOINTS, joint_columns={
+            j: f"J{k} [rad]" for k, j in enumerate(JOINTS, start=1)},
+            position_columns=("J1 [rad]", "y", "z"))
 
 
 def test_candidates_read_dialects_and_mapping(ec66, plain, tmp_path):

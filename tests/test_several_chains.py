@@ -309,6 +309,14 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
                      "btip", *one_chain, "--out", str(out)]) == 1
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "describe one chain; this calibration has several" in err[0]
+    # --validate: one held-out file per data file with several chains, refused before any
+    # fit otherwise
+    for held, said in (([files[1]], "give one held-out file per data file (here 2)"),
+                       ([files[1]] * 3, "2 data file(s), 3 --validate files")):
+        assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
+                     "btip", "--validate", *held, "--out", str(out)]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0], err
     assert {p: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -346,6 +354,27 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
     assert "(base_link -> atip)" in said and "(ctip -> btip)" in said
     rms = [float(line.split("RMS")[1].split()[0]) for line in said.splitlines() if "RMS" in line]
     assert len(rms) == 2 and max(rms) < 0.05, said  # [mm]: noise 0.01 mm per axis
+    # calibrate --validate with one held-out file per data file: each judged on its file's
+    # chain with its set's frames, as kincal evaluate judges it from the files written
+    held = [_csv(tmp_path / f"h{k}.csv", _points(robots[k], true[k], _q(robots[k], 30, rng),
+                                                 k, 10e-6, rng)) for k in range(2)]
+    evaluated = []
+    for k in range(2):
+        assert main(["evaluate", str(out), held[k], "--base", robots[k].base, "--tip",
+                     robots[k].tip, "--frames", str(frames), "--json"]) == 0
+        evaluated.append(json.loads(capsys.readouterr().out)["errors"]["rms_mm"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
+                     "btip", "--method", "ls", "--out", str(tmp_path / "V.urdf"),
+                     "--validate", *held, "--report", str(tmp_path / "R.json"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)["validation"]
+    assert [v["chain"] for v in summary] == ["base_link -> atip", "ctip -> btip"]
+    for v, rms in zip(summary, evaluated):
+        assert v["errors"]["after"]["rms_mm"] == pytest.approx(rms, rel=1e-9)
+        assert v["errors"]["before"]["rms_mm"] > 10 * rms
+    report = json.loads((tmp_path / "R.json").read_text())["validation"]
+    assert [v["source"] for v in report] == held
 
 
 def _plane_touches(robot, true, n, rng, height, tool):

@@ -226,6 +226,28 @@ def test_mdh_models_refuse_tree_paths_in_one_line(tmp_path):
     assert mdh.extract(below.geometry).n == below.geometry.n
 
 
+def test_mdh_out_on_a_tree_path_refused_before_the_fit(tmp_path, capsys):
+    """--mdh-out on a chain from a base off the tip's branch: one line saying why (no MD-H
+    table describes it) before any fit, nothing written (before: the error model's message
+    after the fit, about a model the user had not chosen)."""
+    from kincal.cli.main import main
+
+    path, _ = _tree(tmp_path, 0)
+    robot = Robot.load(path, base="atip", tip="btip")
+    q = random_joint_values(robot.geometry, np.random.default_rng(0), 20)
+    T = robot.tip_poses(q)
+    data = tmp_path / "d.csv"
+    data.write_text(",".join([*robot.joint_names, "x", "y", "z"]) + "\n" + "\n".join(
+        ",".join(repr(float(v)) for v in [*row, *t[:3, 3]]) for row, t in zip(q, T)) + "\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main(["calibrate", str(path), str(data), "--base", "atip", "--tip", "btip",
+                 "--out", str(tmp_path / "c.urdf"), "--mdh-out", str(tmp_path / "m.csv")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--mdh-out writes the chain as an MD-H table" in err[0], err
+    assert "traversed upward" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
 def test_bad_base_and_tip_in_one_line(tmp_path):
     path, _ = _tree(tmp_path, 0)
     with pytest.raises(FrameError, match="unknown base frame 'nowhere'") as exc:
@@ -440,3 +462,61 @@ def test_talos_log_closes_the_feet_loop_on_the_nominal_model():
     q[:, names.index("leg_left_3_joint")] += np.radians(1.0)
     d50_off, _, t50_off, _ = study.feet_closure(urdf, names, q)
     assert d50_off > 1.0 and t50_off > 0.1
+
+
+def test_evaluate_gives_roll_and_pitch_as_the_study_computes_them(tmp_path, capsys):
+    """kincal evaluate on flush touches reports the RMS roll (about the contact frame's x
+    axis) and pitch (about its y axis) beside the tilt; on the real TALOS held-out touches
+    they equal what scripts/talos_contact.py computes from the written files on its own
+    (Pinocchio tip poses, FRAMES.json's plane), and roll^2 + pitch^2 is the tilt's RMS^2."""
+    import json
+
+    from kincal.cli.main import main
+
+    study = _talos_study()
+    names, q_train = study.joint_rows(study.DATA / "left_train.csv")
+    _, q_valid = study.joint_rows(study.DATA / "left_validation.csv")
+    urdf = study.talos_urdf()
+    cal, frames = study.calibrate(tmp_path, urdf, study.DATA / "left_train.csv", "cal")
+    valid = tmp_path / "valid.csv"
+    study.write_joint_csv(valid, names, q_valid)
+    capsys.readouterr()
+    assert main(["evaluate", str(cal), str(valid), "--frames", str(frames), "--base",
+                 study.BASE, "--tip", study.TIP, "--on-plane", "--flush", "--json"]) == 0
+    o = json.loads(capsys.readouterr().out)["orientation_errors"]
+    _, roll, pitch = study.held_out(cal, frames, q_train, q_valid, names, plane="")
+    assert o["roll_rms_deg"] == pytest.approx(roll, abs=1e-6)
+    assert o["pitch_rms_deg"] == pytest.approx(pitch, abs=1e-6)
+    assert o["roll_rms_deg"] ** 2 + o["pitch_rms_deg"] ** 2 == pytest.approx(o["rms_deg"] ** 2)
+    assert main(["evaluate", str(cal), str(valid), "--frames", str(frames), "--base",
+                 study.BASE, "--tip", study.TIP, "--on-plane", "--flush"]) == 0
+    assert f"RMS roll {roll:.4f}, pitch {pitch:.4f} deg" in capsys.readouterr().out
+    # calibrate --validate: the same held-out roll and pitch, before and after
+    assert main(["calibrate", str(urdf), str(study.DATA / "left_train.csv"), "--base",
+                 study.BASE, "--tip", study.TIP, "--on-plane", "--flush", "--tool-offset", "0",
+                 "0", "-0.12", "--validate", str(valid), "--out", str(tmp_path / "v.urdf"),
+                 "--json"]) == 0
+    v = json.loads(capsys.readouterr().out)["validation"]["orientation_errors"]
+    assert v["after"]["roll_rms_deg"] == pytest.approx(roll, abs=1e-6)
+    assert v["after"]["pitch_rms_deg"] == pytest.approx(pitch, abs=1e-6)
+    assert v["before"]["rms_deg"] > 3 * v["after"]["rms_deg"]
+
+
+def test_plan_on_a_tree_path_uses_the_placement_model(tmp_path, capsys):
+    """kincal plan on a chain from a base off the tip's branch plans for the chain's default
+    model (placement), as calibrate fits it (before: the complete model's refusal)."""
+    from kincal.cli.main import main
+    from kincal.planning.pose_selection import select_poses
+
+    path, _ = _tree(tmp_path, 0)
+    robot = Robot.load(path, base="atip", tip="btip")
+    q = random_joint_values(robot.geometry, np.random.default_rng(1), 300)
+    chosen = select_poses(robot, q, 40, tool=(0.0, 0.0, 0.05))
+    assert len(chosen.indices) == 40
+    with pytest.raises(OptionError, match="tree path"):
+        select_poses(robot, q, 40, tool=(0.0, 0.0, 0.05), model="complete")
+    out = tmp_path / "plan.csv"
+    assert main(["plan", str(path), "--base", "atip", "--tip", "btip", "--random", "300",
+                 "--poses", "40", "--tool-offset", "0", "0", "0.05", "--out", str(out)]) == 0, \
+        capsys.readouterr().err
+    assert len(out.read_text().strip().splitlines()) >= 41

@@ -65,6 +65,25 @@ def test_ur_hash_overrides(calibrated, tmp_path):
     assert "  hash: calib_given\n" in (tmp_path / "K.yaml").read_text()
 
 
+def test_a_given_hash_reads_back_as_given(calibrated, tmp_path, capsys):
+    """--ur-hash was written as typed: "a: b" made the file unreadable YAML, "c_1 #x" read
+    back as c_1, "12345" as a number, "on" as True; now such a hash is quoted (a plain
+    calib_... stays plain, as the factory file has it) and an empty one is refused."""
+    import yaml
+
+    tmp, factory, data = calibrated
+    base = ["calibrate", str(XACRO), str(data), *_cli_args(factory), "--tip", "tool0",
+            "--yaml-format", "ur", "--quiet", "--model", "mdh", "--method", "ls"]
+    for k, given in enumerate(("a: b", "c_1 #x", "12345", "on", 'q"uote')):
+        out = tmp_path / f"K{k}.yaml"
+        assert main(base + ["--out", str(tmp_path / f"C{k}.urdf"), "--yaml-out", str(out),
+                            "--ur-hash", given]) == 0
+        assert yaml.safe_load(out.read_text())["kinematics"]["hash"] == given
+    _refused(base + ["--out", str(tmp_path / "E.urdf"), "--yaml-out", str(tmp_path / "E.yaml"),
+                     "--ur-hash", " "], capsys, "--ur-hash is empty")
+    assert not (tmp_path / "E.urdf").exists()
+
+
 def _refused(argv, capsys, *words):
     assert main(argv) != 0
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("kincal: error:")]

@@ -439,6 +439,28 @@ def test_write_refuses_protected_inputs_however_named(tmp_path, monkeypatch):
     assert files_in(tmp_path) == {"robot.urdf", "link.urdf", "hard.urdf"}
 
 
+def test_overwrite_replaces_no_input_but_the_urdf_in_place(tmp_path):
+    """overwrite=True replaced a protected input by any output; now only the pairs of
+    in_place (the corrected URDF over its robot description) may replace an input."""
+    from kincal.export.safe_write import write_all
+
+    robot, data = tmp_path / "robot.urdf", tmp_path / "data.csv"
+    robot.write_text("robot")
+    data.write_text("data")
+    for target in (data, robot):
+        with pytest.raises(ExportError, match="with or without --overwrite"):
+            write_all([(target, "output")], overwrite=True, protect=[robot, data])
+    with pytest.raises(ExportError, match="with or without --overwrite"):  # a URDF over data
+        write_all([(data, "urdf")], overwrite=True, protect=[robot, data],
+                  in_place=[(data, robot)])
+    with pytest.raises(ExportError, match="or pass --overwrite"):  # in place, not asked
+        write_all([(robot, "urdf")], protect=[robot, data], in_place=[(robot, robot)])
+    assert robot.read_text() == "robot" and data.read_text() == "data"
+    write_all([(tmp_path / "." / "robot.urdf", "urdf")], overwrite=True,
+              protect=[robot, data], in_place=[(robot, robot)])
+    assert robot.read_text() == "urdf" and data.read_text() == "data"
+
+
 def test_write_refuses_missing_directory_without_creating_it(tmp_path):
     with pytest.raises(ExportError, match=f"directory {tmp_path / 'missing'} does not exist"):
         write_text_atomic(tmp_path / "missing" / "out.urdf", "x")

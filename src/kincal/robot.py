@@ -407,6 +407,12 @@ class Robot:
             m.jointPlacements[j] = _se3(self._parent_link(j) @ np.asarray(T, float))
         return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source, self.off_chain)
 
+    def parent_link(self, joint: str) -> str:
+        """The URDF parent link of the movable joint ``joint``."""
+        m = self.model
+        fid = m.getFrameId(joint, pin.FrameType.JOINT)
+        return m.frames[m.frames[fid].parentFrame].name
+
     def joint_axis(self, name: str) -> np.ndarray:
         """(3,) the URDF axis of the movable joint ``name`` in its own frame."""
         return self._axis(self.model.getJointId(name))[0]

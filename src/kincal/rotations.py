@@ -344,3 +344,9 @@ def rotation_log(R: np.ndarray) -> np.ndarray:
         axis *= np.where(np.sum(axis * w[wide], axis=1) < 0.0, -1.0, 1.0)[:, None]
         out[wide] = axis * angle[wide, None]
     return out
+
+
+def aligned_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """(M,) distances between point sets A and B after the best rigid motion of B onto A."""
+    a, b = A - np.add.reduce(A) / len(A), B - np.add.reduce(B) / len(B)  # np.mean's sums
+    return np.linalg.norm(a - b @ kabsch_rotation(b.T @ a).T, axis=1)  # a = R b, as rows

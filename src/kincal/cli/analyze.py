@@ -93,7 +93,7 @@ def _analyze(a: Analyze):
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "analysis has several (one --base/--tip per file)")
     protect = check_outputs(robot, [a.report, a.accuracy_plot], overwrite=a.overwrite,
-                            inputs=a.inputs.files)
+                            inputs=(*a.inputs.files, a.accuracy.accuracy_poses))
     sets = a.inputs.read_sets(robots)
     if a.model == "all":  # every model that can describe this chain (these chains)
         tree = several or default_for(robot.geometry) != "complete"
@@ -108,6 +108,10 @@ def _analyze(a: Analyze):
         tool_guess=a.inputs.tool_guess))
         for m in names}
     problem = problems[names[0]]
+    if a.accuracy.asked:  # before the analysis is printed
+        from kincal.planning.accuracy_map import require_mappable
+
+        require_mappable(problem.kinds)
     chains = ", ".join(dict.fromkeys(f"{r.base} -> {r.tip}" for r in robots))
     if len(sets) == 1 and problem.kinds[0].kind == "point":
         print(f"{robot.name} ({chains}), {len(sets[0])} poses from {a.inputs.data}")

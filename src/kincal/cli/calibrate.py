@@ -66,10 +66,12 @@ def register(subparsers) -> None:
     g.add_argument("--robust-scale-mm", type=float, help="scale of the robust loss [mm] "
                    "(default 2.5 x the median pose error)")
     group(p, "inputs").add_argument(
-        "--validate", metavar="HELD.csv",
+        "--validate", metavar="HELD.csv", nargs="+", default=[],
         help="held-out data (read as DATA is, same kind as a training file): its errors "
              "before and after, per axis, with the frames from the calibration (as kincal "
-             "evaluate --frames), in the summary, --report and --html")
+             "evaluate --frames), in the summary, --report and --html. One file, or one per "
+             "data file, each judged on that file's chain with its set's frames (several "
+             "chains: one per data file)")
     g.add_argument("--cv-max-poses", type=int, default=2000, metavar="N",
                    help="choose lambda by CV on a random N of the poses when there are more "
                         "(default 2000; 0: all poses); the final fit uses every pose")
@@ -137,7 +139,7 @@ class Calibrate:
     mdh_out: str | None
     plots: str | None
     html: str | None
-    validate: str | None
+    validate: tuple[str, ...]  # held-out files: none, one, or one per data file
     residuals_out: str | None
     overwrite: bool
     accept_implausible: bool
@@ -182,12 +184,19 @@ def calibration_options(c: Calibrate):
 def _ur_hash(c: Calibrate, robot) -> str:
     """The hash of --yaml-format ur: --ur-hash, else the xacro's kinematics_params file's."""
     from kincal.cli.options import xacro_args
-    from kincal.export.cell_exports import UR_SEGMENTS, ur_hash_of, ur_joints
+    from kincal.export.cell_exports import (UR_SEGMENTS, ur_hash_of, ur_joints,
+                                            ur_layout_problem)
 
     if ur_joints(robot.joint_names) is None:
         raise OptionError("--yaml-format ur needs a chain of the six UR joints ("
                           + ", ".join(j for _, j in UR_SEGMENTS) + "); this chain has "
                           + (", ".join(robot.joint_names) or "none"))
+    problem = ur_layout_problem(robot)  # before the work, as the writer would refuse it
+    if problem is not None:
+        raise OptionError(problem)
+    if c.ur_hash is not None and not c.ur_hash.strip():
+        raise OptionError("--ur-hash is empty; give the hash of the robot's kinematics file "
+                          "(calib_...), or leave the option out to copy it from that file")
     found = c.ur_hash or ur_hash_of(robot.source, xacro_args(c.chain.xacro_arg))
     if not found:
         raise OptionError("--yaml-format ur: no hash found (no kinematics_params file with a "
@@ -195,10 +204,11 @@ def _ur_hash(c: Calibrate, robot) -> str:
     return found
 
 
-def json_summary(result, validation, refused: bool) -> dict:
+def json_summary(result, validations, refused: bool) -> dict:
     """The summary of ``--json``: the run's figures (REPORT.json's keys, without the
     per-sample residuals), given out by :func:`kincal.cli.console.summary_lines`."""
     from kincal.export import report
+    from kincal.export.validation import validation_dict
 
     full = report.result_dict(result)
     keep = ("robot", "data", "lambda", "penalty_choice", "evidence", "errors", "parameters",
@@ -207,7 +217,7 @@ def json_summary(result, validation, refused: bool) -> dict:
             **{k: full[k] for k in keep},
             "identifiability": {k: full["identifiability"][k] for k in
                                 ("rank", "condition_number", "kept", "fixed")},
-            "validation": None if validation is None else validation.as_dict()}
+            "validation": validation_dict(validations)}
 
 
 def run(args) -> int:
@@ -234,32 +244,47 @@ def run(args) -> int:
         raise OptionError("--mdh-out and --yaml-format ur describe one chain; this calibration "
                           "has several (one --base/--tip per file): write --out or --yaml-out "
                           "(kincal format, every chain's joints)")
+    if c.mdh_out is not None and robot.geometry.is_reversed.any():
+        raise OptionError(f"--mdh-out writes the chain as an MD-H table, which a chain from a "
+                          f"base off the tip's branch ({robot.base} -> {robot.tip}: "
+                          f"{int(robot.geometry.is_reversed.sum())} joints traversed upward) "
+                          "does not have; the corrected URDF (--out) and --yaml-out hold its "
+                          "origins")
     ur_hash = _ur_hash(c, robot) if c.yaml_format == "ur" else None
     if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
-    inputs = c.inputs.files + ((c.validate,) if c.validate else ())
-    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots])
-    if c.validate and several:
-        raise OptionError("--validate evaluates one chain; this calibration has several "
-                          "(one --base/--tip per file)")
+    inputs = c.inputs.files + c.validate + tuple(
+        p for p in (c.prior, c.accuracy.accuracy_poses) if p)
+    check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots],
+                  urdf_out=c.out)
+    if c.validate:
+        from kincal.cli.validate import check_count
+
+        check_count(len(c.validate), len(c.inputs.files), several)
     sets = c.inputs.read_sets(robots)  # every file, each read as its kind on its chain
     options = calibration_options(c)
     with warnings.catch_warnings(record=True) as caught:  # kept for the HTML report
         warnings.simplefilter("always", KincalWarning)
         targets = c.accuracy.targets(robot)  # bad values fail here, before solving
+        problem = CalibrationProblem(robots, sets, options)
+        if c.accuracy.asked:  # before the fit
+            from kincal.planning.accuracy_map import require_mappable
+
+            require_mappable(problem.kinds)
         try:
-            result = CalibrationProblem(robots, sets, options).solve()
+            result = problem.solve()
         finally:
             if options.solver.progress is not None:
                 options.solver.progress.close()
     for w in caught:  # and passed on to be printed as usual
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    validation = None
+    validations: tuple = ()
     if c.validate:
         from kincal.cli.validate import held_out
 
-        validation = held_out(result, c.inputs, c.validate)
+        validations = tuple(held_out(result, c.inputs, path, k if len(c.validate) > 1 else None)
+                            for k, path in enumerate(c.validate))
     refused = False
     try:  # the gate before any further work (write_calibration checks it again, quietly)
         accepted = gate(result, c.accept_implausible, c.accept_unconverged)
@@ -267,27 +292,30 @@ def run(args) -> int:
         if not (c.report or c.html or c.plots or c.residuals_out):  # no diagnosis asked
             if not c.quiet:
                 print("\n".join(summary_lines(c.json, [result.summary()],
-                                               json_summary(result, validation, True))))
+                                               json_summary(result, validations, True))))
             raise
         refused, accepted = True, []  # the writer writes the diagnosis, then raises
     for message in accepted:
         warnings.warn(message, KincalWarning)
     amap = None
     if (targets or c.html) and not refused:
-        from kincal.planning.accuracy_map import result_accuracy_map
+        from kincal.planning.accuracy_map import mappable, result_accuracy_map
 
-        if (result.covariance is not None or targets) and not result.chains.several:
+        # --html alone: the map where the data allow one (a point or pose set, one chain)
+        if ((result.covariance is not None or targets) and not result.chains.several
+                and mappable(result.sets)):
             amap = result_accuracy_map(result, **targets)
 
     def lines(written, notes):
         if c.quiet:
             return []
         if c.json:  # stdout holds the JSON alone; what was written goes to stderr
-            return summary_lines(True, (), json_summary(result, validation, refused), written)
+            return summary_lines(True, (), json_summary(result, validations, refused),
+                                 written)
         out = [result.summary()]
         out += [f"  {line}" for line in result.identifiability.summary().splitlines()[1:]
                 if c.verbose or line.startswith(("weak", "  the poses"))]
-        if validation is not None:
+        for validation in validations:
             out += [f"  {line}" for line in validation.lines()]
         out += [f"  export: {n}" for n in notes]
         if amap is not None:
@@ -309,7 +337,7 @@ def run(args) -> int:
             warnings_seen=[str(w.message) for w in caught
                            if issubclass(w.category, KincalWarning)],
             data_source=", ".join(c.inputs.files), command=c.command_line or None,
-            validation=validation,
+            validations=validations,
             xacro_args=xacro_args(c.chain.xacro_arg),
             before_commit=lambda written, notes: say(lines(written, notes)))
     return 0

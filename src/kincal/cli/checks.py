@@ -256,18 +256,20 @@ def check_args(args) -> None:
                               "denied or a read-only file system); choose another --out")
 
 
-def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=()) -> list:
+def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=(), urdf_out=None) -> list:
     """Refuse now, before the work, what the final write would refuse; return the paths
     to protect, for that write (the one list of what the command read).
 
     files: the output paths the command will write (None entries are skipped); inputs:
-    the files it reads (never overwritten without --overwrite; None skipped), the robot's
-    URDF added; dirs: folders it may create (a plots folder)."""
+    the files it reads (never overwritten, with or without --overwrite; None skipped), the
+    robot's URDF added; dirs: folders it may create (a plots folder); urdf_out: the
+    corrected URDF, which alone may replace the robot's URDF (with --overwrite)."""
     from kincal.export.safe_write import check_outputs as check_targets
 
     protect = [robot.source] + [p for p in inputs if p]
     check_targets([f for f in files if f], overwrite=overwrite, protect=protect,
-                  dirs=[d for d in dirs if d])
+                  dirs=[d for d in dirs if d],
+                  in_place=[(urdf_out, robot.source)] if urdf_out else [])
     return protect
 
 

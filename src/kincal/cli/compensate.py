@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -152,7 +153,11 @@ def _compensate(c: Compensate) -> int:
                "notes": list(result.notes)}
     from kincal.export.outputs import File
 
-    say_and_write([File(c.out, "csv", result.csv_blocks(c.length_unit, c.angle_unit))],
+    # the file's one exception to SI, said in the file (a # line, as its provenance is)
+    units = (f"# joint values in {c.angle_unit} (revolute) and {c.length_unit} (prismatic), "
+             "as the input (--angle-unit, --length-unit)\n")
+    say_and_write([File(c.out, "csv", itertools.chain(
+                      [units], result.csv_blocks(c.length_unit, c.angle_unit)))],
                   lambda written: summary_lines(c.json, said, summary, written, wrote=lambda path: (
                       f"  wrote {path} (joint values in {c.angle_unit} and {c.length_unit}, as "
                       "the input)")),

@@ -46,7 +46,7 @@ def run(args) -> int:
     from kincal.frames_file import CellFrames
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.problem import CalibrationProblem
-    from kincal.identification.statistics import AngleStats, ErrorStats, angle_errors
+    from kincal.identification.statistics import ErrorStats, angle_stats
 
     e = typed(Evaluate, args, chain=Chain.of(args), inputs=Inputs.of(args))
     if e.fit_frames == "measurement" and not e.frames:
@@ -93,8 +93,7 @@ def run(args) -> int:
                    f"data (moved {mm:.2f} mm, {deg:.3f} deg)" + how.split(e.frames, 1)[1])
     stats = [ErrorStats.from_errors(err) for _, err in problem.sample_errors(x)]
     km = problem.kinds[0]
-    angles = angle_errors(km, problem.residuals(x, 0))
-    angle = None if angles is None else AngleStats.from_angles(angles)
+    angle = angle_stats(km, problem.residuals(x, 0))
     what = "" if km.kind == "point" else f" ({km.kind} errors)"
     lines = [f"{robot.name} ({robot.base} -> {robot.tip}) on {e.inputs.data}, {how}{what}:",
              f"  {'position: ' if km.kind == 'pose' else ''}{stats[0].line()}"]

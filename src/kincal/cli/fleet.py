@@ -77,9 +77,34 @@ class Fleet:
 
 
 def unit_names(files) -> list[str]:
-    """Each file's unit name: its stem, made unique with its position when stems repeat."""
+    """Each file's unit name (its folder under DIR): its stem, made unique with its
+    position when stems repeat (``x/a.csv y/a.csv`` -> ``a-1 a-2``), and further when that
+    is another file's stem (``a-2.csv`` beside them: ``a-2-2``); names equal but for case
+    count as one (a case-insensitive file system has one folder for both). Two units in one
+    folder would replace each other's files, and the summary would count one twice. A name
+    the fleet's own files or staging folders take is refused."""
+    from kincal.fleet.unit import STAGING
+
     stems = [Path(f).stem for f in files]
-    return [s if stems.count(s) == 1 else f"{s}-{i + 1}" for i, s in enumerate(stems)]
+    keys = [s.casefold() for s in stems]
+    unique = {k for k in keys if keys.count(k) == 1}
+    names: list[str] = []
+    taken = set(unique)
+    for i, (stem, key) in enumerate(zip(stems, keys)):
+        name = stem
+        if key not in unique:
+            name, n = f"{stem}-{i + 1}", 1
+            while name.casefold() in taken:
+                n += 1
+                name = f"{stem}-{i + 1}-{n}"
+            taken.add(name.casefold())
+        names.append(name)
+    reserved = {n.casefold() for n in (PRIOR, SUMMARY_JSON, SUMMARY_HTML)}
+    for f, name in zip(files, names):
+        if name.casefold() in reserved or name.startswith(STAGING) or name in ("", ".", ".."):
+            raise OptionError(f"{f}: its unit would be DIR/{name}, a name the fleet's own files "
+                              f"or staging folders ({STAGING}*) take; rename the data file")
+    return names
 
 
 def run(args) -> int:
@@ -89,7 +114,8 @@ def run(args) -> int:
     from kincal.export.outputs import File
     from kincal.cli.checks import check_outputs
     from kincal.fleet import UnitJob, calibrate_fleet
-    from kincal.fleet.unit import STAGING, URDF
+    from kincal.fleet.unit import FRAMES, REPORT, STAGING, URDF
+    unit_files = (URDF, FRAMES, REPORT)
     from kincal.identification.options import CalibrationOptions
 
     inputs = typed(Inputs, args, files=tuple(args.data))
@@ -105,8 +131,20 @@ def run(args) -> int:
     if taken and not c.overwrite:
         raise OptionError(f"{out}: unit folders exist ({', '.join(taken[:5])}); give "
                           "--overwrite to replace them")
+    for n in taken:  # --overwrite replaces a unit's folder whole: only if it holds no more
+        extra = sorted(p.name for p in (out / n).iterdir()) if (out / n).is_dir() else [n]
+        extra = [e for e in extra if e not in unit_files]  # than a unit's files, none read
+        extra += [Path(f).name for f in (robot.source, *inputs.files) if f and
+                  Path(f).expanduser().resolve().parent == (out / n).resolve()
+                  and Path(f).name not in extra]
+        if extra:
+            raise OptionError(f"{out / n}: holds files a fleet unit does not write "
+                              f"({', '.join(extra[:3])}{', ...' if len(extra) > 3 else ''}), "
+                              "which replacing the unit's folder would delete; move them or "
+                              "choose another --out-dir")
     # no folder made here: the one writer makes DIR with the first file written into it (a
-    # unit's, or the summary's), so a run that fails before leaves nothing behind
+    # unit's, or the summary's), so a run that fails before leaves nothing behind; the
+    # units share it and never remove it, the command does if the run leaves it empty
     made = not out.exists()
     # absolute paths: a worker of a running scheduler (--scheduler) has a cwd of its own
     from kincal.descriptions import portable
@@ -129,9 +167,7 @@ def run(args) -> int:
     except BaseException as exc:  # Ctrl-C, SIGTERM: the workers are stopped by now
         for stage in out.glob(f"{STAGING}*"):  # no half-written unit is left behind
             shutil.rmtree(stage, ignore_errors=True)
-        if made and out.is_dir() and not any(out.iterdir()):
-            with contextlib.suppress(OSError):  # made by a unit stopped midway: no empty
-                out.rmdir()                     # folder is left either
+        _remove_if_empty(out, made)  # made by a unit stopped midway
         from kincal.cli.console import Terminated
 
         if not isinstance(exc, (KeyboardInterrupt, Terminated)):
@@ -151,15 +187,30 @@ def run(args) -> int:
     gate = (f"each unit's own gate: {status.count('calibrated')} calibrated, "
             f"{status.count('refused')} refused, {status.count('failed')} failed of "
             f"{len(status)} units (the prior is learnt from the calibrated ones)")
-    say_and_write(files, lambda written: summary_lines(
-        c.json, [summary.table()], {"command": "fleet", **summary.as_dict()}, written),
-        provenance=c.chain.provenance(robot, inputs.files, c.command_line,
-                                      verdict="per unit", gate=gate),
-        overwrite=c.overwrite, protect=protect, dirs=[out])
+    try:
+        say_and_write(files, lambda written: summary_lines(
+            c.json, [summary.table()], {"command": "fleet", **summary.as_dict()}, written),
+            provenance=c.chain.provenance(robot, inputs.files, c.command_line,
+                                          verdict="per unit", gate=gate),
+            overwrite=c.overwrite, protect=protect, dirs=[out])
+    except BaseException:
+        _remove_if_empty(out, made)  # the units' shared folder, if no unit's files are in it
+        raise
     if summary.prior is None:
+        stale = (f"; {out / PRIOR} is an earlier run's, not this one's (left as it was)"
+                 if (out / PRIOR).exists() else "")
         raise OptionError(f"fewer than 2 of the {len(jobs)} units were calibrated: no fleet "
-                          f"prior written (see {out / SUMMARY_JSON})")
+                          f"prior written (see {out / SUMMARY_JSON}){stale}")
     return 0
+
+
+def _remove_if_empty(out: Path, made: bool) -> None:
+    """Remove the fleet's folder if this run made it and it is empty: the units make it as
+    a shared folder, which none of them removes (another may be writing into it), so that a
+    run that ends without a file in it leaves no empty folder behind."""
+    if made and out.is_dir() and not any(out.iterdir()):
+        with contextlib.suppress(OSError):
+            out.rmdir()
 
 
 def _shown(names, at_most: int = 5) -> str:

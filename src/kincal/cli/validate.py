@@ -13,19 +13,38 @@ import dataclasses
 from kincal.errors import OptionError
 
 
-def held_out(result, inputs, path: str):
+def check_count(n_held: int, n_files: int, several: bool) -> None:
+    """Refuse a count of --validate files that is neither one (one chain) nor one per data
+    file, before any work."""
+    if n_held == 1 and several:
+        raise OptionError("--validate HELD.csv judges one chain; this calibration has several "
+                          "(one --base/--tip per file): give one held-out file per data file "
+                          f"(here {n_files}), each judged on its file's chain")
+    if n_held > 1 and n_held != n_files:
+        raise OptionError(f"--validate takes one held-out file, or one per data file (each "
+                          f"judged on its file's chain with its set's frames): {n_files} data "
+                          f"file(s), {n_held} --validate files")
+
+
+def held_out(result, inputs, path: str, k: int | None = None):
     """The :class:`~kincal.export.validation.Validation` of ``result`` on ``path``, read as
-    the training files are (``inputs``: their reading options)."""
+    the training files are (``inputs``: their reading options). k: judged on the chain of
+    training set k with that set's frames (None: the calibration's one chain, every set's
+    frames as evaluate --frames takes them)."""
     import numpy as np
 
     from kincal.cli.evaluate import with_frames
     from kincal.export.validation import Validation
+    from kincal.identification.statistics import angle_stats
 
-    if result.chains is not None and result.chains.several:
-        raise OptionError("--validate evaluates one chain; this calibration has several "
-                          "(one --base/--tip per file)")
+    several = result.chains is not None and result.chains.several
+    check_count(1 if k is None else len(result.sets), len(result.sets), several)
+    nominal, corrected = result.robot, result.corrected
+    if k is not None and several:  # the chain of set k, with every corrected origin
+        nominal = result.chains.robots[k]
+        corrected = nominal.with_origins(result.chains.origins(result.layout.kinematic(result.x)))
     reading = dataclasses.replace(inputs, files=(path,), set_sigma_mm=None)
-    sets = reading.read_sets(result.robot)
+    sets = reading.read_sets(nominal)
     after_frames = result.frames()
     lay = result.layout
     start = [tuple(float(v) for v in result.x_start[lay.frame_slices[i]])
@@ -33,16 +52,21 @@ def held_out(result, inputs, path: str):
     before_frames = dataclasses.replace(
         after_frames, backlash={},
         sets=tuple(dataclasses.replace(s, values=v) for s, v in zip(after_frames.sets, start)))
+    if k is not None:  # that set's frames alone, the joint terms of its chain's joints
+        mine = set(nominal.joint_names)
+        after_frames, before_frames = (dataclasses.replace(
+            f, sets=(f.sets[k],), backlash={j: v for j, v in f.backlash.items() if j in mine},
+            compliance={j: v for j, v in f.compliance.items() if j in mine})
+            for f in (after_frames, before_frames))
     out = []
-    for robot, frames in ((result.robot, before_frames), (result.corrected, after_frames)):
+    for robot, frames in ((nominal, before_frames), (corrected, after_frames)):
         problem, x = with_frames(robot, sets, frames, inputs.tool_guess)
         (_, errors), = problem.sample_errors(x)
         out.append((problem.residuals(x, 0), errors))
     km = problem.kinds[0]
     per_axis = km.kind == "pose" or (km.kind == "point" and getattr(km.data, "n_points", 1) == 1)
-    orientation: tuple[float, float] | None = None
-    if km.kind == "pose":  # mean orientation error [deg], before and after
-        before, after = (float(np.degrees(np.mean(km.orientation_errors(r)))) for r, _ in out)
-        orientation = (before, after)
+    before, after = (angle_stats(km, r) for r, _ in out)
+    angles = None if before is None or after is None else (before, after)
     return Validation(str(path), km.kind, np.asarray(km.data.rows), out[0][0], out[1][0],
-                      out[0][1], out[1][1], per_axis, orientation)
+                      out[0][1], out[1][1], per_axis, angles,
+                      f"{nominal.base} -> {nominal.tip}" if several else "")

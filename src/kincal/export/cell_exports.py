@@ -45,7 +45,7 @@ _YAML_WORDS = {"y", "n", "yes", "no", "true", "false", "on", "off", "null"}
 
 
 def _key(name: str) -> str:
-    """``name`` as a YAML mapping key that reads back as itself."""
+    """``name`` as a YAML mapping key (or value) that reads back as this string."""
     if _PLAIN_KEY.fullmatch(name) and name.lower() not in _YAML_WORDS:
         return name
     return json.dumps(name)
@@ -97,6 +97,32 @@ def ur_joints(joint_names) -> tuple[str, ...] | None:
     return names
 
 
+def ur_layout_problem(robot) -> str | None:
+    """Why ``robot``'s six UR joints are not in ur_description's layout, or None if they
+    are. ur_description (ROS 2) builds every joint from its segment of the kinematics file,
+    turning about its own z axis, the first under ``<prefix>base_link_inertia``; only then
+    does a file of the URDF's joint origins give the xacro the calibrated robot. Another
+    layout (example-robot-data's and ROS 1's UR URDFs: shoulder_lift about y, the first
+    joint under base_link) read by the xacro is another robot, metres off."""
+    joints = ur_joints(robot.joint_names)
+    if joints is None:
+        return None  # refused as not the six UR joints
+    tilted = [n for n in joints if not np.allclose(robot.joint_axis(n), (0.0, 0.0, 1.0),
+                                                   atol=1e-9)]
+    parent = robot.parent_link(joints[0])
+    prefix = joints[0][: len(joints[0]) - len(UR_SEGMENTS[0][1])]
+    if not tilted and parent == prefix + "base_link_inertia":
+        return None
+    why = (f"{', '.join(tilted)} turn{'s' * (len(tilted) == 1)} about another axis than z"
+           if tilted else f"{joints[0]} hangs under {parent!r}, not "
+           f"{prefix + 'base_link_inertia'!r}")
+    return (f"--yaml-format ur: this URDF is not in ur_description's layout ({why}; e.g. the "
+            "ROS 1 or example-robot-data UR descriptions): ur_description would build "
+            "another robot from its joint origins; calibrate the URDF that ur_description's "
+            "xacro makes (ur.urdf.xacro with --xacro-arg ur_type:=...), or write "
+            "--yaml-format kincal")
+
+
 def ur_hash_of(source, xacro_args: dict | None) -> str | None:
     """The ``hash`` of the kinematics_params file a ur_description xacro was expanded with:
     the ``kinematics_params`` argument (relative to the working folder, as xacro reads it),
@@ -141,12 +167,15 @@ def ur_kinematics_yaml(nominal, corrected, ur_hash: str) -> str:
     (shoulder .. wrist_3) of x, y, z [m], roll, pitch, yaw [rad] (the URDF joint <origin>,
     rpy kept closest to the nominal), then ``hash:`` (the robot's calibration id, which
     ur_robot_driver compares with the controller's). Raises ExportError for a chain that
-    is not the six UR joints."""
+    is not the six UR joints or not in ur_description's layout (:func:`ur_layout_problem`)."""
     joints = ur_joints(corrected.joint_names)
     if joints is None:
         raise ExportError("--yaml-format ur needs a chain of the six UR joints ("
                           + ", ".join(j for _, j in UR_SEGMENTS) + "); this chain has "
                           + ", ".join(corrected.joint_names))
+    problem = ur_layout_problem(nominal)
+    if problem is not None:
+        raise ExportError(problem)
     old, new = nominal.urdf_origins(), corrected.urdf_origins()
     near = _written_rpy(nominal, {name: new[name] for name in joints})
     lines = [f"# kincal: corrected kinematics of {corrected.name} ({corrected.base} -> "
@@ -158,7 +187,7 @@ def ur_kinematics_yaml(nominal, corrected, ur_hash: str) -> str:
         lines.append(f"  {segment}:")
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("x", "y", "z"), T[:3, 3])]
         lines += [f"    {k}: {_num(v)}" for k, v in zip(("roll", "pitch", "yaw"), rpy)]
-    lines.append(f"  hash: {ur_hash}")
+    lines.append(f"  hash: {_key(ur_hash)}")  # "a: b", "12345", "on" read back as given
     return "\n".join(lines) + "\n"
 
 

@@ -234,7 +234,7 @@ def _warnings(result, warnings, notes) -> str:
 
 def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=None,
                 source: str = "kincal", provenance=None, refused: str | None = None,
-                validation=None) -> str:
+                validations=()) -> str:
     """The report of ``result`` (a CalibrationResult) as one HTML document.
 
     accuracy: an :class:`~kincal.planning.accuracy_map.AccuracyMap` (e.g. from
@@ -243,7 +243,8 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
     export notes of the corrected URDF). data_source: the data file's name, for the page.
     provenance: the run's :class:`~kincal.export.provenance.Provenance`. refused: the
     gate's refusal message (the page is then a refused run's diagnosis, marked at its
-    top). validation: held-out errors (:class:`~kincal.export.validation.Validation`).
+    top). validations: held-out errors, one :class:`~kincal.export.validation.Validation`
+    per held-out file.
     """
     from kincal.export import html_run
     from kincal.export import diagnostic_plots as dp
@@ -295,7 +296,7 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
             + _section("joints", joints)
             + _section("cv", _cv(result, cv_png) + _models(result))
             + _section("accuracy", _accuracy(accuracy, acc_png))
-            + _section("validation", html_run.validation_section(validation))
+            + _section("validation", html_run.validation_section(validations))
             + _section("warnings", _warnings(result, warnings, notes))
             + _section("provenance", html_run.provenance_section(provenance)))
     if refused is not None:

@@ -70,16 +70,17 @@ def provenance_section(provenance) -> str:
                                 for line in provenance.lines()) + "</table>")
 
 
-def validation_section(validation) -> str:
-    """Held-out errors before and after, per axis."""
-    if validation is None:
+def validation_section(validations) -> str:
+    """Held-out errors before and after, per axis, of each held-out file."""
+    if not validations:
         return "<p>No held-out data in this run (<code>--validate HELD.csv</code>).</p>"
     head = ('<tr><th class="name">held-out error [mm, deg]</th><th>before</th>'
             "<th>after</th></tr>")
-    rows = "".join(f'<tr><td class="name">{_e(name)}</td><td>{b:.4f}</td><td>{a:.4f}</td>'
-                   "</tr>" for name, b, a in validation.table())
-    return (f"<p>{_e(validation.headline())}</p><table>{head}{rows}</table>"
-            "<p class=\"muted\">Frames from the calibration (not refitted on the held-out "
-            "data), as <code>kincal evaluate --frames</code> does. Per axis: root mean "
+    tables = "".join(
+        f"<p>{_e(v.headline())}</p><table>{head}" + "".join(
+            f'<tr><td class="name">{_e(name)}</td><td>{b:.4f}</td><td>{a:.4f}</td></tr>'
+            for name, b, a in v.table()) + "</table>" for v in validations)
+    return (tables + "<p class=\"muted\">Frames from the calibration (not refitted on the "
+            "held-out data), as <code>kincal evaluate --frames</code> does. Per axis: root mean "
             "square of the residual component in the measurement frame; norm: mean, rms "
             "and max of the error per sample.</p>")

@@ -125,7 +125,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                       accept_unconverged: bool = False, accuracy=None,
                       warnings_seen=(), data_source: str | None = None,
                       before_commit=None, command=None, xacro_args=None,
-                      validation=None, dirs=()) -> Written:
+                      validations=(), dirs=(), shared_dirs=()) -> Written:
     """Check the gate, then write every output of ``outputs`` all-or-none.
 
     accuracy: a predicted accuracy map to add to the report, the HTML and the plots.
@@ -133,13 +133,15 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     (written paths, export notes) once every file is staged and before any takes its name
     (the command line prints there, so that a console that fails leaves nothing written).
     command / xacro_args: the command line and the xacro arguments, for the provenance
-    every file carries (:mod:`kincal.export.provenance`). validation: a
-    :class:`~kincal.export.validation.Validation` (held-out errors) for the report and
+    every file carries (:mod:`kincal.export.provenance`). validations: the
+    :class:`~kincal.export.validation.Validation` of each held-out file for the report and
     the HTML. dirs: folders the writing may make for the files, outermost first (one level
-    each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. the
-    fleet's folder and a unit's staging folder. A result the gate refuses still gets the
-    diagnosis asked for (report, HTML, plots, marked REFUSED; never the URDF, frames or cell
-    files), then the refusal is raised naming where the diagnosis went.
+    each, removed again if it fails; :func:`kincal.export.safe_write.write_all`), e.g. a
+    fleet unit's staging folder; shared_dirs: folders made if missing and never removed
+    (other writers fill them at the same time: the fleet's folder). A result the gate
+    refuses still gets the diagnosis asked for (report, HTML, plots, marked REFUSED; never
+    the URDF, frames or cell files), then the refusal is raised naming where the diagnosis
+    went.
     Returns :class:`Written`.
     """
     o = outputs
@@ -164,7 +166,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     from kincal.export.provenance import Provenance, stamp_urdf
 
     sources = [s.source for s in result.sets]
-    held = () if validation is None else (validation.source,)
+    held = tuple(v.source for v in validations)
     try:
         accepted = gate(result, accept_implausible, accept_unconverged)
     except (ImplausibleResultError, NotConvergedError) as exc:
@@ -177,8 +179,9 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         prov = Provenance.of(result, command=command, xacro_args=xacro_args, refused=why,
                              more_data=held)
         staged = _diagnosis(result, diagnosis, prov, None, warnings_seen,
-                            data_source or ", ".join(sources), (), validation, refused=why)
-        written = _write(result, diagnosis, staged, sources, before_commit, (), dirs)
+                            data_source or ", ".join(sources), (), validations, refused=why)
+        written = _write(result, diagnosis, staged, sources, before_commit, (), dirs,
+                         shared_dirs)
         result.plausibility.check(  # raises again, saying where the diagnosis went
             accept_implausible, accept_unconverged,
             refused="no URDF, frames or cell file is written; the diagnosis (marked REFUSED) "
@@ -217,8 +220,8 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         if o.mdh is not None:
             files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,
-                        data_source or ", ".join(sources), notes, validation)
-    return _write(result, o, files, sources, before_commit, notes, dirs)
+                        data_source or ", ".join(sources), notes, validations)
+    return _write(result, o, files, sources, before_commit, notes, dirs, shared_dirs)
 
 
 def _chains_title(result) -> str:
@@ -249,7 +252,7 @@ def _shown(written, plots) -> list:
 
 
 def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, notes,
-               validation, refused: str | None = None) -> list:
+               validations, refused: str | None = None) -> list:
     """(path, content) of the report, the plots and the HTML: what a calibration's
     diagnosis is, written whether the gate accepted the result or refused it."""
     from kincal.export import report
@@ -259,8 +262,10 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
         content = report.result_dict(result, data_source)
         if accuracy is not None:
             content["accuracy_map"] = accuracy.as_dict()
-        if validation is not None:
-            content["validation"] = validation.as_dict()
+        if validations:
+            from kincal.export.validation import validation_dict
+
+            content["validation"] = validation_dict(validations)
         if refused is not None:
             content["refused"] = {"verdict": "REFUSED", "message": refused}
         content["provenance"] = prov.as_dict()
@@ -268,7 +273,7 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
     if o.residuals is not None:
         from kincal.export.validation import residuals_csv
 
-        files.append((o.residuals, residuals_csv(result, validation, prov.hash_comment())))
+        files.append((o.residuals, residuals_csv(result, validations, prov.hash_comment())))
     if o.plots is not None:
         files += _plots(result, Path(o.plots), accuracy, prov)
     if o.html is not None:
@@ -277,11 +282,12 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
         files.append((o.html, html_report(
             result, accuracy=accuracy, data_source=data_source,
             warnings=list(warnings_seen), notes=[f"export: {n}" for n in notes],
-            provenance=prov, refused=refused, validation=validation)))
+            provenance=prov, refused=refused, validations=validations)))
     return files
 
 
-def _write(result, o: Outputs, files, sources, before_commit, notes, dirs=()) -> Written:
+def _write(result, o: Outputs, files, sources, before_commit, notes, dirs=(),
+           shared_dirs=()) -> Written:
     from kincal.export.safe_write import write_all
 
     if not files:
@@ -290,9 +296,11 @@ def _write(result, o: Outputs, files, sources, before_commit, notes, dirs=()) ->
         return Written((), notes)
     protect = [p for p in (result.robot.source, *sources) if p and not str(p).startswith("<")]
     hook = None if before_commit is None else (lambda targets: before_commit(targets, notes))
+    in_place = [(o.urdf, result.robot.source)] if o.urdf is not None and protect else []
     written = write_all(files, overwrite=o.overwrite, protect=[*protect, *o.protect],
+                        in_place=in_place,
                         dirs=[*dirs, *([o.plots] if o.plots is not None else [])],
-                        before_commit=hook)
+                        shared_dirs=shared_dirs, before_commit=hook)
     return Written(tuple(written), notes)
 
 

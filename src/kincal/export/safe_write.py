@@ -44,8 +44,8 @@ def write_bytes_atomic(path, data: bytes, *, overwrite: bool = False, protect=()
 
     A reader sees the old file or the new one, never half of one, and a failure leaves
     no temporary file. Raises :class:`ExportError` unless ``overwrite`` for an existing
-    target or one of the ``protect`` paths (the user's inputs, recognised through
-    symlinks, relative paths and hard links); always for a directory, a non-regular
+    target; always for one of the ``protect`` paths (the user's inputs, recognised through
+    symlinks, relative paths and hard links), a directory, a non-regular
     file or a missing parent directory (never created silently). A symlink is written
     through: the file it names changes.
     """
@@ -110,24 +110,36 @@ def _check_dir_os(path, new_dirs: set) -> Path:
     raise ExportError(f"{path}: directory {d.parent} does not exist")
 
 
-def _check_target(path, overwrite: bool, protect, new_dirs=frozenset()) -> Path:
+def _check_target(path, overwrite: bool, protect, new_dirs=frozenset(), in_place=()) -> Path:
     """The checks of :func:`write_all` for one file, without writing anything."""
     if not isinstance(path, (str, os.PathLike)) or str(path) == "":
         raise ExportError(f"an output path must be a non-empty str or Path, got {path!r}")
     try:
-        return _check_target_os(path, overwrite, protect, new_dirs)
+        return _check_target_os(path, overwrite, protect, new_dirs, in_place)
     except (OSError, RuntimeError) as exc:
         raise _path_error(path, exc) from None
 
 
-def _check_target_os(path, overwrite: bool, protect, new_dirs) -> Path:
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether paths ``a`` and ``b`` name one file (symlinks, relative paths, hard links)."""
+    a, b = Path(a).expanduser(), Path(b).expanduser()
+    return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
+
+
+def _check_target_os(path, overwrite: bool, protect, new_dirs, in_place=()) -> Path:
     given = Path(path).expanduser()
     target = given.resolve()
     for protected in protect:
         protected = Path(protected).expanduser()
-        same = target == protected.resolve() or (
-            target.exists() and protected.exists() and os.path.samefile(target, protected))
-        if same and not overwrite:
+        if not _same_file(target, protected):
+            continue
+        if not any(_same_file(target, out) and _same_file(protected, source)
+                   for out, source in in_place):
+            raise ExportError(f"{path}: refusing to overwrite the input file {protected}, "
+                              "with or without --overwrite (an output never replaces what "
+                              "the command read, but for the corrected URDF its robot "
+                              "description); choose another output path")
+        if not overwrite:
             raise ExportError(f"{path}: refusing to overwrite the input file {protected}; "
                               "choose another output path or pass --overwrite")
     if target.exists():
@@ -166,11 +178,14 @@ def missing_folders(path) -> list[Path]:
     return out[::-1]
 
 
-def check_outputs(paths, *, overwrite: bool = False, protect=(), dirs=()) -> list[Path]:
+def check_outputs(paths, *, overwrite: bool = False, protect=(), dirs=(),
+                  in_place=()) -> list[Path]:
     """Check, before any work, that :func:`write_all` could write ``paths``; return them resolved.
 
     dirs: folders the transaction may create (one level below an existing folder),
-    e.g. a plots folder; files may name them as parents. Raises :class:`ExportError`
+    e.g. a plots folder; files may name them as parents. protect: the inputs, never
+    replaced, but for the (output, input) pairs of ``in_place`` with ``overwrite`` (the
+    corrected URDF written over its robot description). Raises :class:`ExportError`
     naming the first target that would be refused, and the same for two paths naming
     one file.
     """
@@ -179,7 +194,7 @@ def check_outputs(paths, *, overwrite: bool = False, protect=(), dirs=()) -> lis
         r = _check_dir(d, new_dirs)
         if not r.exists():
             new_dirs.add(r)
-    targets = [_check_target(p, overwrite, protect, new_dirs) for p in paths]
+    targets = [_check_target(p, overwrite, protect, new_dirs, in_place) for p in paths]
     if len(set(targets)) != len(targets):
         raise ExportError("two outputs name the same file: " + ", ".join(str(p) for p in paths))
     return targets
@@ -261,14 +276,20 @@ def _backup(target: Path) -> str:
     return name
 
 
-def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
-              before_commit=None) -> list[Path]:
+def write_all(files, *, overwrite: bool = False, protect=(), dirs=(), shared_dirs=(),
+              in_place=(), before_commit=None) -> list[Path]:
     """Write several files as one transaction: all of them, or none; return the resolved paths.
 
     files: (path, content) pairs, the content bytes, str, or an iterable of str pieces
-    (staged piece by piece, never joined: a large file written in blocks). dirs: folders that may be created for them (see
-    :func:`check_outputs`). Every target is checked before the first byte is written,
-    all contents are staged next to their targets, then committed; a failure at any
+    (staged piece by piece, never joined: a large file written in blocks). dirs: folders
+    that may be created for them (see :func:`check_outputs`; protect and in_place as
+    there). shared_dirs: folders, outermost first and before ``dirs``, made if missing like
+    those but never removed again, even when the writing fails: a folder that other
+    writers running at the same time make and fill too (a fleet's folder, which one unit's
+    failure must not pull from under another unit about to write into it; its owner, the
+    fleet command, removes it if the run leaves it empty). Every target is checked before
+    the first byte is written, all contents are staged next to their targets, then
+    committed; a failure at any
     point (KeyboardInterrupt included) restores every target and removes what was made.
     before_commit: called with the resolved targets once everything is staged, before the
     first target takes its name; if it raises, nothing is written (the CLI prints and
@@ -276,12 +297,15 @@ def write_all(files, *, overwrite: bool = False, protect=(), dirs=(),
     """
     files = [(p, d.encode("utf-8") if isinstance(d, str) else d) for p, d in files]
     files = [(p, d if isinstance(d, bytes) else _encoded(d)) for p, d in files]
-    targets = check_outputs([p for p, _ in files], overwrite=overwrite, protect=protect, dirs=dirs)
+    targets = check_outputs([p for p, _ in files], overwrite=overwrite, protect=protect,
+                            dirs=[*shared_dirs, *dirs], in_place=in_place)
     made_dirs: list[Path] = []
     staged: list[str] = []
     done: list[tuple[Path, str | None]] = []  # (target, backup or None for a new file)
     current = "the outputs"
     try:
+        for d in shared_dirs:  # made if missing, never ours to remove
+            Path(d).expanduser().resolve().mkdir(exist_ok=True)
         for d in dirs:
             d = Path(d).expanduser().resolve()
             if not d.exists():

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.identification.statistics import ErrorStats
+from kincal.identification.statistics import AngleStats, ErrorStats
 from kincal.measurements.csv_table import csv_line
 
 AXES = ("x", "y", "z")
@@ -25,7 +25,10 @@ class Validation:
     numbers. residuals_before / residuals_after: (N, dim) measured minus predicted [m];
     errors_before / errors_after: (N,) each sample's error [m]. Per-axis figures exist
     for point (one point per pose) and pose data, whose first three residual columns are
-    x, y, z of the position in the measurement frame."""
+    x, y, z of the position in the measurement frame. angles: (before, after) statistics
+    of the orientation errors [deg] (poses: the rotation angle; flush touches: the tilt
+    against the plane, with its roll and pitch), None for kinds without one. chain: the
+    chain it was judged on ("base -> tip") in a calibration of several, else ""."""
 
     source: str
     kind: str
@@ -35,7 +38,12 @@ class Validation:
     errors_before: np.ndarray
     errors_after: np.ndarray
     per_axis: bool
-    orientation_deg: tuple[float, float] | None = None  # poses: mean before, after [deg]
+    angles: tuple[AngleStats, AngleStats] | None = None
+    chain: str = ""  # "base -> tip" when the calibration has several chains
+
+    @property
+    def angle_label(self) -> str:
+        return "tilt against the plane" if self.kind == "flush" else "orientation"
 
     @property
     def before(self) -> ErrorStats:
@@ -58,14 +66,21 @@ class Validation:
             out += [(f"{axis} (rms)", float(rb[k]), float(ra[k])) for k, axis in enumerate(AXES)]
         out += [("norm: mean", b.mean, a.mean), ("norm: rms", b.rms, a.rms),
                 ("norm: max", b.max, a.max)]
-        if self.orientation_deg is not None:
-            out.append(("orientation: mean [deg]", *self.orientation_deg))
+        if self.angles is not None:
+            b0, a0 = self.angles
+            label = "tilt" if self.kind == "flush" else "orientation"
+            out += [(f"{label}: mean [deg]", b0.mean, a0.mean),
+                    (f"{label}: rms [deg]", b0.rms, a0.rms)]
+            out += [(f"{k}: rms [deg]", vb, va) for (k, vb), (_, va) in zip(b0.axes, a0.axes)]
         return out
 
     def headline(self) -> str:
         what = "" if self.kind == "point" else f" ({self.kind} errors)"
+        if self.chain:
+            what += f" on {self.chain}"
         return (f"held-out {self.source}{what}, {len(self.rows)} samples: mean "
-                f"{self.before.mean:.3f} -> {self.after.mean:.3f} mm, max "
+                f"{self.before.mean:.3f} -> {self.after.mean:.3f} mm, RMS "
+                f"{self.before.rms:.3f} -> {self.after.rms:.3f} mm, max "
                 f"{self.before.max:.3f} -> {self.after.max:.3f} mm")
 
     def lines(self) -> list[str]:
@@ -75,8 +90,12 @@ class Validation:
             rb, ra = self.axis_rms_mm(self.residuals_before), self.axis_rms_mm(self.residuals_after)
             out.append("  rms per axis [mm]: " + ", ".join(
                 f"{axis} {rb[k]:.3f} -> {ra[k]:.3f}" for k, axis in enumerate(AXES)))
-        if self.orientation_deg is not None:
-            out.append("  orientation mean [deg]: {:.4f} -> {:.4f}".format(*self.orientation_deg))
+        if self.angles is not None:
+            b0, a0 = self.angles
+            parts = "".join(f", {k} {vb:.4f} -> {va:.4f}"
+                            for (k, vb), (_, va) in zip(b0.axes, a0.axes))
+            out.append(f"  {self.angle_label} [deg]: mean {b0.mean:.4f} -> {a0.mean:.4f}, RMS "
+                       f"{b0.rms:.4f} -> {a0.rms:.4f}" + (f" ({parts[2:]})" if parts else ""))
         return out
 
     def as_dict(self) -> dict:
@@ -84,27 +103,37 @@ class Validation:
         from kincal.export.report import stats_dict
 
         out = {"source": self.source, "kind": self.kind, "samples": len(self.rows),
+               **({"chain": self.chain} if self.chain else {}),
                "frames": "from the calibration (not refitted on the held-out data)",
                "errors": {"before": stats_dict(self.before), "after": stats_dict(self.after)}}
         if self.per_axis:
             out["rms_per_axis_mm"] = {
                 "before": dict(zip(AXES, self.axis_rms_mm(self.residuals_before).tolist())),
                 "after": dict(zip(AXES, self.axis_rms_mm(self.residuals_after).tolist()))}
-        if self.orientation_deg is not None:
-            out["orientation_mean_deg"] = {"before": self.orientation_deg[0],
-                                           "after": self.orientation_deg[1]}
+        if self.angles is not None:
+            from kincal.export.report import angle_dict
+
+            out["orientation_errors"] = {"before": angle_dict(self.angles[0]),
+                                         "after": angle_dict(self.angles[1])}
         return out
 
 
-def residuals_csv(result, validation: Validation | None, header: str = "") -> str:
+def validation_dict(validations) -> dict | list | None:
+    """REPORT.json's and the --json summary's ``validation``: None without held-out data,
+    one file's dict, or a list of them (one held-out file per data file)."""
+    dicts = [v.as_dict() for v in validations]
+    return None if not dicts else dicts[0] if len(dicts) == 1 else dicts
+
+
+def residuals_csv(result, validations=(), header: str = "") -> str:
     """Every sample's residual vector after calibration (training sets, then the held-out
-    set) as CSV: split, set, source, kind, row, error_m, r1..rD [m] (D the widest set's
+    sets) as CSV: split, set, source, kind, row, error_m, r1..rD [m] (D the widest set's
     residual size; point sets: dx dy dz per measured point; poses: position, then the
     orientation rows in metres through their sigma ratio). ``header``: ``#`` lines put
     first."""
     parts = [("training", k + 1, s.source, s.kind, s.rows, s.residuals, s.errors_after)
              for k, s in enumerate(result.sets)]
-    if validation is not None:
+    for validation in validations:
         parts.append(("held-out", len(parts) + 1, validation.source, validation.kind,
                       validation.rows, validation.residuals_after, validation.errors_after))
     width = max(np.asarray(p[5]).reshape(len(p[4]), -1).shape[1] for p in parts)

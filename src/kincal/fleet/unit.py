@@ -154,8 +154,10 @@ def _line(e: BaseException) -> str:
 
 def _write(job: UnitJob, result) -> tuple[str, ...]:
     """The unit's files through the one writer into the staging folder, then one rename.
-    The writer makes the staging folder, and the fleet's folder if no unit made it yet: a
-    fleet whose units all fail leaves no folder behind."""
+    The writer makes the staging folder (removed again if the writing fails), and the
+    fleet's folder if no unit made it yet, as a shared folder: never removed by a unit's
+    failure, since other units may be about to write into it (the command removes it if
+    the run leaves it empty)."""
     from kincal.export.outputs import Outputs, write_calibration
 
     assert job.out_dir is not None  # only a job with an out_dir writes
@@ -171,14 +173,24 @@ def _write(job: UnitJob, result) -> tuple[str, ...]:
                               accept_implausible=job.accept_implausible,
                               accept_unconverged=job.accept_unconverged,
                               data_source=job.source, command=job.command,
-                              xacro_args=job.xacro_args, dirs=(job.out_dir, stage))
+                              xacro_args=job.xacro_args, dirs=(stage,),
+                              shared_dirs=(job.out_dir,))
         old = None
-        if final.exists():
-            if not job.overwrite:
-                raise KincalError(f"{final} exists; give --overwrite to replace it")
-            old = final.with_name(f"{STAGING}old-{job.name}")
-            os.replace(final, old)
-        os.replace(stage, final)
+        try:
+            if final.exists():
+                if not job.overwrite:
+                    raise KincalError(f"{final} exists; give --overwrite to replace it")
+                old = final.with_name(f"{STAGING}old-{job.name}")
+                if old.exists():  # left by a run that was killed here
+                    shutil.rmtree(old)
+                os.replace(final, old)
+            os.replace(stage, final)
+        except OSError as e:  # the earlier files back under their name, never left hidden
+            if old is not None and old.exists() and not final.exists():
+                os.replace(old, final)
+            kept = "the earlier ones are kept" if old is not None else "nothing written"
+            raise KincalError(f"{final}: could not put the unit's files in place "
+                              f"({e.strerror or e}); {kept}") from None
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
     finally:

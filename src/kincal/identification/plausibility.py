@@ -66,10 +66,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kincal.errors import ImplausibleResultError, NotConvergedError
+from kincal.identification.gate_causes import (fit_causes, overfit_cause, unit_causes,
+                                                weak_cause)
 from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, spread
 from kincal.models import per_geometry
 from kincal.models.kinematics import ChainKinematics
-from kincal.rotations import kabsch_rotation
+from kincal.models.geometry import chain_length  # the yardstick's chain part
+from kincal.rotations import aligned_distances as _aligned_distances
 
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
@@ -77,7 +80,6 @@ if TYPE_CHECKING:
 
 N_CONFIGURATIONS = 300  # joint configurations for the workspace comparison (seeded)
 MAX_UNIT_POSES = 500  # poses for the unit clue (forward kinematics through the robot)
-OVERFIT_RATIO = 3  # plain LS with fewer equations per identified parameter: a likely cause
 
 
 @dataclass(frozen=True)
@@ -116,6 +118,10 @@ class Evidence:
     angle_max: largest |value| of a revolute joint [rad, as read]; angle_outside: whether
         that value lies outside its joint's URDF limits.
     off_chain_columns: columns of the data file named after URDF joints not on the chain.
+    weak_corrections: when the largest correction is a parameter the data barely tell
+        apart (the identifiability report's weak ones), the weak ones among the largest
+        four; weak_scales: their prior classes' scales where the evidence estimated them,
+        or the penalty's one lambda (:mod:`kincal.identification.gate_causes`).
     """
 
     reach_m: float
@@ -137,6 +143,10 @@ class Evidence:
     method: str = "l2"
     equations: int = 0  # rows of the fit (3 per point, 3 per flush touch, ...); identified:
     identified: int = 0  # parameters the fit moved (plain LS on few equations per one: a cause)
+    weak_corrections: tuple[str, ...] = ()  # the largest corrections if the largest is weak
+    weak_scales: str = ""  # their classes' prior scales as the evidence estimated them, or
+    #                        the one penalty weight ("lambda 0.001 chosen by cross-validation")
+    convention_doubts: tuple[str, ...] = ()  # pose files read in a convention in doubt
 
     @property
     def explained(self) -> float:
@@ -151,7 +161,8 @@ class Finding:
     """One broken criterion: what, how large, against which threshold, and why (likely).
 
     kind: "residual", "corrections", "length_correction", "length_unit", "angle_unit" or
-    "not_converged". value and threshold share ``unit``. parameters: the parameters the
+    "not_converged" (or "orientation_convention": a pose file's convention in doubt, its
+    message the evidence). value and threshold share ``unit``. parameters: the parameters the
     finding is about (largest first). causes: likely causes, most likely first.
     """
 
@@ -238,45 +249,6 @@ class Plausibility:
 
 
 # ------------------------------------------------------------------- judge
-def _unit_causes(ev: Evidence) -> list[str]:
-    out = []
-    r = ev.length_ratio
-    if math.isfinite(r) and r > UNIT_RATIO:
-        out.append(f"positions in millimetres read as metres (they spread {r:.0f}x more than "
-                   "the robot's tip moves; --length-unit mm)")
-    elif math.isfinite(r) and 0 < r < 1.0 / (10 * UNIT_RATIO):
-        out.append(f"positions in metres read as millimetres (they spread {1 / r:.0f}x less "
-                   "than the robot's tip moves)" if ev.length_unit == "mm" else
-                   f"positions in the wrong unit (they spread {1 / r:.0f}x less than the "
-                   "robot's tip moves)")
-    if ev.angle_unit == "rad" and ev.angle_max > DEGREES_AS_RADIANS:
-        out.append(f"joint values in degrees read as radians (a revolute joint reaches "
-                   f"{ev.angle_max:.4g} rad; --angle-unit deg)")
-    return out
-
-
-def _fit_causes(ev: Evidence, th: Thresholds) -> list[str]:
-    out = _unit_causes(ev)
-    if ev.off_chain_columns:
-        out.append("a tip (or base) frame that does not match the data: the file has columns "
-                   f"for URDF joints off the chain ({', '.join(ev.off_chain_columns[:6])}); "
-                   "check --tip")
-    e = ev.explained
-    if math.isfinite(e) and e < th.explained:
-        out.append(f"positions that do not match the joint rows (rows shuffled or a different "
-                   f"data file): the model explains only {max(e, 0.0):.0%} of their motion")
-        out.append("noise as large as the motion itself")
-    else:
-        out.append("measurement noise far above a calibration's (the model explains "
-                   f"{e:.0%} of the motion, the rest is error)" if math.isfinite(e) else
-                   "measurement noise far above a calibration's")
-        if not ev.off_chain_columns:
-            out.append("a tip frame that does not match the data (check --tip and "
-                       "--tool-offset)")
-        out.append("a URDF of another robot, or positions not matching the joint rows")
-    return out
-
-
 def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
     """The findings of the gate on ``ev`` (see the module notes for the criteria)."""
     L_mm = ev.reach_m * 1e3
@@ -285,20 +257,20 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
     if math.isfinite(r) and (r > th.length_ratio or r < 1.0 / th.length_ratio):
         out.append(Finding("length_unit", f"the measured positions spread {r:.4g}x as much as "
                            "the robot's tip moves", r, th.length_ratio, "ratio",
-                           causes=tuple(_unit_causes(ev)[:1])))
+                           causes=tuple(unit_causes(ev)[:1])))
     if ev.angle_unit == "rad" and (ev.angle_max > 4 * math.pi or (
             ev.angle_max > DEGREES_AS_RADIANS and ev.angle_outside)):
         out.append(Finding("angle_unit", f"revolute joint values reach {ev.angle_max:.4g} rad"
                            + (", outside the URDF limits" if ev.angle_outside else ""),
                            ev.angle_max, 4 * math.pi, "rad",
-                           causes=tuple(c for c in _unit_causes(ev) if "degrees" in c)))
+                           causes=tuple(c for c in unit_causes(ev) if "degrees" in c)))
     if ev.residual_median_mm > th.residual * L_mm:
         out.append(Finding(
             "residual", f"the position error after calibration is {ev.residual_median_mm:.4g} mm "
             f"(median; RMS {ev.residual_rms_mm:.4g} mm), above {th.residual:.0%} of the arm's "
             f"reach ({th.residual * L_mm:.3g} mm of {L_mm:.0f} mm): a geometric calibration "
             "leaves a fraction of a millimetre to a few", ev.residual_median_mm,
-            th.residual * L_mm, "mm", causes=tuple(_fit_causes(ev, th))))
+            th.residual * L_mm, "mm", causes=tuple(fit_causes(ev, th))))
     e = ev.explained
     if (not out or out[-1].kind != "residual") and math.isfinite(e) and e < th.explained \
             and ev.residual_rms_mm > th.unexplained_floor_mm:
@@ -306,7 +278,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             "unexplained", f"the model explains only {max(e, 0.0):.0%} of the measured motion: "
             f"the position error after calibration ({ev.residual_rms_mm:.4g} mm RMS) is nearly "
             f"as large as the data's own spread ({ev.spread_mm:.4g} mm RMS about their centre)",
-            max(e, 0.0), th.explained, "fraction", causes=tuple(_fit_causes(ev, th))))
+            max(e, 0.0), th.explained, "fraction", causes=tuple(fit_causes(ev, th))))
     big = ", ".join(f"{n} {v:+.4g} {u}" for n, v, u in ev.corrections[:4])
     names = tuple(n for n, _, _ in ev.corrections[:4])
     if ev.change_rms_mm > th.change * L_mm:
@@ -315,7 +287,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             f"RMS (max {ev.change_max_mm:.4g} mm) over the joint range, above {th.change:.0%} of "
             f"the reach ({th.change * L_mm:.3g} mm); largest: {big}", ev.change_rms_mm,
             th.change * L_mm, "mm", names,
-            causes=tuple(_unit_causes(ev)) + _overfit_cause(ev) + (
+            causes=tuple(unit_causes(ev)) + overfit_cause(ev) + weak_cause(ev) + (
                 "a URDF that does not describe the measured robot or a tip frame that does "
                 "not match the data",)))
     lengths = [(n, v) for n, v, u in ev.corrections if u == "mm"]
@@ -324,7 +296,10 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
         out.append(Finding(
             "length_correction", f"{n} is corrected by {v:+.4g} mm, more than "
             f"{th.length_correction:.0%} of the reach ({L_mm:.0f} mm)", abs(v),
-            th.length_correction * L_mm, "mm", (n,), causes=tuple(_fit_causes(ev, th))))
+            th.length_correction * L_mm, "mm", (n,), causes=tuple(fit_causes(ev, th))))
+    for doubt in ev.convention_doubts:  # orientations in another convention: a wrong fit
+        out.append(Finding("orientation_convention", doubt, 0.0, 0.0, "", causes=(
+            "orientations read in another convention than the file's",)))
     if not ev.converged:
         out.append(Finding(
             "not_converged", f"the solver did not converge in {ev.iterations} iterations",
@@ -344,26 +319,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
     return Plausibility(ev, tuple(out), th, notes)
 
 
-def _overfit_cause(ev: Evidence) -> tuple[str, ...]:  # plain LS on few equations: named first
-    return (f"plain least squares on {ev.equations} equations for {ev.identified} identified "
-            "parameters, which fits the noise (measure more, or use the default --method l2, "
-            "which pulls what the data barely determine toward nominal)",) if (
-        ev.method == "ls" and 0 < ev.equations < OVERFIT_RATIO * ev.identified) else ()
-
-
 # ------------------------------------------------------------------ gather
-def _aligned_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """(M,) distances between point sets A and B after the best rigid motion of B onto A."""
-    a, b = A - np.add.reduce(A) / len(A), B - np.add.reduce(B) / len(B)  # np.mean's sums
-    return np.linalg.norm(a - b @ kabsch_rotation(b.T @ a).T, axis=1)  # a = R b, as rows
-
-
-def chain_length(joint_frames: np.ndarray, T_base_tip: np.ndarray) -> float:
-    """[m] summed distances first joint -> ... -> last joint -> tip frame, at zero values."""
-    pts = np.vstack([joint_frames[:, :3, 3], T_base_tip[:3, 3]])
-    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
-
-
 def reach(chain_m: float, tool_m: float) -> float:
     """[m] the gate's yardstick (module notes): the chain plus the capped tool distance."""
     return chain_m + min(tool_m, max(chain_m, 1.0))
@@ -386,6 +342,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             corrections.append((p.name, p.deviation * factor, unit))
     # largest first, lengths against the reach and angles in degrees on one footing
     corrections.sort(key=lambda c: -abs(c[1]) / (L * 1e3 if c[2] == "mm" else 180.0))
+    weak_top, weak_scales = _weak_corrections(result, corrections)
     worst = result.sets[0] if len(result.sets) == 1 else max(
         result.sets, key=lambda s: float(np.median(s.errors_after)))
     datas = [km.data for km in problem.kinds]
@@ -436,7 +393,28 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         off_chain_columns=off_chain, converged=bool(result.converged),
         iterations=int(result.solve.iterations), method=problem.options.method,
         equations=int(sum(km.N * km.dim for km in problem.kinds)),
-        identified=sum(p.status == "identified" for p in result.parameters))
+        identified=sum(p.status == "identified" for p in result.parameters),
+        weak_corrections=weak_top, weak_scales=weak_scales,
+        convention_doubts=tuple(str(getattr(dt, "convention_doubt", "")) for dt in datas
+                                if getattr(dt, "convention_doubt", "")))
+
+
+def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str, ...], str]:
+    """(the weak ones among the four largest corrections if the largest is weak, their
+    classes' estimated prior scales as text): see Evidence."""
+    weak = {w.name for w in result.identifiability.weak}
+    if not corrections or corrections[0][0] not in weak:
+        return (), ""
+    names = tuple(n for n, _, _ in corrections[:4] if n in weak)
+    fit, lay = result.evidence, result.layout
+    if fit is None:  # one lambda for every parameter
+        how = " chosen by cross-validation" if result.cv is not None else ""
+        return names, (f"lambda {result.lam:.3g}{how}" if math.isfinite(result.lam) else "")
+    classes = dict.fromkeys(c for n, c in zip(lay.names, lay.classes) if n in names)
+    unit = {"length": "mm", "twist": "deg", "offset": "deg"}
+    return names, ", ".join(f"{c} {fit.scale_of(c):.3g} {unit[c]}" for c in classes
+                            if c in unit and c in fit.classes
+                            and not fit.given[fit.classes.index(c)])
 
 
 def _n_chains(problem: CalibrationProblem) -> int:

@@ -19,7 +19,7 @@ from kincal.identification.plausibility import Plausibility
 from kincal.identification.robust import Downweighted
 from kincal.identification.selection import Identifiability
 from kincal.identification.solver import SolveSummary
-from kincal.identification.statistics import AngleStats, ErrorStats, angle_errors
+from kincal.identification.statistics import AngleStats, ErrorStats, angle_stats
 from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 
@@ -197,9 +197,7 @@ class CalibrationResult:
         for i, km in enumerate(problem.kinds):
             r = problem.residuals(x, i)  # first: the fit's last evaluation was there
             r0 = problem.residuals(x_start, i)
-            a0, a = angle_errors(km, r0), angle_errors(km, r)
-            o0 = None if a0 is None else AngleStats.from_angles(a0)
-            o = None if a is None else AngleStats.from_angles(a)
+            o0, o = angle_stats(km, r0), angle_stats(km, r)
             ori = None if o is None else o.mean
             e0, e = km.sample_errors(r0), km.sample_errors(r)  # points: the rows' norms,
             sets.append(SetResult(km.kind, km.data.source, km.data, tuple(km.frame_names),

@@ -63,16 +63,44 @@ class ErrorStats(_Stats):
 @dataclass(frozen=True)
 class AngleStats(_Stats):
     """Statistics of per-sample orientation errors [deg]: each the angle of the rotation
-    between the measured and the predicted orientation (std with ddof = 1)."""
+    between the measured and the predicted orientation (std with ddof = 1). axes: the RMS
+    [deg] of each signed component where a kind has named ones (flush touches: the roll
+    about the contact frame's x axis and the pitch about its y axis), else empty."""
+
+    axes: tuple[tuple[str, float], ...] = ()
 
     @classmethod
-    def from_angles(cls, angles_rad: np.ndarray) -> "AngleStats":
-        """From (N,) angles [rad], each >= 0."""
-        return cls(*_summary(np.degrees(np.abs(np.asarray(angles_rad, dtype=float)))))
+    def from_angles(cls, angles_rad: np.ndarray,
+                    components_rad: dict[str, np.ndarray] | None = None) -> "AngleStats":
+        """From (N,) angles [rad], each >= 0; components_rad: name -> (N,) signed
+        components [rad] whose RMS the statistics also keep (``axes``)."""
+        axes = tuple((k, float(np.degrees(np.sqrt(np.mean(np.square(v))))))
+                     for k, v in (components_rad or {}).items())
+        return cls(*_summary(np.degrees(np.abs(np.asarray(angles_rad, dtype=float)))), axes)
 
     def line(self) -> str:
+        parts = ", ".join(f"{k} {v:.4f}" for k, v in self.axes)
         return (f"mean {self.mean:.4f}  max {self.max:.4f}  std {self.std:.4f}  "
-                f"RMS {self.rms:.4f} deg  (n = {self.n})")
+                f"RMS {self.rms:.4f} deg  (n = {self.n})"
+                + (f"; RMS {parts} deg" if parts else ""))
+
+    def as_dict(self) -> dict:
+        d = {k: v for k, v in asdict(self).items() if k != "axes"}
+        return {**d, **{f"{k}_rms": v for k, v in self.axes}}
+
+
+def angle_stats(kind_model, residuals: np.ndarray) -> AngleStats | None:
+    """The statistics of :func:`angle_errors` (flush touches: also the RMS of the roll and
+    of the pitch, about the contact frame's x and y axes), None for kinds without an
+    orientation."""
+    angles = angle_errors(kind_model, residuals)
+    if angles is None:
+        return None
+    parts = None
+    if kind_model.kind == "flush":
+        tilts = kind_model.tilt_errors(residuals)
+        parts = {"roll": tilts[:, 0], "pitch": tilts[:, 1]}
+    return AngleStats.from_angles(angles, parts)
 
 
 def angle_errors(kind_model, residuals: np.ndarray) -> np.ndarray | None:

@@ -4,12 +4,15 @@
 The one CSV reader behind :class:`kincal.measurements.Measurements` and the candidate
 poses of :mod:`kincal.candidates`. A header row names the columns; blank lines and lines
 starting with ``#`` are skipped (line numbers stay those of the file); a byte-order mark
-and CRLF or CR line ends are accepted. The separator is a comma, or a semicolon or a tab
-when the header has one of those and no comma (sniffed from the header, and said in a
-:class:`KincalNote`). Every cell of a wanted column must be a finite number with a
-decimal point: a decimal comma ("0,5") is refused with a message saying so, never read as
-two cells or as 5. The columns of stated standard deviations (``sigma``, ``sigma_deg``)
-must lie in :data:`COLUMN_RANGES`; a value outside is refused with its line.
+and CRLF or CR line ends are accepted, and UTF-16 with its byte-order mark. The
+separator is a comma, or a semicolon or a tab when the header has one of those and no
+comma outside its double-quoted names (sniffed from the header, and said in a
+:class:`KincalNote`), or the one a first line ``sep=;`` names (as Excel writes it).
+Every cell of a wanted column must be a finite number with a decimal point: a decimal
+comma ("0,5") is refused with a message saying so, never read as two cells or as 5. The
+columns of stated standard deviations (``sigma``, ``sigma_deg``) must lie in
+:data:`COLUMN_RANGES`; a value outside is refused with its line. A column asked for twice
+(a joint mapped onto a position column) is refused.
 
 Robot logs often carry unnamed columns (empty names in the header). An unnamed column of
 text (metadata) or a leading unnamed column (an index, as pandas writes it) is simply not
@@ -166,9 +169,16 @@ def _check_fit(path, line: int, header, row, cols, separator: str) -> None:
                         f"{_shift_hint(header, row, cols)}; name every data column")
 
 
+_SEP_LINE = re.compile(r"^\s*sep=(.)\s*$")  # Excel's first line naming the separator
+_QUOTED = re.compile(r'"(?:[^"]|"")*(?:"|$)')  # a quoted cell (to the line end if open)
+
+
 def sniff_separator(header_line: str) -> str:
-    """The separator of a CSV file from its header line: a comma if there is one, else a
-    semicolon or a tab, whichever occurs (a one-column header: a comma)."""
+    """The separator of a CSV file from its header line, outside its quoted cells (a
+    quoted name may hold a comma: ``"a,b";joint_2`` is separated by semicolons): a comma
+    if there is one, else a semicolon or a tab, whichever occurs (a one-column header: a
+    comma)."""
+    header_line = _QUOTED.sub("", header_line)
     if "," in header_line:
         return ","
     counts = {sep: header_line.count(sep) for sep in (";", "\t")}
@@ -194,6 +204,12 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     path = Path(path)
     required, optional = list(required), list(optional)
     aliases = dict(aliases or {})
+    twice = [c for c in dict.fromkeys(required) if required.count(c) > 1]
+    if twice:  # one column for two things (a joint mapped onto a position column, ...)
+        c = twice[0]
+        what = f"{aliases[c]} and a measured value" if c in aliases else "two values"
+        raise DataError(f"{path}: column {c!r} would be read for {what}; give each its own "
+                        "column (--joint-columns, --position-columns, --orientation-columns)")
     if not path.exists():
         raise InputFileError(f"{kind} file not found: {path}")
     if path.is_dir():
@@ -211,14 +227,26 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     # from the header line.
     flat, lines = array("d"), array("q")
     try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:
+        with open(path, newline="", encoding=_encoding(path)) as fh:
             content = _content_lines(fh)
             pending = []
             for ln in content:  # blank and comment lines before the header
                 pending.append(ln)
                 if ln.strip():
                     break
-            separator = sniff_separator(pending[-1] if pending else "")
+            directive = _SEP_LINE.match(pending[-1] if pending else "")
+            if directive:  # Excel's "sep=;" line names the separator; the header follows
+                separator = directive.group(1)
+                if separator not in SEPARATORS:
+                    raise DataError(f"{path}: the first line names the separator "
+                                    f"{separator!r}; expected a comma, a semicolon or a tab")
+                pending[-1] = "\n"  # read as a blank line: the line numbers stay the file's
+                for ln in content:  # blank and comment lines before the header
+                    pending.append(ln)
+                    if ln.strip():
+                        break
+            else:
+                separator = sniff_separator(pending[-1] if pending else "")
             reader = csv.reader(itertools.chain(pending, content), delimiter=separator)
             rows = ((reader.line_num, row) for row in reader if any(c.strip() for c in row))
             first = next(rows, None)
@@ -282,10 +310,18 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
         raise DataError(f"{path}: a header but no {rows_name}")
     if separator != ",":
         warnings.warn(f"{path}: columns separated by {SEPARATORS[separator]} (read from the "
-                      "header line)", KincalNote)
+                      f"{'sep= line' if directive else 'header line'})", KincalNote)
     values = np.frombuffer(flat, dtype=float).reshape(len(lines), len(cols)).copy()
     return Columns(path, {c: values[:, k] for k, c in enumerate(wanted)},
                    np.array(lines, dtype=int), tuple(header), separator)
+
+
+def _encoding(path: Path) -> str:
+    """UTF-16 when the file starts with its byte-order mark (a spreadsheet's "Unicode
+    text"), else UTF-8 (a byte-order mark allowed)."""
+    with open(path, "rb") as fh:
+        head = fh.read(2)
+    return "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
 
 
 _BLANK_OR_COMMENT = re.compile(rb"\n[ \t]*(?:#|\r?\n)")
@@ -315,7 +351,8 @@ def _read_fast(path: Path, required, optional, ranges) -> Columns | None:
         stop = len(raw)  # the rows: from the header's line end to the last non-blank
         while stop > start and raw[stop - 1] in b" \t\r\n":
             stop -= 1
-        if end < 0 or end >= stop or _BLANK_OR_COMMENT.search(raw, end, stop):
+        if end < 0 or end >= stop or _BLANK_OR_COMMENT.search(raw, end, stop) or \
+                _SEP_LINE.match(first):
             return None
         rows = raw.count(b"\n", end, stop)
         del raw

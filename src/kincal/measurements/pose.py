@@ -51,12 +51,15 @@ FRAMES = ("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
 class PoseData(SampleSet):
     """Measured tool poses: positions (N, 3) [m] and rotations (N, 3, 3) in the measurement
     frame. sigma_deg: (N,) orientation standard deviation [deg] or None (then
-    ``orientation_sigma_deg``)."""
+    ``orientation_sigma_deg``). convention_doubt: why the file's orientations look read in
+    the wrong convention (:mod:`kincal.identification.orientation_convention`), a finding of
+    the plausibility gate; "" when not in doubt."""
 
     positions: np.ndarray
     rotations: np.ndarray
     sigma_deg: np.ndarray | None = None
     orientation_sigma_deg: float = DEFAULT_ORIENTATION_SIGMA_DEG
+    convention_doubt: str = ""
 
     kind = "pose"
 

@@ -55,3 +55,9 @@ class ChainGeometry:
         (a continuous joint): the range that poses are drawn from and steps clipped to."""
         return (np.where(np.isfinite(self.lower), self.lower, -np.pi),
                 np.where(np.isfinite(self.upper), self.upper, np.pi))
+
+
+def chain_length(joint_frames: np.ndarray, T_base_tip: np.ndarray) -> float:
+    """[m] summed distances first joint -> ... -> last joint -> tip frame, at zero values."""
+    pts = np.vstack([joint_frames[:, :3, 3], T_base_tip[:3, 3]])
+    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))

@@ -225,14 +225,28 @@ def point_view(layout, error_model, i: int, n_points: int):
     return ParameterSpace.of_model(error_model, layout.backlash, n_points), idx
 
 
+def mappable(sets) -> bool:
+    """Whether any set (kind models or set results) has base.* and tool.*: a measurement
+    frame and tool point an accuracy map can predict positions of (point and pose sets)."""
+    return any("base.x" in (names := tuple(s.frame_names)) and "tool.x" in names
+               for s in sets)
+
+
+def require_mappable(sets) -> None:
+    """Refuse an accuracy map of data without a point or pose set (see :func:`mappable`),
+    naming the kinds they have: before any work (the command lines) or at the map."""
+    if not mappable(sets):
+        raise OptionError("an accuracy map (--accuracy-map, --accuracy-poses) predicts "
+                          "positions of a point or pose set (its measurement frame and tool "
+                          "point); these data have none (" + ", ".join(
+                              dict.fromkeys(s.kind for s in sets)) + ")")
+
+
 def _located(sets) -> int:
     """Index of the first set (kind models or set results) with base.* and tool.*."""
-    for i, s in enumerate(sets):
-        names = tuple(s.frame_names)
-        if "base.x" in names and "tool.x" in names:
-            return i
-    raise OptionError("an accuracy map needs a point or pose set (a measurement frame and "
-                      "tool point to predict positions of); these data have none")
+    require_mappable(sets)
+    return next(i for i, s in enumerate(sets)
+                if "base.x" in (names := tuple(s.frame_names)) and "tool.x" in names)
 
 
 def result_accuracy_map(result, *, cube=None, grid: int = 5, joint_values=None,

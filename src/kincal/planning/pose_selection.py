@@ -233,7 +233,7 @@ def _check_indices(keep, m: int) -> list[int]:
 def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(), keep=(), targets=None,
                  method: str = "D", max_swaps: int = 1000, seed: int = 0,
                  random_subsets: int = RANDOM_SUBSETS,
-                 model: str = error_models.DEFAULT, kind: str = "point", pivot=None,
+                 model: str | None = None, kind: str = "point", pivot=None,
                  planes=None) -> PoseSelection:
     """Choose ``n`` of the ``candidates`` to measure (see the module notes).
 
@@ -244,7 +244,8 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     fix: parameter names held at nominal (left out of the criterion).
     keep: candidate indices that must be in the selection (e.g. poses already measured).
     method: "D" (maximise log det of the information matrix).
-    model: the error model whose parameters the poses should determine (kincal.models).
+    model: the error model whose parameters the poses should determine (kincal.models;
+        None: the chain's default, ``placement`` on a tree path).
     max_swaps: bound on the exchange stage. seed, random_subsets: the random baseline.
     method "I": minimise the mean predicted position variance over ``targets``
         (:mod:`kincal.planning.i_optimal`).
@@ -307,7 +308,7 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                               f"[m] (--pivot), got {pivot!r}" if pv.shape != (3,) else
                               "the pivot needs 3 finite numbers (x, y, z in the base frame) "
                               f"[m] (--pivot), got {' '.join(f'{v:g}' for v in pv)}")
-    em = error_models.build(model, g)
+    em = error_models.build(model or error_models.default_for(g), g)
     _warn_tool_on_axis(em, t)
     if kind == "point":
         space = ParameterSpace.of_model(em)

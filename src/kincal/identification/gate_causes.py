@@ -1,0 +1,84 @@
+"""The plausibility gate's likely causes: what a refusal names, most likely first.
+
+Inferred from the gate's :class:`kincal.identification.plausibility.Evidence`, never
+certain, and the messages say so (see that module's notes for the order). One more cause
+than the data themselves: a penalty too weak to hold what the data barely tell apart.
+When the largest correction is a parameter the data barely tell from others (a ``weak``
+one of the identifiability report), the prior toward nominal alone held it, and a prior
+scale the evidence estimated large (the same data read three times: an offset scale of
+46 deg, a wrist turned by 79 deg against the contact face's tilt) lets it drift along
+what the data do not see, rather than the URDF or the tip being wrong.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO
+
+if TYPE_CHECKING:
+    from kincal.identification.plausibility import Evidence, Thresholds
+
+OVERFIT_RATIO = 3  # plain LS with fewer equations per identified parameter: a likely cause
+
+
+def unit_causes(ev: Evidence) -> list[str]:
+    out = []
+    r = ev.length_ratio
+    if math.isfinite(r) and r > UNIT_RATIO:
+        out.append(f"positions in millimetres read as metres (they spread {r:.0f}x more than "
+                   "the robot's tip moves; --length-unit mm)")
+    elif math.isfinite(r) and 0 < r < 1.0 / (10 * UNIT_RATIO):
+        out.append(f"positions in metres read as millimetres (they spread {1 / r:.0f}x less "
+                   "than the robot's tip moves)" if ev.length_unit == "mm" else
+                   f"positions in the wrong unit (they spread {1 / r:.0f}x less than the "
+                   "robot's tip moves)")
+    if ev.angle_unit == "rad" and ev.angle_max > DEGREES_AS_RADIANS:
+        out.append(f"joint values in degrees read as radians (a revolute joint reaches "
+                   f"{ev.angle_max:.4g} rad; --angle-unit deg)")
+    return out
+
+
+def fit_causes(ev: Evidence, th: Thresholds) -> list[str]:
+    out = unit_causes(ev)
+    if ev.off_chain_columns:
+        out.append("a tip (or base) frame that does not match the data: the file has columns "
+                   f"for URDF joints off the chain ({', '.join(ev.off_chain_columns[:6])}); "
+                   "check --tip")
+    e = ev.explained
+    if math.isfinite(e) and e < th.explained:
+        out.append(f"positions that do not match the joint rows (rows shuffled or a different "
+                   f"data file): the model explains only {max(e, 0.0):.0%} of their motion")
+        out.append("noise as large as the motion itself")
+    else:
+        out.append("measurement noise far above a calibration's (the model explains "
+                   f"{e:.0%} of the motion, the rest is error)" if math.isfinite(e) else
+                   "measurement noise far above a calibration's")
+        if not ev.off_chain_columns:
+            out.append("a tip frame that does not match the data (check --tip and "
+                       "--tool-offset)")
+        out.append("a URDF of another robot, or positions not matching the joint rows")
+    return out
+
+
+def overfit_cause(ev: Evidence) -> tuple[str, ...]:
+    return (f"plain least squares on {ev.equations} equations for {ev.identified} identified "
+            "parameters, which fits the noise (measure more, or use the default --method l2, "
+            "which pulls what the data barely determine toward nominal)",) if (
+        ev.method == "ls" and 0 < ev.equations < OVERFIT_RATIO * ev.identified) else ()
+
+
+def weak_cause(ev: Evidence) -> tuple[str, ...]:
+    """The penalty too weak for a weak parameter that moved most (see the module notes)."""
+    if ev.method == "ls" or not ev.weak_corrections:
+        return ()
+    one = ev.weak_scales.startswith("lambda")
+    scales = ("" if not ev.weak_scales else f" ({ev.weak_scales})" if one
+              else f", whose scale the evidence estimated at {ev.weak_scales}")
+    remedy = ("choose the penalty by the evidence (--lambda evidence) or a larger lambda"
+              if one else "state the prior scales (--prior-mm, --prior-deg)")
+    return (f"a penalty too weak for what the data barely tell apart: the largest "
+            f"corrections ({', '.join(ev.weak_corrections)}) are weak parameters (their "
+            f"effect is nearly that of others), held only by the penalty toward nominal"
+            f"{scales}; {remedy}, or measure more varied poses",)
