@@ -342,6 +342,14 @@ def chain_cases():
                                                    "btip", "--model", "complete"] + out
     yield "chains: --validate with two chains", two + ["--base", "atip", "base_link", "--tip",
                                                        "btip", "--validate", "{down}"] + out
+    yield "chains: 3 --validate files for 2 data files", two + [
+        "--base", "atip", "base_link", "--tip", "btip", "--validate", "{up}", "{down}",
+        "{down}"] + out
+    yield "tree: --mdh-out on a tree path", cal + ["{up}", "--base", "atip", "--tip", "btip",
+                                                   "--mdh-out", "{d}/m.csv"] + out
+    yield "contacts: --accuracy-map on flush touches", cal + [
+        "{touch_up}", "--base", "atip", "--tip", "btip", "--on-plane", "--flush",
+        "--accuracy-map", "0", "0", "0.3", "0.2"] + out
     yield "chains: --shared-plane, two bases", cal + [
         "{touch_up}", "{touch_down}", "--base", "atip", "base_link", "--tip", "btip",
         "--on-plane", "--flush", "--shared-plane"] + out
