@@ -67,3 +67,26 @@ def test_validate_of_another_kind_is_one_line(data, tmp_path, capsys):
     err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
     assert len(err) == 1 and err[0].startswith("kincal: error:")
     assert not (tmp_path / "c.urdf").exists()
+
+
+def test_held_out_poses_give_orientation_statistics(tmp_path, capsys):
+    """A pose file held out: the orientation error's mean and rms before and after, in the
+    summary and REPORT.json (orientation_errors; orientation_mean_deg kept beside it),
+    equal to kincal evaluate's with the calibration's frames."""
+    for name, seed, n in (("cal", 3, 40), ("held", 4, 25)):
+        assert main(["simulate", "ec66", "--kind", "pose", "--out", str(tmp_path / f"{name}.csv"),
+                     "--poses", str(n), "--seed", str(seed)]) == 0
+    out = tmp_path / "c.urdf"
+    assert main(["calibrate", "ec66", str(tmp_path / "cal.csv"), "--out", str(out),
+                 "--frames-out", str(tmp_path / "f.json"), "--validate",
+                 str(tmp_path / "held.csv"), "--report", str(tmp_path / "r.json")]) == 0
+    assert "orientation [deg]: mean " in capsys.readouterr().out
+    v = json.loads((tmp_path / "r.json").read_text())["validation"]
+    o = v["orientation_errors"]
+    assert o["after"]["rms_deg"] < o["before"]["rms_deg"]
+    assert v["orientation_mean_deg"] == {"before": o["before"]["mean_deg"],
+                                         "after": o["after"]["mean_deg"]}
+    assert main(["evaluate", str(out), str(tmp_path / "held.csv"), "--frames",
+                 str(tmp_path / "f.json"), "--report", str(tmp_path / "e.json")]) == 0
+    e = json.loads((tmp_path / "e.json").read_text())["orientation_errors"]
+    assert e["rms_deg"] == pytest.approx(o["after"]["rms_deg"], rel=1e-9)

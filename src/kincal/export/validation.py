@@ -115,6 +115,9 @@ class Validation:
 
             out["orientation_errors"] = {"before": angle_dict(self.angles[0]),
                                          "after": angle_dict(self.angles[1])}
+            if self.kind == "pose":  # the key REPORT.json had before orientation_errors
+                out["orientation_mean_deg"] = {"before": self.angles[0].mean,
+                                               "after": self.angles[1].mean}
         return out
 
 
