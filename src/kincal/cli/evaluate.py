@@ -46,7 +46,7 @@ def run(args) -> int:
     from kincal.frames_file import CellFrames
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.problem import CalibrationProblem
-    from kincal.identification.statistics import ErrorStats, angle_stats
+    from kincal.identification.statistics import ErrorStats, angle_label, angle_stats
 
     e = typed(Evaluate, args, chain=Chain.of(args), inputs=Inputs.of(args))
     if e.fit_frames == "measurement" and not e.frames:
@@ -98,8 +98,7 @@ def run(args) -> int:
     lines = [f"{robot.name} ({robot.base} -> {robot.tip}) on {e.inputs.data}, {how}{what}:",
              f"  {'position: ' if km.kind == 'pose' else ''}{stats[0].line()}"]
     if angle is not None:
-        label = "tilt against the plane" if km.kind == "flush" else "orientation"
-        lines.append(f"  {label}: {angle.line()}")
+        lines.append(f"  {angle_label(km.kind)}: {angle.line()}")
     content = {"format": "kincal-evaluation-1", "robot": str(robot.source),
                "data": str(e.inputs.data), "kind": km.kind, "frames": how,
                "errors": report.stats_dict(stats[0]),

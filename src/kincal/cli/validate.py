@@ -38,11 +38,12 @@ def held_out(result, inputs, path: str, k: int | None = None):
     from kincal.identification.statistics import angle_stats
 
     several = result.chains is not None and result.chains.several
-    check_count(1 if k is None else len(result.sets), len(result.sets), several)
+    if k is None:
+        check_count(1, len(result.sets), several)
     nominal, corrected = result.robot, result.corrected
     if k is not None and several:  # the chain of set k, with every corrected origin
         nominal = result.chains.robots[k]
-        corrected = nominal.with_origins(result.chains.origins(result.layout.kinematic(result.x)))
+        corrected = result.chains.corrected(result.layout.kinematic(result.x), k)
     reading = dataclasses.replace(inputs, files=(path,), set_sigma_mm=None)
     sets = reading.read_sets(nominal)
     after_frames = result.frames()

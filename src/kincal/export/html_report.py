@@ -105,7 +105,9 @@ def _angle_rows(result) -> list[tuple[str, str]]:
     s = result.sets[0]
     if len(result.sets) > 1 or s.orientation_after is None:
         return []
-    label = "tilt" if s.kind == "flush" else "orientation"
+    from kincal.identification.statistics import angle_label
+
+    label = angle_label(s.kind, short=True)
     return [(f"{label} before", s.orientation_before.line()),
             (f"{label} after", s.orientation_after.line())]
 
@@ -120,7 +122,9 @@ def _angle_html(s) -> str:
     """'<br>orientation before: ...<br>... after: ...' of a pose (or flush) set, or ''."""
     if s.orientation_after is None:
         return ""
-    label = "tilt against the plane" if s.kind == "flush" else "orientation"
+    from kincal.identification.statistics import angle_label
+
+    label = angle_label(s.kind)
     return (f"<br>{label} before: {_e(s.orientation_before.line())}"
             f"<br>{label} after: {_e(s.orientation_after.line())}")
 

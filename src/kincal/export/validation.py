@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kincal.identification.statistics import AngleStats, ErrorStats
+from kincal.identification.statistics import AngleStats, ErrorStats, angle_label
 from kincal.measurements.csv_table import csv_line
 
 AXES = ("x", "y", "z")
@@ -42,10 +42,6 @@ class Validation:
     chain: str = ""  # "base -> tip" when the calibration has several chains
 
     @property
-    def angle_label(self) -> str:
-        return "tilt against the plane" if self.kind == "flush" else "orientation"
-
-    @property
     def before(self) -> ErrorStats:
         return ErrorStats.from_errors(self.errors_before)
 
@@ -68,7 +64,7 @@ class Validation:
                 ("norm: max", b.max, a.max)]
         if self.angles is not None:
             b0, a0 = self.angles
-            label = "tilt" if self.kind == "flush" else "orientation"
+            label = angle_label(self.kind, short=True)
             out += [(f"{label}: mean [deg]", b0.mean, a0.mean),
                     (f"{label}: rms [deg]", b0.rms, a0.rms)]
             out += [(f"{k}: rms [deg]", vb, va) for (k, vb), (_, va) in zip(b0.axes, a0.axes)]
@@ -94,7 +90,7 @@ class Validation:
             b0, a0 = self.angles
             parts = "".join(f", {k} {vb:.4f} -> {va:.4f}"
                             for (k, vb), (_, va) in zip(b0.axes, a0.axes))
-            out.append(f"  {self.angle_label} [deg]: mean {b0.mean:.4f} -> {a0.mean:.4f}, RMS "
+            out.append(f"  {angle_label(self.kind)} [deg]: mean {b0.mean:.4f} -> {a0.mean:.4f}, RMS "
                        f"{b0.rms:.4f} -> {a0.rms:.4f}" + (f" ({parts[2:]})" if parts else ""))
         return out
 

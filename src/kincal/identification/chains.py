@@ -278,13 +278,14 @@ class Chains:
             out.update(m.urdf_origins(np.asarray(kin)[idx]))
         return out
 
-    def corrected(self, kin: np.ndarray) -> Robot:
-        """The first set's robot with the identified kinematics ``kin`` (the union's): one
-        chain through its joint frames, several through every corrected URDF origin."""
+    def corrected(self, kin: np.ndarray, i: int = 0) -> Robot:
+        """Set i's robot (the first set's by default) with the identified kinematics ``kin``
+        (the union's): one chain through its joint frames, several through every corrected
+        URDF origin."""
         if not self.several:
             assert isinstance(self.model, ErrorModel)  # one chain: its own model
             return self.robot.with_joint_frames(self.model.joint_frames(kin))
-        return self.robot.with_origins(self.origins(kin))
+        return self.robots[i].with_origins(self.origins(kin))
 
     def generic_poses(self, model_name: str, layout, K: int):
         """The first chain's measurement model at 2p seeded generic poses (random joint

@@ -97,12 +97,15 @@ class EvidenceFit:
                 w[i] = self.noise_mm ** 2 / self.scale_of(c) ** 2
         return w
 
-    def line(self) -> str:
+    def scale_text(self, cls: str) -> str:
+        """Class ``cls``'s prior scale as the summary writes it ("offset 4.92 deg")."""
         unit = {"length": "mm", "twist": "deg", "offset": "deg", "backlash": "",
-                "compliance": "deg at the RMS torque",
-                "fleet": "x the fleet's scatter"}
-        parts = [f"{c} {s:.3g} {unit[c]}".rstrip() + (" (given)" if g else "")
-                 for c, s, g in zip(self.classes, self.scales, self.given)]
+                "compliance": "deg at the RMS torque", "fleet": "x the fleet's scatter"}
+        return f"{cls} {self.scale_of(cls):.3g} {unit[cls]}".rstrip()
+
+    def line(self) -> str:
+        parts = [self.scale_text(c) + (" (given)" if g else "")
+                 for c, g in zip(self.classes, self.given)]
         noise = (f"noise {self.noise_mm:.3g} mm" + (" (given)" if self.noise_given else "")
                  if len(self.noise_groups) < 2 else "noise per row group " + ", ".join(
                      f"{rows} {s:.3g} {unit}" for rows, s, unit in self.noise_groups))

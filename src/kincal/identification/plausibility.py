@@ -411,9 +411,8 @@ def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str
         how = " chosen by cross-validation" if result.cv is not None else ""
         return names, (f"lambda {result.lam:.3g}{how}" if math.isfinite(result.lam) else "")
     classes = dict.fromkeys(c for n, c in zip(lay.names, lay.classes) if n in names)
-    unit = {"length": "mm", "twist": "deg", "offset": "deg"}
-    return names, ", ".join(f"{c} {fit.scale_of(c):.3g} {unit[c]}" for c in classes
-                            if c in unit and c in fit.classes
+    return names, ", ".join(fit.scale_text(c) for c in classes
+                            if c in ("length", "twist", "offset") and c in fit.classes
                             and not fit.given[fit.classes.index(c)])
 
 

@@ -74,15 +74,13 @@ def errors(result: CalibrationResult) -> list[str]:
     return out
 
 
-def _angle_label(s) -> str:
-    return "tilt against the plane" if s.kind == "flush" else "orientation"
-
-
 def _angle_lines(s, indent: str) -> list[str]:
     """The orientation errors of a pose (or flush) set before and after, in degrees."""
     if s.orientation_after is None:
         return []
-    label = _angle_label(s)
+    from kincal.identification.statistics import angle_label
+
+    label = angle_label(s.kind)
     return [f"{indent}{label} before: {s.orientation_before.line()}",
             f"{indent}{label} after:  {s.orientation_after.line()}"]
 

@@ -89,6 +89,14 @@ class AngleStats(_Stats):
         return {**d, **{f"{k}_rms": v for k, v in self.axes}}
 
 
+def angle_label(kind: str, short: bool = False) -> str:
+    """What a kind's orientation error is called in reports: a flush touch's "tilt against
+    the plane" ("tilt" with ``short``), a pose's "orientation"."""
+    if kind == "flush":
+        return "tilt" if short else "tilt against the plane"
+    return "orientation"
+
+
 def angle_stats(kind_model, residuals: np.ndarray) -> AngleStats | None:
     """The statistics of :func:`angle_errors` (flush touches: also the RMS of the roll and
     of the pitch, about the contact frame's x and y axes), None for kinds without an

@@ -225,11 +225,16 @@ def point_view(layout, error_model, i: int, n_points: int):
     return ParameterSpace.of_model(error_model, layout.backlash, n_points), idx
 
 
+def _locates(s) -> bool:
+    """Whether set ``s`` (a kind model or set result) has base.* and tool.*."""
+    names = tuple(s.frame_names)
+    return "base.x" in names and "tool.x" in names
+
+
 def mappable(sets) -> bool:
     """Whether any set (kind models or set results) has base.* and tool.*: a measurement
     frame and tool point an accuracy map can predict positions of (point and pose sets)."""
-    return any("base.x" in (names := tuple(s.frame_names)) and "tool.x" in names
-               for s in sets)
+    return any(_locates(s) for s in sets)
 
 
 def require_mappable(sets) -> None:
@@ -245,8 +250,7 @@ def require_mappable(sets) -> None:
 def _located(sets) -> int:
     """Index of the first set (kind models or set results) with base.* and tool.*."""
     require_mappable(sets)
-    return next(i for i, s in enumerate(sets)
-                if "base.x" in (names := tuple(s.frame_names)) and "tool.x" in names)
+    return next(i for i, s in enumerate(sets) if _locates(s))
 
 
 def result_accuracy_map(result, *, cube=None, grid: int = 5, joint_values=None,
