@@ -259,3 +259,52 @@ def test_a_calibration_of_a_convention_in_doubt_is_refused_by_the_gate(tmp_path,
     code, _, err = run(capsys, "analyze", "ec66", data, "--orientation-format", "quat-xyzw",
                        *cols)
     assert code == 0 and "is the file's convention quat-wxyz?" in err
+
+
+def test_the_api_checks_the_convention_too(tmp_path):
+    """The convention check lived in the command line: a Python user who read the same
+    file with PoseData.from_csv got no warning, and write_calibration wrote the URDF of a
+    wrong reading. Now the gate checks every calibration's pose data, API or not."""
+    import warnings
+
+    from kincal import Outputs, calibrate, write_calibration
+    from kincal.errors import ImplausibleResultError, KincalWarning
+    from kincal.identification.orientation_convention import checked, other_reading
+
+    sim = tmp_path / "p.csv"
+    assert main(["simulate", "ec66", "--kind", "pose", "--orientation-format", "quat-wxyz",
+                 "--poses", "40", "--seed", "3", "--out", str(sim), "--quiet"]) == 0
+    data_file = tmp_path / "generic.csv"
+    data_file.write_text(sim.read_text().replace("qw,qx,qy,qz", "q1,q2,q3,q4"))
+    robot = Robot.load("ec66")
+    cols = ("q1", "q2", "q3", "q4")
+    wrong = PoseData.from_csv(data_file, robot.joint_names, orientation_columns=cols,
+                              orientation_format="quat-xyzw")
+    right = PoseData.from_csv(data_file, robot.joint_names, orientation_columns=cols,
+                              orientation_format="quat-wxyz")
+    assert wrong.orientation_format == "quat-xyzw" and wrong.convention_doubt is None
+    # the other reading from the rotations is the file read the other way
+    np.testing.assert_allclose(other_reading(wrong.rotations, "quat-xyzw"), right.rotations,
+                               atol=1e-12)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = calibrate(robot, wrong, model="mdh")
+    assert any("is the file's convention quat-wxyz?" in str(w.message) for w in caught
+               if issubclass(w.category, KincalWarning))
+    assert not result.plausibility.plausible
+    assert any(f.kind == "orientation_convention" for f in result.plausibility.findings)
+    out = tmp_path / "api.urdf"
+    with pytest.raises(ImplausibleResultError, match="quat-wxyz"):
+        write_calibration(result, Outputs(urdf=out))
+    assert not out.exists()
+    # the right reading: checked, no doubt, written
+    assert checked(robot, right).convention_doubt == ""
+    good = calibrate(robot, right, model="mdh")
+    assert good.plausibility.plausible
+    write_calibration(good, Outputs(urdf=out))
+    assert out.exists()
+    # named ROS quaternions fix their convention: not checked
+    ros = tmp_path / "ros.csv"
+    assert main(["simulate", "ec66", "--kind", "pose", "--poses", "10", "--seed", "3", "--out",
+                 str(ros), "--quiet"]) == 0
+    assert PoseData.from_csv(ros, robot.joint_names).orientation_format == ""

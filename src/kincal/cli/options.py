@@ -404,18 +404,12 @@ class Inputs:
             fj.check_mimics(d, r, path)
             return d
 
-        sets = [read(path, r, self.orientation_format) for path, r in zip(self.files, robots)]
-        for k, (path, r, d) in enumerate(zip(self.files, robots, sets)):  # other convention?
-            fmt = self.orientation_format or "quat-xyzw"
-            # named quaternion columns say their order; only columns the user names may lie
-            if kind_of(d) == "pose" and (self.orientation_columns or not fmt.startswith("quat")):
-                from kincal.identification.orientation_convention import (
-                    warn_if_other_convention)
+        from kincal.identification.orientation_convention import checked
 
-                ev = warn_if_other_convention(r, d, fmt,
-                                              lambda f, path=path, r=r: read(path, r, f))
-                if ev is not None and ev.suspicious:  # the gate refuses a calibration of it
-                    sets[k] = dataclasses.replace(d, convention_doubt=ev.message())
+        # a convention the columns do not fix is held against the nominal model (warned now;
+        # the gate refuses a calibration of a reading in doubt)
+        sets = [checked(r, read(path, r, self.orientation_format))
+                for path, r in zip(self.files, robots)]
         self._orientation_sigma_used(any(kind_of(d) in ("pose", "flush") for d in sets))
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))

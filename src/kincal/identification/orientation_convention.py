@@ -74,22 +74,38 @@ def convention_evidence(robot, data, other_data, fmt: str, other: str) -> Conven
     return ConventionEvidence(str(data.source), fmt, other, p, o, p2, o2)
 
 
-def warn_if_other_convention(robot, data, fmt: str, read_as) -> ConventionEvidence | None:
-    """Warn (:class:`kincal.errors.KincalWarning`) when pose ``data``, read in the format
-    ``fmt``, look like the other convention. read_as: format -> the same file read in that
-    format (a KincalError there: no check). Returns the evidence, or None when the format
-    has no other convention."""
-    from kincal.errors import KincalError, KincalWarning
+MAX_CHECKED = 2000  # poses the check fits the frames to (evenly spaced): a bounded cost
+
+
+def other_reading(R: np.ndarray, fmt: str) -> np.ndarray:
+    """(N, 3, 3) the rotations the same columns give read in ``fmt``'s other convention.
+    From the rotations themselves: a quaternion's components, or angles with the middle
+    one within +-90 deg (as loggers write them), come back exactly."""
+    from kincal.measurements.orientation_columns import (OTHER_CONVENTION,
+                                                         orientation_values, rotations)
+
+    return rotations(orientation_values(R, fmt), OTHER_CONVENTION[fmt])
+
+
+def checked(robot, data):
+    """``data`` with its orientation convention checked: pose data read in a convention
+    their columns do not fix (``PoseData.orientation_format``) and not checked before get
+    ``convention_doubt``, the evidence's message when the other reading fits the nominal
+    model far better (warned about, :class:`kincal.errors.KincalWarning`; the plausibility
+    gate refuses a calibration of them), else "". Other data come back as they are."""
+    from dataclasses import replace
+
+    from kincal.errors import KincalWarning
     from kincal.measurements.orientation_columns import OTHER_CONVENTION
 
-    other = OTHER_CONVENTION.get(fmt)
-    if other is None:
-        return None
-    try:
-        other_data = read_as(other)
-    except KincalError:
-        return None
-    evidence = convention_evidence(robot, data, other_data, fmt, other)
+    fmt = getattr(data, "orientation_format", "")
+    if fmt not in OTHER_CONVENTION or data.convention_doubt is not None:
+        return data
+    sample = data if len(data) <= MAX_CHECKED else data.subset(
+        np.unique(np.linspace(0, len(data) - 1, MAX_CHECKED).astype(int)))
+    plain = replace(sample, orientation_format="", convention_doubt="")
+    other = replace(plain, rotations=other_reading(sample.rotations, fmt))
+    evidence = convention_evidence(robot, plain, other, fmt, OTHER_CONVENTION[fmt])
     if evidence.suspicious:
         warnings.warn(evidence.message(), KincalWarning)
-    return evidence
+    return replace(data, convention_doubt=evidence.message() if evidence.suspicious else "")

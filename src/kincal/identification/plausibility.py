@@ -66,6 +66,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kincal.errors import ImplausibleResultError, NotConvergedError
+from kincal.identification.orientation_convention import checked
 from kincal.identification.gate_causes import (fit_causes, overfit_cause, unit_causes,
                                                 weak_cause)
 from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, spread
@@ -395,8 +396,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         equations=int(sum(km.N * km.dim for km in problem.kinds)),
         identified=sum(p.status == "identified" for p in result.parameters),
         weak_corrections=weak_top, weak_scales=weak_scales,
-        convention_doubts=tuple(str(getattr(dt, "convention_doubt", "")) for dt in datas
-                                if getattr(dt, "convention_doubt", "")))
+        convention_doubts=tuple(d for d in (getattr(checked(robot, dt), "convention_doubt", "")
+                                            for dt, robot in zip(datas, problem.robots)) if d))
 
 
 def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str, ...], str]:

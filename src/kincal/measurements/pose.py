@@ -51,15 +51,20 @@ FRAMES = ("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
 class PoseData(SampleSet):
     """Measured tool poses: positions (N, 3) [m] and rotations (N, 3, 3) in the measurement
     frame. sigma_deg: (N,) orientation standard deviation [deg] or None (then
-    ``orientation_sigma_deg``). convention_doubt: why the file's orientations look read in
-    the wrong convention (:mod:`kincal.identification.orientation_convention`), a finding of
-    the plausibility gate; "" when not in doubt."""
+    ``orientation_sigma_deg``). orientation_format: the convention the orientations were
+    read in where the file's columns do not fix it (roll/pitch/yaw angles, quaternion
+    columns the user named; ``OTHER_CONVENTION`` has its other reading), "" where they do
+    (ROS's qx qy qz qw, matrices, rotations given as such). convention_doubt: None until
+    :func:`kincal.identification.orientation_convention.checked` has held that reading
+    against the nominal model (the plausibility gate does, for every calibration); then
+    why the orientations look read in the wrong convention, a finding of the gate, or ""."""
 
     positions: np.ndarray
     rotations: np.ndarray
     sigma_deg: np.ndarray | None = None
     orientation_sigma_deg: float = DEFAULT_ORIENTATION_SIGMA_DEG
-    convention_doubt: str = ""
+    orientation_format: str = ""
+    convention_doubt: str | None = None
 
     kind = "pose"
 
@@ -109,7 +114,8 @@ class PoseData(SampleSet):
         roll pitch yaw or phix phiy phiz, suffixed like the position columns)."""
         from kincal.measurements.csv_table import read_columns
         from kincal.measurements.data import unit_factors
-        from kincal.measurements.orientation_columns import OrientationFormat, rotations
+        from kincal.measurements.orientation_columns import (OTHER_CONVENTION,
+                                                              OrientationFormat, rotations)
 
         position_columns = tuple(position_columns)
         fmt = OrientationFormat(orientation_format, None if orientation_columns is None
@@ -120,6 +126,9 @@ class PoseData(SampleSet):
         with warnings.catch_warnings():  # the reading below gives the notes
             warnings.simplefilter("ignore", KincalNote)
             header = read_columns(path, [], header_only=True).header
+        # the columns fix the convention unless they are angles or quaternions the user named
+        unsure = fmt.name in OTHER_CONVENTION and (orientation_columns is not None
+                                                   or not fmt.name.startswith("quat"))
         orientation_columns = fmt.resolve(header, position_columns, str(path))
         c = read_set(path, joint_names, position_columns + orientation_columns,
                      ("sigma", "sigma_deg"), prismatic, angle_unit, length_unit, joint_columns,
@@ -136,7 +145,8 @@ class PoseData(SampleSet):
                    positions=P, rotations=R,
                    sigma=v["sigma"] * L if "sigma" in v else None,
                    sigma_deg=v.get("sigma_deg"), orientation_sigma_deg=orientation_sigma_deg,
-                   rows=c.rows, source=c.source, approach=c.approach, ignored_columns=c.ignored)
+                   rows=c.rows, source=c.source, approach=c.approach, ignored_columns=c.ignored,
+                   orientation_format=fmt.name if unsure else "")
 
 
 def right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
