@@ -298,7 +298,9 @@ def test_the_api_checks_the_convention_too(tmp_path):
         write_calibration(result, Outputs(urdf=out))
     assert not out.exists()
     # the right reading: checked, no doubt, written
-    assert checked(robot, right).convention_doubt == ""
+    from kincal import CalibrationProblem
+
+    assert checked(CalibrationProblem, robot, right).convention_doubt == ""
     good = calibrate(robot, right, model="mdh")
     assert good.plausibility.plausible
     write_calibration(good, Outputs(urdf=out))

@@ -405,10 +405,11 @@ class Inputs:
             return d
 
         from kincal.identification.orientation_convention import checked
+        from kincal.identification.problem import CalibrationProblem
 
         # a convention the columns do not fix is held against the nominal model (warned now;
         # the gate refuses a calibration of a reading in doubt)
-        sets = [checked(r, read(path, r, self.orientation_format))
+        sets = [checked(CalibrationProblem, r, read(path, r, self.orientation_format))
                 for path, r in zip(self.files, robots)]
         self._orientation_sigma_used(any(kind_of(d) in ("pose", "flush") for d in sets))
         if self.set_sigma_mm:

@@ -49,11 +49,11 @@ class ConventionEvidence:
                 f"mm): is the file's convention {self.other}? (--orientation-format)")
 
 
-def nominal_errors(robot, data) -> tuple[float, float]:
+def nominal_errors(CalibrationProblem, robot, data) -> tuple[float, float]:
     """(mean position error [mm], mean orientation error [deg]) of pose data with the
-    nominal model and the frames fitted (the start of a calibration)."""
+    nominal model and the frames fitted (the start of a calibration). CalibrationProblem:
+    the problem class (passed in: the gate, which the problem calls, calls this)."""
     from kincal.identification.options import CalibrationOptions
-    from kincal.identification.problem import CalibrationProblem
     from kincal.identification.statistics import angle_errors
 
     with warnings.catch_warnings():  # the calibration itself gives the data's warnings
@@ -66,11 +66,12 @@ def nominal_errors(robot, data) -> tuple[float, float]:
     return (float(np.mean(km.sample_errors(r))) * 1e3, float(np.degrees(np.mean(angles))))
 
 
-def convention_evidence(robot, data, other_data, fmt: str, other: str) -> ConventionEvidence:
+def convention_evidence(CalibrationProblem, robot, data, other_data, fmt: str, other: str
+                        ) -> ConventionEvidence:
     """The nominal-model errors of ``data`` (read as ``fmt``) and of ``other_data`` (the
-    same file read as ``other``)."""
-    p, o = nominal_errors(robot, data)
-    p2, o2 = nominal_errors(robot, other_data)
+    same file read as ``other``); CalibrationProblem: the problem class."""
+    p, o = nominal_errors(CalibrationProblem, robot, data)
+    p2, o2 = nominal_errors(CalibrationProblem, robot, other_data)
     return ConventionEvidence(str(data.source), fmt, other, p, o, p2, o2)
 
 
@@ -87,12 +88,14 @@ def other_reading(R: np.ndarray, fmt: str) -> np.ndarray:
     return rotations(orientation_values(R, fmt), OTHER_CONVENTION[fmt])
 
 
-def checked(robot, data):
+def checked(CalibrationProblem, robot, data):
     """``data`` with its orientation convention checked: pose data read in a convention
     their columns do not fix (``PoseData.orientation_format``) and not checked before get
     ``convention_doubt``, the evidence's message when the other reading fits the nominal
     model far better (warned about, :class:`kincal.errors.KincalWarning`; the plausibility
-    gate refuses a calibration of them), else "". Other data come back as they are."""
+    gate refuses a calibration of them), else "". Other data come back as they are.
+    CalibrationProblem: the problem class (passed in, so that the gate, which the problem
+    calls, does not import it)."""
     from dataclasses import replace
 
     from kincal.errors import KincalWarning
@@ -105,7 +108,8 @@ def checked(robot, data):
         np.unique(np.linspace(0, len(data) - 1, MAX_CHECKED).astype(int)))
     plain = replace(sample, orientation_format="", convention_doubt="")
     other = replace(plain, rotations=other_reading(sample.rotations, fmt))
-    evidence = convention_evidence(robot, plain, other, fmt, OTHER_CONVENTION[fmt])
+    evidence = convention_evidence(CalibrationProblem, robot, plain, other, fmt,
+                                   OTHER_CONVENTION[fmt])
     if evidence.suspicious:
         warnings.warn(evidence.message(), KincalWarning)
     return replace(data, convention_doubt=evidence.message() if evidence.suspicious else "")

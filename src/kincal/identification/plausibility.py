@@ -396,7 +396,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         equations=int(sum(km.N * km.dim for km in problem.kinds)),
         identified=sum(p.status == "identified" for p in result.parameters),
         weak_corrections=weak_top, weak_scales=weak_scales,
-        convention_doubts=tuple(d for d in (getattr(checked(robot, dt), "convention_doubt", "")
+        convention_doubts=tuple(d for d in (getattr(checked(type(problem), robot, dt),
+                                                    "convention_doubt", "")
                                             for dt, robot in zip(datas, problem.robots)) if d))
 
 
