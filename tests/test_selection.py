@@ -116,3 +116,27 @@ def test_a_run_of_nearly_parallel_columns_never_keeps_more_than_the_rank():
     # well separated columns are untouched by the second pass
     b = analyze(Q @ (np.eye(n) + 0.1 * np.triu(np.ones((n, n)))), [f"j{k}.a" for k in range(n)], n)
     assert len(b.kept) == b.rank == n
+
+
+def test_a_dropped_parameter_acting_through_amplified_kept_ones_is_said():
+    """A dropped column that is the small difference of two large kept ones: a small error
+    of it shows as large, opposite corrections of the kept ones (the TALOS chain from its
+    sole: 28x). The amplification is in effect sizes (columns normalised), and a serial
+    arm's selection (EC66) stays far below the threshold: no note there."""
+    from kincal.identification.selection import AMPLIFIED, analyze
+
+    Q, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(30, 3)))
+    a, b = Q[:, 0], Q[:, 0] + 0.04 * Q[:, 1]
+    c = 2.0 * (b - a)  # = -2 a + 2 b, far smaller than either
+    # joints are kept from the last back: j2 (b) and j1 (a) kept, j0 (c) dropped
+    ident = analyze(np.column_stack([c, a, b]), ["j0.a", "j1.a", "j2.a"], 3)
+    (d,) = ident.duplicates
+    assert d.name == "j0.a" and dict(d.combination) == pytest.approx({"j1.a": -2, "j2.a": 2})
+    expected = 2 * max(np.linalg.norm(a), np.linalg.norm(b)) / np.linalg.norm(c)
+    assert d.amplification == pytest.approx(expected) and d.amplification > AMPLIFIED
+    note = ident.stand_in_note()
+    assert note is not None and "amplified up to" in note and "j0.a ~" in note
+    assert "(amplified" in ident.summary() and note in ident.summary()
+    serial = _problem([0.03, 0.02, 0.12], model="complete").analyze()
+    assert serial.stand_in_note() is None
+    assert max(d.amplification for d in serial.duplicates) < 2.0

@@ -520,3 +520,29 @@ def test_plan_on_a_tree_path_uses_the_placement_model(tmp_path, capsys):
                  "--poses", "40", "--tool-offset", "0", "0", "0.05", "--out", str(out)]) == 0, \
         capsys.readouterr().err
     assert len(out.read_text().strip().splitlines()) >= 41
+
+
+def test_talos_summary_and_report_say_which_kept_parameters_stand_in_amplified(tmp_path, capsys):
+    """On the TALOS touches from the sole, a dropped leg translation acts like 27x a kept
+    one: the calibrate summary says so under its identifiable line, and REPORT.json and the
+    HTML report carry the note and each dropped parameter's amplification."""
+    import json
+
+    from kincal.cli.main import main
+
+    study = _talos_study()
+    report, html = tmp_path / "r.json", tmp_path / "r.html"
+    capsys.readouterr()
+    assert main(["calibrate", str(study.talos_urdf()), str(study.DATA / "left_train.csv"),
+                 "--base", study.BASE, "--tip", study.TIP, "--on-plane", "--flush",
+                 "--tool-offset", "0", "0", "-0.12", "--out", str(tmp_path / "c.urdf"),
+                 "--report", str(report), "--html", str(html)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    k = next(i for i, line in enumerate(lines) if line.startswith("  identifiable:"))
+    assert lines[k + 1].startswith("  note: ") and "amplified up to 28x" in lines[k + 1]
+    assert "leg_left_5_joint.tx ~ +27.4 leg_left_2_joint.tx" in lines[k + 1]
+    ident = json.loads(report.read_text())["identifiability"]
+    gains = {d["name"]: d["amplification"] for d in ident["dropped"]}
+    assert gains["leg_left_5_joint.tx"] == pytest.approx(28, abs=0.5)
+    assert ident["stand_in_note"] == lines[k + 1][len("  note: "):]
+    assert "amplified up to 28x" in html.read_text()

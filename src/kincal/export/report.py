@@ -56,7 +56,9 @@ def identifiability_dict(ident: Identifiability) -> dict:
         "kept": list(ident.kept),
         "dropped": [{"name": d.name, "reproduced_by": [{"name": n, "coefficient": c}
                                                        for n, c in d.combination],
-                     "why": d.describe()} for d in ident.duplicates],
+                     "amplification": d.amplification, "why": d.describe()}
+                    for d in ident.duplicates],
+        "stand_in_note": ident.stand_in_note(),
         "fixed": list(ident.fixed),
         "weak": [{"name": w.name, "independence": w.independence,
                   "sensitivity_mm_per_unit": w.sensitivity, "why": w.describe()}

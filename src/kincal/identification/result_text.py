@@ -144,7 +144,9 @@ def table(result: CalibrationResult) -> list[str]:
 def summary(result: CalibrationResult) -> str:
     """Header, penalty, identifiability, errors per set, solver and gate, parameter table."""
     ident = result.identifiability.summary().splitlines()
-    notes = [f"  {line}" for line in ident[1:]] if len(result.sets) > 1 else []
+    stand_in = result.identifiability.stand_in_note()
+    notes = ([f"  {line}" for line in ident[1:]] if len(result.sets) > 1
+             else [f"  note: {stand_in}"] if stand_in else [])
     models = result.model_choice.lines() if result.model_choice is not None else []
     return "\n".join(header(result) + models + held(result) + [f"  {ident[0]}"] + notes
                      + errors(result)

@@ -34,6 +34,9 @@ _FRAME = re.compile(r"(set\d+\.)?(base|tool\d*|pivot|plane\w*)\.")
 RANK_TOL = 1e-7  # relative size of the new part of a column below which it is redundant
 WEAK_INDEPENDENCE = 0.02  # kept, but 98 % of its effect reproducible by the others
 WEAK_SENSITIVITY = 0.005  # kept, but moves the point less than this [mm RMS per mm or deg]
+# a dropped parameter acting like more than this many times a kept one (columns normalised):
+# the kept ones' values are combinations (TALOS from its sole 28, serial arms about 1)
+AMPLIFIED = 10.0
 
 
 @dataclass(frozen=True)
@@ -42,11 +45,15 @@ class Duplicate:
 
     combination: (name, coefficient) pairs, largest first: one reporting unit of the
     dropped parameter acts like ``coefficient`` units of each named one. Empty when
-    the parameter has no effect at all on the measured point.
+    the parameter has no effect at all on the measured point. amplification: the largest
+    |coefficient| with each column normalised to its effect's size: above
+    :data:`AMPLIFIED` the dropped column is the small difference of large kept ones, and a
+    small error of the dropped parameter shows as a large correction of the kept ones.
     """
 
     name: str
     combination: tuple[tuple[str, float], ...]
+    amplification: float = 0.0
 
     def describe(self) -> str:
         if not self.combination:
@@ -107,13 +114,16 @@ class Identifiability:
         if self.fixed:
             lines.append(f"fixed by the user: {', '.join(self.fixed)}")
         spare = no_spare_note(self.equations, len(self.kept)) if self.equations else None
-        lines += [f"note: {n}" for n in (*self.notes, *([spare] if spare else []))]
+        stand_in = self.stand_in_note()
+        lines += [f"note: {n}" for n in (*self.notes, *([spare] if spare else []),
+                                          *([stand_in] if stand_in else []))]
         if self.rank != len(self.kept):
             lines.append(f"note: the singular values give rank {self.rank}, the ordered "
                          f"selection kept {len(self.kept)}; parameters near the tolerance "
                          f"{self.rank_tol:g} are borderline")
         for d in self.duplicates:
-            lines.append(f"dropped {d.describe()}")
+            lines.append(f"dropped {d.describe()}" + (
+                f"  (amplified {d.amplification:.0f}x)" if d.amplification > AMPLIFIED else ""))
         if len(self.weak) <= 6:
             for w in self.weak:
                 lines.append(f"weak {w.describe()}")
@@ -126,6 +136,20 @@ class Identifiability:
                          "method l2 they stay near nominal. Weakest: "
                          + "; ".join(w.describe() for w in worst))
         return "\n".join(lines)
+
+
+    def stand_in_note(self) -> str | None:
+        """A note when kept parameters stand in for dropped ones amplified (see Duplicate),
+        else None."""
+        big = sorted((d for d in self.duplicates if d.amplification > AMPLIFIED),
+                     key=lambda d: -d.amplification)
+        if not big:
+            return None
+        return (f"{len(big)} dropped parameters act through kept ones amplified up to "
+                f"{big[0].amplification:.0f}x in effect ({big[0].describe()}): those kept "
+                "ones' corrections hold such combinations, not their own joints' errors "
+                "alone, and single corrected origins there are bookkeeping (the predictions "
+                "are the same); kincal analyze -v lists them")
 
 
 def no_spare_note(equations: int, identifiable: int) -> str | None:
@@ -314,7 +338,8 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
             continue
         coef, big = coefs[c]
         top = [(names[kept[i]], coef[i]) for i in big if abs(coef[i]) >= 0.05 * abs(coef[big[0]])]
-        duplicates.append(Duplicate(names[c], tuple(top)))
+        gain = max(abs(coef[i]) * norm_of[kept[i]] for i in range(len(kept))) / norm_of[c]
+        duplicates.append(Duplicate(names[c], tuple(top), gain))
     weak = []
     if kept:
         G = Jkn.T @ Jkn
