@@ -211,7 +211,7 @@ def test_commands_that_treat_chain_joints_as_free_refuse_a_coupled_mimic(tmp_pat
     before = sorted(p.name for p in tmp_path.iterdir())
     code, out, err = run(capsys, "compensate", tmp_path / "c.urdf", full, "--frames",
                          tmp_path / "f.json", "--out", tmp_path / "j.csv")
-    assert code == 1 and "kincal compensate (its joint values solved for) treats every " \
+    assert code == 1 and "compensation (its joint values solved for) treats every " \
         "chain joint as free" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     code, out, err = run(capsys, "plan", urdf, "--tip", "ftip", "--random", "50", "--poses",
@@ -223,3 +223,53 @@ def test_commands_that_treat_chain_joints_as_free_refuse_a_coupled_mimic(tmp_pat
     code, out, err = run(capsys, "simulate", urdf, "--tip", "ftip", "--poses-file", poses,
                          "--out", tmp_path / "sim.csv")
     assert code == 0, err
+
+
+def test_mimic_column_off_its_rule_is_warned_through_the_python_api(tmp_path):
+    """Measurements.from_csv + calibrate on a file whose mimic finger column breaks the
+    URDF's rule: warned as the command line warns (the problem checks every set; before,
+    only the command line's reader did, and the API calibrated the bent column without a
+    word into a URDF whose reader computes the finger from j3)."""
+    import pytest
+
+    from kincal import Measurements, calibrate
+    from kincal.errors import KincalWarning
+    from kincal.robot import Robot
+
+    urdf, q, P, full, short = _mimic_files(tmp_path)
+    off = np.hstack([q, P])
+    off[4, 3] += 0.05
+    bent = write(tmp_path / "bent.csv", ["j1", "j2", "j3", "finger", "x", "y", "z"], off)
+    robot = Robot.load(urdf, tip="ftip")
+    with pytest.warns(KincalWarning, match=r"bent.csv: column finger differs from what the "
+                      r"URDF's <mimic> makes of j3 .* by up to 0.05 \(rad or m, sample 5\)"):
+        calibrate(robot, Measurements.from_csv(bent, robot.joint_names), model="placement",
+                  lam=0.001, tool_guess=(0.01, 0.02, 0.03))
+
+
+def test_compensation_api_refuses_a_coupled_mimic(tmp_path):
+    """compensate() and filter_program() on the arm whose finger mimics j3 on the same
+    chain: refused in one line, as kincal compensate refuses (before, the API returned joint
+    values it called reached whose finger was off the URDF's rule by up to 12 deg, targets
+    5 mm off the data)."""
+    import pytest
+
+    from kincal import Measurements, calibrate
+    from kincal.compensation import compensate, filter_program, read_targets
+    from kincal.errors import OptionError
+    from kincal.robot import Robot
+
+    urdf, q, P, full, short = _mimic_files(tmp_path)
+    robot = Robot.load(urdf, tip="ftip")
+    result = calibrate(robot, Measurements.from_csv(full, robot.joint_names),
+                       model="placement", lam=0.001, tool_guess=(0.01, 0.02, 0.03))
+    moved = P + np.random.default_rng(3).normal(0, 0.005, P.shape)
+    targets = read_targets(write(tmp_path / "t.csv", ["j1", "j2", "j3", "finger", "x", "y",
+                                                      "z"], np.hstack([q, moved])),
+                           result.corrected)
+    says = (r"finger mimics j3 in the URDF \(finger = -0.5 j3 \+ 0.1\), both on the chain "
+            r"base_link -> ftip: compensation \(its joint values solved for\) treats every")
+    with pytest.raises(OptionError, match=says):
+        compensate(result.corrected, result.frames(), targets)
+    with pytest.raises(OptionError, match=says):
+        filter_program(robot, result.corrected, q + 0.05, result.frames())

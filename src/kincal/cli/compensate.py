@@ -106,10 +106,8 @@ def _compensate(c: Compensate) -> int:
     if frames is not None:
         frames = frames.for_chain(c.chain.base, c.chain.tip)  # a chain of several
         c = replace(c, chain=chain_from_frames(c.chain, frames))
-    robot = c.chain.load()
-    from kincal.measurements.fixed_joints import refuse_coupled
-
-    refuse_coupled(robot, "kincal compensate (its joint values solved for)")
+    robot = c.chain.load()  # a chain with a mimic joint and its master: refused by
+    # compensate / filter_program (the API's path too)
     inputs: list[str | Path | None] = [c.targets, c.program, c.nominal, c.frames]
     protect = check_outputs(robot, [c.out], overwrite=c.overwrite, inputs=inputs)
     if frames is not None:

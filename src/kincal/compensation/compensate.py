@@ -38,6 +38,7 @@ from kincal.compensation.targets import Targets, joint_scales
 from kincal.errors import DataError, FrameError
 from kincal.measurements.checks import UNIT_RATIO, spread
 from kincal.measurements.csv_table import csv_line
+from kincal.measurements.fixed_joints import refuse_coupled
 from kincal.rotations import base_rotation
 
 COMPLIANCE_STEPS = 4  # fixed-point steps of the commanded joint values under compliance
@@ -217,6 +218,10 @@ def _deflected(frames: CellFrames | None, robot, sol: IkSolution
         f"on {names[k]}"]
 
 
+# what a chain holding a mimic joint and its master is refused for (fixed_joints)
+COUPLED = "compensation (its joint values solved for)"
+
+
 def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
                options: IkOptions = IkOptions(), length_unit: str = "m") -> Compensation:
     """Joint values with which the calibrated ``robot`` reaches each target.
@@ -226,9 +231,11 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     positions (poses) in the measurement frame. point: which measured point is targeted
     (0 = point 1). length_unit: the unit the targets were read in, for the message when
     they look like another one. Raises DataError for frames of another chain or targets
-    in the wrong unit; targets that cannot be reached are flagged (``reached``), see
-    :meth:`Compensation.failures`.
+    in the wrong unit, OptionError for a chain holding a mimic joint and its master (the
+    joints solved for as free would break the URDF's rule); targets that cannot be
+    reached are flagged (``reached``), see :meth:`Compensation.failures`.
     """
+    refuse_coupled(robot, COUPLED)
     frames.check_chain(robot)
     if not 0 <= point < len(frames.tools):
         raise FrameError(f"measured point {point + 1} asked for, {frames.source} has "
@@ -265,11 +272,13 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
     (of ``frames``, or the tip origin without frames) where the nominal model puts it at
     the program's values, with the tip orientation the nominal model gives (required on
     six or more joints, kept as closely as possible on fewer). Both robots must have the
-    same chain joints.
+    same chain joints, without a mimic joint and its master (refused, as by
+    :func:`compensate`).
     """
     if tuple(nominal.joint_names) != tuple(calibrated.joint_names):
         raise DataError(f"the nominal robot's chain ({', '.join(nominal.joint_names)}) differs "
                         f"from the calibrated one's ({', '.join(calibrated.joint_names)})")
+    refuse_coupled(calibrated, COUPLED)
     tool = np.zeros(3)
     if frames is not None:
         frames.check_chain(calibrated)

@@ -45,6 +45,7 @@ from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze, identifiable
 from kincal.identification.solver import SolverOptions, SolveSummary, solve, steps
 from kincal.measurements.checks import distinct_poses, set_warnings, warn_units
+from kincal.measurements.fixed_joints import check_mimics
 from kincal.measurements.kind import DEFAULT_SIGMA
 from kincal.measurements.sets import as_sets
 from kincal.models.mdh import TOOL_AXIS_WARNING
@@ -143,12 +144,14 @@ class CalibrationProblem:
 
     def _warn_inputs(self) -> None:
         """Joint values outside the URDF limits or in the wrong angle unit, and backlash
-        joints seen from one direction only: warnings, per set."""
+        joints seen from one direction only, a mimic joint's column off the URDF's rule
+        (a reader of the corrected URDF computes it from its master): warnings, per set."""
         for i, km in enumerate(self.kinds):
             g = self.robots[i].geometry  # the set's own chain, and its backlash joints
             for message in set_warnings(km.data, g, [j for j in self.layout.backlash
                                                      if j in g.joint_names]):
                 warnings.warn(f"{km.data.source}: {message}", KincalWarning)
+            check_mimics(km.data, self.robots[i], km.data.source)
 
     # -------------------------------------------------------------- residuals
     def _parts(self, rows):
