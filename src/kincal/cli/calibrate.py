@@ -184,8 +184,8 @@ def calibration_options(c: Calibrate):
 def _ur_hash(c: Calibrate, robot) -> str:
     """The hash of --yaml-format ur: --ur-hash, else the xacro's kinematics_params file's."""
     from kincal.cli.options import xacro_args
-    from kincal.export.cell_exports import (UR_SEGMENTS, ur_hash_of, ur_joints,
-                                            ur_layout_problem)
+    from kincal.export.cell_exports import (UR_SEGMENTS, ur_hash_of, ur_hash_problem,
+                                            ur_joints, ur_layout_problem)
 
     if ur_joints(robot.joint_names) is None:
         raise OptionError("--yaml-format ur needs a chain of the six UR joints ("
@@ -194,9 +194,9 @@ def _ur_hash(c: Calibrate, robot) -> str:
     problem = ur_layout_problem(robot)  # before the work, as the writer would refuse it
     if problem is not None:
         raise OptionError(problem)
-    if c.ur_hash is not None and not c.ur_hash.strip():
-        raise OptionError("--ur-hash is empty; give the hash of the robot's kinematics file "
-                          "(calib_...), or leave the option out to copy it from that file")
+    if c.ur_hash is not None and ur_hash_problem(c.ur_hash, "--ur-hash") is not None:
+        raise OptionError(f"{ur_hash_problem(c.ur_hash, '--ur-hash')}, or leave the option "
+                          "out to copy it from that file")
     found = c.ur_hash or ur_hash_of(robot.source, xacro_args(c.chain.xacro_arg))
     if not found:
         raise OptionError("--yaml-format ur: no hash found (no kinematics_params file with a "

@@ -97,6 +97,18 @@ def ur_joints(joint_names) -> tuple[str, ...] | None:
     return names
 
 
+def ur_hash_problem(ur_hash, what: str = "ur_hash") -> str | None:
+    """Why ``ur_hash`` cannot be the hash of a UR kinematics file (none, empty or blank: no
+    controller's hash is, and ur_robot_driver would find the file not the robot's), or
+    None. what: its name in the message (the command line's option)."""
+    if isinstance(ur_hash, str) and ur_hash.strip():
+        return None
+    return (f"{what} is empty; give the hash of the robot's kinematics file (calib_...)"
+            if isinstance(ur_hash, str) else
+            f"{what} must be the hash of the robot's kinematics file (calib_...), got "
+            f"{ur_hash!r}")
+
+
 def ur_layout_problem(robot) -> str | None:
     """Why ``robot``'s six UR joints are not in ur_description's layout, or None if they
     are. ur_description (ROS 2) builds every joint from its segment of the kinematics file,
@@ -167,13 +179,14 @@ def ur_kinematics_yaml(nominal, corrected, ur_hash: str) -> str:
     (shoulder .. wrist_3) of x, y, z [m], roll, pitch, yaw [rad] (the URDF joint <origin>,
     rpy kept closest to the nominal), then ``hash:`` (the robot's calibration id, which
     ur_robot_driver compares with the controller's). Raises ExportError for a chain that
-    is not the six UR joints or not in ur_description's layout (:func:`ur_layout_problem`)."""
+    is not the six UR joints or not in ur_description's layout (:func:`ur_layout_problem`),
+    or an empty hash (:func:`ur_hash_problem`)."""
     joints = ur_joints(corrected.joint_names)
     if joints is None:
         raise ExportError("--yaml-format ur needs a chain of the six UR joints ("
                           + ", ".join(j for _, j in UR_SEGMENTS) + "); this chain has "
                           + ", ".join(corrected.joint_names))
-    problem = ur_layout_problem(nominal)
+    problem = ur_layout_problem(nominal) or ur_hash_problem(ur_hash)
     if problem is not None:
         raise ExportError(problem)
     old, new = nominal.urdf_origins(), corrected.urdf_origins()

@@ -160,9 +160,12 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         raise ExportError("a UR kinematics file and an MD-H table describe one chain; this "
                           "calibration has several: write the URDF or the kincal YAML (every "
                           "chain's joints)")
-    if o.yaml_format == "ur" and o.yaml is not None and not o.ur_hash:
-        raise ExportError("yaml_format 'ur' needs ur_hash (the hash of the robot's "
-                          "kinematics_params file)")
+    if o.yaml_format == "ur" and o.yaml is not None:
+        from kincal.export.cell_exports import ur_hash_problem
+
+        problem = ur_hash_problem(o.ur_hash, "yaml_format 'ur' needs ur_hash: it")
+        if problem is not None:
+            raise ExportError(problem)
     from kincal.export.provenance import Provenance, stamp_urdf
 
     sources = [s.source for s in result.sets]
