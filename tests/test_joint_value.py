@@ -201,9 +201,9 @@ def test_commands_that_treat_chain_joints_as_free_refuse_a_coupled_mimic(tmp_pat
                          tmp_path / "sim.csv", "--center-m", "0.3", "0.1", "0.6")
     assert code == 1 and err.strip().splitlines() == [
         "kincal: error: finger mimics j3 in the URDF (finger = -0.5 j3 + 0.1), both on the "
-        "chain base_link -> ftip: kincal simulate (its joint values drawn) treats every chain "
-        "joint as free and would break that rule; choose a chain without the mimic joint (e.g. "
-        "a tip before finger)"]
+        "chain base_link -> ftip: drawing simulated poses treats every chain joint as free and "
+        "would break that rule; choose a chain without the mimic joint (e.g. a tip before "
+        "finger)"]
     assert main(["calibrate", str(urdf), str(full), "--tip", "ftip", "--model", "placement",
                  "--lambda", "0.001", "--tool-offset", "0.01", "0.02", "0.03", "--out",
                  str(tmp_path / "c.urdf"), "--frames-out", str(tmp_path / "f.json"), "-q"]) == 0
@@ -216,7 +216,7 @@ def test_commands_that_treat_chain_joints_as_free_refuse_a_coupled_mimic(tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     code, out, err = run(capsys, "plan", urdf, "--tip", "ftip", "--random", "50", "--poses",
                          "5", "--out", tmp_path / "plan.csv")
-    assert code == 1 and "kincal plan (its candidates drawn) treats every chain joint" in err
+    assert code == 1 and "drawing random candidates treats every chain joint" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     # given poses are the file's own values (calibrate checks them): simulated at them
     poses = write(tmp_path / "poses.csv", ["j1", "j2", "j3", "finger"], q)
@@ -273,3 +273,29 @@ def test_compensation_api_refuses_a_coupled_mimic(tmp_path):
         compensate(result.corrected, result.frames(), targets)
     with pytest.raises(OptionError, match=says):
         filter_program(robot, result.corrected, q + 0.05, result.frames())
+
+
+def test_drawing_joint_values_through_the_api_refuses_a_coupled_mimic(tmp_path):
+    """random_candidates, volume_candidates and cube_poses draw every chain joint
+    independently: on the arm whose finger mimics j3 they refuse, as kincal plan and
+    kincal simulate refused alone (before, the API drew poses that break the URDF's rule,
+    which the robot follows, without a word)."""
+    import pytest
+
+    from kincal.errors import OptionError
+    from kincal.planning.candidates import random_candidates
+    from kincal.planning.simulation import cube_poses
+    from kincal.planning.volume_candidates import Volume, VolumeSpec, volume_candidates
+    from kincal.robot import Robot
+
+    urdf, *_ = _mimic_files(tmp_path)
+    robot = Robot.load(urdf, tip="ftip")
+    says = r"finger mimics j3 in the URDF .* treats every chain joint as free"
+    with pytest.raises(OptionError, match="drawing random candidates treats every chain joint"):
+        random_candidates(robot, 20, 0)
+    with pytest.raises(OptionError, match=says):
+        volume_candidates(robot, VolumeSpec(Volume.cube((0.3, 0.1, 0.6), 0.05)), 20)
+    with pytest.raises(OptionError, match=says):
+        cube_poses(robot, 20, (0.3, 0.1, 0.6), 0.05, np.zeros(3), np.random.default_rng(0))
+    below = Robot.load(urdf, tip="l3")  # the chain without the finger: drawn as ever
+    assert random_candidates(below, 5, 0).shape == (5, 3)

@@ -158,7 +158,7 @@ def test_random_candidates_respect_limits(ec66):
     unlimited = SimpleNamespace(geometry=ChainGeometry(
         ("a", "b"), ("revolute", "revolute"), np.tile(np.eye(4), (2, 1, 1)),
         np.array([[0.0, 0.0, 1.0]] * 2), np.eye(4), lower=np.array([-np.inf, 0.0]),
-        upper=np.array([np.inf, 0.5])))
+        upper=np.array([np.inf, 0.5])), joint_names=("a", "b"), mimics={})
     q = random_candidates(unlimited, 2000, 0)
     assert -np.pi <= q[:, 0].min() < -3.0 and 3.0 < q[:, 0].max() <= np.pi
     assert 0.0 <= q[:, 1].min() and q[:, 1].max() <= 0.5

@@ -110,11 +110,8 @@ def run(args) -> int:
     if p.target_cube is not None and p.criterion != "i":
         raise OptionError("--target-cube is the working volume of --criterion i; "
                           "--criterion d does not use it")
-    robot = p.chain.load()
-    if p.candidates is None:  # candidates drawn (--random, a volume), not read
-        from kincal.measurements.fixed_joints import refuse_coupled
-
-        refuse_coupled(robot, "kincal plan (its candidates drawn)")
+    robot = p.chain.load()  # drawn candidates on a chain with a mimic joint and its
+    # master: refused where they are drawn (random_candidates, volume_candidates)
     protect = check_outputs(robot, [p.out], overwrite=p.overwrite,
                             inputs=[p.candidates, p.measured])
     return _plan(p, robot, protect)

@@ -109,11 +109,8 @@ def run(args) -> int:
     if s.orientation_format is not None and s.kind != "pose":
         raise OptionError(f"--orientation-format is how --kind pose writes its orientations; "
                           f"--kind {s.kind} writes none")
-    robot = s.chain.load()
-    if s.poses_file is None:  # a poses file's values are its own (calibrate checks them)
-        from kincal.measurements.fixed_joints import refuse_coupled
-
-        refuse_coupled(robot, "kincal simulate (its joint values drawn)")
+    robot = s.chain.load()  # drawn poses on a chain with a mimic joint and its master:
+    # refused where they are drawn (cube_poses, volume_candidates; a poses file's are its own)
     protect = check_outputs(robot, [s.out, s.truth_out], overwrite=s.overwrite,
                             inputs=[s.poses_file])
     model = models.build(s.model, robot.geometry)

@@ -17,6 +17,7 @@ from kincal.errors import KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import csv_line, read_columns
 from kincal.measurements.data import joint_column_names, unit_factors
+from kincal.measurements.fixed_joints import refuse_coupled
 
 if TYPE_CHECKING:
     from kincal.robot import Robot
@@ -26,12 +27,14 @@ def random_candidates(robot: "Robot", m: int, rng) -> np.ndarray:
     """(m, n_joints) joint values uniform within the joint limits [rad or m].
 
     Joints without limits (continuous) are drawn in [-pi, pi]. rng: a numpy Generator or
-    a seed.
+    a seed. A chain holding a mimic joint and its master is refused (OptionError: drawn
+    independently, the values would break the URDF's rule, which the robot follows).
     """
     if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
         raise OptionError(f"the number of random candidates must be an integer >= 1, got {m!r}")
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
         raise OptionError(f"the seed must be an integer >= 0, got {rng}")
+    refuse_coupled(robot, "drawing random candidates")
     g = robot.geometry
     lo, hi = g.ranges()
     try:

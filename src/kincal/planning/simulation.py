@@ -16,6 +16,7 @@ import numpy as np
 from kincal.errors import OptionError
 from kincal.measurements.point_space import ParameterSpace
 from kincal.measurements.data import Measurements
+from kincal.measurements.fixed_joints import refuse_coupled
 from kincal.measurements.point import MeasurementModel
 from kincal.models.backlash import approach_directions
 from kincal.models.kinematics import ChainKinematics
@@ -113,6 +114,7 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     The same solutions (to rounding) and the same random numbers as solving the poses
     one after the other with :meth:`Robot.inverse_kinematics`, as kincal did before.
     """
+    refuse_coupled(robot, "drawing simulated poses")
     if n < 1:
         raise OptionError(f"need at least one pose, got {n}")
     center = np.asarray(center, float)

@@ -49,6 +49,7 @@ import numpy as np
 from kincal.collision import CollisionChecker
 from kincal.errors import OptionError
 from kincal.identification import blas_threads
+from kincal.measurements.fixed_joints import refuse_coupled
 from kincal.planning.batch_ik import BatchKinematics
 
 if TYPE_CHECKING:
@@ -341,10 +342,12 @@ def volume_candidates(robot: "Robot", spec: VolumeSpec, m: int, seed: int = 0,
 
     Deterministic for a given seed. Raises OptionError naming the constraint to relax
     when the arm cannot reach the volume, the tilt range has no solution, or fewer than
-    ``m`` candidates are found within MAX_ATTEMPTS * m draws.
+    ``m`` candidates are found within MAX_ATTEMPTS * m draws, and for a chain holding a
+    mimic joint and its master (:func:`kincal.measurements.fixed_joints.refuse_coupled`).
     """
     if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
         raise OptionError(f"the number of candidates must be an integer >= 1, got {m!r}")
+    refuse_coupled(robot, "drawing volume candidates")
     # small batched matrices: BLAS threads only wait for each other (see blas_threads)
     with blas_threads.limited(1):
         return _generate(robot, spec, int(m), seed, batch)
