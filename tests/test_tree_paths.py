@@ -243,8 +243,32 @@ def test_mdh_out_on_a_tree_path_refused_before_the_fit(tmp_path, capsys):
     assert main(["calibrate", str(path), str(data), "--base", "atip", "--tip", "btip",
                  "--out", str(tmp_path / "c.urdf"), "--mdh-out", str(tmp_path / "m.csv")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--mdh-out writes the chain as an MD-H table" in err[0], err
+    assert len(err) == 1 and "--mdh-out: an MD-H table describes a chain down" in err[0], err
     assert "traversed upward" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_mdh_table_of_a_tree_path_refused_through_the_api_as_the_command_line_does(tmp_path):
+    """write_calibration(result, Outputs(mdh=...)) on a chain from a base off the tip's
+    branch: one line saying why no MD-H table describes it, nothing written (before: the
+    'complete' error model's refusal, a model the user had not chosen)."""
+    from kincal import Measurements, Outputs, calibrate, write_calibration
+    from kincal.errors import ExportError
+
+    path, _ = _tree(tmp_path, 0)
+    robot = Robot.load(path, base="atip", tip="btip")
+    q = random_joint_values(robot.geometry, np.random.default_rng(0), 40)
+    T = robot.tip_poses(q)
+    data = tmp_path / "d.csv"
+    data.write_text(",".join([*robot.joint_names, "x", "y", "z"]) + "\n" + "\n".join(
+        ",".join(repr(float(v)) for v in [*row, *t[:3, 3]]) for row, t in zip(q, T)) + "\n")
+    result = calibrate(robot, Measurements.from_csv(data, robot.joint_names), model="placement")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(ExportError, match="an MD-H table describes a chain down from its base, "
+                       r"which a chain from a base off the tip's branch \(atip -> btip: \d+ "
+                       "joints traversed upward\\) is not") as exc:
+        write_calibration(result, Outputs(urdf=tmp_path / "c.urdf", mdh=tmp_path / "m.csv"))
+    assert "\n" not in str(exc.value)
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 

@@ -244,12 +244,11 @@ def run(args) -> int:
         raise OptionError("--mdh-out and --yaml-format ur describe one chain; this calibration "
                           "has several (one --base/--tip per file): write --out or --yaml-out "
                           "(kincal format, every chain's joints)")
-    if c.mdh_out is not None and robot.geometry.is_reversed.any():
-        raise OptionError(f"--mdh-out writes the chain as an MD-H table, which a chain from a "
-                          f"base off the tip's branch ({robot.base} -> {robot.tip}: "
-                          f"{int(robot.geometry.is_reversed.sum())} joints traversed upward) "
-                          "does not have; the corrected URDF (--out) and --yaml-out hold its "
-                          "origins")
+    if c.mdh_out is not None:  # before the fit, as the writer would refuse it
+        from kincal.export.cell_exports import mdh_table_problem
+
+        if mdh_table_problem(robot) is not None:
+            raise OptionError(f"--mdh-out: {mdh_table_problem(robot)} (--out, --yaml-out)")
     ur_hash = _ur_hash(c, robot) if c.yaml_format == "ur" else None
     if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "

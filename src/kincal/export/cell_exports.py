@@ -236,6 +236,17 @@ def _xyz_rpy(T: np.ndarray) -> str:
     return " ".join(_num(v) for v in (*T[:3, 3], *matrix_to_rpy(T[:3, :3])))
 
 
+def mdh_table_problem(robot) -> str | None:
+    """Why no MD-H table describes ``robot``'s chain (a base off the tip's branch: joints
+    traversed upward, which no MD-H row holds), or None."""
+    up = int(robot.geometry.is_reversed.sum())
+    if not up:
+        return None
+    return (f"an MD-H table describes a chain down from its base, which a chain from a base "
+            f"off the tip's branch ({robot.base} -> {robot.tip}: {up} joints traversed "
+            "upward) is not; the corrected URDF and the YAML hold its origins")
+
+
 def mdh_table_csv(corrected) -> str:
     """The corrected chain as an MD-H table with Hayati's beta (CSV text, SI units): the
     ``complete`` model's form, so nearly parallel axes (UR, EC66 joints 2-3-4) get a beta
@@ -243,11 +254,14 @@ def mdh_table_csv(corrected) -> str:
 
     Raises ExportError where the table cannot describe the corrected chain exactly, or a
     length in it exceeds ten times the chain's own length (a description no controller
-    should be given).
+    should be given), or a chain no MD-H table describes (:func:`mdh_table_problem`).
     """
     import math
 
     from kincal.models.complete import NEARLY_PARALLEL_DEG
+
+    if mdh_table_problem(corrected) is not None:
+        raise ExportError(mdh_table_problem(corrected))
 
     m = extract(corrected.geometry, beta_below=math.sin(math.radians(NEARLY_PARALLEL_DEG)))
     off_axis = np.abs(m.screw_axes - [0.0, 0.0, 1.0]).max(axis=1)
