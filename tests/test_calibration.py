@@ -127,6 +127,22 @@ def test_bad_cv_options_are_rejected():
         calibrate(robot, data, model="mdh", method="lsq")
 
 
+def test_free_parameters_need_the_penalty_through_the_api_too():
+    """calibrate(..., method="ls", free=...) is refused as --method ls --free is: without
+    the penalty a redundant parameter kept is arbitrary (before, the API fitted joint_1's
+    four parameters, redundant with the measurement frame, and reported them 'identified'
+    while the identifiability report listed them dropped)."""
+    tool = np.array([0.02, 0.0, 0.1])
+    rng, robot, model, q = _setup("ec66", "flange", tool, 3, n=30)
+    data = measure(model, Truth(model.table, BASE, tool), q, 1e-5, rng)
+    for method in ("ls", "frames"):
+        with pytest.raises(OptionError, match=f"free .--free. applies to method l2 .* method "
+                                              f"{method} cannot fit them"):
+            calibrate(robot, data, method=method, free=("joint_1.*",))
+    with pytest.raises(OptionError, match="method ls cannot fit them"):
+        CalibrationProblem(robot, data, CalibrationOptions(method="ls", free=("joint_1.d",)))
+
+
 def test_sigma_weights_down_a_noisy_sample():
     tool = np.array([0.04, 0.03, 0.11])
     rng, robot, model, q = _setup("ec66", "flange", tool, 4)

@@ -82,7 +82,7 @@ OPTION_CASES = {
                          "--robust-scale-mm must be a finite number > 0"),
     "robust scale zero": (CAL + ["--robust", "huber", "--robust-scale-mm", "0"], "> 0"),
     "tool offset inf": (CAL + ["--tool-offset", "0", "inf", "0"], "--tool-offset must be a finite"),
-    "free with ls": (CAL + ["--method", "ls", "--free", "joint_2.d"], "--free applies to method l2"),
+    "free with ls": (CAL + ["--method", "ls", "--free", "joint_2.d"], "free (--free) applies to method l2"),
     "order column alone": (CAL + ["--order-column", "t"], "needs --backlash"),
     "everything fixed": (CAL + ["--method", "frames", "--fix", "base.x", "base.y", "base.z",
                                 "base.rx", "base.ry", "base.rz", "tool.x", "tool.y", "tool.z"],

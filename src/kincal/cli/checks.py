@@ -102,8 +102,6 @@ def _check_calibrate(args) -> None:
     _need(args.robust_scale_mm is None or args.robust is not None,
           "--robust-scale-mm needs --robust huber or --robust cauchy")
     _finite("--robust-scale-mm", args.robust_scale_mm, 0, low_open=True)
-    _need(not args.free or m == "l2", f"--free applies to method l2 (its penalty keeps "
-          f"redundant parameters bounded); method {m} cannot fit them")
     args.lam = DEFAULT_LAMBDA if args.lam is None else args.lam
     args.seed = 0 if args.seed is None else args.seed
 

@@ -169,6 +169,9 @@ class CalibrationOptions:
                 unit = "deg" if key == "prior_deg" else "mm"
                 raise OptionError(f"{key} (--{key.replace('_', '-')}) must be between {lo:g} "
                                   f"and {hi:g} {unit}, got {value!r}")
+        if o.free and o.method != "l2":  # unpenalised, a redundant parameter is arbitrary
+            raise OptionError(f"free (--free) applies to method l2 (its penalty keeps redundant "
+                              f"parameters bounded); method {o.method} cannot fit them")
         if o.prior_scale is not None and (o.prior is None or o.lam != "evidence" or not (
                 math.isfinite(float(o.prior_scale)) and float(o.prior_scale) > 0)):
             raise OptionError(f"prior_scale (of a fleet prior, kept by the evidence) needs a "
