@@ -29,7 +29,7 @@ import numpy as np
 from kincal import models as error_models
 from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
                            ParameterError, listing, suggest)
-from kincal.identification import blas_threads, model_choice, penalty_choice
+from kincal.identification import blas_threads, model_choice, penalty_choice, term_evidence
 from kincal.identification import prior as fleet_prior
 from kincal.identification.chains import Chains
 from kincal.identification.cross_validation import (CrossValidation, cross_validate,
@@ -482,6 +482,8 @@ class CalibrationProblem:
         result = CalibrationResult.build(self, sol, lam, cv, ident, evidence,
                                          f"{how}, chosen automatically: {why}" if why else "",
                                          downweighted)
+        if evidence is not None and not o.robust:  # a load-following error the fit misses
+            result = replace(result, term_evidence=term_evidence.favoured(self, sol.u, evidence))
         return replace(result, plausibility=judge(gather(self, result)))  # the gate's verdict
 
 def calibrate(robot: Robot, data, options: CalibrationOptions | None = None, **overrides):
