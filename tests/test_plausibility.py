@@ -359,10 +359,41 @@ def test_joint_columns_off_the_chain_are_pointed_out(ur10_csv, tmp_path, capsys)
     assert main(["calibrate", "ur10", str(ur10_csv), "--tip", "wrist_2_link", "--out",
                  str(out), "--lambda", "1"]) == 0
     assert out.is_file()
-    assert "URDF joints off the chain (wrist_3_joint)" in capsys.readouterr().err
+    assert ("columns for 1 URDF joint off the chain are ignored: wrist_3_joint beyond the "
+            "chain's ends: if it moves the measured point" in capsys.readouterr().err)
     assert not judge(_evidence(off_chain_columns=("j7",))).findings
     assert judge(_evidence(off_chain_columns=("j7",))).notes
     assert not judge(_evidence(off_chain_columns=("j7",), residual_median_mm=50)).notes
+    # joints on other branches (a whole robot's log) are said to move nothing measured,
+    # also when the fit is bad; the names beyond six are counted, not dropped silently
+    many = tuple(f"b{k}" for k in range(8))
+    (note,) = judge(_evidence(other_branch_columns=many, residual_median_mm=50)).notes
+    assert "8 URDF joints off the chain" in note and "b5 and 2 more" in note
+    assert "move neither the tip nor the base" in note and "check --tip" not in note
+
+
+def test_off_chain_movers_are_the_joints_beyond_the_tip_or_above_the_base():
+    """Of a log's joints off the chain, only those below the tip's link or above the base
+    can move the measured point; a sibling branch's cannot (TALOS: the right arm and leg
+    and the head against the left sole -> left gripper chain; the left gripper's finger
+    hangs below the tip's link)."""
+    from kincal.descriptions import erd_robots_dir
+
+    root = erd_robots_dir()
+    path = None if root is None else root / "talos_data" / "robots" / "talos_full_v2.urdf"
+    if path is None or not path.exists():
+        pytest.skip("example-robot-data's TALOS is not installed")
+    from kincal import Robot
+
+    talos = Robot.load(path, base="left_sole_link", tip="gripper_left_base_link")
+    names = ("arm_right_1_joint", "head_1_joint", "leg_right_3_joint", "gripper_left_joint",
+             "torso_1_joint", "not_a_joint")
+    assert talos.off_chain_movers(names) == ("gripper_left_joint",)
+    # from the torso, the torso joints lie above the base (the data's frame beyond it);
+    # the legs hang on another branch of the URDF tree (from its root, the pelvis)
+    torso = Robot.load(path, base="torso_2_link", tip="gripper_left_base_link")
+    assert torso.off_chain_movers(("leg_left_3_joint", "torso_1_joint", "head_1_joint",
+                                   "arm_right_1_joint")) == ("torso_1_joint",)
 
 
 def test_several_data_sets_go_through_the_gate(tmp_path, capsys):

@@ -221,6 +221,19 @@ class Robot:
                 raise FrameError(f"joint {name!r}: value {value!r} is not a number") from None
         return off
 
+    def off_chain_movers(self, names) -> tuple[str, ...]:
+        """Of the URDF joints ``names``, those off the chain that can move the measured
+        point against the base: below the tip's link in the tree (the point lies further
+        out than the tip) or above the base (the data's frame lies beyond it). A joint on
+        another branch moves neither. Names that are no URDF joint are left out."""
+        m = self.model
+        tip = m.frames[self._tip_id].parentJoint
+        above_base = set(self._ancestors(m.frames[self._base_id].parentJoint))
+        chain = set(self.joint_names)
+        return tuple(n for n in names if isinstance(n, str) and n not in chain
+                     and m.existJointName(n) and (tip in self._ancestors(m.getJointId(n))
+                                                  or m.getJointId(n) in above_base))
+
     @property
     def base_id(self) -> int:
         """Pinocchio frame id of the base frame."""

@@ -212,7 +212,7 @@ def json_summary(result, validations, refused: bool) -> dict:
 
     full = report.result_dict(result)
     keep = ("robot", "data", "lambda", "penalty_choice", "evidence", "errors", "parameters",
-            "frames", "convergence", "plausibility")
+            "frames", "convergence", "plausibility", "diagnosis", "term_evidence")
     return {"command": "calibrate", "verdict": "REFUSED" if refused else "written",
             **{k: full[k] for k in keep},
             "identifiability": {k: full["identifiability"][k] for k in

@@ -141,9 +141,6 @@ def _identification(result) -> str:
         out += [f'<tr><td class="name">{_e(d.name)}</td><td class="name">{_e(d.describe())}'
                 "</td></tr>" for d in ident.duplicates]
         out.append("</table>")
-        note = ident.stand_in_note()
-        if note:
-            out.append(f"<p>Note: {_e(note)}.</p>")
     else:
         out.append("<p>No parameter was dropped.</p>")
     if ident.fixed:

@@ -137,6 +137,8 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "penalty_choice": result.penalty_choice,
         "model_choice": None if result.model_choice is None else result.model_choice.as_dict(),
         "diagnosis": None if finding is None else finding.as_dict(),
+        "term_evidence": (None if result.term_evidence is None
+                          else result.term_evidence.as_dict()),
         "identifiability": identifiability_dict(result.identifiability),
         "parameters": params,
         "frames": result.frames_dict(),

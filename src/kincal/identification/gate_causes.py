@@ -23,6 +23,12 @@ if TYPE_CHECKING:
 OVERFIT_RATIO = 3  # plain LS with fewer equations per identified parameter: a likely cause
 
 
+def names_text(names, shown: int = 6) -> str:
+    """The first ``shown`` names, and how many more."""
+    more = len(names) - shown
+    return ", ".join(names[:shown]) + (f" and {more} more" if more > 0 else "")
+
+
 def unit_causes(ev: Evidence) -> list[str]:
     out = []
     r = ev.length_ratio
@@ -44,7 +50,7 @@ def fit_causes(ev: Evidence, th: Thresholds) -> list[str]:
     out = unit_causes(ev)
     if ev.off_chain_columns:
         out.append("a tip (or base) frame that does not match the data: the file has columns "
-                   f"for URDF joints off the chain ({', '.join(ev.off_chain_columns[:6])}); "
+                   f"for URDF joints beyond the chain's ends ({names_text(ev.off_chain_columns)}); "
                    "check --tip")
     e = ev.explained
     if math.isfinite(e) and e < th.explained:

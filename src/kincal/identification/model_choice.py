@@ -297,7 +297,7 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
                 best = c
         scored.append(c)
     joints = [] if o.backlash else _backlash_joints(base, o.backlash)  # given: the user's
-    soft, notes = (([], ()) if o.compliance else _compliance_joints(base))
+    soft, notes = (([], ()) if o.compliance else compliance_joints(base))
     order = base.robot.joint_names.index
 
     def grown(c, term, j):
@@ -427,7 +427,7 @@ def _backlash_joints(problem, given) -> list[str]:
     return out
 
 
-def _compliance_joints(problem) -> tuple[list[str], tuple[str, ...]]:
+def compliance_joints(problem) -> tuple[list[str], tuple[str, ...]]:
     """(the chain joints a compliance term may be tried on: revolute, carrying an RMS
     gravity torque above MIN_TORQUE over the samples, :func:`kincal.models.compliance.loaded`;
     notes): one chain only; where the

@@ -67,8 +67,8 @@ import numpy as np
 
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.identification.orientation_convention import checked
-from kincal.identification.gate_causes import (fit_causes, overfit_cause, unit_causes,
-                                                weak_cause)
+from kincal.identification.gate_causes import (fit_causes, names_text, overfit_cause,
+                                                unit_causes, weak_cause)
 from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, spread
 from kincal.models import per_geometry
 from kincal.models.kinematics import ChainKinematics
@@ -118,7 +118,9 @@ class Evidence:
         the same poses (NaN when the poses barely move it).
     angle_max: largest |value| of a revolute joint [rad, as read]; angle_outside: whether
         that value lies outside its joint's URDF limits.
-    off_chain_columns: columns of the data file named after URDF joints not on the chain.
+    off_chain_columns: columns of the data file named after URDF joints off the chain that
+        can move the measured point (below the tip or above the base, Robot.off_chain_movers);
+        other_branch_columns: those on other branches, which cannot (ignored, one note).
     weak_corrections: when the largest correction is a parameter the data barely tell
         apart (the identifiability report's weak ones), the weak ones among the largest
         four; weak_scales: their prior classes' scales where the evidence estimated them,
@@ -139,6 +141,7 @@ class Evidence:
     angle_outside: bool = False
     angle_unit: str = "rad"
     off_chain_columns: tuple[str, ...] = ()
+    other_branch_columns: tuple[str, ...] = ()
     converged: bool = True
     iterations: int = 0
     method: str = "l2"
@@ -310,13 +313,21 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                     "data that do not fit the model (see the residual), or a very "
                     "ill-conditioned problem",)))
     notes: tuple[str, ...] = ()
-    if ev.off_chain_columns and not any(f.kind == "residual" for f in out):
-        # the data fit, yet name joints the chain leaves out: a tip short of the data's,
-        # harmless only if those joints cannot move the measured point (e.g. a tool on
-        # the last axis), so say it without refusing
-        notes = (f"the data file has columns for URDF joints off the chain "
-                 f"({', '.join(ev.off_chain_columns[:6])}), ignored: if they move the "
-                 "measured point, the tip frame does not match the data (check --tip)",)
+    beyond = ev.off_chain_columns if not any(f.kind == "residual" for f in out) else ()
+    elsewhere = ev.other_branch_columns
+    if beyond or elsewhere:
+        # a whole robot's log names joints on other branches: they move nothing measured.
+        # Joints beyond the tip (or above the base) while the data fit: a tip short of the
+        # data's, harmless only if they cannot move the measured point (e.g. a tool on the
+        # last axis), so say it without refusing
+        said = [f"{len(elsewhere)} on other branches of the tree move neither the tip nor "
+                f"the base ({names_text(elsewhere)})"] if elsewhere else []
+        said += [f"{names_text(beyond)} beyond the chain's ends: if "
+                 f"{'they move' if len(beyond) > 1 else 'it moves'} the measured point, the "
+                 "tip frame does not match the data (check --tip)"] if beyond else []
+        count = len(elsewhere) + len(beyond)
+        notes = (f"the data file's columns for {count} URDF joint{'s' * (count > 1)} off the chain "
+                 "are ignored: " + "; ".join(said),)
     return Plausibility(ev, tuple(out), th, notes)
 
 
@@ -380,9 +391,14 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             v = dt.joint_values[i, c]
             angle_max = top
             outside = bool(v < gi.lower[c] - 1e-6 or v > gi.upper[c] + 1e-6)
-    frames = set(problem.robot.frame_names()) if any(dt.ignored_columns for dt in datas) else ()
-    off_chain = tuple(dict.fromkeys(c for dt in datas for c in dt.ignored_columns
-                                    if c in frames and c not in problem.error_model.joint_names))
+    on_chains = set(problem.error_model.joint_names)
+    urdf_joints = set(problem.robot.model.names) if any(dt.ignored_columns for dt in datas) else ()
+    off_chain = tuple(dict.fromkeys(c for dt, robot in zip(datas, problem.robots)
+                                    for c in robot.off_chain_movers(dt.ignored_columns)
+                                    if c not in on_chains))
+    elsewhere = tuple(dict.fromkeys(c for dt in datas for c in dt.ignored_columns
+                                    if c in urdf_joints and c not in on_chains
+                                    and c not in off_chain))
     return Evidence(
         reach_m=L, residual_median_mm=worst.after.median, residual_rms_mm=worst.after.rms,
         before_rms_mm=worst.before.rms,
@@ -391,7 +407,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         corrections=tuple(corrections), length_ratio=float(ratio),
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
-        off_chain_columns=off_chain, converged=bool(result.converged),
+        off_chain_columns=off_chain, other_branch_columns=elsewhere,
+        converged=bool(result.converged),
         iterations=int(result.solve.iterations), method=problem.options.method,
         equations=int(sum(km.N * km.dim for km in problem.kinds)),
         identified=sum(p.status == "identified" for p in result.parameters),

@@ -29,7 +29,7 @@ import numpy as np
 from kincal import models as error_models
 from kincal.errors import (DataError, IdentifiabilityError, KincalWarning, OptionError,
                            ParameterError, listing, suggest)
-from kincal.identification import blas_threads, model_choice, penalty_choice
+from kincal.identification import blas_threads, model_choice, penalty_choice, term_evidence
 from kincal.identification import prior as fleet_prior
 from kincal.identification.chains import Chains
 from kincal.identification.cross_validation import (CrossValidation, cross_validate,
@@ -143,15 +143,13 @@ class CalibrationProblem:
         self.layout.index(name)  # raises, listing the valid names
 
     def _warn_inputs(self) -> None:
-        """Joint values outside the URDF limits or in the wrong angle unit, and backlash
-        joints seen from one direction only, a mimic joint's column off the URDF's rule
-        (a reader of the corrected URDF computes it from its master): warnings, per set."""
-        for i, km in enumerate(self.kinds):
-            g = self.robots[i].geometry  # the set's own chain, and its backlash joints
-            for message in set_warnings(km.data, g, [j for j in self.layout.backlash
-                                                     if j in g.joint_names]):
+        """Joint values outside the URDF limits or in the wrong angle unit, backlash joints
+        seen from one direction only, mimic columns off the URDF's rule: warnings, per set."""
+        for km, r in zip(self.kinds, self.robots):  # each set on its own chain
+            back = [j for j in self.layout.backlash if j in r.joint_names]
+            for message in set_warnings(km.data, r.geometry, back):
                 warnings.warn(f"{km.data.source}: {message}", KincalWarning)
-            check_mimics(km.data, self.robots[i], km.data.source)
+            check_mimics(km.data, r, km.data.source)  # a reader of the URDF follows the rule
 
     # -------------------------------------------------------------- residuals
     def _parts(self, rows):
@@ -485,6 +483,8 @@ class CalibrationProblem:
         result = CalibrationResult.build(self, sol, lam, cv, ident, evidence,
                                          f"{how}, chosen automatically: {why}" if why else "",
                                          downweighted)
+        if evidence is not None and not o.robust:  # a load-following error the fit misses
+            result = replace(result, term_evidence=term_evidence.favoured(self, sol.u, evidence))
         return replace(result, plausibility=judge(gather(self, result)))  # the gate's verdict
 
 def calibrate(robot: Robot, data, options: CalibrationOptions | None = None, **overrides):

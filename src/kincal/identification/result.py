@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from kincal.identification.chains import Chains, UnionModel
     from kincal.identification.model_choice import ModelChoice
     from kincal.identification.problem import CalibrationProblem
+    from kincal.identification.term_evidence import TermEvidence
     from kincal.measurements.data import Measurements
     from kincal.measurements.kind import SampleSet
 
@@ -147,7 +148,9 @@ class CalibrationResult:
     corrected are the first set's chain; with several chains, corrected carries every
     corrected URDF origin and error_model is the union's names (no kinematics of its own).
     model_choice: with model "auto", the structures compared and the one chosen
-    (:class:`kincal.identification.model_choice.ModelChoice`), else None.
+    (:class:`kincal.identification.model_choice.ModelChoice`), else None. term_evidence:
+    a compliance term the evidence favours over the fit (reported, not fitted:
+    :class:`kincal.identification.term_evidence.TermEvidence`), else None.
     """
 
     robot: Robot
@@ -171,6 +174,7 @@ class CalibrationResult:
     plausibility: Plausibility | None = None
     chains: Chains | None = None
     model_choice: ModelChoice | None = None
+    term_evidence: TermEvidence | None = None
 
     @classmethod
     def build(cls, problem: CalibrationProblem, sol: SolveSummary, lam, cv, ident,

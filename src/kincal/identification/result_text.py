@@ -110,6 +110,8 @@ def status(result: CalibrationResult) -> list[str]:
     finding = diagnose(r)  # a pattern a missing term would explain, with its size
     if finding is not None:
         out.append(f"  {finding.line()}")
+    if r.term_evidence is not None:  # one the evidence favours, on data too few for that
+        out.append(f"  {r.term_evidence.line()}")
     if r.layout.n_backlash:
         out.append(f"  backlash terms ({', '.join(r.layout.backlash)}): approach directions "
                    f"from {r.order_source}; the URDF models the middle of the play")
