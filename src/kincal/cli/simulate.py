@@ -109,6 +109,8 @@ def run(args) -> int:
     if s.orientation_format is not None and s.kind != "pose":
         raise OptionError(f"--orientation-format is how --kind pose writes its orientations; "
                           f"--kind {s.kind} writes none")
+    if s.truth_out and s.kind != "point":  # before the poses are solved, not after
+        raise OptionError("--truth-out is written for --kind point only")
     robot = s.chain.load()
     if s.poses_file is None:  # a poses file's values are its own (calibrate checks them)
         from kincal.measurements.fixed_joints import refuse_coupled
@@ -161,8 +163,6 @@ def run(args) -> int:
                "poses": len(q), "design": s.design, "where": where,
                "noise_m": s.noise_mm * 1e-3, "seed": s.seed, "truth_seed": s.truth_seed}
     if s.kind != "point":
-        if s.truth_out:
-            raise OptionError("--truth-out is written for --kind point only")
         csv = _other_kind_csv(s, robot, model, q, table, tool, base, rng)
         say_and_write([File(s.out, "csv", csv)],
                       lambda written: summary_lines(s.json, [
