@@ -68,6 +68,30 @@ def test_batched_cube_poses_equal_the_per_pose_path(name, n, center, size, tilt)
         assert a_rng.random() == b_rng.random()  # the generator is where it was before
 
 
+@pytest.mark.parametrize("name, n, center, size, tilt", [
+    ("ur5", 60, (0.4, 0.0, 0.25), 0.3, 30.0),  # random restarts
+    ("panda", 100, (0.4, 0.0, 0.4), 0.6, None),  # position only, with random restarts
+])
+def test_cube_poses_in_small_windows_equal_the_per_pose_path(name, n, center, size, tilt,
+                                                              monkeypatch):
+    """Rounds of WINDOW poses (a restart redoes only its window's rest, not all the poses
+    after it): the same poses and draws, never the remaining poses' rotations at once."""
+    robot = Robot.load(name)
+    tilt = None if tilt is None else np.radians(tilt)
+    counts = []
+    real = simulation._rotations_near
+    monkeypatch.setattr(simulation, "WINDOW", 7)
+    monkeypatch.setattr(simulation, "_rotations_near",
+                        lambda R0, a, rng, count, marks=None: counts.append(count) or real(
+                            R0, a, rng, count, marks))
+    a_rng, b_rng = np.random.default_rng(0), np.random.default_rng(0)
+    expected = _per_pose(robot, n, center, size, (0, 0, 0.12), a_rng, tilt)
+    got = cube_poses(robot, n, center, size, (0, 0, 0.12), b_rng, max_tilt=tilt)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert a_rng.random() == b_rng.random()
+    assert tilt is None or (max(counts) == 7 and len(counts) > n // 7)
+
+
 def test_batched_cube_poses_random_restarts_really_happen():
     # the ur5 case above is the one with random restarts: a test of them, not a no-op
     calls = []

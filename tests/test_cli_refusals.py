@@ -152,6 +152,16 @@ def test_outputs_in_a_read_only_folder_are_refused_before_the_work(work, readonl
         assert "cannot write in" in line and "read-only" in line, line
 
 
+def test_truth_out_of_another_kind_is_refused_before_the_poses_are_solved(work, capsys,
+                                                                          monkeypatch):
+    from kincal.planning import simulation
+
+    monkeypatch.setattr(simulation, "cube_poses", lambda *a, **k: pytest.fail("poses solved"))
+    line = refused(capsys, SIM + ["--kind", "pose", "--truth-out", "t.json"], work)
+    assert "--truth-out is written for --kind point only" in line
+    assert not (work / "s.csv").exists()
+
+
 def test_demo_in_a_read_only_folder_is_refused_at_once(work, readonly, capsys, monkeypatch):
     import kincal.experiments.paper_report as experiment
 

@@ -109,6 +109,8 @@ def run(args) -> int:
     if s.orientation_format is not None and s.kind != "pose":
         raise OptionError(f"--orientation-format is how --kind pose writes its orientations; "
                           f"--kind {s.kind} writes none")
+    if s.truth_out and s.kind != "point":  # before the poses are solved, not after
+        raise OptionError("--truth-out is written for --kind point only")
     robot = s.chain.load()  # drawn poses on a chain with a mimic joint and its master:
     # refused where they are drawn (cube_poses, volume_candidates; a poses file's are its own)
     protect = check_outputs(robot, [s.out, s.truth_out], overwrite=s.overwrite,
@@ -158,8 +160,6 @@ def run(args) -> int:
                "poses": len(q), "design": s.design, "where": where,
                "noise_m": s.noise_mm * 1e-3, "seed": s.seed, "truth_seed": s.truth_seed}
     if s.kind != "point":
-        if s.truth_out:
-            raise OptionError("--truth-out is written for --kind point only")
         csv = _other_kind_csv(s, robot, model, q, table, tool, base, rng)
         say_and_write([File(s.out, "csv", csv)],
                       lambda written: summary_lines(s.json, [

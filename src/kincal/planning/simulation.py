@@ -24,6 +24,11 @@ from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 from kincal.rotations import axis_rotations, rotx
 
+# poses solved (and their orientations drawn) per round of cube_poses: a pose that needs
+# random restarts makes the poses after it draw and solve again, so rounds over all the
+# remaining poses made a million poses cost (restarts x poses); a multiple of 1024
+WINDOW = 16384
+
 
 @dataclass(frozen=True)
 class Truth:
@@ -144,14 +149,16 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     if progress is not None:
         progress(0, n)
         report = lambda k: progress(k, n)  # noqa: E731
-    while first < n:
+    while first < n:  # a window of poses at a time: a restart redoes only its window's rest
+        stop = min(n, first + WINDOW)
         done[0] = first
         marks = {0: rng.bit_generator.state}
-        R = None if max_tilt is None else _rotations_near(R0, max_tilt, rng, n - first, marks)
-        bad = _solve_from_parents(chain, P, R, tool, parent, first, home, solved,
+        R = None if max_tilt is None else _rotations_near(R0, max_tilt, rng, stop - first, marks)
+        bad = _solve_from_parents(chain, P, R, tool, parent, first, stop, home, solved,
                                   lo, hi, report, done)
-        if bad == n:
-            break
+        if bad == stop:
+            first = stop
+            continue
         # pose `bad` needs random restarts: its random numbers come after the rotations of
         # the poses before it and its own, and every later pose draws anew after them
         mark = (bad - first) // 1024 * 1024 if max_tilt is not None else 0
@@ -169,22 +176,22 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     return out
 
 
-def _solve_from_parents(chain, P, R, tool, parent, first, home, solved, lo, hi, report, done,
-                        max_iterations: int = 60, tolerance: float = 1e-10) -> int:
-    """Solve the poses ``first`` ... of P (in the order of solving) into ``solved``, each
-    from its parent's solution (parent -1: ``home``), then from ``home``; R: the
-    orientations of poses first ... (or None). Returns the first pose that neither start
-    solves (len(P) if none): later poses are then to be solved again."""
+def _solve_from_parents(chain, P, R, tool, parent, first, stop, home, solved, lo, hi, report,
+                        done, max_iterations: int = 60, tolerance: float = 1e-10) -> int:
+    """Solve the poses ``first`` ... ``stop - 1`` of P (in the order of solving) into
+    ``solved``, each from its parent's solution (parent -1: ``home``), then from ``home``;
+    R: the orientations of poses first ... stop - 1 (or None). Returns the first pose that
+    neither start solves (``stop`` if none): later poses are then to be solved again."""
     n = len(P)
-    later = np.flatnonzero(parent[first:] >= first) + first
+    later = np.flatnonzero(parent[first:stop] >= first) + first
     kids = later[np.argsort(parent[later], kind="stable")]
-    edges = np.searchsorted(parent[kids], np.arange(n + 1))
-    idx = np.flatnonzero(parent[first:] < first) + first  # their starts are solved already
+    edges = np.searchsorted(parent[kids], np.arange(stop + 1))
+    idx = np.flatnonzero(parent[first:stop] < first) + first  # their starts are solved
     q = np.where((parent[idx] >= 0)[:, None], solved[np.maximum(parent[idx], 0)], home)
     q = np.clip(q, lo, hi)
     steps = np.zeros(len(idx), int)
     from_home = np.zeros(len(idx), bool)
-    bad = n
+    bad = stop
     every = max(1, n // 100)
     while idx.size:
         err, q_next = chain.damped_step(q, tool, P[idx], None if R is None else R[idx - first],
