@@ -226,19 +226,26 @@ def test_mdh_models_refuse_tree_paths_in_one_line(tmp_path):
     assert mdh.extract(below.geometry).n == below.geometry.n
 
 
+def _tree_points(tmp_path, n):
+    """(URDF path, the atip -> btip chain of random tree 0, a file of its tip points at n
+    random joint values, the nominal model's)."""
+    path, _ = _tree(tmp_path, 0)
+    robot = Robot.load(path, base="atip", tip="btip")
+    q = random_joint_values(robot.geometry, np.random.default_rng(0), n)
+    T = robot.tip_poses(q)
+    data = tmp_path / "d.csv"
+    data.write_text(",".join([*robot.joint_names, "x", "y", "z"]) + "\n" + "\n".join(
+        ",".join(repr(float(v)) for v in [*row, *t[:3, 3]]) for row, t in zip(q, T)) + "\n")
+    return path, robot, data
+
+
 def test_mdh_out_on_a_tree_path_refused_before_the_fit(tmp_path, capsys):
     """--mdh-out on a chain from a base off the tip's branch: one line saying why (no MD-H
     table describes it) before any fit, nothing written (before: the error model's message
     after the fit, about a model the user had not chosen)."""
     from kincal.cli.main import main
 
-    path, _ = _tree(tmp_path, 0)
-    robot = Robot.load(path, base="atip", tip="btip")
-    q = random_joint_values(robot.geometry, np.random.default_rng(0), 20)
-    T = robot.tip_poses(q)
-    data = tmp_path / "d.csv"
-    data.write_text(",".join([*robot.joint_names, "x", "y", "z"]) + "\n" + "\n".join(
-        ",".join(repr(float(v)) for v in [*row, *t[:3, 3]]) for row, t in zip(q, T)) + "\n")
+    path, robot, data = _tree_points(tmp_path, 20)
     before = sorted(p.name for p in tmp_path.iterdir())
     assert main(["calibrate", str(path), str(data), "--base", "atip", "--tip", "btip",
                  "--out", str(tmp_path / "c.urdf"), "--mdh-out", str(tmp_path / "m.csv")]) == 1
@@ -255,13 +262,7 @@ def test_mdh_table_of_a_tree_path_refused_through_the_api_as_the_command_line_do
     from kincal import Measurements, Outputs, calibrate, write_calibration
     from kincal.errors import ExportError
 
-    path, _ = _tree(tmp_path, 0)
-    robot = Robot.load(path, base="atip", tip="btip")
-    q = random_joint_values(robot.geometry, np.random.default_rng(0), 40)
-    T = robot.tip_poses(q)
-    data = tmp_path / "d.csv"
-    data.write_text(",".join([*robot.joint_names, "x", "y", "z"]) + "\n" + "\n".join(
-        ",".join(repr(float(v)) for v in [*row, *t[:3, 3]]) for row, t in zip(q, T)) + "\n")
+    path, robot, data = _tree_points(tmp_path, 40)
     result = calibrate(robot, Measurements.from_csv(data, robot.joint_names), model="placement")
     before = sorted(p.name for p in tmp_path.iterdir())
     with pytest.raises(ExportError, match="an MD-H table describes a chain down from its base, "
