@@ -299,3 +299,19 @@ def test_drawing_joint_values_through_the_api_refuses_a_coupled_mimic(tmp_path):
         cube_poses(robot, 20, (0.3, 0.1, 0.6), 0.05, np.zeros(3), np.random.default_rng(0))
     below = Robot.load(urdf, tip="l3")  # the chain without the finger: drawn as ever
     assert random_candidates(below, 5, 0).shape == (5, 3)
+
+
+def test_contact_simulation_refuses_a_coupled_mimic_even_at_given_poses(tmp_path, capsys):
+    """Simulated plane contacts and flush touches move every chain joint onto the planes
+    (and draw more candidates beside the given poses): on a chain holding a mimic joint and
+    its master that breaks the URDF's rule, so they refuse in one line, writing nothing
+    (before: written, the finger off its rule)."""
+    urdf, q, P, full, short = _mimic_files(tmp_path)
+    poses = write(tmp_path / "poses.csv", ["j1", "j2", "j3", "finger"], q)
+    for kind in ("plane", "flush"):
+        out = tmp_path / f"{kind}.csv"
+        code, _, err = run(capsys, "simulate", urdf, "--tip", "ftip", "--poses-file", poses,
+                           "--kind", kind, "--out", out)
+        assert code == 1 and err.count("kincal: error:") == 1, err
+        assert "finger mimics j3" in err and "simulating contacts" in err
+        assert not out.exists()

@@ -113,6 +113,11 @@ def run(args) -> int:
         raise OptionError("--truth-out is written for --kind point only")
     robot = s.chain.load()  # drawn poses on a chain with a mimic joint and its master:
     # refused where they are drawn (cube_poses, volume_candidates; a poses file's are its own)
+    if s.kind in ("plane", "flush"):  # contacts move every chain joint, given poses too
+        from kincal.measurements.fixed_joints import refuse_coupled
+
+        refuse_coupled(robot, "simulating contacts (every chain joint moved onto the planes, "
+                              "candidates drawn beside the given poses)")
     protect = check_outputs(robot, [s.out, s.truth_out], overwrite=s.overwrite,
                             inputs=[s.poses_file])
     model = models.build(s.model, robot.geometry)
