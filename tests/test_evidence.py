@@ -468,3 +468,49 @@ def test_cv_on_fewer_poses_than_folds_names_the_options(tmp_path, capsys):
     assert ("kincal: error: cross-validation needs 2 <= folds <= number of poses (4), got "
             "folds=5 (--folds 4 or fewer, or --lambda evidence)") in err
     assert not out.exists()
+
+
+def test_exact_direction_is_found_only_where_one_direction_fits_the_residual():
+    """J d = r exactly with more rows than columns: the unit direction (found on a subset
+    of the rows, checked on all); a residual with noise beside it, or too few rows: None."""
+    from kincal.identification.evidence import exact_direction
+
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(900, 12))
+    d = rng.normal(size=12)
+    found = exact_direction(J, J @ d)
+    assert found is not None and abs(abs(found @ d) / np.linalg.norm(d) - 1.0) < 1e-12
+    assert exact_direction(J, J @ d + 1e-6 * rng.normal(size=900)) is None
+    looked = set(np.unique(np.linspace(0, 899, 20 * 13).astype(int)).tolist())
+    k = next(i for i in range(900) if i not in looked)
+    bent = J @ d
+    bent[k] += 1e-3  # exact on the rows the search looks at, not on every row
+    assert exact_direction(J, bent) is None
+    assert exact_direction(J[:13], J[:13] @ d) is None  # no row to spare: every r fits
+
+
+def test_plane_contacts_alone_calibrate_with_their_scale_left_to_the_prior(tmp_path, capsys):
+    """3,000 simulated EC66 plane contacts: the contacts' distances are homogeneous in the
+    lengths and plane offsets, so the robot shrunk toward its base fits any data; the
+    evidence drove the noise to 0 along it and the gate refused (656 mm corrections). Now
+    that direction is left to the prior: calibrated, the noise near the simulated 0.05 mm,
+    and the summary says so. Point data have no such direction."""
+    import json
+
+    from kincal.cli.main import main
+
+    data = tmp_path / "plane.csv"
+    assert main(["simulate", "ec66", "--kind", "plane", "--poses", "3000", "--seed", "0",
+                 "--out", str(data), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data), "--on-plane", "--tool-offset", "0", "0",
+                 "0.12", "--out", str(tmp_path / "c.urdf"), "--json"]) == 0
+    ev = json.loads(capsys.readouterr().out)["evidence"]
+    assert ev["exact_direction_to_prior"] and 0.04 < ev["noise_mm"] < 0.06
+    points = tmp_path / "points.csv"
+    assert main(["simulate", "ec66", "--poses", "60", "--seed", "0", "--out", str(points),
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(points), "--lambda", "evidence", "--out",
+                 str(tmp_path / "p.urdf"), "--json"]) == 0
+    assert not json.loads(capsys.readouterr().out)["evidence"]["exact_direction_to_prior"]
