@@ -123,8 +123,15 @@ def gains(problem: CalibrationProblem, u: np.ndarray, fit: evidence.EvidenceFit
     if beta0.size != int(rows.max()) + 1:
         beta0 = np.full(int(rows.max()) + 1, float(np.mean(beta0)))
 
+    gauge = evidence.exact_direction(J[:, base], r)  # as the fit's evidence leaves it
+
     def best(columns, g):
-        linear = evidence.LinearEvidence.of(J[:, columns], y, g, rows)
+        A = J[:, columns]
+        if gauge is not None:  # the base columns come first
+            d = np.zeros(len(columns))
+            d[:base.size] = gauge
+            A = A - np.outer(A @ d, d)
+        linear = evidence.LinearEvidence.of(A, y, g, rows)
         alpha, beta, history, _ = evidence.maximise(linear, len(present), alpha0, beta0, given)
         return float(history[-1]), linear.posterior(alpha, beta)[0]
 
