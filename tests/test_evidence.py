@@ -489,24 +489,29 @@ def test_exact_direction_is_found_only_where_one_direction_fits_the_residual():
     assert exact_direction(J[:13], J[:13] @ d) is None  # no row to spare: every r fits
 
 
-def test_plane_contacts_alone_calibrate_with_their_scale_left_to_the_prior(tmp_path, capsys):
-    """3,000 simulated EC66 plane contacts: the contacts' distances are homogeneous in the
-    lengths and plane offsets, so the robot shrunk toward its base fits any data; the
-    evidence drove the noise to 0 along it and the gate refused (656 mm corrections). Now
-    that direction is left to the prior: calibrated, the noise near the simulated 0.05 mm,
-    and the summary says so. Point data have no such direction."""
+@pytest.mark.parametrize("kind", ["plane", "flush"])
+def test_contacts_calibrate_with_their_scale_left_to_the_prior(tmp_path, capsys, kind):
+    """3,000 simulated EC66 plane contacts or flush touches: a contact's distance (a
+    touch's height) is homogeneous in the lengths and the plane offsets, so the robot
+    shrunk toward its base fits those rows exactly; the evidence drove their noise to 0
+    along it and the gate refused (629-656 mm corrections). Now that direction is left to
+    the prior: calibrated, the noise near the simulated 0.05 mm (and 0.05 deg), and the
+    summary says so. Point data have no such direction."""
     import json
 
     from kincal.cli.main import main
 
-    data = tmp_path / "plane.csv"
-    assert main(["simulate", "ec66", "--kind", "plane", "--poses", "3000", "--seed", "0",
+    data = tmp_path / f"{kind}.csv"
+    assert main(["simulate", "ec66", "--kind", kind, "--poses", "3000", "--seed", "0",
                  "--out", str(data), "--quiet"]) == 0
     capsys.readouterr()
-    assert main(["calibrate", "ec66", str(data), "--on-plane", "--tool-offset", "0", "0",
-                 "0.12", "--out", str(tmp_path / "c.urdf"), "--json"]) == 0
+    flush = ["--flush"] if kind == "flush" else []
+    assert main(["calibrate", "ec66", str(data), "--on-plane", *flush, "--tool-offset", "0",
+                 "0", "0.12", "--out", str(tmp_path / "c.urdf"), "--json"]) == 0
     ev = json.loads(capsys.readouterr().out)["evidence"]
-    assert ev["exact_direction_to_prior"] and 0.04 < ev["noise_mm"] < 0.06
+    assert ev["exact_direction_to_prior"]
+    noise = [g["sigma"] for g in ev["noise_groups"]] or [ev["noise_mm"]]
+    assert all(0.04 < s < 0.06 for s in noise), ev
     points = tmp_path / "points.csv"
     assert main(["simulate", "ec66", "--poses", "60", "--seed", "0", "--out", str(points),
                  "--quiet"]) == 0

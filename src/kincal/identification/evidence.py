@@ -112,8 +112,9 @@ class EvidenceFit:
         noise = (f"noise {self.noise_mm:.3g} mm" + (" (given)" if self.noise_given else "")
                  if len(self.noise_groups) < 2 else "noise per row group " + ", ".join(
                      f"{rows} {s:.3g} {unit}" for rows, s, unit in self.noise_groups))
-        gauge = ("; one direction fits any residual exactly (plane contacts alone: the robot "
-                 "shrunk toward its base), left to the prior" if self.gauged else "")
+        gauge = ("; one direction fits any residual exactly (distances to planes, contact "
+                 "heights: the robot shrunk toward its base), left to the prior"
+                 if self.gauged else "")
         return f"prior scales {', '.join(parts)}; {noise}{gauge}"
 
     def as_dict(self) -> dict:
@@ -267,22 +268,34 @@ def exact_direction(J: np.ndarray, r: np.ndarray) -> np.ndarray | None:
     m, p = J.shape
     if m <= p + 1 or not np.any(r):
         return None
-    from kincal.identification.linalg import triangular_factor
-
-    # found on at most 20 (p + 1) evenly spaced rows (exact on all rows, exact on those),
-    # then checked on every row with one product: a bounded cost on a million rows
+    # found on at most 20 (p + 1) evenly spaced rows (exact on all rows, exact on those; the
+    # least-norm solution: a group's rows may not see every column, a flush touch's height
+    # not the face's tilt), then checked on every row with one product: a bounded cost
     rows = np.unique(np.linspace(0, m - 1, min(m, 20 * (p + 1))).astype(int))
-    Rz = triangular_factor(np.column_stack([J[rows], r[rows]]))
-    if not Rz[p, p] ** 2 <= EXACT ** 2 * float(r[rows] @ r[rows]):
-        return None
-    R = Rz[:p, :p]
-    if np.min(np.abs(np.diag(R))) <= 1e-12 * np.max(np.abs(np.diag(R))):
-        return None  # rank-deficient columns: the selection's business, not this
-    d = np.linalg.solve(R, Rz[:p, p])
-    fitted = J @ d
-    if not float(np.sum((fitted - r) ** 2)) <= EXACT ** 2 * float(r @ r):
+    d, _, rank, _ = np.linalg.lstsq(J[rows], r[rows], rcond=None)
+    if rank >= len(rows) - 1 or not np.any(d):
+        return None  # no row to spare there: every residual fits
+    if not float(np.sum((J @ d - r) ** 2)) <= EXACT ** 2 * float(r @ r):
         return None
     return d / np.linalg.norm(d)
+
+
+def exact_directions(J: np.ndarray, r: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    """Orthonormal directions, each fitting one noise group's residual exactly
+    (:func:`exact_direction` per group of ``rows``): with a noise per group the evidence
+    drives that group's noise to zero along it (flush touches: the heights are homogeneous
+    in the lengths, the tilts do not see them; 3,000 simulated EC66 touches collapsed)."""
+    out: list[np.ndarray] = []
+    for g in np.unique(rows):
+        on = rows == g
+        d = exact_direction(J[on], r[on])
+        if d is None:
+            continue
+        for e in out:
+            d = d - (d @ e) * e
+        if np.linalg.norm(d) > 1e-6:
+            out.append(d / np.linalg.norm(d))
+    return out
 
 
 def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.ndarray,
@@ -344,8 +357,8 @@ def estimate(fit, linearise, u_start: np.ndarray, u_prior: np.ndarray, free: np.
         if white is not None:
             Jf = Jf.copy()
             Jf[:, white[0]] = Jf[:, white[0]] @ white[1]
-        g = exact_direction(Jf, r) if white is None else None
-        if g is not None:  # a direction that fits any residual: to the prior, not the data
+        for g in exact_directions(Jf, r, rows) if white is None else ():
+            # a direction that fits any residual (of a noise group): to the prior, not the data
             Jf, gauged = Jf - np.outer(Jf @ g, g), True
         shift = np.where(groups >= 0, (u_prior - u)[idx], 0.0)  # flat: centred where we are
         y = -(r + J[:, idx] @ shift)

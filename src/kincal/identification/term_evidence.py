@@ -123,13 +123,13 @@ def gains(problem: CalibrationProblem, u: np.ndarray, fit: evidence.EvidenceFit
     if beta0.size != int(rows.max()) + 1:
         beta0 = np.full(int(rows.max()) + 1, float(np.mean(beta0)))
 
-    gauge = evidence.exact_direction(J[:, base], r)  # as the fit's evidence leaves it
+    gauges = evidence.exact_directions(J[:, base], r, rows)  # as the fit's evidence does
 
     def best(columns, g):
         A = J[:, columns]
-        if gauge is not None:  # the base columns come first
+        for e in gauges:  # the base columns come first
             d = np.zeros(len(columns))
-            d[:base.size] = gauge
+            d[:base.size] = e
             A = A - np.outer(A @ d, d)
         linear = evidence.LinearEvidence.of(A, y, g, rows)
         alpha, beta, history, _ = evidence.maximise(linear, len(present), alpha0, beta0, given)
