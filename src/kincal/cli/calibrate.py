@@ -194,9 +194,9 @@ def _ur_hash(c: Calibrate, robot) -> str:
     problem = ur_layout_problem(robot)  # before the work, as the writer would refuse it
     if problem is not None:
         raise OptionError(problem)
-    if c.ur_hash is not None and ur_hash_problem(c.ur_hash, "--ur-hash") is not None:
-        raise OptionError(f"{ur_hash_problem(c.ur_hash, '--ur-hash')}, or leave the option "
-                          "out to copy it from that file")
+    given = None if c.ur_hash is None else ur_hash_problem(c.ur_hash, "--ur-hash")
+    if given is not None:
+        raise OptionError(f"{given}, or leave the option out to copy it from that file")
     found = c.ur_hash or ur_hash_of(robot.source, xacro_args(c.chain.xacro_arg))
     if not found:
         raise OptionError("--yaml-format ur: no hash found (no kinematics_params file with a "
@@ -247,8 +247,9 @@ def run(args) -> int:
     if c.mdh_out is not None:  # before the fit, as the writer would refuse it
         from kincal.export.cell_exports import mdh_table_problem
 
-        if mdh_table_problem(robot) is not None:
-            raise OptionError(f"--mdh-out: {mdh_table_problem(robot)} (--out, --yaml-out)")
+        why = mdh_table_problem(robot)
+        if why is not None:
+            raise OptionError(f"--mdh-out: {why} (--out, --yaml-out)")
     ur_hash = _ur_hash(c, robot) if c.yaml_format == "ur" else None
     if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "

@@ -260,8 +260,9 @@ def mdh_table_csv(corrected) -> str:
 
     from kincal.models.complete import NEARLY_PARALLEL_DEG
 
-    if mdh_table_problem(corrected) is not None:
-        raise ExportError(mdh_table_problem(corrected))
+    why = mdh_table_problem(corrected)
+    if why is not None:
+        raise ExportError(why)
 
     m = extract(corrected.geometry, beta_below=math.sin(math.radians(NEARLY_PARALLEL_DEG)))
     off_axis = np.abs(m.screw_axes - [0.0, 0.0, 1.0]).max(axis=1)

@@ -56,7 +56,8 @@ def refused_banner(result, message: str) -> str:
         rows += [(f"correction {name}", f"{v:+.4g} {unit}") for name, v, unit in
                  ev.corrections[:6]]
         if ev.off_chain_columns:
-            rows.append(("columns of joints beyond the chain's ends", ", ".join(ev.off_chain_columns)))
+            rows.append(("columns of joints beyond the chain's ends",
+                         ", ".join(ev.off_chain_columns)))
         out.append("<table>" + "".join(f'<tr><th class="name">{_e(k)}</th><td>{_e(v)}</td>'
                                        "</tr>" for k, v in rows) + "</table>")
     return "\n".join(out) + "</div>\n"

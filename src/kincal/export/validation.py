@@ -90,8 +90,9 @@ class Validation:
             b0, a0 = self.angles
             parts = "".join(f", {k} {vb:.4f} -> {va:.4f}"
                             for (k, vb), (_, va) in zip(b0.axes, a0.axes))
-            out.append(f"  {angle_label(self.kind)} [deg]: mean {b0.mean:.4f} -> {a0.mean:.4f}, RMS "
-                       f"{b0.rms:.4f} -> {a0.rms:.4f}" + (f" ({parts[2:]})" if parts else ""))
+            out.append(f"  {angle_label(self.kind)} [deg]: mean {b0.mean:.4f} -> "
+                       f"{a0.mean:.4f}, RMS {b0.rms:.4f} -> {a0.rms:.4f}"
+                       + (f" ({parts[2:]})" if parts else ""))
         return out
 
     def as_dict(self) -> dict:

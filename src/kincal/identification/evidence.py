@@ -255,27 +255,32 @@ def maximise(problem: LinearEvidence, n_classes: int, alpha0: np.ndarray, beta0,
 EXACT = 1e-9  # a residual fitted to this fraction of its norm by one direction: exactly
 
 
-def exact_direction(J: np.ndarray, r: np.ndarray) -> np.ndarray | None:
-    """(p,) the unit direction d with J d = r exactly (to EXACT of |r|) when the rows
-    outnumber the columns, else None. Such a direction fits any residual, noise included:
-    plane contacts alone are one (each contact's distance is homogeneous of degree one in
-    every length, the planes' offsets among them, so the robot shrunk toward its base
-    touches every plane; a known length, a distance or a point set breaks it). Maximising
-    the evidence along it drives the noise to zero and the lengths to the collapsed robot
-    (3,000 simulated EC66 plane contacts: 6 of 6 refused by the gate, corrections of 656
-    mm); :func:`estimate` leaves it to the prior: the evidence is taken on the other
-    directions, and the fit's penalty holds the lengths near nominal along it."""
+def exact_direction(J: np.ndarray, r: np.ndarray, on: np.ndarray | None = None
+                    ) -> np.ndarray | None:
+    """(p,) the unit direction d with J d = r exactly (to EXACT of |r|) on the rows ``on``
+    (indices; None: all) when they outnumber the columns, else None. Such a direction fits
+    any residual, noise included: plane contacts alone are one (each contact's distance is
+    homogeneous of degree one in every length, the planes' offsets among them, so the robot
+    shrunk toward its base touches every plane; a known length, a distance or a point set
+    breaks it). Maximising the evidence along it drives the noise to zero and the lengths
+    to the collapsed robot (3,000 simulated EC66 plane contacts: 6 of 6 refused by the
+    gate, corrections of 656 mm); :func:`estimate` leaves it to the prior: the evidence is
+    taken on the other directions, and the fit's penalty holds the lengths near nominal
+    along it."""
     m, p = J.shape
-    if m <= p + 1 or not np.any(r):
+    on = np.arange(m) if on is None else np.asarray(on)
+    if on.size <= p + 1 or not np.any(r[on]):
         return None
     # found on at most 20 (p + 1) evenly spaced rows (exact on all rows, exact on those; the
     # least-norm solution: a group's rows may not see every column, a flush touch's height
-    # not the face's tilt), then checked on every row with one product: a bounded cost
-    rows = np.unique(np.linspace(0, m - 1, min(m, 20 * (p + 1))).astype(int))
-    d, _, rank, _ = np.linalg.lstsq(J[rows], r[rows], rcond=None)
-    if rank >= len(rows) - 1 or not np.any(d):
+    # not the face's tilt), then checked on every row with one product: a bounded cost, and
+    # no copy of J (a million rows)
+    some = on[np.unique(np.linspace(0, on.size - 1, min(on.size, 20 * (p + 1))).astype(int))]
+    d, _, rank, _ = np.linalg.lstsq(J[some], r[some], rcond=None)
+    if rank >= some.size - 1 or not np.any(d):
         return None  # no row to spare there: every residual fits
-    if not float(np.sum((J @ d - r) ** 2)) <= EXACT ** 2 * float(r @ r):
+    miss = (J @ d - r)[on]
+    if not float(miss @ miss) <= EXACT ** 2 * float(r[on] @ r[on]):
         return None
     return d / np.linalg.norm(d)
 
@@ -286,9 +291,9 @@ def exact_directions(J: np.ndarray, r: np.ndarray, rows: np.ndarray) -> list[np.
     drives that group's noise to zero along it (flush touches: the heights are homogeneous
     in the lengths, the tilts do not see them; 3,000 simulated EC66 touches collapsed)."""
     out: list[np.ndarray] = []
-    for g in np.unique(rows):
-        on = rows == g
-        d = exact_direction(J[on], r[on])
+    groups = np.unique(rows)
+    for g in groups:
+        d = exact_direction(J, r, None if groups.size == 1 else np.flatnonzero(rows == g))
         if d is None:
             continue
         for e in out:
