@@ -260,3 +260,34 @@ def test_compensate_takes_the_xacro_arguments_of_its_nominal(tmp_path, capsys):
                  str(tmp_path / "y.csv")]) == 1  # a plain nominal refuses them
     assert f"{cal}: is plain URDF, not xacro" in capsys.readouterr().err
     assert not any((tmp_path / n).exists() for n in ("bad.csv", "x.csv", "y.csv"))
+
+
+def test_api_files_name_the_xacro_arguments_the_robot_was_loaded_with(tmp_path):
+    """Robot.load(xacro, xacro_args=...) keeps the arguments: files written through the API
+    (write_calibration, no xacro_args given) name them in their provenance as the command
+    line's do; the robot's corrected copy keeps them; a plain URDF has none."""
+    import json
+
+    from kincal import Measurements, Outputs, calibrate, write_calibration
+
+    xacro_file = tmp_path / "arm.urdf.xacro"
+    xacro_file.write_text(ARG_XACRO)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = Robot.load(xacro_file, tip="flange", xacro_args={"upper": "0.5"})
+        rng = np.random.default_rng(0)
+        q = rng.uniform(-1.5, 1.5, size=(40, 3))
+        T = robot.tip_poses(q)
+        P = T[:, :3, 3] + T[:, :3, :3] @ [0.05, 0.02, 0.03] + rng.normal(0, 2e-5, (40, 3))
+        data = tmp_path / "d.csv"
+        data.write_text("joint_1,joint_2,flange_joint,x,y,z\n" + "".join(
+            ",".join(repr(float(v)) for v in row) + "\n" for row in np.hstack([q, P])))
+        result = calibrate(robot, Measurements.from_csv(data, robot.joint_names))
+        write_calibration(result, Outputs(urdf=tmp_path / "c.urdf",
+                                          report=tmp_path / "r.json"))
+    assert robot.xacro_args == (("upper", "0.5"),)
+    assert result.corrected.xacro_args == (("upper", "0.5"),)
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["provenance"]["robot"]["xacro_args"] == {"upper": "0.5"}
+    assert "xacro args: upper:=0.5" in (tmp_path / "c.urdf").read_text()
+    assert Robot.load("ec66").xacro_args == ()

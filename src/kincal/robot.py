@@ -82,12 +82,14 @@ class Robot:
     frames: the chain follows the tree path between them, see the module notes).
 
     Build with :meth:`load`. A Robot is never modified: :meth:`with_joint_frames`
-    returns a corrected copy that shares the original URDF text.
+    returns a corrected copy that shares the original URDF text. ``xacro_args``: sorted
+    (name, value) pairs a xacro source was expanded with (the files' provenance).
     """
 
     def __init__(self, model: pin.Model, urdf_text: str, name: str, base: str, tip: str,
-                 source: Path | None = None, joint_values: dict | None = None):
+                 source: Path | None = None, joint_values: dict | None = None, xacro_args=()):
         self.model, self.urdf_text, self.name, self.source = model, urdf_text, name, source
+        self.xacro_args = tuple(sorted((str(k), str(v)) for k, v in dict(xacro_args).items()))
         self.base, self.tip = base, tip
         self._base_id = self._frame_id(base, "base")
         self._tip_id = self._frame_id(tip, "tip")
@@ -149,7 +151,7 @@ class Robot:
             raise FrameError(f"{desc.urdf}: no tip frame given; choose one with --tip, e.g. one "
                              f"of the leaf links: {listing(leaves)}", valid=tuple(leaves))
         return cls(model, text, desc.name, base or root, tip, source=desc.urdf,
-                   joint_values=joint_values)
+                   joint_values=joint_values, xacro_args=xacro_args or {})
 
     @staticmethod
     def _leaf_links(model: pin.Model) -> list[str]:
@@ -418,7 +420,8 @@ class Robot:
         for name, T in origins.items():
             j = self.model.getJointId(name)
             m.jointPlacements[j] = _se3(self._parent_link(j) @ np.asarray(T, float))
-        return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source, self.off_chain)
+        return Robot(m, self.urdf_text, self.name, self.base, self.tip, self.source, self.off_chain,
+                     self.xacro_args)
 
     def parent_link(self, joint: str) -> str:
         """The URDF parent link of the movable joint ``joint``."""

@@ -96,7 +96,8 @@ class Provenance:
                gate: str = "no plausibility gate applies to this output") -> "Provenance":
         """The provenance of a command's files written now: ``robot`` the Robot it loaded
         (None: none), ``data`` every file it read (paths; None entries are skipped),
-        command / xacro_args as in :meth:`of`, verdict / gate what a gate said."""
+        command / xacro_args as in :meth:`of` (None: those the robot was loaded with),
+        verdict / gate what a gate said."""
         from kincal import __version__
 
         if command is not None and not isinstance(command, str):
@@ -109,8 +110,10 @@ class Provenance:
         else:
             robot_file = FileHash.of(robot.source or "<robot>")
             text_sha = _sha256(robot.urdf_text.encode("utf-8"))
+        if xacro_args is None:
+            xacro_args = dict(getattr(robot, "xacro_args", ()))
         return cls(__version__, utc_now(), command, robot_file, text_sha,
-                   tuple(sorted((str(k), str(v)) for k, v in (xacro_args or {}).items())),
+                   tuple(sorted((str(k), str(v)) for k, v in xacro_args.items())),
                    files, verdict, gate)
 
     def _stamped_pieces(self, kind: str, pieces):

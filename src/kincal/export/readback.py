@@ -52,7 +52,8 @@ def chain_robots(result):
             continue
         seen.add((base, tip))
         out.append(c if (base, tip) == (c.base, c.tip) else
-                   Robot(c.model, c.urdf_text, c.name, base, tip, c.source, c.off_chain))
+                   Robot(c.model, c.urdf_text, c.name, base, tip, c.source, c.off_chain,
+                         c.xacro_args))
     return out
 
 
@@ -196,7 +197,7 @@ def check_readback(result, text: str, add_frames: bool = False, folds=()) -> Non
         lo, hi = g.ranges()
         q = np.vstack([np.zeros(g.n), rng.uniform(lo, hi, size=(N_CONFIGURATIONS - 1, g.n))])
         read = Robot(model, text, robot.name, robot.base, robot.tip, robot.source,
-                     dict(robot.off_chain))
+                     dict(robot.off_chain), robot.xacro_args)
         expected = robot.tip_poses(q)
         if robot.tip in change:
             expected = expected @ change[robot.tip]
