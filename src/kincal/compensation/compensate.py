@@ -39,6 +39,7 @@ from kincal.errors import DataError, FrameError
 from kincal.measurements.checks import UNIT_RATIO, spread
 from kincal.measurements.csv_table import csv_line
 from kincal.measurements.fixed_joints import refuse_coupled
+from kincal.measurements.orientation_columns import reading_doubt
 from kincal.rotations import base_rotation
 
 COMPLIANCE_STEPS = 4  # fixed-point steps of the commanded joint values under compliance
@@ -254,6 +255,11 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
         notes = ["position targets: the tool keeps the orientation it has at the seed"
                  + ("" if g.n >= 6 else f" as far as the {g.n} joints allow")]
     else:
+        doubt = reading_doubt(R_MB @ R_seed, targets.rotations, targets.orientation_format,
+                              f"{targets.source}: the wanted orientations",
+                              "the calibrated model's at the seeds")
+        if doubt:  # the seeds (the program) are near the targets: so are their orientations
+            raise DataError(doubt + "; nothing is compensated")
         rotations = R_MB.T @ targets.rotations
         required, notes = np.ones(len(targets), bool), []
     sol = solve(chain, tool, positions_B, rotations, required, targets.seeds, g.lower, g.upper,

@@ -21,8 +21,9 @@ from kincal.errors import DataError, KincalNote, KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import read_columns
 from kincal.measurements.data import unit_factors
-from kincal.measurements.orientation_columns import (DEFAULT_FORMAT, OrientationFormat,
-                                                     found_columns, rotations)
+from kincal.measurements.orientation_columns import (DEFAULT_FORMAT, OTHER_CONVENTION,
+                                                     OrientationFormat, found_columns,
+                                                     rotations)
 from kincal.measurements.pose import QUATERNION_COLUMNS as QUATERNION
 
 
@@ -33,7 +34,9 @@ class Targets:
     seeds: (N, n) joint values the solution starts from [rad or m]. positions: (N, 3)
     wanted tool point in the measurement frame [m]. rotations: (N, 3, 3) wanted tip
     orientation in the measurement frame, or None for positions only.
-    lines: (N,) line numbers in the source file. source: for messages.
+    lines: (N,) line numbers in the source file. source: for messages. orientation_format:
+    the convention of the rotations where their columns do not fix it (angles, or
+    quaternion columns named by the user; :func:`compensate` checks it), else "".
     """
 
     seeds: np.ndarray
@@ -41,6 +44,7 @@ class Targets:
     rotations: np.ndarray | None
     lines: np.ndarray
     source: str = "<targets>"
+    orientation_format: str = ""
 
     def __len__(self) -> int:
         return len(self.seeds)
@@ -107,4 +111,7 @@ def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
                     + angle_unit_warnings(g.joint_names, g.kinds, seeds, angle_unit,
                                           g.lower, g.upper)):
         warnings.warn(f"{table.path}: {message}", KincalWarning)
-    return Targets(seeds, positions, R, table.lines, str(table.path))
+    unsure = columns and fmt.name in OTHER_CONVENTION and (
+        orientation_columns is not None or not fmt.name.startswith("quat"))
+    return Targets(seeds, positions, R, table.lines, str(table.path),
+                   fmt.name if unsure else "")

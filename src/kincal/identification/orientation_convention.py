@@ -16,8 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-FAR_WORSE = 5.0  # the reading asked for is this many times worse than the other ...
-AT_LEAST_DEG = 5.0  # ... and at least this bad [deg] (mean): warned about
+from kincal.measurements.orientation_columns import AT_LEAST_DEG, FAR_WORSE, other_reading
 
 
 @dataclass(frozen=True)
@@ -76,16 +75,6 @@ def convention_evidence(CalibrationProblem, robot, data, other_data, fmt: str, o
 
 
 MAX_CHECKED = 2000  # poses the check fits the frames to (evenly spaced): a bounded cost
-
-
-def other_reading(R: np.ndarray, fmt: str) -> np.ndarray:
-    """(N, 3, 3) the rotations the same columns give read in ``fmt``'s other convention.
-    From the rotations themselves: a quaternion's components, or angles with the middle
-    one within +-90 deg (as loggers write them), come back exactly."""
-    from kincal.measurements.orientation_columns import (OTHER_CONVENTION,
-                                                         orientation_values, rotations)
-
-    return rotations(orientation_values(R, fmt), OTHER_CONVENTION[fmt])
 
 
 def checked(CalibrationProblem, robot, data):

@@ -174,3 +174,40 @@ def orientation_values(R: np.ndarray, fmt: str, angle_scale: float = 1.0) -> np.
     else:  # rpy-xyz: R = Rx(a) Ry(b) Rz(c), the measurement frame's angles
         a = base_angles(R)
     return a / angle_scale
+
+
+# a reading of orientations looks wrong when it is this many times further from what the
+# model says than the other reading, and at least this far [deg] (mean)
+FAR_WORSE = 5.0
+AT_LEAST_DEG = 5.0
+
+
+def other_reading(R: np.ndarray, fmt: str) -> np.ndarray:
+    """(N, 3, 3) the rotations the same columns give read in ``fmt``'s other convention
+    (:data:`OTHER_CONVENTION`). From the rotations themselves: a quaternion's components,
+    or angles with the middle one within +-90 deg (as loggers write them), come back
+    exactly."""
+    return rotations(orientation_values(R, fmt), OTHER_CONVENTION[fmt])
+
+
+def reading_doubt(R_model: np.ndarray, R_read: np.ndarray, fmt: str, what: str,
+                  model: str = "the model's") -> str:
+    """"" or why orientations ``R_read`` (N, 3, 3), read in ``fmt`` (a convention the
+    columns do not fix, :data:`OTHER_CONVENTION`), look read in the wrong one: their mean
+    angle from ``R_model`` (what a model says they should be near) is at least
+    :data:`AT_LEAST_DEG` and :data:`FAR_WORSE` times that of the other reading. what: the
+    orientations, model: ``R_model``, for the message."""
+    if fmt not in OTHER_CONVENTION or not len(R_read):
+        return ""
+    other = OTHER_CONVENTION[fmt]
+
+    def mean_deg(R):
+        c = (np.einsum("nij,nij->n", R_model, R) - 1.0) / 2.0
+        return float(np.degrees(np.mean(np.arccos(np.clip(c, -1.0, 1.0)))))
+
+    given, alt = mean_deg(R_read), mean_deg(other_reading(R_read, fmt))
+    if given < AT_LEAST_DEG or given < FAR_WORSE * alt:
+        return ""
+    return (f"{what} read as {fmt} lie a mean {given:.1f} deg from {model}, read as "
+            f"{other} {alt:.2f} deg: is the file's convention {other}? "
+            "(--orientation-format)")
