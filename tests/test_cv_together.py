@@ -1,7 +1,6 @@
 """Algorithm 1 with the folds evaluated together (one vectorised pass per step over the
 folds' training rows, one parameter vector per row) gives what the folds fitted one at a
-time give: the same chosen lambda and the curve to 1e-9 (on this machine's numpy, bit for
-bit), on tracker-like data in a 400 mm cube, R-test-like data in a 20 mm cube (whose
+time give: the same chosen lambda and the curve to 1e-9 (bit for bit on some BLAS kernels), on tracker-like data in a 400 mm cube, R-test-like data in a 20 mm cube (whose
 small-lambda fits creep under damping, so their end depends on every bit of the path) and
 random poses."""
 
@@ -115,14 +114,17 @@ def test_folds_with_fewer_rows_than_parameters(n):
     """Few poses: each fold's training rows (3 per pose) are fewer than the free parameters,
     so the data's triangle is shorter than the linear problem (a regression: the solver
     wrote it into a square block and failed). Algorithm 1 runs, the folds together give the
-    folds one at a time, and each fold fit lowers its penalised objective."""
+    folds one at a time, and each fold fit lowers its penalised objective. The curves agree
+    to 1e-5, not 1e-9: only the penalty holds some directions of these fits (condition up
+    to lambda^-1), so the last bits of the BLAS move them, and those differ between CPUs'
+    kernels (up to 6e-7 on OpenBLAS's Haswell kernels, 0 on its SkylakeX ones)."""
     problem = CalibrationProblem(ROBOT, _data(10 + n, 0.4, n),
                                  CalibrationOptions(method="l2", lam="cv"))
     assert 3 * n * 4 // 5 < int(problem.free_mask().sum())
     fast, slow = _both(problem)
     assert fast.best_index == slow.best_index
     assert np.all(np.isfinite(fast.mean_error))
-    assert np.abs(fast.mean_error / slow.mean_error - 1).max() < 1e-9
+    assert np.abs(fast.mean_error / slow.mean_error - 1).max() < 1e-5
     rows = np.arange(3 * (n - 2))  # the first n - 2 poses' rows
     sol = problem.fit(1e-2, rows)
     assert sol.cost[-1] < sol.cost[0]
