@@ -14,7 +14,7 @@ import numpy as np
 RIDGE = 1e-6  # start of the greedy search, in units of the average pose's information
 EXCHANGE_TOL = 1e-9  # a swap must raise log det by more than this to be made
 SINGULAR = 1e-12  # reciprocal condition below which an information matrix counts as singular
-CHUNK = 2048  # unchosen candidates scored at once in the exchange (bounds memory)
+CHUNK = 2048  # candidates scored at once (bounds memory)
 
 
 def _det3(A: np.ndarray) -> np.ndarray:
@@ -34,8 +34,13 @@ def _log(x: np.ndarray) -> np.ndarray:
 
 
 def _quad(J: np.ndarray, Minv: np.ndarray) -> np.ndarray:
-    """(k, 3, 3) J_k M^-1 J_k^T for (k, 3, p) Jacobians."""
-    return (J @ Minv) @ J.transpose(0, 2, 1)
+    """(k, 3, 3) J_k M^-1 J_k^T for (k, 3, p) Jacobians, CHUNK at a time (the (k, 3, p)
+    product of all candidates would take as much memory as their Jacobians)."""
+    out = np.empty((len(J), J.shape[1], J.shape[1]))
+    for s in range(0, len(J), CHUNK):
+        Jc = J[s:s + CHUNK]
+        out[s:s + CHUNK] = (Jc @ Minv) @ Jc.transpose(0, 2, 1)
+    return out
 
 
 def _exact_inverse(G: np.ndarray) -> tuple[np.ndarray, float] | None:

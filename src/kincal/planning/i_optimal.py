@@ -42,16 +42,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from kincal.planning.d_optimal import CHUNK
+
 RIDGE = 1e-6  # as in pose_selection: the first greedy picks see a finite objective
 EXCHANGE_RTOL = 1e-9  # a swap must lower V by more than this fraction
 SINGULAR = 1e-12
 
 
-def target_moment(Jt: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray:
+def target_moment(Jt: np.ndarray, frames: np.ndarray | None = None,
+                  count: int | None = None) -> np.ndarray:
     """(p, p) A for target Jacobians (T, 3, p): the mean of J_t^T J_t, or with ``frames``
     ((p,) bool, the frame and tool columns) the kinematic part left after refitting those
-    over the targets (see the module notes)."""
+    over the targets (see the module notes). Only J^T J enters: the triangle R of the
+    stacked rows (as (1, p, p)) gives the same A, with ``count`` the number of targets."""
     T, _, p = Jt.shape
+    T = T if count is None else count
     if frames is None or not frames.any():
         return np.einsum("kip,kiq->pq", Jt, Jt) / T
     S = Jt.reshape(-1, p)
@@ -81,11 +86,16 @@ def mean_variances(Jn: np.ndarray, A: np.ndarray, subsets: np.ndarray) -> np.nda
 
 
 def _gains(Jn: np.ndarray, Minv: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """(M,) decrease of 3 V when each candidate is added to the set of M^-1."""
-    B = Jn @ Minv                                                   # (M, 3, p)
-    C = np.eye(3) + B @ Jn.transpose(0, 2, 1)                       # (M, 3, 3)
-    Q = (B @ A) @ B.transpose(0, 2, 1)                              # (M, 3, 3)
-    return np.trace(np.linalg.solve(C, Q), axis1=1, axis2=2)
+    """(M,) decrease of 3 V when each candidate is added to the set of M^-1 (CHUNK
+    candidates at a time: their (c, 3, p) products, not the whole set's, are held)."""
+    out = np.empty(len(Jn))
+    for s in range(0, len(Jn), CHUNK):
+        J = Jn[s:s + CHUNK]
+        B = J @ Minv                                                # (c, 3, p)
+        C = np.eye(3) + B @ J.transpose(0, 2, 1)                    # (c, 3, 3)
+        Q = (B @ A) @ B.transpose(0, 2, 1)                          # (c, 3, 3)
+        out[s:s + CHUNK] = np.trace(np.linalg.solve(C, Q), axis1=1, axis2=2)
+    return out
 
 
 def _add(Minv: np.ndarray, Jk: np.ndarray, sign: float = 1.0) -> np.ndarray:

@@ -56,8 +56,10 @@ import numpy as np
 
 from kincal.errors import DataError, KincalWarning, OptionError
 from kincal.measurements.point_space import MM, ParameterSpace
+from kincal.identification.reduction import stacked_triangle
 from kincal.identification.selection import RANK_TOL, analyze
 from kincal.measurements.point import MeasurementModel
+from kincal.models.kinematics import BLOCK
 from kincal import models as error_models
 from kincal.models.mdh import TOOL_AXIS_WARNING
 from kincal.planning import i_optimal
@@ -313,21 +315,38 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     if kind == "point":
         space = ParameterSpace.of_model(em)
         x = space.join(em.nominal, np.zeros(6), t)
-        # J^T J does not depend on where the measurement frame is: base at the identity
-        J = MeasurementModel(em, q).jacobian(x)[1] * (space.reporting_scale() / MM)
+        factor = space.reporting_scale() / MM
+        rows_per = 3
+
+        def rows_jacobian_at(poses: np.ndarray) -> np.ndarray:
+            """(len(poses), 3, size) in reporting units, for at most BLOCK poses at a time
+            (the model's intermediates take ~5x the Jacobian's memory; it costs 3 us per
+            pose, so it is made twice instead of held). J^T J does not depend on where the
+            measurement frame is: base at the identity."""
+            return MeasurementModel(em, poses).jacobian(x)[1] * factor
+
+        def rows_jacobian(rows: np.ndarray) -> np.ndarray:
+            return rows_jacobian_at(q[rows])
     else:
         from kincal.measurements.sets import planning_jacobian
 
         J, space = planning_jacobian(em, kind, q, t, pivot, planes)
+        rows_per = J.shape[1]  # equations per pose: 6 (pose), 1 (distance, plane)
+
+        def rows_jacobian(rows: np.ndarray) -> np.ndarray:
+            return J[rows]
+    blocks = [np.arange(s, min(s + BLOCK, M)) for s in range(0, M, BLOCK)]
     free = np.ones(space.size, dtype=bool)
     free[space.indices(fix)] = False  # unknown names raise ParameterError with the list
-    ident = analyze(J.reshape(-1, space.size), space.names, space.n_kinematic, free, RANK_TOL)
+    # on the triangle of the stacked rows, block by block: no whole Jacobian, no copy of it
+    R, m_rows = stacked_triangle((slice(b[0], b[-1] + 1), np.empty(0),
+                                  rows_jacobian(b).reshape(-1, space.size)) for b in blocks)
+    ident = analyze(R, space.names, space.n_kinematic, free, RANK_TOL, m=m_rows)
     cols = space.indices(ident.kept)
     p = cols.size
     if p == 0:
         raise DataError(f"the {M} candidates identify no parameter at all ({len(ident.free)} "
                         "free): give candidates that move every joint")
-    rows_per = J.shape[1]  # equations per pose: 3 (point), 6 (pose), 1 (distance, plane)
     need = math.ceil(p / rows_per)
     if n < need:
         raise OptionError(f"{n} poses give {rows_per * n} equations, but the candidates identify "
@@ -335,14 +354,19 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                           f"redundant): at least {need} poses are needed ({rows_per} equation(s) "
                           "per pose), and many "
                           "more for a good calibration")
-    Jk = J[:, :, cols]
-    scale = np.sqrt(np.einsum("kic,kic->c", Jk, Jk) / M)  # RMS per pose [mm per mm or deg]
-    Jn = np.ascontiguousarray(Jk / scale)
+    Jn = np.empty((M, rows_per, p))  # the kept columns, filled block by block
+    for b in blocks:
+        Jn[b] = rows_jacobian(b)[:, :, cols]
+    scale = np.sqrt(sum(np.einsum("kic,kic->c", Jn[b], Jn[b])
+                        for b in blocks) / M)  # RMS per pose [mm per mm or deg]
+    Jn /= scale
 
     A = None
-    if targets is not None:
-        Jt = MeasurementModel(em, targets).jacobian(x)[1] * (space.reporting_scale() / MM)
-        A = i_optimal.target_moment(Jt[:, :, cols] / scale, space.is_frame[cols])
+    if targets is not None:  # the targets' rows stacked into their triangle, block by block
+        Rt, _ = stacked_triangle((slice(s, s + BLOCK), np.empty(0), (rows_jacobian_at(
+            targets[s:s + BLOCK])[:, :, cols] / scale).reshape(-1, p))
+            for s in range(0, len(targets), BLOCK))
+        A = i_optimal.target_moment(Rt[None], space.is_frame[cols], count=len(targets))
     if method == "I":
         assert A is not None  # I-optimal selection has targets (checked above)
         chosen, Minv, ridge = i_optimal.greedy(Jn, n, keep, A)
@@ -365,8 +389,8 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                       for _ in range(random_subsets)])
     r_ld, r_cond, r_var = _set_figures(Jn, scale, draws)
 
-    mine = analyze(J[chosen].reshape(-1, space.size), space.names, space.n_kinematic, free,
-                   RANK_TOL)
+    mine = analyze(rows_jacobian(np.asarray(chosen)).reshape(-1, space.size), space.names,
+                   space.n_kinematic, free, RANK_TOL)
     lost = tuple(name for name in ident.kept if name not in mine.kept)
     mean_var = r_mean_var = math.nan
     if A is not None:
