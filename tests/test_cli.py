@@ -248,8 +248,9 @@ def test_simulate_works_out_of_the_box_for_every_robot_with_a_default_cube(robot
         out = tmp_path / f"{robot}-{seed}.csv"
         assert main(["simulate", robot, "--poses", "30", "--seed", str(seed), "--out", str(out)]) == 0
         assert len([r for r in out.read_text().splitlines() if not r.startswith("#")]) == 31
-    report = tmp_path / "r.json"
-    assert main(["calibrate", robot, str(out), "--method", "ls", "--out", str(tmp_path / "c.urdf"),
+    report = tmp_path / "r.json"  # the default method: plain LS crawls on weak directions
+    # of some draws (the UR3's small cube drawn on OpenBLAS's Sandybridge kernels)
+    assert main(["calibrate", robot, str(out), "--out", str(tmp_path / "c.urdf"),
                  "--report", str(report), "--quiet"]) == 0
     result = json.loads(report.read_text())
     assert result["convergence"]["converged"]

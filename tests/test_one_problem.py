@@ -59,8 +59,10 @@ def test_shuffled_rows_in_a_small_cube_are_refused_in_the_api_and_the_cli(rtest,
     capsys.readouterr()
     before = sorted(p.name for p in folder.iterdir())
     assert main(["calibrate", "ec66", str(path), "--out", str(folder / "c.urdf")]) == 1
-    err = capsys.readouterr().err
-    assert err.startswith("kincal: error: implausible calibration") and err.count("\n") == 1
+    err = capsys.readouterr().err  # one error line, first (warnings may follow: the
+    # shuffled rows' tool point may land near the last axis, as on other BLAS kernels)
+    assert err.startswith("kincal: error: implausible calibration")
+    assert err.count("kincal: error:") == 1 and err.splitlines()[0].count("kincal:") == 1
     assert sorted(p.name for p in folder.iterdir()) == before
 
 

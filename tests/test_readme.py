@@ -171,12 +171,50 @@ def _normalise(text: str) -> str:
     return " ".join(text.split())
 
 
+# Files a page simulates and then shows figures of: SHA-256 of their data rows (comments
+# off) as the pages' figures were measured. simulate's poses come from iterative inverse
+# kinematics whose arm branch can turn on the BLAS kernels' last bits (OpenBLAS's
+# Sandybridge kernels draw other R-test poses than its Haswell and SkylakeX ones); on such
+# a machine the commands still run, and the figures are not compared (a skip says why).
+DRAWN = {"rt.csv": "942c8fc69e8ba7bee819898784db8b6a6847f34c7960898601a5903bde83a46a"}
+MEASURED_ON = {"Haswell", "SkylakeX"}  # OpenBLAS kernels that draw them (seen 2026-11-24)
+
+
+def _kernels() -> set:
+    """The OpenBLAS kernels numpy and scipy run on here (empty: another BLAS)."""
+    import scipy.linalg  # noqa: F401 (its own OpenBLAS, listed once loaded)
+    from threadpoolctl import threadpool_info
+
+    return {str(i.get("architecture")) for i in threadpool_info()
+            if i.get("internal_api") == "openblas"}
+
+
+def _other_draws(argv: list[str]) -> str:
+    """"" or why the file a ``kincal simulate`` step wrote is not the one the page shows."""
+    import hashlib
+
+    if argv[:2] != ["kincal", "simulate"] or "--out" not in argv:
+        return ""
+    name = argv[argv.index("--out") + 1]
+    if name not in DRAWN:
+        return ""
+    rows = "".join(line for line in Path(name).read_text().splitlines(keepends=True)
+                   if not line.startswith("#"))
+    kernels = _kernels()
+    if hashlib.sha256(rows.encode()).hexdigest() == DRAWN[name] or (
+            kernels and kernels <= MEASURED_ON):  # there a changed file is a changed page
+        return ""
+    return (f"{' '.join(argv)} drew other poses on this machine's BLAS kernels than the page "
+            "shows figures of: the commands ran, their figures are not compared")
+
+
 @pytest.mark.parametrize("page, first, steps", examples(),
                          ids=[f"{page}:line{first}" for page, first, _ in examples()])
 def test_page_commands_run(page, first, steps, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     printed = ""
     skipped = []
+    other = ""  # the page's simulated file is not the one its figures come from
     for step in steps:
         where = f"{page} line {step.line}"
         command = step.command
@@ -194,12 +232,15 @@ def test_page_commands_run(page, first, steps, tmp_path, monkeypatch):
             continue
         assert code == 0, f"{where}: {step.command!r} exited {code}:\n{output}"
         printed += output
+        other = other or _other_draws(argv)
         lines = {_normalise(line) for line in printed.splitlines()}
-        for shown in step.expected:
+        for shown in ([] if other else step.expected):
             assert _normalise(shown) in lines, (
                 f"{where}: {step.command!r} did not print {shown!r}; it printed:\n{printed}")
     if skipped and len(skipped) == len(steps):
         pytest.skip("; ".join(skipped))
+    if other and any(step.expected for step in steps):
+        pytest.skip(other)
 
 
 def test_every_page_command_has_a_rule():
