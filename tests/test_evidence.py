@@ -413,16 +413,13 @@ def test_auto_penalty_keeps_the_folds_the_user_gave():
         choice(9, 10)
 
 
-def test_evidence_refuses_a_fit_through_every_point(tmp_path, capsys):
-    """Four simulated poses (12 equations) for 12 identifiable parameters, where the
-    evidence puts the noise near zero (3e-6 mm) and the fit through every point: refused
-    with both counts, nothing written; with the noise stated, calibrated."""
+def _four_poses(tmp_path):
+    """four.csv: four simulated EC66 poses at given joint values (simulate's own draws
+    depend on the BLAS kernels' last bits, and on other draws the evidence finds an inner
+    optimum: a noise of 0.23 mm, calibrated)."""
     from kincal.cli.main import main
 
-    data, out = tmp_path / "four.csv", tmp_path / "cal.urdf"
-    # four poses given (simulate's own draws depend on the BLAS kernels' last bits, and on
-    # other draws the evidence finds an inner optimum: a noise of 0.23 mm, calibrated)
-    poses = tmp_path / "poses.csv"
+    poses, data = tmp_path / "poses.csv", tmp_path / "four.csv"
     poses.write_text("joint_1,joint_2,joint_3,joint_4,joint_5,joint_6\n"
                      "-0.1576202695,4.2919315843,1.7726804687,-1.7160761253,1.4768494959,-1.6286561854\n"
                      "0.1373103116,4.8143225599,1.7495826771,-1.8470586944,1.4888098272,-1.4150198869\n"
@@ -430,6 +427,16 @@ def test_evidence_refuses_a_fit_through_every_point(tmp_path, capsys):
                      "-0.6001756830,4.2732722918,1.8925881611,-1.2176136959,1.2457383425,-2.4411475372\n")
     assert main(["simulate", "ec66", "--poses-file", str(poses), "--seed", "1", "--out",
                  str(data)]) == 0
+    return data
+
+
+def test_evidence_refuses_a_fit_through_every_point(tmp_path, capsys):
+    """Four simulated poses (12 equations) for 12 identifiable parameters, where the
+    evidence puts the noise near zero (3e-6 mm) and the fit through every point: refused
+    with both counts, nothing written; with the noise stated, calibrated."""
+    from kincal.cli.main import main
+
+    data, out = _four_poses(tmp_path), tmp_path / "cal.urdf"
     capsys.readouterr()
     assert main(["calibrate", "ec66", str(data), "--out", str(out)]) == 1
     err = capsys.readouterr().err
@@ -469,17 +476,7 @@ def test_cv_on_fewer_poses_than_folds_names_the_options(tmp_path, capsys):
     that would run (fewer folds, or the evidence); nothing written."""
     from kincal.cli.main import main
 
-    data, out = tmp_path / "four.csv", tmp_path / "cal.urdf"
-    # four poses given (simulate's own draws depend on the BLAS kernels' last bits, and on
-    # other draws the evidence finds an inner optimum: a noise of 0.23 mm, calibrated)
-    poses = tmp_path / "poses.csv"
-    poses.write_text("joint_1,joint_2,joint_3,joint_4,joint_5,joint_6\n"
-                     "-0.1576202695,4.2919315843,1.7726804687,-1.7160761253,1.4768494959,-1.6286561854\n"
-                     "0.1373103116,4.8143225599,1.7495826771,-1.8470586944,1.4888098272,-1.4150198869\n"
-                     "-0.3680690702,4.9882860479,1.8318732527,-1.7526453938,1.5109518663,-1.7377819389\n"
-                     "-0.6001756830,4.2732722918,1.8925881611,-1.2176136959,1.2457383425,-2.4411475372\n")
-    assert main(["simulate", "ec66", "--poses-file", str(poses), "--seed", "1", "--out",
-                 str(data)]) == 0
+    data, out = _four_poses(tmp_path), tmp_path / "cal.urdf"
     capsys.readouterr()
     assert main(["calibrate", "ec66", str(data), "--out", str(out), "--lambda", "cv"]) == 1
     err = capsys.readouterr().err
