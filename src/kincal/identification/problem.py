@@ -44,7 +44,7 @@ from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
 from kincal.identification.selection import Identifiability, analyze, identifiable
 from kincal.identification.solver import SolverOptions, SolveSummary, solve, steps
-from kincal.measurements.checks import distinct_poses, set_warnings, warn_units
+from kincal.measurements.checks import distinct_poses, input_warnings, warn_units
 from kincal.measurements.fixed_joints import check_mimics
 from kincal.measurements.kind import DEFAULT_SIGMA
 from kincal.measurements.sets import as_sets
@@ -143,13 +143,13 @@ class CalibrationProblem:
         self.layout.index(name)  # raises, listing the valid names
 
     def _warn_inputs(self) -> None:
-        """Joint values outside the URDF limits or in the wrong angle unit, backlash joints
-        seen from one direction only, mimic columns off the URDF's rule: warnings, per set."""
-        for km, r in zip(self.kinds, self.robots):  # each set on its own chain
-            back = [j for j in self.layout.backlash if j in r.joint_names]
-            for message in set_warnings(km.data, r.geometry, back):
-                warnings.warn(f"{km.data.source}: {message}", KincalWarning)
-            check_mimics(km.data, r, km.data.source)  # a reader of the URDF follows the rule
+        """The sets' warnings (:func:`kincal.measurements.checks.input_warnings`), then mimic
+        columns off the URDF's rule (a reader of the URDF follows the rule), per set."""
+        datas = [km.data for km in self.kinds]
+        for message in input_warnings(datas, self.robots, self.layout.backlash):
+            warnings.warn(message, KincalWarning)
+        for data, r in zip(datas, self.robots):  # each set on its own chain
+            check_mimics(data, r, data.source)
 
     # -------------------------------------------------------------- residuals
     def _parts(self, rows):

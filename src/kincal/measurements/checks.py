@@ -168,3 +168,65 @@ def check_sigmas(values, n: int, source: str, what: str = "sigma", unit: str = "
         raise DataError(f"{source}: {where}: {what} {shown} is outside the accepted range "
                         f"{limits} (a standard deviation of the measurement)")
     return s
+
+
+def _sample_rows(data) -> np.ndarray:
+    """(N, k) every per-sample number of a set (its ``per_sample_fields``): joint values,
+    what was measured, its sigmas, its point or plane index; not the line numbers, poses or
+    approach directions, which differ between copies."""
+    n = len(data.joint_values)
+    parts = [np.asarray(v, dtype=float).reshape(n, -1) for name in data.per_sample_fields()
+             if name not in ("rows", "poses", "approach")
+             for v in [getattr(data, name)] if v is not None]
+    return np.hstack(parts)
+
+
+def duplicate_warnings(sets) -> list[str]:
+    """Samples that repeat another exactly (every joint value and every reading to the last
+    digit), in one set or across sets of one kind: a copy counts as a second measurement,
+    weighs twice and makes the noise look smaller than it is. A true repeat measurement
+    differs at least in the last digits of its readings."""
+    out: list[str] = []
+    seen: list[tuple] = []  # (set, its rows as void keys)
+    for data in sets:
+        rows = _sample_rows(data)
+        keys = np.ascontiguousarray(rows).view(np.dtype((np.void, rows.dtype.itemsize
+                                                         * rows.shape[1])))[:, 0]
+        lines = data.rows if data.rows is not None else np.arange(len(rows)) + 2
+        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        copies = np.flatnonzero(first[inverse.ravel()] != np.arange(len(keys)))
+        if copies.size:
+            k = int(copies[0])
+            out.append(f"{data.source}: {copies.size} sample(s) repeat earlier ones exactly "
+                       f"(line {lines[k]} repeats line {lines[first[inverse.ravel()[k]]]}): "
+                       "a copy counts as a second measurement, weighs twice and makes the "
+                       "noise look smaller; remove the copies (a true repeat differs at "
+                       "least in the last digits of its readings)")
+        for other, other_keys in seen:
+            if type(other) is not type(data) or other.joint_names != data.joint_names \
+                    or other_keys.dtype != keys.dtype:
+                continue
+            both = np.flatnonzero(np.isin(keys, other_keys))
+            if both.size:
+                k = int(both[0])
+                j = int(np.flatnonzero(other_keys == keys[k])[0])
+                other_lines = (other.rows if other.rows is not None
+                               else np.arange(len(other_keys)) + 2)
+                out.append(f"{data.source}: {both.size} of its {len(keys)} samples repeat "
+                           f"samples of {other.source} exactly (line {lines[k]} = line "
+                           f"{other_lines[j]} there): the same data given twice? A copy "
+                           "weighs twice and makes the noise look smaller")
+                break
+        seen.append((data, keys))
+    return out
+
+
+def input_warnings(sets, robots, backlash=()) -> list[str]:
+    """Every set's :func:`set_warnings` against its robot's chain (``backlash``: the joints
+    with a backlash term, those on the chain checked), each prefixed with its source, then
+    the :func:`duplicate_warnings` of all the sets."""
+    out = []
+    for data, r in zip(sets, robots):
+        back = [j for j in backlash if j in r.joint_names]
+        out += [f"{data.source}: {m}" for m in set_warnings(data, r.geometry, back)]
+    return out + duplicate_warnings(sets)

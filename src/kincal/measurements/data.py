@@ -197,6 +197,10 @@ class Measurements:
         """Measured points per pose (K)."""
         return int(self.filled[2].max()) + 1 if len(self) else 1
 
+    def per_sample_fields(self) -> tuple[str, ...]:
+        """Names of the (N, ...) fields (None where not given), as the other kinds' sets."""
+        return ("joint_values", "positions", "sigma", "rows", "approach", "points", "poses")
+
     def subset(self, index) -> "Measurements":
         """The samples ``index`` (indices, a mask, or a slice: then views of these arrays,
         no copy, as the blocks of a large fit take them)."""
