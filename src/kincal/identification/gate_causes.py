@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO
+from kincal.measurements.checks import DEGREES_AS_RADIANS, DUPLICATE_WHY, UNIT_RATIO
 
 if TYPE_CHECKING:
     from kincal.identification.plausibility import Evidence, Thresholds
@@ -88,3 +88,19 @@ def weak_cause(ev: Evidence) -> tuple[str, ...]:
             f"corrections ({', '.join(ev.weak_corrections)}) are weak parameters (their "
             f"effect is nearly that of others), held only by the penalty toward nominal"
             f"{scales}; {remedy}, or measure more varied poses",)
+
+
+def duplicate_cause(ev: Evidence) -> tuple[str, ...]:
+    """Samples given more than once (:func:`kincal.measurements.checks.duplicate_samples`):
+    the copies count as measurements, the noise looks smaller than it is and the penalty
+    toward nominal holds less than it should (the TALOS touches read three times: an offset
+    prior scale of 46 deg)."""
+    more = "; ".join(ev.duplicates[:2]) + ("; ..." if len(ev.duplicates) > 2 else "")
+    return (f"the same samples given more than once ({more}): the copies make the noise look "
+            "smaller than it is, and the penalty toward nominal holds less than it should",
+            ) if ev.duplicates else ()
+
+
+def duplicate_notes(ev: Evidence) -> tuple[str, ...]:
+    """The copies' findings with what they do: notes of a result the gate lets through."""
+    return tuple(f"{d}: {DUPLICATE_WHY}" for d in ev.duplicates)

@@ -67,9 +67,10 @@ import numpy as np
 
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.identification.orientation_convention import checked
-from kincal.identification.gate_causes import (fit_causes, names_text, overfit_cause,
-                                                unit_causes, weak_cause)
-from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, spread
+from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes, fit_causes,
+                                                names_text, overfit_cause, unit_causes,
+                                                weak_cause)
+from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, duplicate_samples, spread
 from kincal.models import per_geometry
 from kincal.models.kinematics import ChainKinematics
 from kincal.models.geometry import chain_length  # the yardstick's chain part
@@ -151,6 +152,7 @@ class Evidence:
     weak_scales: str = ""  # their classes' prior scales as the evidence estimated them, or
     #                        the one penalty weight ("lambda 0.001 chosen by cross-validation")
     convention_doubts: tuple[str, ...] = ()  # pose files read in a convention in doubt
+    duplicates: tuple[str, ...] = ()  # samples repeated exactly (checks.duplicate_samples)
 
     @property
     def explained(self) -> float:
@@ -291,7 +293,8 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             f"RMS (max {ev.change_max_mm:.4g} mm) over the joint range, above {th.change:.0%} of "
             f"the reach ({th.change * L_mm:.3g} mm); largest: {big}", ev.change_rms_mm,
             th.change * L_mm, "mm", names,
-            causes=tuple(unit_causes(ev)) + overfit_cause(ev) + weak_cause(ev) + (
+            causes=duplicate_cause(ev) + tuple(unit_causes(ev)) + overfit_cause(ev)
+            + weak_cause(ev) + (
                 "a URDF that does not describe the measured robot or a tip frame that does "
                 "not match the data",)))
     lengths = [(n, v) for n, v, u in ev.corrections if u == "mm"]
@@ -328,7 +331,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
         count = len(elsewhere) + len(beyond)
         notes = (f"the data file's columns for {count} URDF joint{'s' * (count > 1)} off the chain "
                  "are ignored: " + "; ".join(said),)
-    return Plausibility(ev, tuple(out), th, notes)
+    return Plausibility(ev, tuple(out), th, notes + duplicate_notes(ev))
 
 
 # ------------------------------------------------------------------ gather
@@ -415,7 +418,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         weak_corrections=weak_top, weak_scales=weak_scales,
         convention_doubts=tuple(d for d in (getattr(checked(type(problem), robot, dt),
                                                     "convention_doubt", "")
-                                            for dt, robot in zip(datas, problem.robots)) if d))
+                                            for dt, robot in zip(datas, problem.robots)) if d),
+        duplicates=tuple(duplicate_samples(datas)))
 
 
 def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str, ...], str]:

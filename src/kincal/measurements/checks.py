@@ -181,11 +181,16 @@ def _sample_rows(data) -> np.ndarray:
     return np.hstack(parts)
 
 
-def duplicate_warnings(sets) -> list[str]:
+# what a sample repeated exactly does to a calibration (the note kincal adds to the finding)
+DUPLICATE_WHY = ("a copy counts as a second measurement, weighs twice and makes the noise "
+                 "look smaller than it is; remove the copies (a true repeat differs at least "
+                 "in the last digits of its readings)")
+
+
+def duplicate_samples(sets) -> list[str]:
     """Samples that repeat another exactly (every joint value and every reading to the last
-    digit), in one set or across sets of one kind: a copy counts as a second measurement,
-    weighs twice and makes the noise look smaller than it is. A true repeat measurement
-    differs at least in the last digits of its readings."""
+    digit), in one set or across sets of one kind, one finding per set that has them
+    (:data:`DUPLICATE_WHY` says what they do)."""
     out: list[str] = []
     seen: list[tuple] = []  # (set, its rows as void keys)
     for data in sets:
@@ -198,10 +203,7 @@ def duplicate_warnings(sets) -> list[str]:
         if copies.size:
             k = int(copies[0])
             out.append(f"{data.source}: {copies.size} sample(s) repeat earlier ones exactly "
-                       f"(line {lines[k]} repeats line {lines[first[inverse.ravel()[k]]]}): "
-                       "a copy counts as a second measurement, weighs twice and makes the "
-                       "noise look smaller; remove the copies (a true repeat differs at "
-                       "least in the last digits of its readings)")
+                       f"(line {lines[k]} repeats line {lines[first[inverse.ravel()[k]]]})")
         for other, other_keys in seen:
             if type(other) is not type(data) or other.joint_names != data.joint_names \
                     or other_keys.dtype != keys.dtype:
@@ -214,8 +216,7 @@ def duplicate_warnings(sets) -> list[str]:
                                else np.arange(len(other_keys)) + 2)
                 out.append(f"{data.source}: {both.size} of its {len(keys)} samples repeat "
                            f"samples of {other.source} exactly (line {lines[k]} = line "
-                           f"{other_lines[j]} there): the same data given twice? A copy "
-                           "weighs twice and makes the noise look smaller")
+                           f"{other_lines[j]} there: the same data given twice?)")
                 break
         seen.append((data, keys))
     return out
@@ -223,10 +224,11 @@ def duplicate_warnings(sets) -> list[str]:
 
 def input_warnings(sets, robots, backlash=()) -> list[str]:
     """Every set's :func:`set_warnings` against its robot's chain (``backlash``: the joints
-    with a backlash term, those on the chain checked), each prefixed with its source, then
-    the :func:`duplicate_warnings` of all the sets."""
+    with a backlash term, those on the chain checked), each prefixed with its source. (The
+    :func:`duplicate_samples` go through the plausibility gate: a note with the files it
+    lets through, the likely cause in a refusal's one line.)"""
     out = []
     for data, r in zip(sets, robots):
         back = [j for j in backlash if j in r.joint_names]
         out += [f"{data.source}: {m}" for m in set_warnings(data, r.geometry, back)]
-    return out + duplicate_warnings(sets)
+    return out
