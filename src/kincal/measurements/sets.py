@@ -190,9 +190,11 @@ class KindSpace:
         return np.array(sorted(out), dtype=int)
 
 
-def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
-    """(J (M, rows, p) in mm per mm or deg, :class:`KindSpace`) of a kind at candidate
-    poses q (M, n), nominal kinematics: what D-optimal planning maximises over.
+def planning_rows(error_model, kind, q, tool, pivot=None, planes=None):
+    """(rows_jacobian, :class:`KindSpace`, rows per pose) of a kind at candidate poses q
+    (M, n), nominal kinematics: what D-optimal planning maximises over. rows_jacobian(idx)
+    gives the candidates ``idx``'s J (len(idx), rows, p) in mm per mm or deg; take a block
+    at a time (the kind's intermediates take several times the Jacobian's memory).
 
     pose: measurement frame at the identity, tool frame ``tool`` with no turn; distance:
     ``pivot`` (3,) [m] in the base frame (required: where the distances point decides what
@@ -203,15 +205,18 @@ def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
     from kincal.errors import OptionError
     from kincal.measurements.plane import fit_plane
     from kincal.models.chain import Chain
+    from kincal.models.kinematics import BLOCK
     from kincal.rotations import tilt_angles
 
     q = np.asarray(q, float)
     t = np.asarray(tool, float)
     names = tuple(error_model.joint_names)
-    s = Chain(error_model, q).state(error_model.nominal, None, keep=False)
-    P = s.p_tip + s.R_tip @ t
+    P, R = np.empty((len(q), 3)), np.empty((len(q), 3, 3))
+    for b in range(0, len(q), BLOCK):  # the nominal tool points, a block at a time
+        s = Chain(error_model, q[b:b + BLOCK]).state(error_model.nominal, None, keep=False)
+        P[b:b + BLOCK], R[b:b + BLOCK] = s.p_tip + s.R_tip @ t, s.R_tip
     if kind == "pose":
-        data = PoseData(joint_names=names, joint_values=q, positions=P, rotations=s.R_tip)
+        data = PoseData(joint_names=names, joint_values=q, positions=P, rotations=R)
         frames = np.r_[np.zeros(6), t, np.zeros(3)]
     elif kind == "distance":
         if pivot is None:
@@ -237,8 +242,13 @@ def planning_jacobian(error_model, kind, q, tool, pivot=None, planes=None):
         raise OptionError(f"unknown measurement kind {kind!r}; expected one of {', '.join(KINDS)}")
     km = kind_model(error_model, data)
     km.check_fixable(error_model.nominal, t) if kind == "plane" else None
-    _, Jk, Jf, _ = km.residuals(error_model.nominal, frames, np.zeros(0), jacobian=True)
     space = KindSpace(error_model.names + tuple(km.frame_names),
                       tuple(error_model.is_length) + tuple(km.frame_is_length), error_model.size)
-    J = np.concatenate([Jk, Jf], axis=2) * (space.reporting_scale() / 1e-3)
-    return J, space
+    factor = space.reporting_scale() / 1e-3
+
+    def rows_jacobian(idx) -> np.ndarray:
+        _, Jk, Jf, _ = km.subset(np.asarray(idx)).residuals(error_model.nominal, frames,
+                                                            np.zeros(0), jacobian=True)
+        return np.concatenate([Jk, Jf], axis=2) * factor
+
+    return rows_jacobian, space, km.dim

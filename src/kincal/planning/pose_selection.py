@@ -328,13 +328,10 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
         def rows_jacobian(rows: np.ndarray) -> np.ndarray:
             return rows_jacobian_at(q[rows])
     else:
-        from kincal.measurements.sets import planning_jacobian
+        from kincal.measurements.sets import planning_rows
 
-        J, space = planning_jacobian(em, kind, q, t, pivot, planes)
-        rows_per = J.shape[1]  # equations per pose: 6 (pose), 1 (distance, plane)
-
-        def rows_jacobian(rows: np.ndarray) -> np.ndarray:
-            return J[rows]
+        # equations per pose: 6 (pose), 1 (distance, plane), 3 (flush)
+        rows_jacobian, space, rows_per = planning_rows(em, kind, q, t, pivot, planes)
     blocks = [np.arange(s, min(s + BLOCK, M)) for s in range(0, M, BLOCK)]
     free = np.ones(space.size, dtype=bool)
     free[space.indices(fix)] = False  # unknown names raise ParameterError with the list
