@@ -1,13 +1,15 @@
 """The plausibility gate's likely causes: what a refusal names, most likely first.
 
 Inferred from the gate's :class:`kincal.identification.plausibility.Evidence`, never
-certain, and the messages say so (see that module's notes for the order). One more cause
-than the data themselves: a penalty too weak to hold what the data barely tell apart.
-When the largest correction is a parameter the data barely tell from others (a ``weak``
+certain, and the messages say so (see that module's notes for the order). Two more causes
+than the data themselves. A penalty too weak to hold what the data barely tell apart:
+when the largest correction is a parameter the data barely tell from others (a ``weak``
 one of the identifiability report), the prior toward nominal alone held it, and a prior
 scale the evidence estimated large (the same data read three times: an offset scale of
 46 deg, a wrist turned by 79 deg against the contact face's tilt) lets it drift along
-what the data do not see, rather than the URDF or the tip being wrong.
+what the data do not see, rather than the URDF or the tip being wrong. And what made
+that scale large there, named first: samples given more than once, whose copies make the
+noise look smaller than it is (:func:`duplicate_cause`).
 """
 
 from __future__ import annotations
