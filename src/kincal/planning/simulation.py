@@ -28,6 +28,7 @@ from kincal.rotations import axis_rotations, rotx
 # random restarts makes the poses after it draw and solve again, so rounds over all the
 # remaining poses made a million poses cost (restarts x poses); a multiple of 1024
 WINDOW = 16384
+LONG_PATH = 150  # Newton steps of the last random restarts (the first ones take 60)
 
 
 @dataclass(frozen=True)
@@ -231,6 +232,16 @@ def _random_restarts(robot, p, tool, R, R0, max_tilt, home, near, rng, lo, hi, a
         if attempt % 2 == 0 and max_tilt is not None:
             R = random_rotation_near(R0, max_tilt, rng)  # that orientation may be out of reach
         q, ok = robot.inverse_kinematics(p, tool, R, start=start, max_iterations=60)
+        if ok:
+            return q
+    # none did: as many again, each path given more steps (one from far away can need more
+    # than 60; seen on OpenBLAS's Prescott kernels at a cube's edge). Only before giving up,
+    # so every pose the first round solves keeps its numbers.
+    for attempt in range(attempts):
+        start = rng.uniform(lo, hi)
+        if attempt % 2 == 0 and max_tilt is not None:
+            R = random_rotation_near(R0, max_tilt, rng)
+        q, ok = robot.inverse_kinematics(p, tool, R, start=start, max_iterations=LONG_PATH)
         if ok:
             return q
     where = (f"the point {np.round(p, 4)} m of the {size * 1e3:g} mm cube at "
