@@ -21,9 +21,8 @@ from kincal.errors import DataError, KincalNote, KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import read_columns
 from kincal.measurements.data import unit_factors
-from kincal.measurements.orientation_columns import (DEFAULT_FORMAT, OTHER_CONVENTION,
-                                                     OrientationFormat, found_columns,
-                                                     rotations)
+from kincal.measurements.orientation_columns import (DEFAULT_FORMAT, OrientationFormat,
+                                                     found_columns, rotations)
 from kincal.measurements.pose import QUATERNION_COLUMNS as QUATERNION
 
 
@@ -111,7 +110,5 @@ def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
                     + angle_unit_warnings(g.joint_names, g.kinds, seeds, angle_unit,
                                           g.lower, g.upper)):
         warnings.warn(f"{table.path}: {message}", KincalWarning)
-    unsure = columns and fmt.name in OTHER_CONVENTION and (
-        orientation_columns is not None or not fmt.name.startswith("quat"))
     return Targets(seeds, positions, R, table.lines, str(table.path),
-                   fmt.name if unsure else "")
+                   fmt.name if columns and fmt.unfixed else "")

@@ -199,11 +199,12 @@ def duplicate_samples(sets) -> list[str]:
                                                          * rows.shape[1])))[:, 0]
         lines = data.rows if data.rows is not None else np.arange(len(rows)) + 2
         _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-        copies = np.flatnonzero(first[inverse.ravel()] != np.arange(len(keys)))
+        earliest = first[inverse.ravel()]  # each sample's first occurrence
+        copies = np.flatnonzero(earliest != np.arange(len(keys)))
         if copies.size:
             k = int(copies[0])
             out.append(f"{data.source}: {copies.size} sample(s) repeat earlier ones exactly "
-                       f"(line {lines[k]} repeats line {lines[first[inverse.ravel()[k]]]})")
+                       f"(line {lines[k]} repeats line {lines[earliest[k]]})")
         for other, other_keys in seen:
             if type(other) is not type(data) or other.joint_names != data.joint_names \
                     or other_keys.dtype != keys.dtype:

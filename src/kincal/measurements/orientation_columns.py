@@ -91,6 +91,14 @@ class OrientationFormat:
             raise DataError(f"orientation format {self.name} takes {SIZES[self.name]} columns, "
                             f"got {len(self.columns)}: {' '.join(self.columns)}")
 
+    @property
+    def unfixed(self) -> bool:
+        """Whether the file's columns leave the convention open (another one,
+        :data:`OTHER_CONVENTION`, reads the same columns): angles, or quaternion columns
+        the user named; the usual quaternion names fix theirs."""
+        return self.name in OTHER_CONVENTION and (self.columns is not None
+                                                  or not self.name.startswith("quat"))
+
     def resolve(self, header, position_columns=None, source="") -> tuple[str, ...]:
         """The columns to read in ``header`` (DataError naming what is missing)."""
         if self.columns is not None:
@@ -202,8 +210,8 @@ def reading_doubt(R_model: np.ndarray, R_read: np.ndarray, fmt: str, what: str,
     other = OTHER_CONVENTION[fmt]
 
     def mean_deg(R):
-        c = (np.einsum("nij,nij->n", R_model, R) - 1.0) / 2.0
-        return float(np.degrees(np.mean(np.arccos(np.clip(c, -1.0, 1.0)))))
+        turn = rotation_log(np.swapaxes(R_model, 1, 2) @ R)
+        return float(np.degrees(np.mean(np.linalg.norm(turn, axis=1))))
 
     given, alt = mean_deg(R_read), mean_deg(other_reading(R_read, fmt))
     if given < AT_LEAST_DEG or given < FAR_WORSE * alt:

@@ -114,8 +114,7 @@ class PoseData(SampleSet):
         roll pitch yaw or phix phiy phiz, suffixed like the position columns)."""
         from kincal.measurements.csv_table import read_columns
         from kincal.measurements.data import unit_factors
-        from kincal.measurements.orientation_columns import (OTHER_CONVENTION,
-                                                              OrientationFormat, rotations)
+        from kincal.measurements.orientation_columns import OrientationFormat, rotations
 
         position_columns = tuple(position_columns)
         fmt = OrientationFormat(orientation_format, None if orientation_columns is None
@@ -126,9 +125,6 @@ class PoseData(SampleSet):
         with warnings.catch_warnings():  # the reading below gives the notes
             warnings.simplefilter("ignore", KincalNote)
             header = read_columns(path, [], header_only=True).header
-        # the columns fix the convention unless they are angles or quaternions the user named
-        unsure = fmt.name in OTHER_CONVENTION and (orientation_columns is not None
-                                                   or not fmt.name.startswith("quat"))
         orientation_columns = fmt.resolve(header, position_columns, str(path))
         c = read_set(path, joint_names, position_columns + orientation_columns,
                      ("sigma", "sigma_deg"), prismatic, angle_unit, length_unit, joint_columns,
@@ -146,7 +142,7 @@ class PoseData(SampleSet):
                    sigma=v["sigma"] * L if "sigma" in v else None,
                    sigma_deg=v.get("sigma_deg"), orientation_sigma_deg=orientation_sigma_deg,
                    rows=c.rows, source=c.source, approach=c.approach, ignored_columns=c.ignored,
-                   orientation_format=fmt.name if unsure else "")
+                   orientation_format=fmt.name if fmt.unfixed else "")
 
 
 def right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
