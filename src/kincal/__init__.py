@@ -1,4 +1,4 @@
-"""kincal: kinematic calibration of serial robots from URDF.
+"""kincal: kinematic calibration of robots from URDF (any chain of the tree, one or several).
 
     from kincal import Robot, Measurements, calibrate, write_calibration, Outputs
     robot = Robot.load("ec66", tip="flange")

@@ -1,4 +1,4 @@
-"""``kincal evaluate``: the position errors of a model on a data set."""
+"""``kincal evaluate``: the errors of a model on a data set (of any measurement kind)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from kincal.errors import DataError, OptionError
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("evaluate", help="position errors of a model on a data set")
+    p = subparsers.add_parser("evaluate", help="errors of a model on a data set: positions, "
+                              "orientations, distances, contacts")
     add_common(p)
     add_kinds(p, several=False)
     g = group(p, "frames")

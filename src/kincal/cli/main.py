@@ -27,9 +27,10 @@ JSON_COMMANDS = ("calibrate", "evaluate", "analyze", "simulate", "plan", "compen
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="kincal", description="Kinematic calibration of serial "
-                                 "robots from URDF (MD-H errors, L2 toward nominal, evidence "
-                                 "or k-fold CV).")
+    ap = argparse.ArgumentParser(prog="kincal", description="Kinematic calibration of robots "
+                                 "from URDF: any chain of the tree, several chains sharing "
+                                 "joints; complete error models, a penalty toward nominal "
+                                 "(evidence or k-fold CV), a plausibility gate.")
     ap.add_argument("--version", action="version", version=f"kincal {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     for command in COMMANDS:
