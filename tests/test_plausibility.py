@@ -396,6 +396,64 @@ def test_off_chain_movers_are_the_joints_beyond_the_tip_or_above_the_base():
                                    "arm_right_1_joint")) == ("torso_1_joint",)
 
 
+def test_branches_hanging_from_the_base_name_a_moving_base():
+    """Logged joints of other branches that hang from the base's own link (a standing
+    humanoid's legs from its pelvis) make a refusal name a base that moves against the
+    instrument, with those joints and the base; branches further along the chain do not
+    (they cannot carry the base unseen by the chain's joints), nor a refusal without them."""
+    legs = ("leg_l1", "leg_r1", "arm_r1")
+    bad = dict(change_rms_mm=300.0, change_max_mm=500.0, bases=("base_link",))
+    causes = judge(_evidence(other_branch_columns=legs, at_base=2, **bad)).causes
+    (moving,) = [c for c in causes if c.startswith("a base frame that moves")]
+    assert "hang from base_link (leg_l1, leg_r1)" in moving and "arm_r1" not in moving
+    assert "give as --base the link that stays fixed to the instrument" in moving
+    assert causes.index(moving) < causes.index(
+        "a URDF that does not describe the measured robot or a tip frame that does not match "
+        "the data")
+    for quiet in (judge(_evidence(other_branch_columns=legs, at_base=0, **bad)),
+                  judge(_evidence(**bad))):
+        assert not any("base frame that moves" in c for c in quiet.causes)
+    # the residual's causes too (points measured from a base that moved)
+    far = judge(_evidence(other_branch_columns=legs, at_base=1, residual_median_mm=50,
+                          residual_rms_mm=70, bases=("pelvis",)))
+    assert any("hang from pelvis (leg_l1)" in c for c in far.causes)
+
+
+def test_talos_from_the_urdf_root_names_the_moving_base(tmp_path, capsys):
+    """The TALOS touches calibrated from the URDF's root (the default base, the pelvis,
+    which moves with the legs the robot stands on): refused in one line, nothing written,
+    the first likely cause the base that moves with the logged legs (not only a wrong URDF
+    or tip); the same log from the left sole names no such cause (the right leg hangs
+    from the pelvis, six chain joints away), and its note lists the right leg first."""
+    from test_tree_paths import _talos_study
+
+    from kincal.identification.chains import Chains
+    from kincal.measurements.flush import FlushData
+    from kincal.robot import Robot
+
+    study = _talos_study()
+    urdf, train = study.talos_urdf(), str(study.DATA / "left_train.csv")
+    out = tmp_path / "cal.urdf"
+    code = main(["calibrate", str(urdf), train, "--tip", "gripper_left_base_link",
+                 "--on-plane", "--flush", "--tool-offset", "0", "0", "-0.12", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code != 0 and not out.exists() and err.count("\n") == 1
+    assert ("Likely cause: a base frame that moves against the instrument: the file logs "
+            "joints of other branches that hang from base_link (leg_left_1_joint, "
+            "leg_left_2_joint, leg_left_3_joint and 9 more); if the robot stands or rolls on "
+            "them, base_link moves with them") in err
+    ignored = ("arm_right_1_joint", "head_1_joint", "leg_right_3_joint", "leg_left_2_joint")
+    data = FlushData(joint_names=(), joint_values=np.zeros((1, 0)), ignored_columns=ignored)
+    root = Chains([Robot.load(urdf, tip="gripper_left_base_link")], 1)
+    assert root.off_chain_columns([data]) == (
+        (), ("leg_right_3_joint", "leg_left_2_joint", "arm_right_1_joint", "head_1_joint"), 2)
+    sole = Chains([Robot.load(urdf, base="left_sole_link", tip="gripper_left_base_link")], 1)
+    ignored = ignored[:3]
+    data = FlushData(joint_names=(), joint_values=np.zeros((1, 0)), ignored_columns=ignored)
+    assert sole.off_chain_columns([data]) == (
+        (), ("leg_right_3_joint", "arm_right_1_joint", "head_1_joint"), 0)
+
+
 def test_several_data_sets_go_through_the_gate(tmp_path, capsys):
     """A calibration from several files writes nothing when one of them is in mm read as m."""
     from kincal.cli.main import main as kmain

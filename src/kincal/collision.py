@@ -50,13 +50,13 @@ class CollisionChecker:
                 obj.geometry.buildConvexRepresentation(False)
                 obj.geometry = obj.geometry.convex
         base = robot.model.frames[robot.base_id]
-        moved = {j for j in range(m.njoints) if robot.moves_between(base.parentJoint, j)}
+        moved = {j for j in range(m.njoints) if robot.chain_joints_between(base.parentJoint, j)}
         objs = list(geom.geometryObjects)
         pairs = []
         for a in range(len(objs)):
             for b in range(a + 1, len(objs)):
                 ja, jb = objs[a].parentJoint, objs[b].parentJoint
-                if ja == jb or not robot.moves_between(ja, jb):
+                if ja == jb or not robot.chain_joints_between(ja, jb):
                     continue
                 if m.parents[ja] == jb or m.parents[jb] == ja:
                     continue

@@ -241,9 +241,9 @@ class Robot:
         """Pinocchio frame id of the base frame."""
         return self._base_id
 
-    def moves_between(self, a: int, b: int) -> bool:
-        """Whether chain joints (moving their links apart) lie between Pinocchio joints a, b."""
-        return bool((set(self._ancestors(a)) ^ set(self._ancestors(b))) & set(self._chain))
+    def chain_joints_between(self, a: int, b: int) -> int:
+        """How many chain joints (moving their links apart) lie between Pinocchio joints a, b."""
+        return len((set(self._ancestors(a)) ^ set(self._ancestors(b))) & set(self._chain))
 
     def first_moving_joint(self) -> int:
         """Pinocchio joint whose link is the first the chain moves relative to the base."""

@@ -176,6 +176,28 @@ class Chains:
         """The first set's robot (what one-chain readers of a result look at)."""
         return self.robots[0]
 
+    def off_chain_columns(self, datas) -> tuple[tuple[str, ...], tuple[str, ...], int]:
+        """Of the columns the sets ``datas`` (one per set) ignore, those named after URDF
+        joints off every chain: (those that can move a set's measured point, below its tip
+        or above its base (:meth:`kincal.robot.Robot.off_chain_movers`); those on other
+        branches of the tree, which cannot, the branches nearest a base first; how many of
+        those hang from a base's own link (no chain joint between): a robot standing or
+        rolling on them carries that base with them, and no chain joint sees it)."""
+        on = set(self.model.joint_names)
+        movers = tuple(dict.fromkeys(c for dt, r in zip(datas, self.robots)
+                                     for c in r.off_chain_movers(dt.ignored_columns)
+                                     if c not in on))
+        names = set(self.robot.model.names)
+        other = dict.fromkeys(c for dt in datas for c in dt.ignored_columns
+                              if c in names and c not in on and c not in movers)
+
+        def from_base(c: str) -> int:  # chain joints between a base and the joint
+            return min(r.chain_joints_between(r.model.frames[r.base_id].parentJoint,
+                                              r.model.getJointId(c)) for r in self.robots)
+
+        ordered = tuple(sorted(other, key=from_base))
+        return movers, ordered, sum(from_base(c) == 0 for c in ordered)
+
     def backlash(self, joints, term: str = "backlash") -> tuple[str, ...]:
         """The backlash (or compliance) joints ``joints`` checked and in the union's joint
         order."""

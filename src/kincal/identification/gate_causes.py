@@ -9,7 +9,8 @@ scale the evidence estimated large (the same data read three times: an offset sc
 46 deg, a wrist turned by 79 deg against the contact face's tilt) lets it drift along
 what the data do not see, rather than the URDF or the tip being wrong. And what made
 that scale large there, named first: samples given more than once, whose copies make the
-noise look smaller than it is (:func:`duplicate_cause`).
+noise look smaller than it is (:func:`duplicate_cause`). And a base frame that moves in the
+world with joints the data log on other branches (:func:`moving_base_cause`).
 """
 
 from __future__ import annotations
@@ -66,8 +67,27 @@ def fit_causes(ev: Evidence, th: Thresholds) -> list[str]:
         if not ev.off_chain_columns:
             out.append("a tip frame that does not match the data (check --tip and "
                        "--tool-offset)")
+        out += moving_base_cause(ev)
         out.append("a URDF of another robot, or positions not matching the joint rows")
     return out
+
+
+def moving_base_cause(ev: Evidence) -> tuple[str, ...]:
+    """A base that moves against the instrument: the data log joints of other branches that
+    hang from the base's own link (a whole robot's log), and the base moves with them in
+    the world if the robot stands or rolls on them, as a standing humanoid's pelvis does
+    with its legs while no chain joint sees it (the URDF root, the default base: TALOS's
+    flush touches from ``base_link`` move the tool by 548 mm; from the sole on the floor
+    they calibrate). The instrument (a tracker, a table) must stay fixed in the base."""
+    if not ev.at_base:
+        return ()
+    base = " and ".join(ev.bases) or "the base frame"
+    return (f"a base frame that moves against the instrument: the file logs joints of other "
+            f"branches that hang from {base} "
+            f"({names_text(ev.other_branch_columns[:ev.at_base], 3)}); if the robot stands or "
+            f"rolls on them, {base} moves with them and the instrument is not fixed in it: "
+            "give as --base the link that stays fixed to the instrument (for a robot standing "
+            "on a foot, that foot's sole)",)
 
 
 def overfit_cause(ev: Evidence) -> tuple[str, ...]:

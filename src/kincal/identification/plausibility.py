@@ -49,12 +49,12 @@ Criteria (defaults in :class:`Thresholds`), and why:
   (``accept_unconverged``), because the iterate may fit well (plain LS drifting along a
   weak direction) or not at all.
 
-Likely causes are inferred, not certain, and messages say so: unit clues first (even
-below the confident level); columns in the data file named after URDF joints off the
-chain (a tip frame that does not match the data); then how much of the measured motion
-the model explains (1 - e_rms^2 / spread^2): below 0.4 the positions barely follow the
-joint values (rows shuffled, or another data file), above it they do but with errors far
-above a calibration's (noise, a wrong tip, a URDF of another robot).
+Likely causes are inferred, not certain, and messages say so (the order and the texts:
+:mod:`kincal.identification.gate_causes`): unit clues first (even below the confident
+level); columns named after URDF joints off the chain (a tip frame that does not match
+the data) or on other branches (a base that moves with them); then how much of the
+measured motion the model explains (below 0.4: rows shuffled, or another data file;
+above: noise, a wrong tip, a URDF of another robot).
 """
 
 from __future__ import annotations
@@ -68,8 +68,8 @@ import numpy as np
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.identification.orientation_convention import checked
 from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes, fit_causes,
-                                                names_text, overfit_cause, unit_causes,
-                                                weak_cause)
+                                                moving_base_cause, names_text, overfit_cause,
+                                                unit_causes, weak_cause)
 from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, duplicate_samples, spread
 from kincal.models import per_geometry
 from kincal.models.kinematics import ChainKinematics
@@ -121,7 +121,8 @@ class Evidence:
         that value lies outside its joint's URDF limits.
     off_chain_columns: columns of the data file named after URDF joints off the chain that
         can move the measured point (below the tip or above the base, Robot.off_chain_movers);
-        other_branch_columns: those on other branches, which cannot (ignored, one note).
+        other_branch_columns: those on other branches, which cannot (ignored, one note), the
+        first ``at_base`` of them hanging from a base's own link; bases: the chains' bases.
     weak_corrections: when the largest correction is a parameter the data barely tell
         apart (the identifiability report's weak ones), the weak ones among the largest
         four; weak_scales: their prior classes' scales where the evidence estimated them,
@@ -143,6 +144,8 @@ class Evidence:
     angle_unit: str = "rad"
     off_chain_columns: tuple[str, ...] = ()
     other_branch_columns: tuple[str, ...] = ()
+    at_base: int = 0
+    bases: tuple[str, ...] = ()
     converged: bool = True
     iterations: int = 0
     method: str = "l2"
@@ -157,20 +160,18 @@ class Evidence:
     @property
     def explained(self) -> float:
         """Fraction of the measured motion (variance about the centroid) the model explains."""
-        if self.spread_mm <= 0:
-            return float("nan")
-        return 1.0 - (self.residual_rms_mm / self.spread_mm) ** 2
+        return (float("nan") if self.spread_mm <= 0
+                else 1.0 - (self.residual_rms_mm / self.spread_mm) ** 2)
 
 
 @dataclass(frozen=True)
 class Finding:
     """One broken criterion: what, how large, against which threshold, and why (likely).
 
-    kind: "residual", "corrections", "length_correction", "length_unit", "angle_unit" or
-    "not_converged" (or "orientation_convention": a pose file's convention in doubt, its
-    message the evidence). value and threshold share ``unit``. parameters: the parameters the
-    finding is about (largest first). causes: likely causes, most likely first.
-    """
+    kind: "residual", "corrections", "length_correction", "length_unit", "angle_unit",
+    "not_converged" or "orientation_convention" (a pose file's convention in doubt). value
+    and threshold share ``unit``. parameters: those the finding is about (largest first).
+    causes: likely causes, most likely first."""
 
     kind: str
     message: str
@@ -235,8 +236,7 @@ class Plausibility:
         """Raise unless acceptable; return warnings for what was accepted knowingly.
 
         Raises ImplausibleResultError (checked first) or NotConvergedError, each carrying
-        this Plausibility; ``refused`` says what the refusal means for the caller.
-        """
+        this Plausibility; ``refused`` says what the refusal means for the caller."""
         accepted = []
         if not self.plausible:
             if not accept_implausible:
@@ -294,7 +294,7 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             f"the reach ({th.change * L_mm:.3g} mm); largest: {big}", ev.change_rms_mm,
             th.change * L_mm, "mm", names,
             causes=duplicate_cause(ev) + tuple(unit_causes(ev)) + overfit_cause(ev)
-            + weak_cause(ev) + (
+            + weak_cause(ev) + moving_base_cause(ev) + (
                 "a URDF that does not describe the measured robot or a tip frame that does "
                 "not match the data",)))
     lengths = [(n, v) for n, v, u in ev.corrections if u == "mm"]
@@ -394,14 +394,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             v = dt.joint_values[i, c]
             angle_max = top
             outside = bool(v < gi.lower[c] - 1e-6 or v > gi.upper[c] + 1e-6)
-    on_chains = set(problem.error_model.joint_names)
-    urdf_joints = set(problem.robot.model.names) if any(dt.ignored_columns for dt in datas) else ()
-    off_chain = tuple(dict.fromkeys(c for dt, robot in zip(datas, problem.robots)
-                                    for c in robot.off_chain_movers(dt.ignored_columns)
-                                    if c not in on_chains))
-    elsewhere = tuple(dict.fromkeys(c for dt in datas for c in dt.ignored_columns
-                                    if c in urdf_joints and c not in on_chains
-                                    and c not in off_chain))
+    off_chain, elsewhere, at_base = problem.chains.off_chain_columns(datas)
     return Evidence(
         reach_m=L, residual_median_mm=worst.after.median, residual_rms_mm=worst.after.rms,
         before_rms_mm=worst.before.rms,
@@ -410,7 +403,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         corrections=tuple(corrections), length_ratio=float(ratio),
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
-        off_chain_columns=off_chain, other_branch_columns=elsewhere,
+        off_chain_columns=off_chain, other_branch_columns=elsewhere, at_base=at_base,
+        bases=tuple(dict.fromkeys(r.base for r in problem.robots)),
         converged=bool(result.converged),
         iterations=int(result.solve.iterations), method=problem.options.method,
         equations=int(sum(km.N * km.dim for km in problem.kinds)),
