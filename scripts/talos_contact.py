@@ -20,8 +20,10 @@ into a file with the training header, as its README says to.
 
 Usage: python scripts/talos_contact.py [--variants] [--loo]   (about 3 s; --variants: about
        35 s; --loo: each row also by leave-one-out on the training day, about 17 min)
-       python scripts/talos_contact.py --two-chains [SEEDS] [--urdf-alone]   (about 20 s per
-       seed; --urdf-alone: FRAMES.json's face tilts not applied to the held-out touches)
+       python scripts/talos_contact.py --two-chains [SEEDS] [--urdf-alone] [--torso-turn DEG]
+       (about 3 s per seed; --urdf-alone: FRAMES.json's face tilts not applied to the held-out
+       touches; --torso-turn: the right chain's truth turns the shared torso_2 origin by DEG
+       more about x than the left's)
        python scripts/talos_contact.py --subsets 8,10,12,15,18 [--reps 4]   (about 1 min)
 
 --subsets: how many touches the default needs. For each size, --reps random subsets of
@@ -47,6 +49,10 @@ held-out touches themselves: what the table's turn between the days leaves. The 
 the default rows are also read as the data README's figures are (roll and pitch of the
 contact frame in a frame of the plane, less their mean over the training touches): that
 reading gives the README's nominal 1.27 / 1.56 deg.
+
+The mirrored rows: the real touches' mirror image on the right chain (the same problem
+mirrored: the left chain's figures are expected, to rounding), from the left sole through
+the other leg, and with the real left touches in one calibration of both chains.
 
 The last two lines: how well the log's leg joint values close the loop between the feet
 (both soles flat on the floor) on the nominal model, on each day's touches.
@@ -295,9 +301,12 @@ def simulated_touches(model, kin, q_rows, names, robot, plane, noise, rng, sourc
     return out
 
 
-def two_chains(urdf: Path, seeds: int, face_tilt: bool = True) -> list[tuple]:
+def two_chains(urdf: Path, seeds: int, face_tilt: bool = True,
+               torso_turn: float = 0.0) -> list[tuple]:
     """Together against alone on simulated TALOS touches, per seed and noise case: rows
-    (case, seed, chain, alone (h, roll, pitch), together (h, roll, pitch))."""
+    (case, seed, chain, alone (h, roll, pitch), together (h, roll, pitch)). torso_turn
+    [deg]: the right chain's truth has torso_2_joint's origin turned by that much more
+    about x than the left's (data that disagree on the shared torso)."""
     from kincal.identification.chains import Chains
     from kincal.measurements.flush import FlushData, FlushKind
     from kincal.robot import Robot
@@ -326,7 +335,9 @@ def two_chains(urdf: Path, seeds: int, face_tilt: bool = True) -> list[tuple]:
                 folder = Path(tmp)
                 sets = []
                 for k, arm in enumerate(arms):
-                    m, kin = ch.models[k], truth[ch.idx[k]]
+                    m, kin = ch.models[k], truth[ch.idx[k]].copy()
+                    if k == 1:  # what the right chain alone sees of the torso
+                        kin[list(m.names).index("torso_2_joint.rx")] += np.radians(torso_turn)
                     train = simulated_touches(m, kin, touches[k][0], names, arm, planes[k],
                                               noise[k], rng, f"chain{k}")
                     valid = simulated_touches(m, kin, touches[k][1], names, arm, planes[k],
@@ -351,6 +362,44 @@ def two_chains(urdf: Path, seeds: int, face_tilt: bool = True) -> list[tuple]:
                                           face_tilt=face_tilt),
                                  held_out(*one, train, valid, names, arm.base, arm.tip, k,
                                           face_tilt=face_tilt)))
+    return rows
+
+
+def mirrored(urdf: Path, folder: Path) -> list[tuple]:
+    """Rows (label, height [mm], roll, pitch [deg], log evidence) of the real touches'
+    mirror image (:func:`mirror`: the right arm and leg at the left's postures, mirrored)
+    calibrated on the right chain with the default command: a robot and a table mirrored
+    through the sole's xz plane are the same problem, so kincal must give the left chain's
+    figures (nothing in it may favour one side of the tree). Then the same touches from the
+    left sole (a chain through the other leg), and both chains together, the real left touches
+    with the mirrored right ones: their torso errors are each other's mirror images, which
+    one torso cannot be (the worst case for sharing: each chain's own origins absorb what
+    they can)."""
+    names, q_train = joint_rows(DATA / "left_train.csv")
+    _, q_valid = joint_rows(DATA / "left_validation.csv")
+    names = list(names)
+    M = mirror(urdf, names)
+    q_rt, q_rv = q_train @ M.T, q_valid @ M.T
+    right = folder / "mirrored_right.csv"
+    write_joint_csv(right, names, q_rt)
+    left = folder / "left.csv"
+    write_joint_csv(left, names, q_train)
+    rows = []
+    for k, (label, base) in enumerate((
+            ("right sole -> right gripper", RIGHT_BASE),
+            ("left sole -> right gripper (through the other leg)", BASE))):
+        cal, frames = calibrate(folder, urdf, right, f"mirrored{k}", bases=(base,),
+                                tips=(RIGHT_TIP,))
+        rows.append((f"mirror image of the real touches, {label}",
+                     *held_out(cal, frames, q_rt, q_rv, names, base, RIGHT_TIP),
+                     LOG_EVIDENCE[f"mirrored{k}"]))
+    both = calibrate(folder, urdf, [left, right], "mirrored_both", bases=(BASE, RIGHT_BASE),
+                     tips=(TIP, RIGHT_TIP))
+    for k, (chain, qt, qv, base, tip) in enumerate((("left", q_train, q_valid, BASE, TIP),
+                                                    ("mirrored right", q_rt, q_rv, RIGHT_BASE,
+                                                     RIGHT_TIP))):
+        rows.append((f"  real left and mirrored right touches together, the {chain} chain",
+                     *held_out(*both, qt, qv, names, base, tip, k), math.nan))
     return rows
 
 
@@ -508,6 +557,10 @@ def main(argv=None) -> int:
     parser.add_argument("--two-chains", type=int, nargs="?", const=5, default=0,
                         metavar="SEEDS", help="only the simulated two-chain study (left and "
                         "right arms together vs alone), over SEEDS seeds (default 5)")
+    parser.add_argument("--torso-turn", type=float, default=0.0, metavar="DEG",
+                        help="with --two-chains: the right chain's truth turns torso_2_joint's "
+                        "origin by DEG more about x than the left's (chains that disagree on "
+                        "the torso they share)")
     parser.add_argument("--subsets", metavar="SIZES", type=subset_sizes,
                         help="only the subset study: the "
                         "default on random subsets of these sizes of the training touches "
@@ -522,7 +575,8 @@ def main(argv=None) -> int:
         subsets(urdf, args.subsets, args.reps)
         return 0
     if args.two_chains:
-        print_two_chains(two_chains(urdf, args.two_chains, not args.urdf_alone))
+        print_two_chains(two_chains(urdf, args.two_chains, not args.urdf_alone,
+                                    args.torso_turn))
         return 0
     names, q_train = joint_rows(DATA / "left_train.csv")
     _, q_valid = joint_rows(DATA / "left_validation.csv")
@@ -612,6 +666,7 @@ def main(argv=None) -> int:
                          *held_out(cal, frames, q_both, q_valid, names, plane="2"), math.nan))
             rows.append(("  the first day's plane against the second's: tilt [deg], offset "
                          "[mm]", math.nan, *plane_change(frames), math.nan))
+        rows += mirrored(urdf, folder)
     if LOO:
         print("Leave-one-out on the training day (RMS over the 21 touches, each predicted by "
               "the calibration on the other 20): height [mm], roll, pitch [deg]")
