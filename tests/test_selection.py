@@ -140,3 +140,15 @@ def test_a_dropped_parameter_acting_through_amplified_kept_ones_is_said():
     serial = _problem([0.03, 0.02, 0.12], model="complete").analyze()
     assert serial.stand_in_note() is None
     assert max(d.amplification for d in serial.duplicates) < 2.0
+
+
+def test_weak_names_of_one_owner_are_written_once():
+    """The summary's long list of weak parameters (42 on the TALOS touches) writes a joint's
+    or a frame's consecutive names once: 'leg_left_5_joint.rx .rz, plane.rx .ry .d'."""
+    from kincal.identification.selection import grouped
+
+    names = ["leg_left_6_joint.rz", "leg_left_5_joint.rx", "leg_left_5_joint.rz", "plane.rx",
+             "plane.ry", "plane.d", "tool.ry", "plane2.d", "leg_left_5_joint.ty"]
+    assert grouped(names) == ("leg_left_6_joint.rz, leg_left_5_joint.rx .rz, plane.rx .ry .d, "
+                              "tool.ry, plane2.d, leg_left_5_joint.ty")
+    assert grouped([]) == "" and grouped(["x", "y"]) == "x, y"

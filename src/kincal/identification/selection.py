@@ -131,9 +131,10 @@ class Identifiability:
             kin = [w for w in self.weak if not _FRAME.match(w.name)]
             worst = sorted(self.weak, key=lambda w: w.independence)[:3]
             lines.append(f"weak: {len(self.weak)} parameters ({len(kin)} kinematic) are barely "
-                         "told apart by these poses: " + ", ".join(w.name for w in self.weak))
-            lines.append("  the poses cover too little of the workspace to separate them; with "
-                         "method l2 they stay near nominal. Weakest: "
+                         "told apart by these poses: " + grouped([w.name for w in self.weak]))
+            lines.append("  the poses cover too little of the workspace, or the measurements see "
+                         "too little of each pose (a contact fewer directions than a position), "
+                         "to separate them; with method l2 they stay near nominal. Weakest: "
                          + "; ".join(w.describe() for w in worst))
         return "\n".join(lines)
 
@@ -150,6 +151,18 @@ class Identifiability:
                 "ones' corrections hold such combinations, not their own joints' errors "
                 "alone, and single corrected origins there are bookkeeping (the predictions "
                 "are the same); kincal analyze -v lists them")
+
+
+def grouped(names) -> str:
+    """Parameter names with one owner's run written once: "j2.a .d, j3.alpha"."""
+    runs: list[list[str]] = []
+    for n in names:
+        owner, _, part = n.rpartition(".")
+        if runs and owner and runs[-1][0] == owner:
+            runs[-1].append("." + part)
+        else:
+            runs.append([owner, n] if owner else ["", n])
+    return ", ".join(" ".join(r[1:]) for r in runs)
 
 
 def no_spare_note(equations: int, identifiable: int) -> str | None:
