@@ -130,9 +130,11 @@ def _angle_html(s) -> str:
 
 
 def _identification(result) -> str:
+    from kincal.identification.selection import grouped
+
     ident = result.identifiability
     out = [f"<p>{_e(ident.summary().splitlines()[0])}. Kept (identified): "
-           f"{_e(', '.join(ident.kept))}.</p>"]
+           f"{_e(grouped(ident.kept))}.</p>"]
     if ident.duplicates:
         out.append("<p>Dropped as redundant on these data: each is held at its nominal "
                    "value, and the kept parameters on the right absorb its effect (one "

@@ -42,7 +42,7 @@ from kincal.identification.reduction import (analyze_rows, identifiable_rows, on
                                              residual_function)
 from kincal.identification.result import CalibrationResult
 from kincal.identification.robust import irls
-from kincal.identification.selection import Identifiability, analyze, identifiable
+from kincal.identification.selection import Identifiability, analyze, grouped, identifiable
 from kincal.identification.solver import SolverOptions, SolveSummary, solve, steps
 from kincal.measurements.checks import distinct_poses, input_warnings, warn_units
 from kincal.measurements.fixed_joints import check_mimics
@@ -311,7 +311,7 @@ class CalibrationProblem:
                     "with --tool-offset). Identifiable now: " + ", ".join(ident.kept))
         if lost:
             notes.append("frame parameters these data cannot fix, held at their start: "
-                         + ", ".join(lost))
+                         + grouped(lost))
         general = self._structural_kept()
         gone = [n for n in general if n not in ident.kept] if general is not None else []
         if gone and general is not None:
