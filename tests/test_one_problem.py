@@ -42,6 +42,25 @@ def test_a_set_and_a_list_of_one_are_the_same_calibration(rtest):
     assert a.layout.names == b.layout.names and a.plausibility.plausible
 
 
+def test_the_summary_has_one_shape_for_one_set_or_several(rtest, tmp_path, capsys):
+    """One set or two, the command line's summary says the same things once: the notes
+    under the identifiable line, the weak parameters once, the dropped ones only with -v
+    (the several-set path printed every dropped parameter and the weak list twice)."""
+    _, _, folder = rtest
+    data = str(folder / "rt.csv")
+    shapes = []
+    for files, verbose in (([data], []), ([data, data], []), ([data, data], ["-v"])):
+        out = tmp_path / f"c{len(shapes)}.urdf"
+        _quiet(main, ["calibrate", "ec66", *files, "--out", str(out), "--lambda", "evidence",
+                      "--accept-implausible", *verbose])
+        lines = capsys.readouterr().out.splitlines()
+        shapes.append((sum(line.startswith("  weak") for line in lines),
+                       sum(line.startswith("  dropped ") for line in lines),
+                       sum(line.startswith("  identifiable:") for line in lines)))
+    assert shapes[0] == shapes[1] and shapes[0][1] == 0 and shapes[0][2] == 1
+    assert shapes[0][0] <= 1 and shapes[2][1] > 0  # -v lists the dropped ones
+
+
 def test_shuffled_rows_in_a_small_cube_are_refused_in_the_api_and_the_cli(rtest, capsys):
     robot, data, folder = rtest
     shuffled = replace(data, positions=data.positions[np.random.default_rng(0).permutation(

@@ -193,9 +193,8 @@ class CalibrationProblem:
 
     def residual_function(self, rows=None, kinematic: bool = True) -> Callable:
         """residual(u, with_jacobian) -> (r [mm], J) over the samples ``rows`` (global
-        indices over the sets in order; default all); u = x / scale.
-
-        kinematic=False: kinematic and backlash columns left at zero (frame-only fits)."""
+        indices over the sets in order; default all); u = x / scale. kinematic=False:
+        kinematic and backlash columns left at zero (frame-only fits)."""
         w = self._whole.get(kinematic) if rows is None else None  # one for all samples:
         if w is not None and all(a is b for a, b in zip(w, (self.weights, self.scale,
                                                                 self.row_scale))):
@@ -326,7 +325,8 @@ class CalibrationProblem:
         if note:
             notes.append(note)
             warnings.warn(note, KincalWarning)
-        self._ident = replace(ident, notes=ident.notes + tuple(notes))
+        self._ident = replace(ident, notes=ident.notes + tuple(notes),
+                              warned=(note,) if note else ())
         return self._ident
 
     def structural(self) -> Identifiability | None:

@@ -145,10 +145,14 @@ def table(result: CalibrationResult) -> list[str]:
 
 def summary(result: CalibrationResult) -> str:
     """Header, penalty, identifiability, errors per set, solver and gate, parameter table."""
-    ident = result.identifiability.summary().splitlines()
-    stand_in = result.identifiability.stand_in_note()
-    notes = ([f"  {line}" for line in ident[1:]] if len(result.sets) > 1
-             else [f"  note: {stand_in}"] if stand_in else [])
+    i = result.identifiability
+    ident = i.summary().splitlines()
+    # its notes, one set or many (what the data leave at the start, kept parameters standing
+    # in for dropped ones amplified), less those given as warnings; the dropped and weak
+    # lists are the caller's to add (the command line: the weak ones, all with -v)
+    stand_in = i.stand_in_note()
+    notes = [f"  note: {n}" for n in (*i.notes, *([stand_in] if stand_in else []))
+             if n not in i.warned]
     models = result.model_choice.lines() if result.model_choice is not None else []
     return "\n".join(header(result) + models + held(result) + [f"  {ident[0]}"] + notes
                      + errors(result)

@@ -91,7 +91,8 @@ class Identifiability:
     rank: numerical rank of the free columns; singular_values: of the free columns,
     each normalised to unit length (descending); condition_number: of the kept columns
     (normalised). duplicates: why each dropped parameter was dropped. weak: kept but
-    poorly determined parameters.
+    poorly determined parameters. notes: what else the data mean for the fit; warned:
+    those of them also given as warnings (a calibration's summary leaves them out).
     """
 
     names: tuple[str, ...]
@@ -107,6 +108,7 @@ class Identifiability:
     rank_tol: float
     notes: tuple[str, ...] = ()
     equations: int = 0  # rows of the Jacobian analysed (0: not known)
+    warned: tuple[str, ...] = ()
 
     def summary(self) -> str:
         lines = [f"identifiable: {len(self.kept)} of {len(self.free)} free parameters "
