@@ -563,3 +563,24 @@ def test_analyze_takes_several_chains_as_calibrate_does(tmp_path, capsys):
     assert main(["analyze", str(robots[0].source), *files, *chains, "--accuracy-map", "0", "0",
                  "0", "0.1"]) == 1
     assert "describe one chain; this analysis has several" in capsys.readouterr().err
+
+
+def test_joints_held_are_shown_in_their_own_chains_units():
+    """The summary's line of joints held during the measurements (--joint-value) reads each
+    set's joints on that set's chain: a prismatic joint of the second chain, absent from the
+    first, is shown in mm (it was looked up on the first chain's joints and shown as an
+    angle: 0.1 m as 5.73 deg)."""
+    from types import SimpleNamespace as NS
+
+    from kincal.identification.result_text import held
+
+    def robot(names, kinds):
+        return NS(joint_names=names, geometry=NS(kinds=kinds))
+
+    first, second = robot(("j1", "j2"), ("revolute", "revolute")), robot(
+        ("j1", "slide"), ("revolute", "prismatic"))
+    sets = [NS(data=NS(fixed_joints=(("j2", 0.5),))), NS(data=NS(fixed_joints=(("slide", 0.1),)))]
+    result = NS(sets=sets, robot=first, chains=NS(robots=(first, second)))
+    assert held(result) == [
+        "  set 1: joints held during the measurements (not in the file): j2 = 28.6479 deg",
+        "  set 2: joints held during the measurements (not in the file): slide = 100 mm"]

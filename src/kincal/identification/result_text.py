@@ -45,8 +45,9 @@ def held(result: CalibrationResult) -> list[str]:
     out = []
     for k, s in enumerate(result.sets, start=1):
         fixed = getattr(s.data, "fixed_joints", ())
-        if fixed:
-            kinds = dict(zip(result.robot.joint_names, result.robot.geometry.kinds))
+        if fixed:  # in the units of the set's own chain's joints
+            robot = result.robot if result.chains is None else result.chains.robots[k - 1]
+            kinds = dict(zip(robot.joint_names, robot.geometry.kinds))
             out.append(("  " if len(result.sets) == 1 else f"  set {k}: ")
                        + "joints held during the measurements (not in the file): " + ", ".join(
                            f"{j} = {v * 1e3:g} mm" if kinds.get(j) == "prismatic"
