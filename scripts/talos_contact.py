@@ -382,8 +382,7 @@ def mirrored(urdf: Path, folder: Path) -> list[tuple]:
     q_rt, q_rv = q_train @ M.T, q_valid @ M.T
     right = folder / "mirrored_right.csv"
     write_joint_csv(right, names, q_rt)
-    left = folder / "left.csv"
-    write_joint_csv(left, names, q_train)
+    left = DATA / "left_train.csv"  # the log as it is, as the default row reads it
     rows = []
     for k, (label, base) in enumerate((
             ("right sole -> right gripper", RIGHT_BASE),

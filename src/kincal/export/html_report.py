@@ -82,7 +82,7 @@ def _summary(result, data_source) -> str:
             ("method", o.method + (f", lambda = {result.lam:.4g}" if o.method == "l2"
                                    and math.isfinite(result.lam) else "")
              + (" (chosen by cross-validation)" if result.cv is not None else "")),
-            ("identifiable", result.identifiability.summary().splitlines()[0]
+            ("identifiable", result.identifiability.headline()
              .removeprefix("identifiable: ")),
             ("before", result.before.line()), ("after", result.after.line()),
             *_angle_rows(result),
@@ -133,7 +133,7 @@ def _identification(result) -> str:
     from kincal.identification.selection import grouped
 
     ident = result.identifiability
-    out = [f"<p>{_e(ident.summary().splitlines()[0])}. Kept (identified): "
+    out = [f"<p>{_e(ident.headline())}. Kept (identified): "
            f"{_e(grouped(ident.kept))}.</p>"]
     if ident.duplicates:
         out.append("<p>Dropped as redundant on these data: each is held at its nominal "

@@ -188,15 +188,13 @@ class Chains:
                                      for c in r.off_chain_movers(dt.ignored_columns)
                                      if c not in on))
         names = set(self.robot.model.names)
-        other = dict.fromkeys(c for dt in datas for c in dt.ignored_columns
-                              if c in names and c not in on and c not in movers)
-
-        def from_base(c: str) -> int:  # chain joints between a base and the joint
-            return min(r.chain_joints_between(r.model.frames[r.base_id].parentJoint,
-                                              r.model.getJointId(c)) for r in self.robots)
-
-        ordered = tuple(sorted(other, key=from_base))
-        return movers, ordered, sum(from_base(c) == 0 for c in ordered)
+        # the other branches' joints: how many chain joints lie between a base and each
+        from_base = {c: min(r.chain_joints_between(r.model.frames[r.base_id].parentJoint,
+                                                   r.model.getJointId(c)) for r in self.robots)
+                     for dt in datas for c in dt.ignored_columns
+                     if c in names and c not in on and c not in movers}
+        ordered = tuple(sorted(from_base, key=from_base.__getitem__))
+        return movers, ordered, sum(d == 0 for d in from_base.values())
 
     def backlash(self, joints, term: str = "backlash") -> tuple[str, ...]:
         """The backlash (or compliance) joints ``joints`` checked and in the union's joint

@@ -147,7 +147,6 @@ def table(result: CalibrationResult) -> list[str]:
 def summary(result: CalibrationResult) -> str:
     """Header, penalty, identifiability, errors per set, solver and gate, parameter table."""
     i = result.identifiability
-    ident = i.summary().splitlines()
     # its notes, one set or many (what the data leave at the start, kept parameters standing
     # in for dropped ones amplified), less those given as warnings; the dropped and weak
     # lists are the caller's to add (the command line: the weak ones, all with -v)
@@ -155,6 +154,6 @@ def summary(result: CalibrationResult) -> str:
     notes = [f"  note: {n}" for n in (*i.notes, *([stand_in] if stand_in else []))
              if n not in i.warned]
     models = result.model_choice.lines() if result.model_choice is not None else []
-    return "\n".join(header(result) + models + held(result) + [f"  {ident[0]}"] + notes
+    return "\n".join(header(result) + models + held(result) + [f"  {i.headline()}"] + notes
                      + errors(result)
                      + status(result) + table(result))

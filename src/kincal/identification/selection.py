@@ -110,9 +110,13 @@ class Identifiability:
     equations: int = 0  # rows of the Jacobian analysed (0: not known)
     warned: tuple[str, ...] = ()
 
+    def headline(self) -> str:
+        """The summary's first line: how many parameters the data identify."""
+        return (f"identifiable: {len(self.kept)} of {len(self.free)} free parameters "
+                f"(rank {self.rank}, condition number {self.condition_number:.3g})")
+
     def summary(self) -> str:
-        lines = [f"identifiable: {len(self.kept)} of {len(self.free)} free parameters "
-                 f"(rank {self.rank}, condition number {self.condition_number:.3g})"]
+        lines = [self.headline()]
         if self.fixed:
             lines.append(f"fixed by the user: {', '.join(self.fixed)}")
         spare = no_spare_note(self.equations, len(self.kept)) if self.equations else None
@@ -163,7 +167,7 @@ def grouped(names) -> str:
         if runs and owner and runs[-1][0] == owner:
             runs[-1].append("." + part)
         else:
-            runs.append([owner, n] if owner else ["", n])
+            runs.append([owner, n])
     return ", ".join(" ".join(r[1:]) for r in runs)
 
 
