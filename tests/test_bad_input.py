@@ -220,6 +220,20 @@ def test_joint_values_outside_limits_warn(good_csv, tmp_path):
     assert any("joint_3: 1 of 30 values outside its URDF limits" in m and "line 4" in m for m in msgs)
 
 
+
+def test_degrees_everywhere_give_one_limits_warning_after_the_unit_hint(good_csv, tmp_path):
+    """A whole file in degrees puts every joint outside its limits: one warning naming the
+    worst three (not one per joint), after the hint that names the cause."""
+    lines = good_csv.read_text().splitlines()
+    rows = [",".join([repr(float(np.degrees(float(x)))) for x in r.split(",")[:6]] + r.split(",")[6:])
+            for r in lines[1:]]
+    robot = Robot.load("ec66")
+    data = Measurements.from_csv(_csv(tmp_path, "\n".join([lines[0]] + rows)), robot.joint_names)
+    msgs = [m for m in _warnings_of(lambda: calibrate(robot, data, method="ls"))
+            if "URDF limits" in m or "were they degrees" in m]
+    assert len(msgs) == 2 and "were they degrees" in msgs[0], msgs
+    assert msgs[1].count("values outside its URDF limits") == 3 and "more joints" in msgs[1]
+
 # ------------------------------------------------------------------ outliers
 def test_robust_loss_lists_and_resists_outliers():
     robot, data, rng = _simulated_ec66(2, 60, 2e-5)

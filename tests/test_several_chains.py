@@ -373,8 +373,14 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
     for v, rms in zip(summary, evaluated):
         assert v["errors"]["after"]["rms_mm"] == pytest.approx(rms, rel=1e-9)
         assert v["errors"]["before"]["rms_mm"] > 10 * rms
-    report = json.loads((tmp_path / "R.json").read_text())["validation"]
+    whole = json.loads((tmp_path / "R.json").read_text())
+    report = whole["validation"]
     assert [v["source"] for v in report] == held
+    # the report's residuals are every set's, each sample with its set (not the first's alone)
+    res, sets = whole["residuals"], whole["sets"]
+    assert res["set"] == [k + 1 for k, s in enumerate(sets) for _ in s["residuals"]["row"]]
+    assert res["row"] == [r for s in sets for r in s["residuals"]["row"]]
+    assert res["error_mm"] == [e for s in sets for e in s["residuals"]["error_mm"]]
 
 
 def _plane_touches(robot, true, n, rng, height, tool):

@@ -80,6 +80,25 @@ def set_dict(s) -> dict:
                           "residual_rows_m": s.residuals}}
 
 
+def residuals_dict(result: CalibrationResult) -> dict:
+    """Every sample's error after calibration [mm], with its file line (``row``): one set as
+    it always was (its ``point`` per sample, and for points the components); several sets
+    one after the other, each sample's ``set`` (1-based, as ``robot.chains``) beside it, so
+    that no reader takes the first set's for the whole (each set's own are in ``sets``)."""
+    first = result.sets[0]
+    if len(result.sets) == 1:
+        return {"row": first.rows, "point": result.points, "error_mm": first.errors_after * 1e3,
+                **({"dx_dy_dz_mm": first.residuals * 1e3} if first.kind == "point" else {})}
+    points = [getattr(s.data, "points", None) for s in result.sets]
+    return {"set": np.concatenate([np.full(len(s.errors_after), i + 1)
+                                   for i, s in enumerate(result.sets)]),
+            "row": np.concatenate([np.asarray(s.rows) for s in result.sets]),
+            "point": None if all(p is None for p in points) else [  # None: a set without
+                v for s, p in zip(result.sets, points)                  # measured points
+                for v in ([None] * len(s.errors_after) if p is None else np.asarray(p).tolist())],
+            "error_mm": np.concatenate([s.errors_after for s in result.sets]) * 1e3}
+
+
 def result_dict(result: CalibrationResult, data_source: str | None = None) -> dict:
     """The whole result (REPORT.json)."""
     from kincal import __version__
@@ -101,7 +120,6 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
                        **({f"start_{si}": p.nominal}
                           if result.layout.is_frame[result.layout.index(p.name)] else {})})
     first = result.sets[0]
-    errors_mm = first.errors_after * 1e3
     out = {
         "format": FORMAT,
         "kincal_version": __version__,
@@ -150,9 +168,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "robust": {"loss": o.robust, "scale_mm": o.robust_scale_mm,
                    "downweighted": [{"row": d.row, "error_mm": d.error_mm, "weight": d.weight}
                                     for d in result.downweighted]},
-        "residuals": {"row": first.rows, "point": result.points, "error_mm": errors_mm,
-                      **({"dx_dy_dz_mm": first.residuals * 1e3} if first.kind == "point"
-                         else {})},
+        "residuals": residuals_dict(result),
         "plausibility": None if result.plausibility is None else result.plausibility.as_dict(),
     }
     return _clean(out)

@@ -14,9 +14,14 @@ UNIT_RATIO = 30.0  # measured spread this many times the robot's: probably mm re
 DEGREES_AS_RADIANS = 2 * np.pi + 0.5  # [rad] a revolute value beyond: probably degrees
 
 
+LIMIT_JOINTS_LISTED = 3  # joints outside their limits named one warning each; beyond, one
+
+
 def limit_warnings(joint_names, kinds, lower, upper, q, rows) -> list[str]:
-    """Joint values outside the URDF limits (1e-6 of slack for rounding)."""
-    out = []
+    """Joint values outside the URDF limits (1e-6 of slack for rounding): a warning per joint,
+    or, when more than LIMIT_JOINTS_LISTED joints are outside (a unit or a column order that
+    does not fit the file, not one bad sample), one warning naming the worst of them."""
+    out, excess_of = [], []
     outside = (q < np.asarray(lower) - 1e-6) | (q > np.asarray(upper) + 1e-6)
     for j in np.flatnonzero(outside.any(axis=0)).tolist():  # every joint in one test first
         name, lo, hi = joint_names[j], lower[j], upper[j]
@@ -26,7 +31,15 @@ def limit_warnings(joint_names, kinds, lower, upper, q, rows) -> list[str]:
         unit = "m" if kinds[j] == "prismatic" else "rad"
         out.append(f"{name}: {bad.size} of {len(q)} values outside its URDF limits "
                    f"[{lo:.4g}, {hi:.4g}] {unit} (worst {q[k, j]:.4g} at line {rows[k]})")
-    return out
+        excess_of.append(float(excess.max()) / (hi - lo if np.isfinite(hi - lo) and hi > lo
+                                                else 1.0))
+    if len(out) <= LIMIT_JOINTS_LISTED:
+        return out
+    worst = np.argsort(excess_of)[::-1][:LIMIT_JOINTS_LISTED]
+    return [f"{len(out)} of {len(joint_names)} chain joints have values outside their URDF "
+            f"limits, farthest beyond their range: "
+            + "; ".join(out[i] for i in sorted(worst.tolist()))
+            + f"; and {len(out) - LIMIT_JOINTS_LISTED} more joints"]
 
 
 def angle_unit_warnings(joint_names, kinds, q, angle_unit: str, lower=None,
@@ -116,9 +129,9 @@ def set_warnings(data, geometry, backlash=()) -> list[str]:
     pose = np.unique(data.poses, return_index=True)[1]
     q = data.joint_values[pose]
     g = geometry
-    out = (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, data.rows[pose])
-           + angle_unit_warnings(g.joint_names, g.kinds, q, getattr(data, "angle_unit", "rad"),
-                                 g.lower, g.upper))
+    out = (angle_unit_warnings(g.joint_names, g.kinds, q, getattr(data, "angle_unit", "rad"),
+                               g.lower, g.upper)  # first: the cause the limits then show
+           + limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, data.rows[pose]))
     order = getattr(data, "order_source", "the order of the rows")
     timelike = [c for c in data.ignored_columns
                 if re.search(r"time|stamp|(^|_)t($|_)", c, re.IGNORECASE)]
