@@ -120,3 +120,41 @@ def test_added_frames_leave_the_tilt_in_frames_json_and_say_so(rng):
     text, notes, made = _corrected(result, add_frames=True)
     assert made == () and any("--add-frames" in n for n in notes), notes
     check_readback(result, text, True, made)
+
+
+def test_no_fold_where_another_chain_passes_through_the_joint(tmp_path, rng):
+    """A second set's chain through the fixed joint above the flush tip (its tip below it)
+    would be turned by the fold: the tilt stays in FRAMES.json with a note, and the files
+    are written (the read-back check refused the whole calibration before)."""
+    from kincal.identification.chains import Chains
+
+    text = Robot.load("ec66").urdf_text.replace("</robot>", (
+        '<link name="probe"/><joint name="probe_joint" type="revolute"><parent link="flange"/>'
+        '<child link="probe"/><origin xyz="0 0.02 0.05" rpy="0 0 0"/><axis xyz="1 0 0"/>'
+        '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>'))
+    path = tmp_path / "ec66_probe.urdf"
+    path.write_text(text)
+    robots = [Robot.load(path, tip="flange"), Robot.load(path, tip="probe")]
+    ch = Chains(robots, 2, "placement")
+    kin = ch.model.nominal + np.where(ch.model.is_length, 0.3e-3, np.radians(0.03)) * rng.normal(
+        size=ch.model.size)
+    contact = np.array([0.01, -0.02, 0.1, 0.03, -0.02])
+    flush = simulate_flush(ch.models[0], kin[ch.idx[0]], contact, TABLE,
+                           random_joint_values(robots[0].geometry, rng, 3000), 40, 2e-5, 0.01,
+                           rng, limits=(robots[0].geometry.lower, robots[0].geometry.upper))
+    q = random_joint_values(robots[1].geometry, rng, 60)
+    T = robots[1].with_origins(ch.origins(kin - ch.model.nominal)).tip_poses(q)
+    points = kincal.Measurements(joint_names=robots[1].joint_names, joint_values=q,
+                                 positions=T[:, :3, 3] + T[:, :3, :3] @ [0.0, 0.0, 0.03],
+                                 source="probe points")
+    result = kincal.calibrate(robots, [flush, points], method="l2", lam=1e-3, model="placement",
+                              tool_guess=tuple(contact[:3]))
+    assert abs(dict(zip(result.sets[0].frame_names, result.sets[0].frames))["tool.rx"]) > 0.01
+    made, notes = folds(result)
+    assert made == () and any("flange_joint is also on the chain base_link -> probe" in n
+                              for n in notes), notes
+    written = write_calibration(result, Outputs(urdf=tmp_path / "cal.urdf",
+                                                frames=tmp_path / "frames.json"))
+    assert any("also on the chain" in n for n in written.notes)
+    frames = json.loads((tmp_path / "frames.json").read_text())
+    assert frames["sets"][0]["frames"]["tool.rx"] != 0.0 and "tilts_in_urdf" not in frames

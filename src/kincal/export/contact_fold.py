@@ -17,7 +17,8 @@ by ``(R_c^T d - d) . t`` for a residual tilt ``d``: micrometres).
 
 It is folded only where that is exact and harmless: the tip is a link whose parent joint
 is fixed and on the chain (the tip below the chain's last joint, not an ancestor of the
-base), every set on that tip is a flush set with the same contact frame, the readable
+base), every set on that tip is a flush set with the same contact frame, no other set's
+chain passes through that joint (one end below the tip: the turn would move it), the readable
 export did not already move another offset into that joint, and the tilt is at most
 :data:`MAX_FOLD_DEG` (a larger one is the face's design, not an error: turning the tip
 link's meshes by it would mislead; FRAMES.json keeps it, with a note).
@@ -26,6 +27,7 @@ link's meshes by it would mislead; FRAMES.json keeps it, with a note).
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -59,18 +61,34 @@ class Fold:
                 "and FRAMES.json holds the contact point with zero tilts")
 
 
-def _fixed_joint_above(robot, tip: str):
-    """(joint name, its URDF origin (4, 4)) of the fixed joint above the link ``tip`` when
-    it lies between the chain's last joint and the tip; else (None, why). Read from the
-    URDF text (the tree as written), not the model in memory."""
-    import xml.etree.ElementTree as ET
-
+def _joints_by_child(robot) -> dict:
+    """{child link: its URDF joint element}, read from the URDF text (the tree as written),
+    not the model in memory."""
     root = ET.fromstring(robot.urdf_text.encode("utf-8"))
-    joints = {}
-    for e in root.findall("joint"):
-        child = e.find("child")
-        if child is not None:
-            joints[child.get("link", "")] = e
+    return {child.get("link", ""): e for e in root.findall("joint")
+            if (child := e.find("child")) is not None}
+
+
+def _crosses(joints: dict, link: str, frame: str) -> bool:
+    """Whether ``frame`` (a link, or a joint: its child link) hangs below ``link``."""
+    by_name = {e.get("name"): child for child, e in joints.items()}
+    frame, seen = by_name.get(frame, frame), set()
+    while frame not in seen:
+        if frame == link:
+            return True
+        seen.add(frame)
+        above = joints.get(frame)
+        parent = None if above is None else above.find("parent")
+        if parent is None:
+            return False
+        frame = parent.get("link", "")
+    return False
+
+
+def _fixed_joint_above(robot, tip: str, joints: dict):
+    """(joint name, its URDF origin (4, 4)) of the fixed joint above the link ``tip`` when
+    it lies between the chain's last joint and the tip; else (None, why). joints:
+    :func:`_joints_by_child` of the robot."""
     above = joints.get(tip)
     if above is None:
         return None, f"the tip {tip!r} is not a link below a joint"
@@ -101,6 +119,7 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
     from kincal.export.readback import chain_robots
 
     robots: dict = {}  # the chains' robots by tip, made when a flush tip needs them
+    tree: dict = {}  # the URDF's joints by child link, likewise
     by_tip: dict[str, list[int]] = {}
     for i, s in enumerate(result.sets):
         by_tip.setdefault(s.tip_frame or result.robot.tip, []).append(i)
@@ -124,9 +143,17 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
                          "written into a URDF joint; a reader of the URDF alone must apply it")
             continue
         robots = robots or {r.tip: r for r in chain_robots(result)}
-        joint, origin = _fixed_joint_above(robots[tip], tip)
-        if joint is None or joint in exclude or joint in result.error_model.joint_names:
-            why = origin if joint is None else f"{joint} already carries another change"
+        tree = tree or _joints_by_child(robots[tip])
+        joint, origin = _fixed_joint_above(robots[tip], tip, tree)
+        # another set's chain through that joint (one of its ends below the tip) would turn
+        crossing = [f"{s.base_frame} -> {s.tip_frame}" for i, s in enumerate(result.sets)
+                    if i not in idx and _crosses(tree, tip, s.tip_frame or result.robot.tip)
+                    != _crosses(tree, tip, s.base_frame or result.robot.base)]
+        if (joint is None or joint in exclude or joint in result.error_model.joint_names
+                or crossing):
+            why = (origin if joint is None else f"{joint} already carries another change"
+                   if not crossing else f"{joint} is also on the chain {crossing[0]}, which "
+                   "the turn would move")
             notes.append(f"{said}: {why}, so no URDF joint can carry it")
             continue
         R = base_rotation(rx, ry, 0.0)
