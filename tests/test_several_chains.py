@@ -590,3 +590,39 @@ def test_joints_held_are_shown_in_their_own_chains_units():
     assert held(result) == [
         "  set 1: joints held during the measurements (not in the file): j2 = 28.6479 deg",
         "  set 2: joints held during the measurements (not in the file): slide = 100 mm"]
+
+
+def test_each_chains_backlash_and_compliance_terms_stay_with_it():
+    """FRAMES.json of two chains holds every chain's terms; the frames of one chain (what
+    kincal evaluate and compensate read) keep that chain's, so a compliance term of the other
+    arm's leg no longer refuses the file ("no chain joint ... for a compliance term"); a
+    term on no chain of the file is still refused."""
+    from kincal.errors import DataError
+
+    left = ("l1", "t1", "l2")
+    right = ("r1", "t1", "r2")
+    f = CellFrames("robot", "", "lb", "lt", left, (
+        FlushSetFrames("a.csv", "lb", "lt", left), FlushSetFrames("b.csv", "rb", "rt", right)),
+        backlash={"l2": 1e-3, "r2": 2e-3}, compliance={"l1": 1e-3, "t1": 2e-3, "r1": 3e-3})
+    for (base, tip), joints, back in ((("lb", "lt"), {"l1", "t1"}, {"l2"}),
+                                      (("rb", "rt"), {"t1", "r1"}, {"r2"})):
+        mine = f.for_chain(base, tip)
+        assert set(mine.compliance) == joints and set(mine.backlash) == back
+        assert [s.source for s in mine.sets] == (["a.csv", "b.csv"] if base == "lb"
+                                                 else ["b.csv"])  # the file's chain: all
+    odd = CellFrames("robot", "", "lb", "lt", left, f.sets, compliance={"x9": 1e-3})
+    assert odd.for_chain("rb", "rt").compliance == {"x9": 1e-3}
+
+    class _Robot:
+        model_name, base, tip, joint_names, name = "robot", "rb", "rt", right, "robot"
+
+    with pytest.raises(DataError, match="no chain joint 'x9'"):
+        odd.for_chain("rb", "rt").check_chain(_Robot())
+
+
+def FlushSetFrames(source, base, tip, joints):
+    """A flush set's frames on the chain base -> tip."""
+    from kincal.frames_file import SetFrames
+
+    return SetFrames("flush", source, ("plane.rx", "plane.ry", "plane.d"), (0.0, 0.0, 0.7),
+                     base, tip, joints)

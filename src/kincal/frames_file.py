@@ -39,7 +39,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -343,14 +343,21 @@ class CellFrames:
         top-level one); this file otherwise. The chain hash recorded is the top-level
         chain's: the selected chain is checked by its base, tip and joints."""
         base, tip = base or self.base_frame, tip or self.tip_frame
-        if (base, tip) == (self.base_frame, self.tip_frame):
-            return self
-        mine = tuple(s for s in self.sets if (s.base_frame, s.tip_frame) == (base, tip))
+        top = (base, tip) == (self.base_frame, self.tip_frame)
+        mine = tuple(s for s in self.sets if (s.base_frame or self.base_frame,
+                                              s.tip_frame or self.tip_frame) == (base, tip))
         if not mine:
             return self
-        return CellFrames(self.robot, "", base, tip, mine[0].joints, mine,
-                          {j: v for j, v in self.backlash.items()}, self.source,
-                          dict(self.compliance))
+        joints = set(self.joints if top else mine[0].joints)
+        others = {j for s in self.sets for j in s.joints} - joints
+        # the backlash and compliance terms of the other chains' joints are theirs; a term on
+        # no chain of the file stays, for check_chain to refuse
+        backlash, compliance = ({j: v for j, v in terms.items() if j not in others}
+                                for terms in (self.backlash, self.compliance))
+        if top:
+            return replace(self, backlash=backlash, compliance=compliance)
+        return CellFrames(self.robot, "", base, tip, mine[0].joints, mine, backlash,
+                          self.source, compliance)
 
     # ------------------------------------------------------------ checks
     def check_chain(self, robot) -> None:
