@@ -392,8 +392,10 @@ class Inputs:
             from kincal.measurements.sets import header_of
 
             fixed = {j: v for j, v in held.items() if j in r.joint_names}
-            fj.check_absent(path, header_of(path), fixed, self.joint_map())
-            follow = fj.mimicked(path, header_of(path), r, fixed, self.joint_map())
+            columns = self.joint_map() or {}
+            header = header_of(path, [columns.get(j, j) for j in r.joint_names])
+            fj.check_absent(path, header, fixed, self.joint_map())
+            follow = fj.mimicked(path, header, r, fixed, self.joint_map())
             d = read_set_file(path, [j for j in r.joint_names if j not in {*fixed, *follow}],
                               _prismatic(r), self.length_unit, self.angle_unit, pos,
                               self.orientation_columns, self.on_plane,
