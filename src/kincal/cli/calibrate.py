@@ -335,7 +335,7 @@ def run(args) -> int:
             result, outputs, accept_implausible=c.accept_implausible,
             accept_unconverged=c.accept_unconverged, accuracy=amap,
             warnings_seen=[str(w.message) for w in caught
-                           if issubclass(w.category, KincalWarning)],
+                           if issubclass(w.category, KincalWarning)] + accepted,
             data_source=", ".join(c.inputs.files), command=c.command_line or None,
             validations=validations,
             xacro_args=xacro_args(c.chain.xacro_arg),
