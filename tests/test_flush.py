@@ -336,3 +336,22 @@ def test_json_summary_gives_the_noise_of_heights_and_tilts(tmp_path, capsys):
                                                         ("t.csv tilt", "deg")]
     assert groups[0]["sigma"] == pytest.approx(0.3, rel=0.3)
     assert groups[1]["sigma"] == pytest.approx(0.03, rel=0.3)
+
+
+def test_residual_figures_name_the_height(rng, monkeypatch):
+    """--plots' residuals.png of flush touches said 'position error (mm)' (the HTML's
+    figure said 'height error (mm)'): both take the label from the set's kind."""
+    from kincal.export import plots
+
+    robot = Robot.load("ec66", tip="flange")
+    em = models.build("complete", robot.geometry)
+    data = simulate_flush(em, em.nominal, CONTACT, TABLE,
+                          random_joint_values(robot.geometry, rng, 500), 30, 1e-5, 0.01, rng)
+    result = kincal.calibrate(robot, [data], method="l2", lam=1e-3,
+                              tool_guess=tuple(CONTACT[:3]))
+    labels = []
+    save = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, *a, **k: (
+        labels.append(fig.axes[0].get_ylabel()), save(fig, *a, **k))[1])
+    names = [name for name, _ in plots.calibration_figures(result)]
+    assert labels[names.index("residuals.png")] == "height error (mm)"
