@@ -318,7 +318,8 @@ def test_a_kind_of_row_the_parameters_fit_exactly_shares_its_sets_noise(rng):
 
 def test_json_summary_gives_the_noise_of_heights_and_tilts(tmp_path, capsys):
     """The command line: heights with 0.3 mm and tilts with 0.03 deg of noise; --json's
-    evidence.noise_groups has each, labelled with the file and its unit."""
+    evidence.noise_groups has each, labelled with the file and its unit; its sets hold the
+    tilt errors the human summary prints."""
     from kincal.cli.main import main
 
     data = tmp_path / "t.csv"
@@ -331,7 +332,11 @@ def test_json_summary_gives_the_noise_of_heights_and_tilts(tmp_path, capsys):
                  str(tmp_path / "f.json"), "--json"]) == 0
     import json
 
-    groups = json.loads(capsys.readouterr().out)["evidence"]["noise_groups"]
+    out = json.loads(capsys.readouterr().out)
+    groups = out["evidence"]["noise_groups"]
+    # the tilts the summary prints (they were missing: the top-level errors are heights)
+    tilts = out["sets"][0]["orientation_errors"]
+    assert tilts["after"]["rms_deg"] < tilts["before"]["rms_deg"] and "residuals" not in out["sets"][0]
     assert [(g["rows"], g["unit"]) for g in groups] == [("t.csv height", "mm"),
                                                         ("t.csv tilt", "deg")]
     assert groups[0]["sigma"] == pytest.approx(0.3, rel=0.3)

@@ -215,6 +215,7 @@ def json_summary(result, validations, refused: bool) -> dict:
             "frames", "convergence", "plausibility", "diagnosis", "term_evidence")
     return {"command": "calibrate", "verdict": "REFUSED" if refused else "written",
             **{k: full[k] for k in keep},
+            "sets": [{k: v for k, v in s.items() if k != "residuals"} for s in full["sets"]],
             "identifiability": {k: full["identifiability"][k] for k in
                                 ("rank", "condition_number", "kept", "fixed")},
             "validation": validation_dict(validations)}
