@@ -433,11 +433,13 @@ def chain_from_frames(chain: Chain, frames) -> Chain:
         elif given != recorded:
             from kincal.errors import FrameError
 
+            held = frames.chains() or ((frames.base_frame, frames.tip_frame),)
             raise FrameError(f"--{role} {given!r} does not match the {role} frame {recorded!r} "
                              f"recorded in {frames.source} (its frames were identified for "
-                             f"{frames.base_frame} -> {frames.tip_frame}); use --{role} "
-                             f"{recorded} or frames identified for this chain",
-                             valid=(recorded,))
+                             f"{', '.join(f'{b} -> {t}' for b, t in held)}); "
+                             + (f"use --{role} {recorded}" if len(held) == 1 else
+                                "give --base and --tip of one of them")
+                             + " or frames identified for this chain", valid=(recorded,))
     return chain
 
 def _prismatic(robot) -> list[str]:
