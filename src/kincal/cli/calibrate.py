@@ -314,8 +314,10 @@ def run(args) -> int:
             return summary_lines(True, (), json_summary(result, validations, refused),
                                  written)
         out = [result.summary()]
+        said = set(out[0].splitlines())  # -v: the notes under its identifiable line once
         out += [f"  {line}" for line in result.identifiability.summary().splitlines()[1:]
-                if c.verbose or line.startswith(("weak", "  the poses"))]
+                if (c.verbose and f"  {line}" not in said)
+                or line.startswith(("weak", "  the poses"))]
         for validation in validations:
             out += [f"  {line}" for line in validation.lines()]
         out += [f"  export: {n}" for n in notes]
