@@ -292,3 +292,17 @@ def test_the_gates_warnings_are_in_the_page(tmp_path):
     text = page.read_text()
     warned = text[text.index('id="warnings"'):text.index('id="provenance"')]
     assert "warning: accepted an implausible calibration as asked" in warned
+
+
+def test_held_out_caption_speaks_of_axes_only_where_there_are_some():
+    """A flush file's held-out table (heights and tilts) has no per-axis rows; its caption
+    explained them anyway ('Per axis: root mean square of the residual component in the
+    measurement frame'), there being no measurement frame either."""
+    from kincal.export.html_run import validation_section
+    from kincal.export.validation import Validation
+
+    z = np.zeros((3, 3))
+    flush = Validation("held.csv", "flush", np.arange(3), z, z, np.ones(3), np.ones(3), False)
+    point = replace(flush, kind="point", per_axis=True)
+    assert "Per axis" not in validation_section([flush])
+    assert "Per axis" in validation_section([point])
