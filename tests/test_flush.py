@@ -360,3 +360,21 @@ def test_residual_figures_name_the_height(rng, monkeypatch):
         labels.append(fig.axes[0].get_ylabel()), save(fig, *a, **k))[1])
     names = [name for name, _ in plots.calibration_figures(result)]
     assert labels[names.index("residuals.png")] == "height error (mm)"
+
+
+def test_a_tool_offset_in_millimetres_is_named(tmp_path, capsys):
+    """--tool-offset 0 0 -120 (mm) on metre data: contacts have no positions to tell the
+    unit by, and the gate refused the 120 m lever arm's motion naming a weak penalty as the
+    likely cause. A tool point beyond 3 chain lengths from the tip is now warned about."""
+    from kincal.cli.main import main
+
+    data = tmp_path / "t.csv"
+    assert main(["simulate", "ec66", "--kind", "flush", "--poses", "30", "--seed", "1",
+                 "--out", str(data), "-q"]) == 0
+    for offset, warned in (("0.1", False), ("100", True)):
+        capsys.readouterr()
+        main(["calibrate", "ec66", str(data), "--on-plane", "--flush", "--tool-offset", "0",
+              "0", offset, "--out", str(tmp_path / f"c{offset}.urdf"), "-q"])
+        err = capsys.readouterr().err
+        assert ("lies 100 m from the tip frame, 86 times the chain's length (1.17 m): were its "
+                "values millimetres?" in err) == warned, err
