@@ -97,3 +97,18 @@ def test_a_warning_raised_twice_is_said_once(monkeypatch, capsys):
     err = capsys.readouterr().err.splitlines()
     assert err == ["kincal: error: stop here", "kincal: warning: the same thing",
                    "kincal: warning: another thing"], err
+
+
+def test_verbose_says_each_note_once(tmp_path, capsys):
+    """-v added the identifiability report, whose notes the summary prints under its
+    identifiable line already: each note came twice (flush touches: three notes)."""
+    data = tmp_path / "flush.csv"
+    assert main(["simulate", "ec66", "--kind", "flush", "--poses", "30", "--seed", "1",
+                 "--out", str(data), "-q"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(data), "--on-plane", "--flush", "--tool-offset", "0",
+                 "0", "0.1", "--out", str(tmp_path / "c.urdf"), "-v"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    notes = [line for line in out if line.strip().startswith("note:")]
+    assert notes and len(notes) == len(set(notes)), notes
+    assert any(line.strip().startswith("dropped ") for line in out)  # -v's own lines stay

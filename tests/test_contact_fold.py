@@ -5,6 +5,7 @@ sees the identified contact frame."""
 from __future__ import annotations
 
 import json
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
@@ -47,7 +48,8 @@ def test_the_urdf_alone_gives_the_identified_contact_frame(tmp_path, rng):
     identified = dict(zip(result.sets[0].frame_names, result.sets[0].frames))
     assert abs(identified["tool.rx"]) > 0.01  # a tilt to carry
     written = write_calibration(result, Outputs(urdf=tmp_path / "cal.urdf",
-                                                frames=tmp_path / "frames.json"))
+                                                frames=tmp_path / "frames.json",
+                                                yaml=tmp_path / "k.yaml"))
     assert any("flange_joint" in n and "turned about the contact point" in n
                for n in written.notes)
     data = json.loads((tmp_path / "frames.json").read_text())
@@ -68,6 +70,18 @@ def test_the_urdf_alone_gives_the_identified_contact_frame(tmp_path, rng):
     joints = tuple(result.error_model.joint_names)
     for name, T in result.corrected.urdf_origins(joints).items():
         assert np.abs(read.urdf_origins((name,))[name] - T).max() < 1e-12
+    # the YAML of corrected origins holds the folded joint as the URDF does (it listed the
+    # chain joints alone: a reader of it and FRAMES.json lost the tilt)
+    from kincal.export.cell_exports import read_kinematics_yaml
+    from kincal.rotations import rpy_to_matrix
+
+    yaml = read_kinematics_yaml((tmp_path / "k.yaml").read_text())
+    assert list(yaml) == [*joints, "flange_joint"]
+    origin = ET.fromstring((tmp_path / "cal.urdf").read_bytes()).find(
+        "joint[@name='flange_joint']/origin")
+    xyz, rpy = (np.array(origin.get(k).split(), float) for k in ("xyz", "rpy"))
+    np.testing.assert_allclose(yaml["flange_joint"], transform(rpy_to_matrix(rpy), xyz),
+                               rtol=0, atol=1e-15)
 
 
 def test_the_readback_checks_the_folded_joint(rng):

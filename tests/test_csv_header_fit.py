@@ -83,3 +83,25 @@ def test_talos_logs_train_reads_validation_is_refused():
     with pytest.raises(DataError, match="columns 34-37 hold numbers but have no name.*4 columns "
                                         "to their right"):
         read_columns(SHARED / "left_validation.csv", joints)
+
+
+def test_the_command_lines_reading_says_the_shift_too(tmp_path, capsys):
+    """TALOS's validation log (4 empty names at the end): read_columns said the shift, but
+    the command line reads the header first, without the columns it wants, and said only
+    'name every data column'. The header read now knows the chain joints' columns."""
+    from kincal.measurements.sets import header_of, read_set_file
+
+    path = _log(tmp_path, ["joint_names"] + JOINTS + ["", "", "", ""])
+    for read in (lambda: header_of(path, JOINTS),
+                 lambda: read_set_file(path, JOINTS, on_plane=True, flush=True)):
+        with pytest.raises(DataError, match="columns 8-11 hold numbers but have no name.*"
+                                            "fit the cells 4 columns to their right"):
+            read()
+    from kincal.cli.main import main
+
+    ec66 = [f"joint_{i}" for i in range(1, 7)]
+    path.write_text(path.read_text().replace(",".join(JOINTS), ",".join(ec66), 1))
+    assert main(["calibrate", "ec66", str(path), "--on-plane", "--flush", "--quiet",
+                 "--out", str(tmp_path / "cal.urdf")]) == 1
+    assert "4 columns to their right" in capsys.readouterr().err
+    assert not (tmp_path / "cal.urdf").exists()

@@ -318,7 +318,8 @@ def test_a_kind_of_row_the_parameters_fit_exactly_shares_its_sets_noise(rng):
 
 def test_json_summary_gives_the_noise_of_heights_and_tilts(tmp_path, capsys):
     """The command line: heights with 0.3 mm and tilts with 0.03 deg of noise; --json's
-    evidence.noise_groups has each, labelled with the file and its unit."""
+    evidence.noise_groups has each, labelled with the file and its unit; its sets hold the
+    tilt errors the human summary prints."""
     from kincal.cli.main import main
 
     data = tmp_path / "t.csv"
@@ -331,8 +332,49 @@ def test_json_summary_gives_the_noise_of_heights_and_tilts(tmp_path, capsys):
                  str(tmp_path / "f.json"), "--json"]) == 0
     import json
 
-    groups = json.loads(capsys.readouterr().out)["evidence"]["noise_groups"]
+    out = json.loads(capsys.readouterr().out)
+    groups = out["evidence"]["noise_groups"]
+    # the tilts the summary prints (they were missing: the top-level errors are heights)
+    tilts = out["sets"][0]["orientation_errors"]
+    assert tilts["after"]["rms_deg"] < tilts["before"]["rms_deg"] and "residuals" not in out["sets"][0]
     assert [(g["rows"], g["unit"]) for g in groups] == [("t.csv height", "mm"),
                                                         ("t.csv tilt", "deg")]
     assert groups[0]["sigma"] == pytest.approx(0.3, rel=0.3)
     assert groups[1]["sigma"] == pytest.approx(0.03, rel=0.3)
+
+
+def test_residual_figures_name_the_height(rng, monkeypatch):
+    """--plots' residuals.png of flush touches said 'position error (mm)' (the HTML's
+    figure said 'height error (mm)'): both take the label from the set's kind."""
+    from kincal.export import plots
+
+    robot = Robot.load("ec66", tip="flange")
+    em = models.build("complete", robot.geometry)
+    data = simulate_flush(em, em.nominal, CONTACT, TABLE,
+                          random_joint_values(robot.geometry, rng, 500), 30, 1e-5, 0.01, rng)
+    result = kincal.calibrate(robot, [data], method="l2", lam=1e-3,
+                              tool_guess=tuple(CONTACT[:3]))
+    labels = []
+    save = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, *a, **k: (
+        labels.append(fig.axes[0].get_ylabel()), save(fig, *a, **k))[1])
+    names = [name for name, _ in plots.calibration_figures(result)]
+    assert labels[names.index("residuals.png")] == "height error (mm)"
+
+
+def test_a_tool_offset_in_millimetres_is_named(tmp_path, capsys):
+    """--tool-offset 0 0 -120 (mm) on metre data: contacts have no positions to tell the
+    unit by, and the gate refused the 120 m lever arm's motion naming a weak penalty as the
+    likely cause. A tool point beyond 3 chain lengths from the tip is now warned about."""
+    from kincal.cli.main import main
+
+    data = tmp_path / "t.csv"
+    assert main(["simulate", "ec66", "--kind", "flush", "--poses", "30", "--seed", "1",
+                 "--out", str(data), "-q"]) == 0
+    for offset, warned in (("0.1", False), ("100", True)):
+        capsys.readouterr()
+        main(["calibrate", "ec66", str(data), "--on-plane", "--flush", "--tool-offset", "0",
+              "0", offset, "--out", str(tmp_path / f"c{offset}.urdf"), "-q"])
+        err = capsys.readouterr().err
+        assert ("lies 100 m from the tip frame, 86 times the chain's length (1.17 m): were its "
+                "values millimetres?" in err) == warned, err

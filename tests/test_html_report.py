@@ -269,3 +269,40 @@ def test_refused_run_report_rendered_with_its_red_box(tmp_path):
     rgb = np.asarray(Image.open(shot).convert("RGB")).astype(int)[:900]
     red = (rgb[..., 0] > 150) & (rgb[..., 1] < 60) & (rgb[..., 2] < 60)
     assert red.sum() > 2000  # the box's border and heading
+
+
+def test_the_gates_warnings_are_in_the_page(tmp_path):
+    """The page's 'Warnings and notes' lacked what the gate said on the console: an
+    accepted implausible result ('accepted an implausible calibration as asked') and the
+    gate's notes (a whole robot's log: columns of joints off the chain ignored)."""
+    import csv
+
+    data = tmp_path / "cal.csv"
+    assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--seed", "2"]) == 0
+    rows = list(csv.DictReader(line for line in data.open() if not line.startswith("#")))
+    mm = tmp_path / "mm.csv"  # millimetres, read as metres: implausible
+    with mm.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows({**r, **{k: str(float(r[k]) * 1000) for k in "xyz"}} for r in rows)
+    page = tmp_path / "accepted.html"
+    assert main(["calibrate", "ec66", str(mm), "--lambda", "0.01", "--out",
+                 str(tmp_path / "c.urdf"), "--html", str(page), "-q",
+                 "--accept-implausible"]) == 0
+    text = page.read_text()
+    warned = text[text.index('id="warnings"'):text.index('id="provenance"')]
+    assert "warning: accepted an implausible calibration as asked" in warned
+
+
+def test_held_out_caption_speaks_of_axes_only_where_there_are_some():
+    """A flush file's held-out table (heights and tilts) has no per-axis rows; its caption
+    explained them anyway ('Per axis: root mean square of the residual component in the
+    measurement frame'), there being no measurement frame either."""
+    from kincal.export.html_run import validation_section
+    from kincal.export.validation import Validation
+
+    z = np.zeros((3, 3))
+    flush = Validation("held.csv", "flush", np.arange(3), z, z, np.ones(3), np.ones(3), False)
+    point = replace(flush, kind="point", per_axis=True)
+    assert "Per axis" not in validation_section([flush])
+    assert "Per axis" in validation_section([point])

@@ -354,6 +354,15 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
     assert "(base_link -> atip)" in said and "(ctip -> btip)" in said
     rms = [float(line.split("RMS")[1].split()[0]) for line in said.splitlines() if "RMS" in line]
     assert len(rms) == 2 and max(rms) < 0.05, said  # [mm]: noise 0.01 mm per axis
+    # one of the two frames given: the recorded chain that has it (--tip btip alone was
+    # refused, 'use --tip atip', the first chain's); a chain the file lacks: the error lists
+    # the chains it holds
+    assert main(["evaluate", str(out), files[1], "--tip", "btip", "--frames", str(frames)]) == 0
+    assert f"{rms[1]:.3f}" in capsys.readouterr().out.split("(ctip -> btip)")[1]
+    assert main(["evaluate", str(out), files[1], "--base", "base_link", "--tip", "btip",
+                 "--frames", str(frames)]) == 1
+    assert ("identified for base_link -> atip, ctip -> btip); give --base and --tip of one of "
+            "them") in capsys.readouterr().err
     # calibrate --validate with one held-out file per data file: each judged on its file's
     # chain with its set's frames, as kincal evaluate judges it from the files written
     held = [_csv(tmp_path / f"h{k}.csv", _points(robots[k], true[k], _q(robots[k], 30, rng),

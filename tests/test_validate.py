@@ -90,3 +90,20 @@ def test_held_out_poses_give_orientation_statistics(tmp_path, capsys):
                  str(tmp_path / "f.json"), "--report", str(tmp_path / "e.json")]) == 0
     e = json.loads((tmp_path / "e.json").read_text())["orientation_errors"]
     assert e["rms_deg"] == pytest.approx(o["after"]["rms_deg"], rel=1e-9)
+
+
+def test_held_out_before_is_the_nominal_model_with_compliance_terms_too(data, tmp_path):
+    """'before' is the nominal kinematics with the frames the calibration started from; with
+    --compliance it carried the fitted compliance (the backlash was dropped, the compliance
+    kept): TALOS's held-out heights 'before' read 8.07 mm with the stance leg's terms and
+    9.88 mm without. The same before with or without the terms."""
+    before = []
+    for k, terms in enumerate(([], ["--compliance", "joint_2", "joint_3"])):
+        report = tmp_path / f"r{k}.json"
+        assert main(["calibrate", "ec66", str(data / "cal.csv"), "--tip", "flange", "--lambda",
+                     "0.01", "--out", str(tmp_path / f"c{k}.urdf"), *terms, "--validate",
+                     str(data / "held.csv"), "--report", str(report), "-q"]) == 0
+        report = json.loads(report.read_text())
+        assert report["options"]["compliance"] == terms[1:]
+        before.append(report["validation"]["errors"]["before"])
+    assert before[1] == pytest.approx(before[0], rel=1e-12)

@@ -337,11 +337,20 @@ class CellFrames:
                                    else f"shape {T.shape}")
                                 + "); fix one of them or write the file anew")
 
+    def chains(self) -> tuple[tuple[str, str], ...]:
+        """The (base, tip) frames of the chains the sets were measured on, first seen first."""
+        return tuple(dict.fromkeys((s.base_frame or self.base_frame, s.tip_frame or
+                                    self.tip_frame) for s in self.sets))
+
     def for_chain(self, base: str | None, tip: str | None) -> "CellFrames":
         """The frames of the sets measured on the chain ``base`` -> ``tip`` (None: as
         recorded) when that is another chain of a calibration of several (not the file's
         top-level one); this file otherwise. The chain hash recorded is the top-level
-        chain's: the selected chain is checked by its base, tip and joints."""
+        chain's: the selected chain is checked by its base, tip and joints. One of the two
+        given: the recorded chain with that frame, if there is one alone."""
+        if (base is None) != (tip is None):
+            fit = [c for c in self.chains() if base in (None, c[0]) and tip in (None, c[1])]
+            base, tip = fit[0] if len(fit) == 1 else (base, tip)
         base, tip = base or self.base_frame, tip or self.tip_frame
         top = (base, tip) == (self.base_frame, self.tip_frame)
         mine = tuple(s for s in self.sets if (s.base_frame or self.base_frame,

@@ -215,6 +215,7 @@ def json_summary(result, validations, refused: bool) -> dict:
             "frames", "convergence", "plausibility", "diagnosis", "term_evidence")
     return {"command": "calibrate", "verdict": "REFUSED" if refused else "written",
             **{k: full[k] for k in keep},
+            "sets": [{k: v for k, v in s.items() if k != "residuals"} for s in full["sets"]],
             "identifiability": {k: full["identifiability"][k] for k in
                                 ("rank", "condition_number", "kept", "fixed")},
             "validation": validation_dict(validations)}
@@ -313,8 +314,10 @@ def run(args) -> int:
             return summary_lines(True, (), json_summary(result, validations, refused),
                                  written)
         out = [result.summary()]
+        said = set(out[0].splitlines())  # -v: the notes under its identifiable line once
         out += [f"  {line}" for line in result.identifiability.summary().splitlines()[1:]
-                if c.verbose or line.startswith(("weak", "  the poses"))]
+                if (c.verbose and f"  {line}" not in said)
+                or line.startswith(("weak", "  the poses"))]
         for validation in validations:
             out += [f"  {line}" for line in validation.lines()]
         out += [f"  export: {n}" for n in notes]
@@ -335,7 +338,7 @@ def run(args) -> int:
             result, outputs, accept_implausible=c.accept_implausible,
             accept_unconverged=c.accept_unconverged, accuracy=amap,
             warnings_seen=[str(w.message) for w in caught
-                           if issubclass(w.category, KincalWarning)],
+                           if issubclass(w.category, KincalWarning)] + accepted,
             data_source=", ".join(c.inputs.files), command=c.command_line or None,
             validations=validations,
             xacro_args=xacro_args(c.chain.xacro_arg),

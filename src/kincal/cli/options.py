@@ -392,8 +392,10 @@ class Inputs:
             from kincal.measurements.sets import header_of
 
             fixed = {j: v for j, v in held.items() if j in r.joint_names}
-            fj.check_absent(path, header_of(path), fixed, self.joint_map())
-            follow = fj.mimicked(path, header_of(path), r, fixed, self.joint_map())
+            columns = self.joint_map() or {}
+            header = header_of(path, [columns.get(j, j) for j in r.joint_names])
+            fj.check_absent(path, header, fixed, self.joint_map())
+            follow = fj.mimicked(path, header, r, fixed, self.joint_map())
             d = read_set_file(path, [j for j in r.joint_names if j not in {*fixed, *follow}],
                               _prismatic(r), self.length_unit, self.angle_unit, pos,
                               self.orientation_columns, self.on_plane,
@@ -431,11 +433,13 @@ def chain_from_frames(chain: Chain, frames) -> Chain:
         elif given != recorded:
             from kincal.errors import FrameError
 
+            held = frames.chains() or ((frames.base_frame, frames.tip_frame),)
             raise FrameError(f"--{role} {given!r} does not match the {role} frame {recorded!r} "
                              f"recorded in {frames.source} (its frames were identified for "
-                             f"{frames.base_frame} -> {frames.tip_frame}); use --{role} "
-                             f"{recorded} or frames identified for this chain",
-                             valid=(recorded,))
+                             f"{', '.join(f'{b} -> {t}' for b, t in held)}); "
+                             + (f"use --{role} {recorded}" if len(held) == 1 else
+                                "give --base and --tip of one of them")
+                             + " or frames identified for this chain", valid=(recorded,))
     return chain
 
 def _prismatic(robot) -> list[str]:

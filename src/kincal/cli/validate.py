@@ -50,8 +50,8 @@ def held_out(result, inputs, path: str, k: int | None = None):
     lay = result.layout
     start = [tuple(float(v) for v in result.x_start[lay.frame_slices[i]])
              for i in range(len(result.sets))]
-    before_frames = dataclasses.replace(
-        after_frames, backlash={},
+    before_frames = dataclasses.replace(  # the nominal model: no joint terms
+        after_frames, backlash={}, compliance={},
         sets=tuple(dataclasses.replace(s, values=v) for s, v in zip(after_frames.sets, start)))
     if k is not None:  # that set's frames alone, the joint terms of its chain's joints
         mine = set(nominal.joint_names)

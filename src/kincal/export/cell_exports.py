@@ -3,7 +3,8 @@
 - :func:`kinematics_yaml`: the corrected joint origins as a YAML overlay keyed by URDF
   joint name, ``x, y, z`` [m] and ``roll, pitch, yaw`` [rad] (URDF rpy) per joint, the
   layout of ur_description's ``default_kinematics.yaml`` (there keyed by its own segment
-  names). Every chain joint is listed, changed or not, so the file is the whole chain.
+  names). Every chain joint is listed, changed or not, so the file is the whole chain; so
+  is a fixed joint a flush face's tilt is written into (as the corrected URDF has it).
 - :func:`ur_kinematics_yaml`: the same values as ur_description's own file (segment keys
   and the robot's ``hash``, :func:`ur_hash_of`), which its ``ur.urdf.xacro`` reads back.
 - :func:`mdh_table_csv`: the corrected chain as a modified Denavit-Hartenberg (Craig)
@@ -51,18 +52,23 @@ def _key(name: str) -> str:
     return json.dumps(name)
 
 
-def kinematics_yaml(nominal, corrected, joints=None, chains: str | None = None) -> str:
+def kinematics_yaml(nominal, corrected, joints=None, chains: str | None = None,
+                    fixed=()) -> str:
     """The corrected URDF origins of every chain joint as YAML text.
 
     nominal: the robot the calibration started from (its rpy are the reference the
     corrected triples stay closest to); corrected: ``result.corrected``. joints: the
     movable URDF joints to list (default: the chain's; with several chains, the union of
     theirs, ``result.error_model.joint_names``); chains: how the title names the chains
-    (default "base -> tip"). Applying the values to the nominal URDF's ``<origin>``
-    elements reproduces the corrected model.
+    (default "base -> tip"). fixed: (name, nominal origin, corrected origin) [(4, 4)] of
+    fixed joints the corrected URDF changes too (a flush face's tilt,
+    :mod:`kincal.export.contact_fold`), listed after them. Applying the values to the
+    nominal URDF's ``<origin>`` elements reproduces the corrected model.
     """
     names = tuple(corrected.joint_names if joints is None else joints)
     old, new = nominal.urdf_origins(names), corrected.urdf_origins(names)
+    for name, before, after in fixed:
+        names, old[name], new[name] = names + (name,), before, after
     lines = [f"# kincal: corrected joint origins of {corrected.name} "
              f"({chains or f'{corrected.base} -> {corrected.tip}'})",
              "# per joint: the <origin> of the URDF joint, the pose of the joint frame in its",

@@ -53,6 +53,11 @@ class Fold:
     origin: np.ndarray
     sets: tuple[int, ...]
 
+    @property
+    def nominal(self) -> np.ndarray:
+        """(4, 4) the joint's URDF origin before the fold [m]."""
+        return self.origin @ np.linalg.inv(self.change)
+
     def describe(self) -> str:
         rx, ry = (math.degrees(v) for v in self.tilts)
         return (f"the contact face's tilt (rx {rx:+.4f} deg, ry {ry:+.4f} deg against "

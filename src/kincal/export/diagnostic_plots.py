@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 # the figure and save helpers are shared with the other plots on purpose: one look
-from kincal.export.plots import _COLORS, PngText, _figure, _save, equal_axes_mm
+from kincal.export.plots import _COLORS, PngText, _figure, _save, equal_axes_mm, error_label
 
 
 def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
@@ -35,9 +35,7 @@ def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
     step = max(1, len(k) // 20)
     ax.set_xticks(k[::step], [str(int(r)) for r in np.asarray(s.rows)[::step]], fontsize=7)
     ax.set_xlabel("sample (line in the data file)")
-    ax.set_ylabel({"point": "position", "pose": "position and orientation",
-                   "distance": "distance", "plane": "distance to the plane",
-                   "flush": "height"}.get(s.kind, "sample") + " error (mm)")
+    ax.set_ylabel(error_label(s.kind))
     what = "" if len(result.sets) == 1 else f" of set {set_index + 1} ({s.kind}, {s.source})"
     ax.set_title(f"Residuals per sample{what}, before and after calibration", fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)

@@ -81,7 +81,8 @@ def validation_section(validations) -> str:
         f"<p>{_e(v.headline())}</p><table>{head}" + "".join(
             f'<tr><td class="name">{_e(name)}</td><td>{b:.4f}</td><td>{a:.4f}</td></tr>'
             for name, b, a in v.table()) + "</table>" for v in validations)
+    axes = ("Per axis: root mean square of the residual component in the measurement frame; "
+            if any(v.per_axis for v in validations) else "")  # not for contacts, distances
     return (tables + "<p class=\"muted\">Frames from the calibration (not refitted on the "
-            "held-out data), as <code>kincal evaluate --frames</code> does. Per axis: root mean "
-            "square of the residual component in the measurement frame; norm: mean, rms "
-            "and max of the error per sample.</p>")
+            f"held-out data), as <code>kincal evaluate --frames</code> does. {axes}norm: mean, "
+            "rms and max of the error per sample.</p>")

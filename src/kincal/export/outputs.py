@@ -219,7 +219,8 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         elif o.yaml is not None:
             files.append((o.yaml, prov.under_title(kinematics_yaml(
                 result.robot, result.corrected, joints=result.error_model.joint_names,
-                chains=_chains_title(result)))))
+                chains=_chains_title(result),
+                fixed=[(f.joint, f.nominal, f.origin) for f in made]))))
         if o.mdh is not None:
             files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,

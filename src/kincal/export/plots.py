@@ -162,13 +162,21 @@ def plot_point_sets(calibration_mm, validation_mm, path, *, highlight_index=None
     return _save(fig, path, overwrite, source)
 
 
+def error_label(kind: str) -> str:
+    """The axis label of a set's per-sample errors [mm], by its measurement kind."""
+    return {"point": "position", "pose": "position and orientation", "distance": "distance",
+            "plane": "distance to the plane", "flush": "height"}.get(kind, "sample") + " error (mm)"
+
+
 def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
                              title: str = "Position error distribution",
-                             overwrite: bool = False, source: PngText = "kincal") -> Path | bytes:
-    """Box plots (with the points) of per-pose position errors [mm], one per method.
+                             overwrite: bool = False, source: PngText = "kincal",
+                             ylabel: str = "position error (mm)") -> Path | bytes:
+    """Box plots (with the points) of per-pose errors [mm], one per method.
 
     series: (label, (N,) errors [mm]) pairs, drawn left to right. A log axis is used
     when the largest median is over 20 times the smallest, so all boxes stay readable.
+    ylabel: what the errors are (:func:`error_label` of a set's kind).
     """
     labels = [s[0] for s in series]
     data = [np.asarray(s[1], float) for s in series]
@@ -186,7 +194,7 @@ def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
     meds = [np.median(d) for d in data if d.size]
     if meds and min(meds) > 0 and max(meds) / min(meds) > 20:
         ax.set_yscale("log")
-    ax.set_ylabel("position error (mm)")
+    ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)
     ax.tick_params(axis="x", labelsize=8)
@@ -315,8 +323,8 @@ def calibration_figures(result, source: PngText = "kincal") -> list[tuple[str, b
         what = "" if len(result.sets) == 1 else f" of set {i + 1} ({s.kind}, {s.source})"
         title = (f"Calibration residuals{what}, {len(after)} samples; before: mean "
                  f"{s.before.mean:.3f}, max {s.before.max:.3f} mm")
-        out.append((_residuals_png(i), png_bytes(plot_error_distributions(series, None, title=title,
-                                                        source=source))))
+        out.append((_residuals_png(i), png_bytes(plot_error_distributions(
+            series, None, title=title, source=source, ylabel=error_label(s.kind)))))
     kin = list(result.parameters[:result.layout.n_kinematic])
     if any(p.status == "identified" for p in kin):
         how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")

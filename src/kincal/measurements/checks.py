@@ -108,16 +108,41 @@ def distinct_poses(q: np.ndarray) -> int:
     return int(np.unique(np.round(q, 9), axis=0).shape[0])
 
 
+TOOL_RATIO = 3.0  # a tool point farther from the tip than this many chain lengths: a unit slip
+
+
+def tool_unit_warnings(error_model, tool_guess) -> list[str]:
+    """A tool point guess [m] farther from the tip frame than TOOL_RATIO times the chain's
+    length: millimetres given as metres (a contact set has no positions to tell it by; the
+    gate then refuses the lever arm's motion, not naming the cause)."""
+    if tool_guess is None:
+        return []
+    from kincal.models.geometry import chain_length
+
+    em = error_model
+    frames = em.joint_frames()  # the tip frame at zero joint values, from the last placed frame
+    length = chain_length(frames, frames[-1] @ np.linalg.inv(em.joint_offsets[-1]) @ em.T_last_tip)
+    far = float(np.linalg.norm(tool_guess))
+    if far <= TOOL_RATIO * length:
+        return []
+    return [f"the tool point guess (--tool-offset) lies {far:.4g} m from the tip frame, "
+            f"{far / length:.0f} times the chain's length ({length:.3g} m): were its values "
+            "millimetres? --tool-offset is in the data's --length-unit"]
+
+
 def warn_units(kinds, tool_guess=None) -> None:
-    """Warn (:class:`~kincal.errors.KincalWarning`) :func:`unit_warnings` of each kind model:
-    a fit's start does, and so does a problem evaluated without a fit (evaluate --frames)."""
+    """Warn (:class:`~kincal.errors.KincalWarning`) :func:`unit_warnings` of each kind model
+    and :func:`tool_unit_warnings` of each chain: a fit's start does, and so does a problem
+    evaluated without a fit (evaluate --frames)."""
     import warnings
 
     from kincal.errors import KincalWarning
 
+    messages = []
     for km in kinds:
-        for message in unit_warnings(km, tool_guess):
-            warnings.warn(message, KincalWarning)
+        messages += unit_warnings(km, tool_guess) + tool_unit_warnings(km.error_model, tool_guess)
+    for message in dict.fromkeys(messages):
+        warnings.warn(message, KincalWarning)
 
 
 def set_warnings(data, geometry, backlash=()) -> list[str]:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from kincal.errors import DataError
 from kincal.measurements.csv_table import csv_line
-from kincal.measurements.data import Measurements
+from kincal.measurements.data import Measurements, joint_column_names
 from kincal.measurements.distance import DistanceData, DistanceKind
 from kincal.measurements.flush import FlushData, FlushKind, planning_set
 from kincal.measurements.kind import SampleSet
@@ -54,8 +54,10 @@ def kind_model(error_model, data, backlash=(), compliance=(), torque=None):
     return cls(error_model, data, backlash, compliance, torque)
 
 
-def header_of(path) -> list[str]:
-    """The column names of a CSV file (the reader that follows gives the notes)."""
+def header_of(path, columns=()) -> list[str]:
+    """The column names of a CSV file (the reader that follows gives the notes). columns:
+    the names the file should hold (the chain joints' columns), for the shift that would
+    fit a header that does not fit its first row."""
     import warnings
 
     from kincal.errors import KincalNote
@@ -63,7 +65,7 @@ def header_of(path) -> list[str]:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalNote)
-        return list(read_columns(path, [], header_only=True).header)
+        return list(read_columns(path, [], optional=columns, header_only=True).header)
 
 
 def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="rad",
@@ -79,7 +81,7 @@ def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="
     ignored silently)."""
     from kincal.measurements.orientation_columns import DEFAULT_FORMAT, found_columns
 
-    header = header_of(path)
+    header = header_of(path, joint_column_names(joint_names, joint_columns).values())
     pos = tuple(position_columns) if position_columns else ("x", "y", "z")
     has_pos = all(c in header for c in pos)
     quat = tuple(orientation_columns) if orientation_columns else QUATERNION_COLUMNS
