@@ -17,14 +17,10 @@ import pytest
 from kincal import Measurements, Robot, calibrate
 from kincal.cli.main import main
 from kincal.errors import ImplausibleResultError, NotConvergedError
-from kincal.identification.plausibility import (
-    Evidence,
-    Thresholds,
-    _aligned_distances,
-    chain_length,
-    judge,
-    reach,
-)
+from kincal.identification.plausibility import Evidence, Thresholds, judge
+from kincal.identification.tool_motion import reach
+from kincal.models.geometry import chain_length
+from kincal.rotations import aligned_distances as _aligned_distances
 from kincal.rotations import rotx, rotz
 
 
@@ -418,6 +414,40 @@ def test_branches_hanging_from_the_base_name_a_moving_base():
                           residual_rms_mm=70, bases=("pelvis",)))
     assert any("hang from pelvis (leg_l1)" in c for c in far.causes)
 
+
+
+def test_orientation_left_far_off_after_calibration_is_a_finding():
+    """A flush face far from flush after calibration (or a pose's orientation far off): the
+    model does not describe the data, whatever the heights say; half a degree is real
+    data's, and sets without orientations have none to judge."""
+    tilt = dict(orientation_what="tilt against the plane", orientation_rms_deg=45.9)
+    assert not judge(_evidence(orientation_median_deg=0.49, **tilt)).findings
+    assert not judge(_evidence()).findings  # points: no orientation (None)
+    found = judge(_evidence(orientation_median_deg=36.5, off_chain_columns=(
+        "arm_left_6_joint", "arm_left_7_joint"), **tilt)).findings
+    assert [f.kind for f in found] == ["orientation"] and found[0].threshold == 5.0
+    assert "tilt against the plane after calibration is 36.5 deg" in found[0].message
+    assert found[0].causes[0].startswith("a tip frame that does not match the data: the file "
+                                         "has columns for URDF joints beyond")
+
+
+def test_talos_touches_on_a_tip_two_joints_short_are_refused(tmp_path, capsys):
+    """TALOS's flush touches calibrated to arm_left_5_link instead of the gripper: the
+    heights pass the residual criterion (9 mm of a 2.2 m reach), the tilts stay 36 deg off
+    (median): refused in one line naming the tip, nothing written; the right tip calibrates."""
+    from test_tree_paths import _talos_study
+
+    study = _talos_study()
+    urdf, train = study.talos_urdf(), str(study.DATA / "left_train.csv")
+    argv = ["calibrate", str(urdf), train, "--base", "left_sole_link", "--on-plane", "--flush",
+            "--tool-offset", "0", "0", "-0.12", "--out", str(tmp_path / "cal.urdf")]
+    capsys.readouterr()
+    assert main(argv + ["--tip", "arm_left_5_link"]) != 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(err) == 1 and "the tilt against the plane after calibration is 36" in err[0]
+    assert "Likely cause: a tip frame that does not match the data" in err[0]
+    assert not (tmp_path / "cal.urdf").exists()
+    assert main(argv + ["--tip", "gripper_left_base_link"]) == 0
 
 def test_talos_from_the_urdf_root_names_the_moving_base(tmp_path, capsys):
     """The TALOS touches calibrated from the URDF's root (the default base, the pelvis,

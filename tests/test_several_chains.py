@@ -464,7 +464,7 @@ def test_gate_judges_every_chain_not_only_the_first(tmp_path):
     """A second chain whose own branch the data say is far from its URDF (another robot's
     arm: a private origin moved by a third of its reach) is refused by the corrections
     finding, though the first chain barely changes."""
-    from kincal.identification.plausibility import chain_length
+    from kincal.models.geometry import chain_length
 
     robots, joints = _tree(tmp_path)
     rng = np.random.default_rng(5)
@@ -484,7 +484,7 @@ def test_gate_judges_every_chain_not_only_the_first(tmp_path):
     # the first chain alone moves far less: the finding is the second chain's
     first = robots[0].with_origins(res.corrected.urdf_origins(tuple(res.error_model.joint_names)))
     q = _q(robots[0], 300, np.random.default_rng(0))
-    from kincal.identification.plausibility import _aligned_distances
+    from kincal.rotations import aligned_distances as _aligned_distances
 
     d = _aligned_distances(robots[0].tip_poses(q)[:, :3, 3], first.tip_poses(q)[:, :3, 3])
     assert np.sqrt(np.mean(d ** 2)) * 1e3 < 0.5 * ev.change_rms_mm

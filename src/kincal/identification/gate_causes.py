@@ -72,6 +72,20 @@ def fit_causes(ev: Evidence, th: Thresholds) -> list[str]:
     return out
 
 
+def orientation_causes(ev: Evidence) -> tuple[str, ...]:
+    """Why orientations (a pose's, a flush face's tilt) stay far off after calibration: the
+    clues in the file first (units; a base that moves with the logged legs: TALOS's touches
+    from the pelvis, 13 deg median; columns beyond the tip: with --tip arm_left_5_link, two
+    joints short of the gripper, 36 deg; arm_left_6_link 24 deg), then the tip."""
+    beyond = (f"a tip frame that does not match the data: the file has columns for URDF "
+              f"joints beyond the chain's ends ({names_text(ev.off_chain_columns)}); check --tip",
+              ) if ev.off_chain_columns else ()
+    return (*unit_causes(ev), *moving_base_cause(ev), *beyond,  # the clues the file gives
+            *(() if beyond else ("a tip frame that does not match the data (check --tip)",)),
+            "orientations in another convention or frame than the file's, or a face that does "
+            "not lie flush at every touch", "a URDF of another robot")
+
+
 def moving_base_cause(ev: Evidence) -> tuple[str, ...]:
     """A base that moves against the instrument: the data log joints of other branches that
     hang from the base's own link (a whole robot's log), and the base moves with them in

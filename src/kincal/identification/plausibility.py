@@ -40,6 +40,12 @@ Criteria (defaults in :class:`Thresholds`), and why:
   shuffled rows by 38-56 % (``python scripts/plausibility_cases.py``). One
   parameter check remains: an identified length correction above half of L, which no
   drift measured comes near (9.5 %).
+- **Orientation**: the median orientation error after calibration (a pose's; a flush
+  touch's tilt against its plane, which the residual's heights do not hold) above 5 deg.
+  Real data leave about half a degree (TALOS flush touches 0.49 deg median, TIAGo motion
+  capture 0.9 deg RMS); TALOS's touches on a tip two or one joints short of the gripper
+  (``--tip arm_left_5_link``, ``arm_left_6_link``) leave 36 and 24 deg with heights the
+  residual lets through (9.2 and 2.7 mm of a 2.2 m reach).
 - **Units** (from :mod:`kincal.measurements.checks`, confident cases only): the measured
   positions spread 300 times more (or less) than the nominal tip motion (millimetres read
   as metres gives about 1000; the warning level stays at 30); revolute joint values read
@@ -68,19 +74,17 @@ import numpy as np
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.identification.orientation_convention import checked
 from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes, fit_causes,
-                                                moving_base_cause, names_text, overfit_cause,
+                                                moving_base_cause, names_text,
+                                                orientation_causes, overfit_cause,
                                                 unit_causes, weak_cause)
+from kincal.identification.statistics import angle_label
 from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, duplicate_samples, spread
-from kincal.models import per_geometry
-from kincal.models.kinematics import ChainKinematics
-from kincal.models.geometry import chain_length  # the yardstick's chain part
-from kincal.rotations import aligned_distances as _aligned_distances
+from kincal.identification.tool_motion import change, n_chains, tool_points
 
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
     from kincal.identification.result import CalibrationResult
 
-N_CONFIGURATIONS = 300  # joint configurations for the workspace comparison (seeded)
 MAX_UNIT_POSES = 500  # poses for the unit clue (forward kinematics through the robot)
 
 
@@ -99,6 +103,8 @@ class Thresholds:
         the reach) when the error after calibration is also above unexplained_floor_mm.
     unexplained_floor_mm: RMS error [mm] below which a low explained fraction is left
         alone (a nearly still point measured with a fine instrument).
+    orientation_deg: median orientation error after calibration [deg] (a pose's, a flush
+        touch's tilt against its plane) above which the model does not describe the data.
     """
 
     residual: float = 0.02
@@ -107,6 +113,7 @@ class Thresholds:
     length_ratio: float = 10 * UNIT_RATIO
     explained: float = 0.4
     unexplained_floor_mm: float = 0.5
+    orientation_deg: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -156,6 +163,9 @@ class Evidence:
     #                        the one penalty weight ("lambda 0.001 chosen by cross-validation")
     convention_doubts: tuple[str, ...] = ()  # pose files read in a convention in doubt
     duplicates: tuple[str, ...] = ()  # samples repeated exactly (checks.duplicate_samples)
+    orientation_median_deg: float | None = None  # the worst set's orientation errors after
+    orientation_rms_deg: float | None = None  # calibration (poses; flush: the tilts) [deg]
+    orientation_what: str = ""  # what they are ("tilt against the plane", "orientation")
 
     @property
     def explained(self) -> float:
@@ -168,8 +178,9 @@ class Evidence:
 class Finding:
     """One broken criterion: what, how large, against which threshold, and why (likely).
 
-    kind: "residual", "corrections", "length_correction", "length_unit", "angle_unit",
-    "not_converged" or "orientation_convention" (a pose file's convention in doubt). value
+    kind: "residual", "orientation", "unexplained", "corrections", "length_correction",
+    "length_unit", "angle_unit", "not_converged" or "orientation_convention" (a pose file's
+    convention in doubt). value
     and threshold share ``unit``. parameters: those the finding is about (largest first).
     causes: likely causes, most likely first."""
 
@@ -277,6 +288,13 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             f"reach ({th.residual * L_mm:.3g} mm of {L_mm:.0f} mm): a geometric calibration "
             "leaves a fraction of a millimetre to a few", ev.residual_median_mm,
             th.residual * L_mm, "mm", causes=tuple(fit_causes(ev, th))))
+    if ev.orientation_median_deg is not None and ev.orientation_median_deg > th.orientation_deg:
+        out.append(Finding(
+            "orientation", f"the {ev.orientation_what} after calibration is "
+            f"{ev.orientation_median_deg:.4g} deg (median; RMS {ev.orientation_rms_deg:.4g} "
+            f"deg), above {th.orientation_deg:g} deg: a geometric calibration leaves a fraction "
+            "of a degree", ev.orientation_median_deg, th.orientation_deg, "deg",
+            causes=orientation_causes(ev)))
     e = ev.explained
     if (not out or out[-1].kind != "residual") and math.isfinite(e) and e < th.explained \
             and ev.residual_rms_mm > th.unexplained_floor_mm:
@@ -335,11 +353,6 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
 
 
 # ------------------------------------------------------------------ gather
-def reach(chain_m: float, tool_m: float) -> float:
-    """[m] the gate's yardstick (module notes): the chain plus the capped tool distance."""
-    return chain_m + min(tool_m, max(chain_m, 1.0))
-
-
 def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     """The evidence of ``result``, calibrated by ``problem`` (one or many sets of any kind).
 
@@ -348,7 +361,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     residual is the worst set's (median and RMS of its sample errors); the spread and the
     unit clue come from the first set that measures positions."""
     lay = result.layout
-    L, d, rms = max((_change(problem, result, k) for k in range(_n_chains(problem))),
+    L, d, rms = max((change(problem, result, k) for k in range(n_chains(problem))),
                     key=lambda c: c[2] / c[0])  # the worst chain's
     corrections = []
     for p, kinematic in zip(result.parameters, lay.is_kinematic.tolist(), strict=True):
@@ -373,7 +386,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             first = first[np.linspace(0, len(first) - 1, MAX_UNIT_POSES).astype(int)]
         guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
             problem.options.tool_guess, float)
-        s_pred = spread(_tool_points(problem.robot, dt.joint_values[first], guess))
+        s_pred = spread(tool_points(problem.robot, dt.joint_values[first], guess))
         s_all = spread(dt.positions)  # = the subset's when that is every row (in order)
         s_meas = s_all if len(first) == len(dt) else spread(dt.positions[first])
         ratio = s_meas / s_pred if s_pred >= 1e-3 else float("nan")
@@ -395,6 +408,10 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             angle_max = top
             outside = bool(v < gi.lower[c] - 1e-6 or v > gi.upper[c] + 1e-6)
     off_chain, elsewhere, at_base = problem.chains.off_chain_columns(datas)
+    # the worst set's orientation errors after calibration (poses; flush: the tilts)
+    turned = [(a.median, a.rms, angle_label(s.kind)) for s in result.sets
+              if (a := s.orientation_after) is not None]
+    o_median, o_rms, o_what = max(turned) if turned else (None, None, "")
     return Evidence(
         reach_m=L, residual_median_mm=worst.after.median, residual_rms_mm=worst.after.rms,
         before_rms_mm=worst.before.rms,
@@ -413,7 +430,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         convention_doubts=tuple(d for d in (getattr(checked(type(problem), robot, dt),
                                                     "convention_doubt", "")
                                             for dt, robot in zip(datas, problem.robots)) if d),
-        duplicates=tuple(duplicate_samples(datas)))
+        duplicates=tuple(duplicate_samples(datas)), orientation_median_deg=o_median,
+        orientation_rms_deg=o_rms, orientation_what=o_what)
 
 
 def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str, ...], str]:
@@ -431,64 +449,3 @@ def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str
     return names, ", ".join(fit.scale_text(c) for c in classes
                             if c in ("length", "twist", "offset") and c in fit.classes
                             and not fit.given[fit.classes.index(c)])
-
-
-def _n_chains(problem: CalibrationProblem) -> int:
-    chains = getattr(problem, "chains", None)
-    return len(chains.chain_robots) if chains is not None and chains.several else 1
-
-
-def _change(problem: CalibrationProblem, result: CalibrationResult,
-            chain: int) -> tuple[float, np.ndarray, float]:
-    """(reach [m], (M,) distances [mm], their RMS) of chain ``chain`` (each is judged): how
-    far the corrected model moves its tool point (the chain's first set's; none: the tip)
-    from the nominal one's at seeded configurations over the joint limits (a turn if none)."""
-    lay = result.layout
-    if _n_chains(problem) == 1:
-        robot, corrected, first = problem.robot, result.corrected, 0
-    else:
-        robot = problem.chains.chain_robots[chain]
-        corrected = robot.with_origins(result.corrected.urdf_origins(
-            tuple(problem.error_model.joint_names)))
-        first = problem.chains.of_set.index(chain)
-    g = robot.geometry
-    tool_start, tool = np.zeros(3), np.zeros(3)
-    name = lay.set_prefix(first) + "tool."
-    if name + "x" in lay.frame_names(first):  # by name: a flush set stores z, x, y
-        k = [lay.index(name + c) for c in "xyz"]
-        tool_start, tool = result.x_start[k], result.x[k]
-    # the chain's length, the configurations and their joint motions' coefficients depend
-    # on the robot alone: kept per robot (models.per_geometry); both robots' points by the
-    # same arithmetic
-    q, motions, length = per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
-        *_configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))
-    L = reach(length, float(np.linalg.norm(tool_start)))
-    d = _aligned_distances(_tool_points(robot, q, tool_start, motions),
-                           _tool_points(corrected, q, tool, motions)) * 1e3
-    return L, d, math.sqrt(float(np.add.reduce(d * d)) / d.size)  # np.sqrt(np.mean(d ** 2))
-
-
-def _configurations(robot) -> tuple[np.ndarray, np.ndarray]:
-    """(q (M, n), motions), read-only: the gate's seeded joint values over the robot's
-    limits (unbounded revolute: a turn) and their joint motions' coefficients
-    (:meth:`kincal.models.kinematics.ChainKinematics.motions`), which the corrected robot's
-    chain shares (its placements alone differ)."""
-    g = robot.geometry
-    span = np.where(np.array(g.kinds) == "prismatic", 1.0, math.pi)
-    lo = np.maximum(np.where(np.isfinite(g.lower), g.lower, -span), -span)
-    hi = np.minimum(np.where(np.isfinite(g.upper), g.upper, span), span)
-    q = np.random.default_rng(0).uniform(lo, hi, (N_CONFIGURATIONS, g.n))
-    motions = ChainKinematics.of(g).motions(q)
-    q.flags.writeable = motions.flags.writeable = False
-    return q, motions
-
-
-def _tool_points(robot, q: np.ndarray, tool: np.ndarray, motions=None) -> np.ndarray:
-    """(M, 3) the point ``tool`` of the tip frame [m], in the base frame, at joint values q
-    (``motions``: their coefficients, if made before).
-
-    Through the vectorised chain of the robot's own geometry (read from its Pinocchio
-    model, so the corrected robot's is what the URDF export writes): a few products over
-    all configurations per joint instead of a Pinocchio call per configuration; tests
-    check it against :meth:`kincal.robot.Robot.tip_poses`."""
-    return ChainKinematics.of(robot.geometry).tip_points(q, tool, motions)
