@@ -431,6 +431,18 @@ def test_orientation_left_far_off_after_calibration_is_a_finding():
                                          "has columns for URDF joints beyond")
 
 
+
+def test_a_tool_point_chain_lengths_from_its_tip_is_a_finding():
+    """A tool point identified several chain lengths from the tip: the data did not fix it
+    (for plane contacts the first cause: a flat face's touches without --flush)."""
+    assert not judge(_evidence(tool_far=(0.12, 2.1, "t.csv", "flush"))).findings
+    found = judge(_evidence(tool_far=(10.1, 2.1, "t.csv", "plane"))).findings
+    assert [f.kind for f in found] == ["tool_point"] and found[0].threshold == pytest.approx(6.3)
+    assert "identified 10.1 m from the tip frame, 5 times the chain's length" in found[0].message
+    assert "with --flush each touch also gives the face's two tilts" in found[0].causes[0]
+    points = judge(_evidence(tool_far=(10.1, 2.1, "p.csv", "point"))).findings
+    assert "--fix tool.x tool.y tool.z" in points[0].causes[0]
+
 def test_talos_touches_on_a_tip_two_joints_short_are_refused(tmp_path, capsys):
     """TALOS's flush touches calibrated to arm_left_5_link instead of the gripper: the
     heights pass the residual criterion (9 mm of a 2.2 m reach), the tilts stay 36 deg off
@@ -443,11 +455,21 @@ def test_talos_touches_on_a_tip_two_joints_short_are_refused(tmp_path, capsys):
             "--tool-offset", "0", "0", "-0.12", "--out", str(tmp_path / "cal.urdf")]
     capsys.readouterr()
     assert main(argv + ["--tip", "arm_left_5_link"]) != 0
-    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    err = [line for line in capsys.readouterr().err.splitlines()
+           if line.startswith("kincal: error:")]
     assert len(err) == 1 and "the tilt against the plane after calibration is 36" in err[0]
     assert "Likely cause: a tip frame that does not match the data" in err[0]
     assert not (tmp_path / "cal.urdf").exists()
     assert main(argv + ["--tip", "gripper_left_base_link"]) == 0
+    # the same touches without --flush, as plane contacts: a 10 m tool point, refused
+    capsys.readouterr()
+    plane = [a for a in argv if a != "--flush"] + ["--tip", "gripper_left_base_link",
+                                                  "--overwrite"]
+    (tmp_path / "cal.urdf").unlink()
+    assert main(plane) != 0 and not (tmp_path / "cal.urdf").exists()
+    err = [line for line in capsys.readouterr().err.splitlines()
+           if line.startswith("kincal: error:")]
+    assert len(err) == 1 and "Likely cause: contacts of a flat face read as plane" in err[0]
 
 def test_talos_from_the_urdf_root_names_the_moving_base(tmp_path, capsys):
     """The TALOS touches calibrated from the URDF's root (the default base, the pelvis,

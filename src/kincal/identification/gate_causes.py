@@ -86,6 +86,17 @@ def orientation_causes(ev: Evidence) -> tuple[str, ...]:
             "not lie flush at every touch", "a URDF of another robot")
 
 
+def tool_causes(ev: Evidence) -> tuple[str, ...]:
+    """Why a tool point is identified several chain lengths from its tip: data that do not
+    fix it (TALOS's flush touches read as plane contacts, without --flush: 10.1 m, std error
+    3 m), or a unit slip."""
+    flush = ("contacts of a flat face read as plane contacts (one distance per touch): with "
+             "--flush each touch also gives the face's two tilts",) if ev.tool_far[3] == "plane" else ()
+    return (*flush, "data that do not fix the tool point: give --tool-offset and hold it "
+            "(--fix tool.x tool.y tool.z)", *unit_causes(ev),
+            "--tool-offset or the positions in another length unit than the data's")
+
+
 def moving_base_cause(ev: Evidence) -> tuple[str, ...]:
     """A base that moves against the instrument: the data log joints of other branches that
     hang from the base's own link (a whole robot's log), and the base moves with them in

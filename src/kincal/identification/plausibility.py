@@ -46,6 +46,10 @@ Criteria (defaults in :class:`Thresholds`), and why:
   capture poses 0.50 deg RMS, 0.91 held out); TALOS's touches on a tip two or one joints short of the gripper
   (``--tip arm_left_5_link``, ``arm_left_6_link``) leave 36 and 24 deg with heights the
   residual lets through (9.2 and 2.7 mm of a 2.2 m reach).
+- **Tool point**: a set's identified tool point more than 3 chain lengths from its tip
+  frame (:data:`kincal.measurements.checks.TOOL_RATIO`): the data did not fix it. TALOS's
+  flush touches read as plane contacts (``--flush`` forgotten): 10.1 m, std error 3 m,
+  with corrections and residual that pass; real tools sit within one chain length.
 - **Units** (from :mod:`kincal.measurements.checks`, confident cases only): the measured
   positions spread 300 times more (or less) than the nominal tip motion (millimetres read
   as metres gives about 1000; the warning level stays at 30); revolute joint values read
@@ -75,11 +79,12 @@ from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.identification.orientation_convention import checked
 from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes, fit_causes,
                                                 moving_base_cause, names_text,
-                                                orientation_causes, overfit_cause,
+                                                orientation_causes, overfit_cause, tool_causes,
                                                 unit_causes, weak_cause)
 from kincal.identification.statistics import angle_label
-from kincal.measurements.checks import DEGREES_AS_RADIANS, UNIT_RATIO, duplicate_samples, spread
-from kincal.identification.tool_motion import change, n_chains, tool_points
+from kincal.measurements.checks import (DEGREES_AS_RADIANS, TOOL_RATIO, UNIT_RATIO,
+                                        duplicate_samples, spread)
+from kincal.identification.tool_motion import change, farthest_tool, n_chains, tool_points
 
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
@@ -166,6 +171,7 @@ class Evidence:
     orientation_median_deg: float | None = None  # the worst set's orientation errors after
     orientation_rms_deg: float | None = None  # calibration (poses; flush: the tilts) [deg]
     orientation_what: str = ""  # what they are ("tilt against the plane", "orientation")
+    tool_far: tuple = ()  # (m, chain m, set, kind) of the tool point farthest from its tip
 
     @property
     def explained(self) -> float:
@@ -295,6 +301,12 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             f"deg), above {th.orientation_deg:g} deg: a geometric calibration leaves a fraction "
             "of a degree", ev.orientation_median_deg, th.orientation_deg, "deg",
             causes=orientation_causes(ev)))
+    if ev.tool_far and ev.tool_far[0] > TOOL_RATIO * ev.tool_far[1]:
+        far, length, source, kind = ev.tool_far
+        out.append(Finding(
+            "tool_point", f"the tool point of {source} is identified {far:.4g} m from the tip "
+            f"frame, {far / length:.0f} times the chain's length ({length:.3g} m)", far,
+            TOOL_RATIO * length, "m", causes=tool_causes(ev)))
     e = ev.explained
     if (not out or out[-1].kind != "residual") and math.isfinite(e) and e < th.explained \
             and ev.residual_rms_mm > th.unexplained_floor_mm:
@@ -431,7 +443,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
                                                     "convention_doubt", "")
                                             for dt, robot in zip(datas, problem.robots)) if d),
         duplicates=tuple(duplicate_samples(datas)), orientation_median_deg=o_median,
-        orientation_rms_deg=o_rms, orientation_what=o_what)
+        orientation_rms_deg=o_rms, orientation_what=o_what,
+        tool_far=farthest_tool(problem, result) or ())
 
 
 def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str, ...], str]:

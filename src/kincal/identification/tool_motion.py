@@ -56,12 +56,37 @@ def change(problem: CalibrationProblem, result: CalibrationResult,
     # the chain's length, the configurations and their joint motions' coefficients depend
     # on the robot alone: kept per robot (models.per_geometry); both robots' points by the
     # same arithmetic
-    q, motions, length = per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
+    q, motions, _ = per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
         *configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))
-    L = reach(length, float(np.linalg.norm(tool_start)))
+    L = reach(chain_length_of(robot), float(np.linalg.norm(tool_start)))
     d = aligned_distances(tool_points(robot, q, tool_start, motions),
                            tool_points(corrected, q, tool, motions)) * 1e3
     return L, d, math.sqrt(float(np.add.reduce(d * d)) / d.size)  # np.sqrt(np.mean(d ** 2))
+
+
+def chain_length_of(robot) -> float:
+    """[m] the robot's chain length at zero joint values (the reach's chain part)."""
+    g = robot.geometry
+    return per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
+        *configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))[2]
+
+
+def farthest_tool(problem: CalibrationProblem, result: CalibrationResult):
+    """(distance [m], its chain's length [m], the set, its kind) of the identified tool point
+    farthest from its tip frame in chain lengths (tool.*, tool2.*, ... of every set that has
+    one); None when no set has a tool point."""
+    out = None
+    for s, robot in zip(result.sets, problem.robots):
+        names = list(s.frame_names)
+        stems = [n[:-1] for n in names if n.startswith("tool") and n.endswith(".x")]
+        if not stems:
+            continue
+        length = max(chain_length_of(robot), 1e-9)
+        far = max(float(np.linalg.norm([s.frames[names.index(t + c)] for c in "xyz"]))
+                  for t in stems)
+        if out is None or far / length > out[0] / out[1]:
+            out = (far, length, s.source, s.kind)
+    return out
 
 
 def configurations(robot) -> tuple[np.ndarray, np.ndarray]:
