@@ -156,7 +156,7 @@ class Identifiability:
                 f"{big[0].amplification:.0f}x in effect ({big[0].describe()}): those kept "
                 "ones' corrections hold such combinations, not their own joints' errors "
                 "alone, and single corrected origins there are bookkeeping (the predictions "
-                "are the same); kincal analyze -v lists them")
+                "are the same); kincal analyze (and calibrate -v) lists them")
 
 
 def grouped(names) -> str:
