@@ -251,3 +251,28 @@ def test_robust_loss_lists_and_resists_outliers():
     assert abs(robust.x[k] - clean.x[k]) < 0.2 * abs(plain.x[k] - clean.x[k])
     assert "down-weighted" in robust.summary()
     assert len(dirty) == 60  # nothing dropped from the user's data
+
+
+@pytest.mark.parametrize("kind", ["flush", "plane", "point"])
+def test_radians_read_as_degrees_are_named_for_every_kind(kind, tmp_path):
+    """Joint values in radians read with --angle-unit deg: every value within +-6.8 'deg' of
+    zero. The hint was given for point files only (the other kinds did not keep the unit
+    the file was read in), and only when the values spanned under 3 deg."""
+    from kincal.measurements.checks import set_warnings
+    from kincal.measurements.sets import read_set_file
+
+    robot = Robot.load("ec66")
+    rng = np.random.default_rng(0)
+    lo, hi = robot.geometry.ranges()
+    q = rng.uniform(np.maximum(lo, -2.5), np.minimum(hi, 2.5), (20, robot.geometry.n))
+    cols = list(robot.joint_names) + (["x", "y", "z"] if kind == "point" else [])
+    rows = np.hstack([q, rng.normal(size=(20, 3))]) if kind == "point" else q
+    path = _csv(tmp_path, "\n".join([",".join(cols)] + [",".join(map(repr, r.tolist()))
+                                                        for r in rows]))
+    data = read_set_file(path, robot.joint_names, angle_unit="deg", on_plane=kind != "point",
+                         flush=kind == "flush")
+    said = set_warnings(data, robot.geometry)
+    assert any("were they radians? Drop --angle-unit deg" in m for m in said), said
+    assert not any("radians" in m for m in set_warnings(
+        read_set_file(path, robot.joint_names, on_plane=kind != "point", flush=kind == "flush"),
+        robot.geometry))

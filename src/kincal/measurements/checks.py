@@ -56,7 +56,12 @@ def angle_unit_warnings(joint_names, kinds, q, angle_unit: str, lower=None,
     if angle_unit == "rad" and biggest > DEGREES_AS_RADIANS:
         return [f"revolute joint values reach {biggest:.4g} rad ({biggest / np.pi:.1f} pi): were "
                 "they degrees? Read them with --angle-unit deg (Python: angle_unit='deg')"]
-    if angle_unit != "deg" or len(q) <= 3:
+    if angle_unit != "deg":
+        return []
+    if bounded and biggest <= np.radians(DEGREES_AS_RADIANS):  # as read: within +-6.8 "deg"
+        return [f"revolute joint values all lie within +-{np.degrees(biggest):.3g} deg of zero, "
+                "as radians would read as degrees: were they radians? Drop --angle-unit deg"]
+    if len(q) <= 3:
         return []
     spans = np.ptp(q[:, rev], axis=0)
     if float(spans.max()) < np.radians(3.0):

@@ -63,6 +63,7 @@ class DistanceData(SampleSet):
             k = int(np.argmax(v["sigma"] <= 0))
             raise DataError(f"{c.source}, line {c.rows[k]}, column 'sigma': must be > 0")
         return cls(joint_names=tuple(joint_names), joint_values=c.joint_values,
+                   angle_unit=angle_unit,
                    distances=v[distance_column] * L,
                    sigma=v["sigma"] * L if "sigma" in v else None, rows=c.rows,
                    source=c.source, approach=c.approach, ignored_columns=c.ignored)

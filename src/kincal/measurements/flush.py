@@ -134,7 +134,8 @@ class FlushData(SampleSet):
                             "'sigma' [length unit] or drop 'sigma_deg'")
         check_touch_counts(np.zeros(len(c.rows), int) if planes is None else planes, labels,
                            c.source)
-        return cls(joint_names=tuple(joint_names), joint_values=c.joint_values, planes=planes,
+        return cls(joint_names=tuple(joint_names), joint_values=c.joint_values,
+                   angle_unit=angle_unit, planes=planes,
                    labels=labels, sigma=v["sigma"] * L if "sigma" in v else None,
                    sigma_deg=v.get("sigma_deg"),
                    orientation_sigma_deg=orientation_sigma_deg,

@@ -68,6 +68,7 @@ class SampleSet:
     poses: np.ndarray | None = None
     ignored_columns: tuple[str, ...] = field(default=())
     fixed_joints: tuple[tuple[str, float], ...] = ()  # (joint, value [SI]) not in the file
+    angle_unit: str = "rad"  # how the file wrote revolute joints (for the unit checks)
 
     kind = "abstract"
 

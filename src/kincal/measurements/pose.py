@@ -138,6 +138,7 @@ class PoseData(SampleSet):
                 k = int(np.argmax(v[name] <= 0))
                 raise DataError(f"{c.source}, line {c.rows[k]}, column {name!r}: must be > 0")
         return cls(joint_names=tuple(joint_names), joint_values=c.joint_values,
+                   angle_unit=angle_unit,
                    positions=P, rotations=R,
                    sigma=v["sigma"] * L if "sigma" in v else None,
                    sigma_deg=v.get("sigma_deg"), orientation_sigma_deg=orientation_sigma_deg,
