@@ -299,3 +299,18 @@ def test_an_unreachable_orientation_is_named_as_the_cause(work, capsys):
 def _rows(path) -> list[str]:
     """Header and rows of a CSV kincal wrote, without its provenance (# lines)."""
     return [r for r in path.read_text().splitlines() if not r.startswith("#")]
+
+
+@pytest.mark.parametrize("option", ["--tip", "--base", "--fix", "--validate"])
+def test_an_option_of_several_values_before_the_data_names_what_it_took(option, capsys):
+    """`kincal calibrate ur5 --tip tool0 poses.csv ...`: --tip takes one frame per data file
+    and swallows the file, and argparse said only that the data are missing."""
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", "ur5", option, "tool0", "poses.csv", "--out", "c.urdf"])
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert exc.value.code == 2 and "the following arguments are required: data" in last
+    assert f"({option} took 'poses.csv' as one of its values: it takes several; give the " \
+           "data files right after the robot" in last
+    with pytest.raises(SystemExit):  # nothing swallowed: argparse's message alone
+        main(["calibrate", "ur5", "--out", "c.urdf"])
+    assert "took" not in capsys.readouterr().err
