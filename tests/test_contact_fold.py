@@ -172,3 +172,17 @@ def test_no_fold_where_another_chain_passes_through_the_joint(tmp_path, rng):
     assert any("also on the chain" in n for n in written.notes)
     frames = json.loads((tmp_path / "frames.json").read_text())
     assert frames["sets"][0]["frames"]["tool.rx"] != 0.0 and "tilts_in_urdf" not in frames
+
+
+def test_the_mdh_table_carries_the_folded_tilt(tmp_path, rng):
+    """The MD-H table written beside the URDF describes the same tip frame: its T_n_tip has
+    the face's tilt the URDF's fixed joint carries (FRAMES.json then holds zero tilts)."""
+    from test_cell_exports import _mdh_product
+
+    result = _result(rng)
+    write_calibration(result, Outputs(urdf=tmp_path / "cal.urdf", mdh=tmp_path / "mdh.csv"))
+    read = Robot.load(tmp_path / "cal.urdf", tip="flange")
+    q = random_joint_values(read.geometry, rng, 20)
+    got = _mdh_product((tmp_path / "mdh.csv").read_text(), q)
+    assert np.abs(got - read.tip_poses(q)).max() < 1e-9
+    assert np.abs(got - result.corrected.tip_poses(q)).max() > 1e-5  # the tilt, not nothing

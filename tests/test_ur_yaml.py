@@ -149,3 +149,31 @@ def test_api_refuses_an_empty_hash(calibrated, tmp_path):
         write_calibration(result, Outputs(urdf=tmp_path / "C.urdf", yaml=tmp_path / "K.yaml",
                                           yaml_format="ur", ur_hash="   "))
     assert not any(tmp_path.iterdir())
+
+
+def test_a_flush_face_tilt_stays_in_frames_json_beside_a_ur_kinematics_file(calibrated, tmp_path,
+                                                                            capsys):
+    """ur_description's kinematics file has no place for a flush face's tilt: with
+    --yaml-format ur it is not folded into the URDF (which the YAML must describe) and stays
+    in FRAMES.json, with a note; without it, the URDF carries it as before."""
+    import json
+
+    _, factory, _ = calibrated
+    flush = tmp_path / "flush.csv"
+    assert main(["simulate", str(XACRO), *_cli_args(factory), "--tip", "tool0", "--kind",
+                 "flush", "--center-m", "0.7", "0.0", "0.4", "--poses", "40", "--seed", "2",
+                 "--out", str(flush)]) == 0
+    common = ["calibrate", str(XACRO), str(flush), *_cli_args(factory), "--tip", "tool0",
+              "--on-plane", "--flush", "--tool-offset", "0", "0", "0.1"]
+    capsys.readouterr()
+    assert main(common + ["--out", str(tmp_path / "U.urdf"), "--frames-out",
+                          str(tmp_path / "U.json"), "--yaml-out", str(tmp_path / "U.yaml"),
+                          "--yaml-format", "ur"]) == 0
+    said = capsys.readouterr().out
+    assert "stays in FRAMES.json only: ur_description's kinematics file" in said
+    frames = json.loads((tmp_path / "U.json").read_text())
+    assert frames["sets"][0]["frames"]["tool.ry"] != 0.0 and "tilts_in_urdf" not in frames
+    assert main(common + ["--out", str(tmp_path / "K.urdf"), "--frames-out",
+                          str(tmp_path / "K.json")]) == 0
+    frames = json.loads((tmp_path / "K.json").read_text())
+    assert frames["sets"][0]["frames"]["tool.ry"] == 0.0 and frames["tilts_in_urdf"]

@@ -253,10 +253,12 @@ def mdh_table_problem(robot) -> str | None:
             "upward) is not; the corrected URDF and the YAML hold its origins")
 
 
-def mdh_table_csv(corrected) -> str:
+def mdh_table_csv(corrected, tip_change=None) -> str:
     """The corrected chain as an MD-H table with Hayati's beta (CSV text, SI units): the
     ``complete`` model's form, so nearly parallel axes (UR, EC66 joints 2-3-4) get a beta
     and finite lengths instead of MD-H's common normal thousands of metres away.
+    tip_change: (4, 4) the tip frame's change the corrected URDF makes beyond the chain (a
+    flush face's tilt, :mod:`kincal.export.contact_fold`), in ``T_n_tip``.
 
     Raises ExportError where the table cannot describe the corrected chain exactly, or a
     length in it exceeds ten times the chain's own length (a description no controller
@@ -300,7 +302,7 @@ def mdh_table_csv(corrected) -> str:
              "# T_base_tip(q) = T_base_0 A_1 ... A_n T_n_tip, the fixed transforms as x y z "
              "[m] roll pitch yaw [rad] (URDF rpy):",
              f"# T_base_0: {_xyz_rpy(m.T_base_0)}",
-             f"# T_n_tip: {_xyz_rpy(m.T_n_tip)}",
+             f"# T_n_tip: {_xyz_rpy(m.T_n_tip if tip_change is None else m.T_n_tip @ tip_change)}",
              "joint,type,a_m,alpha_rad,beta_rad,d_m,theta_rad"]
     for name, kind, row, beta in zip(m.joint_names, m.kinds, m.table, m.beta):
         a, alpha, d, theta = row

@@ -87,8 +87,10 @@ def corrected_urdf(result, readable: bool = True, add_frames: bool = False):
     return text, notes
 
 
-def _corrected(result, readable: bool = True, add_frames: bool = False):
-    """(text, export notes, the contact folds made)."""
+def _corrected(result, readable: bool = True, add_frames: bool = False,
+               no_fold: str | None = None):
+    """(text, export notes, the contact folds made). no_fold: why no contact face's tilt may
+    go into the URDF (another file written beside cannot carry it), or None."""
     from kincal.export.contact_fold import folds
     from kincal.export.readable_export import corrected_text, regauged_joints
 
@@ -98,12 +100,13 @@ def _corrected(result, readable: bool = True, add_frames: bool = False):
     text = edits.text
     made: tuple = ()
     said: tuple[str, ...] = ()
-    if add_frames:
-        from kincal.export.urdf_export import add_frames_of
+    if add_frames or no_fold:
+        if add_frames:
+            from kincal.export.urdf_export import add_frames_of
 
-        text = add_frames_of(result, text)
-        said = tuple(f"the contact face's tilt on {f.tip!r} stays in FRAMES.json only: "
-                     "--add-frames hangs the frames on the tip as identified"
+            text = add_frames_of(result, text)
+        why = no_fold or "--add-frames hangs the frames on the tip as identified"
+        said = tuple(f"the contact face's tilt on {f.tip!r} stays in FRAMES.json only: {why}"
                      for f in folds(result)[0])
     else:  # the added frames hang tool points on the tip as identified: no fold under them
         from kincal.export.urdf_export import edit_joint_origins
@@ -199,7 +202,10 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     if o.urdf is not None:
         from kincal.export.readback import check_readback
 
-        text, notes, made = _corrected(result, add_frames=o.add_frames)
+        text, notes, made = _corrected(result, add_frames=o.add_frames, no_fold=(
+            "ur_description's kinematics file (--yaml-format ur) has no place for it, and the "
+            "URDF written beside describes the same robot" if o.yaml is not None
+            and o.yaml_format == "ur" else None))
         check_readback(result, text, o.add_frames, made)  # only the origins changed, and
         # to the calibrated model as a URDF reader reads them
         files.append((o.urdf, stamp_urdf(text, prov)))
@@ -222,7 +228,8 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                 chains=_chains_title(result),
                 fixed=[(f.joint, f.nominal, f.origin) for f in made]))))
         if o.mdh is not None:
-            files.append((o.mdh, prov.under_title(mdh_table_csv(result.corrected))))
+            files.append((o.mdh, prov.under_title(mdh_table_csv(  # one chain: one fold
+                result.corrected, made[0].change if made else None))))
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,
                         data_source or ", ".join(sources), notes, validations)
     return _write(result, o, files, sources, before_commit, notes, dirs, shared_dirs)
