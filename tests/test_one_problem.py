@@ -207,3 +207,16 @@ def test_samples_repeated_exactly_are_named_by_the_gate(rtest, tmp_path, capsys)
     assert main(["calibrate", "ec66", str(path), "--out", str(tmp_path / "c.urdf")]) == 0
     assert "kincal: warning: " + str(path) + ": 1 sample(s) repeat earlier ones exactly" in (
         capsys.readouterr().err)
+
+
+def test_weak_parameters_say_their_unit(rtest):
+    """The weak list's sensitivity is millimetres of the measured point per millimetre or
+    per degree of the parameter, said as such (it read "mm per unit")."""
+    robot, data, _ = rtest
+    result = _quiet(calibrate, robot, data)
+    weak = result.identifiability.weak
+    assert weak
+    length = dict(zip(result.layout.names, result.layout.is_length.tolist()))
+    for w in weak:
+        assert w.describe().split(", ")[-1].endswith("mm per mm" if length[w.name]
+                                                     else "mm per deg"), w.describe()

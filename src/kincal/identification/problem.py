@@ -325,8 +325,8 @@ class CalibrationProblem:
         if note:
             notes.append(note)
             warnings.warn(note, KincalWarning)
-        self._ident = replace(ident, notes=ident.notes + tuple(notes),
-                              warned=(note,) if note else ())
+        self._ident = replace(ident, notes=ident.notes + tuple(notes), warned=(note,) if note
+                              else ()).in_units(dict(zip(lay.names, lay.is_length.tolist())))
         return self._ident
 
     def structural(self) -> Identifiability | None:

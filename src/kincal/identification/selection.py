@@ -21,7 +21,7 @@ from __future__ import annotations
 import functools
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -75,10 +75,11 @@ class Weak:
     independence: float
     sensitivity: float
     hint: str = ""
+    unit: str = ""  # of the parameter: "mm" or "deg" ("": not known here)
 
     def describe(self) -> str:
         text = (f"{self.name}: only {100 * self.independence:.2g} % of its effect is its own, "
-                f"{self.sensitivity:.3g} mm per unit")
+                f"{self.sensitivity:.3g} mm per {self.unit or 'unit'}")
         return text + (f" ({self.hint})" if self.hint else "")
 
 
@@ -109,6 +110,11 @@ class Identifiability:
     notes: tuple[str, ...] = ()
     equations: int = 0  # rows of the Jacobian analysed (0: not known)
     warned: tuple[str, ...] = ()
+
+    def in_units(self, is_length: dict) -> "Identifiability":
+        """The same, each weak parameter with its unit ("mm" where ``is_length[name]``)."""
+        return replace(self, weak=tuple(replace(w, unit="mm" if is_length[w.name] else "deg")
+                                        for w in self.weak))
 
     def headline(self) -> str:
         """The summary's first line: how many parameters the data identify."""
