@@ -58,8 +58,8 @@ def test_the_written_file_is_the_calibrated_model_to_yourdfpy(ec66_result, tmp_p
 def _planted(monkeypatch, change):
     honest = outputs._corrected  # what write_calibration writes (text, notes, folds)
 
-    def corrupted(result, readable=True, add_frames=False):
-        text, notes, made = honest(result, readable, add_frames)
+    def corrupted(result, readable=True, add_frames=False, no_fold=None):
+        text, notes, made = honest(result, readable, add_frames, no_fold)
         bad = change(text)
         assert bad != text  # the corruption did land
         return bad, notes, made
