@@ -467,9 +467,11 @@ def test_talos_touches_on_a_tip_two_joints_short_are_refused(tmp_path, capsys):
                                                   "--overwrite"]
     (tmp_path / "cal.urdf").unlink()
     assert main(plane) != 0 and not (tmp_path / "cal.urdf").exists()
-    err = [line for line in capsys.readouterr().err.splitlines()
-           if line.startswith("kincal: error:")]
+    said = capsys.readouterr().err.splitlines()
+    err = [line for line in said if line.startswith("kincal: error:")]
     assert len(err) == 1 and "Likely cause: contacts of a flat face read as plane" in err[0]
+    # the evidence did not settle there either, and says so (the summary alone said it)
+    assert any("the evidence's prior scales and noise did not settle" in line for line in said)
 
 def test_talos_from_the_urdf_root_names_the_moving_base(tmp_path, capsys):
     """The TALOS touches calibrated from the URDF's root (the default base, the pelvis,

@@ -143,6 +143,12 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
             "nothing is left to estimate the instrument's noise or how far to pull toward "
             "nominal. Measure more poses, or state the noise (--noise-mm) and the "
             "tolerances (--prior-mm, --prior-deg)")
+    if not ev.converged:
+        warnings.warn(
+            f"the evidence's prior scales and noise did not settle in {ev.iterations} rounds "
+            "(the fit is the last round's): the data barely tell how far to pull toward "
+            "nominal; state the tolerances and noise (--prior-mm, --prior-deg, --noise-mm), "
+            "or judge the result on held-out data (--validate)", KincalWarning)
     return sol, replace(ev, noise_groups=_noise_in_units(problem, rows, keys, ev.row_noise))
 
 
