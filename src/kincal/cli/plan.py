@@ -150,7 +150,8 @@ def _plan(p: Plan, robot, protect: list) -> int:
         planes = contacts.planes if contacts.labels != ("",) else None
     if p.kind in ("plane", "flush") and (p.candidates is None or p.measured is not None):
         raise OptionError(f"--kind {p.kind} plans among contact poses: give CANDIDATES.csv "
-                          "(joint columns and a 'plane' column), without --random or --measured")
+                          "(joint columns of poses in contact; a 'plane' column where they touch "
+                          "several planes), without --random or --measured")
     if p.candidates is not None:
         q, lines = read_candidates(p.candidates, robot, p.length_unit, p.angle_unit,
                                    joint_columns=columns)
