@@ -247,16 +247,7 @@ def test_tiago_report_complete_small_and_rendered(tmp_path):
 def test_refused_run_report_rendered_with_its_red_box(tmp_path):
     """A refused calibration's diagnosis page, looked at in headless Chromium: rendered,
     figures drawn, and the REFUSED box (red border) at its top."""
-    import csv
-
-    data = tmp_path / "cal.csv"
-    assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--seed", "2"]) == 0
-    rows = list(csv.DictReader(line for line in data.open() if not line.startswith("#")))
-    mm = tmp_path / "mm.csv"  # millimetres, read as metres: the gate refuses
-    with mm.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows({**r, **{k: str(float(r[k]) * 1000) for k in "xyz"}} for r in rows)
+    mm = _millimetres_as_metres(tmp_path)  # the gate refuses
     page = tmp_path / "refused.html"
     assert main(["calibrate", "ec66", str(mm), "--lambda", "0.01", "--out",
                  str(tmp_path / "c.urdf"), "--html", str(page), "-q"]) == 1
@@ -275,16 +266,7 @@ def test_the_gates_warnings_are_in_the_page(tmp_path):
     """The page's 'Warnings and notes' lacked what the gate said on the console: an
     accepted implausible result ('accepted an implausible calibration as asked') and the
     gate's notes (a whole robot's log: columns of joints off the chain ignored)."""
-    import csv
-
-    data = tmp_path / "cal.csv"
-    assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--seed", "2"]) == 0
-    rows = list(csv.DictReader(line for line in data.open() if not line.startswith("#")))
-    mm = tmp_path / "mm.csv"  # millimetres, read as metres: implausible
-    with mm.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows({**r, **{k: str(float(r[k]) * 1000) for k in "xyz"}} for r in rows)
+    mm = _millimetres_as_metres(tmp_path)  # implausible
     page = tmp_path / "accepted.html"
     assert main(["calibrate", "ec66", str(mm), "--lambda", "0.01", "--out",
                  str(tmp_path / "c.urdf"), "--html", str(page), "-q",
@@ -306,3 +288,18 @@ def test_held_out_caption_speaks_of_axes_only_where_there_are_some():
     point = replace(flush, kind="point", per_axis=True)
     assert "Per axis" not in validation_section([flush])
     assert "Per axis" in validation_section([point])
+
+
+def _millimetres_as_metres(tmp_path):
+    """A simulated EC66 point file with its positions in millimetres (read as metres)."""
+    import csv
+
+    data = tmp_path / "cal.csv"
+    assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--seed", "2"]) == 0
+    rows = list(csv.DictReader(line for line in data.open() if not line.startswith("#")))
+    mm = tmp_path / "mm.csv"
+    with mm.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows({**r, **{k: str(float(r[k]) * 1000) for k in "xyz"}} for r in rows)
+    return mm
