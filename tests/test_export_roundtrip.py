@@ -204,3 +204,39 @@ def test_calibration_writes_a_regauged_joint_whose_link_carries_a_fixed_frame(tm
     assert main(["evaluate", str(out), str(tmp_path / "d.csv"), "--frames",
                  str(tmp_path / "f.json"), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["errors"]["max_mm"] < 1e-3  # noise-free data
+
+
+def test_no_regauge_turns_a_link_a_chain_ends_at(tmp_path, rng, capsys):
+    """Two chains, one to the wrist, one ending at arm_6_link, whose joint's offset (pitch -90
+    deg in its origin) the readable export moved into its children: that turned arm_6_link's
+    frame, the second chain's tip, and the read-back check refused the whole calibration
+    ('differs from the calibrated model of base_footprint -> arm_6_link ... please report
+    this').
+    A joint whose child link is a chain's base or tip now keeps its offset."""
+    from kincal.cli.main import main
+
+    src = _load("tiago_file", "wrist_ft_tool_link").source
+    tool = np.array([0.05, 0.02, 0.1])
+    files = []
+    for tip in ("wrist_ft_tool_link", "arm_6_link"):
+        robot = Robot.load(src, tip=tip)
+        model = mdh.extract(robot.geometry)
+        err = np.zeros_like(model.table)
+        err[:, 3] = 2e-3  # joint offsets: arm_6's is the one the export would regauge
+        truth = robot.with_joint_frames(model.joint_frames(model.table + err))
+        q = random_joint_values(robot.geometry, rng, 40)
+        T = truth.tip_poses(q)
+        P = T[:, :3, 3] + T[:, :3, :3] @ tool
+        rows = [",".join(robot.joint_names) + ",x,y,z"]
+        rows += [",".join(repr(float(v)) for v in (*qi, *p)) for qi, p in zip(q, P)]
+        files.append(tmp_path / f"{tip}.csv")
+        files[-1].write_text("\n".join(rows) + "\n")
+    out = tmp_path / "c.urdf"
+    assert main(["calibrate", str(src), *map(str, files), "--tip", "wrist_ft_tool_link",
+                 "arm_6_link", "--model", "offsets", "--tool-offset", *map(str, tool),
+                 "--out", str(out), "--frames-out", str(tmp_path / "f.json"), "-q"]) == 0
+    capsys.readouterr()
+    for tip, f in zip(("wrist_ft_tool_link", "arm_6_link"), files):
+        assert main(["evaluate", str(out), str(f), "--tip", tip, "--frames",
+                     str(tmp_path / "f.json"), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["errors"]["max_mm"] < 1e-3

@@ -635,3 +635,25 @@ def FlushSetFrames(source, base, tip, joints):
 
     return SetFrames("flush", source, ("plane.rx", "plane.ry", "plane.d"), (0.0, 0.0, 0.7),
                      base, tip, joints)
+
+
+@pytest.mark.parametrize("prismatic_first", [False, True])
+def test_tool_axis_note_on_chains_ending_in_a_prismatic_joint_and_a_revolute_one(
+        prismatic_first, rng):
+    """Point sets on two chains, one ending in a prismatic joint (a finger), one in a revolute
+    joint: each set's tool points are judged against its own chain's last axis. The command
+    line crashed with a TypeError (None > float: the prismatic chain's distances, None, were
+    compared with the other's) when the revolute chain came first (TIAGo, the head and a
+    fingertip); a tool point on the revolute chain's last axis is still named."""
+    arm, finger = (Robot.load("panda", base="panda_link0", tip=t)
+                   for t in ("panda_link7", "panda_leftfinger"))
+    robots = (finger, arm) if prismatic_first else (arm, finger)
+    q = [_q(r, 40, rng) for r in robots]
+    sets = [Measurements(joint_names=r.joint_names, joint_values=q[k],
+                         positions=r.tip_poses(q[k])[:, :3, 3], source=f"chain{k + 1}")
+            for k, r in enumerate(robots)]
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        notes = CalibrationProblem(list(robots), sets, CalibrationOptions()).analyze().notes
+    assert any("from the axis of panda_joint7" in n for n in notes)  # its tool point: 0
+    assert any("from the axis of panda_joint7" in str(w.message) for w in seen)

@@ -94,9 +94,12 @@ def _corrected(result, readable: bool = True, add_frames: bool = False,
     from kincal.export.contact_fold import folds
     from kincal.export.readable_export import corrected_text, regauged_joints
 
+    from kincal.export.readback import chain_ends
+
     edits, moved = corrected_text(result.robot, result.corrected, readable,
                                   source=str(result.robot.source),
-                                  joints=tuple(result.error_model.joint_names))
+                                  joints=tuple(result.error_model.joint_names),
+                                  ends=chain_ends(result))
     text = edits.text
     made: tuple = ()
     said: tuple[str, ...] = ()

@@ -76,21 +76,25 @@ def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def corrected_text(nominal: Robot, corrected: Robot, readable: bool = True,
-                   source: str = "<string>", joints=None
+                   source: str = "<string>", joints=None, ends=()
                    ) -> tuple[EditResult, tuple[Regauged | RpySwing, ...]]:
     """The corrected URDF text, and what a reader should know about its rpy: the joints
     whose offset was moved into the child origins, and the swings that remain. joints: the
     movable joints whose origins may have changed (default: the nominal robot's chain; the
-    union of several chains')."""
+    union of several chains'). ends: the chains' base and tip frames (link or joint names):
+    a joint whose child link is one of theirs keeps its offset (its link's frame, which the
+    move would turn, is where a set's frames hang)."""
     origins = nominal.changed_origins(corrected, joints=joints)
     result = edit_joint_origins(nominal.urdf_text, origins, source=source)
     if not readable:
         return result, ()
     old = nominal.urdf_origins(joints)
+    fixed_links = {nominal.link_of(f)[0] for f in ends}
     moved: list[Regauged | RpySwing] = []
     for name, T_new in list(origins.items()):
         edit = result.for_joint(name)
-        if _swing(edit, old[name][:3, :3], T_new[:3, :3]) < SWING:
+        if (_swing(edit, old[name][:3, :3], T_new[:3, :3]) < SWING
+                or nominal.link_of(name)[0] in fixed_links):
             continue
         axis = nominal.joint_axis(name)  # its sign does not matter: angle flips with it
         # the part of the correction that turns the joint about its own axis

@@ -57,6 +57,11 @@ def chain_robots(result):
     return out
 
 
+def chain_ends(result) -> tuple[str, ...]:
+    """The base and tip frames of every chain of ``result``."""
+    return tuple(f for r in chain_robots(result) for f in (r.base, r.tip))
+
+
 def _refuse(what: str) -> ExportError:
     return ExportError(f"the corrected URDF, read back before writing, {what}; nothing is "
                        "written (please report this: the URDF text does not say what was "
@@ -158,7 +163,8 @@ def _regauged(result) -> set[str]:
     from kincal.export.readable_export import corrected_text, regauged_joints
 
     _, moved = corrected_text(result.robot, result.corrected, True,
-                              joints=tuple(result.error_model.joint_names))
+                              joints=tuple(result.error_model.joint_names),
+                              ends=chain_ends(result))
     return regauged_joints(moved)
 
 

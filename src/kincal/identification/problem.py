@@ -359,21 +359,21 @@ class CalibrationProblem:
         return self._general_J
 
     def _tool_axis_note(self) -> str:
-        """A warning when every tool point of a point set sits near the last (revolute) axis."""
+        """A warning when every tool point of a point set sits near the last (revolute) axis
+        of its own chain (the first such set; a chain ending in a prismatic joint has none)."""
         lay, x = self.layout, self.start()
-        dists = []
         for i, km in enumerate(self.kinds):
-            if km.kind == "point":
-                f = lay.frames(x, i)
-                dists += [km.error_model.last_axis_distance(t) for t in f[6:].reshape(-1, 3)]
-        if not dists or dists[0] is None or max(dists) >= TOOL_AXIS_WARNING:
-            return ""
-        dist, last = max(dists), self.kinds[0].error_model.joint_names[-1]
-        which = "tool point is" if len(dists) == 1 else f"{len(dists)} measured points are all"
-        return (f"the {which} {dist * 1e3:.2f} mm from the axis of {last}: turning about "
-                f"that axis barely moves it, so {last}.theta and the tilt of that axis "
-                f"({last}.alpha) are weak or redundant; an offset tool point (>= 20 mm off the "
-                "axis) makes them identifiable")
+            dists = [km.error_model.last_axis_distance(t) for t in lay.frames(x, i)[6:]
+                     .reshape(-1, 3)] if km.kind == "point" else []
+            if not dists or dists[0] is None or max(dists) >= TOOL_AXIS_WARNING:
+                continue
+            dist, last = max(dists), km.error_model.joint_names[-1]
+            which = "tool point is" if len(dists) == 1 else f"{len(dists)} measured points are all"
+            return (f"the {which} {dist * 1e3:.2f} mm from the axis of {last}: turning about "
+                    f"that axis barely moves it, so {last}.theta and the tilt of that axis "
+                    f"({last}.alpha) are weak or redundant; an offset tool point (>= 20 mm off "
+                    "the axis) makes them identifiable")
+        return ""
 
     def free_mask(self) -> np.ndarray:
         """(p,) the parameters the fit moves: identifiable ones, and ``free`` names."""
