@@ -93,7 +93,6 @@ def _corrected(result, readable: bool = True, add_frames: bool = False,
     go into the URDF (another file written beside cannot carry it), or None."""
     from kincal.export.contact_fold import folds
     from kincal.export.readable_export import corrected_text, regauged_joints
-
     from kincal.export.readback import chain_ends
 
     edits, moved = corrected_text(result.robot, result.corrected, readable,
