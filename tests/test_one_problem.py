@@ -163,8 +163,8 @@ def test_a_urdf_the_second_parser_reads_otherwise_is_not_written(rtest, tmp_path
     result = _quiet(calibrate, robot, data)
     honest = outputs._corrected  # what write_calibration writes (text, notes, folds)
 
-    def nudged(result, readable=True, add_frames=False):
-        text, notes, made = honest(result, readable, add_frames)
+    def nudged(result, readable=True, add_frames=False, no_fold=None):
+        text, notes, made = honest(result, readable, add_frames, no_fold)
         m = re.search(r'(<joint name="joint_3".*?<origin[^>]*xyz=")([-0-9.e]+)', text, re.S)
         return text[:m.start(2)] + repr(float(m.group(2)) + 1e-6) + text[m.end(2):], notes, made
 

@@ -19,6 +19,7 @@ import warnings
 from kincal import __version__
 from kincal.cli import analyze, calibrate, compensate, demo, evaluate, fleet, plan, simulate
 from kincal.cli.console import Terminated, quiet_stdout, say, stdout_to_null
+from kincal.cli.usage import UsageParser
 from kincal.errors import KincalError, KincalNote, KincalWarning
 
 COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo, fleet)
@@ -26,33 +27,8 @@ COMMANDS = (calibrate, evaluate, analyze, simulate, plan, compensate, demo, flee
 JSON_COMMANDS = ("calibrate", "evaluate", "analyze", "simulate", "plan", "compensate", "fleet")
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse's parser, with a hint where a usage error has a likely cause argparse cannot
-    see: an option that takes several values (``--tip`` and ``--base`` one frame per data
-    file, ``--validate``, ``--fix`` ...) given before the data files swallows them, and
-    argparse then says only that the data are missing."""
-
-    argv: tuple[str, ...] = ()  # the command line being parsed (set by :func:`main`)
-
-    def error(self, message):
-        if "the following arguments are required" in message and "data" in message:
-            options = {o for a in self._actions if a.nargs in ("+", "*") for o in a.option_strings}
-            taken, where = None, None
-            for token in _Parser.argv:
-                if token.startswith("-"):
-                    where = token if token in options else None
-                elif where and token.lower().endswith((".csv", ".txt", ".tsv")):
-                    taken = (where, token)
-                    break
-            if taken:
-                message += (f" ({taken[0]} took {taken[1]!r} as one of its values: it takes "
-                            "several; give the data files right after the robot, before the "
-                            "options)")
-        super().error(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
-    ap = _Parser(prog="kincal", description="Kinematic calibration of robots "
+    ap = UsageParser(prog="kincal", description="Kinematic calibration of robots "
                                  "from URDF: any chain of the tree, several chains sharing "
                                  "joints; complete error models, a penalty toward nominal "
                                  "(evidence or k-fold CV), a plausibility gate.")
@@ -156,7 +132,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     _standard_streams()
     parser = build_parser()
-    _Parser.argv = tuple(sys.argv[1:] if argv is None else argv)
+    UsageParser.argv = tuple(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     args.command_line = ["kincal", *(sys.argv[1:] if argv is None else argv)]
     # SIGTERM unwinds like Ctrl-C (only the main thread may set handlers: main() called
