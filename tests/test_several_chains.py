@@ -657,3 +657,21 @@ def test_tool_axis_note_on_chains_ending_in_a_prismatic_joint_and_a_revolute_one
         notes = CalibrationProblem(list(robots), sets, CalibrationOptions()).analyze().notes
     assert any("from the axis of panda_joint7" in n for n in notes)  # its tool point: 0
     assert any("from the axis of panda_joint7" in str(w.message) for w in seen)
+
+
+def test_every_report_names_every_chain(tmp_path):
+    """The console summary named both chains of a two-chain calibration, the HTML page's
+    title and robot row the first alone; all reports now say one thing (chains_text)."""
+    from kincal.export.html_report import html_report
+
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(0)
+    sets = [_points(robots[k], robots[k], _q(robots[k], 40, rng), k, 1e-5, rng)
+            for k in range(2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = calibrate(list(robots), sets, CalibrationOptions(method="ls"))
+    both = "base_link -> atip, ctip -> btip"
+    assert result.chains_text() == both and f"({both})" in result.summary().splitlines()[0]
+    page = html_report(result)
+    assert page.count(f"({both})".replace(">", "&gt;")) >= 3  # <title>, <h1>, the robot row

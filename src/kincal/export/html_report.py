@@ -70,7 +70,7 @@ def _section(sid: str, body: str) -> str:
 
 def _summary(result, data_source) -> str:
     r, o = result.robot, result.options
-    rows = [("robot", f"{r.name} ({r.base} -> {r.tip})"), ("URDF", r.source),
+    rows = [("robot", f"{r.name} ({result.chains_text()})"), ("URDF", r.source),
             ("data", data_source or "(not given)"),
             *[(f"set {k}" if len(result.sets) > 1 else "samples",
                (f"{s.kind}, {s.source}: " if len(result.sets) > 1 else "")
@@ -268,7 +268,7 @@ def html_report(result, *, accuracy=None, warnings=(), notes=(), data_source=Non
         cv = result.cv
         cv_png = plots.plot_cv_curve(cv.lambdas, cv.mean_error, cv.best_lambda, None,
                                      fold_errors_mm=cv.fold_errors, source=source)
-    title = f"kincal calibration of {result.robot.name} ({result.robot.base} -> {result.robot.tip})"
+    title = f"kincal calibration of {result.robot.name} ({result.chains_text()})"
     nav = "".join(f'<a href="#{sid}">{_e(t)}</a>' for sid, t in SECTIONS)
     residuals = ""
     for i, s in enumerate(result.sets):  # a part per measurement set

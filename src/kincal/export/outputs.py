@@ -227,7 +227,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         elif o.yaml is not None:
             files.append((o.yaml, prov.under_title(kinematics_yaml(
                 result.robot, result.corrected, joints=result.error_model.joint_names,
-                chains=_chains_title(result),
+                chains=result.chains_text(),
                 fixed=[(f.joint, f.nominal, f.origin) for f in made]))))
         if o.mdh is not None:
             files.append((o.mdh, prov.under_title(mdh_table_csv(  # one chain: one fold
@@ -235,12 +235,6 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     files += _diagnosis(result, o, prov, accuracy, warnings_seen,
                         data_source or ", ".join(sources), notes, validations)
     return _write(result, o, files, sources, before_commit, notes, dirs, shared_dirs)
-
-
-def _chains_title(result) -> str:
-    """"base -> tip" of every chain of the result, in set order."""
-    robots = result.chains.chain_robots if result.chains is not None else (result.robot,)
-    return ", ".join(f"{r.base} -> {r.tip}" for r in robots)
 
 
 def _refusal(result, accept_implausible, accept_unconverged, refused: str) -> str:

@@ -413,6 +413,11 @@ class CalibrationResult:
         return km.sample_errors(km.residuals(kin, s.frames, b))
 
     # --------------------------------------------------------------- summary
+    def chains_text(self) -> str:
+        """"base -> tip" of every chain, in set order (the titles of every report)."""
+        return ", ".join(dict.fromkeys(f"{s.base_frame} -> {s.tip_frame}" for s in self.sets
+                                       if s.base_frame)) or f"{self.robot.base} -> {self.robot.tip}"
+
     def summary(self) -> str:
         from kincal.identification.result_text import summary
 

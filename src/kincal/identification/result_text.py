@@ -27,9 +27,7 @@ def header(result: CalibrationResult) -> list[str]:
         if r.cv.subsample:
             cv += " on a random {} of the {} poses".format(*r.cv.subsample)
     sets = f"{n} measurement set(s), " if n > 1 else ""
-    chains = ", ".join(dict.fromkeys(f"{s.base_frame} -> {s.tip_frame}" for s in r.sets
-                                     if s.base_frame)) or f"{r.robot.base} -> {r.robot.tip}"
-    return [f"kincal calibration of {r.robot.name} ({chains}), {sets}"
+    return [f"kincal calibration of {r.robot.name} ({r.chains_text()}), {sets}"
             f"method {r.options.method}, {how}{cv}",
             *([f"  penalty: {r.penalty_choice}"] if r.penalty_choice else []),
             *([f"  fleet prior: {r.options.prior.n_units} units ({r.options.prior.method}); "
