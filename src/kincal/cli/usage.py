@@ -12,7 +12,7 @@ class UsageParser(argparse.ArgumentParser):
     file, ``--validate``, ``--fix`` ...) given before the data files swallows them, and
     argparse then says only that the data are missing."""
 
-    argv: tuple[str, ...] = ()  # the command line being parsed (set by :func:`kincal.cli.main.main`)
+    argv: tuple[str, ...] = ()  # the command line being parsed (set by cli.main.main)
 
     def error(self, message):
         if "the following arguments are required" in message and "data" in message:

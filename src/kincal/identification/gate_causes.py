@@ -91,7 +91,8 @@ def tool_causes(ev: Evidence) -> tuple[str, ...]:
     fix it (TALOS's flush touches read as plane contacts, without --flush: 10.1 m, std error
     3 m), or a unit slip."""
     flush = ("contacts of a flat face read as plane contacts (one distance per touch): with "
-             "--flush each touch also gives the face's two tilts",) if ev.tool_far[3] == "plane" else ()
+             "--flush each touch also gives the face's two tilts",
+             ) if ev.tool_far[3] == "plane" else ()
     return (*flush, "data that do not fix the tool point: give --tool-offset and hold it "
             "(--fix tool.x tool.y tool.z)", *unit_causes(ev),
             "--tool-offset or the positions in another length unit than the data's")

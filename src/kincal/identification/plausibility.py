@@ -43,9 +43,9 @@ Criteria (defaults in :class:`Thresholds`), and why:
 - **Orientation**: the median orientation error after calibration (a pose's; a flush
   touch's tilt against its plane, which the residual's heights do not hold) above 5 deg.
   Real data leave about half a degree (TALOS flush touches 0.49 deg median, TIAGo's motion
-  capture poses 0.50 deg RMS, 0.91 held out); TALOS's touches on a tip two or one joints short of the gripper
-  (``--tip arm_left_5_link``, ``arm_left_6_link``) leave 36 and 24 deg with heights the
-  residual lets through (9.2 and 2.7 mm of a 2.2 m reach).
+  capture poses 0.50 deg RMS, 0.91 held out); TALOS's touches on a tip two or one joints
+  short of the gripper (``--tip arm_left_5_link``, ``arm_left_6_link``) leave 36 and 24 deg
+  with heights the residual lets through (9.2 and 2.7 mm of a 2.2 m reach).
 - **Tool point**: a set's identified tool point more than 3 chain lengths from its tip
   frame (:data:`kincal.measurements.checks.TOOL_RATIO`): the data did not fix it. TALOS's
   flush touches read as plane contacts (``--flush`` forgotten): 10.1 m, std error 3 m,

@@ -47,28 +47,29 @@ def change(problem: CalibrationProblem, result: CalibrationResult,
         corrected = robot.with_origins(result.corrected.urdf_origins(
             tuple(problem.error_model.joint_names)))
         first = problem.chains.of_set.index(chain)
-    g = robot.geometry
     tool_start, tool = np.zeros(3), np.zeros(3)
     name = lay.set_prefix(first) + "tool."
     if name + "x" in lay.frame_names(first):  # by name: a flush set stores z, x, y
         k = [lay.index(name + c) for c in "xyz"]
         tool_start, tool = result.x_start[k], result.x[k]
-    # the chain's length, the configurations and their joint motions' coefficients depend
-    # on the robot alone: kept per robot (models.per_geometry); both robots' points by the
-    # same arithmetic
-    q, motions, _ = per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
-        *configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))
-    L = reach(chain_length_of(robot), float(np.linalg.norm(tool_start)))
+    q, motions, length = _kept(robot)  # both robots' points by the same arithmetic
+    L = reach(length, float(np.linalg.norm(tool_start)))
     d = aligned_distances(tool_points(robot, q, tool_start, motions),
                            tool_points(corrected, q, tool, motions)) * 1e3
     return L, d, math.sqrt(float(np.add.reduce(d * d)) / d.size)  # np.sqrt(np.mean(d ** 2))
 
 
-def chain_length_of(robot) -> float:
-    """[m] the robot's chain length at zero joint values (the reach's chain part)."""
+def _kept(robot) -> tuple[np.ndarray, np.ndarray, float]:
+    """(the configurations, their joint motions' coefficients, the chain's length [m] at zero
+    joint values): they depend on the robot alone, kept per robot (models.per_geometry)."""
     g = robot.geometry
     return per_geometry(("gate configurations", N_CONFIGURATIONS), g, lambda: (
-        *configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))[2]
+        *configurations(robot), chain_length(g.joint_frames, g.T_base_tip)))
+
+
+def chain_length_of(robot) -> float:
+    """[m] the robot's chain length at zero joint values (the reach's chain part)."""
+    return _kept(robot)[2]
 
 
 def farthest_tool(problem: CalibrationProblem, result: CalibrationResult):
