@@ -344,6 +344,25 @@ def test_cli_program_filter(cli_cell, tmp_path):
                  "--out", str(tmp / "x.csv")]) == 1  # --program without --nominal
 
 
+@pytest.mark.parametrize("given, said", [
+    (["--frames", "FRAMES", "--position-columns", "a", "b", "c"], "a --program has joint values"),
+    (["--point", "2"], "--point 2 picks a measured point of --frames")])
+def test_cli_program_refuses_options_it_would_ignore(cli_cell, given, said, capsys):
+    """A program has no positions to name, and without FRAMES.json no second tool point:
+    both options were accepted and had no effect."""
+    result, q, P, urdf, fj, tmp = cli_cell
+    prog = tmp / "program.csv"
+    prog.write_text(",".join(result.robot.joint_names) + "\n"
+                    + "\n".join(",".join(repr(float(v)) for v in qk) for qk in q) + "\n")
+    out = tmp / "joints.csv"
+    assert main(["compensate", str(urdf), "--program", str(prog), "--nominal", "ec66",
+                 "--tip", "flange", "--out", str(out)]
+                + [str(fj) if g == "FRAMES" else g for g in given]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("kincal: error:") and err.count("\n") == 1 and said in err
+    assert not out.exists()
+
+
 def test_cli_full_pose_targets_and_bad_quaternions(cli_cell, capsys):
     result, q, P, urdf, fj, tmp = cli_cell
     _, quats = _targets_from(result, q, quaternions=True)

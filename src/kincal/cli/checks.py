@@ -228,9 +228,14 @@ def check_args(args) -> None:
         _check_plan(args, volume)
     elif c == "compensate":
         _finite("--tolerance-mm", args.tolerance_mm, 0, low_open=True)
-        _need(args.program is None or not (args.orientation_format or args.orientation_columns),
-              "--orientation-format and --orientation-columns describe TARGETS.csv; a "
-              "--program has joint values only")
+        _need(args.program is None or not (args.position_columns or args.orientation_format
+                                           or args.orientation_columns),
+              "--position-columns, --orientation-format and --orientation-columns describe "
+              "TARGETS.csv; a --program has joint values only")
+        args.position_columns = args.position_columns or ("x", "y", "z")
+        _need(args.point == 1 or args.frames is not None,
+              f"--point {args.point} picks a measured point of --frames FRAMES.json; without "
+              "it the tip frame's origin is moved")
         _need(not args.nominal_xacro_arg or args.nominal is not None,
               "--nominal-xacro-arg is an argument of the --nominal description: it needs "
               "--nominal (ROBOT's xacro arguments are --xacro-arg)")

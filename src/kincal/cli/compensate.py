@@ -36,7 +36,7 @@ def register(subparsers) -> None:
                    help="the model the program was planned on (URDF, xacro or a robot name)")
     add_xacro_args(i, "--nominal-xacro-arg", "a xacro --nominal description (ROBOT's are "
                    "--xacro-arg)")
-    i.add_argument("--position-columns", nargs=3, default=("x", "y", "z"), metavar="COL",
+    i.add_argument("--position-columns", nargs=3, metavar="COL",
                    help="names of the target position columns (default x y z)")
     i.add_argument("--orientation-format", choices=ORIENTATION_FORMATS, metavar="FORMAT",
                    help="how TARGETS.csv writes the wanted orientations, as a pose file "
