@@ -328,11 +328,16 @@ def test_cli_bad_input_one_error_nothing_written(cli_cell, case, capsys):
             "other_robot": "does not match the tip frame 'flange'"}[case] in err
 
 
-def test_cli_program_filter(cli_cell, tmp_path):
-    result, q, P, urdf, fj, tmp = cli_cell
+def _program(result, q, tmp):
+    """A joint program file: the chain joints' columns, the rows q [rad]."""
     prog = tmp / "program.csv"
     prog.write_text(",".join(result.robot.joint_names) + "\n"
                     + "\n".join(",".join(repr(float(v)) for v in qk) for qk in q) + "\n")
+    return prog
+
+def test_cli_program_filter(cli_cell, tmp_path):
+    result, q, P, urdf, fj, tmp = cli_cell
+    prog = _program(result, q, tmp)
     out = tmp / "joints.csv"
     assert main(["compensate", str(urdf), "--program", str(prog), "--nominal", "ec66",
                  "--tip", "flange", "--frames", str(fj), "--out", str(out)]) == 0
@@ -351,9 +356,7 @@ def test_cli_program_refuses_options_it_would_ignore(cli_cell, given, said, caps
     """A program has no positions to name, and without FRAMES.json no second tool point:
     both options were accepted and had no effect."""
     result, q, P, urdf, fj, tmp = cli_cell
-    prog = tmp / "program.csv"
-    prog.write_text(",".join(result.robot.joint_names) + "\n"
-                    + "\n".join(",".join(repr(float(v)) for v in qk) for qk in q) + "\n")
+    prog = _program(result, q, tmp)
     out = tmp / "joints.csv"
     assert main(["compensate", str(urdf), "--program", str(prog), "--nominal", "ec66",
                  "--tip", "flange", "--out", str(out)]
