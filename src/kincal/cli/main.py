@@ -132,7 +132,6 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     _standard_streams()
     parser = build_parser()
-    UsageParser.argv = tuple(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     args.command_line = ["kincal", *(sys.argv[1:] if argv is None else argv)]
     # SIGTERM unwinds like Ctrl-C (only the main thread may set handlers: main() called

@@ -4,6 +4,7 @@ argparse cannot see."""
 from __future__ import annotations
 
 import argparse
+import sys
 
 
 class UsageParser(argparse.ArgumentParser):
@@ -12,7 +13,11 @@ class UsageParser(argparse.ArgumentParser):
     file, ``--validate``, ``--fix`` ...) given before the data files swallows them, and
     argparse then says only that the data are missing."""
 
-    argv: tuple[str, ...] = ()  # the command line being parsed (set by cli.main.main)
+    argv: tuple[str, ...] = ()  # the command line being parsed (by the top parser)
+
+    def parse_args(self, args=None, namespace=None):
+        UsageParser.argv = tuple(sys.argv[1:] if args is None else args)
+        return super().parse_args(args, namespace)
 
     def error(self, message):
         if "the following arguments are required" in message and "data" in message:
