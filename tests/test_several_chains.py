@@ -345,12 +345,17 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
             P = (T[:, :3, 3] + T[:, :3, :3] @ s.tools[0]) @ base_rotation(*s.base[3:]).T
             errors.append(np.abs(P + s.base[:3] - truth).max())
         assert errors[1] < 0.1e-3 and errors[1] < 0.1 * errors[0], errors
-    # kincal evaluate on one chain: the first by default, the second by its base and tip
+    # kincal evaluate on one chain: the first by default, with a warning naming the chains
+    # (the other chain's data were judged on the first chain without a word), the second by
+    # its base and tip
     capsys.readouterr()
     assert main(["evaluate", str(out), files[0], "--frames", str(frames)]) == 0
+    first = capsys.readouterr()
+    assert ("kincal: warning: " + str(frames) + " holds the frames of 2 chains (base_link -> "
+            "atip, ctip -> btip); the first, base_link -> atip, is used: give --tip") in first.err
     assert main(["evaluate", str(out), files[1], "--base", "ctip", "--tip", "btip",
                  "--frames", str(frames)]) == 0
-    said = capsys.readouterr().out
+    said = first.out + capsys.readouterr().out
     assert "(base_link -> atip)" in said and "(ctip -> btip)" in said
     rms = [float(line.split("RMS")[1].split()[0]) for line in said.splitlines() if "RMS" in line]
     assert len(rms) == 2 and max(rms) < 0.05, said  # [mm]: noise 0.01 mm per axis

@@ -39,12 +39,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from kincal.errors import DataError, InputFileError
+from kincal.errors import DataError, InputFileError, KincalWarning
 from kincal.rotations import base_rotation, inverse, matrix_to_quaternion, transform
 
 FORMAT = "kincal-frames"
@@ -351,6 +352,12 @@ class CellFrames:
         if (base is None) != (tip is None):
             fit = [c for c in self.chains() if base in (None, c[0]) and tip in (None, c[1])]
             base, tip = fit[0] if len(fit) == 1 else (base, tip)
+        elif base is None and len(self.chains()) > 1:  # data of another chain: metres off
+            warnings.warn(f"{self.source} holds the frames of {len(self.chains())} chains ("
+                          + ", ".join(f"{b} -> {t}" for b, t in self.chains())
+                          + f"); the first, {self.base_frame} -> {self.tip_frame}, is used: "
+                          "give --tip (and --base) of the chain the data were measured on",
+                          KincalWarning)
         base, tip = base or self.base_frame, tip or self.tip_frame
         top = (base, tip) == (self.base_frame, self.tip_frame)
         mine = tuple(s for s in self.sets if (s.base_frame or self.base_frame,
