@@ -76,7 +76,15 @@ def test_flush_contacts_from_simulation_to_calibration_and_plan(tmp_path, capsys
                  "--flush"]) == 0
     assert "(flush errors)" in capsys.readouterr().out
     assert main(["plan", "ec66", str(data), "--kind", "flush", "--poses", "10",
-                 "--tool-offset", "0.02", "0", "0.1", "--out", str(tmp_path / "p.csv")]) == 0
+                 "--tool-offset", "0.02", "0", "0.1", "--out", str(tmp_path / "p.csv"),
+                 "--noise-mm", "0.1"]) == 0
+    # the predicted errors name the noise of each row: heights and tilts (the tilt rows weigh
+    # as a set stating no sigma weighs them: 0.05 deg against 0.05 mm); was "mm per axis"
+    assert ("largest predicted std errors at a noise of 0.1 mm per height and 0.1 deg per "
+            "tilt:") in capsys.readouterr().out
+    assert main(["plan", "ec66", str(data), "--kind", "flush", "--poses", "10", "--json",
+                 "--tool-offset", "0.02", "0", "0.1", "--out", str(tmp_path / "p2.csv")]) == 0
+    assert json.loads(capsys.readouterr().out)["noise"] == "0.05 mm per height and 0.05 deg per tilt"
     assert main(["simulate", "ec66", "--kind", "point", "--orientation-noise-deg", "0.1",
                  "--out", str(tmp_path / "x.csv")]) == 1
 

@@ -139,7 +139,18 @@ def test_fix_leaves_parameters_out(ec66):
     assert not set(s.fixed) & set(s.parameters)
     assert "joint_6.d" in s.parameters  # no longer a duplicate of tool.z
     text = s.summary(0.02)
-    assert "fixed by the user: tool.x" in text and "0.02 mm noise" in text
+    assert "fixed by the user: tool.x" in text and "a noise of 0.02 mm per axis:" in text
+
+
+def test_predicted_errors_name_each_kinds_noise(ec66):
+    """The noise the predicted errors are for, per row of the kind: a pose's orientation
+    rows weigh 0.01 deg against 0.05 mm (the pose sets' default), one distance per pose."""
+    candidates = random_candidates(ec66, 60, np.random.default_rng(4))
+    pose = select_poses(ec66, candidates, 12, tool=TOOL, kind="pose", random_subsets=2)
+    assert "a noise of 0.1 mm per axis and 0.02 deg per orientation axis:" in pose.summary(0.1)
+    dist = select_poses(ec66, candidates, 40, tool=TOOL, kind="distance", random_subsets=2,
+                        pivot=(0.4, 0.0, 0.2))
+    assert "a noise of 0.05 mm per distance:" in dist.summary()
 
 
 def test_tool_on_last_axis_warns(ec66):
@@ -237,7 +248,7 @@ def test_cli_plan_writes_the_chosen_poses_and_refuses_to_overwrite(ec66, tmp_pat
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "D-optimal selection of 15 of 300" in text and "random median" in text
-    assert "0.02 mm noise" in text and "deg" in text and "wrote" in text
+    assert "a noise of 0.02 mm per axis" in text and "deg" in text and "wrote" in text
     lines = _rows(out)
     assert lines[0] == "joint_1,joint_2,joint_3,joint_4,joint_5,joint_6,candidate_line"
     assert len(lines) == 16

@@ -47,7 +47,9 @@ def register(subparsers) -> None:
     c.add_argument("--fix", nargs="+", default=[], metavar="NAME",
                    help="parameters held nominal (left out of the criterion)")
     c.add_argument("--noise-mm", type=float, default=0.05,
-                   help="noise per axis [mm] for the predicted standard errors (default 0.05)")
+                   help="length noise [mm] per axis, distance or height for the predicted "
+                        "standard errors (default 0.05; orientations and tilts weigh as in a "
+                        "set stating no sigma: 0.01 and 0.05 deg per 0.05 mm)")
     add_joint_columns(p, "CANDIDATES and --measured")
     add_overwrite(p, help="replace an existing output file")
     add_volume_options(p, "in --length-unit")
@@ -217,6 +219,7 @@ def _plan(p: Plan, robot, protect: list) -> int:
                "joint_names": list(selection.joint_names),
                "joint_values_si": q[new].tolist(), "log_det": selection.log_det,
                "condition_number": selection.condition, "noise_mm": p.noise_mm,
+               "noise": selection.noise_text(p.noise_mm),
                "std_errors": [{"name": n, "unit": u, "std_error": float(v)} for n, u, v in zip(
                    selection.parameters, selection.units, selection.std_errors(p.noise_mm))],
                "not_identifiable": list(selection.not_identifiable)}

@@ -136,6 +136,23 @@ class PoseSelection:
     mean_variance: float = math.nan
     random_mean_variance: float = math.nan
     n_targets: int = 0
+    kind: str = "point"
+
+    def noise_text(self, sigma_mm: float) -> str:
+        """The noise the predicted errors are for, per equation of the kind: a distance or a
+        height per contact; a pose's orientation and a flush touch's tilts weigh against the
+        length noise as the sets weigh them when no sigma is stated (kincal's defaults)."""
+        from kincal.measurements.flush import DEFAULT_TILT_SIGMA_DEG
+        from kincal.measurements.kind import DEFAULT_SIGMA
+        from kincal.measurements.pose import DEFAULT_ORIENTATION_SIGMA_DEG
+
+        per_mm = sigma_mm / (DEFAULT_SIGMA * 1e3)
+        return {"pose": f"{sigma_mm:g} mm per axis and "
+                        f"{DEFAULT_ORIENTATION_SIGMA_DEG * per_mm:g} deg per orientation axis",
+                "distance": f"{sigma_mm:g} mm per distance",
+                "plane": f"{sigma_mm:g} mm per contact distance",
+                "flush": f"{sigma_mm:g} mm per height and {DEFAULT_TILT_SIGMA_DEG * per_mm:g} "
+                         "deg per tilt"}.get(self.kind, f"{sigma_mm:g} mm per axis")
 
     def std_errors(self, sigma_mm: float) -> np.ndarray:
         """(p,) predicted standard errors [mm or deg, see ``units``] of ``parameters`` for a
@@ -178,7 +195,7 @@ class PoseSelection:
         lines.append(f"  greedy log det {self.greedy_log_det:.2f}, then {self.swaps} exchanges "
                      f"({how})")
         se, se_r = self.std_errors(sigma_mm), self.random_std_errors(sigma_mm)
-        lines.append(f"  largest predicted std errors at {sigma_mm:g} mm noise per axis:")
+        lines.append(f"  largest predicted std errors at a noise of {self.noise_text(sigma_mm)}:")
         lines.append(f"    {'parameter':<22} {'chosen':>10} {'random':>10}  unit")
         for unit in ("mm", "deg"):
             idx = [i for i in range(p) if self.units[i] == unit]
@@ -402,4 +419,4 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                          _readonly(np.median(r_var, axis=0)), int(random_subsets),
                          criterion=method, mean_variance=mean_var,
                          random_mean_variance=r_mean_var,
-                         n_targets=0 if targets is None else len(targets))
+                         n_targets=0 if targets is None else len(targets), kind=kind)
