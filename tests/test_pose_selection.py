@@ -371,3 +371,19 @@ def test_target_poses_are_for_point_measurements(ec66, tmp_path, capsys):
 def _rows(path) -> list[str]:
     """Header and rows of the CSV plan wrote, without its provenance (# lines)."""
     return [r for r in path.read_text().splitlines() if not r.startswith("#")]
+
+
+def test_a_set_singular_by_its_condition_has_no_finite_log_det():
+    """A chosen set whose information is singular by the condition (variances inf) was
+    reported with a finite log det beside condition inf (TALOS flush, 19 of 21 touches:
+    -169.96 chosen, -inf random)."""
+    from kincal.planning.pose_selection import _set_figures
+
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(6, 2, 3))
+    J[:, :, 2] = J[:, :, 1] + 1e-9 * rng.normal(size=(6, 2))  # two columns nearly alike
+    ld, cond, var = _set_figures(J, np.ones(3), np.array([[0, 1, 2, 3, 4, 5], [0, 1, 2, 3, 4, 5]]))
+    assert np.all(np.isinf(cond)) and np.all(np.isinf(var)) and np.all(ld == -np.inf)
+    J[:, :, 2] = rng.normal(size=(6, 2))  # well conditioned: finite figures
+    ld, cond, var = _set_figures(J, np.ones(3), np.array([[0, 1, 2, 3, 4, 5]]))
+    assert np.isfinite(ld[0]) and np.isfinite(cond[0]) and np.all(np.isfinite(var))

@@ -213,10 +213,11 @@ def _set_figures(Jn: np.ndarray, scale: np.ndarray, subsets: np.ndarray):
     X = Jn[subsets].reshape(K, -1, Jn.shape[2])
     G = X.transpose(0, 2, 1) @ X
     sign, log_det = np.linalg.slogdet(G)
-    log_det = np.where(sign > 0, log_det, -np.inf)
     d = np.sqrt(np.einsum("kii->ki", G))
     w = np.linalg.eigvalsh(G / (d[:, :, None] * d[:, None, :]))
     ok = w[:, 0] > SINGULAR * w[:, -1]
+    # singular by the condition (as the variances are): no finite log det beside them
+    log_det = np.where((sign > 0) & ok, log_det, -np.inf)
     cond = np.where(ok, w[:, -1] / np.where(ok, w[:, 0], 1.0), np.inf)
     var = np.full((K, scale.size), np.inf)
     if ok.any():
