@@ -172,6 +172,14 @@ def test_cli_analyze_prints_the_table_and_writes_nothing(tmp_path, capsys):
     assert "model: complete + backlash elbow_joint, chosen by 5-fold CV" in out
     assert "<- chosen" in out
     assert sorted(tmp_path.iterdir()) == before
+    # --json: the same comparison, not only the chosen model's name (it was left out)
+    for command in (["analyze"], ["calibrate", "--out", str(tmp_path / "c.urdf")]):
+        assert main([*command[:1], "ur10", str(csv), "--tip", "tool0", "--json",
+                     *command[1:]]) == 0
+        mc = json.loads(capsys.readouterr().out)["model_choice"]
+        assert mc["criterion"] == "cv" and mc["chosen"]["backlash"] == ["elbow_joint"]
+        assert sum(c["chosen"] for c in mc["candidates"]) == 1
+        assert {c["candidate"] for c in mc["candidates"]} >= {"complete", "offsets"}
 
 
 def test_bad_model_names_list_auto(tmp_path, capsys):
