@@ -108,6 +108,18 @@ def test_a_malformed_prior_is_refused(tmp_path, fleet_dir):
     with pytest.raises(PriorError, match="not a fleet prior"):
         (tmp_path / "G.json").write_text("[]")
         FleetPrior.read(tmp_path / "G.json")
+    # a NaN is named as what it is, where it is (it said "got shape (k, k)", the right shape)
+    for where in ("covariance", "mean"):
+        d = json.loads((fleet_dir / "FLEET.json").read_text())
+        words = (f"mean deviation of {d['parameters'][1]['name']} is not a finite number"
+                 if where == "mean" else "got a NaN or infinity")
+        if where == "covariance":
+            d["covariance"][1][1] = float("nan")
+        else:
+            d["parameters"][1]["mean"] = float("nan")
+        bad.write_text(json.dumps(d))
+        with pytest.raises(PriorError, match=words):
+            FleetPrior.read(bad)
 
 
 def test_prior_option_needs_a_fleet_prior():

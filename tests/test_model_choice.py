@@ -172,6 +172,14 @@ def test_cli_analyze_prints_the_table_and_writes_nothing(tmp_path, capsys):
     assert "model: complete + backlash elbow_joint, chosen by 5-fold CV" in out
     assert "<- chosen" in out
     assert sorted(tmp_path.iterdir()) == before
+    # --json: the same comparison, not only the chosen model's name (it was left out)
+    for command in (["analyze"], ["calibrate", "--out", str(tmp_path / "c.urdf")]):
+        assert main([*command[:1], "ur10", str(csv), "--tip", "tool0", "--json",
+                     *command[1:]]) == 0
+        mc = json.loads(capsys.readouterr().out)["model_choice"]
+        assert mc["criterion"] == "cv" and mc["chosen"]["backlash"] == ["elbow_joint"]
+        assert sum(c["chosen"] for c in mc["candidates"]) == 1
+        assert {c["candidate"] for c in mc["candidates"]} >= {"complete", "offsets"}
 
 
 def test_bad_model_names_list_auto(tmp_path, capsys):
@@ -216,6 +224,30 @@ def test_diagnosis_names_backlash_with_its_size_even_with_a_given_model(planted)
     assert (f.joint, f.cause) == (joint, "backlash")
     assert abs(f.size) == pytest.approx(np.degrees(model_auto.HALF_PLAY), rel=0.15)
     assert f.line() in res.summary() and f.rms_mm[1] < f.rms_mm[0]
+
+
+def test_diagnosis_names_backlash_seen_by_several_files(planted):
+    """Two files (two point sets, each with its own measurement frame and tool point, its
+    own approach directions): the planted backlash is named by the one test over both, as
+    with one file, and not on clean data split alike (it used to say nothing for several
+    sets)."""
+    from kincal.identification.diagnosis import diagnose
+    from kincal.measurements.data import Measurements
+
+    robot, data, joint, _ = planted
+
+    def halves(d):
+        h = len(d.joint_values) // 2
+        return [Measurements(d.joint_names, d.joint_values[s], d.positions[s])
+                for s in (slice(None, h), slice(h, None))]
+
+    res = calibrate(robot, halves(data), model="complete")
+    f = diagnose(res)
+    assert len(res.sets) == 2 and (f.joint, f.cause) == (joint, "backlash")
+    assert abs(f.size) == pytest.approx(np.degrees(model_auto.HALF_PLAY), rel=0.15)
+    assert f.line() in res.summary() and f.rms_mm[1] < f.rms_mm[0]
+    clean = model_auto.case("UR10", 2, planted=False)[1]
+    assert diagnose(calibrate(robot, halves(clean), model="complete")) is None
 
 
 def test_diagnosis_names_a_periodic_joint_error():

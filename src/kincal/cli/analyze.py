@@ -154,6 +154,8 @@ def _analyze(a: Analyze):
                           lambda fields: plot_accuracy_map(amap, source=fields)))
     summary = {"command": "analyze", "robot": str(robot.source),
                "data": [str(f) for f in a.inputs.files], "model": problem.model_name,
+               "model_choice": (None if problem.model_choice is None
+                                else problem.model_choice.as_dict()),
                **({"identifiability": as_json} if len(names) == 1 else {"models": as_json}),
                "accuracy_map": None if amap is None else amap.as_dict()}
     return robot, summary, files, protect

@@ -212,7 +212,8 @@ def json_summary(result, validations, refused: bool) -> dict:
 
     full = report.result_dict(result)
     keep = ("robot", "data", "lambda", "penalty_choice", "evidence", "errors", "parameters",
-            "frames", "convergence", "plausibility", "diagnosis", "term_evidence")
+            "frames", "convergence", "plausibility", "model_choice", "diagnosis",
+            "term_evidence")
     return {"command": "calibrate", "verdict": "REFUSED" if refused else "written",
             **{k: full[k] for k in keep},
             "sets": [{k: v for k, v in s.items() if k != "residuals"} for s in full["sets"]],

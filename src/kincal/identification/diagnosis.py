@@ -1,6 +1,7 @@
 """Residual diagnosis: a pattern a missing term would explain, named with its size.
 
-After any fit (``--model`` chosen or given), the residuals of a point set are tested
+After any fit (``--model`` chosen or given), the residuals of the point sets (several files
+together: the kinematic parameters shared, each set's frames its own) are tested
 against what each joint's missing term would leave: backlash (the joint off by +-b with
 its approach direction), a scale error of a prismatic joint (off by k * q), a periodic
 error of a revolute joint (off by c * cos q + s * sin q), a compliance of a revolute joint
@@ -71,35 +72,29 @@ def nested_p(gain: float, rss: float, dof: int, k: int = 1, tests: int = 1) -> f
 
 
 def diagnose(result) -> Finding | None:
-    """The strongest significant pattern in the first point set's residuals, or None (also
-    for other kinds, several sets or chains)."""
-    from kincal.measurements.point import MeasurementModel
-    from kincal.models.compliance import torque_rms
-
-    if len(result.sets) != 1 or result.sets[0].kind != "point" or (
+    """The strongest significant pattern in the point sets' residuals, or None (also when
+    a set is of another kind, or with several chains). Several point sets (files) are
+    tested together: one term per joint, seen by every set through its own approach
+    directions, with the kinematic parameters shared and each set's frames its own."""
+    if any(s.kind != "point" for s in result.sets) or (
             result.chains is not None and result.chains.several):
         return None
-    s = result.sets[0]
+    from kincal.models.compliance import torque_rms
+
     em = result.error_model
-    d = s.data.for_chain(em.joint_names)
-    # Beyond MAX_POSES the test runs on that many poses evenly spaced in file order (their
-    # approach directions from the whole sequence): a pattern that matters is plain at
-    # thousands of poses, and the Jacobian, its SVD and the gravity torques then cost what
-    # a summary may (at 100,000 poses they cost more than the fit).
-    keep = (slice(None) if len(d) <= MAX_POSES
-            else np.unique(np.linspace(0, len(d) - 1, MAX_POSES).round().astype(int)))
-    q, g, n = d.joint_values[keep], d.approach[keep], em.n
-    # (3N,) measured - predicted [m]
-    r = np.asarray(s.residuals, float).reshape(len(d), -1)[keep].reshape(-1)
     joints = tuple(em.joint_names)
-    x = np.concatenate([result.kinematic, result.base, result.tools.ravel(), np.zeros(n)])
-    _, J = MeasurementModel(em, q, np.ones_like(q), joints, np.asarray(d.points)[keep],
-                            d.n_points).jacobian(x)
-    Jq = J[:, :, -n:]  # (N, 3, n) the measured point's motion per joint [m per rad or m]
     have = [joints.index(j) for j in result.layout.backlash if j in joints]
     stiff = [joints.index(j) for j in result.layout.compliance if j in joints]
+    blocks = [_set_block(result, s, -(-MAX_POSES // len(result.sets))) for s in result.sets]
+    q, g, r, Jq, K = (np.concatenate([b[i] for b in blocks]) for i in range(5))
+    # each set's frame columns its own: block-diagonal beside the shared kinematic ones
+    own = np.zeros((len(r), sum(b[5].shape[1] for b in blocks)))
+    row = col = 0
+    for b in blocks:
+        own[row:row + len(b[5]), col:col + b[5].shape[1]] = b[5]
+        row, col = row + len(b[5]), col + b[5].shape[1]
     tau = _torques(result.robot, q, em.kinds)
-    A = np.column_stack([J[:, :, :-n].reshape(len(r), -1)]
+    A = np.column_stack([K, own]
                         + [(Jq[:, :, j] * g[:, j:j + 1]).reshape(-1, 1) for j in have]
                         + [(Jq[:, :, j] * tau[:, j:j + 1]).reshape(-1, 1) for j in stiff])
     U, sv, _ = np.linalg.svd(A, full_matrices=False)
@@ -142,6 +137,32 @@ def diagnose(result) -> Finding | None:
                    math.sqrt(max(float(r @ r) - gain, 0.0) / N) * 1e3)
             best = (F, Finding(name, cause, float(size), rms, p))
     return None if best is None else best[1]
+
+
+def _set_block(result, s, max_poses: int) -> tuple:
+    """One point set's part of the test, on at most ``max_poses`` of its poses: (q (N, n),
+    approach (N, n), residual (3N,) [m], the measured point's motion per joint (N, 3, n),
+    the kinematic columns (3N, k), the set's frame columns (3N, f))."""
+    from kincal.measurements.point import MeasurementModel
+
+    em = result.error_model
+    n, k = em.n, result.kinematic.size
+    d = s.data.for_chain(em.joint_names)
+    # Beyond max_poses the test runs on that many poses evenly spaced in file order (their
+    # approach directions from the whole sequence): a pattern that matters is plain at
+    # thousands of poses, and the Jacobian, its SVD and the gravity torques then cost what
+    # a summary may (at 100,000 poses they cost more than the fit).
+    keep = (slice(None) if len(d) <= max_poses
+            else np.unique(np.linspace(0, len(d) - 1, max_poses).round().astype(int)))
+    q, g = d.joint_values[keep], d.approach[keep]
+    r = np.asarray(s.residuals, float).reshape(len(d), -1)[keep].reshape(-1)  # measured - predicted
+    b, t = s.frame_names.index("base.x"), s.frame_names.index("tool.x")
+    x = np.concatenate([result.kinematic, s.frames[b:b + 6],
+                        s.frames[t:t + 3 * d.n_points], np.zeros(n)])
+    _, J = MeasurementModel(em, q, np.ones_like(q), em.joint_names, np.asarray(d.points)[keep],
+                            d.n_points).jacobian(x)
+    J = J.reshape(len(r), -1)
+    return q, g, r, J[:, -n:].reshape(len(q), 3, n), J[:, :k], J[:, k:-n]
 
 
 def _torques(robot, q: np.ndarray, kinds) -> np.ndarray:

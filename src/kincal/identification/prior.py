@@ -144,9 +144,14 @@ class FleetPrior:
                              "expected robot, robot_hash, model, units, shrinkage, parameters "
                              "(name, unit m or rad, mean) and a k x k covariance") from None
         k = len(names)
-        if cov.shape != (k, k) or not (np.all(np.isfinite(cov)) and np.all(np.isfinite(mean))):
+        if cov.shape != (k, k) or not np.all(np.isfinite(cov)):
             raise PriorError(f"{path}: the covariance must be a finite {k} x {k} matrix (one "
-                             f"row per parameter), got shape {cov.shape}")
+                             f"row per parameter), got " + (f"shape {cov.shape}" if cov.shape
+                                                            != (k, k) else "a NaN or infinity"))
+        if not np.all(np.isfinite(mean)):
+            raise PriorError(f"{path}: the mean deviation of "
+                             f"{names[int(np.flatnonzero(~np.isfinite(mean))[0])]} is not a "
+                             "finite number")
         if not np.allclose(cov, cov.T, rtol=1e-9, atol=0) or np.linalg.eigvalsh(
                 cov).min() < -1e-9 * max(float(np.abs(cov).max()), 1e-300):
             raise PriorError(f"{path}: the covariance is not symmetric positive semidefinite")
