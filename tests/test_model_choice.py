@@ -250,6 +250,19 @@ def test_diagnosis_names_backlash_seen_by_several_files(planted):
     assert diagnose(calibrate(robot, halves(clean), model="complete")) is None
 
 
+def test_diagnosis_suggests_the_terms_given_with_the_one_found(planted):
+    """Backlash given on another joint than the one with the play: the suggestion keeps
+    the joint given (the option replaces the joints it names; it said --backlash
+    elbow_joint alone, dropping wrist_1_joint)."""
+    from kincal.identification.diagnosis import diagnose
+
+    robot, data, joint, _ = planted
+    res = calibrate(robot, data, model="complete", backlash=("wrist_1_joint",))
+    f = diagnose(res)
+    assert (f.joint, f.cause, f.given) == (joint, "backlash", ("wrist_1_joint",))
+    assert f"(--backlash wrist_1_joint {joint})" in f.line()
+
+
 def test_diagnosis_names_a_periodic_joint_error():
     from kincal.identification.diagnosis import diagnose
 

@@ -40,15 +40,17 @@ class Finding:
     size: float
     rms_mm: tuple[float, float]
     p_value: float
+    given: tuple[str, ...] = ()  # the joints the fit already has this kind of term for
 
     def line(self) -> str:
+        option = " ".join((*self.given, self.joint))  # the option replaces the joints given
         what = {"backlash": f"backlash of about {abs(self.size):.3g} deg half-play "
-                            f"(--backlash {self.joint})",
+                            f"(--backlash {option})",
                 "scale": f"a scale error of about {self.size:+.3g} % of its travel",
                 "periodic": f"a periodic error of about {self.size:.3g} deg amplitude "
                             "(once per turn)",
                 "compliance": f"a compliance of about {self.size:+.3g} deg at the RMS "
-                              f"gravity torque (--compliance {self.joint})"}[self.cause]
+                              f"gravity torque (--compliance {option})"}[self.cause]
         return (f"diagnosis: the residuals follow {self.joint}: {what}; modelled, the RMS "
                 f"would go from {self.rms_mm[0]:.3g} to {self.rms_mm[1]:.3g} mm "
                 f"(p = {self.p_value:.2g})")
@@ -135,7 +137,9 @@ def diagnose(result) -> Finding | None:
                     else math.degrees(coef[0]))
             rms = (math.sqrt(float(r @ r) / N) * 1e3,
                    math.sqrt(max(float(r @ r) - gain, 0.0) / N) * 1e3)
-            best = (F, Finding(name, cause, float(size), rms, p))
+            given = {"backlash": have, "compliance": stiff}.get(cause, [])
+            best = (F, Finding(name, cause, float(size), rms, p,
+                               tuple(joints[i] for i in given)))
     return None if best is None else best[1]
 
 
