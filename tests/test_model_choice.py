@@ -263,6 +263,17 @@ def test_diagnosis_suggests_the_terms_given_with_the_one_found(planted):
     assert f"(--backlash wrist_1_joint {joint})" in f.line()
 
 
+def test_evidence_line_gives_the_backlash_scale_its_unit(planted):
+    """The evidence's prior scale of the backlash class is in degrees of half-play (mm
+    for a prismatic joint); the summary printed the number alone."""
+    robot, data, joint, _ = planted
+    res = calibrate(robot, data, model="complete", backlash=(joint,), lam="evidence")
+    line = next(s for s in res.summary().splitlines() if "prior scales" in s)
+    scale = float(line.split("backlash ")[1].split()[0])
+    assert "deg half-play (mm if prismatic)" in line.split("backlash ")[1]
+    assert scale == pytest.approx(np.degrees(model_auto.HALF_PLAY), rel=0.5)  # the play's size
+
+
 def test_diagnosis_names_a_periodic_joint_error():
     from kincal.identification.diagnosis import diagnose
 

@@ -102,7 +102,8 @@ class EvidenceFit:
 
     def scale_text(self, cls: str) -> str:
         """Class ``cls``'s prior scale as the summary writes it ("offset 4.92 deg")."""
-        unit = {"length": "mm", "twist": "deg", "offset": "deg", "backlash": "",
+        unit = {"length": "mm", "twist": "deg", "offset": "deg",
+                "backlash": "deg half-play (mm if prismatic)",
                 "compliance": "deg at the RMS torque", "fleet": "x the fleet's scatter"}
         return f"{cls} {self.scale_of(cls):.3g} {unit[cls]}".rstrip()
 
