@@ -296,6 +296,19 @@ def test_an_unreachable_orientation_is_named_as_the_cause(work, capsys):
     assert main(argv + ["--tilt-deg", "180"]) == 0  # any orientation: reached
 
 
+def test_a_chain_of_five_joints_reaches_a_point_at_any_orientation(work, capsys):
+    """EC66 from link_1 (5 joints) reaches this cube's points, but no chosen orientation
+    there: the refusal says so, and --tilt-deg 180 (any orientation) draws the poses with
+    the orientation free (it sampled orientations the 5 joints cannot take, and failed
+    naming the orientation even at 180 deg)."""
+    argv = ["simulate", "ec66", "--base", "link_1", "--out", "e.csv", "--poses", "10",
+            "--center-m", "0.35", "0.037", "-0.456", "--size-mm", "20"]
+    line = refused(capsys, argv, work)
+    assert "orientation is the cause" in line and "a chain of 5 joints cannot give" in line
+    assert main(argv + ["--tilt-deg", "180"]) == 0
+    check_stderr(capsys.readouterr().err, errors=0)
+
+
 def _rows(path) -> list[str]:
     """Header and rows of a CSV kincal wrote, without its provenance (# lines)."""
     return [r for r in path.read_text().splitlines() if not r.startswith("#")]

@@ -123,6 +123,8 @@ def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.G
     refuse_coupled(robot, "drawing simulated poses")
     if n < 1:
         raise OptionError(f"need at least one pose, got {n}")
+    if max_tilt is not None and orientation is None and max_tilt >= np.pi:
+        max_tilt = None  # every orientation is within 180 deg of pointing down: free
     center = np.asarray(center, float)
     pts = center + (latin_hypercube(n, rng) if lhs else rng.random((n, 3)) - 0.0) * size - size / 2
     R0 = rotx(np.pi) if orientation is None else np.asarray(orientation, float)
@@ -253,7 +255,11 @@ def _random_restarts(robot, p, tool, R, R0, max_tilt, home, near, rng, lo, hi, a
         raise OptionError(f"no joint solution reaches {where} with the tool within "
                           f"{np.degrees(max_tilt):g} deg of pointing down: the tip's "
                           "orientation is the cause (an arm that cannot point its tip "
-                          "down there); allow a larger --tilt-deg or choose another --tip")
+                          "down there); allow a larger --tilt-deg (180: any orientation) or "
+                          "choose another --tip"
+                          + (f" (a chain of {robot.geometry.n} joints cannot give the tool a "
+                             "chosen orientation at a chosen point)" if robot.geometry.n < 6
+                             else ""))
     raise OptionError(f"no joint solution reaches {where}; move the cube")
 
 
