@@ -105,19 +105,17 @@ def _cause(exc: BaseException) -> BaseException | None:
     return None
 
 
-def expand_xacro(path, max_chars: int, args=None) -> str:
-    """The URDF text that xacro makes of the file at ``path``, with ``args`` {name: value}
-    for its ``xacro:arg``\\ s (the others at their defaults). Raises :class:`UrdfError`, one
-    line, when the expansion fails or the result is over ``max_chars``; xacro's own
-    warnings become :class:`KincalWarning`\\ s.
-    """
-    p = Path(path)
+def _process(p: Path, args) -> tuple[str, tuple[Path, ...]]:
+    """(URDF text, the files xacro read: includes and ``load_yaml``\\ s) of ``p``'s expansion.
+    Raises :class:`UrdfError`, one line, when it fails; xacro's warnings become
+    :class:`KincalWarning`\\ s."""
     try:
         import xacro
     except ImportError:  # a dependency of kincal; only a broken install lacks it
         raise UrdfError(f"{p}: is a xacro file and the 'xacro' package is not installed; "
                         "pip install xacro, or expand it first: xacro FILE > robot.urdf") from None
     stderr = io.StringIO()
+    seen = len(xacro.all_includes)  # xacro appends each file it reads (never resets)
     try:
         with _package_lookup(p), contextlib.redirect_stderr(stderr):
             doc = xacro.process_file(str(p.resolve()), mappings=dict(args or {}))
@@ -131,12 +129,32 @@ def expand_xacro(path, max_chars: int, args=None) -> str:
         hint = ("; pass the file's arguments with --xacro-arg NAME:=VALUE"
                 if "substitution argument" in reason and not args else "")
         raise UrdfError(f"{p}: xacro expansion failed{where}: {reason}{hint}") from None
+    read = tuple(Path(f) for f in xacro.all_includes[seen:])
     for line in dict.fromkeys(_ANSI.sub("", stderr.getvalue()).splitlines()):
         if line.startswith("warning:"):
             warnings.warn(f"{p}: xacro {line}", KincalWarning)
+    return text, read
+
+
+def expand_xacro(path, max_chars: int, args=None) -> str:
+    """The URDF text that xacro makes of the file at ``path``, with ``args`` {name: value}
+    for its ``xacro:arg``\\ s (the others at their defaults). Raises :class:`UrdfError`, one
+    line, when the expansion fails or the result is over ``max_chars``; xacro's own
+    warnings become :class:`KincalWarning`\\ s.
+    """
+    p = Path(path)
+    text, _ = _process(p, args)
     if len(text) > max_chars:
         raise UrdfError(f"{p}: the expanded URDF has {len(text)} characters, more than "
                         f"{max_chars}; not a URDF kincal will read")
     warnings.warn(f"{p}: expanded with xacro (a corrected URDF is written as plain URDF)",
                   KincalNote)
     return text
+
+
+def files_read(path, args=None) -> tuple[Path, ...]:
+    """The files xacro reads when it expands ``path`` with ``args``, as xacro found them:
+    a relative name (``kinematics_params:=K.yaml``) is joined to the folder of the xacro
+    file that reads it, not to the working folder. Expands the file again (raises as
+    :func:`expand_xacro`)."""
+    return _process(Path(path), args)[1]
