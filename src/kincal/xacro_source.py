@@ -76,6 +76,37 @@ def find_package(pkg: str, start: Path) -> Path:
         f"ROS_PACKAGE_PATH (export ROS_PACKAGE_PATH=/path/to/src)")
 
 
+class _SeenArgs(dict):
+    """xacro's argument values, noting every name xacro looks up: a ``<xacro:arg>`` the
+    files declare or a ``$(arg NAME)`` they use. xacro reads the dict it is given as is."""
+
+    def __init__(self, values):
+        super().__init__(values)
+        self.seen: set = set()
+
+    def __contains__(self, name) -> bool:
+        self.seen.add(name)
+        return super().__contains__(name)
+
+    def __getitem__(self, name):
+        self.seen.add(name)
+        return super().__getitem__(name)
+
+
+def _unused(p: Path, given: dict, args: _SeenArgs) -> str | None:
+    """Why an argument given for ``p`` would be ignored (xacro ignores a name no file
+    declares or uses: a misspelt kinematics_params expands the default robot), or None."""
+    unused = [name for name in given if name not in args.seen]
+    if not unused:
+        return None
+    from kincal.errors import listing, suggest
+
+    known = sorted(args.seen)
+    return (f"{p}: xacro argument {', '.join(unused)} is neither declared nor used by this "
+            f"file (xacro would ignore it); its arguments: {listing(known) or 'none'}."
+            + suggest(unused[0], known))
+
+
 @contextlib.contextmanager
 def _package_lookup(start: Path):
     """xacro's $(find) answered by :func:`find_package` while the context is open.
@@ -116,9 +147,10 @@ def _process(p: Path, args) -> tuple[str, tuple[Path, ...]]:
                         "pip install xacro, or expand it first: xacro FILE > robot.urdf") from None
     stderr = io.StringIO()
     seen = len(xacro.all_includes)  # xacro appends each file it reads (never resets)
+    mappings = _SeenArgs(args or {})
     try:
         with _package_lookup(p), contextlib.redirect_stderr(stderr):
-            doc = xacro.process_file(str(p.resolve()), mappings=dict(args or {}))
+            doc = xacro.process_file(str(p.resolve()), mappings=mappings)
             text = doc.toprettyxml(indent="  ")
     except Exception as exc:  # xacro raises XacroException, expat, eval and OS errors
         cause = _cause(exc)
@@ -129,6 +161,9 @@ def _process(p: Path, args) -> tuple[str, tuple[Path, ...]]:
         hint = ("; pass the file's arguments with --xacro-arg NAME:=VALUE"
                 if "substitution argument" in reason and not args else "")
         raise UrdfError(f"{p}: xacro expansion failed{where}: {reason}{hint}") from None
+    unused = _unused(p, dict(args or {}), mappings)
+    if unused is not None:
+        raise UrdfError(unused)
     read = tuple(Path(f) for f in xacro.all_includes[seen:])
     for line in dict.fromkeys(_ANSI.sub("", stderr.getvalue()).splitlines()):
         if line.startswith("warning:"):
