@@ -675,3 +675,27 @@ def test_every_report_names_every_chain(tmp_path):
     assert result.chains_text() == both and f"({both})" in result.summary().splitlines()[0]
     page = html_report(result)
     assert page.count(f"({both})".replace(">", "&gt;")) >= 3  # <title>, <h1>, the robot row
+
+
+def test_unit_clue_of_points_on_a_second_chain_after_plane_touches_on_the_first(tmp_path):
+    """The gate's unit clue (measured spread against the nominal tool point's) takes the first
+    set that measures positions: here points on the second chain after plane touches on the
+    first. It was computed with the first chain's kinematics: a traceback where the chains'
+    joint counts differ (IndexError; TIAGo-like: flush touches at the gripper, points at a
+    shorter chain's tip), a wrong ratio otherwise. Now the set's own chain, as for the
+    points calibrated alone."""
+    from kincal.measurements.plane import PlaneData
+
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(7)
+    touches = PlaneData(joint_names=robots[0].joint_names, source="touches",
+                        joint_values=_plane_touches(robots[0], robots[0], 30, rng, 0.1,
+                                                    TOOLS[0]))
+    points = _points(robots[1], robots[1], _q(robots[1], 40, rng), 1, 10e-6, rng)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        both = calibrate(list(robots), [touches, points], method="ls")
+        alone = calibrate(robots[1], points, method="ls")
+    ratio = both.plausibility.evidence.length_ratio
+    assert np.isfinite(ratio) and ratio == pytest.approx(
+        alone.plausibility.evidence.length_ratio, rel=1e-12)
