@@ -617,8 +617,7 @@ def test_each_chains_backlash_and_compliance_terms_stay_with_it():
                                       (("rb", "rt"), {"t1", "r1"}, {"r2"})):
         mine = f.for_chain(base, tip)
         assert set(mine.compliance) == joints and set(mine.backlash) == back
-        assert [s.source for s in mine.sets] == (["a.csv", "b.csv"] if base == "lb"
-                                                 else ["b.csv"])  # the file's chain: all
+        assert [s.source for s in mine.sets] == (["a.csv"] if base == "lb" else ["b.csv"])
     odd = CellFrames("robot", "", "lb", "lt", left, f.sets, compliance={"x9": 1e-3})
     assert odd.for_chain("rb", "rt").compliance == {"x9": 1e-3}
 
@@ -627,6 +626,35 @@ def test_each_chains_backlash_and_compliance_terms_stay_with_it():
 
     with pytest.raises(DataError, match="no chain joint 'x9'"):
         odd.for_chain("rb", "rt").check_chain(_Robot())
+
+
+def test_the_frames_of_a_chain_are_its_own_sets_only():
+    """FRAMES.json of flush touches on the file's chain (EC66 lb -> lt: flange) and points on
+    another (rb -> rt: link_5): evaluate and compensate on the file's chain read the other
+    chain's measurement frame and tool point (a point in another tip frame) as its own,
+    rc 0 (EC66: 67 mm mean error from evaluate, 14 deg joint changes from compensate). The
+    file's chain now has its own sets only, and no measurement frame: refused, naming the
+    chain that has one."""
+    from kincal.errors import DataError
+    from kincal.frames_file import SetFrames
+
+    left, right = ("l1", "t1", "l2"), ("r1", "t1", "r2")
+    names = tuple(f"base.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")) + tuple(
+        f"tool.{c}" for c in "xyz")
+    point = SetFrames("point", "b.csv", names, (0.8, 0.3, -0.2, 0.0, 0.0, 1.0, 0.05, 0.02, 0.08),
+                      "rb", "rt", right)
+    f = CellFrames("robot", "", "lb", "lt", left, (FlushSetFrames("a.csv", "lb", "lt", left),
+                                                   point))
+    with pytest.raises(DataError, match=r"no measurement set on the chain lb -> lt .*kinds "
+                                        r"flush.*its point or pose sets are on rb -> rt"):
+        f.located()
+    for base, tip in (("lb", "lt"), (None, "lt"), (None, None)):
+        mine = f.for_chain(base, tip)
+        assert [s.source for s in mine.sets] == ["a.csv"]
+        with pytest.raises(DataError, match="no measurement set on the chain lb -> lt"):
+            mine.located()
+    assert f.for_chain("rb", "rt").located() is point
+    assert f.for_chain(None, "rt").tools.tolist() == [[0.05, 0.02, 0.08]]
 
 
 def FlushSetFrames(source, base, tip, joints):
