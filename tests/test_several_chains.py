@@ -622,8 +622,7 @@ def test_each_chains_backlash_and_compliance_terms_stay_with_it():
                                       (("rb", "rt"), {"t1", "r1"}, {"r2"})):
         mine = f.for_chain(base, tip)
         assert set(mine.compliance) == joints and set(mine.backlash) == back
-        assert [s.source for s in mine.sets] == (["a.csv", "b.csv"] if base == "lb"
-                                                 else ["b.csv"])  # the file's chain: all
+        assert [s.source for s in mine.sets] == (["a.csv"] if base == "lb" else ["b.csv"])
     odd = CellFrames("robot", "", "lb", "lt", left, f.sets, compliance={"x9": 1e-3})
     assert odd.for_chain("rb", "rt").compliance == {"x9": 1e-3}
 
@@ -632,6 +631,35 @@ def test_each_chains_backlash_and_compliance_terms_stay_with_it():
 
     with pytest.raises(DataError, match="no chain joint 'x9'"):
         odd.for_chain("rb", "rt").check_chain(_Robot())
+
+
+def test_the_frames_of_a_chain_are_its_own_sets_only():
+    """FRAMES.json of flush touches on the file's chain (EC66 lb -> lt: flange) and points on
+    another (rb -> rt: link_5): evaluate and compensate on the file's chain read the other
+    chain's measurement frame and tool point (a point in another tip frame) as its own,
+    rc 0 (EC66: 67 mm mean error from evaluate, 14 deg joint changes from compensate). The
+    file's chain now has its own sets only, and no measurement frame: refused, naming the
+    chain that has one."""
+    from kincal.errors import DataError
+    from kincal.frames_file import SetFrames
+
+    left, right = ("l1", "t1", "l2"), ("r1", "t1", "r2")
+    names = tuple(f"base.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")) + tuple(
+        f"tool.{c}" for c in "xyz")
+    point = SetFrames("point", "b.csv", names, (0.8, 0.3, -0.2, 0.0, 0.0, 1.0, 0.05, 0.02, 0.08),
+                      "rb", "rt", right)
+    f = CellFrames("robot", "", "lb", "lt", left, (FlushSetFrames("a.csv", "lb", "lt", left),
+                                                   point))
+    with pytest.raises(DataError, match=r"no measurement set on the chain lb -> lt .*kinds "
+                                        r"flush.*its point or pose sets are on rb -> rt"):
+        f.located()
+    for base, tip in (("lb", "lt"), (None, "lt"), (None, None)):
+        mine = f.for_chain(base, tip)
+        assert [s.source for s in mine.sets] == ["a.csv"]
+        with pytest.raises(DataError, match="no measurement set on the chain lb -> lt"):
+            mine.located()
+    assert f.for_chain("rb", "rt").located() is point
+    assert f.for_chain(None, "rt").tools.tolist() == [[0.05, 0.02, 0.08]]
 
 
 def FlushSetFrames(source, base, tip, joints):
@@ -680,3 +708,27 @@ def test_every_report_names_every_chain(tmp_path):
     assert result.chains_text() == both and f"({both})" in result.summary().splitlines()[0]
     page = html_report(result)
     assert page.count(f"({both})".replace(">", "&gt;")) >= 3  # <title>, <h1>, the robot row
+
+
+def test_unit_clue_of_points_on_a_second_chain_after_plane_touches_on_the_first(tmp_path):
+    """The gate's unit clue (measured spread against the nominal tool point's) takes the first
+    set that measures positions: here points on the second chain after plane touches on the
+    first. It was computed with the first chain's kinematics: a traceback where the chains'
+    joint counts differ (IndexError; TIAGo-like: flush touches at the gripper, points at a
+    shorter chain's tip), a wrong ratio otherwise. Now the set's own chain, as for the
+    points calibrated alone."""
+    from kincal.measurements.plane import PlaneData
+
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(7)
+    touches = PlaneData(joint_names=robots[0].joint_names, source="touches",
+                        joint_values=_plane_touches(robots[0], robots[0], 30, rng, 0.1,
+                                                    TOOLS[0]))
+    points = _points(robots[1], robots[1], _q(robots[1], 40, rng), 1, 10e-6, rng)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        both = calibrate(list(robots), [touches, points], method="ls")
+        alone = calibrate(robots[1], points, method="ls")
+    ratio = both.plausibility.evidence.length_ratio
+    assert np.isfinite(ratio) and ratio == pytest.approx(
+        alone.plausibility.evidence.length_ratio, rel=1e-12)

@@ -99,6 +99,54 @@ def test_format_and_hash_need_yaml_out(calibrated, tmp_path, capsys):
     assert not (tmp_path / "C.urdf").exists()
 
 
+def test_a_hash_goes_with_the_ur_format_only(calibrated, tmp_path, capsys):
+    """--ur-hash with the kincal YAML (joint-name keys, no hash) was accepted and dropped:
+    the user got a file ur_description cannot read; refused, in the CLI and the API."""
+    from kincal import Measurements, Outputs, calibrate, write_calibration
+    from kincal.errors import ExportError
+
+    tmp, factory, data = calibrated
+    base = ["calibrate", str(XACRO), str(data), *_cli_args(factory), "--tip", "tool0",
+            "--out", str(tmp_path / "C.urdf"), "--yaml-out", str(tmp_path / "K.yaml"),
+            "--ur-hash", "calib_1"]
+    _refused(base, capsys, "--ur-hash", "--yaml-format ur")
+    _refused(base + ["--yaml-format", "kincal"], capsys, "--ur-hash", "--yaml-format ur")
+    robot = Robot.load(str(XACRO), tip="tool0", xacro_args=_args(factory))
+    result = calibrate(robot, Measurements.from_csv(data, robot.joint_names), model="mdh",
+                       method="ls")
+    with pytest.raises(ExportError, match="ur_hash .*yaml_format='ur'"):
+        write_calibration(result, Outputs(urdf=tmp_path / "C.urdf", yaml=tmp_path / "K.yaml",
+                                          ur_hash="calib_1"))
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_relative_kinematics_file_gives_the_hash_of_the_file_xacro_read(calibrated, tmp_path,
+                                                                         monkeypatch):
+    """xacro reads a relative kinematics_params beside the xacro file that loads it
+    (ur_description's urdf/); the hash was read relative to the working folder instead:
+    another robot's hash from a file of the same name there, or "no hash found"."""
+    import re
+
+    _, _, data = calibrated
+    relative = "../config/ur10e/default_kinematics.yaml"  # from urdf/: the factory file
+    read = (XACRO.parent / relative).read_text()
+    expected = re.search(r"hash:\s*(\S+)", read).group(1)
+    cell = tmp_path / "cell"  # the working folder holds another file at the same name
+    (cell / "config" / "ur10e").mkdir(parents=True)
+    (cell / "urdf").mkdir()
+    (cell / "config" / "ur10e" / "default_kinematics.yaml").write_text(
+        read.replace(expected, "calib_another_robot"))
+    for k, folder in enumerate((cell / "urdf", tmp_path)):  # there, and where none is
+        monkeypatch.chdir(folder)
+        out = tmp_path / f"K{k}.yaml"
+        assert main(["calibrate", str(XACRO), str(data), "--xacro-arg", "ur_type:=ur10e",
+                     "--xacro-arg", "name:=ur", "--xacro-arg", f"kinematics_params:={relative}",
+                     "--tip", "tool0", "--model", "mdh", "--method", "ls", "--quiet",
+                     "--out", str(tmp_path / f"C{k}.urdf"), "--yaml-out", str(out),
+                     "--yaml-format", "ur"]) == 0
+        assert out.read_text().endswith(f"  hash: {expected}\n")
+
+
 def test_ur_format_needs_the_six_ur_joints(calibrated, tmp_path, capsys):
     _, factory, data = calibrated
     _refused(["calibrate", str(XACRO), str(data), *_cli_args(factory), "--tip", "wrist_2_link",

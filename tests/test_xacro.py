@@ -291,3 +291,26 @@ def test_api_files_name_the_xacro_arguments_the_robot_was_loaded_with(tmp_path):
     assert report["provenance"]["robot"]["xacro_args"] == {"upper": "0.5"}
     assert "xacro args: upper:=0.5" in (tmp_path / "c.urdf").read_text()
     assert Robot.load("ec66").xacro_args == ()
+
+
+def test_an_argument_the_xacro_neither_declares_nor_uses_is_refused(tmp_path, capsys):
+    """xacro ignores an argument no file declares or uses: a misspelt kinematics_params
+    expanded ur_description's default robot (and gave its hash to --yaml-format ur) without
+    a word. kincal refuses it in one line naming the file's arguments, in the CLI (here
+    simulate; every command reads the robot alike) and in the API, and writes nothing."""
+    xacro_file = tmp_path / "arm.urdf.xacro"
+    xacro_file.write_text(ARG_XACRO.replace(
+        '<link name="base_link"/>', '<xacro:arg name="unused" default="1"/><link name="base_link"/>'))
+    with pytest.raises(UrdfError, match=r"xacro argument uper is neither declared nor used .*"
+                                        r"its arguments: unused, upper\. Did you mean 'upper'"):
+        Robot.load(xacro_file, tip="flange", xacro_args={"uper": "0.5"})
+    out = tmp_path / "d.csv"
+    assert main(["simulate", str(xacro_file), "--xacro-arg", "upper:=0.5", "--xacro-arg",
+                 "uper:=0.5", "--tip", "flange", "--center-m", "0.3", "0", "0.3",
+                 "--out", str(out)]) == 1
+    err = [s for s in capsys.readouterr().err.splitlines() if s.startswith("kincal: error:")]
+    assert len(err) == 1 and "xacro argument uper is neither declared nor used" in err[0]
+    assert not out.exists()
+    with warnings.catch_warnings():  # declared but unused and used: both are arguments
+        warnings.simplefilter("ignore")
+        Robot.load(xacro_file, tip="flange", xacro_args={"upper": "0.5", "unused": "2"})

@@ -340,8 +340,14 @@ class CellFrames:
 
     def chains(self) -> tuple[tuple[str, str], ...]:
         """The (base, tip) frames of the chains the sets were measured on, first seen first."""
-        return tuple(dict.fromkeys((s.base_frame or self.base_frame, s.tip_frame or
-                                    self.tip_frame) for s in self.sets))
+        return tuple(dict.fromkeys(map(self._chain_of, self.sets)))
+
+    def _chain_of(self, s: SetFrames) -> tuple[str, str]:
+        return s.base_frame or self.base_frame, s.tip_frame or self.tip_frame
+
+    def _on(self, chain: tuple[str, str]) -> tuple[SetFrames, ...]:
+        """The sets measured on ``chain`` (base, tip); a set naming none is on the file's."""
+        return tuple(s for s in self.sets if self._chain_of(s) == chain)
 
     def for_chain(self, base: str | None, tip: str | None) -> "CellFrames":
         """The frames of the sets measured on the chain ``base`` -> ``tip`` (None: as
@@ -360,8 +366,7 @@ class CellFrames:
                           KincalWarning)
         base, tip = base or self.base_frame, tip or self.tip_frame
         top = (base, tip) == (self.base_frame, self.tip_frame)
-        mine = tuple(s for s in self.sets if (s.base_frame or self.base_frame,
-                                              s.tip_frame or self.tip_frame) == (base, tip))
+        mine = self._on((base, tip))
         if not mine:
             return self
         joints = set(self.joints if top else mine[0].joints)
@@ -370,8 +375,8 @@ class CellFrames:
         # no chain of the file stays, for check_chain to refuse
         backlash, compliance = ({j: v for j, v in terms.items() if j not in others}
                                 for terms in (self.backlash, self.compliance))
-        if top:
-            return replace(self, backlash=backlash, compliance=compliance)
+        if top:  # its own sets only: another chain's frames would be read on this one
+            return replace(self, sets=mine, backlash=backlash, compliance=compliance)
         return CellFrames(self.robot, "", base, tip, mine[0].joints, mine, backlash,
                           self.source, compliance)
 
@@ -407,14 +412,24 @@ class CellFrames:
                                 f"{', '.join(robot.joint_names)})")
 
     def located(self) -> SetFrames:
-        """The first set with a measurement frame and tool point (points, poses)."""
-        for s in self.sets:
-            if s.has("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
-                     "tool.x", "tool.y", "tool.z"):
+        """The first set with a measurement frame and tool point (points, poses) on the
+        file's chain (a set of another chain has its tool point in another tip frame)."""
+        def located(s: SetFrames) -> bool:
+            return s.has("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
+                          "tool.x", "tool.y", "tool.z")
+
+        chain = (self.base_frame, self.tip_frame)
+        for s in self._on(chain):
+            if located(s):
                 return s
-        raise DataError(f"{self.source}: no measurement set in it has a measurement frame "
-                        "and tool point (kinds " + ", ".join(s.kind for s in self.sets)
-                        + "); targets in a measurement frame need a point or pose calibration")
+        elsewhere = dict.fromkeys(" -> ".join(self._chain_of(s)) for s in self.sets
+                                  if located(s))
+        raise DataError(f"{self.source}: no measurement set on the chain {' -> '.join(chain)} "
+                        "has a measurement frame and tool point (kinds "
+                        + ", ".join(s.kind for s in self._on(chain)) + "); targets in a "
+                        "measurement frame need a point or pose calibration"
+                        + (f" (its point or pose sets are on {', '.join(elsewhere)}: give "
+                           "that chain's --tip/--base)" if elsewhere else ""))
 
     @property
     def base(self) -> np.ndarray:

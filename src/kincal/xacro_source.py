@@ -76,6 +76,37 @@ def find_package(pkg: str, start: Path) -> Path:
         f"ROS_PACKAGE_PATH (export ROS_PACKAGE_PATH=/path/to/src)")
 
 
+class _SeenArgs(dict):
+    """xacro's argument values, noting every name xacro looks up: a ``<xacro:arg>`` the
+    files declare or a ``$(arg NAME)`` they use. xacro reads the dict it is given as is."""
+
+    def __init__(self, values):
+        super().__init__(values)
+        self.seen: set = set()
+
+    def __contains__(self, name) -> bool:
+        self.seen.add(name)
+        return super().__contains__(name)
+
+    def __getitem__(self, name):
+        self.seen.add(name)
+        return super().__getitem__(name)
+
+
+def _unused(p: Path, given: dict, args: _SeenArgs) -> str | None:
+    """Why an argument given for ``p`` would be ignored (xacro ignores a name no file
+    declares or uses: a misspelt kinematics_params expands the default robot), or None."""
+    unused = [name for name in given if name not in args.seen]
+    if not unused:
+        return None
+    from kincal.errors import listing, suggest
+
+    known = sorted(args.seen)
+    return (f"{p}: xacro argument {', '.join(unused)} is neither declared nor used by this "
+            f"file (xacro would ignore it); its arguments: {listing(known) or 'none'}."
+            + suggest(unused[0], known))
+
+
 @contextlib.contextmanager
 def _package_lookup(start: Path):
     """xacro's $(find) answered by :func:`find_package` while the context is open.
@@ -105,22 +136,21 @@ def _cause(exc: BaseException) -> BaseException | None:
     return None
 
 
-def expand_xacro(path, max_chars: int, args=None) -> str:
-    """The URDF text that xacro makes of the file at ``path``, with ``args`` {name: value}
-    for its ``xacro:arg``\\ s (the others at their defaults). Raises :class:`UrdfError`, one
-    line, when the expansion fails or the result is over ``max_chars``; xacro's own
-    warnings become :class:`KincalWarning`\\ s.
-    """
-    p = Path(path)
+def _process(p: Path, args) -> tuple[str, tuple[Path, ...]]:
+    """(URDF text, the files xacro read: includes and ``load_yaml``\\ s) of ``p``'s expansion.
+    Raises :class:`UrdfError`, one line, when it fails; xacro's warnings become
+    :class:`KincalWarning`\\ s."""
     try:
         import xacro
     except ImportError:  # a dependency of kincal; only a broken install lacks it
         raise UrdfError(f"{p}: is a xacro file and the 'xacro' package is not installed; "
                         "pip install xacro, or expand it first: xacro FILE > robot.urdf") from None
     stderr = io.StringIO()
+    seen = len(xacro.all_includes)  # xacro appends each file it reads (never resets)
+    mappings = _SeenArgs(args or {})
     try:
         with _package_lookup(p), contextlib.redirect_stderr(stderr):
-            doc = xacro.process_file(str(p.resolve()), mappings=dict(args or {}))
+            doc = xacro.process_file(str(p.resolve()), mappings=mappings)
             text = doc.toprettyxml(indent="  ")
     except Exception as exc:  # xacro raises XacroException, expat, eval and OS errors
         cause = _cause(exc)
@@ -131,12 +161,35 @@ def expand_xacro(path, max_chars: int, args=None) -> str:
         hint = ("; pass the file's arguments with --xacro-arg NAME:=VALUE"
                 if "substitution argument" in reason and not args else "")
         raise UrdfError(f"{p}: xacro expansion failed{where}: {reason}{hint}") from None
+    unused = _unused(p, dict(args or {}), mappings)
+    if unused is not None:
+        raise UrdfError(unused)
+    read = tuple(Path(f) for f in xacro.all_includes[seen:])
     for line in dict.fromkeys(_ANSI.sub("", stderr.getvalue()).splitlines()):
         if line.startswith("warning:"):
             warnings.warn(f"{p}: xacro {line}", KincalWarning)
+    return text, read
+
+
+def expand_xacro(path, max_chars: int, args=None) -> str:
+    """The URDF text that xacro makes of the file at ``path``, with ``args`` {name: value}
+    for its ``xacro:arg``\\ s (the others at their defaults). Raises :class:`UrdfError`, one
+    line, when the expansion fails or the result is over ``max_chars``; xacro's own
+    warnings become :class:`KincalWarning`\\ s.
+    """
+    p = Path(path)
+    text, _ = _process(p, args)
     if len(text) > max_chars:
         raise UrdfError(f"{p}: the expanded URDF has {len(text)} characters, more than "
                         f"{max_chars}; not a URDF kincal will read")
     warnings.warn(f"{p}: expanded with xacro (a corrected URDF is written as plain URDF)",
                   KincalNote)
     return text
+
+
+def files_read(path, args=None) -> tuple[Path, ...]:
+    """The files xacro reads when it expands ``path`` with ``args``, as xacro found them:
+    a relative name (``kinematics_params:=K.yaml``) is joined to the folder of the xacro
+    file that reads it, not to the working folder. Expands the file again (raises as
+    :func:`expand_xacro`)."""
+    return _process(Path(path), args)[1]

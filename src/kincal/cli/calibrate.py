@@ -236,6 +236,9 @@ def run(args) -> int:
     if (c.yaml_format is not None or c.ur_hash is not None) and c.yaml_out is None:
         raise OptionError("--yaml-format and --ur-hash describe --yaml-out's file: give "
                           "--yaml-out KINEMATICS.yaml")
+    if c.ur_hash is not None and c.yaml_format != "ur":
+        raise OptionError("--ur-hash is the hash of ur_description's kinematics file: give it "
+                          "with --yaml-format ur (the kincal YAML has no hash)")
     from kincal.export.provenance import utc_now
 
     utc_now()  # a bad SOURCE_DATE_EPOCH fails here, before the work

@@ -19,6 +19,7 @@ YAML is written by hand: the file is flat, and PyYAML is not a dependency.
 from __future__ import annotations
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -142,27 +143,29 @@ def ur_layout_problem(robot) -> str | None:
 
 
 def ur_hash_of(source, xacro_args: dict | None) -> str | None:
-    """The ``hash`` of the kinematics_params file a ur_description xacro was expanded with:
-    the ``kinematics_params`` argument (relative to the working folder, as xacro reads it),
-    else the xacro's default ``$(find ur_description)/config/<ur_type>/default_kinematics.yaml``
-    found as kincal's expansion finds packages. None when no file or no hash is found."""
-    args = dict(xacro_args or {})
-    path = args.get("kinematics_params")
-    if path is None:
-        if source is None or not str(source).endswith(".xacro") or "ur_type" not in args:
-            return None
-        from kincal.xacro_source import find_package
-
-        try:
-            path = find_package("ur_description", Path(source)) / "config" / \
-                args["ur_type"] / "default_kinematics.yaml"
-        except Exception:  # the package is not found: no hash to copy
-            return None
-    try:
-        found = _HASH.search(Path(path).read_text(encoding="utf-8", errors="replace"))
-    except OSError:
+    """The ``hash`` of the kinematics file a ur_description xacro was expanded with: the file
+    xacro read (:func:`kincal.xacro_source.files_read`) for the ``kinematics_params``
+    argument (a relative name is joined to the folder of the xacro file that loads it, as
+    xacro does, not to the working folder), else the first file read with a ``hash:`` line
+    (the xacro's default ``config/<ur_type>/default_kinematics.yaml``). None for a plain
+    URDF, or when no such file or hash is found."""
+    if source is None or not str(source).endswith(".xacro"):
         return None
-    return found.group(1) if found else None
+    from kincal.xacro_source import files_read
+
+    wanted = dict(xacro_args or {}).get("kinematics_params")
+    for path in files_read(source, xacro_args):
+        # xacro joins a relative name to its folder: the path read ends with the name given
+        if (not (str(path) == wanted or str(path).endswith(os.sep + wanted))
+                if wanted is not None else path.suffix not in (".yaml", ".yml")):
+            continue
+        try:
+            found = _HASH.search(path.read_text(encoding="utf-8", errors="replace"))
+        except OSError:
+            continue
+        if found:
+            return found.group(1)
+    return None
 
 
 def _written_rpy(nominal, origins: dict) -> dict[str, np.ndarray]:

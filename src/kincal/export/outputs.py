@@ -160,6 +160,9 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
                               "expected a file name (a folder for plots)")
     if o.yaml_format not in ("kincal", "ur"):
         raise ExportError(f"yaml_format must be 'kincal' or 'ur', got {o.yaml_format!r}")
+    if o.ur_hash is not None and (o.yaml is None or o.yaml_format != "ur"):
+        raise ExportError("ur_hash is the hash of ur_description's kinematics file: give it "
+                          "with yaml=... and yaml_format='ur' (the kincal YAML has no hash)")
     several = result.chains is not None and result.chains.several
     if several and ((o.yaml is not None and o.yaml_format == "ur") or o.mdh is not None):
         raise ExportError("a UR kinematics file and an MD-H table describe one chain; this "

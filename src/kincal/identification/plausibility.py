@@ -389,16 +389,17 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     # unit clue: the measured spread against the nominal tip's with the tool guess, on at
     # most MAX_UNIT_POSES poses spread through the file (a reference forward kinematics)
     ratio, spread_mm, unit_set = float("nan"), float("nan"), datas[0]
-    positioned = [dt for dt in datas if getattr(dt, "positions", None) is not None]
-    if positioned:
-        unit_set = dt = positioned[0]
+    positioned = [(dt, robot) for dt, robot in zip(datas, problem.robots)
+                  if getattr(dt, "positions", None) is not None]
+    if positioned:  # the set on its own chain (the first chain may be another set's)
+        (dt, robot), unit_set = positioned[0], positioned[0][0]
         points = getattr(dt, "points", None)
         first = np.arange(len(dt)) if points is None else np.flatnonzero(points == 0)
         if len(first) > MAX_UNIT_POSES:
             first = first[np.linspace(0, len(first) - 1, MAX_UNIT_POSES).astype(int)]
         guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
             problem.options.tool_guess, float)
-        s_pred = spread(tool_points(problem.robot, dt.joint_values[first], guess))
+        s_pred = spread(tool_points(robot, dt.joint_values[first], guess))
         s_all = spread(dt.positions)  # = the subset's when that is every row (in order)
         s_meas = s_all if len(first) == len(dt) else spread(dt.positions[first])
         ratio = s_meas / s_pred if s_pred >= 1e-3 else float("nan")
