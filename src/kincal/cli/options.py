@@ -332,33 +332,10 @@ class Inputs:
                               "is one (no qx qy qz qw columns, no --on-plane --flush)")
 
     def held_joints(self, robots) -> dict[str, float]:
-        """{joint: value [SI]} of --joint-value NAME=VALUE (the file's units), checked
-        against the chains of ``robots``."""
-        from kincal.errors import listing, suggest
+        """{joint: value [SI]} of --joint-value NAME=VALUE (the file's units)."""
+        from kincal.measurements.fixed_joints import held_values
 
-        names = [j for r in robots for j in r.joint_names]
-        prismatic = {j for r in robots for j in _prismatic(r)}
-        out: dict[str, float] = {}
-        for item in self.joint_value:
-            name, eq, text = item.partition("=")
-            name = name.strip()
-            try:
-                value = float(text)
-            except ValueError:
-                value = math.nan
-            if not eq or not name or not math.isfinite(value):
-                raise OptionError(f"--joint-value expects NAME=VALUE (a chain joint and a "
-                                  f"finite number), got {item!r}")
-            if name not in names:
-                raise OptionError(f"--joint-value {name}: not a joint of the chain."
-                                  f"{suggest(name, names)} Chain joints: "
-                                  f"{listing(tuple(dict.fromkeys(names)))}")
-            if name in out:
-                raise OptionError(f"--joint-value {name} given twice")
-            scale = (length_scale(self.length_unit) if name in prismatic
-                     else angle_scale(self.angle_unit))
-            out[name] = value * scale
-        return out
+        return held_values(self.joint_value, robots, self.length_unit, self.angle_unit)
 
     def read_sets(self, robot) -> list:
         """Every data file, each read as its kind (on ``robot``'s chain, or with a list, on
