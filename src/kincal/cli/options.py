@@ -325,11 +325,17 @@ class Inputs:
         """{URDF joint: CSV column} of --joint-columns, or None."""
         return joint_map(self.joint_columns)
 
-    def _orientation_sigma_used(self, has_poses: bool) -> None:
+    def _kind_options_used(self, has_poses: bool, has_angles: bool) -> None:
+        """Refuse the options of pose files that no file would use."""
+        if self.positions_only and not has_angles:
+            raise OptionError("--positions-only reads a pose file's positions alone; none of "
+                              "the data files has orientation columns beside its positions")
         if self.orientation_sigma_deg is not None and not has_poses:
             raise OptionError("--orientation-sigma-deg is the orientation noise of pose files "
                               "(or the tilt noise of flush contacts); none of the data files "
-                              "is one (no qx qy qz qw columns, no --on-plane --flush)")
+                              "is one (" + ("read with --positions-only" if self.positions_only
+                                            else "no qx qy qz qw columns")
+                              + ", no --on-plane --flush)")
 
     def held_joints(self, robots) -> dict[str, float]:
         """{joint: value [SI]} of --joint-value NAME=VALUE (the file's units)."""
@@ -363,15 +369,19 @@ class Inputs:
         robots = robot if isinstance(robot, (list, tuple)) else [robot] * len(self.files)
 
         held = self.held_joints(robots)
+        angled = []  # per file: orientation columns beside its positions
 
         def read(path, r, fmt):
             from kincal.measurements import fixed_joints as fj
+            from kincal.measurements.orientation_columns import found_columns
             from kincal.measurements.sets import header_of
 
             fixed = {j: v for j, v in held.items() if j in r.joint_names}
             columns = self.joint_map() or {}
             header = header_of(path, [columns.get(j, j) for j in r.joint_names])
             fj.check_absent(path, header, fixed, self.joint_map())
+            angled.append(all(c in header for c in pos or "xyz")
+                          and bool(found_columns(header, pos)))
             follow = fj.mimicked(path, header, r, fixed, self.joint_map())
             d = read_set_file(path, [j for j in r.joint_names if j not in {*fixed, *follow}],
                               _prismatic(r), self.length_unit, self.angle_unit, pos,
@@ -389,7 +399,7 @@ class Inputs:
         # the gate refuses a calibration of a reading in doubt)
         sets = [checked(CalibrationProblem, r, read(path, r, self.orientation_format))
                 for path, r in zip(self.files, robots)]
-        self._orientation_sigma_used(any(kind_of(d) in ("pose", "flush") for d in sets))
+        self._kind_options_used(any(kind_of(d) in ("pose", "flush") for d in sets), any(angled))
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))
                     for d, s in zip(sets, self.set_sigma_mm)]
