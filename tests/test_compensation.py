@@ -160,6 +160,30 @@ def test_full_pose_targets_give_back_the_joint_values(cell):
     np.testing.assert_allclose(comp.joint_values, q, atol=1e-8)
 
 
+def test_pose_targets_are_orientations_of_the_calibrated_tool_frame(cell):
+    """A pose calibration's tool frame is turned on the tip (tool.rx .ry .rz): targets
+    written as its data were measured (the tool frame's pose in the measurement frame,
+    T_MB T_tip(q) T_tip_tool) give back the joint values. compensate met the tip's
+    orientation instead: joints 47 deg off, 'orientation max 5e-14 deg' in its summary."""
+    from scipy.spatial.transform import Rotation
+
+    robot, result, _, q = cell
+    d = result.frames_dict()
+    rx, ry, rz = 0.5, -0.2, 0.3  # a marker body mounted at an angle [rad]
+    d["sets"][0]["kind"] = "pose"
+    d["sets"][0]["frames"].update({"tool.rx": rx, "tool.ry": ry, "tool.rz": rz})
+    frames = CellFrames.from_dict(d)
+    R_tool = Rotation.from_euler("XYZ", [rx, ry, rz]).as_matrix()  # rotx roty rotz
+    R_MB = Rotation.from_euler("XYZ", result.base[3:]).as_matrix()
+    P = result.predict(q)
+    R_wanted = R_MB @ result.corrected.tip_poses(q)[:, :3, :3] @ R_tool
+    seeds = q + np.radians(1.0) * np.random.default_rng(3).normal(size=q.shape)
+    comp = compensate(result.corrected, frames,
+                      Targets(seeds, P, R_wanted, np.arange(len(q)) + 2))
+    assert comp.reached.all()
+    np.testing.assert_allclose(comp.joint_values, q, atol=1e-8)
+
+
 def test_program_filter_reaches_the_nominal_poses(cell):
     robot, result, frames, q = cell
     comp = filter_program(robot, result.corrected, q, frames)

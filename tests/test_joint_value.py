@@ -23,13 +23,18 @@ def write(path, header, rows):
     return path
 
 
-def test_held_joint_gives_the_same_calibration_and_is_recorded(tmp_path, capsys):
+def simulated(tmp_path, capsys):
+    """(header, rows) of 30 simulated EC66 points."""
     full = tmp_path / "full.csv"
     assert main(["simulate", "ec66", "--poses", "30", "--out", str(full), "--seed", "4"]) == 0
     capsys.readouterr()
     lines = [r for r in full.read_text().splitlines() if not r.startswith("#")]
-    header = lines[0].split(",")
-    rows = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    return lines[0].split(","), np.array([[float(v) for v in line.split(",")]
+                                          for line in lines[1:]])
+
+
+def test_held_joint_gives_the_same_calibration_and_is_recorded(tmp_path, capsys):
+    header, rows = simulated(tmp_path, capsys)
     k = header.index("joint_6")
     rows[:, k] = 30.0 * np.pi / 180  # the wrist held at 30 deg
     with_column = write(tmp_path / "with.csv", header, rows)
@@ -81,6 +86,25 @@ def test_joint_value_refusals_are_one_line(tmp_path, capsys):
                         "given twice")):
         code, out, err = run(capsys, "analyze", "ec66", data, *argv)
         assert code == 1 and err.count("\n") == 1 and says in err, err
+
+
+def test_joint_value_outside_the_urdf_limits_is_refused_naming_the_option(tmp_path, capsys):
+    """A held value outside the joint's URDF limits (degrees given with --angle-unit rad) is
+    refused at the option, before any work: it used to run the calibration, then blame the
+    data file ("d.csv: joint_6: 10 of 10 values outside its URDF limits (worst 100 at line
+    2)", "were they degrees?") and refuse through the gate."""
+    header, rows = simulated(tmp_path, capsys)
+    keep = [k for k, c in enumerate(header) if c != "joint_6"]
+    data = write(tmp_path / "d.csv", [header[k] for k in keep], rows[:, keep])
+    for argv, says in ((("--joint-value", "joint_6=100"), "[-6.283, 6.283] rad"),
+                       (("--joint-value", "joint_6=400", "--angle-unit", "deg"),
+                        "[-360, 360] deg")):
+        for command in (["calibrate", "ec66", data, "--out", tmp_path / "c.urdf"],
+                        ["analyze", "ec66", data]):
+            code, out, err = run(capsys, *command, *argv)
+            assert code == 1 and err.count("\n") == 1, err
+            assert f"--joint-value {argv[1]}: outside joint_6's URDF limits {says}" in err
+            assert not (tmp_path / "c.urdf").exists()
 
 
 MIMIC_ARM = """<?xml version="1.0"?>

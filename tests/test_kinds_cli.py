@@ -43,6 +43,24 @@ def test_simulate_every_kind_and_calibrate_them_together(tmp_path, capsys):
     assert code == 0 and "plane contact sees only motion along the plane's normal" in out
 
 
+def test_simulate_plane_says_how_many_contacts_it_wrote(tmp_path, capsys):
+    """Plane contacts come as a whole number on each of the 3 planes (at least 3): the
+    line and --json say what the file holds, not the --poses asked (40 asked gave 39
+    rows, 4 asked 9, both reported as asked)."""
+    for asked, rows in ((40, 39), (4, 9), (30, 30)):
+        path = tmp_path / f"c{asked}.csv"
+        code, out, err = run(capsys, "simulate", "ec66", "--kind", "plane", "--poses", asked,
+                             "--out", path, "--json")
+        assert code == 0, err
+        written = [line for line in path.read_text().splitlines()
+                   if not line.startswith("#")][1:]
+        assert len(written) == rows and json.loads(out)["poses"] == rows
+        code, out, err = run(capsys, "simulate", "ec66", "--kind", "plane", "--poses", asked,
+                             "--out", path, "--overwrite")
+        assert f"at {rows} poses" in out
+        assert (f"{rows // 3} on each of 3 planes, {asked} asked" in out) == (rows != asked)
+
+
 def test_ambiguous_and_bad_files_one_line_error(tmp_path, capsys):
     path = tmp_path / "both.csv"
     rows = np.random.default_rng(0).normal(size=(5, 10))

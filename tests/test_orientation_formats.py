@@ -63,6 +63,24 @@ def test_bad_quaternion_and_matrix_rows_are_refused_with_their_line():
         rotations([np.diag([1.0, 1.0, -1.0]).ravel()], "matrix")
 
 
+def test_angles_in_degrees_read_as_radians_are_warned():
+    """Joints in radians beside roll/pitch/yaw in degrees: no --angle-unit reads both, and
+    the gate's refusal named noise, tip or URDF as the cause; the reading now warns with
+    the largest angle. Angles of a turn or less (radians as loggers write them) are not."""
+    R = Rotation.random(20, random_state=3)  # no gimbal lock: scipy's angles warn there
+    deg = R.as_euler("xyz", degrees=True)
+    with pytest.warns(UserWarning, match=r"poses.csv: orientation angles \(roll, pitch, yaw\) "
+                      r"reach 1\d\d(\.\d)? rad: were they degrees\?"):
+        rotations(deg, "rpy-zyx", 1.0, "poses.csv", columns=("roll", "pitch", "yaw"))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for fmt, values in (("rpy-zyx", R.as_euler("xyz")), ("rotvec", R.as_rotvec()),
+                            ("rpy-xyz", deg)):
+            rotations(values, fmt, 1.0 if fmt != "rpy-xyz" else np.pi / 180)
+
+
 def figaroh_file(path, names, q, p, R, convention="xyz", degrees=False):
     """FIGAROH's layout: x1 y1 z1 phix1 phiy1 phiz1 and the joint columns."""
     phi = Rotation.from_matrix(R).as_euler(convention, degrees=degrees)

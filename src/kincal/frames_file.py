@@ -103,6 +103,16 @@ class SetFrames:
             k += 1
         return np.array(out)
 
+    @property
+    def tool_rotation(self) -> np.ndarray | None:
+        """(3, 3) the tool frame's rotation in the tip frame (a pose set's tool.rx .ry .rz,
+        a flush set's face tilts; ``R = rotx(rx) roty(ry) rotz(rz)``), None for a set that
+        has none (points)."""
+        if not any(self.has("tool." + c) for c in ANGLE_NAMES):
+            return None
+        return base_rotation(*(self.value("tool." + c) if self.has("tool." + c) else 0.0
+                               for c in ANGLE_NAMES))
+
     def derived(self) -> dict:
         """The 4x4 matrices and quaternion of the measurement frame and tool points."""
         out: dict = {}
@@ -114,10 +124,7 @@ class SetFrames:
                 ("x", "y", "z", "qx", "qy", "qz", "qw"),
                 [*map(float, b[:3]), *map(float, matrix_to_quaternion(T[:3, :3]))]))
         if self.has("tool.x", "tool.y", "tool.z"):
-            rot = None  # a tool frame (poses), or a contact face's tilt (flush: rx, ry)
-            if any(self.has("tool." + c) for c in ANGLE_NAMES):
-                rot = base_rotation(*(self.value("tool." + c) if self.has("tool." + c) else 0.0
-                                      for c in ANGLE_NAMES))
+            rot = self.tool_rotation  # a tool frame (poses), a contact face's tilt (flush)
             for k, t in enumerate(self.tools, start=1):
                 out["T_tip_tool" + ("" if k == 1 else f"_{k}")] = transform(
                     rot if k == 1 else None, t).tolist()
@@ -440,6 +447,12 @@ class CellFrames:
     def tools(self) -> np.ndarray:
         """(K, 3) its tool points in the tip frame [m]."""
         return self.located().tools
+
+    @property
+    def tool_rotation(self) -> np.ndarray:
+        """(3, 3) its tool frame's rotation in the tip frame (identity for points)."""
+        R = self.located().tool_rotation
+        return np.eye(3) if R is None else R
 
     @property
     def T_measurement_base(self) -> np.ndarray:

@@ -325,40 +325,23 @@ class Inputs:
         """{URDF joint: CSV column} of --joint-columns, or None."""
         return joint_map(self.joint_columns)
 
-    def _orientation_sigma_used(self, has_poses: bool) -> None:
+    def _kind_options_used(self, has_poses: bool, has_angles: bool) -> None:
+        """Refuse the options of pose files that no file would use."""
+        if self.positions_only and not has_angles:
+            raise OptionError("--positions-only reads a pose file's positions alone; none of "
+                              "the data files has orientation columns beside its positions")
         if self.orientation_sigma_deg is not None and not has_poses:
             raise OptionError("--orientation-sigma-deg is the orientation noise of pose files "
                               "(or the tilt noise of flush contacts); none of the data files "
-                              "is one (no qx qy qz qw columns, no --on-plane --flush)")
+                              "is one (" + ("read with --positions-only" if self.positions_only
+                                            else "no qx qy qz qw columns")
+                              + ", no --on-plane --flush)")
 
     def held_joints(self, robots) -> dict[str, float]:
-        """{joint: value [SI]} of --joint-value NAME=VALUE (the file's units), checked
-        against the chains of ``robots``."""
-        from kincal.errors import listing, suggest
+        """{joint: value [SI]} of --joint-value NAME=VALUE (the file's units)."""
+        from kincal.measurements.fixed_joints import held_values
 
-        names = [j for r in robots for j in r.joint_names]
-        prismatic = {j for r in robots for j in _prismatic(r)}
-        out: dict[str, float] = {}
-        for item in self.joint_value:
-            name, eq, text = item.partition("=")
-            name = name.strip()
-            try:
-                value = float(text)
-            except ValueError:
-                value = math.nan
-            if not eq or not name or not math.isfinite(value):
-                raise OptionError(f"--joint-value expects NAME=VALUE (a chain joint and a "
-                                  f"finite number), got {item!r}")
-            if name not in names:
-                raise OptionError(f"--joint-value {name}: not a joint of the chain."
-                                  f"{suggest(name, names)} Chain joints: "
-                                  f"{listing(tuple(dict.fromkeys(names)))}")
-            if name in out:
-                raise OptionError(f"--joint-value {name} given twice")
-            scale = (length_scale(self.length_unit) if name in prismatic
-                     else angle_scale(self.angle_unit))
-            out[name] = value * scale
-        return out
+        return held_values(self.joint_value, robots, self.length_unit, self.angle_unit)
 
     def read_sets(self, robot) -> list:
         """Every data file, each read as its kind (on ``robot``'s chain, or with a list, on
@@ -386,15 +369,19 @@ class Inputs:
         robots = robot if isinstance(robot, (list, tuple)) else [robot] * len(self.files)
 
         held = self.held_joints(robots)
+        angled = []  # per file: orientation columns beside its positions
 
         def read(path, r, fmt):
             from kincal.measurements import fixed_joints as fj
+            from kincal.measurements.orientation_columns import found_columns
             from kincal.measurements.sets import header_of
 
             fixed = {j: v for j, v in held.items() if j in r.joint_names}
             columns = self.joint_map() or {}
             header = header_of(path, [columns.get(j, j) for j in r.joint_names])
             fj.check_absent(path, header, fixed, self.joint_map())
+            angled.append(all(c in header for c in pos or "xyz")
+                          and bool(found_columns(header, pos)))
             follow = fj.mimicked(path, header, r, fixed, self.joint_map())
             d = read_set_file(path, [j for j in r.joint_names if j not in {*fixed, *follow}],
                               _prismatic(r), self.length_unit, self.angle_unit, pos,
@@ -412,7 +399,7 @@ class Inputs:
         # the gate refuses a calibration of a reading in doubt)
         sets = [checked(CalibrationProblem, r, read(path, r, self.orientation_format))
                 for path, r in zip(self.files, robots)]
-        self._orientation_sigma_used(any(kind_of(d) in ("pose", "flush") for d in sets))
+        self._kind_options_used(any(kind_of(d) in ("pose", "flush") for d in sets), any(angled))
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))
                     for d, s in zip(sets, self.set_sigma_mm)]

@@ -31,7 +31,8 @@ def register(subparsers) -> None:
     m.add_argument("--kind", choices=("point", "pose", "distance", "plane", "flush"),
                    default="point",
                    help="what is measured: points (default), 6-DoF tool poses, distances to "
-                        "a pivot 0.3 m below the poses, contacts with 3 planes through them")
+                        "a pivot 0.3 m below the poses, contacts with 3 planes through them "
+                        "(a third of --poses on each, at least 3)")
     m.add_argument("--orientation-noise-deg", type=float,
                    help="sd of orientation noise per axis [deg] (--kind pose, default 0.01; "
                         "--kind flush: of the face's two tilts, default 0.05)")
@@ -165,11 +166,14 @@ def run(args) -> int:
                "poses": len(q), "design": s.design, "where": where,
                "noise_m": s.noise_mm * 1e-3, "seed": s.seed, "truth_seed": s.truth_seed}
     if s.kind != "point":
-        csv = _other_kind_csv(s, robot, model, q, table, tool, base, rng)
+        csv, n = _other_kind_csv(s, robot, model, q, table, tool, base, rng)
+        # plane contacts come as a whole number per plane (at least 3): say what was written
+        summary["poses"] = n
+        asked = "" if n == len(q) else f"; {n // 3} on each of 3 planes, {len(q)} asked"
         say_and_write([File(s.out, "csv", csv)],
                       lambda written: summary_lines(s.json, [
-                          f"simulated {s.kind} measurements of {robot.name} at {len(q)} poses "
-                          f"({s.design} design), noise {s.noise_mm} mm: "
+                          f"simulated {s.kind} measurements of {robot.name} at {n} poses "
+                          f"({s.design} design{asked}), noise {s.noise_mm} mm: "
                           + ", ".join(map(str, written))], summary, written, wrote=None),
                       provenance=prov, overwrite=s.overwrite, protect=protect)
         return 0
@@ -201,8 +205,9 @@ def _truth_json(s: Simulate, robot, model, truth) -> dict:
         "noise_m": s.noise_mm * 1e-3}
 
 
-def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str:
-    """CSV text of a simulated set of kind ``s.kind`` (not points) at poses q."""
+def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> tuple[str, int]:
+    """CSV text of a simulated set of kind ``s.kind`` (not points) at poses q, and its
+    number of samples."""
     import numpy as np
 
     from kincal.measurements.sets import to_csv_text
@@ -234,4 +239,4 @@ def _other_kind_csv(s: Simulate, robot, model, q, table, tool, base, rng) -> str
         per = max(3, len(q) // 3)
         data = ks.simulate_contacts(model, table, tool, planes, cand, per, noise, rng,
                                     source="simulated")
-    return to_csv_text(data, s.orientation_format or "quat-xyzw")
+    return to_csv_text(data, s.orientation_format or "quat-xyzw"), len(data)

@@ -53,7 +53,7 @@ class Compensation:
     joint_names, kinds: the chain. seeds, joint_values: (N, n) [rad or m]. lines: (N,)
     line numbers of the targets in their file. position_error: (N,) distance [m] of the
     calibrated model's tool point from the target; orientation_error: (N,) [rad] of its
-    tip orientation from the wanted one; orientation_required: (N,) whether that
+    tool frame's (as of its tip's) orientation from the wanted one; orientation_required: (N,) whether that
     orientation had to be met (a full pose) or was only kept where possible. reached:
     (N,) within the tolerances. at_limit: (N, n). notes: what a user should know.
     """
@@ -245,6 +245,9 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     chain = ChainKinematics.of(g)
     tool = frames.tools[point]
     R_MB = base_rotation(*frames.base[3:])
+    # a pose calibration's tool frame is turned on the tip: the wanted orientations are the
+    # tool frame's, as its data measured them (the tip's own for points: identity)
+    R_tool = frames.tool_rotation if point == 0 else np.eye(3)
     t_MB = frames.base[:3]
     positions_B = (targets.positions - t_MB) @ R_MB  # R_MB^T (p - t) row-wise
     R_seed, p_seed = chain.tool_poses(targets.seeds, tool)
@@ -255,12 +258,12 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
         notes = ["position targets: the tool keeps the orientation it has at the seed"
                  + ("" if g.n >= 6 else f" as far as the {g.n} joints allow")]
     else:
-        doubt = reading_doubt(R_MB @ R_seed, targets.rotations, targets.orientation_format,
+        doubt = reading_doubt(R_MB @ R_seed @ R_tool, targets.rotations, targets.orientation_format,
                               f"{targets.source}: the wanted orientations",
                               "the calibrated model's at the seeds")
         if doubt:  # the seeds (the program) are near the targets: so are their orientations
             raise DataError(doubt + "; nothing is compensated")
-        rotations = R_MB.T @ targets.rotations
+        rotations = R_MB.T @ targets.rotations @ R_tool.T  # the tip's, in the base frame
         required, notes = np.ones(len(targets), bool), []
     sol = solve(chain, tool, positions_B, rotations, required, targets.seeds, g.lower, g.upper,
                 options)

@@ -2,10 +2,12 @@
 
 A TARGETS.csv has the chain joints (named as in the URDF: the user's program, the seeds)
 and ``x,y,z``, the wanted position of the measured tool point in the measurement frame;
-optionally the wanted orientation of the tip frame in the measurement frame, written as a
-pose file writes it (:mod:`kincal.measurements.orientation_columns`: ``qx,qy,qz,qw`` by
-default, a unit quaternion, scalar last; any other format when it is named). Revolute
-joints and orientation angles in ``angle_unit``, positions and prismatic joints in
+optionally the wanted orientation of the tool frame in the measurement frame (as a pose
+calibration's data measured it: the tip frame turned by the calibration's ``tool.rx .ry
+.rz``; the tip frame's own after a point calibration), written as a pose file writes it
+(:mod:`kincal.measurements.orientation_columns`: ``qx,qy,qz,qw`` by default, a unit
+quaternion, scalar last; any other format when it is named). Revolute joints and
+orientation angles in ``angle_unit``, positions and prismatic joints in
 ``length_unit``; inside, SI. Orientation columns that would not be read are refused, as a
 pose file's are: an orientation is never dropped silently.
 """
@@ -31,8 +33,8 @@ class Targets:
     """N targets of one chain (SI).
 
     seeds: (N, n) joint values the solution starts from [rad or m]. positions: (N, 3)
-    wanted tool point in the measurement frame [m]. rotations: (N, 3, 3) wanted tip
-    orientation in the measurement frame, or None for positions only.
+    wanted tool point in the measurement frame [m]. rotations: (N, 3, 3) wanted tool
+    frame orientation in the measurement frame, or None for positions only.
     lines: (N,) line numbers in the source file. source: for messages. orientation_format:
     the convention of the rotations where their columns do not fix it (angles, or
     quaternion columns named by the user; :func:`compensate` checks it), else "".

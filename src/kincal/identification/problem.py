@@ -3,18 +3,16 @@ measurement sets of any kind.
 
 ``CalibrationProblem(robot, sets, options)`` builds; ``.analyze()`` says what the data
 identify; ``.solve()`` identifies (plain least squares, or L2 toward nominal with per-class
-priors chosen by maximum evidence, lambda chosen by k-fold CV, or lambda given) and returns
-a :class:`~kincal.identification.result.CalibrationResult` carrying the plausibility gate's
-verdict. ``calibrate(...)`` does all three. One data set is a list of one: there is no other
-path.
+priors chosen by maximum evidence, lambda by k-fold CV, or lambda given) and returns a
+:class:`~kincal.identification.result.CalibrationResult` carrying the plausibility gate's
+verdict. ``calibrate(...)`` does all three. One data set is a list of one: no other path.
 
 The sets share the kinematic and backlash parameters; each adds its kind's frames
 (:mod:`kincal.identification.layout`). Weights: each sample's residual rows are divided by
 its stated sigma (a set's ``sigma``, or :data:`kincal.measurements.kind.DEFAULT_SIGMA` where
-a set states none), normalised to RMS 1 over all samples; sets without sigmas weigh alike
-(all weights 1); ``row_scale`` (per set, one factor per row of a sample) holds the noise
-levels the evidence estimates per kind of row. Residuals are in mm, the solver's variables
-are the parameters over their penalty scale (1 mm, 1 deg).
+a set states none), normalised to RMS 1 over all samples; sets without sigmas all weigh 1;
+``row_scale`` (per set, one factor per row of a sample) holds the noise levels the evidence
+estimates per kind of row. Residuals in mm; variables over their penalty scale (1 mm, 1 deg).
 """
 
 from __future__ import annotations
@@ -438,11 +436,13 @@ class CalibrationProblem:
         ident = self.analyze()
         lay = self.layout
         if o.method != "frames" and not any(lay.is_penalised[lay.index(n)] for n in ident.kept):
+            free = (lay.is_penalised & self._unfixed()).any()  # --fix may hold them all
             raise IdentifiabilityError(
-                f"these data identify none of the {int(lay.is_penalised.sum())} kinematic "
-                f"parameters (identifiable: {len(ident.kept)} of {int(self._unfixed().sum())}"
-                "): nothing would be calibrated. Check the sets' sigmas (a weight of 1e-300 "
-                "silences a set), and measure poses that move every joint")
+                ("these data identify none of the" if free else "--fix holds all")
+                + f" {int(lay.is_penalised.sum())} kinematic parameters (identifiable: "
+                f"{len(ident.kept)} of {int(self._unfixed().sum())}): nothing would be calibrated"
+                + (". Check the sets' sigmas (a weight of 1e-300 silences a set), and measure "
+                   "poses that move every joint" if free else "; fix fewer names"))
         general = self._structural_kept()
         if general is not None:
             m = 3 * self.n_samples

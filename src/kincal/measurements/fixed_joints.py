@@ -25,6 +25,45 @@ import numpy as np
 from kincal.errors import DataError
 
 
+def held_values(items, robots, length_unit: str = "m", angle_unit: str = "rad") -> dict:
+    """{joint: value [rad or m]} of ``--joint-value NAME=VALUE`` items (values in the
+    file's units), each a joint of the chain of one of ``robots`` and within its URDF
+    limits (it held there while the robot was measured); OptionError otherwise."""
+    import math
+
+    from kincal.errors import OptionError, listing, suggest
+    from kincal.measurements.data import unit_factors
+
+    L, A = unit_factors(length_unit, angle_unit, OptionError)
+    joints = {j: (g.kinds[k], g.lower[k], g.upper[k]) for r in robots
+              for g in [r.geometry] for k, j in enumerate(g.joint_names)}
+    out: dict[str, float] = {}
+    for item in items:
+        name, eq, text = item.partition("=")
+        name = name.strip()
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not eq or not name or not math.isfinite(value):
+            raise OptionError(f"--joint-value expects NAME=VALUE (a chain joint and a "
+                              f"finite number), got {item!r}")
+        if name not in joints:
+            raise OptionError(f"--joint-value {name}: not a joint of the chain."
+                              f"{suggest(name, list(joints))} Chain joints: "
+                              f"{listing(tuple(joints))}")
+        if name in out:
+            raise OptionError(f"--joint-value {name} given twice")
+        kind, lo, hi = joints[name]
+        scale, unit = (L, length_unit) if kind == "prismatic" else (A, angle_unit)
+        out[name] = value * scale
+        if not lo - 1e-6 <= out[name] <= hi + 1e-6:  # the slack of the data's limit check
+            raise OptionError(f"--joint-value {item}: outside {name}'s URDF limits "
+                              f"[{lo / scale:.4g}, {hi / scale:.4g}] {unit} (values in the "
+                              "files' units, --angle-unit and --length-unit)")
+    return out
+
+
 def check_absent(path, header, fixed: dict, joint_columns=None) -> None:
     """Refuse a held joint that the file has a column for."""
     mapping = dict(joint_columns or {})

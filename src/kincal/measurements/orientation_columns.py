@@ -135,10 +135,28 @@ def rotations(values: np.ndarray, fmt: str, angle_scale: float = 1.0, source: st
         U, _, Vt = np.linalg.svd(M)  # the nearest rotation: the rounding only
         return U @ Vt
     a = v * angle_scale
+    _unit_warning(v, angle_scale, source, columns)
     if fmt == "rotvec":
         return rotation_exp(a)
     Rx, Ry, Rz = (rotations_about(k, a[:, k]) for k in range(3))
     return Rz @ Ry @ Rx if fmt == "rpy-zyx" else Rx @ Ry @ Rz
+
+
+def _unit_warning(v: np.ndarray, angle_scale: float, source, columns) -> None:
+    """Warn angles read as radians beyond a turn (and a half): degrees, most likely. They
+    are read in the revolute joints' unit, so a file of joints in radians and angles in
+    degrees has no reading: the warning says so (the gate then refuses the calibration)."""
+    import warnings
+
+    from kincal.errors import KincalWarning
+    from kincal.measurements.checks import DEGREES_AS_RADIANS
+
+    biggest = float(np.abs(v).max()) if v.size else 0.0
+    if angle_scale == 1.0 and biggest > DEGREES_AS_RADIANS:
+        warnings.warn(f"{source}: orientation angles ({', '.join(columns)}) reach "
+                      f"{biggest:.4g} rad: were they degrees? They are read in the revolute "
+                      "joints' unit (--angle-unit deg reads both in degrees; joints in radians "
+                      "and angles in degrees must be converted to one unit)", KincalWarning)
 
 
 def _refuse(bad_amount, source, rows, columns, what, verb, shown, expected) -> None:
