@@ -12,26 +12,22 @@ compensate`` and the API read. Version 2 (``"format": "kincal-frames", "version"
                "T_tip_tool": [[...]]}, ...],
      "backlash": {"joint_6": ...}, "convention": "...", "backlash_convention": "..."}
 
-A set may also hold ``"fixed_joints": {"joint": value}``: chain joints its data file had no
-column for, held at that value [rad or m] during the measurements (``--joint-value``). The
-key is optional and additive (files without it read as before; readers that do not know it
-ignore it), so the version stays 2.
+A set may also hold ``"fixed_joints": {"joint": value}`` (``--joint-value``: joints held
+during the measurements [rad or m]); optional and additive, so the version stays 2.
 
 Frames are in metres and radians, named as the kinds name them (``base.*`` the pose of the
 robot's base frame B in the measurement frame M, ``R_base = rotx(rx) roty(ry) rotz(rz)``;
 ``tool.*`` the tool point (or frame) in the tip frame; ``pivot.*``, ``plane.*``, ...). The
 4x4 matrices are derived, for cells that take those; on reading they must agree with the
 named values. Each set records the chain it was measured on (``base_frame``,
-``tip_frame``: several chains of one robot can be calibrated together); a set without them
-(an older file) is on the file's top-level chain. ``chain_hash`` identifies the robot model and chain (robot name, base, tip,
-joint names, kinds and axes; not the joint origins, which a calibration changes), so frames
-are never applied to another robot or chain.
+``tip_frame``; an older file's sets are on its top-level chain). ``chain_hash`` identifies
+the robot model and chain (robot name, base, tip, joint names, kinds and axes; not the
+joint origins, which a calibration changes), so frames never go to another robot or chain.
 
-The file also carries version 1's top-level keys (``base``, ``tool``, ``tool_points``,
-``T_measurement_base``, ``T_tip_tool``) for the first point or pose set, so readers of
-version 1 keep working. Earlier files are still read: version 1 (top-level ``base``/``tool``/``tool_points``) and
-the several-set ``kincal-frames-sets-1``. Values are checked: finite, translations within
-1 km, angles within 100 rad, JSON nesting at most 32 deep.
+Version 1's top-level keys (``base``, ``tool``, ``tool_points``, ``T_measurement_base``,
+``T_tip_tool``) are written for the first point or pose set, for version 1 readers;
+version 1 and the several-set ``kincal-frames-sets-1`` are still read. Values are
+checked: finite, translations within 1 km, angles within 100 rad, nesting at most 32 deep.
 """
 
 from __future__ import annotations
@@ -47,6 +43,8 @@ import numpy as np
 
 from kincal.errors import DataError, InputFileError, KincalWarning
 from kincal.rotations import base_rotation, inverse, matrix_to_quaternion, transform
+
+AXES6 = ("x", "y", "z", "rx", "ry", "rz")  # a frame's named values: translation, rotation
 
 FORMAT = "kincal-frames"
 VERSION = 2
@@ -91,7 +89,7 @@ class SetFrames:
     @property
     def base(self) -> np.ndarray:
         """(6,) the measurement frame (base.x ... base.rz)."""
-        return np.array([self.value("base." + c) for c in ("x", "y", "z", "rx", "ry", "rz")])
+        return np.array([self.value("base." + c) for c in AXES6])
 
     @property
     def tools(self) -> np.ndarray:
@@ -116,7 +114,7 @@ class SetFrames:
     def derived(self) -> dict:
         """The 4x4 matrices and quaternion of the measurement frame and tool points."""
         out: dict = {}
-        if self.has(*("base." + c for c in ("x", "y", "z", "rx", "ry", "rz"))):
+        if self.has(*("base." + c for c in AXES6)):
             b = self.base
             T = transform(base_rotation(*b[3:]), b[:3])
             out["T_measurement_base"] = T.tolist()
@@ -141,11 +139,10 @@ class SetFrames:
 class CellFrames:
     """The frames of a calibration: the chain they belong to and each set's frames.
 
-    robot / chain_hash: the robot model (see :func:`chain_hash`; "" when an old file does
-    not say). base_frame, tip_frame, joints: the chain. sets: one :class:`SetFrames` per
-    measurement set. backlash: {joint: half the play [rad or m]}. source: for messages.
-    compliance: {joint: deflection per N m of gravity torque [rad/(N m)], revolute joints}
-    (:mod:`kincal.models.compliance`).
+    robot / chain_hash: the robot model (:func:`chain_hash`; "" when an old file does not
+    say). base_frame, tip_frame, joints: the chain. sets: one :class:`SetFrames` per set.
+    backlash: {joint: half the play [rad or m]}; compliance: {joint: deflection per N m of
+    gravity torque [rad/(N m)]} (:mod:`kincal.models.compliance`). source: for messages.
     """
 
     robot: str
@@ -164,7 +161,7 @@ class CellFrames:
                   source: str = "<frames>") -> "CellFrames":
         """The frames of one point set: base (6,) [m, rad] and tool points (K, 3) [m]."""
         t = np.atleast_2d(np.asarray(tools, float))
-        names = [f"base.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")]
+        names = [f"base.{c}" for c in AXES6]
         for k in range(1, len(t) + 1):
             names += [("tool." if k == 1 else f"tool{k}.") + c for c in "xyz"]
         values = tuple(float(v) for v in np.r_[np.asarray(base, float), t.ravel()])
@@ -188,26 +185,25 @@ class CellFrames:
                          **({"fixed_joints": {j: float(v) for j, v in s.fixed_joints}}
                             if s.fixed_joints else {})}
                         for s in self.sets]}
-        if self.backlash:
-            out["backlash"] = {j: float(v) for j, v in self.backlash.items()}
-            out["backlash_convention"] = BACKLASH_CONVENTION
-        if self.compliance:
-            out["compliance"] = {j: float(v) for j, v in self.compliance.items()}
-            out["compliance_convention"] = COMPLIANCE_CONVENTION
+        for key, terms, convention in (("backlash", self.backlash, BACKLASH_CONVENTION),
+                                       ("compliance", self.compliance, COMPLIANCE_CONVENTION)):
+            if terms:
+                out |= {key: {j: float(v) for j, v in terms.items()},
+                        key + "_convention": convention}
         try:  # version 1's keys, of the first point or pose set, for readers of version 1
             s = self.located()
         except DataError:  # no measurement frame: the first set's tool point (contacts)
             first = next((t for t in self.sets if t.has("tool.x", "tool.y", "tool.z")), None)
             if first is not None:
                 out["tool"] = dict(zip("xyz", map(float, first.tools[0])))
-                out.update({k: v for k, v in first.derived().items()})
+                out.update(first.derived())
             return out
         tools = s.tools
-        out["base"] = dict(zip(("x", "y", "z", "rx", "ry", "rz"), map(float, s.base)))
+        out["base"] = dict(zip(AXES6, map(float, s.base)))
         out["tool"] = dict(zip("xyz", map(float, tools[0])))
         if len(tools) > 1:
             out["tool_points"] = [dict(zip("xyz", map(float, t))) for t in tools]
-        out.update({k: v for k, v in s.derived().items()})
+        out.update(s.derived())
         return out
 
     def dumps(self, provenance: dict | None = None, folds: list | None = None) -> str:
@@ -285,7 +281,7 @@ class CellFrames:
     @classmethod
     def _from_v1(cls, data: dict, source: str) -> "CellFrames":
         names, values = [], []
-        for c in ("x", "y", "z", "rx", "ry", "rz"):
+        for c in AXES6:
             names.append("base." + c)
             values.append(float(data["base"][c]))
         tools = data.get("tool_points", [data["tool"]])
@@ -358,19 +354,16 @@ class CellFrames:
 
     def for_chain(self, base: str | None, tip: str | None) -> "CellFrames":
         """The frames of the sets measured on the chain ``base`` -> ``tip`` (None: as
-        recorded) when that is another chain of a calibration of several (not the file's
-        top-level one); this file otherwise. The chain hash recorded is the top-level
-        chain's: the selected chain is checked by its base, tip and joints. One of the two
-        given: the recorded chain with that frame, if there is one alone."""
+        recorded; one of the two given: the one recorded chain with that frame), checked by
+        its base, tip and joints (the chain hash is the top-level chain's)."""
         if (base is None) != (tip is None):
             fit = [c for c in self.chains() if base in (None, c[0]) and tip in (None, c[1])]
             base, tip = fit[0] if len(fit) == 1 else (base, tip)
         elif base is None and len(self.chains()) > 1:  # data of another chain: metres off
-            warnings.warn(f"{self.source} holds the frames of {len(self.chains())} chains ("
-                          + ", ".join(f"{b} -> {t}" for b, t in self.chains())
-                          + f"); the first, {self.base_frame} -> {self.tip_frame}, is used: "
-                          "give --tip (and --base) of the chain the data were measured on",
-                          KincalWarning)
+            warnings.warn(f"{self.source} holds the frames of {len(self.chains())} chains "
+                          f"({', '.join(map(' -> '.join, self.chains()))}); the first, "
+                          f"{self.base_frame} -> {self.tip_frame}, is used: give --tip (and "
+                          "--base) of the chain the data were measured on", KincalWarning)
         base, tip = base or self.base_frame, tip or self.tip_frame
         top = (base, tip) == (self.base_frame, self.tip_frame)
         mine = self._on((base, tip))
@@ -422,8 +415,7 @@ class CellFrames:
         """The first set with a measurement frame and tool point (points, poses) on the
         file's chain (a set of another chain has its tool point in another tip frame)."""
         def located(s: SetFrames) -> bool:
-            return s.has("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz",
-                          "tool.x", "tool.y", "tool.z")
+            return s.has(*(f"base.{c}" for c in AXES6), "tool.x", "tool.y", "tool.z")
 
         chain = (self.base_frame, self.tip_frame)
         for s in self._on(chain):
@@ -472,7 +464,7 @@ def _fixed(value) -> tuple[tuple[str, float], ...]:
     return tuple((str(j), float(v)) for j, v in value.items())
 
 
-def _backlash(data: dict, key: str = "backlash") -> dict:
+def _backlash(data: dict, key: str = "backlash") -> dict:  # or compliance
     b = data.get(key, {})
     if not isinstance(b, dict):
         raise TypeError(f"{key} must be an object {{joint: value}}")
@@ -499,10 +491,7 @@ def _depth(value, limit: int = MAX_DEPTH + 1) -> int:
     while level and depth <= limit:
         nxt: list = []
         for v in level:
-            if isinstance(v, dict):
-                nxt.extend(v.values())
-            elif isinstance(v, list):
-                nxt.extend(v)
+            nxt.extend(v.values() if isinstance(v, dict) else v if isinstance(v, list) else ())
         if nxt:
             depth += 1
         level = nxt

@@ -102,7 +102,7 @@ def _rotations_near(R0: np.ndarray, max_angle: float, rng, count: int,
 
 
 def cube_poses(robot: Robot, n: int, center, size: float, tool, rng: np.random.Generator,
-               orientation=None, max_tilt: float = np.radians(30), lhs: bool = True,
+               orientation=None, max_tilt: float | None = np.radians(30), lhs: bool = True,
                attempts: int = 40, progress=None) -> np.ndarray:
     """(n, dof) joint values putting the tool point at points of a cube [m].
 
