@@ -112,6 +112,22 @@ def test_misspelled_column_suggests(tmp_path, capsys, good_csv):
     text = good_csv.read_text().replace("joint_4", "jiont_4", 1)
     line = _run(["ec66", _csv(tmp_path, text)], tmp_path, capsys)
     assert "joint_4" in line and "Did you mean 'jiont_4'" in line
+    assert "--joint-value" not in line  # a misspelt column, not a joint held still
+
+
+def test_a_joint_not_logged_points_to_joint_value(tmp_path, capsys, good_csv):
+    """A chain joint without a column (held still, so the logger left it out): the refusal
+    names the option that gives its value (issue 23: it said 'missing column' alone)."""
+    rows = [r.split(",") for r in good_csv.read_text().splitlines() if not r.startswith("#")]
+    k = rows[0].index("joint_6")
+    text = "\n".join(",".join(c for i, c in enumerate(r) if i != k) for r in rows) + "\n"
+    line = _run(["ec66", _csv(tmp_path, text)], tmp_path, capsys)
+    assert "missing column(s) joint_6" in line and "(--joint-value joint_6=VALUE)" in line
+    for kind in (["--on-plane"], ["--on-plane", "--flush"]):  # the other kinds' reader
+        plane = "\n".join(",".join(c for i, c in enumerate(r) if i != k)
+                           for r in (r[:6] for r in rows)) + "\n"
+        line = _run(["ec66", _csv(tmp_path, plane, "p.csv"), *kind], tmp_path, capsys)
+        assert "(--joint-value joint_6=VALUE)" in line, line
 
 
 def test_duplicated_column(tmp_path, capsys, good_csv):

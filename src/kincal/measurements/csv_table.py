@@ -188,7 +188,7 @@ def sniff_separator(header_line: str) -> str:
 
 def read_columns(path, required, optional=(), kind: str = "data", expected: str = "",
                  rows_name: str = "samples", aliases=None, ranges=None,
-                 header_only: bool = False) -> Columns:
+                 header_only: bool = False, joints=()) -> Columns:
     """Read the ``required`` (and any ``optional``) columns of the CSV file ``path``.
 
     kind: what the file is, for "<kind> file not found". expected: what the required
@@ -196,7 +196,8 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     {column: what it stands for} (e.g. the URDF joint a renamed column holds), for
     messages. ranges: {column: (low, high, unit)} of accepted values (default
     COLUMN_RANGES). Warns a :class:`KincalNote` when the separator is not a comma.
-    header_only: read the header and check that it fits the first row; no values.
+    header_only: read the header and check that it fits the first row; no values. joints:
+    the required columns that hold chain joints (a missing one may have been held still).
     """
     ranges = COLUMN_RANGES if ranges is None else ranges
     if not isinstance(path, (str, os.PathLike)) or str(path) == "":
@@ -261,6 +262,11 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
             if missing:
                 extra = [h for h in header if h not in required]
                 hints = "".join(_column_hint(m, extra) for m in missing)
+                held = [aliases.get(m, m) for m in missing
+                        if m in joints and not _column_hint(m, extra)]
+                if held:  # no close name: a joint not logged, held still while measuring?
+                    hints += (f" A chain joint held still during the measurements needs no "
+                              f"column: give its value (--joint-value {held[0]}=VALUE).")
                 named = [f"{m} (for {aliases[m]})" if m in aliases else m for m in missing]
                 if all(_is_number(h) for h in header):  # e.g. numpy.savetxt writes "# a,b,c"
                     hints += (f" Line {first[0]} holds numbers, not column names: the header "

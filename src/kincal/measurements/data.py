@@ -256,7 +256,8 @@ class Measurements:
         extra = [c for c in (sigma_column, order_column) if c is not None]
         table = read_columns(path, wanted, extra, kind="data",
                              expected="the chain joints and positions",
-                             aliases={c: j for j, c in columns.items() if c != j})
+                             aliases={c: j for j, c in columns.items() if c != j},
+                             joints=tuple(columns.values()))
         path = table.path
         if order_column is not None and order_column not in table.values:
             raise DataError(f"{path}: no order column {order_column!r}."

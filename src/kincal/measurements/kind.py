@@ -219,7 +219,8 @@ def read_set(path, joint_names, wanted, optional=(), prismatic=(), angle_unit="r
     columns = joint_column_names(joint_names, joint_columns)
     table = read_columns(path, list(columns.values()) + list(wanted), optional, kind="data",
                          expected=expected or "the chain joints",
-                         aliases={c: j for j, c in columns.items() if c != j})
+                         aliases={c: j for j, c in columns.items() if c != j},
+                         joints=tuple(columns.values()))
     q = np.column_stack([table.values[columns[j]] * (L if j in set(prismatic) else A)
                          for j in joint_names])
     return SetColumns(q, table.values, np.asarray(table.lines), approach_directions(q),
