@@ -265,8 +265,12 @@ def test_robust_loss_lists_and_resists_outliers():
     clean = calibrate(robot, data, method="ls")
     k = plain.space.index("joint_4.a")
     assert abs(robust.x[k] - clean.x[k]) < 0.2 * abs(plain.x[k] - clean.x[k])
-    assert "down-weighted" in robust.summary()
+    assert "robust loss cauchy: 3 samples down-weighted below 0.5: line 19 (" in robust.summary()
     assert len(dirty) == 60  # nothing dropped from the user's data
+    # clean data: no sample down-weighted, said so (the line ended "below 0.5: " and nothing)
+    quiet = calibrate(robot, data, method="ls", robust="huber")
+    assert quiet.downweighted == ()
+    assert "robust loss huber: no sample down-weighted below 0.5\n" in quiet.summary()
 
 
 @pytest.mark.parametrize("kind", ["flush", "plane", "point"])

@@ -100,10 +100,11 @@ def status(result: CalibrationResult) -> list[str]:
             + "); result.plausibility has the evidence")
     if r.options.robust:
         d = r.downweighted
-        out.append(f"  robust loss {r.options.robust}: {len(d)} samples down-weighted below "
-                   "0.5: " + ", ".join(f"line {w.row} ({w.error_mm:.3g} mm, weight "
-                                       f"{w.weight:.2f})" for w in d[:10])
-                   + (" ..." if len(d) > 10 else ""))
+        out.append(f"  robust loss {r.options.robust}: " + (
+            "no sample down-weighted below 0.5" if not d else
+            f"{len(d)} samples down-weighted below 0.5: " + ", ".join(
+                f"line {w.row} ({w.error_mm:.3g} mm, weight {w.weight:.2f})" for w in d[:10])
+            + (" ..." if len(d) > 10 else "")))
     from kincal.identification.diagnosis import diagnose
 
     finding = diagnose(r)  # a pattern a missing term would explain, with its size
