@@ -373,6 +373,27 @@ def test_cli_program_filter(cli_cell, tmp_path):
                  "--out", str(tmp / "x.csv")]) == 1  # --program without --nominal
 
 
+def test_a_nominal_robot_of_another_model_is_refused(tmp_path, capsys):
+    """--nominal of another model of the same chain (UR5 for a UR10: same joint names)
+    was accepted, most targets "reached" with joint values for the wrong arm; now refused
+    in one line, as far beyond what any calibration kincal writes moves the tool."""
+    ur10 = Robot.load("ur10")
+    q = np.random.default_rng(0).uniform(-1.0, 1.0, (10, 6))
+    prog = tmp_path / "prog.csv"
+    prog.write_text(",".join(ur10.joint_names) + "\n"
+                    + "".join(",".join(f"{v!r}" for v in row.tolist()) + "\n" for row in q))
+    out = tmp_path / "joints.csv"
+    assert main(["compensate", "ur10", "--program", str(prog), "--nominal", "ur5",
+                 "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("kincal: error: the nominal robot") and err.count("\n") == 1
+    assert "more than any calibration kincal writes" in err and not out.exists()
+    with pytest.raises(DataError, match="mm RMS apart"):
+        filter_program(Robot.load("ur5"), ur10, q)
+    assert main(["compensate", "ur10", "--program", str(prog), "--nominal", "ur10",
+                 "--out", str(out)]) == 0  # the same model: nothing to refuse
+
+
 @pytest.mark.parametrize("given, said", [
     (["--frames", "FRAMES", "--position-columns", "a", "b", "c"], "a --program has joint values"),
     (["--point", "2"], "--point 2 picks a measured point of --frames")])

@@ -272,6 +272,24 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
                      notes + _backlash_notes(frames, robot) + soft)
 
 
+def _same_model(nominal, calibrated, tool) -> None:
+    """Refuse a nominal robot farther from the calibrated one than any calibration kincal
+    writes: the gate's limit on how far corrections move the tool point (another model of
+    the same chain, a UR5e for a UR10e, moves it by decimetres)."""
+    from kincal.identification.plausibility import Thresholds
+    from kincal.identification.tool_motion import between
+
+    L, d = between(nominal, calibrated, tool)
+    rms, limit = float(np.sqrt(np.mean(d ** 2))), Thresholds().change * L * 1e3
+    if rms > limit:
+        raise DataError(f"the nominal robot {nominal.source} and the calibrated one "
+                        f"{calibrated.source} put the tool point {rms:.4g} mm RMS apart (max "
+                        f"{d.max():.4g} mm) over the joint range, more than any calibration "
+                        f"kincal writes ({limit:.3g} mm, {Thresholds().change:.0%} of the "
+                        "reach): give as --nominal the description the calibration started "
+                        "from (the same model and xacro arguments)")
+
+
 def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames | None = None,
                    lines=None, point: int = 0, options: IkOptions = IkOptions(),
                    source: str = "<program>") -> Compensation:
@@ -295,6 +313,7 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
             raise FrameError(f"measured point {point + 1} asked for, {frames.source} has "
                              f"{len(frames.tools)} tool point(s)")
         tool = frames.tools[point]
+    _same_model(nominal, calibrated, tool)
     program = np.atleast_2d(np.asarray(program, dtype=float))
     R_nom, p_nom = ChainKinematics.of(nominal.geometry).tool_poses(program, tool)
     g = calibrated.geometry

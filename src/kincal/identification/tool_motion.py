@@ -52,11 +52,19 @@ def change(problem: CalibrationProblem, result: CalibrationResult,
     if name + "x" in lay.frame_names(first):  # by name: a flush set stores z, x, y
         k = [lay.index(name + c) for c in "xyz"]
         tool_start, tool = result.x_start[k], result.x[k]
-    q, motions, length = _kept(robot)  # both robots' points by the same arithmetic
-    L = reach(length, float(np.linalg.norm(tool_start)))
-    d = aligned_distances(tool_points(robot, q, tool_start, motions),
-                           tool_points(corrected, q, tool, motions)) * 1e3
+    L, d = between(robot, corrected, tool_start, tool)
     return L, d, math.sqrt(float(np.add.reduce(d * d)) / d.size)  # np.sqrt(np.mean(d ** 2))
+
+
+def between(robot, other, tool, other_tool=None) -> tuple[float, np.ndarray]:
+    """(reach [m], (M,) distances [mm]): how far ``other`` (a robot of the same chain) puts
+    its tool point (``other_tool``, default ``tool``, tip frame [m]) from where ``robot``
+    puts ``tool``, at the gate's seeded configurations, a rigid motion aligned away."""
+    tool = np.asarray(tool, float)
+    q, motions, length = _kept(robot)  # both robots' points by the same arithmetic
+    d = aligned_distances(tool_points(robot, q, tool, motions), tool_points(
+        other, q, tool if other_tool is None else np.asarray(other_tool, float), motions))
+    return reach(length, float(np.linalg.norm(tool))), d * 1e3
 
 
 def _kept(robot) -> tuple[np.ndarray, np.ndarray, float]:
