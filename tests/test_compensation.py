@@ -387,7 +387,7 @@ def test_a_nominal_robot_of_another_model_is_refused(tmp_path, capsys):
                  "--out", str(out)]) == 1
     err = capsys.readouterr().err
     assert err.startswith("kincal: error: the nominal robot") and err.count("\n") == 1
-    assert "more than any calibration kincal writes" in err and not out.exists()
+    assert "more than the gate lets a calibration move it" in err and not out.exists()
     with pytest.raises(DataError, match="mm RMS apart"):
         filter_program(Robot.load("ur5"), ur10, q)
     assert main(["compensate", "ur10", "--program", str(prog), "--nominal", "ur10",

@@ -284,10 +284,10 @@ def _same_model(nominal, calibrated, tool) -> None:
     if rms > limit:
         raise DataError(f"the nominal robot {nominal.source} and the calibrated one "
                         f"{calibrated.source} put the tool point {rms:.4g} mm RMS apart (max "
-                        f"{d.max():.4g} mm) over the joint range, more than any calibration "
-                        f"kincal writes ({limit:.3g} mm, {Thresholds().change:.0%} of the "
-                        "reach): give as --nominal the description the calibration started "
-                        "from (the same model and xacro arguments)")
+                        f"{d.max():.4g} mm) over the joint range, more than the gate lets a "
+                        f"calibration move it ({limit:.3g} mm, {Thresholds().change:.0%} of "
+                        "the reach): give as --nominal the description the calibration "
+                        "started from (the same model and xacro arguments)")
 
 
 def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames | None = None,
