@@ -212,3 +212,6 @@ def test_auto_chooses_no_term_when_none_is_planted(name, seed):
     assert re.search(r"\(\d backlash, [1-9] compliance\)", note), note
     assert len(mc.step_p) == 1 and mc.step_p[0] >= ALPHA
     assert not any(c.compliance or c.backlash for c in mc.candidates)
+    # nothing significant was left out of the scoring: no note says so (it counted every
+    # candidate the score test rejected as "not CV-scored")
+    assert not any("not CV-scored" in n for n in mc.notes), mc.notes

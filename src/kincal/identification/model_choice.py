@@ -323,8 +323,9 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
                                         progress=None), with_terms(best, pool), pool, used,
                                 best.lam)
         step_p += (tests[0][2],)
-        strong = [(t, j, pv) for t, j, pv in tests if pv < ALPHA][:SCREEN]
-        screened += len(pool) - len(strong)
+        significant = [(t, j, pv) for t, j, pv in tests if pv < ALPHA]
+        strong = significant[:SCREEN]
+        screened += len(significant) - len(strong)  # significant, left out of the scoring
         if not strong:
             t, j, pv = tests[0]
             nb = sum(t == "b" for t, _ in pool)
@@ -344,7 +345,7 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
             break
         best = top
     if screened:
-        notes += (f"{screened} joint-term candidates not CV-scored: each forward step scores "
+        notes += (f"{screened} significant joint-term candidates not CV-scored: each step scores "
                   f"at most the {SCREEN} strongest the score test at the current best's fit "
                   f"finds significant",)
     table = tuple(replace(c, chosen=c.structure == best.structure) for c in scored)
