@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from chains import random_chain, random_tree, sample_robots
 
-from kincal.identification import tool_motion
+from kincal.models import workspace
 from kincal.robot import Robot
 
 
@@ -28,7 +28,7 @@ def test_gate_tool_points_match_pinocchio(tmp_path):
         tool = rng.normal(size=3) * 0.1
         T = robot.tip_poses(q)
         want = T[:, :3, 3] + T[:, :3, :3] @ tool
-        assert np.abs(tool_motion.tool_points(robot, q, tool) - want).max() < 1e-12
+        assert np.abs(workspace.tool_points(robot, q, tool) - want).max() < 1e-12
 
 
 def _point_data(n, seed=0):

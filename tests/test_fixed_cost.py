@@ -9,7 +9,7 @@ import numpy as np
 from chains import random_chain, random_tree, sample_robots
 
 from kincal import models
-from kincal.identification import tool_motion
+from kincal.models import workspace
 from kincal.identification.problem import CalibrationOptions, CalibrationProblem
 from kincal.robot import Robot
 
@@ -57,11 +57,11 @@ def test_gate_points_on_the_kept_motions_equal_points_made_anew(tmp_path):
 
     rng = np.random.default_rng(1)
     for robot in _robots(tmp_path):
-        q, motions = tool_motion.configurations(robot)
+        q, motions = workspace.configurations(robot)
         assert not q.flags.writeable and not motions.flags.writeable
         tool = rng.normal(size=3) * 0.1
         for r in (robot, _corrected(robot, rng)):
-            fast = tool_motion.tool_points(r, q, tool, motions)
+            fast = workspace.tool_points(r, q, tool, motions)
             assert np.array_equal(fast, ChainKinematics(r.geometry).tip_points(q, tool))
             T = r.tip_poses(q[:20])
             assert np.abs(fast[:20] - (T[:, :3, 3] + T[:, :3, :3] @ tool)).max() < 1e-12

@@ -18,7 +18,7 @@ from kincal import Measurements, Robot, calibrate
 from kincal.cli.main import main
 from kincal.errors import ImplausibleResultError, NotConvergedError
 from kincal.identification.plausibility import Evidence, Thresholds, judge
-from kincal.identification.tool_motion import reach
+from kincal.models.workspace import reach
 from kincal.models.geometry import chain_length
 from kincal.rotations import aligned_distances as _aligned_distances
 from kincal.rotations import rotx, rotz

@@ -34,6 +34,7 @@ import numpy as np
 from kincal.frames_file import CellFrames
 from kincal.compensation.ik import IkOptions, IkSolution, solve
 from kincal.models.kinematics import ChainKinematics
+from kincal.models.workspace import CHANGE, between
 from kincal.compensation.targets import Targets, joint_scales
 from kincal.errors import DataError, FrameError
 from kincal.measurements.checks import UNIT_RATIO, spread
@@ -276,16 +277,13 @@ def _same_model(nominal, calibrated, tool) -> None:
     """Refuse a nominal robot farther from the calibrated one than any calibration kincal
     writes: the gate's limit on how far corrections move the tool point (another model of
     the same chain, a UR5e for a UR10e, moves it by decimetres)."""
-    from kincal.identification.plausibility import Thresholds
-    from kincal.identification.tool_motion import between
-
     L, d = between(nominal, calibrated, tool)
-    rms, limit = float(np.sqrt(np.mean(d ** 2))), Thresholds().change * L * 1e3
+    rms, limit = float(np.sqrt(np.mean(d ** 2))), CHANGE * L * 1e3
     if rms > limit:
         raise DataError(f"the nominal robot {nominal.source} and the calibrated one "
                         f"{calibrated.source} put the tool point {rms:.4g} mm RMS apart (max "
                         f"{d.max():.4g} mm) over the joint range, more than the gate lets a "
-                        f"calibration move it ({limit:.3g} mm, {Thresholds().change:.0%} of "
+                        f"calibration move it ({limit:.3g} mm, {CHANGE:.0%} of "
                         "the reach): give as --nominal the description the calibration "
                         "started from (the same model and xacro arguments)")
 

@@ -84,7 +84,8 @@ from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes,
 from kincal.identification.statistics import angle_label
 from kincal.measurements.checks import (DEGREES_AS_RADIANS, TOOL_RATIO, UNIT_RATIO,
                                         duplicate_samples, spread)
-from kincal.identification.tool_motion import change, farthest_tool, n_chains, tool_points
+from kincal.identification.tool_motion import change, farthest_tool, n_chains
+from kincal.models.workspace import CHANGE, tool_points
 
 if TYPE_CHECKING:
     from kincal.identification.problem import CalibrationProblem
@@ -113,7 +114,7 @@ class Thresholds:
     """
 
     residual: float = 0.02
-    change: float = 0.10
+    change: float = CHANGE
     length_correction: float = 0.5
     length_ratio: float = 10 * UNIT_RATIO
     explained: float = 0.4
