@@ -54,9 +54,10 @@ class Compensation:
     joint_names, kinds: the chain. seeds, joint_values: (N, n) [rad or m]. lines: (N,)
     line numbers of the targets in their file. position_error: (N,) distance [m] of the
     calibrated model's tool point from the target; orientation_error: (N,) [rad] of its
-    tool frame's (as of its tip's) orientation from the wanted one; orientation_required: (N,) whether that
-    orientation had to be met (a full pose) or was only kept where possible. reached:
-    (N,) within the tolerances. at_limit: (N, n). notes: what a user should know.
+    tool frame's orientation (its tip's turned by the tool's) from the wanted one;
+    orientation_required: (N,) whether that orientation had to be met (a full pose) or was
+    only kept where possible. reached: (N,) within the tolerances. at_limit: (N, n). notes:
+    what a user should know.
     """
 
     joint_names: tuple[str, ...]
@@ -259,7 +260,8 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
         notes = ["position targets: the tool keeps the orientation it has at the seed"
                  + ("" if g.n >= 6 else f" as far as the {g.n} joints allow")]
     else:
-        doubt = reading_doubt(R_MB @ R_seed @ R_tool, targets.rotations, targets.orientation_format,
+        doubt = reading_doubt(R_MB @ R_seed @ R_tool, targets.rotations,
+                              targets.orientation_format,
                               f"{targets.source}: the wanted orientations",
                               "the calibrated model's at the seeds")
         if doubt:  # the seeds (the program) are near the targets: so are their orientations
@@ -274,9 +276,9 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
 
 
 def _same_model(nominal, calibrated, tool) -> None:
-    """Refuse a nominal robot farther from the calibrated one than any calibration kincal
-    writes: the gate's limit on how far corrections move the tool point (another model of
-    the same chain, a UR5e for a UR10e, moves it by decimetres)."""
+    """Refuse a nominal robot farther from the calibrated one than the gate lets a
+    calibration move the tool point (:data:`kincal.models.workspace.CHANGE`; another model
+    of the same chain, a UR5 for a UR10, moves it by decimetres)."""
     L, d = between(nominal, calibrated, tool)
     rms, limit = float(np.sqrt(np.mean(d ** 2))), CHANGE * L * 1e3
     if rms > limit:

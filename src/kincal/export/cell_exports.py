@@ -154,11 +154,14 @@ def ur_hash_of(source, xacro_args: dict | None) -> str | None:
     from kincal.xacro_source import files_read
 
     wanted = dict(xacro_args or {}).get("kinematics_params")
-    for path in files_read(source, xacro_args):
+
+    def kinematics_file(path: Path) -> bool:
+        if wanted is None:
+            return path.suffix in (".yaml", ".yml")
         # xacro joins a relative name to its folder: the path read ends with the name given
-        if (not (str(path) == wanted or str(path).endswith(os.sep + wanted))
-                if wanted is not None else path.suffix not in (".yaml", ".yml")):
-            continue
+        return str(path) == wanted or str(path).endswith(os.sep + wanted)
+
+    for path in filter(kinematics_file, files_read(source, xacro_args)):
         try:
             found = _HASH.search(path.read_text(encoding="utf-8", errors="replace"))
         except OSError:

@@ -393,7 +393,8 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     positioned = [(dt, robot) for dt, robot in zip(datas, problem.robots)
                   if getattr(dt, "positions", None) is not None]
     if positioned:  # the set on its own chain (the first chain may be another set's)
-        (dt, robot), unit_set = positioned[0], positioned[0][0]
+        dt, robot = positioned[0]
+        unit_set = dt
         points = getattr(dt, "points", None)
         first = np.arange(len(dt)) if points is None else np.flatnonzero(points == 0)
         if len(first) > MAX_UNIT_POSES:
