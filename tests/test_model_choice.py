@@ -336,3 +336,25 @@ def test_pose_sets_try_backlash_terms_too():
     assert ("elbow_joint",) in tried
     robot, clean = _pose_case(None)
     assert calibrate(robot, [clean], model="auto").model_choice.backlash == ()
+
+
+def test_diagnosis_names_backlash_in_pose_sets():
+    """6-DoF poses with the play planted on one joint, calibrated with a given model: the
+    residual diagnosis names the joint and the half-play, with the position and the
+    orientation RMS it would leave (it looked at point sets only); the same poses without
+    backlash: nothing named."""
+    from kincal.identification.diagnosis import diagnose
+
+    warnings.simplefilter("ignore", KincalWarning)
+    robot, data = _pose_case("wrist_2_joint")
+    res = calibrate(robot, [data], model="complete")
+    f = diagnose(res)
+    assert (f.joint, f.cause) == ("wrist_2_joint", "backlash")
+    assert abs(f.size) == pytest.approx(np.degrees(model_auto.HALF_PLAY), rel=0.15)
+    assert f.rms_mm[1] < f.rms_mm[0] and f.rms_deg[1] < f.rms_deg[0]
+    s = res.sets[0]  # "now" is the fit's own: position and orientation RMS
+    assert f.rms_mm[0] == pytest.approx(s.after.rms, rel=1e-9)
+    assert f.rms_deg[0] == pytest.approx(s.orientation_after.rms, rel=1e-9)
+    assert f.line() in res.summary() and "the orientation's from" in f.line()
+    robot, clean = _pose_case(None)
+    assert diagnose(calibrate(robot, [clean], model="complete")) is None

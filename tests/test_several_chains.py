@@ -732,3 +732,34 @@ def test_unit_clue_of_points_on_a_second_chain_after_plane_touches_on_the_first(
     ratio = both.plausibility.evidence.length_ratio
     assert np.isfinite(ratio) and ratio == pytest.approx(
         alone.plausibility.evidence.length_ratio, rel=1e-12)
+
+
+def test_diagnosis_names_backlash_of_a_shared_joint_over_two_chains(tmp_path):
+    """Backlash planted on a trunk joint both chains traverse (the tool poses are those of
+    q + b g, the files record q): the residual diagnosis, one test over the two chains'
+    sets, names that joint with its size (it said nothing with several chains); the same
+    poses without the play: nothing named."""
+    from kincal.identification.diagnosis import diagnose
+    from kincal.models.backlash import approach_directions
+
+    robots, _ = _tree(tmp_path)
+    rng = np.random.default_rng(11)
+    half = np.radians(0.1)
+    found = []
+    for play in (half, 0.0):
+        sets = []
+        for k in range(2):
+            q = _q(robots[k], 80, rng)
+            moved = q.copy()
+            j = robots[k].joint_names.index("tj1")
+            moved[:, j] += play * approach_directions(q)[:, j]
+            d = _points(robots[k], robots[k], moved, k, 2e-5, rng)
+            sets.append(Measurements(joint_names=robots[k].joint_names, joint_values=q,
+                                     positions=d.positions, source=d.source))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            found.append(diagnose(calibrate(list(robots), sets, method="ls")))
+    f, clean = found
+    assert (f.joint, f.cause) == ("tj1", "backlash") and f.rms_deg is None
+    assert abs(f.size) == pytest.approx(0.1, rel=0.15) and f.rms_mm[1] < f.rms_mm[0]
+    assert clean is None

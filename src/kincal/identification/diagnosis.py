@@ -1,20 +1,22 @@
 """Residual diagnosis: a pattern a missing term would explain, named with its size.
 
-After any fit (``--model`` chosen or given), the residuals of the point sets (several files
-together: the kinematic parameters shared, each set's frames its own) are tested
-against what each joint's missing term would leave: backlash (the joint off by +-b with
-its approach direction), a scale error of a prismatic joint (off by k * q), a periodic
-error of a revolute joint (off by c * cos q + s * sin q), a compliance of a revolute joint
-(off by c * tau, tau the gravity torque it carries, from the URDF's inertials: only where
-they give it one, :mod:`kincal.gravity`). Each pattern is the joint's own
-motion ``dP/dq_j`` times that function of the samples, with what the fitted parameters
-can already absorb projected out; the pattern with the largest F statistic is reported
-when its p-value, times the number of patterns tried (Bonferroni), is below ``ALPHA``.
-Plain numpy over the result's arrays; the Jacobian comes from the point model. The F
-distribution's tail is computed here (:func:`f_sf`, the regularised incomplete beta
-function by its continued fraction) rather than by ``scipy.stats``, whose import costs a
-command that prints a summary 0.4-1.2 s (tests/test_diagnosis_compliance.py compares the
-two).
+After any fit (``--model`` chosen or given), the residuals of every set (several files,
+any kinds, several chains together: the kinematic parameters shared, each set's frames its
+own) are tested against what each joint's missing term would leave: backlash (the joint
+off by +-b with its approach direction), a scale error of a prismatic joint (off by k * q),
+a periodic error of a revolute joint (off by c * cos q + s * sin q), a compliance of a
+revolute joint (off by c * tau, tau the gravity torque it carries, from the URDF's
+inertials: only where they give it one, :mod:`kincal.gravity`). Each pattern is the
+residual's motion with the joint's value ``dr/dq_j`` (the kind's own analytic Jacobian:
+a backlash term on every joint with every approach +1) times that function of the
+samples, with what the fitted parameters can already absorb projected out, the rows
+weighed as the fit weighs them (orientation rows of poses and tilts of flush touches
+scaled by their sigma ratio, sets by their stated sigmas); the pattern with the largest F
+statistic is reported when its p-value, times the number of patterns tried (Bonferroni),
+is below ``ALPHA``. Plain numpy over the result's arrays. The F distribution's tail is
+computed here (:func:`f_sf`, the regularised incomplete beta function by its continued
+fraction) rather than by ``scipy.stats``, whose import costs a command that prints a
+summary 0.4-1.2 s (tests/test_diagnosis_compliance.py compares the two).
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ MAX_POSES = 5000  # poses the test looks at: evenly spaced in file order beyond 
 class Finding:
     """A pattern in the residuals. cause: "backlash", "scale", "periodic" or "compliance";
     size: half the play [deg], the scale error [%], the amplitude [deg] or the deflection
-    at the samples' RMS gravity torque [deg]; rms_mm: (now, with the term) sample RMS
-    [mm]; p_value: Bonferroni-corrected."""
+    at the samples' RMS gravity torque [deg]; rms_mm: (now, with the term) RMS of the
+    samples' errors [mm] (position, distance, height above a plane: each kind's own);
+    rms_deg: the same of their orientation errors [deg] (poses, flush tilts), None without
+    them; p_value: Bonferroni-corrected."""
 
     joint: str
     cause: str
@@ -41,6 +45,7 @@ class Finding:
     rms_mm: tuple[float, float]
     p_value: float
     given: tuple[str, ...] = ()  # the joints the fit already has this kind of term for
+    rms_deg: tuple[float, float] | None = None
 
     def line(self) -> str:
         option = " ".join((*self.given, self.joint))  # the option replaces the joints given
@@ -52,13 +57,17 @@ class Finding:
                 "compliance": f"a compliance of about {self.size:+.3g} deg at the RMS "
                               f"gravity torque (--compliance {option})"}[self.cause]
         return (f"diagnosis: the residuals follow {self.joint}: {what}; modelled, the RMS "
-                f"would go from {self.rms_mm[0]:.3g} to {self.rms_mm[1]:.3g} mm "
-                f"(p = {self.p_value:.2g})")
+                f"would go from {self.rms_mm[0]:.3g} to {self.rms_mm[1]:.3g} mm"
+                + ("" if self.rms_deg is None else
+                   f", the orientation's from {self.rms_deg[0]:.3g} to {self.rms_deg[1]:.3g} deg")
+                + f" (p = {self.p_value:.2g})")
 
     def as_dict(self) -> dict:
         unit = "%" if self.cause == "scale" else "deg"
         return {"joint": self.joint, "cause": self.cause, f"size_{unit}": self.size,
                 "rms_now_mm": self.rms_mm[0], "rms_with_term_mm": self.rms_mm[1],
+                **({} if self.rms_deg is None else {"rms_now_deg": self.rms_deg[0],
+                                                    "rms_with_term_deg": self.rms_deg[1]}),
                 "p_value": self.p_value}
 
 
@@ -74,35 +83,35 @@ def nested_p(gain: float, rss: float, dof: int, k: int = 1, tests: int = 1) -> f
 
 
 def diagnose(result) -> Finding | None:
-    """The strongest significant pattern in the point sets' residuals, or None (also when
-    a set is of another kind, or with several chains). Several point sets (files) are
-    tested together: one term per joint, seen by every set through its own approach
-    directions, with the kinematic parameters shared and each set's frames its own."""
-    if any(s.kind != "point" for s in result.sets) or (
-            result.chains is not None and result.chains.several):
-        return None
+    """The strongest significant pattern in the residuals of every set, or None. The sets
+    are tested together, whatever their kinds and chains: one term per joint, seen by every
+    set through its own approach directions, with the kinematic parameters shared (a joint
+    on several chains has one term) and each set's frames its own."""
     from kincal.models.compliance import torque_rms
 
     em = result.error_model
     joints = tuple(em.joint_names)
     have = [joints.index(j) for j in result.layout.backlash if j in joints]
     stiff = [joints.index(j) for j in result.layout.compliance if j in joints]
-    blocks = [_set_block(result, s, -(-MAX_POSES // len(result.sets))) for s in result.sets]
-    q, g, r, Jq, K = (np.concatenate([b[i] for b in blocks]) for i in range(5))
-    # each set's frame columns its own: block-diagonal beside the shared kinematic ones
-    own = np.zeros((len(r), sum(b[5].shape[1] for b in blocks)))
+    blocks = [_SetBlock.of(result, i, -(-MAX_POSES // len(result.sets)))
+              for i in range(len(result.sets))]
+    q, g, tau = (np.concatenate([getattr(b, f) for b in blocks]) for f in ("q", "g", "tau"))
+    Jq, r = np.concatenate([b.Jq for b in blocks]), np.concatenate([b.r for b in blocks])
+    at = np.concatenate([b.sample + sum(len(c.q) for c in blocks[:i])
+                         for i, b in enumerate(blocks)])  # each row's sample
+    own = np.zeros((len(r), sum(b.own.shape[1] for b in blocks)))
     row = col = 0
-    for b in blocks:
-        own[row:row + len(b[5]), col:col + b[5].shape[1]] = b[5]
-        row, col = row + len(b[5]), col + b[5].shape[1]
-    tau = _torques(result.robot, q, em.kinds)
-    A = np.column_stack([K, own]
-                        + [(Jq[:, :, j] * g[:, j:j + 1]).reshape(-1, 1) for j in have]
-                        + [(Jq[:, :, j] * tau[:, j:j + 1]).reshape(-1, 1) for j in stiff])
+    for b in blocks:  # each set's frame columns its own: block-diagonal beside the shared
+        own[row:row + len(b.own), col:col + b.own.shape[1]] = b.own
+        row, col = row + len(b.own), col + b.own.shape[1]
+    w = _row_weights(blocks)  # as the fit weighs the sets (their stated sigmas)
+    A = np.column_stack([np.concatenate([b.K for b in blocks]), own]
+                        + [Jq[:, j] * g[at, j] for j in have]
+                        + [Jq[:, j] * tau[at, j] for j in stiff]) * w[:, None]
     U, sv, _ = np.linalg.svd(A, full_matrices=False)
     U = U[:, sv > 1e-9 * sv[0]]
     rank = U.shape[1]
-    resid = r - U @ (U.T @ r)  # the fit already absorbed its own directions
+    resid = r * w - U @ (U.T @ (r * w))  # the fit already absorbed its own directions
     rss = float(resid @ resid)
     tests = []
     for j, name in enumerate(joints):
@@ -118,7 +127,7 @@ def diagnose(result) -> Finding | None:
     best = None
     m = len(r)
     for name, cause, fs, j in tests:
-        C = np.column_stack([(Jq[:, :, j] * f[:, None]).reshape(-1) for f in fs])
+        C = np.column_stack([Jq[:, j] * f[at] * w for f in fs])
         C = C - U @ (U.T @ C)
         if np.linalg.norm(C) <= 1e-12 * max(float(np.linalg.norm(A)), 1e-300):
             continue
@@ -130,43 +139,114 @@ def diagnose(result) -> Finding | None:
         F = (gain / k) / ((rss - gain) / dof)
         p = nested_p(gain, rss - gain, dof, k, len(tests))
         if p < ALPHA and (best is None or F > best[0]):
-            N = len(q)
             size = (100 * coef[0] if cause == "scale" else
                     math.degrees(float(np.hypot(*coef))) if cause == "periodic"
                     else math.degrees(coef[0] * torque_rms(fs[0])) if cause == "compliance"
                     else math.degrees(coef[0]))
-            rms = (math.sqrt(float(r @ r) / N) * 1e3,
-                   math.sqrt(max(float(r @ r) - gain, 0.0) / N) * 1e3)
+            after = r - (C @ coef) / w  # the residual rows with the term
+            mm, deg = _rms(blocks, r, after)
             given = {"backlash": have, "compliance": stiff}.get(cause, [])
-            best = (F, Finding(name, cause, float(size), rms, p,
-                               tuple(joints[i] for i in given)))
+            best = (F, Finding(name, cause, float(size), mm, p,
+                               tuple(joints[i] for i in given), deg))
     return None if best is None else best[1]
 
 
-def _set_block(result, s, max_poses: int) -> tuple:
-    """One point set's part of the test, on at most ``max_poses`` of its poses: (q (N, n),
-    approach (N, n), residual (3N,) [m], the measured point's motion per joint (N, 3, n),
-    the kinematic columns (3N, k), the set's frame columns (3N, f))."""
-    from kincal.measurements.point import MeasurementModel
+@dataclass(frozen=True)
+class _SetBlock:
+    """One set's part of the test, in the union's joints (zero where its chain has none):
+    q, approach g, gravity torques tau (N, n) of its samples; per residual row (the set's
+    rows sample by sample): the residual r [m; angle rows as the fit scales them], its
+    sample, its motion per joint value Jq (rows, n), the kinematic columns K (rows, k) and
+    the set's frame columns own (rows, f); the kind model (what its rows mean) and the
+    samples' stated sigmas [m] (None: none stated)."""
 
-    em = result.error_model
-    n, k = em.n, result.kinematic.size
-    d = s.data.for_chain(em.joint_names)
-    # Beyond max_poses the test runs on that many poses evenly spaced in file order (their
-    # approach directions from the whole sequence): a pattern that matters is plain at
-    # thousands of poses, and the Jacobian, its SVD and the gravity torques then cost what
-    # a summary may (at 100,000 poses they cost more than the fit).
-    keep = (slice(None) if len(d) <= max_poses
-            else np.unique(np.linspace(0, len(d) - 1, max_poses).round().astype(int)))
-    q, g = d.joint_values[keep], d.approach[keep]
-    r = np.asarray(s.residuals, float).reshape(len(d), -1)[keep].reshape(-1)  # measured - predicted
-    b, t = s.frame_names.index("base.x"), s.frame_names.index("tool.x")
-    x = np.concatenate([result.kinematic, s.frames[b:b + 6],
-                        s.frames[t:t + 3 * d.n_points], np.zeros(n)])
-    _, J = MeasurementModel(em, q, np.ones_like(q), em.joint_names, np.asarray(d.points)[keep],
-                            d.n_points).jacobian(x)
-    J = J.reshape(len(r), -1)
-    return q, g, r, J[:, -n:].reshape(len(q), 3, n), J[:, :k], J[:, k:-n]
+    q: np.ndarray
+    g: np.ndarray
+    tau: np.ndarray
+    r: np.ndarray
+    sample: np.ndarray
+    Jq: np.ndarray
+    K: np.ndarray
+    own: np.ndarray
+    kind_model: object
+    sigma: np.ndarray | None
+
+    @classmethod
+    def of(cls, result, i: int, max_poses: int) -> "_SetBlock":
+        """Set ``i`` of ``result`` on at most ``max_poses`` of its samples: beyond that
+        many, evenly spaced in file order (their approach directions from the whole
+        sequence): a pattern that matters is plain at thousands of poses, and the Jacobian,
+        its SVD and the gravity torques then cost what a summary may (at 100,000 poses they
+        cost more than the fit)."""
+        from dataclasses import replace
+
+        from kincal.measurements.sets import kind_model
+
+        s = result.sets[i]
+        union = tuple(result.error_model.joint_names)
+        em, idx = ((result.error_model, np.arange(result.kinematic.size))
+                   if result.chains is None else result.chains.chain_of(i))
+        robot = result.robot if result.chains is None else result.chains.robots[i]
+        d = s.data.for_chain(em.joint_names)
+        keep = (np.arange(len(d)) if len(d) <= max_poses
+                else np.unique(np.linspace(0, len(d) - 1, max_poses).round().astype(int)))
+        d = d.subset(keep)
+        q, g = np.asarray(d.joint_values, float), np.asarray(d.approach, float)
+        N, n = q.shape
+        # a backlash term on every joint, every approach +1: its column is the residual's
+        # motion per joint value (the kind's own analytic derivative)
+        km = kind_model(em, replace(d, approach=np.ones_like(q)), tuple(range(n)))
+        _, dK, dF, dq = km.residuals(np.asarray(result.kinematic)[idx], s.frames,
+                                     np.zeros(n), jacobian=True)
+        rows = N * km.dim
+        cols = [union.index(j) for j in em.joint_names]
+        wide = [np.zeros((N, len(union))) for _ in range(3)]
+        for a, v in zip(wide, (q, g, _torques(robot, q, em.kinds))):
+            a[:, cols] = v
+        Jq = np.zeros((rows, len(union)))
+        Jq[:, cols] = -dq.reshape(rows, n)  # the prediction's motion (r = measured - it)
+        K = np.zeros((rows, result.kinematic.size))
+        K[:, idx] = dK.reshape(rows, -1)
+        return cls(*wide, np.asarray(s.residuals, float)[keep].reshape(-1),
+                   np.repeat(np.arange(N), km.dim), Jq, K, dF.reshape(rows, -1), km,
+                   None if d.sigma is None else np.asarray(d.sigma, float))
+
+
+def _row_weights(blocks) -> np.ndarray:
+    """(rows,) each residual row's weight: 1 / its sample's sigma where a set states one
+    (:data:`kincal.measurements.kind.DEFAULT_SIGMA` for the others), as the fit weighs
+    them; all 1 when no set states one."""
+    from kincal.measurements.kind import DEFAULT_SIGMA
+
+    if all(b.sigma is None for b in blocks):
+        return np.ones(sum(len(b.r) for b in blocks))
+    sig = np.concatenate([(np.full(len(b.q), DEFAULT_SIGMA) if b.sigma is None
+                           else b.sigma)[b.sample] for b in blocks])
+    return sig.min() / sig
+
+
+def _rms(blocks, before: np.ndarray, after: np.ndarray) -> tuple:
+    """((RMS now, with the term) of the samples' errors [mm] (position, distance, height:
+    the kind's own), and of their orientation errors [deg] or None when no set has one)."""
+    from kincal.identification.statistics import angle_errors
+
+    out: dict = {"mm": ([], []), "deg": ([], [])}
+    row = 0
+    for b in blocks:
+        km, N = b.kind_model, len(b.q)
+        for k, r in enumerate((before, after)):
+            part = r[row:row + N * km.dim].reshape(N, km.dim)
+            out["mm"][k].append(km.sample_errors(part) * 1e3)
+            angles = angle_errors(km, part)
+            if angles is not None:
+                out["deg"][k].append(np.degrees(angles))
+        row += N * km.dim
+
+    def rms(parts):
+        return math.sqrt(float(np.mean(np.concatenate(parts) ** 2)))
+
+    return (tuple(rms(p) for p in out["mm"]),
+            tuple(rms(p) for p in out["deg"]) if out["deg"][0] else None)
 
 
 def _torques(robot, q: np.ndarray, kinds) -> np.ndarray:
