@@ -207,9 +207,11 @@ class _SetBlock:
         Jq[:, cols] = -dq.reshape(rows, n)  # the prediction's motion (r = measured - it)
         K = np.zeros((rows, result.kinematic.size))
         K[:, idx] = dK.reshape(rows, -1)
-        return cls(*wide, np.asarray(s.residuals, float)[keep].reshape(-1),
-                   np.repeat(np.arange(N), km.dim), Jq, K, dF.reshape(rows, -1), km,
-                   None if d.sigma is None else np.asarray(d.sigma, float))
+        return cls(q=wide[0], g=wide[1], tau=wide[2],
+                   r=np.asarray(s.residuals, float)[keep].reshape(-1),
+                   sample=np.repeat(np.arange(N), km.dim), Jq=Jq, K=K,
+                   own=dF.reshape(rows, -1), kind_model=km,
+                   sigma=None if d.sigma is None else np.asarray(d.sigma, float))
 
 
 def _row_weights(blocks) -> np.ndarray:
