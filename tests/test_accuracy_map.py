@@ -119,3 +119,70 @@ def test_bad_cube_is_refused():
         cube_grid([0, 0, 0], 0.1, 0)
     with pytest.raises(OptionError, match="centre"):
         cube_grid([0, 0], 0.1)
+
+
+def _pose_result():
+    """A least-squares calibration of ec66 on 30 noisy tool poses (known frames)."""
+    from kincal.measurements.pose import PoseData
+    from kincal.rotations import base_rotation, rotation_exp
+
+    rng = np.random.default_rng(7)
+    robot = Robot.load("ec66")
+    g = robot.geometry
+    lo, hi = np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi)
+    q = rng.uniform(lo, hi, size=(30, g.n))
+    base, tool = np.array([0.4, -0.2, 0.1, 0.05, -0.1, 0.3]), np.array([0.01, -0.02, 0.08])
+    Rb, Rt = base_rotation(*base[3:]), base_rotation(0.2, -0.1, 0.4)
+    T = robot.tip_poses(q)
+    p = (T[:, :3, 3] + T[:, :3, :3] @ tool) @ Rb.T + base[:3]
+    R = rotation_exp(rng.normal(scale=np.radians(0.01), size=(30, 3))) @ Rb @ T[:, :3, :3] @ Rt
+    data = PoseData(joint_names=robot.joint_names, joint_values=q, rotations=R,
+                    positions=p + rng.normal(scale=NOISE, size=p.shape))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return CalibrationProblem(robot, [data], CalibrationOptions(method="ls")).solve(), rng
+
+
+def test_pose_map_orientation_matches_finite_differences():
+    """The orientation figure of a pose calibration's map: sqrt(trace T C T^T) with T the
+    tool frame's small turn per parameter, here by central differences of the pose kind's
+    residuals (not its Jacobian) over the whole parameter vector, with the calibration's
+    covariance; to 1e-5. A factor, radians for degrees or the position rows fail it."""
+    from kincal.measurements.pose import PoseData, PoseKind
+    from kincal.rotations import base_rotation, rotation_log
+
+    res, rng = _pose_result()
+    g, lay = res.robot.geometry, res.layout
+    q = rng.uniform(np.maximum(g.lower, -np.pi), np.minimum(g.upper, np.pi), size=(8, g.n))
+    amap = result_accuracy_map(res, joint_values=q)
+    assert amap.orientation_std is not None and amap.orientation_std.shape == (8,)
+    f = lay.frames(res.x, 0)  # the tool frame at x, by Pinocchio on the corrected robot
+    R_hat = (base_rotation(*f[3:6]) @ res.corrected.tip_poses(q)[:, :3, :3]
+             @ base_rotation(*f[9:12]))
+    km = PoseKind(res.error_model, PoseData(joint_names=res.robot.joint_names, joint_values=q,
+                                            positions=np.zeros((8, 3)), rotations=R_hat,
+                                            approach=np.zeros(q.shape)))
+    c = km.data.ratio()[:, None]
+
+    def turn(x):  # rows c log(R_hat R(x)^T): minus the turn of the tool frame, times c
+        return km.residuals(*lay.split(x, 0))[:, 3:] / c
+
+    assert np.abs(turn(res.x)).max() < 1e-9  # the engine and Pinocchio agree at x
+    h = 1e-6
+    D = np.stack([(turn(res.x + h * e) - turn(res.x - h * e)) / (2 * h)
+                  for e in np.eye(lay.size)], axis=2)                   # (8, 3, p)
+    S = np.einsum("mip,pq,mjq->mij", D, res.covariance, D)
+    want = np.sqrt(np.trace(S, axis1=1, axis2=2))
+    np.testing.assert_allclose(amap.orientation_std, want, rtol=1e-5)
+    d = amap.as_dict()
+    np.testing.assert_allclose(d["orientation_std_per_pose_deg"], np.degrees(want), rtol=1e-5)
+    assert d["orientation_std_deg"]["max"] == pytest.approx(np.degrees(want).max(), rel=1e-5)
+    assert f"max {np.degrees(want).max():.4f} deg" in amap.summary()
+    assert "orientation std (tool frame)" in amap.summary()
+
+
+def test_point_map_has_no_orientation(setup):
+    _, res = _calibrate(setup, CalibrationOptions(method="ls"), 0)
+    amap = result_accuracy_map(res)
+    assert amap.orientation_std is None and "orientation" not in amap.summary()
+    assert not any("orientation" in k for k in amap.as_dict())

@@ -156,3 +156,32 @@ def test_html_report_for_kinds_without_positions(tmp_path, capsys):
         code, out, err = run(capsys, "analyze", "ec66", data, *extra, "--accuracy-map", 0.4, 0,
                              0.3, 0.2)
         assert code == 1 and f"these data have none ({kind})" in err and not out, (out, err)
+
+
+def test_accuracy_map_of_pose_data_gives_the_orientation_in_degrees(tmp_path, capsys):
+    """calibrate and analyze --accuracy-poses on 6-DoF poses: the map's summary and its JSON
+    give the tool frame's predicted orientation error [deg] per pose as well; points keep
+    the position figures alone."""
+    for kind in ("pose", "point"):
+        code, out, err = run(capsys, "simulate", "ec66", "--kind", kind, "--poses", 30,
+                             "--out", tmp_path / f"{kind}.csv", "--seed", 4, "-q")
+        assert code == 0, err
+    for kind in ("pose", "point"):
+        data = tmp_path / f"{kind}.csv"
+        for command in (("calibrate", "--lambda", 0.01, "--out", tmp_path / f"{kind}.urdf"),
+                        ("analyze",)):
+            report = tmp_path / f"{kind}-{command[0]}.json"
+            code, out, err = run(capsys, command[0], "ec66", data, *command[1:],
+                                 "--accuracy-poses", data, "--report", report)
+            assert code == 0, err
+            amap = json.loads(report.read_text())["accuracy_map"]
+            if kind == "point":
+                assert "orientation" not in out and "orientation_std_deg" not in amap
+                continue
+            per_pose = amap["orientation_std_per_pose_deg"]
+            assert len(per_pose) == amap["reached"] == 30
+            # 0.01 deg orientation noise per axis over 30 poses: thousandths of a degree
+            assert 1e-4 < amap["orientation_std_deg"]["median"] < 0.01
+            assert amap["orientation_std_deg"]["max"] == max(per_pose)
+            assert f"orientation std (tool frame): median {np.median(per_pose):.4f}" in out
+            assert f"max {max(per_pose):.4f} deg" in out

@@ -172,3 +172,75 @@ def test_tiago_poses_calibrate_report_html_and_evaluate(tmp_path, capsys):
                  "--report", str(tmp_path / "e.json")]) == 0
     got = json.loads((tmp_path / "e.json").read_text())["orientation_errors"]
     check(got, angles_deg(R2, predicted(corrected, q2, f)[1]), "_deg")
+
+
+def _frames_file(path, robot, kind_set):
+    frames = CellFrames(robot.model_name, chain_hash(robot), robot.base, robot.tip,
+                        robot.joint_names, (kind_set,))
+    path.write_text(frames.dumps())
+    return str(path)
+
+
+def _write_points(path, names, q, columns, p):
+    rows = np.hstack([q, p])
+    path.write_text(",".join([*names, *columns]) + "\n"
+                    + "".join(",".join(map(repr, r.tolist())) + "\n" for r in rows))
+    return str(path)
+
+
+def test_points_are_evaluated_with_a_pose_calibrations_frames(tmp_path, capsys):
+    """A pose set's frames serve points: its measurement frame and the origin of its tool
+    frame (the tool point). Points planted at known distances from that origin (by
+    Pinocchio) come out at those distances; several points per pose are refused (one
+    tool origin), nothing written."""
+    robot = Robot.load("ec66")
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-2.5, 2.5, size=(20, len(robot.joint_names)))
+    p = predicted(robot, q, np.r_[BASE, TOOL])[0]
+    d = np.linspace(0.01e-3, 0.4e-3, len(q))  # [m] the planted errors
+    u = rng.normal(size=p.shape)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    frames = _frames_file(tmp_path / "f.json", robot,
+                          SetFrames("pose", "poses.csv", FRAMES, tuple(np.r_[BASE, TOOL])))
+    data = _write_points(tmp_path / "points.csv", robot.joint_names, q, "xyz", p + d[:, None] * u)
+    report = tmp_path / "e.json"
+    assert main(["evaluate", "ec66", data, "--frames", frames, "--report", str(report)]) == 0
+    out = capsys.readouterr().out
+    how = f"frames from {frames} (the pose set's measurement frame and tool origin)"
+    assert how in out and "orientation" not in out
+    got = json.loads(report.read_text())
+    assert got["kind"] == "point" and got["frames"] == how
+    assert got["errors"]["mean_mm"] == pytest.approx(d.mean() * 1e3, abs=1e-9)
+    assert got["errors"]["max_mm"] == pytest.approx(d.max() * 1e3, abs=1e-9)
+    two = _write_points(tmp_path / "two.csv", robot.joint_names, q,
+                        ("x1", "y1", "z1", "x2", "y2", "z2"), np.hstack([p, p]))
+    report.unlink()
+    assert main(["evaluate", "ec66", two, "--frames", frames, "--position-columns", "x1",
+                 "y1", "z1", "x2", "y2", "z2", "--report", str(report)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("kincal: error:")
+    assert "2 measured points per pose" in err and "one origin (tool.x .y .z)" in err
+    assert not report.exists()
+
+
+def test_a_pose_file_on_a_point_calibration_is_refused_and_its_positions_evaluated(
+        tmp_path, capsys):
+    """A point calibration holds no tool orientation: a pose file against its frames is
+    refused, saying so and pointing to --positions-only, which evaluates the positions
+    with the point set's measurement frame and tool point."""
+    robot = Robot.load("ec66")
+    q, p, R, _ = planted(robot)
+    exact = predicted(robot, q, np.r_[BASE, TOOL[:3], 0.0, 0.0, 0.0])[0]
+    data = str(write_poses(tmp_path / "poses.csv", robot.joint_names, q, p, R))
+    point = CellFrames.of_points(BASE, TOOL[:3]).sets[0]
+    frames = _frames_file(tmp_path / "f.json", robot, point)
+    assert main(["evaluate", "ec66", data, "--frames", frames]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("kincal: error:")
+    assert "a point calibration holds no tool orientation" in err and "--positions-only" in err
+    report = tmp_path / "e.json"
+    assert main(["evaluate", "ec66", data, "--frames", frames, "--positions-only",
+                 "--report", str(report)]) == 0
+    got = json.loads(report.read_text())["errors"]
+    assert got["mean_mm"] == pytest.approx(np.linalg.norm(p - exact, axis=1).mean() * 1e3,
+                                           abs=1e-9)

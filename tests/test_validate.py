@@ -107,3 +107,21 @@ def test_held_out_before_is_the_nominal_model_with_compliance_terms_too(data, tm
         assert report["options"]["compliance"] == terms[1:]
         before.append(report["validation"]["errors"]["before"])
     assert before[1] == pytest.approx(before[0], rel=1e-12)
+
+
+def test_held_out_points_on_a_pose_calibration_match_evaluate(tmp_path, capsys):
+    """Points held out from a pose calibration are judged with the pose set's measurement
+    frame and tool origin (as kincal evaluate --frames takes them; they were refused)."""
+    for kind, seed, n in (("pose", 1, 40), ("point", 2, 20)):
+        assert main(["simulate", "ec66", "--kind", kind, "--out", str(tmp_path / f"{kind}.csv"),
+                     "--poses", str(n), "--seed", str(seed), "--truth-seed", "3", "-q"]) == 0
+    out, frames = tmp_path / "c.urdf", tmp_path / "f.json"
+    assert main(["calibrate", "ec66", str(tmp_path / "pose.csv"), "--lambda", "0.01", "--out",
+                 str(out), "--frames-out", str(frames), "--validate",
+                 str(tmp_path / "point.csv"), "--report", str(tmp_path / "r.json")]) == 0
+    v = json.loads((tmp_path / "r.json").read_text())["validation"]
+    assert v["samples"] == 20 and v["errors"]["after"]["mean_mm"] < 0.2
+    assert main(["evaluate", str(out), str(tmp_path / "point.csv"), "--frames", str(frames),
+                 "--report", str(tmp_path / "e.json")]) == 0
+    ev = json.loads((tmp_path / "e.json").read_text())["errors"]
+    assert ev["mean_mm"] == pytest.approx(v["errors"]["after"]["mean_mm"], rel=1e-9)

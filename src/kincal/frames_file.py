@@ -42,9 +42,11 @@ from pathlib import Path
 import numpy as np
 
 from kincal.errors import DataError, InputFileError, KincalWarning
+from kincal.input_files import json_depth, non_finite_path
 from kincal.rotations import base_rotation, inverse, matrix_to_quaternion, transform
 
 AXES6 = ("x", "y", "z", "rx", "ry", "rz")  # a frame's named values: translation, rotation
+POINT_FRAMES = tuple(f"base.{c}" for c in AXES6) + ("tool.x", "tool.y", "tool.z")  # 1 point
 
 FORMAT = "kincal-frames"
 VERSION = 2
@@ -100,6 +102,19 @@ class SetFrames:
             out.append([self.value(f"tool{k}.{c}") for c in "xyz"])
             k += 1
         return np.array(out)
+
+    def as_points(self) -> "SetFrames | None":
+        """The frames this set holds for point data (the point kind's names): a point set's
+        own; a pose set's measurement frame and its tool frame's origin on the tip, the
+        tool point of one measured point (the tool's orientation, which points do not see,
+        left out); None for a set without a measurement frame and tool point (contacts).
+        The one place that says which frames of a pose set serve points."""
+        if self.kind not in ("point", "pose") or not self.has(*POINT_FRAMES):
+            return None
+        if self.kind == "point":
+            return self
+        return replace(self, kind="point", names=POINT_FRAMES,
+                       values=tuple(self.value(n) for n in POINT_FRAMES))
 
     @property
     def tool_rotation(self) -> np.ndarray | None:
@@ -232,10 +247,10 @@ class CellFrames:
         """From the content of a FRAMES.json of any version."""
         if not isinstance(data, dict):
             raise DataError(f"{source}: not a kincal frames file (a JSON object was expected)")
-        if _depth(data) > MAX_DEPTH:
+        if json_depth(data, MAX_DEPTH + 1) > MAX_DEPTH:
             raise DataError(f"{source}: not a kincal frames file (JSON nested more than "
                             f"{MAX_DEPTH} deep)")
-        bad = _non_finite(data)
+        bad = non_finite_path(data)
         if bad:
             raise DataError(f"{source}: {bad} is not a finite number; frames are finite "
                             "values in metres and radians (a corrupted or hand-edited file?)")
@@ -414,15 +429,12 @@ class CellFrames:
     def located(self) -> SetFrames:
         """The first set with a measurement frame and tool point (points, poses) on the
         file's chain (a set of another chain has its tool point in another tip frame)."""
-        def located(s: SetFrames) -> bool:
-            return s.has(*(f"base.{c}" for c in AXES6), "tool.x", "tool.y", "tool.z")
-
         chain = (self.base_frame, self.tip_frame)
         for s in self._on(chain):
-            if located(s):
+            if s.as_points() is not None:
                 return s
         elsewhere = dict.fromkeys(" -> ".join(self._chain_of(s)) for s in self.sets
-                                  if located(s))
+                                  if s.as_points() is not None)
         raise DataError(f"{self.source}: no measurement set on the chain {' -> '.join(chain)} "
                         "has a measurement frame and tool point (kinds "
                         + ", ".join(s.kind for s in self._on(chain)) + "); targets in a "
@@ -470,29 +482,3 @@ def _backlash(data: dict, key: str = "backlash") -> dict:  # or compliance
         raise TypeError(f"{key} must be an object {{joint: value}}")
     return {str(j): float(v) for j, v in b.items()}
 
-
-def _non_finite(value, where: str = "") -> str:
-    """The key path of the first NaN or infinite number in a JSON value, or ""."""
-    stack = [(where, value)]
-    while stack:
-        path, v = stack.pop()
-        if isinstance(v, float) and not math.isfinite(v):
-            return path or "a value"
-        if isinstance(v, dict):
-            stack.extend((f"{path}.{k}" if path else str(k), x) for k, x in v.items())
-        elif isinstance(v, list):
-            stack.extend((f"{path}[{i}]", x) for i, x in enumerate(v))
-    return ""
-
-
-def _depth(value, limit: int = MAX_DEPTH + 1) -> int:
-    """Nesting depth of a JSON value, counted up to ``limit`` (iteratively)."""
-    depth, level = 0, [value]
-    while level and depth <= limit:
-        nxt: list = []
-        for v in level:
-            nxt.extend(v.values() if isinstance(v, dict) else v if isinstance(v, list) else ())
-        if nxt:
-            depth += 1
-        level = nxt
-    return depth

@@ -1,4 +1,5 @@
-"""Checks on a file the user gives as input, before a byte of it is read.
+"""Checks on a file the user gives as input, before a byte of it is read, and on the JSON
+value read from it (nesting depth, non-finite numbers).
 
 A path to a FIFO, a device (``/dev/zero``, ``/dev/stdin``) or a socket would block or
 never end; a file far larger than any real input would fill the memory. Both are
@@ -8,6 +9,7 @@ that what they open is a regular file of bounded size.
 
 from __future__ import annotations
 
+import math
 import os
 import stat
 from pathlib import Path
@@ -73,3 +75,30 @@ def read_json(path, kind: str, what: str, error=InputFileError, expected: str = 
         raise error(f"{p}: not {what} (JSON nested too deeply)") from None
     except ValueError as exc:
         raise error(f"{p}: not {what} (invalid JSON: {exc})") from None
+
+
+def non_finite_path(value, where: str = "") -> str:
+    """The key path of the first NaN or infinite number in a JSON value, or ""."""
+    stack = [(where, value)]
+    while stack:
+        path, v = stack.pop()
+        if isinstance(v, float) and not math.isfinite(v):
+            return path or "a value"
+        if isinstance(v, dict):
+            stack.extend((f"{path}.{k}" if path else str(k), x) for k, x in v.items())
+        elif isinstance(v, list):
+            stack.extend((f"{path}[{i}]", x) for i, x in enumerate(v))
+    return ""
+
+
+def json_depth(value, limit: int) -> int:
+    """Nesting depth of a JSON value, counted up to ``limit`` (iteratively)."""
+    depth, level = 0, [value]
+    while level and depth <= limit:
+        nxt: list = []
+        for v in level:
+            nxt.extend(v.values() if isinstance(v, dict) else v if isinstance(v, list) else ())
+        if nxt:
+            depth += 1
+        level = nxt
+    return depth

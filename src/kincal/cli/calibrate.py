@@ -67,7 +67,8 @@ def register(subparsers) -> None:
                    "(default 2.5 x the median pose error)")
     group(p, "inputs").add_argument(
         "--validate", metavar="HELD.csv", nargs="+", default=[],
-        help="held-out data (read as DATA is, same kind as a training file): its errors "
+        help="held-out data (read as DATA is, same kind as a training file, or points on a "
+             "pose calibration: its measurement frame and tool origin): its errors "
              "before and after, per axis, with the frames from the calibration (as kincal "
              "evaluate --frames), in the summary, --report and --html. One file, or one per "
              "data file, each judged on that file's chain with its set's frames (several "

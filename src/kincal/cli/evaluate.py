@@ -74,15 +74,20 @@ def run(args) -> int:
         x = problem.solve().x
         how = "measurement frame and tool point fitted on these data"
     else:
-        problem, x = with_frames(robot, sets, frames, e.inputs.tool_guess)
+        problem, x, served = with_frames(robot, sets, frames, e.inputs.tool_guess)
         lay = problem.layout
-        how = f"frames from {e.frames}"
+        # a point file on a pose calibration: its frames serve the points (SetFrames.as_points)
+        whose = "" if served[0] == problem.kinds[0].kind else f"the {served[0]} set's "
+        how = f"frames from {e.frames}" + (f" ({whose}measurement frame and tool origin)"
+                                           if whose else "")
+        terms = ""
         if backlash:
-            how += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
+            terms += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
                     f"{getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
         if lay.compliance:
-            how += (f" with compliance of {', '.join(lay.compliance)} (gravity torques from "
+            terms += (f" with compliance of {', '.join(lay.compliance)} (gravity torques from "
                     "the URDF's inertials)")
+        how += terms
         if e.fit_frames == "measurement":
             from kincal.identification.frame_refit import moved, refit_measurement_frame
 
@@ -90,8 +95,9 @@ def run(args) -> int:
             for i, km in enumerate(problem.kinds):
                 x[lay.frame_slices[i]] = refit_measurement_frame(km, *lay.split(x, i))
             mm, deg = moved(lay.frames(saved, 0), lay.frames(x, 0), problem.kinds[0])
-            how = (f"tool and kinematics from {e.frames}, measurement frame refitted on these "
-                   f"data (moved {mm:.2f} mm, {deg:.3f} deg)" + how.split(e.frames, 1)[1])
+            how = (f"tool and kinematics from {e.frames}"
+                   + (f" ({whose}tool origin)" if whose else "") + ", measurement frame "
+                   f"refitted on these data (moved {mm:.2f} mm, {deg:.3f} deg)" + terms)
     stats = [ErrorStats.from_errors(err) for _, err in problem.sample_errors(x)]
     km = problem.kinds[0]
     angle = angle_stats(km, problem.residuals(x, 0))
@@ -119,9 +125,11 @@ def run(args) -> int:
 
 
 def with_frames(robot, sets, frames, tool_guess=None):
-    """(problem, x): ``sets`` on ``robot``'s kinematics as they are, with the frames (and
-    backlash) of ``frames`` (a CellFrames); nothing is fitted, the problem only lays out
-    the parameters. The one path of ``evaluate --frames`` and ``calibrate --validate``."""
+    """(problem, x, served): ``sets`` on ``robot``'s kinematics as they are, with the frames
+    (and backlash) of ``frames`` (a CellFrames); nothing is fitted, the problem only lays
+    out the parameters. served: per set, the kind of the FRAMES.json set its frames came
+    from (its own kind, or "pose" for points on a pose calibration). The one path of
+    ``evaluate --frames`` and ``calibrate --validate``."""
     from kincal.identification.options import CalibrationOptions
     from kincal.identification.problem import CalibrationProblem
     from kincal.measurements.checks import warn_units
@@ -133,32 +141,51 @@ def with_frames(robot, sets, frames, tool_guess=None):
     lay = problem.layout
     x = problem.x_nominal
     used: set[int] = set()
+    served = []
     for i, km in enumerate(problem.kinds):
-        x[lay.frame_slices[i]] = saved_frames(frames, km, used)
+        x[lay.frame_slices[i]], kind = saved_frames(frames, km, used)
+        served.append(kind)
     if backlash or compliance:
         x[lay.backlash_slice] = ([frames.backlash[j] for j in lay.backlash]
                                  + [frames.compliance[j] for j in lay.compliance])
-    return problem, x
+    return problem, x, tuple(served)
 
 
-def saved_frames(frames, km, used: set) -> list[float]:
-    """The frame values FRAMES.json holds for a set of ``km``'s kind: of the sets of that
-    kind not used yet, the one calibrated on this very file (its recorded source), else the
-    first (another day's file); a point set may read fewer tool points than the file has."""
+def saved_frames(frames, km, used: set) -> tuple[list[float], str]:
+    """(values, kind): the frame values FRAMES.json holds for a set of ``km``'s kind and the
+    kind of the set they come from. Of the sets not used yet, those of that kind, then, for
+    points, the pose sets' measurement frame and tool origin (:meth:`SetFrames.as_points`):
+    the one calibrated on this very file (its recorded source), else the first (another
+    day's file); a point set may read fewer tool points than the file has."""
     names = tuple(km.frame_names)
-    fits = [j for j, s in enumerate(frames.sets) if j not in used and s.kind == km.kind
-            and all(n in s.names for n in names)]
-    same = [j for j in fits if _same_file(frames.sets[j].source, km.data.source)]
-    for j in same[:1] or fits[:1]:
+    mine = [(j, s) for j, s in enumerate(frames.sets) if s.kind == km.kind]
+    if km.kind == "point":
+        mine += [(j, s.as_points()) for j, s in enumerate(frames.sets) if s.kind == "pose"]
+    fits = [(j, s) for j, s in mine if j not in used and s is not None and s.has(*names)]
+    same = [(j, s) for j, s in fits if _same_file(s.source, km.data.source)]
+    for j, s in same[:1] or fits[:1]:
         used.add(j)
-        s = frames.sets[j]
-        return [s.value(n) for n in names]
+        return [s.value(n) for n in names], frames.sets[j].kind
+    kinds = {s.kind for s in frames.sets}
     if km.kind == "point":
         K = km.data.n_points
         for s in frames.sets:
             if s.kind == "point" and s.has("tool.x") and len(s.tools) < K:
                 raise DataError(f"{km.data.source} has {K} measured points per pose, "
                                 f"{frames.source} has {len(s.tools)} tool point(s)")
+        if "pose" in kinds and "point" not in kinds and K > 1:
+            raise DataError(f"{km.data.source} has {K} measured points per pose, "
+                            f"{frames.source} holds a pose calibration's frames: its tool "
+                            "frame has one origin (tool.x .y .z), the tool point of one "
+                            "measured point per pose; evaluate a file of one point per pose "
+                            "(--position-columns of one point) or fit the frames on these "
+                            "data (--fit-frames)")
+    if km.kind == "pose" and "point" in kinds and "pose" not in kinds:
+        raise DataError(f"{frames.source} holds a point calibration's frames: a point "
+                        "calibration holds no tool orientation (tool.rx .ry .rz), which the "
+                        f"orientations of {km.data.source} are compared with; evaluate its "
+                        "positions with --positions-only (the point set's measurement frame "
+                        "and tool point), or fit the frames on these data (--fit-frames)")
     have = "; ".join(f"{s.kind} ({', '.join(s.names[:9])})" for s in frames.sets)
     raise DataError(f"{frames.source} holds no {km.kind} set with frames {', '.join(names)} "
                     f"for {km.data.source} (it holds: {have})")

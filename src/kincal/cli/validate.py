@@ -61,7 +61,7 @@ def held_out(result, inputs, path: str, k: int | None = None):
             for f in (after_frames, before_frames))
     out = []
     for robot, frames in ((nominal, before_frames), (corrected, after_frames)):
-        problem, x = with_frames(robot, sets, frames, inputs.tool_guess)
+        problem, x, _ = with_frames(robot, sets, frames, inputs.tool_guess)
         (_, errors), = problem.sample_errors(x)
         out.append((problem.residuals(x, 0), errors))
     km = problem.kinds[0]

@@ -197,22 +197,38 @@ class PoseKind(KindModel):
             return r
         N = self.N
         Ji = right_jacobian_inverse(phi) * -c[:, :, None]  # d(orientation rows)/d(turn)
+        Tk, Tf, Tb = self._turns(s, base, a, kinematic)
         if kinematic:
             Kp, Bp = s.point_columns(P_base)
-            Kr, Br = s.rotation_columns()
-            Jk = np.concatenate([-(Rb @ Kp), Ji @ (Rb @ Kr)], axis=1)
-            Jb = np.concatenate([-(Rb @ Bp), Ji @ (Rb @ Br)], axis=1)
+            Jk = np.concatenate([-(Rb @ Kp), Ji @ Tk], axis=1)
+            Jb = np.concatenate([-(Rb @ Bp), Ji @ Tb], axis=1)
         else:
             Jk, Jb = self._zero_chain_columns(6)
         Jf = np.zeros((N, 6, 12))
-        Jp, W = base_columns(P_base, base)
-        Jf[:, :3, :6] = -Jp
-        Jf[:, 3:, 3:6] = Ji @ W
-        RbRtip = Rb @ s.R_tip                                    # (N, 3, 3)
-        Jf[:, :3, 6:9] = -RbRtip
-        Wt = base_turns(a[0], a[1])                              # tool turns, tip frame
-        Jf[:, 3:, 9:12] = Ji @ (RbRtip @ Wt)
+        Jf[:, :3, :6] = -base_columns(P_base, base)[0]
+        Jf[:, :3, 6:9] = -(Rb @ s.R_tip)
+        Jf[:, 3:] = Ji @ Tf
         return r, Jk, Jf, Jb
+
+    def _turns(self, s, base, a, kinematic=True):
+        """(kinematic (N, 3, p), frames (N, 3, 12), joint terms (N, 3, n_terms)): the small
+        turn of the tool frame [rad], in the measurement frame, per unit of each parameter
+        (chain state ``s``, measurement frame ``base``, tool angles ``a``)."""
+        Rb = base_rotation(*base[3:])
+        Tk, Tb = (Rb @ K for K in s.rotation_columns()) if kinematic else \
+            self._zero_chain_columns(3)
+        Tf = np.zeros((self.N, 3, 12))
+        Tf[:, :, 3:6] = base_turns(base[3], base[4])
+        Tf[:, :, 9:12] = Rb @ s.R_tip @ base_turns(a[0], a[1])  # tool turns, tip frame
+        return Tk, Tf, Tb
+
+    def tool_turns(self, kin, frames, backlash=None) -> np.ndarray:
+        """(N, 3, p + 12 + n_terms) the small turn of the tool frame [rad], in the
+        measurement frame, per unit of each parameter: kinematic, this set's frames, joint
+        terms (their values ``backlash``), in that order. What a parameter covariance C
+        makes of the tool's orientation: T C T^T (:mod:`kincal.planning.accuracy_map`)."""
+        s = self.chain.state(kin, backlash, keep=True)
+        return np.concatenate(self._turns(s, frames[:6], frames[9:12]), axis=2)
 
     def start(self, kin, tool_guess=None):
         from kincal.measurements.frames_init import initial_frames

@@ -10,6 +10,12 @@ scatter over repeated calibrations with the same poses). Two numbers per pose, i
 - ``worst_axis``: sqrt of the largest eigenvalue, the standard deviation along the
   worst direction.
 
+For a pose set the map also gives the tool frame's orientation: with T_k = d(turn)/dx
+(3, p), the small turn of the tool frame in the measurement frame per unit of each
+parameter (the pose kind's orientation rows, :meth:`PoseKind.tool_turns`), Sigma_k =
+T_k C T_k^T [rad^2] and ``orientation_std`` = sqrt(trace), the RMS angle [rad; deg in
+the summary and the files].
+
 Targets are either joint configurations (the calibration poses, or a candidates file), or
 a cube of grid points in the chain's base frame, each reached by inverse kinematics on
 the (corrected) robot from the nearest calibration pose, so the map stays on the branch
@@ -30,6 +36,8 @@ import numpy as np
 from kincal.errors import OptionError
 from kincal.measurements.point_space import BASE, MM, ParameterSpace
 from kincal.measurements.point import MeasurementModel
+from kincal.measurements.pose import FRAMES as POSE_FRAMES
+from kincal.measurements.pose import PoseData, PoseKind
 from kincal.robot import Robot
 
 
@@ -49,6 +57,8 @@ class AccuracyMap:
     configuration within the joint limits reached [m] (empty for pose sets).
     targets: what the poses are, for reports ("5x5x5 grid ...", "the 60 calibration poses").
     covariance_source: where C came from ("calibration (sandwich)", "design, noise ...").
+    orientation_std: (M,) sqrt(trace of the 3x3 covariance of the tool frame's small turn)
+    [rad], for a pose set; None for points (no tool orientation).
     """
 
     positions: np.ndarray
@@ -58,6 +68,7 @@ class AccuracyMap:
     skipped: np.ndarray
     targets: str
     covariance_source: str
+    orientation_std: np.ndarray | None = None
 
     def summary(self) -> str:
         """A few lines with the figures in mm."""
@@ -68,6 +79,11 @@ class AccuracyMap:
             lines.append(f"  3-D std: median {np.median(s):.4f}  mean {np.mean(s):.4f}  "
                          f"min {np.min(s):.4f}  max {np.max(s):.4f} mm  (n = {len(s)}); "
                          f"worst axis up to {np.max(self.worst_axis) / MM:.4f} mm")
+            if self.orientation_std is not None:
+                a = np.degrees(self.orientation_std)
+                lines.append(f"  orientation std (tool frame): median {np.median(a):.4f}  "
+                             f"mean {np.mean(a):.4f}  min {np.min(a):.4f}  max "
+                             f"{np.max(a):.4f} deg")
         else:
             lines.append("  no target reached")
         if len(self.skipped):
@@ -79,7 +95,7 @@ class AccuracyMap:
     def as_dict(self) -> dict:
         """JSON-ready content (SI positions, figures in mm)."""
         s = self.std / MM
-        return {"targets": self.targets, "covariance": self.covariance_source,
+        out = {"targets": self.targets, "covariance": self.covariance_source,
                 "frame": "positions in the chain's base frame [m]; std of the predicted "
                          "point in the measurement frame [mm]",
                 "reached": int(len(self.std)), "skipped": int(len(self.skipped)),
@@ -90,6 +106,13 @@ class AccuracyMap:
                 "joint_values": self.joint_values.tolist(),
                 "std_3d_mm": s.tolist(), "worst_axis_mm": (self.worst_axis / MM).tolist(),
                 "skipped_positions_m": self.skipped.tolist()}
+        if self.orientation_std is not None:  # a pose set: the tool frame's orientation too
+            a = np.degrees(self.orientation_std)
+            out |= {"orientation_std_deg": {"median": float(np.median(a)) if len(a) else None,
+                                            "mean": float(np.mean(a)) if len(a) else None,
+                                            "max": float(np.max(a)) if len(a) else None},
+                    "orientation_std_per_pose_deg": a.tolist()}
+        return out
 
 
 def _chain_model(owner):
@@ -122,6 +145,27 @@ def predicted_std(chain, space: ParameterSpace, x: np.ndarray, covariance: np.nd
     S = np.einsum("mip,pq,mjq->mij", J, covariance, J)           # (M, 3, 3)
     eig = np.linalg.eigvalsh(S)
     return np.sqrt(np.maximum(eig.sum(axis=1), 0.0)), np.sqrt(np.maximum(eig[:, -1], 0.0))
+
+
+def predicted_turn_std(chain, backlash: tuple[str, ...], x: np.ndarray,
+                       covariance: np.ndarray, joint_values: np.ndarray) -> np.ndarray:
+    """(M,) sqrt(trace T_k C T_k^T) [rad]: the RMS angle of the tool frame's predicted
+    orientation error at the poses (the module notes).
+
+    chain: the chain's error model. backlash: the joints of its backlash terms. x and
+    covariance: over the pose kind's parameters (kinematic, the 12 frames of
+    :data:`kincal.measurements.pose.FRAMES`, the backlash terms) [SI]; backlash terms in
+    the middle of their play, as for positions."""
+    q = np.atleast_2d(np.asarray(joint_values, float))
+    M = len(q)
+    data = PoseData(joint_names=tuple(chain.joint_names), joint_values=q,
+                    positions=np.zeros((M, 3)), rotations=np.tile(np.eye(3), (M, 1, 1)),
+                    approach=np.zeros(q.shape))
+    km = PoseKind(chain, data, [list(chain.joint_names).index(j) for j in backlash])
+    p, f = chain.size, len(POSE_FRAMES)
+    T = km.tool_turns(x[:p], x[p:p + f], x[p + f:])                # (M, 3, p + 12 + nb)
+    S = np.einsum("mip,pq,mjq->mij", T, covariance, T)
+    return np.sqrt(np.maximum(np.trace(S, axis1=1, axis2=2), 0.0))
 
 
 def tool_positions(chain, space: ParameterSpace, x: np.ndarray,
@@ -173,14 +217,15 @@ def reach(robot: Robot, targets: np.ndarray, tool: np.ndarray, seeds: np.ndarray
 
 def accuracy_map(robot: Robot, chain, space: ParameterSpace, x: np.ndarray,
                  covariance: np.ndarray, seeds: np.ndarray, *, cube=None, grid: int = 5,
-                 joint_values=None, targets: str = "", covariance_source: str = ""
-                 ) -> AccuracyMap:
+                 joint_values=None, targets: str = "", covariance_source: str = "",
+                 orientation: tuple[np.ndarray, np.ndarray] | None = None) -> AccuracyMap:
     """The map over a cube (``cube=(center (3,) [m], edge [m])``, base frame) or at the
     poses ``joint_values`` (M, n); exactly one of them.
 
     robot: the robot to reach grid points with (the corrected one after a calibration),
     consistent with ``chain`` (the error model) and ``x``. seeds: (S, n) joint values to
-    start inverse kinematics from (the calibration poses).
+    start inverse kinematics from (the calibration poses). orientation: (x, covariance)
+    over a pose set's parameters (:func:`predicted_turn_std`), or None (points).
     """
     if (cube is None) == (joint_values is None):
         raise OptionError("give exactly one of a cube or a set of poses for the accuracy map")
@@ -204,8 +249,13 @@ def accuracy_map(robot: Robot, chain, space: ParameterSpace, x: np.ndarray,
     else:
         std = worst = np.zeros(0)
         pos = np.zeros((0, 3))
+    turn = None
+    if orientation is not None:
+        x_pose, c_pose = orientation
+        turn = _ro(predicted_turn_std(chain, space.backlash, x_pose, c_pose, q) if len(q)
+                   else np.zeros(0))
     return AccuracyMap(_ro(pos), _ro(q), _ro(std), _ro(worst),
-                       _ro(skipped), targets, covariance_source)
+                       _ro(skipped), targets, covariance_source, turn)
 
 
 def point_view(layout, error_model, i: int, n_points: int):
@@ -223,6 +273,27 @@ def point_view(layout, error_model, i: int, n_points: int):
                 np.arange(layout.backlash_slice.start,
                           layout.backlash_slice.start + layout.n_backlash)].astype(int)
     return ParameterSpace.of_model(error_model, layout.backlash, n_points), idx
+
+
+def pose_view(layout, i: int) -> np.ndarray | None:
+    """(q,) indices into ``layout`` of set i's pose-kind parameters (kinematic, its 12
+    frames, the backlash terms; what :func:`predicted_turn_std` takes), None unless set i
+    holds a tool frame's orientation (a pose set)."""
+    names = layout.frame_names(i)
+    mine = [layout.set_prefix(i) + n for n in POSE_FRAMES]
+    if not all(n in names for n in mine):
+        return None
+    start = layout.frame_slices[i].start
+    return np.r_[np.arange(layout.n_kinematic), [start + names.index(n) for n in mine],
+                 np.arange(layout.backlash_slice.start,
+                           layout.backlash_slice.start + layout.n_backlash)].astype(int)
+
+
+def _orientation(layout, i: int, x: np.ndarray, covariance: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(x, covariance) of set i's pose-kind parameters, or None (not a pose set)."""
+    idx = pose_view(layout, i)
+    return None if idx is None else (x[idx], covariance[np.ix_(idx, idx)])
 
 
 def _locates(s) -> bool:
@@ -271,6 +342,7 @@ def result_accuracy_map(result, *, cube=None, grid: int = 5, joint_values=None,
     return accuracy_map(result.corrected, _chain_model(result), space, result.x[idx],
                         result.covariance[np.ix_(idx, idx)], seeds, cube=cube, grid=grid,
                         joint_values=joint_values, targets=targets,
+                        orientation=_orientation(result.layout, i, result.x, result.covariance),
                         covariance_source=f"from the calibration ({result.options.method}, "
                                           + (f"lambda {result.lam:.3g}" if np.isfinite(result.lam)
                                              else "priors per class")  # evidence: no one lambda
@@ -311,8 +383,9 @@ def design_accuracy_map(problem, noise: float, *, cube=None, grid: int = 5,
     if cube is None and joint_values is None:
         joint_values, targets = seeds, f"the {len(seeds)} measured poses"
     how = "least squares" if lam == 0 else f"L2, lambda {lam:g}"
-    return accuracy_map(problem.robot, _chain_model(problem), space, x,
-                        design_covariance(problem, noise, lam)[np.ix_(idx, idx)], seeds, cube=cube, grid=grid,
-                        joint_values=joint_values, targets=targets,
+    cov = design_covariance(problem, noise, lam)
+    return accuracy_map(problem.robot, _chain_model(problem), space, x, cov[np.ix_(idx, idx)],
+                        seeds, cube=cube, grid=grid, joint_values=joint_values, targets=targets,
+                        orientation=_orientation(problem.layout, i, problem.start(), cov),
                         covariance_source=f"predicted before solving: {how}, noise "
                                           f"{noise / MM:g} mm per axis")
