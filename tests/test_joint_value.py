@@ -6,6 +6,7 @@ import json
 import re
 
 import numpy as np
+import pytest
 
 from kincal.cli.main import main
 from kincal.frames_file import CellFrames
@@ -254,8 +255,6 @@ def test_mimic_column_off_its_rule_is_warned_through_the_python_api(tmp_path):
     URDF's rule: warned as the command line warns (the problem checks every set; before,
     only the command line's reader did, and the API calibrated the bent column without a
     word into a URDF whose reader computes the finger from j3)."""
-    import pytest
-
     from kincal import Measurements, calibrate
     from kincal.errors import KincalWarning
     from kincal.robot import Robot
@@ -276,8 +275,6 @@ def test_compensation_api_refuses_a_coupled_mimic(tmp_path):
     chain: refused in one line, as kincal compensate refuses (before, the API returned joint
     values it called reached whose finger was off the URDF's rule by up to 12 deg, targets
     5 mm off the data)."""
-    import pytest
-
     from kincal import Measurements, calibrate
     from kincal.compensation import compensate, filter_program, read_targets
     from kincal.errors import OptionError
@@ -304,8 +301,6 @@ def test_drawing_joint_values_through_the_api_refuses_a_coupled_mimic(tmp_path):
     independently: on the arm whose finger mimics j3 they refuse, as kincal plan and
     kincal simulate refused alone (before, the API drew poses that break the URDF's rule,
     which the robot follows, without a word)."""
-    import pytest
-
     from kincal.errors import OptionError
     from kincal.planning.candidates import random_candidates
     from kincal.planning.simulation import cube_poses
@@ -339,3 +334,86 @@ def test_contact_simulation_refuses_a_coupled_mimic_even_at_given_poses(tmp_path
         assert code == 1 and err.count("kincal: error:") == 1, err
         assert "finger mimics j3" in err and "simulating contacts" in err
         assert not out.exists()
+
+
+def _held_calibration(tmp_path, capsys):
+    """(without, with_column, header, rows, urdf, frames): 30 simulated EC66 points with
+    joint_6 held at 30 deg, calibrated from the file without its column (--joint-value)."""
+    header, rows = simulated(tmp_path, capsys)
+    k = header.index("joint_6")
+    rows[:, k] = np.radians(30.0)
+    with_column = write(tmp_path / "with.csv", header, rows)
+    without = write(tmp_path / "without.csv", header[:k] + header[k + 1:],
+                    np.delete(rows, k, axis=1))
+    code, out, err = run(capsys, "calibrate", "ec66", without, "--model", "offsets", "--fix",
+                         "joint_6.theta", "--lambda", 0, "--joint-value",
+                         f"joint_6={float(np.radians(30.0))!r}", "--out", tmp_path / "b.urdf",
+                         "--frames-out", tmp_path / "b.json")
+    assert code == 0, err
+    return without, with_column, header, rows, tmp_path / "b.urdf", tmp_path / "b.json"
+
+
+def test_evaluate_reads_a_file_without_the_held_column_at_the_recorded_value(tmp_path, capsys):
+    """evaluate --frames on a file of the same logger (no joint_6 column): the value
+    FRAMES.json records applies, said in the output and the report (before: refused,
+    'missing column(s) joint_6', the user had to repeat the value)."""
+    without, with_column, header, rows, urdf, frames = _held_calibration(tmp_path, capsys)
+    code, out, err = run(capsys, "evaluate", urdf, without, "--frames", frames, "--report",
+                         tmp_path / "r.json")
+    assert code == 0, err
+    assert (f"joints held during the measurements (not in the file): joint_6 = 30 deg (as "
+            f"{frames} records)") in out
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["fixed_joints"] == {"joint_6": np.radians(30.0)}
+    assert report["fixed_joints_source"] == {"joint_6": str(frames)}
+    code, ref, err = run(capsys, "evaluate", urdf, with_column, "--frames", frames)
+    assert code == 0 and "differs" not in err, err  # the column at the held value: silent
+    assert out.splitlines()[1] == ref.splitlines()[1]  # the same errors as with the column
+
+
+def test_evaluate_warns_where_the_held_joint_differs_from_frames_json(tmp_path, capsys):
+    """An explicit --joint-value still wins, warned when it differs from the recorded value
+    (both in degrees); a file with a column for the held joint is read as it is, warned
+    when its values stray from the held value (before: the first silently, the second
+    without a word)."""
+    without, with_column, header, rows, urdf, frames = _held_calibration(tmp_path, capsys)
+    code, out, err = run(capsys, "evaluate", urdf, without, "--frames", frames,
+                         "--joint-value", "joint_6=32", "--angle-unit", "deg", "--json")
+    assert code == 0, err
+    assert ("--joint-value joint_6 = 32 deg differs from its value held during the calibration "
+            f"(joint_6 = 30 deg, as {frames} records): the given value is used") in err
+    report = json.loads(out)
+    assert report["fixed_joints"] == {"joint_6": pytest.approx(np.radians(32.0))}
+    assert report["fixed_joints_source"] == {"joint_6": "--joint-value"}
+    assert report["errors"]["max_mm"] > 1  # 2 deg on the wrist: the tool point moved
+    moved = rows.copy()
+    moved[3:, header.index("joint_6")] = np.radians(31.0)
+    off = write(tmp_path / "off.csv", header, moved)
+    code, out, err = run(capsys, "evaluate", urdf, off, "--frames", frames)
+    assert code == 0, err
+    assert (f"{off}: column joint_6 differs from its value held during the calibration "
+            f"(joint_6 = 30 deg, as {frames} records) in 27 of 30 rows, by up to 1 deg (line 5): "
+            "its values are read as they are") in " ".join(err.split())
+
+
+def test_calibrate_validate_reads_the_held_out_file_as_evaluate_does(tmp_path, capsys):
+    """calibrate --validate judges the held-out file as evaluate --frames does (one path):
+    without the held joint's column it gets the training's held value; with the column it
+    is read as it is, warned where it strays (before: refused, 'has a column for joint_6,
+    also given with --joint-value', although --joint-value described the training file)."""
+    header, rows = simulated(tmp_path, capsys)
+    k = header.index("joint_6")
+    rows[:, k] = np.radians(30.0)
+    train = write(tmp_path / "train.csv", header[:k] + header[k + 1:],
+                  np.delete(rows[:20], k, axis=1))
+    held_out = rows[20:].copy()
+    held_out[:, k] = np.radians(31.0)
+    off = write(tmp_path / "off.csv", header, held_out)
+    code, out, err = run(capsys, "calibrate", "ec66", train, "--model", "offsets", "--fix",
+                         "joint_6.theta", "--lambda", 0, "--joint-value",
+                         f"joint_6={float(np.radians(30.0))!r}", "--validate", off, "--out",
+                         tmp_path / "c.urdf")
+    assert code == 0, err
+    assert (f"{off}: column joint_6 differs from its value held during the calibration "
+            "(joint_6 = 30 deg, as the calibration records) in 10 of 10 rows, by up to 1 deg "
+            "(line 2): its values are read as they are") in " ".join(err.split())
