@@ -417,3 +417,75 @@ def test_calibrate_validate_reads_the_held_out_file_as_evaluate_does(tmp_path, c
     assert (f"{off}: column joint_6 differs from its value held during the calibration "
             "(joint_6 = 30 deg, as the calibration records) in 10 of 10 rows, by up to 1 deg "
             "(line 2): its values are read as they are") in " ".join(err.split())
+
+
+def test_compensate_holds_the_joints_the_calibration_held(tmp_path, capsys):
+    """kincal compensate with FRAMES.json recording joint_6 held at 30 deg: the targets file
+    may leave its column out, the inverse kinematics keeps it at 30 deg and reaches the
+    targets with the other joints, a note says so; a column at another value is warned
+    about and the held value used; the --program path alike (before: 'missing column
+    joint_6', and with the column the solver moved the held wrist)."""
+    without, with_column, header, rows, urdf, frames = _held_calibration(tmp_path, capsys)
+    k = header.index("joint_6")
+    keep = [i for i, h in enumerate(header) if h.startswith("joint_") or h in "xyz"]
+    targets = rows[:10, keep].copy()
+    targets[:, -3:] += np.random.default_rng(5).normal(0, 0.002, (10, 3))  # 2 mm off the data
+    out = tmp_path / "j.csv"
+    names = [header[i] for i in keep]
+    short = write(tmp_path / "t.csv", [h for h in names if h != "joint_6"],
+                  np.delete(targets, names.index("joint_6"), axis=1))
+    code, said, err = run(capsys, "compensate", urdf, short, "--frames", frames, "--out", out,
+                          "--json")
+    assert code == 0, err
+    summary = json.loads(said)
+    assert summary["reached"] == 10
+    assert (f"held where the calibration held them (joint_6 = 30 deg, as {frames} records)"
+            in summary["notes"][-1])
+    q = np.array(summary["joint_values_si"])
+    np.testing.assert_array_equal(q[:, 5], np.radians(30.0))
+    assert np.abs(q[:, :5] - targets[:, :5]).max() > 1e-4  # the other joints moved
+    wrong = targets.copy()
+    wrong[:, names.index("joint_6")] = np.radians(40.0)
+    full = write(tmp_path / "full.csv", names, wrong)
+    code, said, err = run(capsys, "compensate", urdf, full, "--frames", frames, "--out", out,
+                          "--json", "--overwrite")
+    assert code == 0, err
+    assert (f"{full}: column joint_6 differs from its value held during the calibration "
+            f"(joint_6 = 30 deg, as {frames} records) in 10 of 10 rows, by up to 10 deg (line 2):"
+            " the held value is used") in " ".join(err.split())
+    np.testing.assert_array_equal(np.array(json.loads(said)["joint_values_si"])[:, 5],
+                                  np.radians(30.0))
+    program = write(tmp_path / "p.csv", [h for h in header[:k] if h.startswith("joint_")],
+                    rows[:10, [i for i in range(k) if header[i].startswith("joint_")]])
+    code, said, err = run(capsys, "compensate", urdf, "--program", program, "--nominal", "ec66",
+                          "--frames", frames, "--out", out, "--json", "--overwrite")
+    assert code == 0, err
+    summary = json.loads(said)
+    assert summary["reached"] == 10 and "held where the calibration held" in summary["notes"][1]
+    np.testing.assert_array_equal(np.array(summary["joint_values_si"])[:, 5], np.radians(30.0))
+
+
+def test_compensation_api_holds_the_joints_the_frames_record_held(tmp_path, capsys):
+    """compensate() and filter_program() with the CellFrames of a calibration that held
+    joint_6: the solution keeps it at its held value (seeds elsewhere warned about); before,
+    the solver moved it from the seed's value without a word."""
+    from kincal.compensation import Targets, compensate, filter_program
+    from kincal.errors import KincalWarning
+    from kincal.robot import Robot
+
+    without, with_column, header, rows, urdf, path = _held_calibration(tmp_path, capsys)
+    frames = CellFrames.read(path)
+    robot = Robot.load(urdf, tip=frames.tip_frame)
+    joints = [header.index(f"joint_{i}") for i in range(1, 7)]
+    seeds = rows[:8, joints].copy()
+    seeds[:, 5] = 0.0
+    positions = rows[:8, [header.index(c) for c in "xyz"]] + 0.002
+    with pytest.warns(KincalWarning, match="column joint_6 differs from its value held during "
+                      r"the calibration \(joint_6 = 30 deg"):
+        result = compensate(robot, frames, Targets(seeds, positions, None, np.arange(2, 10)))
+    assert result.reached.all() and not result.at_limit.any()
+    np.testing.assert_array_equal(result.joint_values[:, 5], np.radians(30.0))
+    with pytest.warns(KincalWarning, match="column joint_6 differs"):
+        result = filter_program(Robot.load("ec66", tip=frames.tip_frame), robot, seeds, frames)
+    assert result.reached.all()
+    np.testing.assert_array_equal(result.joint_values[:, 5], np.radians(30.0))

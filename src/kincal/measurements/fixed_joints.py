@@ -216,6 +216,17 @@ class HeldJoints:
     def as_dict(self) -> dict[str, float]:
         return dict(self.values)
 
+    def joint_values(self, table, joint_names, scale, columns=None) -> np.ndarray:
+        """(N, n) joint values [SI] of a read table (:class:`~kincal.measurements.csv_table.
+        Columns`, the held joints' columns read as optional ones): each joint's column times
+        its ``scale`` (n,), a held joint without a column at its held value. columns:
+        {joint: CSV column} where they differ."""
+        held, columns = self.as_dict(), dict(columns or {})
+        n = len(table.lines)
+        return np.column_stack([
+            np.full(n, held[j]) if j in held and columns.get(j, j) not in table.values
+            else table.values[columns.get(j, j)] * u for j, u in zip(joint_names, scale)])
+
     def text(self, kinds: dict) -> str:
         """``joint = value unit, ...`` (mm, deg); ``kinds``: {joint: kind}."""
         return ", ".join(held_text(j, v, kinds.get(j, "revolute")) for j, v in self.values)
