@@ -6,6 +6,7 @@ import json
 import re
 
 import numpy as np
+import pytest
 
 from kincal.cli.main import main
 from kincal.frames_file import CellFrames
@@ -254,8 +255,6 @@ def test_mimic_column_off_its_rule_is_warned_through_the_python_api(tmp_path):
     URDF's rule: warned as the command line warns (the problem checks every set; before,
     only the command line's reader did, and the API calibrated the bent column without a
     word into a URDF whose reader computes the finger from j3)."""
-    import pytest
-
     from kincal import Measurements, calibrate
     from kincal.errors import KincalWarning
     from kincal.robot import Robot
@@ -276,8 +275,6 @@ def test_compensation_api_refuses_a_coupled_mimic(tmp_path):
     chain: refused in one line, as kincal compensate refuses (before, the API returned joint
     values it called reached whose finger was off the URDF's rule by up to 12 deg, targets
     5 mm off the data)."""
-    import pytest
-
     from kincal import Measurements, calibrate
     from kincal.compensation import compensate, filter_program, read_targets
     from kincal.errors import OptionError
@@ -304,8 +301,6 @@ def test_drawing_joint_values_through_the_api_refuses_a_coupled_mimic(tmp_path):
     independently: on the arm whose finger mimics j3 they refuse, as kincal plan and
     kincal simulate refused alone (before, the API drew poses that break the URDF's rule,
     which the robot follows, without a word)."""
-    import pytest
-
     from kincal.errors import OptionError
     from kincal.planning.candidates import random_candidates
     from kincal.planning.simulation import cube_poses
@@ -339,3 +334,158 @@ def test_contact_simulation_refuses_a_coupled_mimic_even_at_given_poses(tmp_path
         assert code == 1 and err.count("kincal: error:") == 1, err
         assert "finger mimics j3" in err and "simulating contacts" in err
         assert not out.exists()
+
+
+def _held_calibration(tmp_path, capsys):
+    """(without, with_column, header, rows, urdf, frames): 30 simulated EC66 points with
+    joint_6 held at 30 deg, calibrated from the file without its column (--joint-value)."""
+    header, rows = simulated(tmp_path, capsys)
+    k = header.index("joint_6")
+    rows[:, k] = np.radians(30.0)
+    with_column = write(tmp_path / "with.csv", header, rows)
+    without = write(tmp_path / "without.csv", header[:k] + header[k + 1:],
+                    np.delete(rows, k, axis=1))
+    code, out, err = run(capsys, "calibrate", "ec66", without, "--model", "offsets", "--fix",
+                         "joint_6.theta", "--lambda", 0, "--joint-value",
+                         f"joint_6={float(np.radians(30.0))!r}", "--out", tmp_path / "b.urdf",
+                         "--frames-out", tmp_path / "b.json")
+    assert code == 0, err
+    return without, with_column, header, rows, tmp_path / "b.urdf", tmp_path / "b.json"
+
+
+def test_evaluate_reads_a_file_without_the_held_column_at_the_recorded_value(tmp_path, capsys):
+    """evaluate --frames on a file of the same logger (no joint_6 column): the value
+    FRAMES.json records applies, said in the output and the report (before: refused,
+    'missing column(s) joint_6', the user had to repeat the value)."""
+    without, with_column, header, rows, urdf, frames = _held_calibration(tmp_path, capsys)
+    code, out, err = run(capsys, "evaluate", urdf, without, "--frames", frames, "--report",
+                         tmp_path / "r.json")
+    assert code == 0, err
+    assert (f"joints held during the measurements (not in the file): joint_6 = 30 deg (as "
+            f"{frames} records)") in out
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["fixed_joints"] == {"joint_6": np.radians(30.0)}
+    assert report["fixed_joints_source"] == {"joint_6": str(frames)}
+    code, ref, err = run(capsys, "evaluate", urdf, with_column, "--frames", frames)
+    assert code == 0 and "differs" not in err, err  # the column at the held value: silent
+    assert out.splitlines()[1] == ref.splitlines()[1]  # the same errors as with the column
+
+
+def test_evaluate_warns_where_the_held_joint_differs_from_frames_json(tmp_path, capsys):
+    """An explicit --joint-value still wins, warned when it differs from the recorded value
+    (both in degrees); a file with a column for the held joint is read as it is, warned
+    when its values stray from the held value (before: the first silently, the second
+    without a word)."""
+    without, with_column, header, rows, urdf, frames = _held_calibration(tmp_path, capsys)
+    code, out, err = run(capsys, "evaluate", urdf, without, "--frames", frames,
+                         "--joint-value", "joint_6=32", "--angle-unit", "deg", "--json")
+    assert code == 0, err
+    assert ("--joint-value joint_6 = 32 deg differs from its value held during the calibration "
+            f"(joint_6 = 30 deg, as {frames} records): the given value is used") in err
+    report = json.loads(out)
+    assert report["fixed_joints"] == {"joint_6": pytest.approx(np.radians(32.0))}
+    assert report["fixed_joints_source"] == {"joint_6": "--joint-value"}
+    assert report["errors"]["max_mm"] > 1  # 2 deg on the wrist: the tool point moved
+    moved = rows.copy()
+    moved[3:, header.index("joint_6")] = np.radians(31.0)
+    off = write(tmp_path / "off.csv", header, moved)
+    code, out, err = run(capsys, "evaluate", urdf, off, "--frames", frames)
+    assert code == 0, err
+    assert (f"{off}: column joint_6 differs from its value held during the calibration "
+            f"(joint_6 = 30 deg, as {frames} records) in 27 of 30 rows, by up to 1 deg (line 5): "
+            "its values are read as they are") in " ".join(err.split())
+
+
+def test_calibrate_validate_reads_the_held_out_file_as_evaluate_does(tmp_path, capsys):
+    """calibrate --validate judges the held-out file as evaluate --frames does (one path):
+    without the held joint's column it gets the training's held value; with the column it
+    is read as it is, warned where it strays (before: refused, 'has a column for joint_6,
+    also given with --joint-value', although --joint-value described the training file)."""
+    header, rows = simulated(tmp_path, capsys)
+    k = header.index("joint_6")
+    rows[:, k] = np.radians(30.0)
+    train = write(tmp_path / "train.csv", header[:k] + header[k + 1:],
+                  np.delete(rows[:20], k, axis=1))
+    held_out = rows[20:].copy()
+    held_out[:, k] = np.radians(31.0)
+    off = write(tmp_path / "off.csv", header, held_out)
+    code, out, err = run(capsys, "calibrate", "ec66", train, "--model", "offsets", "--fix",
+                         "joint_6.theta", "--lambda", 0, "--joint-value",
+                         f"joint_6={float(np.radians(30.0))!r}", "--validate", off, "--out",
+                         tmp_path / "c.urdf")
+    assert code == 0, err
+    assert (f"{off}: column joint_6 differs from its value held during the calibration "
+            "(joint_6 = 30 deg, as the calibration records) in 10 of 10 rows, by up to 1 deg "
+            "(line 2): its values are read as they are") in " ".join(err.split())
+
+
+def test_compensate_holds_the_joints_the_calibration_held(tmp_path, capsys):
+    """kincal compensate with FRAMES.json recording joint_6 held at 30 deg: the targets file
+    may leave its column out, the inverse kinematics keeps it at 30 deg and reaches the
+    targets with the other joints, a note says so; a column at another value is warned
+    about and the held value used; the --program path alike (before: 'missing column
+    joint_6', and with the column the solver moved the held wrist)."""
+    without, with_column, header, rows, urdf, frames = _held_calibration(tmp_path, capsys)
+    k = header.index("joint_6")
+    keep = [i for i, h in enumerate(header) if h.startswith("joint_") or h in "xyz"]
+    targets = rows[:10, keep].copy()
+    targets[:, -3:] += np.random.default_rng(5).normal(0, 0.002, (10, 3))  # 2 mm off the data
+    out = tmp_path / "j.csv"
+    names = [header[i] for i in keep]
+    short = write(tmp_path / "t.csv", [h for h in names if h != "joint_6"],
+                  np.delete(targets, names.index("joint_6"), axis=1))
+    code, said, err = run(capsys, "compensate", urdf, short, "--frames", frames, "--out", out,
+                          "--json")
+    assert code == 0, err
+    summary = json.loads(said)
+    assert summary["reached"] == 10
+    assert (f"held where the calibration held them (joint_6 = 30 deg, as {frames} records)"
+            in summary["notes"][-1])
+    q = np.array(summary["joint_values_si"])
+    np.testing.assert_array_equal(q[:, 5], np.radians(30.0))
+    assert np.abs(q[:, :5] - targets[:, :5]).max() > 1e-4  # the other joints moved
+    wrong = targets.copy()
+    wrong[:, names.index("joint_6")] = np.radians(40.0)
+    full = write(tmp_path / "full.csv", names, wrong)
+    code, said, err = run(capsys, "compensate", urdf, full, "--frames", frames, "--out", out,
+                          "--json", "--overwrite")
+    assert code == 0, err
+    assert (f"{full}: column joint_6 differs from its value held during the calibration "
+            f"(joint_6 = 30 deg, as {frames} records) in 10 of 10 rows, by up to 10 deg (line 2):"
+            " the held value is used") in " ".join(err.split())
+    np.testing.assert_array_equal(np.array(json.loads(said)["joint_values_si"])[:, 5],
+                                  np.radians(30.0))
+    program = write(tmp_path / "p.csv", [h for h in header[:k] if h.startswith("joint_")],
+                    rows[:10, [i for i in range(k) if header[i].startswith("joint_")]])
+    code, said, err = run(capsys, "compensate", urdf, "--program", program, "--nominal", "ec66",
+                          "--frames", frames, "--out", out, "--json", "--overwrite")
+    assert code == 0, err
+    summary = json.loads(said)
+    assert summary["reached"] == 10 and "held where the calibration held" in summary["notes"][1]
+    np.testing.assert_array_equal(np.array(summary["joint_values_si"])[:, 5], np.radians(30.0))
+
+
+def test_compensation_api_holds_the_joints_the_frames_record_held(tmp_path, capsys):
+    """compensate() and filter_program() with the CellFrames of a calibration that held
+    joint_6: the solution keeps it at its held value (seeds elsewhere warned about); before,
+    the solver moved it from the seed's value without a word."""
+    from kincal.compensation import Targets, compensate, filter_program
+    from kincal.errors import KincalWarning
+    from kincal.robot import Robot
+
+    without, with_column, header, rows, urdf, path = _held_calibration(tmp_path, capsys)
+    frames = CellFrames.read(path)
+    robot = Robot.load(urdf, tip=frames.tip_frame)
+    joints = [header.index(f"joint_{i}") for i in range(1, 7)]
+    seeds = rows[:8, joints].copy()
+    seeds[:, 5] = 0.0
+    positions = rows[:8, [header.index(c) for c in "xyz"]] + 0.002
+    with pytest.warns(KincalWarning, match="column joint_6 differs from its value held during "
+                      r"the calibration \(joint_6 = 30 deg"):
+        result = compensate(robot, frames, Targets(seeds, positions, None, np.arange(2, 10)))
+    assert result.reached.all() and not result.at_limit.any()
+    np.testing.assert_array_equal(result.joint_values[:, 5], np.radians(30.0))
+    with pytest.warns(KincalWarning, match="column joint_6 differs"):
+        result = filter_program(Robot.load("ec66", tip=frames.tip_frame), robot, seeds, frames)
+    assert result.reached.all()
+    np.testing.assert_array_equal(result.joint_values[:, 5], np.radians(30.0))

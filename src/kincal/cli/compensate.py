@@ -97,7 +97,8 @@ def run(args) -> int:
 
 
 def _compensate(c: Compensate) -> int:
-    from kincal.compensation import CellFrames, IkOptions, compensate, filter_program, read_targets
+    from kincal.compensation import (CellFrames, HeldJoints, IkOptions, compensate,
+                                     filter_program, read_targets)
     from kincal.planning.candidates import read_candidates
 
     options = IkOptions(position_tolerance=c.tolerance_mm * 1e-3)
@@ -110,8 +111,10 @@ def _compensate(c: Compensate) -> int:
     # compensate / filter_program (the API's path too)
     inputs: list[str | Path | None] = [c.targets, c.program, c.nominal, c.frames]
     protect = check_outputs(robot, [c.out], overwrite=c.overwrite, inputs=inputs)
+    held = HeldJoints()  # the joints the calibration held: their columns may be left out
     if frames is not None:
         frames.check_chain(robot)  # before reading targets: a wrong file is the likelier error
+        held = HeldJoints.of(frames, robot)
     if c.program is not None:
         from kincal.robot import Robot
 
@@ -119,14 +122,15 @@ def _compensate(c: Compensate) -> int:
         nominal = Robot.load(c.nominal, tip=c.chain.tip, base=c.chain.base,
                              xacro_args=xacro_args(c.nominal_xacro_arg, "--nominal-xacro-arg"))
         q, lines = read_candidates(c.program, nominal, c.length_unit, c.angle_unit,
-                                   kind="program")
+                                   kind="program", held=held)
         result = filter_program(nominal, robot, q, frames, lines, c.point - 1, options,
                                 source=str(c.program))
         inputs = [c.program, nominal.source]
     else:
         assert frames is not None  # targets come with --frames (run)
         targets = read_targets(c.targets, robot, c.length_unit, c.angle_unit,
-                               c.position_columns, c.orientation_format, c.orientation_columns)
+                               c.position_columns, c.orientation_format, c.orientation_columns,
+                               held)
         result = compensate(robot, frames, targets, c.point - 1, options, c.length_unit)
         inputs = [c.targets]
     failures = result.failures()

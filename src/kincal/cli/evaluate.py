@@ -64,9 +64,13 @@ def run(args) -> int:
     robot = e.chain.load()
     protect = check_outputs(robot, [e.report], overwrite=e.overwrite,
                             inputs=(e.inputs.data, e.frames))
+    held = None
     if frames is not None:
+        from kincal.measurements.fixed_joints import HeldJoints
+
         frames.check_chain(robot)
-    sets = e.inputs.read_sets(robot)
+        held = HeldJoints.of(frames, robot)  # a file without their columns gets them
+    sets = e.inputs.read_sets(robot, held)
     backlash = tuple(frames.backlash) if frames is not None else ()
     if frames is None:
         problem = CalibrationProblem(robot, sets, CalibrationOptions(
@@ -82,11 +86,11 @@ def run(args) -> int:
                                            if whose else "")
         terms = ""
         if backlash:
-            terms += (f" with backlash of {', '.join(lay.backlash)} (approach directions from "
-                    f"{getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
+            terms += (f" with backlash of {', '.join(lay.backlash)} (approach directions "
+                      f"from {getattr(problem.kinds[0].data, 'order_source', 'the row order')})")
         if lay.compliance:
-            terms += (f" with compliance of {', '.join(lay.compliance)} (gravity torques from "
-                    "the URDF's inertials)")
+            terms += (f" with compliance of {', '.join(lay.compliance)} (gravity torques "
+                      "from the URDF's inertials)")
         how += terms
         if e.fit_frames == "measurement":
             from kincal.identification.frame_refit import moved, refit_measurement_frame
@@ -106,10 +110,15 @@ def run(args) -> int:
              f"  {'position: ' if km.kind == 'pose' else ''}{stats[0].line()}"]
     if angle is not None:
         lines.append(f"  {angle_label(km.kind)}: {angle.line()}")
+    fixed, source = _held(e, robot, km.data, held)
+    if fixed:
+        lines.append(f"  {fixed}")
     content = {"format": "kincal-evaluation-1", "robot": str(robot.source),
                "data": str(e.inputs.data), "kind": km.kind, "frames": how,
                "errors": report.stats_dict(stats[0]),
-               "orientation_errors": None if angle is None else report.angle_dict(angle)}
+               "orientation_errors": None if angle is None else report.angle_dict(angle),
+               "fixed_joints": dict(getattr(km.data, "fixed_joints", ())),
+               "fixed_joints_source": source}
     summary = {"command": "evaluate", **{k: v for k, v in content.items() if k != "format"}}
     if not e.report:
         say(summary_lines(e.json, lines, summary))
@@ -122,6 +131,23 @@ def run(args) -> int:
                                                     e.command_line),
                       overwrite=e.overwrite, protect=protect)
     return 0
+
+
+def _held(e: Evaluate, robot, data, held) -> tuple[str, dict]:
+    """(the line saying which joints the file had no column for and where their values came
+    from, or "", {joint: "--joint-value" or the FRAMES.json}) of the set ``data``."""
+    from kincal.measurements.fixed_joints import held_text
+
+    given = e.inputs.held_joints([robot])
+    fixed = tuple(getattr(data, "fixed_joints", ()))
+    source = {j: "--joint-value" if j in given or held is None else held.source
+              for j, _ in fixed}
+    kinds = dict(zip(robot.joint_names, robot.geometry.kinds))
+    parts = [held_text(j, v, kinds[j]) + ("" if source[j] == "--joint-value"
+                                           else f" (as {source[j]} records)")
+             for j, v in fixed]
+    return ("joints held during the measurements (not in the file): " + ", ".join(parts)
+            if parts else ""), source
 
 
 def with_frames(robot, sets, frames, tool_guess=None):

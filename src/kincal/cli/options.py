@@ -343,9 +343,13 @@ class Inputs:
 
         return held_values(self.joint_value, robots, self.length_unit, self.angle_unit)
 
-    def read_sets(self, robot) -> list:
+    def read_sets(self, robot, held=None) -> list:
         """Every data file, each read as its kind (on ``robot``'s chain, or with a list, on
-        its own robot's), weighted by --set-sigma-mm if given."""
+        its own robot's), weighted by --set-sigma-mm if given. held: the joints a
+        calibration held (:class:`~kincal.measurements.fixed_joints.HeldJoints`, from
+        FRAMES.json): a file without a column for one gets its recorded value, unless
+        --joint-value gives one (warned where it differs); a file with the column is read
+        as it is (warned where it strays from the held value)."""
         import numpy as np
 
         from kincal.measurements.sets import read_set_file
@@ -368,18 +372,24 @@ class Inputs:
         pos = self.position_columns if self.position_columns != ("x", "y", "z") else None
         robots = robot if isinstance(robot, (list, tuple)) else [robot] * len(self.files)
 
-        held = self.held_joints(robots)
+        from kincal.measurements import fixed_joints as fj
+
+        given = self.held_joints(robots)
+        held = held or fj.HeldJoints()
+        kinds = {j: k for r in robots for j, k in zip(r.joint_names, r.geometry.kinds)}
+        held.warn_given(given, kinds)
         angled = []  # per file: orientation columns beside its positions
 
         def read(path, r, fmt):
-            from kincal.measurements import fixed_joints as fj
             from kincal.measurements.orientation_columns import found_columns
             from kincal.measurements.sets import header_of
 
-            fixed = {j: v for j, v in held.items() if j in r.joint_names}
+            fixed = {j: v for j, v in given.items() if j in r.joint_names}
             columns = self.joint_map() or {}
             header = header_of(path, [columns.get(j, j) for j in r.joint_names])
             fj.check_absent(path, header, fixed, self.joint_map())
+            fixed.update({j: v for j, v in held.values if j in r.joint_names
+                          and j not in fixed and columns.get(j, j) not in header})
             angled.append(all(c in header for c in pos or "xyz")
                           and bool(found_columns(header, pos)))
             follow = fj.mimicked(path, header, r, fixed, self.joint_map())
@@ -390,6 +400,8 @@ class Inputs:
                               flush=self.flush, orientation_format=fmt,
                               positions_only=self.positions_only)
             # a mimic column off its rule is warned by the problem (the API's path too)
+            held.warn_off(path, d.joint_names, kinds, d.joint_values, "its values are read as "
+                          "they are; the calibration holds at the recorded value only", d.rows)
             return fj.with_fixed_joints(d, r.joint_names, fixed, follow) if fixed or follow else d
 
         from kincal.identification.orientation_convention import checked

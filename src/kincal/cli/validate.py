@@ -1,7 +1,8 @@
 """``kincal calibrate --validate HELD.csv``: the held-out errors of a calibration.
 
 The held-out file is evaluated the way ``kincal evaluate --frames`` evaluates one
-(:func:`kincal.cli.evaluate.with_frames`): frames from the training, nothing refitted.
+(:func:`kincal.cli.evaluate.with_frames`): frames from the training, nothing refitted; the
+joints the training held (``--joint-value``) at the values its frames record.
 Before: the nominal kinematics with the frames fitted on the training data with them
 (the start of the calibration); after: the calibrated kinematics and frames.
 """
@@ -36,6 +37,7 @@ def held_out(result, inputs, path: str, k: int | None = None):
     from kincal.cli.evaluate import with_frames
     from kincal.export.validation import Validation
     from kincal.identification.statistics import angle_stats
+    from kincal.measurements.fixed_joints import HeldJoints
 
     several = result.chains is not None and result.chains.several
     if k is None:
@@ -44,9 +46,12 @@ def held_out(result, inputs, path: str, k: int | None = None):
     if k is not None and several:  # the chain of set k, with every corrected origin
         nominal = result.chains.robots[k]
         corrected = result.chains.corrected(result.layout.kinematic(result.x), k)
-    reading = dataclasses.replace(inputs, files=(path,), set_sigma_mm=None)
-    sets = reading.read_sets(nominal)
     after_frames = result.frames()
+    # the joints the training held come from its frames, as evaluate --frames takes them: a
+    # held-out file with their columns is read as it is (warned where they stray)
+    reading = dataclasses.replace(inputs, files=(path,), set_sigma_mm=None, joint_value=())
+    held = dataclasses.replace(HeldJoints.of(after_frames, nominal), source="the calibration")
+    sets = reading.read_sets(nominal, held)
     lay = result.layout
     start = [tuple(float(v) for v in result.x_start[lay.frame_slices[i]])
              for i in range(len(result.sets))]

@@ -11,6 +11,7 @@ from kincal.compensation.compensate import Compensation, compensate, filter_prog
 from kincal.frames_file import CellFrames
 from kincal.compensation.ik import IkOptions
 from kincal.compensation.targets import Targets, read_targets
+from kincal.measurements.fixed_joints import HeldJoints
 
-__all__ = ["CellFrames", "Compensation", "IkOptions", "Targets", "compensate", "filter_program",
-           "read_targets"]
+__all__ = ["CellFrames", "Compensation", "HeldJoints", "IkOptions", "Targets", "compensate",
+           "filter_program", "read_targets"]

@@ -18,6 +18,11 @@ motion is not known from a target file, so targets are reached with every joint 
 middle of its play (the corrected URDF's model), and the summary says how large the
 remaining play is.
 
+Joints the calibration held still (FRAMES.json's ``fixed_joints``, ``--joint-value``) stay
+at their held values: the calibration holds there only (and the robot may not move them).
+The solver keeps them (lower = upper), the other joints reach the targets; a seed (a
+program's value) elsewhere is warned about and the held value used; the summary says so.
+
 Compliance terms (FRAMES.json, :mod:`kincal.models.compliance`) are compensated: the joint
 values the solver finds are where the joints must *be*; the commanded values are those
 less the deflection the gravity torque causes there (q_cmd + c tau(q_cmd) = q, solved by
@@ -39,7 +44,7 @@ from kincal.compensation.targets import Targets, joint_scales
 from kincal.errors import DataError, FrameError
 from kincal.measurements.checks import UNIT_RATIO, spread
 from kincal.measurements.csv_table import csv_line
-from kincal.measurements.fixed_joints import refuse_coupled
+from kincal.measurements.fixed_joints import HeldJoints, refuse_coupled
 from kincal.measurements.orientation_columns import reading_doubt
 from kincal.rotations import base_rotation
 
@@ -199,16 +204,38 @@ def _backlash_notes(frames: CellFrames | None, robot) -> list[str]:
             "of its play, the side it is approached from moves the tool by up to that much"]
 
 
-def _deflected(frames: CellFrames | None, robot, sol: IkSolution
+def _held(robot, frames: CellFrames | None, seeds, source: str, lines):
+    """(seeds, lower, upper, notes): the joints ``frames`` records as held (module notes)
+    set to their values in the seeds (warned where the file has others) and held by the
+    limits (lower = upper), the other joints' URDF limits."""
+    g = robot.geometry
+    seeds = np.array(seeds, dtype=float)
+    lower, upper = np.array(g.lower, dtype=float), np.array(g.upper, dtype=float)
+    held = HeldJoints() if frames is None else HeldJoints.of(frames, robot)
+    if not held.values:
+        return seeds, lower, upper, []
+    kinds = dict(zip(g.joint_names, g.kinds))
+    held.warn_off(source, g.joint_names, kinds, seeds, "the held value is used", lines)
+    for j, v in held.values:
+        k = list(g.joint_names).index(j)
+        seeds[:, k] = lower[k] = upper[k] = v
+    return seeds, lower, upper, [
+        f"held where the calibration held them ({held.text(kinds)}, as {held.source} "
+        "records): the calibration holds there only, the other joints reach the targets"]
+
+
+def _deflected(frames: CellFrames | None, robot, sol: IkSolution, lower, upper
                ) -> tuple[IkSolution, list[str]]:
     """(the solution with commanded joint values that the gravity torques deflect onto the
-    solver's, notes) for frames with compliance terms; (sol, []) without."""
+    solver's, notes) for frames with compliance terms; (sol, []) without. A held joint
+    (lower = upper) is not commanded: it keeps its value."""
     if frames is None or not frames.compliance:
         return sol, []
     names = list(robot.joint_names)
     c = np.zeros(len(names))
     for j, v in frames.compliance.items():
         c[names.index(j)] = v
+    c[np.asarray(lower) >= np.asarray(upper)] = 0.0
     q = np.asarray(sol.q, float)
     cmd = q.copy()
     for _ in range(COMPLIANCE_STEPS):  # a contraction: |c dtau/dq| << 1
@@ -246,14 +273,16 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     g = robot.geometry
     chain = ChainKinematics.of(g)
     tool = frames.tools[point]
+    seeds, lower, upper, held = _held(robot, frames, targets.seeds, targets.source,
+                                      targets.lines)
     R_MB = base_rotation(*frames.base[3:])
     # a pose calibration's tool frame is turned on the tip: the wanted orientations are the
     # tool frame's, as its data measured them (the tip's own for points: identity)
     R_tool = frames.tool_rotation if point == 0 else np.eye(3)
     t_MB = frames.base[:3]
     positions_B = (targets.positions - t_MB) @ R_MB  # R_MB^T (p - t) row-wise
-    R_seed, p_seed = chain.tool_poses(targets.seeds, tool)
-    _check_units(chain, tool, g.lower, g.upper, positions_B, targets.positions,
+    R_seed, p_seed = chain.tool_poses(seeds, tool)
+    _check_units(chain, tool, lower, upper, positions_B, targets.positions,
                  p_seed @ R_MB.T + t_MB, targets.source, length_unit)
     if targets.rotations is None:
         rotations, required = R_seed, np.zeros(len(targets), bool)
@@ -268,11 +297,10 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
             raise DataError(doubt + "; nothing is compensated")
         rotations = R_MB.T @ targets.rotations @ R_tool.T  # the tip's, in the base frame
         required, notes = np.ones(len(targets), bool), []
-    sol = solve(chain, tool, positions_B, rotations, required, targets.seeds, g.lower, g.upper,
-                options)
-    sol, soft = _deflected(frames, robot, sol)
-    return _solution(robot, sol, targets.seeds, targets.lines, required, targets.source,
-                     notes + _backlash_notes(frames, robot) + soft)
+    sol = solve(chain, tool, positions_B, rotations, required, seeds, lower, upper, options)
+    sol, soft = _deflected(frames, robot, sol, lower, upper)
+    return _solution(robot, sol, seeds, targets.lines, required, targets.source,
+                     notes + held + _backlash_notes(frames, robot) + soft)
 
 
 def _same_model(nominal, calibrated, tool) -> None:
@@ -314,15 +342,17 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
                              f"{len(frames.tools)} tool point(s)")
         tool = frames.tools[point]
     _same_model(nominal, calibrated, tool)
-    program = np.atleast_2d(np.asarray(program, dtype=float))
+    lines = np.arange(2, len(program) + 2) if lines is None else lines
+    # the held joints at their values before the nominal poses are made: the targets too
+    program, lower, upper, held = _held(calibrated, frames, np.atleast_2d(program), source,
+                                        lines)
     R_nom, p_nom = ChainKinematics.of(nominal.geometry).tool_poses(program, tool)
     g = calibrated.geometry
     required = np.full(len(program), g.n >= 6)
-    sol = solve(ChainKinematics.of(g), tool, p_nom, R_nom, required, program, g.lower, g.upper,
+    sol = solve(ChainKinematics.of(g), tool, p_nom, R_nom, required, program, lower, upper,
                 options)
     notes = ["program filter: each pose of the nominal model at the program's joint values "
              "(tool point and orientation, base frame) is reached by the calibrated model"]
-    lines = np.arange(2, len(program) + 2) if lines is None else lines
-    sol, soft = _deflected(frames, calibrated, sol)
+    sol, soft = _deflected(frames, calibrated, sol, lower, upper)
     return _solution(calibrated, sol, program, lines, required, source,
-                     notes + _backlash_notes(frames, calibrated) + soft)
+                     notes + held + _backlash_notes(frames, calibrated) + soft)

@@ -109,12 +109,16 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
 
     rotations: (N, 3, 3) wanted tip orientations in B; required: (N,) bool, True where
     the orientation must be met, False where it is only preferred. seeds: (N, n) start
-    values; lower, upper: (n,) joint limits (+-inf allowed). At most
+    values; lower, upper: (n,) joint limits (+-inf allowed; lower = upper holds a joint
+    there: it takes no step, and is never reported at a limit). At most
     :data:`kincal.models.kinematics.BLOCK` targets iterate at once: the memory of the
     iterations is bounded.
     """
     q = np.clip(np.array(seeds, dtype=float), lower, upper)
     N, n = q.shape
+    # a held joint is left out of every step at once (the blocking below would take it out
+    # too, at the cost of a second step per row and iteration)
+    moving = np.asarray(lower) < np.asarray(upper)
     iterations = np.zeros(N, dtype=int)
     # a pool of at most BLOCK targets iterates together; a finished target's slot takes the
     # next target at once, so the few slow ones share their iterations with new targets
@@ -137,6 +141,8 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         idx = target[slots]
         t = iterations[idx]  # each target's own iteration count
         R, p, Jp, Jo = chain.evaluate(q[idx], tool)
+        if not moving.all():
+            Jp, Jo = Jp * moving, Jo * moving
         e_p = positions[idx] - p
         e_o = rotation_log(rotations[idx] @ np.swapaxes(R, 1, 2))
         n_p, n_o = np.linalg.norm(e_p, axis=1), np.linalg.norm(e_o, axis=1)
@@ -179,5 +185,5 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
     reached = (pos_err <= options.position_tolerance) & (
         ~np.asarray(required, bool) | (rot_err <= options.orientation_tolerance))
     span = np.maximum(np.where(np.isfinite(upper - lower), upper - lower, 1.0), 1e-12)
-    at_limit = (q - lower <= 1e-9 * span) | (upper - q <= 1e-9 * span)
+    at_limit = ((q - lower <= 1e-9 * span) | (upper - q <= 1e-9 * span)) & moving
     return IkSolution(q, pos_err, rot_err, reached, at_limit, iterations)

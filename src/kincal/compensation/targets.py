@@ -23,6 +23,7 @@ from kincal.errors import DataError, KincalNote, KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import read_columns
 from kincal.measurements.data import unit_factors
+from kincal.measurements.fixed_joints import HeldJoints
 from kincal.measurements.orientation_columns import (DEFAULT_FORMAT, OrientationFormat,
                                                      found_columns, rotations)
 from kincal.measurements.pose import QUATERNION_COLUMNS as QUATERNION
@@ -59,13 +60,15 @@ def joint_scales(kinds, length_unit: str, angle_unit: str) -> np.ndarray:
 
 def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
                  position_columns=("x", "y", "z"), orientation_format: str | None = None,
-                 orientation_columns=None) -> Targets:
+                 orientation_columns=None, held: HeldJoints | None = None) -> Targets:
     """Targets from a CSV file (see the module notes); values outside the joint limits and
     angles that look like degrees are warned about, as for measurements.
     position_columns: the names of the x, y, z columns. orientation_format, orientation_columns:
     how the wanted orientations are written (:class:`~kincal.measurements.orientation_columns.
     OrientationFormat`); both None: ``qx qy qz qw`` if the file has them, else positions only
-    (other orientation columns refused)."""
+    (other orientation columns refused). held: the joints the calibration held
+    (:meth:`HeldJoints.of` its frames), whose columns the file may leave out (their seeds:
+    the held values)."""
     position_columns = tuple(position_columns)
     if len(position_columns) != 3:
         raise OptionError(f"a target has one position: give 3 position columns, got "
@@ -100,9 +103,13 @@ def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
                             "orientations too, or remove them to reach the positions alone")
     expected = (f"the chain joints (seeds) and {', '.join(position_columns)}"
                 + (f" and {', '.join(columns)} ({fmt.name})" if columns else ""))
-    table = read_columns(path, [*robot.joint_names, *position_columns, *columns],
-                         kind="targets", expected=expected, rows_name="targets")
-    seeds = np.column_stack([table.values[j] for j in robot.joint_names]) * scale
+    held = held or HeldJoints()
+    fixed = held.as_dict()
+    table = read_columns(path, [*(j for j in robot.joint_names if j not in fixed),
+                                *position_columns, *columns],
+                         [j for j in robot.joint_names if j in fixed], kind="targets",
+                         expected=expected, rows_name="targets")
+    seeds = held.joint_values(table, robot.joint_names, scale)
     positions = np.column_stack([table.values[c] for c in position_columns]) * L
     R = None
     if columns:

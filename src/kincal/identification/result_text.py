@@ -40,6 +40,8 @@ def header(result: CalibrationResult) -> list[str]:
 
 def held(result: CalibrationResult) -> list[str]:
     """The chain joints a set's file had no column for, and the values they were held at."""
+    from kincal.measurements.fixed_joints import held_text
+
     out = []
     for k, s in enumerate(result.sets, start=1):
         fixed = getattr(s.data, "fixed_joints", ())
@@ -48,8 +50,7 @@ def held(result: CalibrationResult) -> list[str]:
             kinds = dict(zip(robot.joint_names, robot.geometry.kinds))
             out.append(("  " if len(result.sets) == 1 else f"  set {k}: ")
                        + "joints held during the measurements (not in the file): " + ", ".join(
-                           f"{j} = {v * 1e3:g} mm" if kinds.get(j) == "prismatic"
-                           else f"{j} = {math.degrees(v):g} deg" for j, v in fixed))
+                           held_text(j, v, kinds.get(j, "revolute")) for j, v in fixed))
     return out
 
 

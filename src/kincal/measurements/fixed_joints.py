@@ -14,11 +14,17 @@ without its column gets it from its master's column (the master on the chain); a
 its column is read as it is, and warned about where the column differs from k M + o (a
 reader of the corrected URDF computes it from M). Held with ``--joint-value`` while its
 master moves, or with neither column nor master on the chain: refused.
+
+A calibration holds only at the values its held joints had: :class:`HeldJoints` reads them
+back from FRAMES.json (each set's ``fixed_joints``), for ``kincal evaluate`` (a file of the
+same logger, without the column, gets them) and ``kincal compensate`` (the inverse
+kinematics keeps them there).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -29,8 +35,6 @@ def held_values(items, robots, length_unit: str = "m", angle_unit: str = "rad") 
     """{joint: value [rad or m]} of ``--joint-value NAME=VALUE`` items (values in the
     file's units), each a joint of the chain of one of ``robots`` and within its URDF
     limits (it held there while the robot was measured); OptionError otherwise."""
-    import math
-
     from kincal.errors import OptionError, listing, suggest
     from kincal.measurements.data import unit_factors
 
@@ -172,3 +176,94 @@ def with_fixed_joints(data, joint_names, fixed: dict, follow: dict | None = None
     held = tuple((j, float(fixed[j])) for j in joint_names if j in fixed)
     return dataclasses.replace(data, joint_names=joint_names, joint_values=q, approach=g,
                                fixed_joints=held)
+
+
+HELD_TOLERANCE = 1e-5  # [rad or m] a held joint's value farther from the recorded one: warned
+
+
+def held_text(joint: str, value: float, kind: str) -> str:
+    """``joint = value`` in mm (prismatic) or deg (revolute) of a value [m or rad]."""
+    return (f"{joint} = {value * 1e3:g} mm" if kind == "prismatic"
+            else f"{joint} = {math.degrees(value):g} deg")
+
+
+@dataclasses.dataclass(frozen=True)
+class HeldJoints:
+    """The chain joints a calibration held still, as FRAMES.json records them (each set's
+    ``fixed_joints``): the values at which alone the calibration holds.
+
+    values: ((joint, value [rad or m]), ...), chain order; a joint counts when every set of
+    the chain records it held at one value (a set that moved it, or two held values: the
+    calibration is not bound to one). source: the FRAMES.json, for messages.
+    """
+
+    values: tuple[tuple[str, float], ...] = ()
+    source: str = "FRAMES.json"
+
+    @classmethod
+    def of(cls, frames, robot) -> "HeldJoints":
+        """The held joints of ``frames`` (a :class:`~kincal.frames_file.CellFrames`, of one
+        chain or several) on ``robot``'s chain (its base, tip and joints)."""
+        joints = tuple(robot.joint_names)
+        mine = frames.for_chain(robot.base, robot.tip)
+        sets = [s for s in mine.sets if tuple(s.joints or mine.joints) == joints]
+        held = [dict(s.fixed_joints) for s in sets]
+        values = tuple((j, float(held[0][j])) for j in joints
+                       if held and all(j in h and abs(h[j] - held[0][j]) <= HELD_TOLERANCE
+                                       for h in held))
+        return cls(values, str(frames.source))
+
+    def as_dict(self) -> dict[str, float]:
+        return dict(self.values)
+
+    def joint_values(self, table, joint_names, scale, columns=None) -> np.ndarray:
+        """(N, n) joint values [SI] of a read table (:class:`~kincal.measurements.csv_table.
+        Columns`, the held joints' columns read as optional ones): each joint's column times
+        its ``scale`` (n,), a held joint without a column at its held value. columns:
+        {joint: CSV column} where they differ."""
+        held, columns = self.as_dict(), dict(columns or {})
+        n = len(table.lines)
+        return np.column_stack([
+            np.full(n, held[j]) if j in held and columns.get(j, j) not in table.values
+            else table.values[columns.get(j, j)] * u for j, u in zip(joint_names, scale)])
+
+    def text(self, kinds: dict) -> str:
+        """``joint = value unit, ...`` (mm, deg); ``kinds``: {joint: kind}."""
+        return ", ".join(held_text(j, v, kinds.get(j, "revolute")) for j, v in self.values)
+
+    def warn_given(self, given: dict, kinds: dict) -> None:
+        """Warn where a ``--joint-value`` (``given`` {joint: value [SI]}) differs from the value
+        FRAMES.json records the joint held at: the given one is used."""
+        import warnings
+
+        from kincal.errors import KincalWarning
+
+        for j, v in self.values:
+            if j in given and abs(given[j] - v) > HELD_TOLERANCE:
+                warnings.warn(f"--joint-value {held_text(j, given[j], kinds[j])} differs from "
+                              f"its value held during the calibration ({held_text(j, v, kinds[j])}"
+                              f", as {self.source} records): the given value is used, the "
+                              "calibration holds at the recorded one only", KincalWarning)
+
+    def warn_off(self, path, joint_names, kinds, q, then: str, lines=None) -> None:
+        """Warn where the column of a held joint in ``q`` (N, n) [SI], a file's values for
+        ``joint_names``, strays from its held value by more than :data:`HELD_TOLERANCE`;
+        ``then``: what is done with them. lines: (N,) the file's line numbers."""
+        import warnings
+
+        from kincal.errors import KincalWarning
+
+        names = list(joint_names)
+        for j, v in self.values:
+            if j not in names or not len(q):
+                continue
+            off = np.abs(np.asarray(q)[:, names.index(j)] - v)
+            k = int(off.argmax())
+            if off[k] > HELD_TOLERANCE:
+                where = f"line {lines[k]}" if lines is not None else f"sample {k + 1}"
+                big = (f"{off[k] * 1e3:.4g} mm" if kinds[j] == "prismatic"
+                       else f"{math.degrees(off[k]):.4g} deg")
+                warnings.warn(f"{path}: column {j} differs from its value held during the "
+                              f"calibration ({held_text(j, v, kinds[j])}, as {self.source} "
+                              f"records) in {int((off > HELD_TOLERANCE).sum())} of {len(off)} "
+                              f"rows, by up to {big} ({where}): {then}", KincalWarning)

@@ -17,7 +17,7 @@ from kincal.errors import KincalWarning, OptionError
 from kincal.measurements.checks import angle_unit_warnings, limit_warnings
 from kincal.measurements.csv_table import csv_line, read_columns
 from kincal.measurements.data import joint_column_names, unit_factors
-from kincal.measurements.fixed_joints import refuse_coupled
+from kincal.measurements.fixed_joints import HeldJoints, refuse_coupled
 
 if TYPE_CHECKING:
     from kincal.robot import Robot
@@ -45,22 +45,29 @@ def random_candidates(robot: "Robot", m: int, rng) -> np.ndarray:
 
 
 def read_candidates(path, robot: "Robot", length_unit: str = "m", angle_unit: str = "rad",
-                    kind: str = "candidates", joint_columns=None) -> tuple[np.ndarray, np.ndarray]:
+                    kind: str = "candidates", joint_columns=None,
+                    held: HeldJoints | None = None) -> tuple[np.ndarray, np.ndarray]:
     """((M, n_joints) candidate joint values [SI], (M,) their line numbers) from a CSV file.
 
     The header names the chain joints as in the URDF (other columns are ignored).
     Revolute joints are read in ``angle_unit``, prismatic ones in ``length_unit``. Values
     outside the URDF limits are warned about, not dropped. kind: what the file is, for
     messages. joint_columns: {URDF joint: CSV column} for columns named otherwise (see
-    :meth:`kincal.measurements.data.Measurements.from_csv`).
+    :meth:`kincal.measurements.data.Measurements.from_csv`). held: the joints a calibration
+    held (:class:`~kincal.measurements.fixed_joints.HeldJoints`), whose columns the file may
+    leave out (read at the held values).
     """
     L, A = unit_factors(length_unit, angle_unit, OptionError)
     g = robot.geometry
+    held = held or HeldJoints()
     columns = joint_column_names(robot.joint_names, joint_columns)
-    table = read_columns(path, list(columns.values()), kind=kind, expected="the chain joints",
-                         rows_name="poses", aliases={c: j for j, c in columns.items() if c != j})
+    fixed = held.as_dict()
+    table = read_columns(path, [c for j, c in columns.items() if j not in fixed],
+                         [c for j, c in columns.items() if j in fixed], kind=kind,
+                         expected="the chain joints", rows_name="poses",
+                         aliases={c: j for j, c in columns.items() if c != j})
     unit = [L if k == "prismatic" else A for k in g.kinds]
-    q = np.column_stack([table.values[columns[j]] * u for j, u in zip(robot.joint_names, unit)])
+    q = held.joint_values(table, robot.joint_names, unit, columns)
     for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, table.lines)
                     + angle_unit_warnings(g.joint_names, g.kinds, q, angle_unit, g.lower,
                                           g.upper)):
