@@ -131,6 +131,13 @@ IGNORED = [
     (SIM + ["--kind", "pose", "--orientation-noise-deg", "-1"],
      "--orientation-noise-deg must be a finite number >= 0"),
     (SIM + ["--floor", "0"], "--floor is checked for poses drawn in a volume"),
+    # audit of issue 12: --no-floor and --design were taken and did nothing
+    (SIM + ["--no-floor"], "--no-floor is checked for poses drawn in a volume"),
+    (PLAN + ["--no-floor"], "--no-floor is checked for poses drawn in a volume"),
+    (["simulate", "ec66", "--out", "s.csv", "--poses-file", "points.csv", "--design", "rtest"],
+     "--design is not used with --poses-file"),
+    (SIM + ["--in-cube", "0.4", "0", "0.3", "0.02", "--max-tilt", "40", "--design", "rtest"],
+     "--design is not used with --in-cube/--in-sphere and --max-tilt"),
 ]
 
 
