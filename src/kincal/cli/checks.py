@@ -138,6 +138,7 @@ def _check_simulate(args) -> None:
     _finite("--orientation-noise-deg", args.orientation_noise_deg, 0, 10)
     for option in ("tilt_direction", "in_cube", "in_sphere"):
         _finite("--" + option.replace("_", "-"), getattr(args, option))
+    _volume_sizes(args)
     _finite("--max-tilt", args.max_tilt, 0, 180)
     _check_floor(args, volume)
     args.poses = 60 if args.poses is None else args.poses
@@ -166,7 +167,17 @@ def _check_plan(args, volume: bool) -> None:
         _finite("--home", args.home)
     for option in ("tilt_direction", "target_cube", "in_cube", "in_sphere"):
         _finite("--" + option.replace("_", "-"), getattr(args, option))
+    _volume_sizes(args)
     _finite("--max-tilt", args.max_tilt, 0, 180)
+
+
+def _volume_sizes(args) -> None:
+    """A cube's edge or a sphere's radius > 0, said in the unit the user typed it in."""
+    for option, size in (("target_cube", "EDGE"), ("in_cube", "EDGE"), ("in_sphere", "R")):
+        v = getattr(args, option, None)
+        unit = getattr(args, "length_unit", None) or "m"
+        _finite(f"--{option.replace('_', '-')} {size} [{unit}]", None if v is None else v[3],
+                0, low_open=True)
 
 
 def check_args(args) -> None:
