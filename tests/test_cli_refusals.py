@@ -131,6 +131,18 @@ IGNORED = [
     (SIM + ["--kind", "pose", "--orientation-noise-deg", "-1"],
      "--orientation-noise-deg must be a finite number >= 0"),
     (SIM + ["--floor", "0"], "--floor is checked for poses drawn in a volume"),
+    # audit of issue 12: --no-floor and --design were taken and did nothing
+    (SIM + ["--no-floor"], "--no-floor is checked for poses drawn in a volume"),
+    (PLAN + ["--no-floor"], "--no-floor is checked for poses drawn in a volume"),
+    (["simulate", "ec66", "--out", "s.csv", "--poses-file", "points.csv", "--design", "rtest"],
+     "--design is not used with --poses-file"),
+    (SIM + ["--in-cube", "0.4", "0", "0.3", "0.02", "--max-tilt", "40", "--design", "rtest"],
+     "--design is not used with --in-cube/--in-sphere and --max-tilt"),
+    # a size <= 0 was said in metres ("the sphere radius ... [m], got -0.005") whatever the unit
+    (["plan", "ec66", "--in-sphere", "400", "0", "250", "-5", "--length-unit", "mm", "--poses",
+      "5", "--out", "chosen.csv"], "--in-sphere R [mm] must be a finite number > 0, got -5"),
+    (PLAN + ["--target-cube", "400", "0", "250", "0", "--length-unit", "mm"],
+     "--target-cube EDGE [mm] must be a finite number > 0, got 0"),
 ]
 
 

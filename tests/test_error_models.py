@@ -258,3 +258,20 @@ def test_placement_offset_class_is_exactly_a_joint_zero(name, base, tip, rng):
         else:
             assert min(gaps) > 1e-7, pname
     assert n_offsets >= len(joints) - 2  # a revolute joint's zero per origin with errors
+
+
+def test_analyze_model_all_says_what_placement_adds_over_mdh(tmp_path, capsys):
+    """Audit of issue 10: the comparison listed '+' only for complete (by name), so placement,
+    whose names are others, seemed to add nothing over mdh; it now counts the directions
+    (placement's span holds mdh's: the rank difference)."""
+    from kincal.cli.main import main
+
+    data = tmp_path / "poses.csv"
+    assert main(["simulate", "ec66", "--out", str(data), "--seed", "1", "-q"]) == 0
+    capsys.readouterr()
+    assert main(["analyze", "ec66", str(data), "--model", "all"]) == 0
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()
+             if line.startswith("  ") and "kinematic parameters identified" in line}
+    assert "(+ joint_3.beta, joint_4.beta)" in lines["complete"]
+    assert "(+ 2 directions mdh cannot express)" in lines["placement"]
+    assert "(+" not in lines["mdh"] and "(+" not in lines["offsets"]

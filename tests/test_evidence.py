@@ -256,6 +256,30 @@ def test_cli_given_tolerances_and_misuse(rtest_csv, tmp_path, capsys):
         "with method l2 and lambda 'evidence' (got method l2, lambda 'cv')"]
 
 
+@pytest.mark.parametrize("extra, says", [
+    (["--model", "offsets", "--prior-mm", "0.3"],
+     "error model offsets has none on this chain"),
+    (["--model", "offsets", "--prior-mm", "0.3", "--prior-deg", "0.03"],
+     "error model offsets has none on this chain"),
+    (["--fix", "*.a", "*.d", "--prior-mm", "0.3"], "none of them is free here"),
+])
+def test_a_tolerance_of_a_class_the_fit_lacks_is_refused(rtest_csv, tmp_path, capsys, extra,
+                                                         says):
+    """Audit of issue 12: --prior-mm on the offsets model (no lengths on a revolute arm) or
+    with every length held was kept and used nowhere, the calibration written without a
+    word; now one line naming the classes that are free, and nothing written."""
+    from kincal.cli.main import main
+
+    out = tmp_path / "c.urdf"
+    code = main(["calibrate", "ec66", str(rtest_csv), "--out", str(out), "--lambda",
+                 "evidence", *extra])
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert code == 1 and not out.exists()
+    errors = [line for line in err if line.startswith("kincal: error:")]
+    assert len(errors) == 1 and "prior_mm (--prior-mm) 0.3 mm" in errors[0], err
+    assert says in errors[0] and "used nowhere" in errors[0]
+
+
 def test_cv_guard_reaches_the_user_on_small_volume_data(rtest_csv):
     from kincal.measurements.data import Measurements
 

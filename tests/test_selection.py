@@ -98,6 +98,36 @@ def test_tool_point_near_last_axis_gives_a_note_and_a_warning():
         assert _problem([0.05, 0.03, 0.12]).analyze().notes == ()
 
 
+@pytest.mark.parametrize("model, named, not_named", [
+    ("mdh", "joint_6.theta and the tilt of that axis (joint_6.alpha) are", ()),
+    ("placement", "joint_6.ry and the tilt of that axis (joint_6.rx, joint_6.rz) are",
+     ("joint_6.theta", "joint_6.alpha")),
+    ("offsets", "joint_6.theta is weak or redundant; an offset tool point (>= 20 mm off the "
+                "axis) makes it identifiable", ("joint_6.alpha",)),
+])
+def test_the_tool_on_axis_note_names_the_models_own_parameters(model, named, not_named):
+    """Audit of issue 10: the note named joint_6.theta and joint_6.alpha whatever the
+    model, parameters that placement and offsets do not have (the user could not --fix or
+    look them up); the plan's warning alike."""
+    import warnings
+
+    from kincal import Robot, select_poses
+    from kincal.planning.candidates import random_candidates
+
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        notes = _problem([0.0005, 0.0, 0.12], model=model).analyze().notes
+    note = next(n for n in notes if "from the axis of joint_6" in n)
+    assert named in note and not any(name in note for name in not_named), note
+    arm = Robot.load("ec66")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        select_poses(arm, random_candidates(arm, 300, np.random.default_rng(0)), 20, tool=(0.0, 0.0, 0.1),
+                     model=model, method="D")
+    said = [str(w.message) for w in caught if "from the axis of joint_6" in str(w.message)]
+    assert said and not any(name in said[0] for name in not_named), said
+
+
 def test_a_run_of_nearly_parallel_columns_never_keeps_more_than_the_rank():
     """Each column's new part passes the ordered test (2e-7 of its norm > 1e-7), but the
     twelve span three directions above the rank's tolerance: before the fix all twelve

@@ -401,3 +401,22 @@ def test_floor_without_collision_geometry_keeps_tool_and_tip_above(ec66):
     free = volume_candidates(ec66, VolumeSpec(Volume.cube((0.4, 0.0, 0.0), 0.1), TOOL,
                                               math.radians(10), floor_z=None), 50, seed=0)
     assert free.rejections.collision == 0 and (free.points[:, 2] < 0).any()
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["plan", "ec66", "--random", "300", "--poses", "10", "--target-cube", "3", "0", "0.25",
+      "0.4"], "--target-cube: the arm cannot reach the centre [3.0, 0.0, 0.25] m"),
+    (["plan", "ec66", "--in-cube", "0.4", "0", "0.25", "0.02", "--random", "100", "--poses",
+      "10", "--target-cube", "0.4", "0", "0.25", "6", "--target-poses", "50"],
+     "--target-cube: only"),
+])
+def test_a_target_cube_that_fails_is_named_not_the_measurement_volume(tmp_path, capsys, argv,
+                                                                      says):
+    """Audit of issue 12: a --target-cube out of reach said 'move the volume (--in-cube/
+    --in-sphere centre)' (with no --in-cube given), and one too large 'only N of the 1000
+    candidates asked for ... ask for fewer candidates' (the target poses, not --random)."""
+    out = tmp_path / "o.csv"
+    assert main(argv + ["--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and not out.exists()
+    assert says in err and "--in-cube" not in err and "candidates" not in err, err

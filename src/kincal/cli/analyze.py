@@ -171,6 +171,9 @@ def _print_comparison(names, problems, idents) -> None:
         extra = [n for n in kin if n not in mdh_kept and m == "complete"]
         line = (f"  {m:<10} {len(kin):3d} of {p.layout.n_kinematic:3d} kinematic parameters "
                 "identified")
+        more = idents[m].rank - idents["mdh"].rank if "mdh" in idents else 0
         if extra:
             line += f"  (+ {', '.join(extra)})"
+        elif m == "placement" and more > 0:  # its span holds mdh's; its names are others
+            line += f"  (+ {more} directions mdh cannot express)"
         print(line)

@@ -108,8 +108,9 @@ def _check_calibrate(args) -> None:
 
 def _check_floor(args, volume: bool) -> None:
     _need(args.floor is None or not args.no_floor, "give --floor Z or --no-floor, not both")
-    _need(args.floor is None or volume, "--floor is checked for poses drawn in a volume: it "
-          "needs --in-cube or --in-sphere")
+    for option, given in (("--floor", args.floor is not None), ("--no-floor", args.no_floor)):
+        _need(not given or volume, f"{option} is checked for poses drawn in a volume: it "
+              "needs --in-cube or --in-sphere")
     _finite("--floor", args.floor, -1e6, 1e6)
     args.floor = 0.0 if args.floor is None else args.floor
 
@@ -122,19 +123,26 @@ def _check_simulate(args) -> None:
                               ("--size-mm", args.size_mm), ("--tilt-deg", args.tilt_deg)):
             _need(value is None, f"{option} is not used with --poses-file (the poses are "
                   "the file's rows)")
+        _need(args.design is None, "--design is not used with --poses-file (the poses are the "
+              "file's rows)")
     elif volume:
         for option, value in (("--center-m", args.center_m), ("--size-mm", args.size_mm)):
             _need(value is None, f"{option} is not used with --in-cube/--in-sphere (the volume "
                   "gives the centre and the size)")
+        _need(args.design is None or args.max_tilt is None, "--design is not used with "
+              "--in-cube/--in-sphere and --max-tilt (the volume gives the centre and the size, "
+              "--max-tilt the tilt; --design only sets the default tilt there)")
     _need(args.orientation_noise_deg is None or args.kind in ("pose", "flush"),
           "--orientation-noise-deg is the orientation noise of --kind pose (or the tilt "
           "noise of --kind flush)")
     _finite("--orientation-noise-deg", args.orientation_noise_deg, 0, 10)
     for option in ("tilt_direction", "in_cube", "in_sphere"):
         _finite("--" + option.replace("_", "-"), getattr(args, option))
+    _volume_sizes(args)
     _finite("--max-tilt", args.max_tilt, 0, 180)
     _check_floor(args, volume)
     args.poses = 60 if args.poses is None else args.poses
+    args.design = "tracker" if args.design is None else args.design
     default = 0.05 if args.kind == "flush" else 0.01  # a face's tilt, a tracker's orientation
     args.orientation_noise_deg = (default if args.orientation_noise_deg is None
                                   else args.orientation_noise_deg + 0.0)
@@ -159,7 +167,17 @@ def _check_plan(args, volume: bool) -> None:
         _finite("--home", args.home)
     for option in ("tilt_direction", "target_cube", "in_cube", "in_sphere"):
         _finite("--" + option.replace("_", "-"), getattr(args, option))
+    _volume_sizes(args)
     _finite("--max-tilt", args.max_tilt, 0, 180)
+
+
+def _volume_sizes(args) -> None:
+    """A cube's edge or a sphere's radius > 0, said in the unit the user typed it in."""
+    for option, size in (("target_cube", "EDGE"), ("in_cube", "EDGE"), ("in_sphere", "R")):
+        v = getattr(args, option, None)
+        unit = getattr(args, "length_unit", None) or "m"
+        _finite(f"--{option.replace('_', '-')} {size} [{unit}]", None if v is None else v[3],
+                0, low_open=True)
 
 
 def check_args(args) -> None:

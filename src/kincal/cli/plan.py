@@ -12,6 +12,8 @@ from kincal.cli.options import (Chain, add_common, add_joint_columns, add_overwr
 from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
 from kincal.errors import OptionError
 
+_TARGETS = "target poses (--target-poses)"  # what the working volume's draws are, in errors
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -176,8 +178,11 @@ def _plan(p: Plan, robot, protect: list) -> int:
             replace(p.volume, in_cube=c), robot, unit, tool)
         tspec = replace(base_spec, volume=Volume.cube([v * unit for v in c[:3]], c[3] * unit),
                         home=None if spec is None else tuple(vc.home))
-        targets = np.array(volume_candidates(robot, tspec, p.target_poses,
-                                             seed=p.seed + 1).joint_values)
+        try:
+            targets = np.array(volume_candidates(robot, tspec, p.target_poses, seed=p.seed + 1,
+                                                 what=_TARGETS).joint_values)
+        except OptionError as e:  # the volume named is the target cube, not --in-cube
+            raise OptionError(f"--target-cube: {e}") from None
         source += (f"\n  {len(targets)} target poses in the {tspec.volume.describe()} (same tilt "
                    "range and branch)")
     elif p.criterion == "i" and spec is not None:  # the default working volume
@@ -186,7 +191,7 @@ def _plan(p: Plan, robot, protect: list) -> int:
         tspec = working_volume(spec, vc.home)
         try:
             targets = np.array(volume_candidates(robot, tspec, p.target_poses,
-                                                 seed=p.seed + 1).joint_values)
+                                                 seed=p.seed + 1, what=_TARGETS).joint_values)
         except OptionError as e:
             raise OptionError(f"the default working volume of --criterion i, {e}; give the "
                               "working volume (--target-cube) or --criterion d") from None

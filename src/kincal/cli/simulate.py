@@ -26,8 +26,9 @@ def register(subparsers) -> None:
                    "component of every joint placement, as a real arm has)")
     group(p, "outputs").add_argument("--out", required=True, help="CSV to write (SI units)")
     m = group(p, "measurement")
-    m.add_argument("--design", choices=("tracker", "rtest"), default="tracker",
-                   help="tracker: 400 mm cube; rtest: 20 mm cube, varied orientation")
+    m.add_argument("--design", choices=("tracker", "rtest"),
+                   help="tracker (default): 400 mm cube, tilt <= 30 deg; rtest: 20 mm cube, "
+                        "tilt <= 15 deg (with a volume: its default tilt only)")
     m.add_argument("--kind", choices=("point", "pose", "distance", "plane", "flush"),
                    default="point",
                    help="what is measured: points (default), 6-DoF tool poses, distances to "

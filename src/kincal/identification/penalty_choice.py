@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from kincal.errors import IdentifiabilityError, KincalWarning
+from kincal.errors import IdentifiabilityError, KincalWarning, OptionError
 from kincal.identification import evidence
 from kincal.identification.cross_validation import (SMALL_VOLUME, CrossValidation,
                                                     check_fold_count, free_fraction,
@@ -120,9 +120,12 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
     u_prior = problem.start() / problem.scale
     r0, J0 = residual(u_prior, True)
     rows, per_set, keys = noise_groups(problem, J0[:, free])
+    classes = prior_classes(problem)
     given = {} if o.prior_mm is None else {"length": o.prior_mm}
     if o.prior_deg is not None:
         given.update(twist=o.prior_deg, offset=o.prior_deg)
+    _refuse_unused_tolerances(problem, {classes[i] for i in np.flatnonzero(free)} - {None},
+                              set(classes) - {None})
     if o.prior_scale is not None:
         given["fleet"] = o.prior_scale
 
@@ -132,7 +135,7 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
                            residual=residual if len(keys) == 1 else problem.residual_function())
 
     sol, ev = evidence.estimate(
-        fit, lambda u: residual(u, True), u_prior, u_prior, free, prior_classes(problem), given,
+        fit, lambda u: residual(u, True), u_prior, u_prior, free, classes, given,
         o.noise_mm, shape=None if problem.prior is None else problem.prior.precision,
         rows=rows)
     m, k = r0.size, int(free.sum())
@@ -150,6 +153,25 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
             "nominal; state the tolerances and noise (--prior-mm, --prior-deg, --noise-mm), "
             "or judge the result on held-out data (--validate)", KincalWarning)
     return sol, replace(ev, noise_groups=_noise_in_units(problem, rows, keys, ev.row_noise))
+
+
+def _refuse_unused_tolerances(problem: CalibrationProblem, present: set, has: set) -> None:
+    """A given tolerance whose classes have no free parameter in this problem would be kept
+    and used nowhere: refused, naming the classes that are free here. present: the classes
+    of the free (identified, not held) penalised parameters; has: of all the model's."""
+    o = problem.options
+    for option, value, unit, wants in (("prior_mm", o.prior_mm, "mm", ("length",)),
+                                       ("prior_deg", o.prior_deg, "deg", ("twist", "offset"))):
+        if value is not None and not present & set(wants):
+            why = ("none of them is free here (held by --fix, or not identified by these "
+                   "data)" if has & set(wants) else
+                   f"error model {problem.model_name} has none on this chain")
+            raise OptionError(
+                f"{option} (--{option.replace('_', '-')}) {value:g} {unit} is the prior scale "
+                f"of the {' and '.join(wants)} parameters, but {why}, so it would be used "
+                f"nowhere (the free penalised classes: {', '.join(sorted(present)) or 'none'})"
+                ": drop it" + ("" if has & set(wants) else
+                               ", or choose a model that has them (--model complete)"))
 
 
 def _tool_start(problem: CalibrationProblem) -> np.ndarray:

@@ -368,9 +368,7 @@ class CalibrationProblem:
             dist, last = max(dists), km.error_model.joint_names[-1]
             which = "tool point is" if len(dists) == 1 else f"{len(dists)} measured points are all"
             return (f"the {which} {dist * 1e3:.2f} mm from the axis of {last}: turning about "
-                    f"that axis barely moves it, so {last}.theta and the tilt of that axis "
-                    f"({last}.alpha) are weak or redundant; an offset tool point (>= 20 mm off "
-                    "the axis) makes them identifiable")
+                    f"that axis barely moves it, so {km.error_model.last_axis_weak_text()}")
         return ""
 
     def free_mask(self) -> np.ndarray:

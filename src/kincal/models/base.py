@@ -118,6 +118,28 @@ class ErrorModel:
         (x, y, z), (u, v, w) = (p - self.screw_points[-1]).tolist(), self.screw_axes[-1].tolist()
         return float(np.linalg.norm([y * w - z * v, z * u - x * w, x * v - y * u]))
 
+    def last_axis_parameters(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """The last joint's parameters a tool point on its axis cannot see, by this model's
+        names: (its offsets: the turn about the axis, its twists: the tilt of the axis);
+        e.g. (("joint_6.theta",), ("joint_6.alpha",)) for MD-H, no twist for offsets."""
+        last = self.joint_names[-1] + "."
+
+        def of(cls: str) -> tuple[str, ...]:
+            return tuple(n for n, c in zip(self.names, self.classes)
+                         if n.startswith(last) and c == cls)
+
+        return of(OFFSET), of(TWIST)
+
+    def last_axis_weak_text(self) -> str:
+        """What a tool point on the last axis leaves weak, in this model's names."""
+        off, tilt = self.last_axis_parameters()
+        if not tilt and len(off) == 1:
+            return (f"{off[0]} is weak or redundant; an offset tool point (>= 20 mm off the "
+                    "axis) makes it identifiable")
+        return (", ".join(off) + (f" and the tilt of that axis ({', '.join(tilt)})" if tilt
+                                  else "") + " are weak or redundant; an offset tool point "
+                "(>= 20 mm off the axis) makes them identifiable")
+
     def describe(self) -> str:
         """One paragraph: the model, its parameter count and the classes it uses."""
         counts = {c: self.classes.count(c) for c in (LENGTH, TWIST, OFFSET)}

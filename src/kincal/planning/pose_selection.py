@@ -232,11 +232,12 @@ def _warn_tool_on_axis(model, tool: np.ndarray) -> None:
     """Warn when the tool guess sits on the last revolute axis (its turn is then invisible)."""
     dist = model.last_axis_distance(tool)
     if dist is not None and dist < TOOL_AXIS_WARNING:
-        last = model.joint_names[-1]
-        warnings.warn(f"the tool point guess is {dist * 1e3:.2f} mm from the axis of {last}: "
-                      f"the selection then ignores {last}.theta (and weakly sees {last}.alpha); "
-                      "give the real offset of the measured point (tool, --tool-offset)",
-                      KincalWarning)
+        offset, tilt = model.last_axis_parameters()
+        sees = f" (and weakly sees {', '.join(tilt)})" if tilt else ""
+        warnings.warn(f"the tool point guess is {dist * 1e3:.2f} mm from the axis of "
+                      f"{model.joint_names[-1]}: the selection then ignores "
+                      f"{', '.join(offset)}{sees}; give the real offset of the measured point "
+                      "(tool, --tool-offset)", KincalWarning)
 
 
 def _check_indices(keep, m: int) -> list[int]:

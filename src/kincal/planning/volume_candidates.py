@@ -333,12 +333,13 @@ def _explain_unreachable(kin, spec, starts):
                           "(or --home)")
     raise OptionError(f"the arm cannot reach {where} (within its joint limits, tool point "
                       f"{np.round(spec.tool, 4).tolist()} m in the tip frame): move the volume "
-                      "(--in-cube/--in-sphere centre) nearer the arm")
+                      "(its centre) nearer the arm")
 
 
 def volume_candidates(robot: "Robot", spec: VolumeSpec, m: int, seed: int = 0,
-                      batch: int = 512) -> VolumeCandidates:
-    """``m`` candidate configurations satisfying ``spec`` (see the module notes).
+                      batch: int = 512, what: str = "candidates") -> VolumeCandidates:
+    """``m`` candidate configurations satisfying ``spec`` (see the module notes); ``what``
+    they are, as the error for too few names them ("target poses (--target-poses)").
 
     Deterministic for a given seed. Raises OptionError naming the constraint to relax
     when the arm cannot reach the volume, the tilt range has no solution, or fewer than
@@ -350,10 +351,10 @@ def volume_candidates(robot: "Robot", spec: VolumeSpec, m: int, seed: int = 0,
     refuse_coupled(robot, "drawing volume candidates")
     # small batched matrices: BLAS threads only wait for each other (see blas_threads)
     with blas_threads.limited(1):
-        return _generate(robot, spec, int(m), seed, batch)
+        return _generate(robot, spec, int(m), seed, batch, what)
 
 
-def _generate(robot, spec, m, seed, batch) -> VolumeCandidates:
+def _generate(robot, spec, m, seed, batch, what) -> VolumeCandidates:
     kin = BatchKinematics(robot, spec.tool)
     collisions = _Collisions(robot, spec.floor_z, spec.tool)
     if spec.home is None:
@@ -399,14 +400,14 @@ def _generate(robot, spec, m, seed, batch) -> VolumeCandidates:
         have += len(Q)
     rej = Rejections(**counts)
     if have < m:
-        _too_few(spec, m, have, attempts, rej, collisions.note)
+        _too_few(spec, m, have, attempts, rej, collisions.note, what)
     Qa = np.concatenate(found_q)[:m]
     return VolumeCandidates(spec, _readonly(Qa), _readonly(np.concatenate(found_p)[:m]),
                             _readonly(np.concatenate(found_t)[:m]), _readonly(home), found,
                             attempts, rej, collisions.note, tuple(robot.joint_names))
 
 
-def _too_few(spec, m, have, attempts, rej, note):
+def _too_few(spec, m, have, attempts, rej, note, what):
     worst = max(("not_reached", rej.not_reached), ("branch", rej.branch),
                 ("collision", rej.collision), key=lambda kv: kv[1])[0]
     advice = {"not_reached": "most targets are out of reach: shrink the volume or move it "
@@ -415,8 +416,8 @@ def _too_few(spec, m, have, attempts, rej, note):
                         "volume, or give a --home farther from singular configurations",
               "collision": f"most solutions collide ({note}): move the volume away from the "
                            "floor and the robot, or lower --max-tilt"}[worst]
-    raise OptionError(f"only {have} of the {m} candidates asked for satisfy the constraints "
+    raise OptionError(f"only {have} of the {m} {what} asked for satisfy the constraints "
                       f"after {attempts} targets drawn in the {spec.volume.describe()} with tilt "
                       f"<= {math.degrees(spec.max_tilt):g} deg ({rej.not_reached} not reached, "
                       f"{rej.branch} on another branch, {rej.collision} colliding): {advice}; "
-                      "or ask for fewer candidates")
+                      f"or ask for fewer {what}")
