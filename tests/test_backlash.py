@@ -49,6 +49,10 @@ def test_order_column_from_csv(tmp_path):
     assert Measurements.from_csv(f, ["j1"]).approach[:, 0].tolist() == [0, -1, 1]
     with pytest.raises(DataError, match="no order column 'time'"):
         Measurements.from_csv(f, ["j1"], order_column="time")
+    # a measured value is not an order (it was taken as one: --order-column x1 on TIAGo)
+    for col, what in (("x", "a position column"), ("j1", "a joint column")):
+        with pytest.raises(DataError, match=f"order column '{col}' is {what}; expected"):
+            Measurements.from_csv(f, ["j1"], order_column=col)
 
 
 @pytest.mark.parametrize("name,tip", [("ur5", "tool0"), ("tiago_file", "wrist_ft_tool_link")])
