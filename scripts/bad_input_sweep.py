@@ -164,7 +164,8 @@ def option_cases():
         ["--method", "ls", "--lambda", "5"], ["--method", "frames", "--lambda", "cv"],
         ["--lambda", "2", "--folds", "3"], ["--lambda", "2", "--seed", "3"],
         ["--method", "ls", "--folds", "3"], ["--robust-scale-mm", "2"],
-        ["--method", "ls", "--free", "joint_2.d"], ["--order-column", "x"],
+        ["--method", "ls", "--free", "joint_2.d"], ["--model", "complete", "--order-column", "t"],
+        ["--backlash", "joint_6", "--order-column", "x"],
         ["--method", "frames", "--backlash", "joint_6"], ["--fix", "joint_9.a"],
         ["--free", "nope"], ["--backlash", "joint_9"], ["--tip", "flang"], ["--base", "nolink"],
         ["--tip", "base_link", "--base", "flange"], ["--position-columns", "x", "y"],
@@ -181,6 +182,8 @@ def option_cases():
     yield "evaluate --tool-offset with --frames", ["evaluate", "ec66", "{csv}", "--frames",
                                                    "{frames}", "--tool-offset", "0", "0", "0.1"]
     yield "evaluate neither frames nor fit", ["evaluate", "ec66", "{csv}"]
+    yield "evaluate --order-column without backlash", ["evaluate", "ec66", "{csv}", "--frames",
+                                                        "{frames}", "--order-column", "t"]
     yield "unknown robot", ["calibrate", "ec77", "{csv}", "--out", "{d}/o.urdf"]
     yield "unknown command", ["calibrat", "ec66"]
     yield "unknown option", cal + ["--lamda", "1"]

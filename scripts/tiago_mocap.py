@@ -29,7 +29,7 @@ does not offer are prototyped here (see PROPOSALS at the end of this file's outp
   backlash g = approach direction (+1 / -1: sign of the last motion of that joint before
   the posture, from the time order of the rows; kincal.backlash, a library option) and
   compliance g = gravity torque [N m] of the joint (Pinocchio, the URDF inertias;
-  prototype);
+  a library option too now: CalibrationOptions.compliance, `--compliance JOINT`);
 - the hand pose from all four markers: the markers are one rigid body (spacing constant to
   0.01 mm), so the tool becomes a marker-body pose (marker 1 point + 3 rotation angles) and
   markers 2-4 add residuals with weight MARKER_WEIGHT relative to marker 1;
@@ -767,14 +767,16 @@ def cli_demo(study: Study, shared: Path, model: Model) -> str:
 PROPOSALS = """\
 Model extensions
 
-Backlash terms are a kincal option (CalibrationOptions.backlash, `--backlash JOINT
---order-column COL`). Prototyped here only, without a held-out gain on these data so far:
-1. Compliance terms "<joint>.compliance" (g = gravity torque; Robot.gravity_torques(q) so
-   that Pinocchio stays behind the Robot boundary).
-2. The hand pose as one rigid marker body (its layout fitted once, 3 rotation
+Backlash and compliance terms are kincal options (CalibrationOptions.backlash and
+.compliance; `--backlash JOINT --order-column COL`, `--compliance JOINT`), and the default
+`--model auto` adds those its score test finds and CV confirms (docs/results.md: arm_6's
+and arm_7's backlash and arm_6's compliance, 2.16 mm held out). This script's own rows with
+those terms are its ExtendedProblem's. Prototyped here only, without a held-out gain on
+these data so far:
+1. The hand pose as one rigid marker body (its layout fitted once, 3 rotation
    parameters); kincal itself takes the four markers as separate measured points
    (`--position-columns x1 y1 z1 ... z4`), each with its own position on the hand.
-3. CalibrationOptions.selection = "stepwise": forward selection of parameters by the
+2. CalibrationOptions.selection = "stepwise": forward selection of parameters by the
    same k-fold CV that chooses lambda, with the path kept in the result.
 """
 

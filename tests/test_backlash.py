@@ -49,6 +49,10 @@ def test_order_column_from_csv(tmp_path):
     assert Measurements.from_csv(f, ["j1"]).approach[:, 0].tolist() == [0, -1, 1]
     with pytest.raises(DataError, match="no order column 'time'"):
         Measurements.from_csv(f, ["j1"], order_column="time")
+    # a measured value is not an order (it was taken as one: --order-column x1 on TIAGo)
+    for col, what in (("x", "a position column"), ("j1", "a joint column")):
+        with pytest.raises(DataError, match=f"order column '{col}' is {what}; expected"):
+            Measurements.from_csv(f, ["j1"], order_column=col)
 
 
 @pytest.mark.parametrize("name,tip", [("ur5", "tool0"), ("tiago_file", "wrist_ft_tool_link")])
@@ -200,3 +204,46 @@ def test_an_unused_time_column_is_pointed_out(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", KincalWarning)
         calibrate(robot, ordered, method="ls", backlash=("wrist_2_joint",))
+
+
+def _reversed_with_time(tmp_path, n=40):
+    """The UR10 backlash data written last sample first, with a column giving the true order."""
+    rng, robot, model, q, truth = _ur10_with_backlash(n=n)
+    lines = measure(model, truth, q, 0.0, rng).to_csv_text().splitlines()
+    csv = tmp_path / "d.csv"
+    rows = [f"{row},{k}" for k, row in enumerate(lines[1:])][::-1]
+    csv.write_text("\n".join([lines[0] + ",t"] + rows) + "\n")
+    return csv
+
+
+def test_model_auto_takes_the_order_column_its_backlash_terms_need(tmp_path, capsys):
+    """--model auto (the default) weighs backlash terms, and the time-stamp warning tells the
+    user to give --order-column: it was refused ("it needs --backlash")."""
+    csv = _reversed_with_time(tmp_path)
+    out, frames = tmp_path / "cal.urdf", tmp_path / "frames.json"
+    code = main(["calibrate", "ur10", str(csv), "--tip", "tool0", "--order-column", "t",
+                 "--out", str(out), "--frames-out", str(frames), "--quiet"])
+    assert code == 0, capsys.readouterr().err
+    assert "wrist_2_joint" in json.loads(frames.read_text())["backlash"]
+    code = main(["calibrate", "ur10", str(csv), "--tip", "tool0", "--order-column", "t",
+                 "--model", "complete", "--out", str(tmp_path / "x.urdf")])
+    err = capsys.readouterr().err
+    assert code == 1 and "needs --backlash, or --model auto" in err
+    assert not (tmp_path / "x.urdf").exists()
+
+
+def test_evaluate_refuses_an_order_column_no_backlash_term_uses(tmp_path, capsys):
+    """evaluate ignored --order-column when FRAMES.json had no backlash (or with --fit-frames);
+    calibrate and analyze refuse it there."""
+    rng, robot, model, q, truth = _ur10_with_backlash(n=20)
+    csv = _reversed_with_time(tmp_path, n=20)
+    frames = tmp_path / "frames.json"
+    frames.write_text(json.dumps({"base": dict(zip(("x", "y", "z", "rx", "ry", "rz"), BASE)),
+                                  "tool": {"x": 0.05, "y": 0.02, "z": 0.1}}))
+    report = tmp_path / "r.json"
+    for how in (["--frames", str(frames)], ["--fit-frames"]):
+        code = main(["evaluate", "ur10", str(csv), "--tip", "tool0", "--order-column", "t",
+                     *how, "--report", str(report)])
+        err = capsys.readouterr().err
+        assert code == 1 and "--order-column gives the approach directions" in err, err
+        assert len(err.strip().splitlines()) == 1 and not report.exists()

@@ -112,6 +112,12 @@ def test_planted_compliance_is_recovered_and_the_frames_carry_it(tmp_path):
     assert back.compliance == pytest.approx(res.compliance)
     text = res.summary()
     assert "compliance terms: joint_2" in text and "deg/(N m)" in text
+    from kincal.export.report import result_dict  # REPORT.json: SI keys name its unit too
+
+    row = next(p for p in result_dict(res)["parameters"] if p["name"] == "joint_2.compliance")
+    assert row["estimate_rad/(N m)"] == pytest.approx(3e-5, rel=1e-6)  # was "estimate_rad"
+    assert row["deviation_deg/(N m)"] == pytest.approx(np.degrees(3e-5), rel=1e-6)
+    assert not {"nominal_rad", "estimate_rad", "deviation_rad", "std_error_rad"} & set(row)
     from kincal.planning.accuracy_map import point_view  # the map: geometry and frames
 
     space, idx = point_view(res.layout, res.error_model, 0, 1)

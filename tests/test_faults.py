@@ -83,7 +83,9 @@ OPTION_CASES = {
     "robust scale zero": (CAL + ["--robust", "huber", "--robust-scale-mm", "0"], "> 0"),
     "tool offset inf": (CAL + ["--tool-offset", "0", "inf", "0"], "--tool-offset must be a finite"),
     "free with ls": (CAL + ["--method", "ls", "--free", "joint_2.d"], "free (--free) applies to method l2"),
-    "order column alone": (CAL + ["--order-column", "t"], "needs --backlash"),
+    # --model auto (the default) may add backlash terms: the order column is theirs there
+    "order column alone": (CAL + ["--model", "complete", "--order-column", "t"],
+                           "needs --backlash, or --model auto"),
     "everything fixed": (CAL + ["--method", "frames", "--fix", "base.x", "base.y", "base.z",
                                 "base.rx", "base.ry", "base.rz", "tool.x", "tool.y", "tool.z"],
                          "nothing to fit"),

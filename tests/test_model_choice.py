@@ -143,6 +143,12 @@ def test_no_out_of_sample_comparison_keeps_the_default():
     res = calibrate(robot, data, model="auto", lam=0.1)  # a given lambda: no CV to compare by
     assert res.model_choice.criterion == "none" and res.model_choice.backlash == ()
     assert "kept" in res.summary()
+    # the reason names the cause, not a list of possible ones ("a small measurement volume,
+    # no measured positions, or a given lambda" read as a verdict on wide data)
+    assert "(lambda 0.1 given)" in res.model_choice.reason
+    assert "small measurement volume" not in res.model_choice.reason
+    res = calibrate(robot, data, model="auto", lam="evidence")
+    assert "(lambda evidence given)" in res.model_choice.reason
 
 
 def test_a_kept_default_counts_the_free_parameters_of_the_problem_that_fits():

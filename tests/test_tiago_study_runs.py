@@ -19,3 +19,6 @@ def test_the_tiago_study_runs_and_agrees_with_kincal():
     assert agree and float(agree.group(1)) < 1e-9, out.stdout[-3000:]
     selected = re.search(r"\| ([^|]*)\*\*\(selected by CV\)\*\* \|", out.stdout)
     assert selected and "backlash arm_6" in selected.group(1), out.stdout[-3000:]
+    # its closing notes called compliance terms a prototype long after --compliance landed
+    proposals = out.stdout.split("Prototyped here only")[1]
+    assert "ompliance" not in proposals and "`--compliance JOINT`" in out.stdout

@@ -193,9 +193,11 @@ def check_args(args) -> None:
               "the tip frame; check the unit (--length-unit)")
     c = args.command
     if hasattr(args, "backlash"):  # calibrate, analyze (evaluate reads backlash from FRAMES.json)
-        _need(getattr(args, "order_column", None) is None or bool(args.backlash),
+        # --model auto (the default) weighs backlash terms too: their directions need the order
+        _need(getattr(args, "order_column", None) is None or bool(args.backlash)
+              or getattr(args, "model", None) == "auto",
               "--order-column gives the approach directions of backlash terms: it needs "
-              "--backlash")
+              f"--backlash, or --model auto, which may add them (--model {args.model})")
     if hasattr(args, "grid"):
         _need(args.grid is None or args.accuracy_map is not None,
               "--grid is the number of grid points per edge of the --accuracy-map cube: it "

@@ -61,6 +61,11 @@ def run(args) -> int:
         frames = CellFrames.read(e.frames)  # the one schema, any version; values checked
         frames = frames.for_chain(e.chain.base, e.chain.tip)  # a chain of several
         e = replace(e, chain=chain_from_frames(e.chain, frames))
+    if e.inputs.order_column and not (frames is not None and frames.backlash):
+        raise OptionError("--order-column gives the approach directions of backlash terms: "
+                          + (f"{e.frames} has none" if frames is not None else
+                             "--fit-frames fits none (the backlash values come from "
+                             "--frames FRAMES.json)"))
     robot = e.chain.load()
     protect = check_outputs(robot, [e.report], overwrite=e.overwrite,
                             inputs=(e.inputs.data, e.frames))

@@ -110,7 +110,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
     params = []
     for p in result.parameters:
         nom, dev, se, unit = p.reported()
-        si = "m" if p.is_length else "rad"
+        si = ("m" if p.is_length else "rad") + ("/(N m)" if unit.endswith("/(N m)") else "")
         params.append({"name": p.name, "status": p.status, "unit": unit,
                        f"nominal_{si}": p.nominal, f"estimate_{si}": p.estimate,
                        f"deviation_{si}": p.deviation, f"std_error_{si}": p.std_error,

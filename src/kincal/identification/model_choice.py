@@ -257,14 +257,15 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
     base = problem(None, o.backlash)
     default = base.model_name
     how = o.lam
+    why = f"lambda {how:g} given" if isinstance(how, (int, float)) else f"lambda {how} given"
     if how == "auto":
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", KincalWarning)
-            how, _ = penalty_choice.automatic(base)
+            how, auto_why = penalty_choice.automatic(base)
+        why = f"lambda auto chose {how}: {auto_why}"
     if how != "cv":
-        return keep(default, "the penalty is not chosen by cross-validation on these data (a "
-                    "small measurement volume, no measured positions, or a given lambda): "
-                    "nothing judges the candidates out of sample; the chain's default")
+        return keep(default, f"the penalty is not chosen by cross-validation ({why}); nothing "
+                    "judges the candidates out of sample: the chain's default")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalWarning)
         cv0 = base.cross_validate()

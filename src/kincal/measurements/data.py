@@ -253,6 +253,11 @@ class Measurements:
         L, A = unit_factors(length_unit, angle_unit)
         columns = joint_column_names(joint_names, joint_columns)
         wanted = list(columns.values()) + list(position_columns)
+        if order_column in wanted:  # the order of the samples, not one of their values
+            raise DataError(f"{path}: order column {order_column!r} is a "
+                            f"{'position' if order_column in position_columns else 'joint'} "
+                            "column; expected a column giving the acquisition order (a time "
+                            "stamp or sample number)")
         extra = [c for c in (sigma_column, order_column) if c is not None]
         table = read_columns(path, wanted, extra, kind="data",
                              expected="the chain joints and positions",
