@@ -77,6 +77,20 @@ def sphere_center(P: np.ndarray, d: np.ndarray) -> np.ndarray:
     return sol[:3]
 
 
+def pivot_and_tool(p: np.ndarray, R: np.ndarray, d: np.ndarray) -> list[np.ndarray]:
+    """[(6,) pivot c and tool point t] best giving |p_k + R_k t - c| = d_k, or [] when the
+    tip's turns cannot fix them (fewer than 16 samples, or rank < 16). Linear in
+    (|t|^2 + |c|^2, t, c, c t^T): d^2 - |p|^2 = k + 2 (R^T p).t - 2 p.c - 2 R : (c t^T)
+    (the bilinear term's 9 products as unknowns of their own); closed form, no start."""
+    N = len(d)
+    if N < 16:
+        return []
+    A = np.column_stack([np.ones(N), 2.0 * np.einsum("nkj,nk->nj", R, p), -2.0 * p,
+                         -2.0 * R.reshape(N, 9)])
+    sol, _, rank, _ = np.linalg.lstsq(A, d ** 2 - np.sum(p * p, axis=1), rcond=None)
+    return [np.concatenate([sol[4:7], sol[1:4]])] if rank == A.shape[1] else []
+
+
 class DistanceKind(KindModel):
     """Residuals and Jacobian of measured distances (see the module notes)."""
 
@@ -107,9 +121,19 @@ class DistanceKind(KindModel):
         return r, Jk, Jf, Jb
 
     def start(self, kin, tool_guess=None):
+        """The pivot and tool point: with ``tool_guess`` (``--tool-offset``), that tool and
+        the pivot that fits it; without, the better (by the distances' RMS) of the tool at
+        the tip origin with its pivot and :func:`pivot_and_tool` (the tool unknown: in a
+        small volume the tip origin's sphere is far off, and the fit from it ended in a
+        false minimum, 3.3 mm RMS against 0.05 mm noise on a 20 mm cube)."""
         s = self.chain.state(kin, None, keep=False)
+        d = self.data.distances
         t = np.zeros(3) if tool_guess is None else np.asarray(tool_guess, float)
-        return np.concatenate([sphere_center(s.p_tip + s.R_tip @ t, self.data.distances), t])
+        starts = [np.concatenate([sphere_center(s.p_tip + s.R_tip @ t, d), t])]
+        if tool_guess is None:
+            starts += pivot_and_tool(s.p_tip, s.R_tip, d)
+        return min(starts, key=lambda f: float(np.mean((d - np.linalg.norm(
+            s.p_tip + s.R_tip @ f[3:] - f[:3], axis=1)) ** 2)))
 
     def sample_errors(self, r):
         return np.abs(r[:, 0])
