@@ -332,3 +332,32 @@ def test_an_option_of_several_values_before_the_data_names_what_it_took(option, 
     with pytest.raises(SystemExit):  # nothing swallowed: argparse's message alone
         main(["calibrate", "ur5", "--out", "c.urdf"])
     assert "took" not in capsys.readouterr().err
+
+
+def _in_degrees(src: Path, dst: Path) -> None:
+    """``src`` (a point file kincal wrote) with its joint columns in degrees."""
+    import math
+
+    rows = _rows(src)
+    joints = [i for i, h in enumerate(rows[0].split(",")) if h.startswith("joint_")]
+    dst.write_text("\n".join([rows[0]] + [",".join(
+        repr(math.degrees(float(c))) if i in joints else c for i, c in enumerate(r.split(",")))
+        for r in rows[1:]]) + "\n")
+
+
+@pytest.mark.parametrize("how", ["program", "targets"])
+def test_compensate_refuses_joint_values_in_degrees_read_as_radians(work, capsys, how):
+    """A program (or targets' seeds) logged in degrees and read as radians: with
+    --flag-unreachable a JOINTS.csv of nonsense was written, exit 0, behind two warnings;
+    without it the one line blamed unreachable targets. Now: the unit, nothing solved."""
+    _in_degrees(work / "points.csv", work / "deg.csv")
+    argv = (["compensate", "cal.urdf", "--program", "deg.csv", "--nominal", "ec66"]
+            if how == "program" else ["compensate", "cal.urdf", "deg.csv", "--frames",
+                                      "frames.json"])
+    argv += ["--tip", "flange", "--out", "j.csv"]
+    for extra in ([], ["--flag-unreachable"]):
+        line = refused(capsys, argv + extra, work)
+        assert "deg.csv: joint_" in line and "outside its URDF limits" in line, line
+        assert "were the joint values degrees? Read them with --angle-unit deg" in line, line
+    assert main(argv + ["--angle-unit", "deg"]) == 0  # read as what they are: compensated
+
