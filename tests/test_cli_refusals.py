@@ -361,3 +361,27 @@ def test_compensate_refuses_joint_values_in_degrees_read_as_radians(work, capsys
         assert "were the joint values degrees? Read them with --angle-unit deg" in line, line
     assert main(argv + ["--angle-unit", "deg"]) == 0  # read as what they are: compensated
 
+
+@pytest.mark.parametrize("argv, says", [
+    (["calibrate", "ec66", "cal.urdf", "--out", "o.urdf"],
+     "cal.urdf: is XML (a URDF or xacro file?), not a CSV data file"),
+    (["calibrate", "ec66", "frames.json", "--out", "o.urdf"],
+     "frames.json: is JSON (a FRAMES.json, REPORT.json or FLEET.json?), not a CSV data file"),
+    (["calibrate", "ec66", "points.csv", "--validate", "frames.json", "--out", "o.urdf"],
+     "frames.json: is JSON"),
+    (["compensate", "cal.urdf", "--program", "cal.urdf", "--nominal", "ec66", "--tip",
+      "flange", "--out", "j.csv"], "cal.urdf: is XML (a URDF or xacro file?), not a CSV "
+                                  "program file"),
+    (["plan", "ec66", "cal.urdf", "--poses", "5", "--out", "p.csv"], "not a CSV candidates"),
+    (["calibrate", "points.csv", "points.csv", "--tip", "flange", "--out", "o.urdf"],
+     "points.csv: not XML (it begins '# made by kincal"),
+    (["compensate", "cal.urdf", "--program", "points.csv", "--nominal", "frames.json",
+      "--tip", "flange", "--out", "j.csv"], "frames.json: not XML (it begins '{')"),
+])
+def test_a_file_of_another_kind_is_named_as_such(work, capsys, argv, says):
+    """A URDF or a JSON file given as a data file was read as a CSV whose header lacks the
+    columns (with advice to hold joints with --joint-value) or as a header not fitting its
+    rows (or decimal commas?); a data file given as the robot as malformed XML."""
+    line = refused(capsys, argv, work)
+    assert says in line, line
+    assert "decimal commas" not in line and "--joint-value" not in line
