@@ -168,6 +168,7 @@ class Evidence:
     weak_scales: str = ""  # their classes' prior scales as the evidence estimated them, or
     #                        the one penalty weight ("lambda 0.001 chosen by cross-validation")
     convention_doubts: tuple[str, ...] = ()  # pose files read in a convention in doubt
+    orientation_angle_max: float = 0.0  # [rad] largest orientation angle read (PoseData's)
     duplicates: tuple[str, ...] = ()  # samples repeated exactly (checks.duplicate_samples)
     orientation_median_deg: float | None = None  # the worst set's orientation errors after
     orientation_rms_deg: float | None = None  # calibration (poses; flush: the tilts) [deg]
@@ -288,6 +289,11 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                            + (", outside the URDF limits" if ev.angle_outside else ""),
                            ev.angle_max, 4 * math.pi, "rad",
                            causes=tuple(c for c in unit_causes(ev) if "degrees" in c)))
+    if ev.orientation_angle_max > DEGREES_AS_RADIANS:  # no rpy or rotvec writer goes there
+        out.append(Finding("angle_unit", f"orientation angles reach "
+                           f"{ev.orientation_angle_max:.4g} rad", ev.orientation_angle_max,
+                           DEGREES_AS_RADIANS, "rad",
+                           causes=tuple(c for c in unit_causes(ev) if "orientation" in c)))
     if ev.residual_median_mm > th.residual * L_mm:
         out.append(Finding(
             "residual", f"the position error after calibration is {ev.residual_median_mm:.4g} mm "
@@ -445,6 +451,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         convention_doubts=tuple(d for d in (getattr(checked(type(problem), robot, dt),
                                                     "convention_doubt", "")
                                             for dt, robot in zip(datas, problem.robots)) if d),
+        orientation_angle_max=max(float(getattr(dt, "angles_read_max", 0.0)) for dt in datas),
         duplicates=tuple(duplicate_samples(datas)), orientation_median_deg=o_median,
         orientation_rms_deg=o_rms, orientation_what=o_what,
         tool_far=farthest_tool(problem, result) or ())
