@@ -462,6 +462,13 @@ def unit_and_kind_cases():
     for v in ("foo", ":=1", "foo=1"):
         yield f"--xacro-arg {v}", ["calibrate", "ec66", "{csv}", "--xacro-arg", v, "--out",
                                    "{d}/o.urdf"], None
+    for extra in (["--method", "ls"], ["--lambda", "0.1"], ["--lambda", "evidence"]):
+        yield (f"--cv-max-poses with {' '.join(extra)} (no CV)", [
+            "calibrate", "ec66", "{csv}", *extra, "--cv-max-poses", "10", "--out",
+            "{d}/o.urdf"], None)
+    for v in ("0", "100000"):  # 100,000 worker processes hung the machine starting them
+        yield f"fleet --workers {v}", ["fleet", "ec66", "{csv}", "{poses}", "--workers", v,
+                                       "--out-dir", "{d}/D"], None
     yield ("--xacro-arg on a plain URDF", ["calibrate", "ec66", "{csv}", "--xacro-arg",
                                            "ur_type:=ur5e", "--out", "{d}/o.urdf"], None)
     # outputs over inputs, --overwrite or not

@@ -131,6 +131,13 @@ IGNORED = [
     (SIM + ["--kind", "pose", "--orientation-noise-deg", "-1"],
      "--orientation-noise-deg must be a finite number >= 0"),
     (SIM + ["--floor", "0"], "--floor is checked for poses drawn in a volume"),
+    # no cross-validation runs: --cv-max-poses was accepted and ignored
+    (CAL + ["--cv-max-poses", "10"], "--cv-max-poses is used only when lambda may be chosen"),
+    (CAL[:3] + ["--lambda", "0.1", "--cv-max-poses", "10", "--out", "c.urdf"],
+     "--cv-max-poses is used only when lambda may be chosen by cross-validation"),
+    # each worker a process: 100,000 hung the machine starting them (6.7 GB)
+    (["fleet", "ec66", "points.csv", "poses.csv", "--out-dir", "D", "--workers", "100000"],
+     "--workers must be an integer >= 1 and <= "),
 ]
 
 

@@ -43,7 +43,8 @@ def register(subparsers) -> None:
                         "in small volumes); 0 (default): each unit alone")
     e = group(p, "engine")
     e.add_argument("--workers", type=int, default=1, metavar="N",
-                   help="worker processes of the local Dask cluster (default 1)")
+                   help="worker processes of the local Dask cluster (default 1; at most 4 per "
+                        "CPU)")
     e.add_argument("--scheduler", metavar="ADDRESS",
                    help="a running Dask scheduler (tcp://host:8786) instead of a local cluster")
     o = group(p, "outputs")
