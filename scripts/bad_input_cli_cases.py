@@ -373,3 +373,120 @@ def chain_cases():
     yield "mimic: evaluate, held while its master moves", [
         "evaluate", "{tree}", "{nofinger}", "--base", "base_link", "--tip", "btip",
         "--fit-frames", "--joint-value", "finger=0.1"]
+
+
+# ------------------------------- units and file kinds on the newer paths (audit, issue 6/11)
+def _simulated(d: Path, name: str, *argv: str, degrees=(), millimetres=()) -> None:
+    """d/name: a simulated EC66 file (``argv`` after ``simulate ec66``), its ``degrees``
+    columns (a prefix: "joint_" for all joints) in degrees, ``millimetres`` columns in mm."""
+    import contextlib
+    import io
+    import math
+
+    from kincal.cli.main import main
+
+    src = d / ("src-" + name)
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["simulate", "ec66", "--out", str(src), "--poses", "40", *argv]) == 0
+    rows = [r for r in src.read_text().splitlines() if not r.startswith("#")]
+    src.unlink()
+    header = rows[0].split(",")
+    scale = [180 / math.pi if h.startswith(tuple(degrees)) and degrees else
+             1e3 if h in millimetres else 1.0 for h in header]
+    (d / name).write_text("\n".join([rows[0]] + [",".join(
+        repr(float(c) * s) if s != 1.0 else c for c, s in zip(r.split(","), scale))
+        for r in rows[1:]]) + "\n")
+
+
+def unit_and_kind_cases():
+    """(label, argv, setup) of wrong units on the newer paths (flush and plane contacts,
+    poses with --orientation-format, compensate's program and targets), files of the wrong
+    kind in another's place, malformed --joint-value and --xacro-arg, one fleet unit's data
+    given twice, and outputs over inputs: each refused, one line, nothing written."""
+    J = ("joint_",)
+
+    def sim(name, *argv, **units):
+        return lambda d: _simulated(d, name, *argv, **units)
+
+    cal = ["calibrate", "ec66", "{d}/bad.csv", "--out", "{d}/o.urdf", "--frames-out",
+           "{d}/f.json"]
+    yield ("flush contacts in degrees read as radians", cal + ["--on-plane", "--flush"],
+           sim("bad.csv", "--kind", "flush", degrees=J))
+    yield ("plane contacts in degrees read as radians", cal + ["--on-plane"],
+           sim("bad.csv", "--kind", "plane", degrees=J))
+    rpy = ["--kind", "pose", "--orientation-format", "rpy-zyx"]
+    yield ("pose rpy angles in degrees read as radians", cal + ["--orientation-format", "rpy-zyx"],
+           sim("bad.csv", *rpy, degrees=("roll", "pitch", "yaw")))
+    yield ("pose positions in mm read as m", cal + ["--orientation-format", "rpy-zyx"],
+           sim("bad.csv", *rpy, millimetres=("x", "y", "z")))
+    comp = ["compensate", "{urdf}", "--tip", "flange", "--out", "{d}/j.csv"]
+    targets = ["compensate", "{urdf}", "{x}", "--tip", "flange", "--out", "{d}/j.csv",
+               "--frames", "{frames}"]  # TARGETS right after the robot (argparse: nargs ?)
+
+    def on(x, argv):
+        return [a.replace("{x}", x) for a in argv]
+    for flag in ([], ["--flag-unreachable"]):
+        yield (f"compensate --program in degrees {' '.join(flag)}",
+               comp + ["--program", "{d}/bad.csv", "--nominal", "ec66", *flag],
+               sim("bad.csv", degrees=J))
+        yield (f"compensate targets' seeds in degrees {' '.join(flag)}",
+               on("{d}/bad.csv", targets) + flag, sim("bad.csv", degrees=J))
+    yield ("compensate targets in mm read as m", on("{d}/bad.csv", targets),
+           sim("bad.csv", millimetres=("x", "y", "z")))
+    # files of another kind in a file's place
+    for what, argv in (("data", ["calibrate", "ec66", "{x}", "--out", "{d}/o.urdf"]),
+                       ("--validate", ["calibrate", "ec66", "{csv}", "--validate", "{x}",
+                                       "--out", "{d}/o.urdf"]),
+                       ("--program", comp + ["--program", "{x}", "--nominal", "ec66"]),
+                       ("targets", targets),
+                       ("candidates", ["plan", "ec66", "{x}", "--poses", "5", "--out",
+                                       "{d}/p.csv"]),
+                       ("evaluate data", ["evaluate", "ec66", "{x}", "--fit-frames"])):
+        for kind, x in (("a URDF", "{urdf}"), ("a FRAMES.json", "{frames}")):
+            yield f"{what} is {kind}", on(x, argv), None
+    for what, argv in (("robot", ["calibrate", "{x}", "{csv}", "--tip", "flange", "--out",
+                                  "{d}/o.urdf"]),
+                       ("--nominal", comp + ["--program", "{csv}", "--nominal", "{x}"]),
+                       ("--frames", ["evaluate", "ec66", "{csv}", "--frames", "{x}"]),
+                       ("--prior", ["calibrate", "ec66", "{csv}", "--prior", "{x}", "--out",
+                                    "{d}/o.urdf"])):
+        for kind, x in (("a CSV", "{csv}"), ("a FRAMES.json", "{frames}"), ("a URDF", "{urdf}")):
+            if not (what == "robot" and kind == "a URDF") and not (
+                    what == "--nominal" and kind == "a URDF") and not (
+                    what == "--frames" and kind == "a FRAMES.json"):
+                yield f"{what} is {kind}", on(x, argv), None
+    for v in ("joint_1=abc", "joint_1=nan", "joint_1=inf", "=0.1", "joint_1", "joint_1=1e300",
+              "nojoint=0.1"):
+        yield f"--joint-value {v}", ["calibrate", "ec66", "{csv}", "--joint-value", v,
+                                     "--out", "{d}/o.urdf"], None
+    for v in ("foo", ":=1", "foo=1"):
+        yield f"--xacro-arg {v}", ["calibrate", "ec66", "{csv}", "--xacro-arg", v, "--out",
+                                   "{d}/o.urdf"], None
+    for extra in (["--method", "ls"], ["--lambda", "0.1"], ["--lambda", "evidence"]):
+        yield (f"--cv-max-poses with {' '.join(extra)} (no CV)", [
+            "calibrate", "ec66", "{csv}", *extra, "--cv-max-poses", "10", "--out",
+            "{d}/o.urdf"], None)
+    for v in ("0", "100000"):  # 100,000 worker processes hung the machine starting them
+        yield f"fleet --workers {v}", ["fleet", "ec66", "{csv}", "{poses}", "--workers", v,
+                                       "--out-dir", "{d}/D"], None
+    yield ("--xacro-arg on a plain URDF", ["calibrate", "ec66", "{csv}", "--xacro-arg",
+                                           "ur_type:=ur5e", "--out", "{d}/o.urdf"], None)
+    # outputs over inputs, --overwrite or not
+    yield ("FRAMES.json over the robot", ["calibrate", "{urdf}", "{csv}", "--tip", "flange",
+                                          "--out", "{d}/o.urdf", "--frames-out", "{urdf}",
+                                          "--overwrite"], None)
+    yield ("--residuals-out over the data", ["calibrate", "ec66", "{csv}", "--out", "{d}/o.urdf",
+                                             "--residuals-out", "{csv}", "--overwrite"], None)
+    yield ("--out over the --validate file", ["calibrate", "ec66", "{csv}", "--validate",
+                                              "{poses}", "--out", "{poses}", "--overwrite"], None)
+    yield ("compensate --out over its --program", comp[:-1] + [
+        "{csv}", "--program", "{csv}", "--nominal", "ec66", "--overwrite"], None)
+    # one fleet unit's data twice: two units of one
+    fleet = ["fleet", "ec66", "--tip", "flange", "--out-dir", "{d}/D"]
+
+    def copy(d):
+        (d / "copy.csv").write_bytes(Path(d / "bad.csv").read_bytes())
+
+    yield "fleet: one file twice", fleet + ["{csv}", "{csv}"], None
+    yield ("fleet: a copy of a unit's file", fleet + ["{d}/bad.csv", "{csv}", "{d}/copy.csv"],
+           lambda d: (sim("bad.csv")(d), copy(d)))

@@ -31,7 +31,8 @@ from pathlib import Path
 
 from bad_input_cli_cases import (CaseSkipped, chain_cases, console_cases,
                                   ignored_option_cases, message_cases, output_first_cases,
-                                  run_console_case, snapshot, tree_inputs, undo_read_only)
+                                  run_console_case, snapshot, tree_inputs,
+                                  unit_and_kind_cases, undo_read_only)
 
 REPO = Path(__file__).resolve().parents[1]
 EC66 = REPO / "urdf" / "ec66.urdf"
@@ -460,6 +461,8 @@ def cases(inputs_dir: Path, inputs: dict):
     for label, argv, setup in output_first_cases():
         yield label, cli(argv, setup, codes=(1,))
     for label, argv, setup in message_cases():
+        yield label, cli(argv, setup, codes=(1,))
+    for label, argv, setup in unit_and_kind_cases():  # newer paths' units, files' kinds
         yield label, cli(argv, setup, codes=(1,))
     for label, argv, how, code in console_cases():
         yield label, console(argv, how, code)

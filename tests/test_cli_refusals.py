@@ -143,6 +143,13 @@ IGNORED = [
       "5", "--out", "chosen.csv"], "--in-sphere R [mm] must be a finite number > 0, got -5"),
     (PLAN + ["--target-cube", "400", "0", "250", "0", "--length-unit", "mm"],
      "--target-cube EDGE [mm] must be a finite number > 0, got 0"),
+    # no cross-validation runs: --cv-max-poses was accepted and ignored
+    (CAL + ["--cv-max-poses", "10"], "--cv-max-poses is used only when lambda may be chosen"),
+    (CAL[:3] + ["--lambda", "0.1", "--cv-max-poses", "10", "--out", "c.urdf"],
+     "--cv-max-poses is used only when lambda may be chosen by cross-validation"),
+    # each worker a process: 100,000 hung the machine starting them (6.7 GB)
+    (["fleet", "ec66", "points.csv", "poses.csv", "--out-dir", "D", "--workers", "100000"],
+     "--workers must be an integer >= 1 and <= "),
 ]
 
 
@@ -344,3 +351,56 @@ def test_an_option_of_several_values_before_the_data_names_what_it_took(option, 
     with pytest.raises(SystemExit):  # nothing swallowed: argparse's message alone
         main(["calibrate", "ur5", "--out", "c.urdf"])
     assert "took" not in capsys.readouterr().err
+
+
+def _in_degrees(src: Path, dst: Path) -> None:
+    """``src`` (a point file kincal wrote) with its joint columns in degrees."""
+    import math
+
+    rows = _rows(src)
+    joints = [i for i, h in enumerate(rows[0].split(",")) if h.startswith("joint_")]
+    dst.write_text("\n".join([rows[0]] + [",".join(
+        repr(math.degrees(float(c))) if i in joints else c for i, c in enumerate(r.split(",")))
+        for r in rows[1:]]) + "\n")
+
+
+@pytest.mark.parametrize("how", ["program", "targets"])
+def test_compensate_refuses_joint_values_in_degrees_read_as_radians(work, capsys, how):
+    """A program (or targets' seeds) logged in degrees and read as radians: with
+    --flag-unreachable a JOINTS.csv of nonsense was written, exit 0, behind two warnings;
+    without it the one line blamed unreachable targets. Now: the unit, nothing solved."""
+    _in_degrees(work / "points.csv", work / "deg.csv")
+    argv = (["compensate", "cal.urdf", "--program", "deg.csv", "--nominal", "ec66"]
+            if how == "program" else ["compensate", "cal.urdf", "deg.csv", "--frames",
+                                      "frames.json"])
+    argv += ["--tip", "flange", "--out", "j.csv"]
+    for extra in ([], ["--flag-unreachable"]):
+        line = refused(capsys, argv + extra, work)
+        assert "deg.csv: joint_" in line and "outside its URDF limits" in line, line
+        assert "were the joint values degrees? Read them with --angle-unit deg" in line, line
+    assert main(argv + ["--angle-unit", "deg"]) == 0  # read as what they are: compensated
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["calibrate", "ec66", "cal.urdf", "--out", "o.urdf"],
+     "cal.urdf: is XML (a URDF or xacro file?), not a CSV data file"),
+    (["calibrate", "ec66", "frames.json", "--out", "o.urdf"],
+     "frames.json: is JSON (a FRAMES.json, REPORT.json or FLEET.json?), not a CSV data file"),
+    (["calibrate", "ec66", "points.csv", "--validate", "frames.json", "--out", "o.urdf"],
+     "frames.json: is JSON"),
+    (["compensate", "cal.urdf", "--program", "cal.urdf", "--nominal", "ec66", "--tip",
+      "flange", "--out", "j.csv"], "cal.urdf: is XML (a URDF or xacro file?), not a CSV "
+                                  "program file"),
+    (["plan", "ec66", "cal.urdf", "--poses", "5", "--out", "p.csv"], "not a CSV candidates"),
+    (["calibrate", "points.csv", "points.csv", "--tip", "flange", "--out", "o.urdf"],
+     "points.csv: not XML (it begins '# made by kincal"),
+    (["compensate", "cal.urdf", "--program", "points.csv", "--nominal", "frames.json",
+      "--tip", "flange", "--out", "j.csv"], "frames.json: not XML (it begins '{')"),
+])
+def test_a_file_of_another_kind_is_named_as_such(work, capsys, argv, says):
+    """A URDF or a JSON file given as a data file was read as a CSV whose header lacks the
+    columns (with advice to hold joints with --joint-value) or as a header not fitting its
+    rows (or decimal commas?); a data file given as the robot as malformed XML."""
+    line = refused(capsys, argv, work)
+    assert says in line, line
+    assert "decimal commas" not in line and "--joint-value" not in line

@@ -80,3 +80,19 @@ def test_frame_move_is_the_rotation_angle_also_for_small_turns():
         mm, deg = moved(np.zeros(12), after, km)
         angle = np.degrees(Rotation.from_euler("XYZ", after[3:6]).magnitude())  # Rx Ry Rz
         assert abs(mm - 1.0) < 1e-12 and abs(deg - angle) < 1e-12 * angle
+
+
+def test_evaluate_warns_of_joint_columns_beyond_the_chain(tmp_path, capsys):
+    """A chain of a FRAMES.json of several chains (or a --tip) that ends before the data's:
+    the file's column of a joint below the tip was ignored without a word and the errors
+    (hundreds of mm) read as the model's. calibrate's gate says so; evaluate now warns."""
+    data = tmp_path / "d.csv"
+    assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--tool-m", "0.03",
+                 "0.02", "0.12", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", "ec66", str(data), "--tip", "link_5", "--fit-frames"]) == 0
+    err = [e for e in capsys.readouterr().err.splitlines() if e.startswith("kincal: warning:")]
+    assert any(f"{data}: the columns of joint_6, URDF joints beyond the chain's ends "
+               "(base_link -> link_5), are ignored" in e and "check --tip" in e for e in err), err
+    assert main(["evaluate", "ec66", str(data), "--fit-frames"]) == 0  # its own chain: no word
+    assert "beyond the chain" not in capsys.readouterr().err

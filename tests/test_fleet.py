@@ -316,3 +316,25 @@ def test_hierarchical_e_step_keeps_the_prior_as_it_is_and_its_width_where_blind(
 def test_prior_scale_needs_a_prior_and_evidence():
     with pytest.raises(OptionError, match="prior_scale"):
         CalibrationOptions(prior_scale=1.0).validated()
+
+
+def test_one_units_data_given_twice_is_refused(fleet_files, tmp_path, capsys):
+    """The same file twice (or a copy of it) made two units, u01-1 and u01-2, of one unit's
+    data, exit 0: a prior whose scatter shrank toward that unit. Refused, nothing written."""
+    import shutil
+
+    one = fleet_files / "u01.csv"
+    shutil.copy(one, tmp_path / "copy.csv")
+    out = tmp_path / "D"
+    for twice, says in (([one, one], "u01.csv is given twice"),
+                        ([one, fleet_files / "u02.csv", fleet_files / "x" / ".." / "u01.csv"],
+                         f"u01.csv is {one}"),
+                        ([one, fleet_files / "u02.csv", tmp_path / "copy.csv"],
+                         f"copy.csv has the same bytes as {one}")):
+        (fleet_files / "x").mkdir(exist_ok=True)
+        capsys.readouterr()
+        assert main(["fleet", "ec66", *map(str, twice), "--tip", "flange", "--out-dir",
+                     str(out)]) == 1
+        err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        assert len(err) == 1 and err[0].startswith("kincal: error:") and says in err[0], err
+        assert "one unit's data given twice" in err[0] and not out.exists()

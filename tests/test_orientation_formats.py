@@ -328,3 +328,29 @@ def test_the_api_checks_the_convention_too(tmp_path):
     assert main(["simulate", "ec66", "--kind", "pose", "--poses", "10", "--seed", "3", "--out",
                  str(ros), "--quiet"]) == 0
     assert PoseData.from_csv(ros, robot.joint_names).orientation_format == ""
+
+
+def test_the_gate_names_orientation_angles_in_degrees_as_the_cause(tmp_path, capsys):
+    """Joints in radians, roll/pitch/yaw in degrees: the gate refused, but its likely cause
+    was noise, a tip or another URDF (the 'were they degrees?' warning came after the line).
+    The reader's largest angle is now a unit clue of the gate: the cause it names."""
+    src, bad = tmp_path / "p.csv", tmp_path / "deg.csv"
+    assert main(["simulate", "ec66", "--kind", "pose", "--orientation-format", "rpy-zyx",
+                 "--poses", "30", "--seed", "3", "--out", str(src), "--quiet"]) == 0
+    rows = [r.split(",") for r in src.read_text().splitlines() if not r.startswith("#")]
+    turned = [rows[0].index(c) for c in ("roll", "pitch", "yaw")]
+    bad.write_text("\n".join(",".join(
+        repr(float(np.degrees(float(c)))) if k and i in turned else c for i, c in enumerate(r))
+        for k, r in enumerate(rows)) + "\n")
+    capsys.readouterr()
+    argv = ["calibrate", "ec66", "--orientation-format", "rpy-zyx", "--out",
+            str(tmp_path / "o.urdf")]
+    assert main([*argv[:2], str(bad), *argv[2:]]) == 1
+    err = capsys.readouterr().err.splitlines()
+    line = next(e for e in err if e.startswith("kincal: error:"))
+    assert "orientation angles reach 1" in line and "Likely cause: orientation angles in " \
+        "degrees read as radians (they reach 1" in line, line
+    assert not (tmp_path / "o.urdf").exists()
+    assert main([*argv[:2], str(src), *argv[2:]]) == 0  # the same file in radians: plausible
+    assert PoseData.from_csv(src, Robot.load("ec66").joint_names,
+                             orientation_format="rpy-zyx").angles_read_max < np.pi + 1e-9

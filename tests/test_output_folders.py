@@ -109,8 +109,9 @@ def test_fleet_interrupted_before_any_unit_leaves_no_folder_it_made(tmp_path, mo
     from kincal.cli import main
     from kincal.fleet.unit import STAGING
 
-    data = tmp_path / "u1.csv"
-    assert main(["simulate", "ec66", "--poses", "12", "--seed", "1", "--out", str(data)]) == 0
+    data, data2 = tmp_path / "u1.csv", tmp_path / "u2.csv"  # two units (one twice: refused)
+    for seed, path in (("1", data), ("2", data2)):
+        assert main(["simulate", "ec66", "--poses", "12", "--seed", seed, "--out", str(path)]) == 0
     out = tmp_path / "D"
     if existed:
         out.mkdir()
@@ -123,7 +124,7 @@ def test_fleet_interrupted_before_any_unit_leaves_no_folder_it_made(tmp_path, mo
 
     monkeypatch.setattr(fleet, "calibrate_fleet", interrupted)
     capsys.readouterr()
-    assert main(["fleet", "ec66", str(data), str(data), "--tip", "flange",
+    assert main(["fleet", "ec66", str(data), str(data2), "--tip", "flange",
                  "--out-dir", str(out)]) == 130
     assert "0 of the 2 units are complete" in capsys.readouterr().err
     assert out.is_dir() is existed

@@ -712,3 +712,27 @@ def test_talos_three_copies_of_a_day_name_the_penalty(tmp_path, capsys):
             "samples repeat samples of " + train + " exactly (line ") in line
     assert "or a penalty too weak for what the data barely tell apart" in line
     assert "whose scale the evidence estimated at" in line and "--prior-deg" in line
+
+
+def test_a_second_file_in_millimetres_is_the_unit_clue(tmp_path, capsys):
+    """Two point files, the second's positions in mm: the unit clue was the first positioned
+    set's alone, so the gate named noise, a tip or another URDF as the likely cause. Every
+    set's spread is judged now; the clue names the file that is off."""
+    for seed in ("1", "7"):
+        assert main(["simulate", "ec66", "--out", str(tmp_path / f"s{seed}.csv"), "--poses",
+                     "40", "--seed", seed, "--tool-m", "0.03", "0.02", "0.12", "--quiet"]) == 0
+
+    def to_mm(header, values):
+        values[:, [header.index(c) for c in "xyz"]] *= 1e3
+
+    _rewrite(tmp_path / "s7.csv", tmp_path / "mm.csv", to_mm)
+    out = tmp_path / "o.urdf"
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(tmp_path / "s1.csv"), str(tmp_path / "mm.csv"),
+                 "--out", str(out)]) == 1
+    line = _error_line(capsys)
+    assert f"the measured positions of {tmp_path / 'mm.csv'} spread" in line, line
+    assert "Likely cause: positions in millimetres read as metres" in line, line
+    assert not out.exists()
+    assert main(["calibrate", "ec66", str(tmp_path / "s1.csv"), str(tmp_path / "s7.csv"),
+                 "--out", str(out), "--quiet"]) == 0  # both in metres: plausible

@@ -134,6 +134,11 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
     than ``<robot>``. An ``xmlns:xacro`` declaration alone is accepted: generated
     URDFs often keep it.
     """
+    start = text.lstrip("\ufeff \t\r\n")
+    if start and not start.startswith("<"):  # a data file given as the robot, say
+        first = start.splitlines()[0][:40]
+        raise UrdfError(f"{source}: not XML (it begins {first!r}): expected a URDF or xacro "
+                        "file, which begins with '<' (is a data file given in its place?)")
     # The encoding argument overrides the document's declaration: we hand expat
     # the str encoded as UTF-8, whatever the declaration says.
     parser = expat.ParserCreate(encoding="UTF-8")

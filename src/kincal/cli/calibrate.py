@@ -73,7 +73,7 @@ def register(subparsers) -> None:
              "evaluate --frames), in the summary, --report and --html. One file, or one per "
              "data file, each judged on that file's chain with its set's frames (several "
              "chains: one per data file)")
-    g.add_argument("--cv-max-poses", type=int, default=2000, metavar="N",
+    g.add_argument("--cv-max-poses", type=int, metavar="N",
                    help="choose lambda by CV on a random N of the poses when there are more "
                         "(default 2000; 0: all poses); the final fit uses every pose")
     o = group(p, "outputs")

@@ -18,6 +18,9 @@ from kincal.errors import OptionError
 # Every option is checked here, before a file is read: a value that is not finite or out
 # of range, and a flag that would be silently ignored, is an error. Defaults of options
 # that only some settings use are None, so that "given but unused" can be told apart.
+# fleet --workers: processes of the local Dask cluster; beyond a few per CPU they only cost
+# memory (100,000 asked for hung the machine at 6.7 GB, starting them)
+MAX_WORKERS = 4 * (os.cpu_count() or 1)
 MAX_POSES = 1_000_000  # simulate --poses, plan --random: beyond any real measurement campaign
 DEFAULT_LAMBDA = "auto"  # --lambda when not given (None in the parser: "given" can be told)
 
@@ -94,7 +97,8 @@ def _check_calibrate(args) -> None:
         lambda_value(args.lam)
     # a lambda given as a number, or no penalty at all: no cross-validation to fold or seed
     chosen = m == "l2" and (args.lam is None or args.lam in ("auto", "cv"))
-    for option, value in (("--folds", args.folds), ("--seed", args.seed)):
+    for option, value in (("--folds", args.folds), ("--seed", args.seed),
+                          ("--cv-max-poses", args.cv_max_poses)):
         _need(value is None or chosen, f"{option} is used only when lambda may be chosen by "
               "cross-validation (method l2 with --lambda cv or auto)")
     _count("--folds", args.folds, 2)
@@ -104,6 +108,10 @@ def _check_calibrate(args) -> None:
     _finite("--robust-scale-mm", args.robust_scale_mm, 0, low_open=True)
     args.lam = DEFAULT_LAMBDA if args.lam is None else args.lam
     args.seed = 0 if args.seed is None else args.seed
+    if args.cv_max_poses is None:  # CalibrationOptions' default: 2000
+        from kincal.identification.options import CalibrationOptions
+
+        args.cv_max_poses = CalibrationOptions().cv_max_poses
 
 
 def _check_floor(args, volume: bool) -> None:
@@ -261,7 +269,7 @@ def check_args(args) -> None:
               "--nominal (ROBOT's xacro arguments are --xacro-arg)")
     elif c == "fleet":
         lambda_value(args.lam)
-        _count("--workers", args.workers, 1)
+        _count("--workers", args.workers, 1, MAX_WORKERS)  # each a process: 100,000 hung
         _count("--hierarchical", args.hierarchical, 0)
     elif c == "demo":
         out = Path(args.out).expanduser()

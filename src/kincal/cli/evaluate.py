@@ -107,6 +107,7 @@ def run(args) -> int:
             how = (f"tool and kinematics from {e.frames}"
                    + (f" ({whose}tool origin)" if whose else "") + ", measurement frame "
                    f"refitted on these data (moved {mm:.2f} mm, {deg:.3f} deg)" + terms)
+    _beyond_the_chain(problem, e.inputs.data)
     stats = [ErrorStats.from_errors(err) for _, err in problem.sample_errors(x)]
     km = problem.kinds[0]
     angle = angle_stats(km, problem.residuals(x, 0))
@@ -136,6 +137,24 @@ def run(args) -> int:
                                                     e.command_line),
                       overwrite=e.overwrite, protect=protect)
     return 0
+
+
+def _beyond_the_chain(problem, source) -> None:
+    """Warn of the data's columns for URDF joints below the tip (or above the base), which
+    the chain ignores though they may move the measured point: data of another chain (a
+    FRAMES.json of several chains, --tip). calibrate's gate says the same (a note, or the
+    likely cause of a refusal); evaluate judges nothing, so it warns."""
+    import warnings
+
+    from kincal.errors import KincalWarning
+    from kincal.identification.gate_causes import names_text
+
+    beyond = problem.chains.off_chain_columns([km.data for km in problem.kinds])[0]
+    if beyond:
+        warnings.warn(f"{source}: the columns of {names_text(beyond)}, URDF joints beyond the "
+                      f"chain's ends ({problem.robots[0].base} -> {problem.robots[0].tip}), "
+                      "are ignored: if they move the measured point, the chain does not match "
+                      "the data (check --tip and --base)", KincalWarning)
 
 
 def _held(e: Evaluate, robot, data, held) -> tuple[str, dict]:

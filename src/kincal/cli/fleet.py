@@ -43,7 +43,8 @@ def register(subparsers) -> None:
                         "in small volumes); 0 (default): each unit alone")
     e = group(p, "engine")
     e.add_argument("--workers", type=int, default=1, metavar="N",
-                   help="worker processes of the local Dask cluster (default 1)")
+                   help="worker processes of the local Dask cluster (default 1; at most 4 per "
+                        "CPU)")
     e.add_argument("--scheduler", metavar="ADDRESS",
                    help="a running Dask scheduler (tcp://host:8786) instead of a local cluster")
     o = group(p, "outputs")
@@ -107,6 +108,34 @@ def unit_names(files) -> list[str]:
     return names
 
 
+def repeated_units(files) -> None:
+    """Refuse one unit's data given twice (the same file, or two files of the same bytes):
+    the fleet would count it as two units, and its prior's scatter would shrink toward that
+    unit's deviations. Files that cannot be read are left to the unit (FAILED, reported)."""
+    import hashlib
+
+    stats = []
+    for f in files:
+        with contextlib.suppress(OSError):
+            if os.path.isfile(f):
+                stats.append((f, os.stat(f)))
+    keys: dict = {}
+    for f, st in stats:  # the same file: one inode
+        keys.setdefault((st.st_dev, st.st_ino), []).append(f)
+    sizes = [st.st_size for _, st in stats]
+    for f, st in stats:  # the same bytes: hashed only where two files share a size
+        if sizes.count(st.st_size) > 1 and len(keys[(st.st_dev, st.st_ino)]) == 1:
+            with open(f, "rb") as fh:
+                keys.setdefault(hashlib.file_digest(fh, "sha256").hexdigest(), []).append(f)
+    for key, same in keys.items():
+        if len(same) > 1:
+            how = ("is given twice" if same[0] == same[1] else f"is {same[0]}"
+                   if isinstance(key, tuple) else f"has the same bytes as {same[0]}")
+            raise OptionError(f"{same[1]} {how}: one unit's data given twice would "
+                              "count as two units and shrink the fleet's scatter; give each "
+                              "unit's file once")
+
+
 def run(args) -> int:
     from kincal.cli.console import say_and_write, summary_lines
     from kincal.cli.checks import lambda_value
@@ -142,6 +171,7 @@ def run(args) -> int:
                               f"({', '.join(extra[:3])}{', ...' if len(extra) > 3 else ''}), "
                               "which replacing the unit's folder would delete; move them or "
                               "choose another --out-dir")
+    repeated_units(inputs.files)
     # no folder made here: the one writer makes DIR with the first file written into it (a
     # unit's, or the summary's), so a run that fails before leaves nothing behind; the
     # units share it and never remove it, the command does if the run leaves it empty

@@ -42,7 +42,7 @@ from kincal.models.kinematics import ChainKinematics
 from kincal.models.workspace import CHANGE, between
 from kincal.compensation.targets import Targets, joint_scales
 from kincal.errors import DataError, FrameError
-from kincal.measurements.checks import UNIT_RATIO, spread
+from kincal.measurements.checks import UNIT_RATIO, degrees_read_as_radians, spread
 from kincal.measurements.csv_table import csv_line
 from kincal.measurements.fixed_joints import HeldJoints, refuse_coupled
 from kincal.measurements.orientation_columns import reading_doubt
@@ -211,6 +211,11 @@ def _held(robot, frames: CellFrames | None, seeds, source: str, lines):
     g = robot.geometry
     seeds = np.array(seeds, dtype=float)
     lower, upper = np.array(g.lower, dtype=float), np.array(g.upper, dtype=float)
+    # degrees read as radians: the seeds (a program's values) far outside the limits; a
+    # program so read is commanded nonsense, the targets' branches a guess: solve nothing
+    degrees = degrees_read_as_radians(g.joint_names, g.kinds, lower, upper, seeds, lines)
+    if degrees:
+        raise DataError(f"{source}: {degrees}; nothing is compensated")
     held = HeldJoints() if frames is None else HeldJoints.of(frames, robot)
     if not held.values:
         return seeds, lower, upper, []

@@ -46,6 +46,11 @@ def unit_causes(ev: Evidence) -> list[str]:
     if ev.angle_unit == "rad" and ev.angle_max > DEGREES_AS_RADIANS:
         out.append(f"joint values in degrees read as radians (a revolute joint reaches "
                    f"{ev.angle_max:.4g} rad; --angle-unit deg)")
+    if ev.orientation_angle_max > DEGREES_AS_RADIANS:
+        out.append(f"orientation angles in degrees read as radians (they reach "
+                   f"{ev.orientation_angle_max:.4g} rad; --angle-unit deg reads the joints and "
+                   "the angles in degrees: a file of joints in radians and angles in degrees "
+                   "must be converted to one unit)")
     return out
 
 

@@ -152,6 +152,7 @@ class Evidence:
     corrections: tuple[tuple[str, float, str], ...] = ()
     length_ratio: float = float("nan")
     length_unit: str = "m"
+    length_source: str = ""  # the file of length_ratio when several sets measure positions
     angle_max: float = 0.0
     angle_outside: bool = False
     angle_unit: str = "rad"
@@ -168,6 +169,7 @@ class Evidence:
     weak_scales: str = ""  # their classes' prior scales as the evidence estimated them, or
     #                        the one penalty weight ("lambda 0.001 chosen by cross-validation")
     convention_doubts: tuple[str, ...] = ()  # pose files read in a convention in doubt
+    orientation_angle_max: float = 0.0  # [rad] largest orientation angle read (PoseData's)
     duplicates: tuple[str, ...] = ()  # samples repeated exactly (checks.duplicate_samples)
     orientation_median_deg: float | None = None  # the worst set's orientation errors after
     orientation_rms_deg: float | None = None  # calibration (poses; flush: the tilts) [deg]
@@ -279,8 +281,9 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
     out = []
     r = ev.length_ratio
     if math.isfinite(r) and (r > th.length_ratio or r < 1.0 / th.length_ratio):
-        out.append(Finding("length_unit", f"the measured positions spread {r:.4g}x as much as "
-                           "the robot's tip moves", r, th.length_ratio, "ratio",
+        of = f" of {ev.length_source}" if ev.length_source else ""
+        out.append(Finding("length_unit", f"the measured positions{of} spread {r:.4g}x as much "
+                           "as the robot's tip moves", r, th.length_ratio, "ratio",
                            causes=tuple(unit_causes(ev)[:1])))
     if ev.angle_unit == "rad" and (ev.angle_max > 4 * math.pi or (
             ev.angle_max > DEGREES_AS_RADIANS and ev.angle_outside)):
@@ -288,6 +291,11 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                            + (", outside the URDF limits" if ev.angle_outside else ""),
                            ev.angle_max, 4 * math.pi, "rad",
                            causes=tuple(c for c in unit_causes(ev) if "degrees" in c)))
+    if ev.orientation_angle_max > DEGREES_AS_RADIANS:  # no rpy or rotvec writer goes there
+        out.append(Finding("angle_unit", f"orientation angles reach "
+                           f"{ev.orientation_angle_max:.4g} rad", ev.orientation_angle_max,
+                           DEGREES_AS_RADIANS, "rad",
+                           causes=tuple(c for c in unit_causes(ev) if "orientation" in c)))
     if ev.residual_median_mm > th.residual * L_mm:
         out.append(Finding(
             "residual", f"the position error after calibration is {ev.residual_median_mm:.4g} mm "
@@ -388,24 +396,29 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         result.sets, key=lambda s: float(np.median(s.errors_after)))
     datas = [km.data for km in problem.kinds]
     # unit clue: the measured spread against the nominal tip's with the tool guess, on at
-    # most MAX_UNIT_POSES poses spread through the file (a reference forward kinematics)
+    # most MAX_UNIT_POSES poses spread through the file (a reference forward kinematics),
+    # of every set that measures positions, each on its own chain: the clue is the set
+    # farthest off (a second file in mm beside one in m), the spread the worst set's
     ratio, spread_mm, unit_set = float("nan"), float("nan"), datas[0]
-    positioned = [(dt, robot) for dt, robot in zip(datas, problem.robots)
-                  if getattr(dt, "positions", None) is not None]
-    if positioned:  # the set on its own chain (the first chain may be another set's)
-        dt, robot = positioned[0]
-        unit_set = dt
+    guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
+        problem.options.tool_guess, float)
+    clues = []
+    for dt, robot in zip(datas, problem.robots):
+        if getattr(dt, "positions", None) is None:
+            continue
         points = getattr(dt, "points", None)
         first = np.arange(len(dt)) if points is None else np.flatnonzero(points == 0)
         if len(first) > MAX_UNIT_POSES:
             first = first[np.linspace(0, len(first) - 1, MAX_UNIT_POSES).astype(int)]
-        guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
-            problem.options.tool_guess, float)
         s_pred = spread(tool_points(robot, dt.joint_values[first], guess))
         s_all = spread(dt.positions)  # = the subset's when that is every row (in order)
         s_meas = s_all if len(first) == len(dt) else spread(dt.positions[first])
-        ratio = s_meas / s_pred if s_pred >= 1e-3 else float("nan")
-        spread_mm = s_all * 1e3
+        clues.append((s_meas / s_pred if s_pred >= 1e-3 else float("nan"), s_all * 1e3, dt))
+        if dt is worst.data:
+            spread_mm = s_all * 1e3
+    if clues:
+        ratio, _, unit_set = max(clues, key=lambda c: abs(math.log(c[0])) if math.isfinite(
+            c[0]) and c[0] > 0 else -1.0)
     angle_max, outside = 0.0, False
     for dt, robot in zip(datas, problem.robots):  # each set against its own chain
         gi = robot.geometry  # continuous joints (no limits) may turn many times: no clue
@@ -430,10 +443,11 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     return Evidence(
         reach_m=L, residual_median_mm=worst.after.median, residual_rms_mm=worst.after.rms,
         before_rms_mm=worst.before.rms,
-        spread_mm=spread_mm if positioned and worst.data is unit_set else float("nan"),
+        spread_mm=spread_mm,
         change_rms_mm=rms, change_max_mm=float(d.max()),
         corrections=tuple(corrections), length_ratio=float(ratio),
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
+        length_source=str(getattr(unit_set, "source", "")) if len(clues) > 1 else "",
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
         off_chain_columns=off_chain, other_branch_columns=elsewhere, at_base=at_base,
         bases=tuple(dict.fromkeys(r.base for r in problem.robots)),
@@ -445,6 +459,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         convention_doubts=tuple(d for d in (getattr(checked(type(problem), robot, dt),
                                                     "convention_doubt", "")
                                             for dt, robot in zip(datas, problem.robots)) if d),
+        orientation_angle_max=max(float(getattr(dt, "angles_read_max", 0.0)) for dt in datas),
         duplicates=tuple(duplicate_samples(datas)), orientation_median_deg=o_median,
         orientation_rms_deg=o_rms, orientation_what=o_what,
         tool_far=farthest_tool(problem, result) or ())

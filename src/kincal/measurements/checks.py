@@ -14,6 +14,23 @@ UNIT_RATIO = 30.0  # measured spread this many times the robot's: probably mm re
 DEGREES_AS_RADIANS = 2 * np.pi + 0.5  # [rad] a revolute value beyond: probably degrees
 
 
+
+def degrees_read_as_radians(joint_names, kinds, lower, upper, q, rows) -> str:
+    """"" or what shows that revolute values in radians were degrees: a joint with limits
+    beyond them and beyond a turn and a half (DEGREES_AS_RADIANS), the farthest such value
+    named with its line. A value within a turn is no sign (the limits may be wrong)."""
+    q = np.asarray(q, dtype=float)
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    bounded = np.array([k == "revolute" for k in kinds]) & (np.isfinite(lo) | np.isfinite(hi))
+    sign = (np.abs(q) > DEGREES_AS_RADIANS) & ((q < lo - 1e-6) | (q > hi + 1e-6)) & bounded
+    if not sign.any():
+        return ""
+    i, j = np.unravel_index(np.argmax(np.where(sign, np.abs(q), -1.0)), q.shape)
+    return (f"{joint_names[j]} is {q[i, j]:.4g} rad ({q[i, j] / np.pi:.1f} pi) at line "
+            f"{rows[i]}, outside its URDF limits [{lo[j]:.4g}, {hi[j]:.4g}] rad "
+            f"({int(sign.any(axis=1).sum())} of {len(q)} rows have such values): were the "
+            "joint values degrees? Read them with --angle-unit deg (Python: angle_unit='deg')")
+
 LIMIT_JOINTS_LISTED = 3  # joints outside their limits named one warning each; beyond, one
 
 

@@ -216,6 +216,7 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     if path.is_dir():
         raise InputFileError(f"expected a CSV file, got a directory: {path}")
     check_regular_file(path, f"{kind} CSV", MAX_DATA_BYTES)  # no FIFO, /dev/zero, 10 GB file
+    _refuse_other_kind(path, kind)
     if not header_only:
         fast = _read_fast(path, required, optional, ranges)
         if fast is not None:
@@ -320,6 +321,26 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
     values = np.frombuffer(flat, dtype=float).reshape(len(lines), len(cols)).copy()
     return Columns(path, {c: values[:, k] for k, c in enumerate(wanted)},
                    np.array(lines, dtype=int), tuple(header), separator)
+
+
+def _refuse_other_kind(path: Path, kind: str) -> None:
+    """A URDF or a JSON file (FRAMES.json, ...) given where a CSV file is read: say so,
+    rather than name its first line's text as a header without the columns."""
+    try:
+        with open(path, encoding=_encoding(path)) as fh:
+            head = fh.read(4096)
+    except (UnicodeError, OSError):
+        return  # the reading names it, with its line
+    first = next((ln.strip() for ln in head.splitlines()
+                  if ln.strip() and not ln.lstrip().startswith("#")), "")
+    if first.startswith("<"):
+        what = "XML (a URDF or xacro file?)"
+    elif first.startswith("{") or re.match(r"\[\s*(?:[{\[\"\d-]|$)", first):
+        what = "JSON (a FRAMES.json, REPORT.json or FLEET.json?)"
+    else:
+        return
+    raise DataError(f"{path}: is {what}, not a CSV {kind} file: expected a header line of "
+                    "column names, then rows of numbers (is a file given in another's place?)")
 
 
 def _encoding(path: Path) -> str:

@@ -57,7 +57,10 @@ class PoseData(SampleSet):
     (ROS's qx qy qz qw, matrices, rotations given as such). convention_doubt: None until
     :func:`kincal.identification.orientation_convention.checked` has held that reading
     against the nominal model (the plausibility gate does, for every calibration); then
-    why the orientations look read in the wrong convention, a finding of the gate, or ""."""
+    why the orientations look read in the wrong convention, a finding of the gate, or "".
+    angles_read_max: the largest |angle| of the file's angle columns (rpy, rotvec) read as
+    radians, 0 otherwise (quaternions, matrices, --angle-unit deg): beyond a turn and a half,
+    degrees most likely, a clue of the plausibility gate."""
 
     positions: np.ndarray
     rotations: np.ndarray
@@ -65,6 +68,7 @@ class PoseData(SampleSet):
     orientation_sigma_deg: float = DEFAULT_ORIENTATION_SIGMA_DEG
     orientation_format: str = ""
     convention_doubt: str | None = None
+    angles_read_max: float = 0.0  # [rad]
 
     kind = "pose"
 
@@ -130,8 +134,10 @@ class PoseData(SampleSet):
                      ("sigma", "sigma_deg"), prismatic, angle_unit, length_unit, joint_columns,
                      expected=f"the chain joints, positions and orientations ({fmt.name})")
         v = c.values
-        R = rotations(np.column_stack([v[k] for k in orientation_columns]), fmt.name,
-                      A, c.source, c.rows, orientation_columns)
+        angles = np.column_stack([v[k] for k in orientation_columns])
+        R = rotations(angles, fmt.name, A, c.source, c.rows, orientation_columns)
+        read_max = (float(np.abs(angles).max()) if A == 1.0 and angles.size and fmt.name in
+                    ("rpy-zyx", "rpy-xyz", "rotvec") else 0.0)
         P = np.column_stack([v[k] for k in position_columns]) * L
         for name in ("sigma", "sigma_deg"):
             if name in v and np.any(v[name] <= 0):
@@ -143,7 +149,8 @@ class PoseData(SampleSet):
                    sigma=v["sigma"] * L if "sigma" in v else None,
                    sigma_deg=v.get("sigma_deg"), orientation_sigma_deg=orientation_sigma_deg,
                    rows=c.rows, source=c.source, approach=c.approach, ignored_columns=c.ignored,
-                   orientation_format=fmt.name if fmt.unfixed else "")
+                   orientation_format=fmt.name if fmt.unfixed else "",
+                   angles_read_max=read_max)
 
 
 def right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
