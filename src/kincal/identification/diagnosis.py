@@ -97,8 +97,7 @@ def diagnose(result) -> Finding | None:
               for i in range(len(result.sets))]
     q, g, tau = (np.concatenate([getattr(b, f) for b in blocks]) for f in ("q", "g", "tau"))
     Jq, r = np.concatenate([b.Jq for b in blocks]), np.concatenate([b.r for b in blocks])
-    at = np.concatenate([b.sample + sum(len(c.q) for c in blocks[:i])
-                         for i, b in enumerate(blocks)])  # each row's sample
+    at = np.concatenate([b.sample + k for b, k in zip(blocks, _firsts(blocks))])  # row's sample
     own = np.zeros((len(r), sum(b.own.shape[1] for b in blocks)))
     row = col = 0
     for b in blocks:  # each set's frame columns its own: block-diagonal beside the shared
@@ -215,16 +214,17 @@ class _SetBlock:
 
 
 def _row_weights(blocks) -> np.ndarray:
-    """(rows,) each residual row's weight: 1 / its sample's sigma where a set states one
-    (:data:`kincal.measurements.kind.DEFAULT_SIGMA` for the others), as the fit weighs
-    them; all 1 when no set states one."""
-    from kincal.measurements.kind import DEFAULT_SIGMA
+    """(rows,) each residual row's weight: its sample's, as the fit weighs the sets
+    (:func:`kincal.measurements.kind.sample_weights`)."""
+    from kincal.measurements.kind import sample_weights
 
-    if all(b.sigma is None for b in blocks):
-        return np.ones(sum(len(b.r) for b in blocks))
-    sig = np.concatenate([(np.full(len(b.q), DEFAULT_SIGMA) if b.sigma is None
-                           else b.sigma)[b.sample] for b in blocks])
-    return sig.min() / sig
+    w = sample_weights([b.sigma for b in blocks], [len(b.q) for b in blocks])
+    return w[np.concatenate([b.sample + k for b, k in zip(blocks, _firsts(blocks))])]
+
+
+def _firsts(blocks) -> np.ndarray:
+    """(B,) the index of each block's first sample among all the blocks' samples."""
+    return np.cumsum([0] + [len(b.q) for b in blocks[:-1]])
 
 
 def _rms(blocks, before: np.ndarray, after: np.ndarray) -> tuple:

@@ -44,7 +44,7 @@ from kincal.identification.selection import Identifiability, analyze, grouped, i
 from kincal.identification.solver import SolverOptions, SolveSummary, solve, steps
 from kincal.measurements.checks import distinct_poses, input_warnings, warn_units
 from kincal.measurements.fixed_joints import check_mimics
-from kincal.measurements.kind import DEFAULT_SIGMA
+from kincal.measurements.kind import sample_weights
 from kincal.measurements.sets import as_sets
 from kincal.models.mdh import TOOL_AXIS_WARNING
 from kincal.robot import Robot
@@ -79,12 +79,9 @@ class CalibrationProblem:
             self.kinds) if o.shared_planes else (), soft, ch.torque_rms(self.kinds, soft))
         self.scale = self.layout.penalty_scale(o.length_scale, o.angle_scale)
         self.offsets = np.cumsum([0] + [km.N for km in self.kinds])
-        self.weights, self.row_scale = np.ones(self.n_samples), None
-        if any(km.data.sigma is not None for km in self.kinds):
-            sig = np.concatenate([km.data.sigma if km.data.sigma is not None
-                                  else np.full(km.N, DEFAULT_SIGMA) for km in self.kinds])
-            inv = sig.min() / sig  # in (0, 1]: no overflow whatever the unit of the sigmas
-            self.weights = inv / np.sqrt(np.mean(inv ** 2))
+        self.weights = sample_weights([km.data.sigma for km in self.kinds],
+                                      [km.N for km in self.kinds])
+        self.row_scale = None
         for name in [n for n in o.fix + o.free if not any(c in n for c in "*?[")]:
             self._check_name(name)  # a name of another model says which model has it
         self.layout.expand(o.fix), self.layout.expand(o.free)  # unknown names raise, listed

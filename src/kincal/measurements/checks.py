@@ -14,7 +14,6 @@ UNIT_RATIO = 30.0  # measured spread this many times the robot's: probably mm re
 DEGREES_AS_RADIANS = 2 * np.pi + 0.5  # [rad] a revolute value beyond: probably degrees
 
 
-
 def degrees_read_as_radians(joint_names, kinds, lower, upper, q, rows) -> str:
     """"" or what shows that revolute values in radians were degrees: a joint with limits
     beyond them and beyond a turn and a half (DEGREES_AS_RADIANS), the farthest such value
@@ -30,6 +29,7 @@ def degrees_read_as_radians(joint_names, kinds, lower, upper, q, rows) -> str:
             f"{rows[i]}, outside its URDF limits [{lo[j]:.4g}, {hi[j]:.4g}] rad "
             f"({int(sign.any(axis=1).sum())} of {len(q)} rows have such values): were the "
             "joint values degrees? Read them with --angle-unit deg (Python: angle_unit='deg')")
+
 
 LIMIT_JOINTS_LISTED = 3  # joints outside their limits named one warning each; beyond, one
 

@@ -38,6 +38,19 @@ from kincal.models.chain import Chain
 DEFAULT_SIGMA = 0.05e-3  # [m] position / distance noise assumed when a set states none
 
 
+def sample_weights(sigmas, counts) -> np.ndarray:
+    """(sum(counts),) each sample's weight from its set's stated sigmas [m] (a set's (N,)
+    array, or None: :data:`DEFAULT_SIGMA`), normalised to RMS 1; all 1 when no set states
+    one. sigmas, counts: per set. The one weighting of sets against each other (the fit's,
+    and the residual diagnosis's)."""
+    if all(s is None for s in sigmas):
+        return np.ones(int(sum(counts)))
+    sig = np.concatenate([np.full(n, DEFAULT_SIGMA) if s is None else np.asarray(s, float)
+                          for s, n in zip(sigmas, counts)])
+    inv = sig.min() / sig  # in (0, 1]: no overflow whatever the unit of the sigmas
+    return inv / np.sqrt(np.mean(inv ** 2))
+
+
 def readonly(a, dtype=float) -> np.ndarray:
     a = np.array(a, dtype=dtype)
     a.setflags(write=False)
