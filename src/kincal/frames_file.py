@@ -13,7 +13,11 @@ compensate`` and the API read. Version 2 (``"format": "kincal-frames", "version"
      "backlash": {"joint_6": ...}, "convention": "...", "backlash_convention": "..."}
 
 A set may also hold ``"fixed_joints": {"joint": value}`` (``--joint-value``: joints held
-during the measurements [rad or m]); optional and additive, so the version stays 2.
+during the measurements [rad or m]); optional and additive, so the version stays 2, as is
+``"tilts_in_urdf"``: the contact-face tilts the URDF written beside carries (the flush sets
+on that tip hold zero tilts), each ``{"tip_frame", "joint", "tool.rx", "tool.ry",
+"origin_written": {"xyz", "rpy"}, "origin_before": {"xyz", "rpy"}}``; a reader given another
+URDF puts them back where it lacks them (:mod:`kincal.tilts_in_urdf`).
 
 Frames are in metres and radians, named as the kinds name them (``base.*`` the pose of the
 robot's base frame B in the measurement frame M, ``R_base = rotx(rx) roty(ry) rotz(rz)``;
@@ -44,6 +48,7 @@ import numpy as np
 from kincal.errors import DataError, InputFileError, KincalWarning
 from kincal.input_files import json_depth, non_finite_path
 from kincal.rotations import base_rotation, inverse, matrix_to_quaternion, transform
+from kincal.tilts_in_urdf import TiltInUrdf
 
 AXES6 = ("x", "y", "z", "rx", "ry", "rz")  # a frame's named values: translation, rotation
 POINT_FRAMES = tuple(f"base.{c}" for c in AXES6) + ("tool.x", "tool.y", "tool.z")  # 1 point
@@ -158,6 +163,8 @@ class CellFrames:
     say). base_frame, tip_frame, joints: the chain. sets: one :class:`SetFrames` per set.
     backlash: {joint: half the play [rad or m]}; compliance: {joint: deflection per N m of
     gravity torque [rad/(N m)]} (:mod:`kincal.models.compliance`). source: for messages.
+    tilts_in_urdf: contact-face tilts the URDF written beside carries
+    (:mod:`kincal.tilts_in_urdf`).
     """
 
     robot: str
@@ -169,6 +176,7 @@ class CellFrames:
     backlash: dict = field(default_factory=dict)
     source: str = "<frames>"
     compliance: dict = field(default_factory=dict)
+    tilts_in_urdf: tuple[TiltInUrdf, ...] = ()
 
     @classmethod
     def of_points(cls, base, tools, *, robot: str = "", base_frame: str = "",
@@ -205,6 +213,8 @@ class CellFrames:
             if terms:
                 out |= {key: {j: float(v) for j, v in terms.items()},
                         key + "_convention": convention}
+        if self.tilts_in_urdf:
+            out["tilts_in_urdf"] = [t.as_dict() for t in self.tilts_in_urdf]
         try:  # version 1's keys, of the first point or pose set, for readers of version 1
             s = self.located()
         except DataError:  # no measurement frame: the first set's tool point (contacts)
@@ -221,13 +231,10 @@ class CellFrames:
         out.update(s.derived())
         return out
 
-    def dumps(self, provenance: dict | None = None, folds: list | None = None) -> str:
+    def dumps(self, provenance: dict | None = None) -> str:
         """The file's text; ``provenance`` (who made it, from what) is kept under its own
-        key, which readers ignore, as are ``folds`` (``tilts_in_urdf``: contact-face tilts
-        the URDF written beside carries, :mod:`kincal.export.contact_fold`)."""
+        key, which readers ignore."""
         out = self.as_dict()
-        if folds:
-            out["tilts_in_urdf"] = folds
         if provenance is not None:
             out["provenance"] = provenance
         return json.dumps(out, indent=2) + "\n"
@@ -291,7 +298,8 @@ class CellFrames:
         return cls(str(data.get("robot", "")), str(data.get("chain_hash", "")),
                    str(data.get("base_frame", "")), str(data.get("tip_frame", "")),
                    tuple(str(j) for j in data.get("joints", ())), tuple(sets),
-                   _backlash(data), source, _backlash(data, "compliance"))
+                   _backlash(data), source, _backlash(data, "compliance"),
+                   tuple(map(TiltInUrdf.from_dict, data.get("tilts_in_urdf", []))))
 
     @classmethod
     def _from_v1(cls, data: dict, source: str) -> "CellFrames":
@@ -393,7 +401,7 @@ class CellFrames:
         if top:  # its own sets only: another chain's frames would be read on this one
             return replace(self, sets=mine, backlash=backlash, compliance=compliance)
         return CellFrames(self.robot, "", base, tip, mine[0].joints, mine, backlash,
-                          self.source, compliance)
+                          self.source, compliance, self.tilts_in_urdf)
 
     # ------------------------------------------------------------ checks
     def check_chain(self, robot) -> None:

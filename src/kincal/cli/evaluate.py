@@ -70,10 +70,13 @@ def run(args) -> int:
     protect = check_outputs(robot, [e.report], overwrite=e.overwrite,
                             inputs=(e.inputs.data, e.frames))
     held = None
+    notes: tuple[str, ...] = ()
     if frames is not None:
         from kincal.measurements.fixed_joints import HeldJoints
+        from kincal.tilts_in_urdf import on_urdf
 
         frames.check_chain(robot)
+        frames, notes = on_urdf(frames, robot)  # a contact face's tilt this URDF lacks
         held = HeldJoints.of(frames, robot)  # a file without their columns gets them
     sets = e.inputs.read_sets(robot, held)
     backlash = tuple(frames.backlash) if frames is not None else ()
@@ -119,12 +122,13 @@ def run(args) -> int:
     fixed, source = _held(e, robot, km.data, held)
     if fixed:
         lines.append(f"  {fixed}")
+    lines += [f"  note: {n}" for n in notes]
     content = {"format": "kincal-evaluation-1", "robot": str(robot.source),
                "data": str(e.inputs.data), "kind": km.kind, "frames": how,
                "errors": report.stats_dict(stats[0]),
                "orientation_errors": None if angle is None else report.angle_dict(angle),
                "fixed_joints": dict(getattr(km.data, "fixed_joints", ())),
-               "fixed_joints_source": source}
+               "fixed_joints_source": source, "notes": list(notes)}
     summary = {"command": "evaluate", **{k: v for k, v in content.items() if k != "format"}}
     if not e.report:
         say(summary_lines(e.json, lines, summary))

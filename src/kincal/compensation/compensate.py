@@ -47,6 +47,7 @@ from kincal.measurements.csv_table import csv_line
 from kincal.measurements.fixed_joints import HeldJoints, refuse_coupled
 from kincal.measurements.orientation_columns import reading_doubt
 from kincal.rotations import base_rotation
+from kincal.tilts_in_urdf import on_urdf
 
 COMPLIANCE_STEPS = 4  # fixed-point steps of the commanded joint values under compliance
 REACH_MARGIN = 1.05  # targets beyond this multiple of the chain's reach cannot be reached
@@ -278,6 +279,7 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     g = robot.geometry
     chain = ChainKinematics.of(g)
     tool = frames.tools[point]
+    frames, tilts = on_urdf(frames, robot)  # a contact face's tilt this URDF lacks
     seeds, lower, upper, held = _held(robot, frames, targets.seeds, targets.source,
                                       targets.lines)
     R_MB = base_rotation(*frames.base[3:])
@@ -305,7 +307,7 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     sol = solve(chain, tool, positions_B, rotations, required, seeds, lower, upper, options)
     sol, soft = _deflected(frames, robot, sol, lower, upper)
     return _solution(robot, sol, seeds, targets.lines, required, targets.source,
-                     notes + held + _backlash_notes(frames, robot) + soft)
+                     notes + list(tilts) + held + _backlash_notes(frames, robot) + soft)
 
 
 def _same_model(nominal, calibrated, tool) -> None:
@@ -340,12 +342,14 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
                         f"from the calibrated one's ({', '.join(calibrated.joint_names)})")
     refuse_coupled(calibrated, COUPLED)
     tool = np.zeros(3)
+    tilts: tuple[str, ...] = ()
     if frames is not None:
         frames.check_chain(calibrated)
         if not 0 <= point < len(frames.tools):
             raise FrameError(f"measured point {point + 1} asked for, {frames.source} has "
                              f"{len(frames.tools)} tool point(s)")
         tool = frames.tools[point]
+        frames, tilts = on_urdf(frames, calibrated)  # a contact face's tilt it lacks
     _same_model(nominal, calibrated, tool)
     lines = np.arange(2, len(program) + 2) if lines is None else lines
     # the held joints at their values before the nominal poses are made: the targets too
@@ -357,7 +361,8 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
     sol = solve(ChainKinematics.of(g), tool, p_nom, R_nom, required, program, lower, upper,
                 options)
     notes = ["program filter: each pose of the nominal model at the program's joint values "
-             "(tool point and orientation, base frame) is reached by the calibrated model"]
+             "(tool point and orientation, base frame) is reached by the calibrated model",
+             *tilts]
     sol, soft = _deflected(frames, calibrated, sol, lower, upper)
     return _solution(calibrated, sol, program, lines, required, source,
                      notes + held + _backlash_notes(frames, calibrated) + soft)

@@ -11,9 +11,12 @@ So when a URDF is written, the tilt goes into the origin of the fixed joint abov
 link (``gripper_left_base_link_joint`` on TALOS), turned about the contact point:
 ``origin' = origin @ D``, ``D = [R_c, t - R_c t]``, so the new tip frame is the contact
 frame's orientation and the contact point keeps its coordinates ``t`` (the user's
-``--tool-offset``); FRAMES.json then holds the same point with zero tilts. The contact
-point and face normal are the same as before to first order (kincal's flush height moves
-by ``(R_c^T d - d) . t`` for a residual tilt ``d``: micrometres).
+``--tool-offset``); FRAMES.json then holds the same point with zero tilts and a
+``tilts_in_urdf`` record of the tilts and the joint's origin as written and before, by which
+a reader given another URDF (the nominal one) puts the tilt back
+(:mod:`kincal.tilts_in_urdf`). The contact point and face normal are the same as before to
+first order (kincal's flush height moves by ``(R_c^T d - d) . t`` for a residual tilt
+``d``: micrometres).
 
 It is folded only where that is exact and harmless: the tip is a link whose parent joint
 is fixed and on the chain (the tip below the chain's last joint, not an ancestor of the
@@ -32,10 +35,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from kincal.rotations import base_rotation, rpy_to_matrix, transform
+from kincal.rotations import base_rotation, transform
+from kincal.tilts_in_urdf import TILTS, Origin, TiltInUrdf, joint_origin
 
 MAX_FOLD_DEG = 5.0  # [deg] largest face tilt written into a URDF joint origin
-TILTS = ("tool.rx", "tool.ry")
 
 
 @dataclass(frozen=True)
@@ -44,7 +47,8 @@ class Fold:
 
     joint: the fixed URDF joint; tip: the tip link; tilts: (rx, ry) [rad]; change: (4, 4)
     D, the tip frame's change in itself; origin: (4, 4) the joint's new URDF origin [m];
-    sets: the indices of the result's sets on that tip."""
+    sets: the indices of the result's sets on that tip; before: the joint's origin as the
+    URDF wrote it before the fold."""
 
     joint: str
     tip: str
@@ -52,11 +56,12 @@ class Fold:
     change: np.ndarray
     origin: np.ndarray
     sets: tuple[int, ...]
+    before: Origin
 
     @property
     def nominal(self) -> np.ndarray:
         """(4, 4) the joint's URDF origin before the fold [m]."""
-        return self.origin @ np.linalg.inv(self.change)
+        return self.before.matrix
 
     def describe(self) -> str:
         rx, ry = (math.degrees(v) for v in self.tilts)
@@ -91,7 +96,7 @@ def _crosses(joints: dict, link: str, frame: str) -> bool:
 
 
 def _fixed_joint_above(robot, tip: str, joints: dict):
-    """(joint name, its URDF origin (4, 4)) of the fixed joint above the link ``tip`` when
+    """(joint name, its URDF origin) of the fixed joint above the link ``tip`` when
     it lies between the chain's last joint and the tip; else (None, why). joints:
     :func:`_joints_by_child` of the robot."""
     above = joints.get(tip)
@@ -111,10 +116,7 @@ def _fixed_joint_above(robot, tip: str, joints: dict):
     if (j is None or not names or j.get("name") != names[-1]
             or (rev is not None and bool(rev[-1]))):
         return None, f"the tip link {tip!r} is not below the chain's last joint"
-    o = above.find("origin")
-    xyz, rpy = ((np.array([float(v) for v in (o.get(k) or "0 0 0").split()]) if o is not None
-                 else np.zeros(3)) for k in ("xyz", "rpy"))
-    return str(above.get("name")), transform(rpy_to_matrix(rpy), xyz)
+    return str(above.get("name")), Origin.of(above)
 
 
 def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
@@ -149,14 +151,14 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
             continue
         robots = robots or {r.tip: r for r in chain_robots(result)}
         tree = tree or _joints_by_child(robots[tip])
-        joint, origin = _fixed_joint_above(robots[tip], tip, tree)
+        joint, before = _fixed_joint_above(robots[tip], tip, tree)
         # another set's chain through that joint (one of its ends below the tip) would turn
         crossing = [f"{s.base_frame} -> {s.tip_frame}" for i, s in enumerate(result.sets)
                     if i not in idx and _crosses(tree, tip, s.tip_frame or result.robot.tip)
                     != _crosses(tree, tip, s.base_frame or result.robot.base)]
         if (joint is None or joint in exclude or joint in result.error_model.joint_names
                 or crossing):
-            why = (origin if joint is None else f"{joint} already carries another change"
+            why = (before if joint is None else f"{joint} already carries another change"
                    if not crossing else f"{joint} is also on the chain {crossing[0]}, which "
                    "the turn would move")
             notes.append(f"{said}: {why}, so no URDF joint can carry it")
@@ -164,12 +166,14 @@ def folds(result, exclude=()) -> tuple[tuple[Fold, ...], tuple[str, ...]]:
         R = base_rotation(rx, ry, 0.0)
         tv = np.array(t)
         D = transform(R, tv - R @ tv)
-        out.append(Fold(joint, tip, (rx, ry), D, origin @ D, tuple(idx)))
+        out.append(Fold(joint, tip, (rx, ry), D, before.matrix @ D, tuple(idx), before))
     return tuple(out), tuple(notes)
 
 
-def folded_frames(frames, made: tuple[Fold, ...]):
-    """The CellFrames ``frames`` with the folded sets' tilts set to zero."""
+def folded_frames(frames, made: tuple[Fold, ...], text: str):
+    """The CellFrames ``frames`` with the folded sets' tilts set to zero and the folds
+    recorded (``tilts_in_urdf``), with the joints' origins as ``text``, the URDF written,
+    has them and as they were."""
     if not made:
         return frames
     zero = {i for f in made for i in f.sets}
@@ -179,11 +183,6 @@ def folded_frames(frames, made: tuple[Fold, ...]):
             s = replace(s, values=tuple(0.0 if n in TILTS else v
                                         for n, v in zip(s.names, s.values)))
         sets.append(s)
-    return replace(frames, sets=tuple(sets))
-
-
-def record(made: tuple[Fold, ...]) -> list[dict]:
-    """What FRAMES.json says about the folds (readers ignore it)."""
-    return [{"tip_frame": f.tip, "joint": f.joint, "tool.rx": f.tilts[0], "tool.ry": f.tilts[1],
-             "note": "written into the joint's origin, turned about the contact point; the "
-                     "tilts here are zero"} for f in made]
+    return replace(frames, sets=tuple(sets), tilts_in_urdf=tuple(
+        TiltInUrdf(f.tip, f.joint, f.tilts, joint_origin(text, f.joint), f.before)
+        for f in made))

@@ -214,11 +214,11 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
         check_readback(result, text, o.add_frames, made)  # only the origins changed, and
         # to the calibrated model as a URDF reader reads them
         files.append((o.urdf, stamp_urdf(text, prov)))
-    if o.frames is not None:
-        from kincal.export.contact_fold import folded_frames, record
+    if o.frames is not None:  # made: a URDF text was written, whose folds are recorded
+        from kincal.export.contact_fold import folded_frames
 
-        files.append((o.frames, folded_frames(result.frames(), made).dumps(
-            provenance=prov.as_dict(), folds=record(made))))
+        files.append((o.frames, folded_frames(result.frames(), made, text if made else "")
+                      .dumps(provenance=prov.as_dict())))
     if o.yaml is not None or o.mdh is not None:
         from kincal.export.cell_exports import (kinematics_yaml, mdh_table_csv,
                                                 ur_kinematics_yaml)
