@@ -29,6 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bad_input_bound_cases import bound_cases
 from bad_input_cli_cases import (CaseSkipped, chain_cases, console_cases,
                                   ignored_option_cases, message_cases, output_first_cases,
                                   run_console_case, snapshot, tree_inputs,
@@ -458,6 +459,8 @@ def cases(inputs_dir: Path, inputs: dict):
             "{{d}}", "{d}") if "{" in a else a for a in argv], codes=(1,))
     for label, argv in ignored_option_cases():  # 2: "-inf" reads as an option to argparse
         yield label, cli(argv, codes=(1, 2))
+    for label, argv in bound_cases():  # numeric options beyond their range
+        yield label, cli(argv, codes=(1,))
     for label, argv, setup in output_first_cases():
         yield label, cli(argv, setup, codes=(1,))
     for label, argv, setup in message_cases():

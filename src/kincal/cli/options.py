@@ -360,8 +360,8 @@ class Inputs:
         if self.flush and not self.on_plane:
             raise OptionError("--flush describes plane contacts: give it with --on-plane")
         if self.set_sigma_mm:
-            if len(self.set_sigma_mm) != len(self.files) or min(self.set_sigma_mm) <= 0:
-                raise OptionError(f"--set-sigma-mm takes one positive value per data file: "
+            if len(self.set_sigma_mm) != len(self.files):
+                raise OptionError(f"--set-sigma-mm takes one value per data file: "
                                   f"{len(self.files)} files, got {list(self.set_sigma_mm)}")
             lo, hi = SIGMA_RANGE_M
             for s in self.set_sigma_mm:

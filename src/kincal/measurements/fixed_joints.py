@@ -34,9 +34,11 @@ from kincal.errors import DataError
 def held_values(items, robots, length_unit: str = "m", angle_unit: str = "rad") -> dict:
     """{joint: value [rad or m]} of ``--joint-value NAME=VALUE`` items (values in the
     file's units), each a joint of the chain of one of ``robots`` and within its URDF
-    limits (it held there while the robot was measured); OptionError otherwise."""
+    limits (it held there while the robot was measured; a joint without limits within the
+    magnitudes of a data file's values, :data:`~kincal.measurements.data.MAX_ABS_VALUE`);
+    OptionError otherwise."""
     from kincal.errors import OptionError, listing, suggest
-    from kincal.measurements.data import unit_factors
+    from kincal.measurements.data import MAX_ABS_VALUE, unit_factors
 
     L, A = unit_factors(length_unit, angle_unit, OptionError)
     joints = {j: (g.kinds[k], g.lower[k], g.upper[k]) for r in robots
@@ -61,8 +63,12 @@ def held_values(items, robots, length_unit: str = "m", angle_unit: str = "rad") 
         kind, lo, hi = joints[name]
         scale, unit = (L, length_unit) if kind == "prismatic" else (A, angle_unit)
         out[name] = value * scale
+        # a joint without limits (continuous): the magnitudes a data file's column may hold
+        limits = "URDF limits" if math.isfinite(lo) and math.isfinite(hi) else \
+            "accepted range (the URDF gives no limits: a data file's magnitudes)"
+        lo, hi = max(lo, -MAX_ABS_VALUE), min(hi, MAX_ABS_VALUE)
         if not lo - 1e-6 <= out[name] <= hi + 1e-6:  # the slack of the data's limit check
-            raise OptionError(f"--joint-value {item}: outside {name}'s URDF limits "
+            raise OptionError(f"--joint-value {item}: outside {name}'s {limits} "
                               f"[{lo / scale:.4g}, {hi / scale:.4g}] {unit} (values in the "
                               "files' units, --angle-unit and --length-unit)")
     return out
