@@ -148,12 +148,16 @@ def add_kinds(p, several: bool = True):
 
 
 def add_model(p, allow_all: bool = False, default: str | None = None, help: str | None = None,
-              allow_auto: bool = False):
+              allow_auto: bool = False, auto: str | None = None):
+    """--model NAME, the error model: the one definition of its choices (kincal.models) and
+    of its default; allow_auto: "auto" (the default) too, ``auto`` saying what it means for
+    the command (default: calibrate's, the models compared by CV)."""
     from kincal.models import DEFAULT, MODELS, SUITS
 
     choices = (("auto",) if allow_auto else ()) + MODELS + (("all",) if allow_all else ())
-    auto = ("auto (default): the error models and, with approach directions, backlash terms "
-            "compared by K-fold CV and the best used, the table shown; " if allow_auto else "")
+    auto = "" if not allow_auto else "auto (default): " + (auto or (
+        "the error models and, with approach directions, backlash terms compared by K-fold "
+        "CV and the best used, the table shown")) + "; "
     group(p, "model and penalty").add_argument(
         "--model", choices=choices, default="auto" if allow_auto else default, metavar="NAME",
         help=help or (auto + (f"error model (default: {DEFAULT}; " if not allow_auto else "(")
