@@ -200,7 +200,8 @@ class HeldJoints:
 
     values: ((joint, value [rad or m]), ...), chain order; a joint counts when every set of
     the chain records it held at one value (a set that moved it, or two held values: the
-    calibration is not bound to one). source: the FRAMES.json, for messages.
+    calibration is not bound to one; two held values are warned about, :meth:`of`).
+    source: the FRAMES.json, for messages.
     """
 
     values: tuple[tuple[str, float], ...] = ()
@@ -217,7 +218,28 @@ class HeldJoints:
         values = tuple((j, float(held[0][j])) for j in joints
                        if held and all(j in h and abs(h[j] - held[0][j]) <= HELD_TOLERANCE
                                        for h in held))
-        return cls(values, str(frames.source))
+        out = cls(values, str(frames.source))
+        kinds = dict(zip(joints, robot.geometry.kinds))
+        for j in joints:  # held by every set, but not at one value: not held, and why
+            if held and j not in dict(values) and all(j in h for h in held):
+                out._warn_two_values(j, kinds[j], [(k, s.source, h[j]) for k, (s, h)
+                                                   in enumerate(zip(sets, held))])
+        return out
+
+    def _warn_two_values(self, joint: str, kind: str, sets) -> None:
+        """Warn that ``joint`` was held at different values in the calibration's sets
+        ``sets`` ((index, source, value [rad or m]), ...): it is not taken as held."""
+        import warnings
+
+        from kincal.errors import KincalWarning
+
+        where = ", ".join(f"{held_text(joint, v, kind)} in set {k + 1}"
+                          + (f" ({source})" if source else "") for k, source, v in sets)
+        warnings.warn(f"{joint} was held still at different values in the calibration's sets "
+                      f"({where}, as {self.source} records): the calibration holds at neither "
+                      f"alone, so {joint} is not taken as held at a recorded value; give its "
+                      f"value explicitly (its column in the file, or --joint-value "
+                      f"{joint}=VALUE where the command takes it)", KincalWarning)
 
     def as_dict(self) -> dict[str, float]:
         return dict(self.values)
