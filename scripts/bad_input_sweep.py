@@ -225,6 +225,9 @@ def output_cases():
     def fleet_named(d):
         (d / "FLEET.json.csv").write_text("joint_1,x\n1,2\n")
 
+    def bad_unit(d):
+        (d / "bad.csv").write_text("joint_1,x\n1,2\n")
+
     nothing = None
     yield "out exists", cal + ["--out", "{d}/out.urdf"], existing
     yield "out is a directory", cal + ["--out", "{d}/out.urdf", "--overwrite"], folder
@@ -275,6 +278,9 @@ def output_cases():
                                                        "joint_1=x"], nothing
     yield "fleet unit named as the fleet's own file", [
         "fleet", "ec66", "{csv}", "{d}/FLEET.json.csv", "--out-dir", "{d}/D"], fleet_named
+    # one unit calibrated, one failed: the fleet fails, and writes no unit's files either
+    yield "fleet with fewer than 2 units calibrated", [
+        "fleet", "ec66", "{csv}", "{d}/bad.csv", "--out-dir", "{d}/D", "--quiet"], bad_unit
     yield "analyze report exists", ["analyze", "ec66", "{csv}", "--report", "{d}/out.urdf"], existing
     yield "evaluate report is a dir", ["evaluate", "ec66", "{csv}", "--fit-frames", "--report",
                                        "{d}/out.urdf", "--overwrite"], folder

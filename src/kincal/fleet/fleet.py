@@ -72,9 +72,9 @@ def calibrate_fleet(robot, jobs: list[UnitJob], workers: int = 1, scheduler: str
                     rounds: int = 0, progress: Callable | None = None,
                     batch: int | None = None, on_round: Callable | None = None
                     ) -> FleetSummary:
-    """Every job on the engine; the summary with the prior. The outputs are written by the
-    last round only (its jobs' out_dir); earlier rounds of the hierarchical fit write
-    nothing. progress(done, total, outcome) after each unit (total counts every round).
+    """Every job on the engine; the summary with the prior. The outputs are staged by the
+    last round only (its jobs' out_dir), for the caller to put in place or discard
+    (:mod:`kincal.fleet.folders`); earlier rounds of the hierarchical fit write nothing. progress(done, total, outcome) after each unit (total counts every round).
     batch: units per task (None: engine.batch_size). on_round(r, prior): the prior learned
     after round r (0: each unit alone), e.g. to compare the rounds. rounds: 0 to
     :data:`MAX_ROUNDS`."""
