@@ -149,9 +149,8 @@ def add_kinds(p, several: bool = True):
 
 def add_model(p, allow_all: bool = False, default: str | None = None, help: str | None = None,
               allow_auto: bool = False, auto: str | None = None):
-    """--model NAME, the error model: the one definition of its choices (kincal.models) and
-    of its default; allow_auto: "auto" (the default) too, ``auto`` saying what it means for
-    the command (default: calibrate's, the models compared by CV)."""
+    """--model NAME: the one definition of its choices (kincal.models) and default; with
+    allow_auto "auto" (the default), ``auto`` what it means there (calibrate's: CV)."""
     from kincal.models import DEFAULT, MODELS, SUITS
 
     choices = (("auto",) if allow_auto else ()) + MODELS + (("all",) if allow_all else ())
