@@ -29,6 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bad_input_bound_cases import bound_cases
 from bad_input_cli_cases import (CaseSkipped, chain_cases, console_cases,
                                   ignored_option_cases, message_cases, output_first_cases,
                                   run_console_case, snapshot, tree_inputs,
@@ -224,6 +225,9 @@ def output_cases():
     def fleet_named(d):
         (d / "FLEET.json.csv").write_text("joint_1,x\n1,2\n")
 
+    def bad_unit(d):
+        (d / "bad.csv").write_text("joint_1,x\n1,2\n")
+
     nothing = None
     yield "out exists", cal + ["--out", "{d}/out.urdf"], existing
     yield "out is a directory", cal + ["--out", "{d}/out.urdf", "--overwrite"], folder
@@ -274,6 +278,9 @@ def output_cases():
                                                        "joint_1=x"], nothing
     yield "fleet unit named as the fleet's own file", [
         "fleet", "ec66", "{csv}", "{d}/FLEET.json.csv", "--out-dir", "{d}/D"], fleet_named
+    # one unit calibrated, one failed: the fleet fails, and writes no unit's files either
+    yield "fleet with fewer than 2 units calibrated", [
+        "fleet", "ec66", "{csv}", "{d}/bad.csv", "--out-dir", "{d}/D", "--quiet"], bad_unit
     yield "analyze report exists", ["analyze", "ec66", "{csv}", "--report", "{d}/out.urdf"], existing
     yield "evaluate report is a dir", ["evaluate", "ec66", "{csv}", "--fit-frames", "--report",
                                        "{d}/out.urdf", "--overwrite"], folder
@@ -458,6 +465,8 @@ def cases(inputs_dir: Path, inputs: dict):
             "{{d}}", "{d}") if "{" in a else a for a in argv], codes=(1,))
     for label, argv in ignored_option_cases():  # 2: "-inf" reads as an option to argparse
         yield label, cli(argv, codes=(1, 2))
+    for label, argv in bound_cases():  # numeric options beyond their range
+        yield label, cli(argv, codes=(1,))
     for label, argv, setup in output_first_cases():
         yield label, cli(argv, setup, codes=(1,))
     for label, argv, setup in message_cases():

@@ -140,9 +140,9 @@ IGNORED = [
      "--design is not used with --in-cube/--in-sphere and --max-tilt"),
     # a size <= 0 was said in metres ("the sphere radius ... [m], got -0.005") whatever the unit
     (["plan", "ec66", "--in-sphere", "400", "0", "250", "-5", "--length-unit", "mm", "--poses",
-      "5", "--out", "chosen.csv"], "--in-sphere R [mm] must be a finite number > 0, got -5"),
+      "5", "--out", "chosen.csv"], "--in-sphere R must be a finite number > 0 and <= 1e+06 mm, got -5"),
     (PLAN + ["--target-cube", "400", "0", "250", "0", "--length-unit", "mm"],
-     "--target-cube EDGE [mm] must be a finite number > 0, got 0"),
+     "--target-cube EDGE must be a finite number > 0 and <= 1e+06 mm, got 0"),
     # no cross-validation runs: --cv-max-poses was accepted and ignored
     (CAL + ["--cv-max-poses", "10"], "--cv-max-poses is used only when lambda may be chosen"),
     (CAL[:3] + ["--lambda", "0.1", "--cv-max-poses", "10", "--out", "c.urdf"],

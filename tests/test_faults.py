@@ -79,8 +79,8 @@ OPTION_CASES = {
     "seed negative": (CAL + ["--seed", "-3"], "--seed must be an integer >= 0"),
     "robust scale alone": (CAL + ["--robust-scale-mm", "2"], "needs --robust"),
     "robust scale nan": (CAL + ["--robust", "huber", "--robust-scale-mm", "nan"],
-                         "--robust-scale-mm must be a finite number > 0"),
-    "robust scale zero": (CAL + ["--robust", "huber", "--robust-scale-mm", "0"], "> 0"),
+                         "--robust-scale-mm must be a finite number >= 1e-06 and <= 1000 mm"),
+    "robust scale zero": (CAL + ["--robust", "huber", "--robust-scale-mm", "0"], ">= 1e-06"),
     "tool offset inf": (CAL + ["--tool-offset", "0", "inf", "0"], "--tool-offset must be a finite"),
     "free with ls": (CAL + ["--method", "ls", "--free", "joint_2.d"], "free (--free) applies to method l2"),
     # --model auto (the default) may add backlash terms: the order column is theirs there

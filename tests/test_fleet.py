@@ -242,10 +242,19 @@ def _ec66_text() -> str:
     return EC66.read_text()
 
 
-def test_a_run_without_a_prior_says_the_prior_left_is_an_earlier_runs(fleet_files, tmp_path,
-                                                                      capsys):
-    """--overwrite with fewer than 2 units calibrated replaces the summary but writes no
-    FLEET.json: the one there is the earlier run's, which the error line now says."""
+def _tree(folder) -> dict:
+    """Every file and folder under ``folder``: bytes and modification times."""
+    return {str(p.relative_to(folder)): (p.read_bytes() if p.is_file() else None,
+                                         p.stat().st_mtime_ns)
+            for p in sorted(folder.rglob("*"))}
+
+
+def test_a_fleet_that_fails_writes_nothing_and_replaces_nothing(fleet_files, tmp_path, capsys):
+    """Fewer than 2 units calibrated: the fleet fails (exit 1, no prior). It still wrote
+    FLEET_SUMMARY.json and fleet.html, replaced them under --overwrite, and put the one
+    calibrated unit's files in place (over the earlier run's): result files a pipeline could
+    take for this failed run's. Now nothing is written or replaced, and the one error line
+    names each unit's outcome."""
     out = tmp_path / "D"
     good = [str(fleet_files / "u01.csv"), str(fleet_files / "u02.csv")]
     argv = ["fleet", "ec66", "--tip", "flange", "--tool-offset", "0", "0", "0.045", "--quiet",
@@ -253,12 +262,20 @@ def test_a_run_without_a_prior_says_the_prior_left_is_an_earlier_runs(fleet_file
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalWarning)
         assert main([*argv, *good]) == 0
-        prior = (out / "FLEET.json").read_bytes()
+        before = _tree(out)
+        assert {"FLEET.json", "FLEET_SUMMARY.json", "fleet.html", "u01/corrected.urdf"} <= set(before)
         capsys.readouterr()
         assert main([*argv, good[0], str(fleet_files / "bad.csv"), "--overwrite"]) == 1
-    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
-    assert len(err) == 1 and "FLEET.json is an earlier run's, not this one's" in err[0], err
-    assert (out / "FLEET.json").read_bytes() == prior
+        err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+        assert _tree(out) == before  # u01 calibrated again, but not put in place
+        (line,) = err
+        assert line.startswith("kincal: error: fewer than 2 of the 2 units were calibrated")
+        assert "u01: calibrated" in line and "bad: failed (" in line and "missing" in line, line
+        assert "FLEET.json is an earlier run's, left as it was" in line, line
+        fresh = tmp_path / "E"  # a folder the run would have made: not made
+        capsys.readouterr()
+        assert main([*argv[:-1], str(fresh), good[0], str(fleet_files / "bad.csv")]) == 1
+    assert not fresh.exists()
 
 
 def test_unit_names_are_unique_folders():
@@ -338,3 +355,34 @@ def test_one_units_data_given_twice_is_refused(fleet_files, tmp_path, capsys):
         err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
         assert len(err) == 1 and err[0].startswith("kincal: error:") and says in err[0], err
         assert "one unit's data given twice" in err[0] and not out.exists()
+
+
+def test_a_fleet_whose_summary_cannot_be_written_takes_its_units_out_again(
+        fleet_files, tmp_path, capsys, monkeypatch):
+    """The units are put in place just before the summary and the prior are written; if
+    those cannot be (a full disk, a closed stdout), the units go out again and the earlier
+    ones come back: all of the fleet's files, or none."""
+    import kincal.cli.console as console
+    from kincal.errors import ExportError
+
+    out = tmp_path / "D"
+    argv = ["fleet", "ec66", str(fleet_files / "u01.csv"), str(fleet_files / "u02.csv"),
+            "--tip", "flange", "--tool-offset", "0", "0", "0.045", "--quiet", "--out-dir",
+            str(out)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert main(argv) == 0
+        before = _tree(out)
+
+        def full(*args, **kwargs):
+            assert (out / "u01" / "corrected.urdf").exists()  # the units are in place
+            raise ExportError("FLEET_SUMMARY.json: could not write (No space left on device)")
+
+        monkeypatch.setattr(console, "say_and_write", full)
+        capsys.readouterr()
+        assert main([*argv, "--overwrite"]) == 1
+        assert _tree(out) == before
+        fresh = tmp_path / "E"
+        assert main([*argv[:-1], str(fresh)]) == 1
+    assert not fresh.exists()
+    assert "No space left" in capsys.readouterr().err

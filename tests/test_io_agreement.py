@@ -225,7 +225,7 @@ def test_every_plot_calibrate_may_write_is_checked_before_the_work(cell, tmp_pat
 
 
 @pytest.mark.parametrize("extra, named", [
-    (["--accuracy-map", "nan", "0", "0.3", "0.2"], "--accuracy-map must be a finite number"),
+    (["--accuracy-map", "nan", "0", "0.3", "0.2"], "--accuracy-map CX CY CZ must be a finite number"),
     (["--accuracy-map", "0.4", "0", "0.3", "-1"], "--accuracy-map EDGE must be a finite number > 0"),
     (["--accuracy-map", "0.4", "0", "0.3", "0.2", "--grid", "0"], "--grid must be an integer")])
 def test_accuracy_cube_options_are_named_in_their_refusal(cell, tmp_path, capsys, extra, named):

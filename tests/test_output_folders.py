@@ -126,7 +126,7 @@ def test_fleet_interrupted_before_any_unit_leaves_no_folder_it_made(tmp_path, mo
     capsys.readouterr()
     assert main(["fleet", "ec66", str(data), str(data2), "--tip", "flange",
                  "--out-dir", str(out)]) == 130
-    assert "0 of the 2 units are complete" in capsys.readouterr().err
+    assert "after 0 of the 2 unit calibrations: nothing was written" in capsys.readouterr().err
     assert out.is_dir() is existed
     if existed:
         assert list(out.iterdir()) == []
@@ -146,6 +146,7 @@ def test_a_fleet_units_failure_leaves_the_shared_folder_to_the_unit_about_to_wri
     import warnings
 
     from kincal.errors import KincalWarning
+    from kincal.fleet.folders import commit_units
     from kincal.fleet.unit import STAGING, UnitJob, calibrate_unit
     from kincal.identification.options import CalibrationOptions
     import numpy as np
@@ -199,7 +200,10 @@ def test_a_fleet_units_failure_leaves_the_shared_folder_to_the_unit_about_to_wri
         thread.join(60)
     assert got["A"].status == "failed" and "No space left" in got["A"].message
     assert got["B"].status == "calibrated", got["B"].message
-    assert sorted(p.name for p in out.iterdir()) == ["B"]  # no staging folder of A's left
+    # B staged, waiting for the fleet's outcome; no staging folder of A's left
+    assert sorted(p.name for p in out.iterdir()) == [f"{STAGING}B"]
+    commit_units(out, ["B"], overwrite=False).done()
+    assert sorted(p.name for p in out.iterdir()) == ["B"]
     assert sorted(p.name for p in (out / "B").iterdir()) == [
         "FRAMES.json", "REPORT.json", "corrected.urdf"]
 
@@ -208,14 +212,17 @@ def test_a_fleet_unit_that_cannot_take_its_name_keeps_the_earlier_files(tmp_path
     """--overwrite: the earlier DIR/<unit> is moved aside, the new one renamed in. When that
     rename failed, the earlier files stayed hidden as DIR/.partial-old-<unit> (which the
     command's clean-up of staging folders then deletes) and the unit came back as an
-    internal error; now they are back under their name and the unit fails with one line."""
+    internal error; now they are back under their name, every unit put in place before is
+    taken out again (the fleet's units are put in place together, kincal.fleet.folders),
+    and one line says so."""
     import functools
     import warnings
 
     import numpy as np
 
-    from kincal.errors import KincalWarning
-    from kincal.fleet import unit as fleet_unit
+    from kincal.errors import ExportError, KincalWarning
+    from kincal.fleet import folders
+    from kincal.fleet.folders import commit_units, discard_staged
     from kincal.fleet.simulated import FleetModel
     from kincal.fleet.unit import STAGING, UnitJob, calibrate_unit
     from kincal.identification.options import CalibrationOptions
@@ -225,13 +232,20 @@ def test_a_fleet_unit_that_cannot_take_its_name_keeps_the_earlier_files(tmp_path
     rng = np.random.default_rng(1)
     data = fm.rtest(fm.unit(rng), rng, n=30)
     out = tmp_path / "D"
-    job = UnitJob("u1", "<u1>", functools.partial(Robot.load, "ec66", tip="flange"),
-                  functools.partial(lambda d, r: [d], data),
-                  CalibrationOptions(tool_guess=(0, 0, 0.11)), str(out), overwrite=True)
+
+    def job(name):
+        return UnitJob(name, f"<{name}>", functools.partial(Robot.load, "ec66", tip="flange"),
+                       functools.partial(lambda d, r: [d], data),
+                       CalibrationOptions(tool_guess=(0, 0, 0.11)), str(out), overwrite=True)
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", KincalWarning)
-        assert calibrate_unit(job).status == "calibrated"
-        before = {p.name: p.read_bytes() for p in (out / "u1").iterdir()}
+        for name in ("u0", "u1"):
+            assert calibrate_unit(job(name)).status == "calibrated"
+        commit_units(out, ["u0", "u1"], overwrite=True).done()
+        before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+        for name in ("u0", "u1"):
+            assert calibrate_unit(job(name)).status == "calibrated"  # staged again
         real = os.replace
 
         def replace(src, dst):
@@ -239,8 +253,9 @@ def test_a_fleet_unit_that_cannot_take_its_name_keeps_the_earlier_files(tmp_path
                 raise OSError(28, "No space left on device")
             return real(src, dst)
 
-        monkeypatch.setattr(fleet_unit.os, "replace", replace)
-        again = calibrate_unit(job)
-    assert again.status == "failed" and "the earlier ones are kept" in again.message
-    assert sorted(p.name for p in out.iterdir()) == ["u1"]
-    assert {p.name: p.read_bytes() for p in (out / "u1").iterdir()} == before
+        monkeypatch.setattr(folders.os, "replace", replace)
+        with pytest.raises(ExportError, match="No space left.*the earlier ones are kept"):
+            commit_units(out, ["u0", "u1"], overwrite=True)
+    discard_staged(out)
+    assert sorted(p.name for p in out.iterdir()) == ["u0", "u1"]  # u0 taken out again too
+    assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before

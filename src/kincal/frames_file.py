@@ -57,7 +57,10 @@ FORMAT = "kincal-frames"
 VERSION = 2
 CONVENTION = ("P_measured = R_base (p_tip + R_tip t_tool) + t_base, R_base = rotx(rx) "
               "roty(ry) rotz(rz); metres and radians")
-MAX_LENGTH = 1e3  # [m] largest translation accepted in a frames file
+# [m] the largest length kincal accepts in a robot cell: a frame's translation (a frames
+# file, a tool point or measurement frame guess), a point or the size of a volume the
+# commands are given (a cube, a sphere, a floor, a pivot); a kilometre is a unit slip
+MAX_LENGTH = 1e3
 MAX_ANGLE = 100.0  # [rad]
 MAX_COMPLIANCE = 1.0  # [rad/(N m)] largest compliance accepted (1 rad at 1 N m)
 MAX_DEPTH = 32

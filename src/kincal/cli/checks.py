@@ -29,8 +29,9 @@ LAMBDA_WORDS = ("auto", "cv", "evidence")
 
 
 def lambda_value(text: str) -> str | float:
-    """--lambda as the fit takes it: one of :data:`LAMBDA_WORDS`, or a finite number >= 0
-    (calibrate and fleet); OptionError otherwise."""
+    """--lambda as the fit takes it: one of :data:`LAMBDA_WORDS`, or a finite number from 0
+    to :data:`kincal.identification.options.MAX_LAMBDA` (calibrate and fleet); OptionError
+    otherwise."""
     if text in LAMBDA_WORDS:
         return text
     try:
@@ -38,8 +39,10 @@ def lambda_value(text: str) -> str | float:
     except ValueError:
         raise OptionError(f"--lambda must be 'auto', 'cv', 'evidence' or a number, got "
                           f"{text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise OptionError(f"--lambda must be a finite number >= 0, got {value:g}")
+    from kincal.identification.options import MAX_LAMBDA
+
+    _finite("--lambda", value, 0, MAX_LAMBDA, why="a penalty weight: beyond, the nominal "
+            "kinematics outweigh any data set")
     return value
 
 
@@ -48,17 +51,40 @@ def _need(ok: bool, message: str) -> None:
         raise OptionError(message)
 
 
-def _finite(option: str, values, low=None, high=None, low_open=False) -> None:
-    """Each number of ``option`` is finite and within [low, high] (low excluded if low_open)."""
+def _finite(option: str, values, low=None, high=None, low_open=False, unit: str = "",
+            why: str = "", scale: float = 1.0) -> None:
+    """Each number of ``option`` times ``scale`` is finite and within [low, high] (low
+    excluded if low_open: the bounds in the unit they are defined in, SI where ``scale``
+    converts to it); else one line naming the option, the value and the range in the
+    option's ``unit`` (the bounds divided by ``scale``), and ``why`` the range."""
     if values is None:
         return
     for v in (values if isinstance(values, (list, tuple)) else [values]):
-        ok = math.isfinite(v) and (low is None or (v > low if low_open else v >= low)) \
-            and (high is None or v <= high)
+        x = v * scale
+        ok = math.isfinite(x) and (low is None or (x > low if low_open else x >= low)) \
+            and (high is None or x <= high)
         if not ok:
-            bound = ("" if low is None else f" {'>' if low_open else '>='} {low:g}") + (
-                "" if high is None else f"{' and' if low is not None else ''} <= {high:g}")
-            _need(False, f"{option} must be a finite number{bound}, got {v:g}")
+            bound = ("" if low is None else f" {'>' if low_open else '>='} {low / scale:g}") + (
+                "" if high is None else
+                f"{' and' if low is not None else ''} <= {high / scale:g}")
+            _need(False, f"{option} must be a finite number{bound}{' ' + unit if unit else ''}"
+                  f", got {v:g}{f' ({why})' if why else ''}")
+
+
+def _cell_lengths(option: str, values, args, size: bool = False,
+                  what: str = "of the base frame") -> None:
+    """Lengths of the robot cell, in the command's length unit (--length-unit; metres where
+    it has none, simulate): each within :data:`kincal.frames_file.MAX_LENGTH` of the frame
+    (``size``: a size > 0 and up to it)."""
+    from kincal.cli.options import length_scale
+    from kincal.frames_file import MAX_LENGTH
+
+    unit = getattr(args, "length_unit", None) or "m"
+    why = (f"a robot cell: up to {MAX_LENGTH:g} m" if size else
+           f"a robot cell: within {MAX_LENGTH:g} m {what}") + (
+        "; check --length-unit" if hasattr(args, "length_unit") else "")
+    _finite(option, values, 0 if size else -MAX_LENGTH, MAX_LENGTH, low_open=size, unit=unit,
+            why=why, scale=length_scale(unit))
 
 
 def _count(option: str, value, low: int, high: int | None = None) -> None:
@@ -87,7 +113,7 @@ def _measurement_noise(value) -> None:
     (:data:`kincal.identification.options.EVIDENCE_RANGE`)."""
     from kincal.identification.options import EVIDENCE_RANGE
 
-    _finite("--noise-mm", value, *EVIDENCE_RANGE)
+    _finite("--noise-mm", value, *EVIDENCE_RANGE, unit="mm")
 
 
 def _check_calibrate(args) -> None:
@@ -105,7 +131,10 @@ def _check_calibrate(args) -> None:
     _count("--seed", args.seed, 0)
     _need(args.robust_scale_mm is None or args.robust is not None,
           "--robust-scale-mm needs --robust huber or --robust cauchy")
-    _finite("--robust-scale-mm", args.robust_scale_mm, 0, low_open=True)
+    from kincal.identification.robust import SCALE_RANGE_M
+
+    _finite("--robust-scale-mm", args.robust_scale_mm, *SCALE_RANGE_M, unit="mm", scale=1e-3,
+            why="a pose error's scale: beyond, no pose is down-weighted")
     args.lam = DEFAULT_LAMBDA if args.lam is None else args.lam
     args.seed = 0 if args.seed is None else args.seed
     if args.cv_max_poses is None:  # CalibrationOptions' default: 2000
@@ -119,7 +148,7 @@ def _check_floor(args, volume: bool) -> None:
     for option, given in (("--floor", args.floor is not None), ("--no-floor", args.no_floor)):
         _need(not given or volume, f"{option} is checked for poses drawn in a volume: it "
               "needs --in-cube or --in-sphere")
-    _finite("--floor", args.floor, -1e6, 1e6)
+    _cell_lengths("--floor", args.floor, args)
     args.floor = 0.0 if args.floor is None else args.floor
 
 
@@ -143,11 +172,8 @@ def _check_simulate(args) -> None:
     _need(args.orientation_noise_deg is None or args.kind in ("pose", "flush"),
           "--orientation-noise-deg is the orientation noise of --kind pose (or the tilt "
           "noise of --kind flush)")
-    _finite("--orientation-noise-deg", args.orientation_noise_deg, 0, 10)
-    for option in ("tilt_direction", "in_cube", "in_sphere"):
-        _finite("--" + option.replace("_", "-"), getattr(args, option))
-    _volume_sizes(args)
-    _finite("--max-tilt", args.max_tilt, 0, 180)
+    _finite("--orientation-noise-deg", args.orientation_noise_deg, 0, 10, unit="deg")
+    _volume_options(args)
     _check_floor(args, volume)
     args.poses = 60 if args.poses is None else args.poses
     args.design = "tracker" if args.design is None else args.design
@@ -161,7 +187,7 @@ def _check_plan(args, volume: bool) -> None:
     _check_floor(args, volume)
     _need(args.pivot is None or args.kind == "distance",
           "--pivot is the guess of the pivot of --kind distance")
-    _finite("--pivot", args.pivot)
+    _cell_lengths("--pivot", args.pivot, args)
     if args.criterion is None:  # I-optimal where it applies (the predicted point), else D
         args.criterion = "i" if args.kind == "point" else "d"
     _need(args.target_poses is None or args.criterion == "i",
@@ -171,34 +197,30 @@ def _check_plan(args, volume: bool) -> None:
           "or a volume (--in-cube/--in-sphere) whose default working cube they are drawn in")
     _count("--target-poses", args.target_poses, 1, MAX_POSES)
     args.target_poses = 1000 if args.target_poses is None else args.target_poses
-    if args.home is not None:
+    if args.home is not None:  # within the joint limits: checked on the loaded robot
         _finite("--home", args.home)
-    for option in ("tilt_direction", "target_cube", "in_cube", "in_sphere"):
-        _finite("--" + option.replace("_", "-"), getattr(args, option))
-    _volume_sizes(args)
-    _finite("--max-tilt", args.max_tilt, 0, 180)
+    _volume_options(args)
 
 
-def _volume_sizes(args) -> None:
-    """A cube's edge or a sphere's radius > 0, said in the unit the user typed it in."""
+def _volume_options(args) -> None:
+    """The volumes (a cube's centre and edge, a sphere's centre and radius, plan's target
+    cube) in the cell, said in the unit the user typed them in; a tilt direction (any
+    finite length: only its direction counts) and the largest tilt."""
+    from kincal.planning.volume_candidates import MAX_TILT_DEG
+
     for option, size in (("target_cube", "EDGE"), ("in_cube", "EDGE"), ("in_sphere", "R")):
         v = getattr(args, option, None)
-        unit = getattr(args, "length_unit", None) or "m"
-        _finite(f"--{option.replace('_', '-')} {size} [{unit}]", None if v is None else v[3],
-                0, low_open=True)
+        flag = "--" + option.replace("_", "-")
+        _cell_lengths(f"{flag} CX CY CZ", None if v is None else v[:3], args)
+        _cell_lengths(f"{flag} {size}", None if v is None else v[3], args, size=True)
+    _finite("--tilt-direction", args.tilt_direction)
+    _finite("--max-tilt", args.max_tilt, 0, MAX_TILT_DEG, unit="deg")
 
 
 def check_args(args) -> None:
     """Raise OptionError for any option value or combination the command would not use."""
-    offset = getattr(args, "tool_offset", None)
-    _finite("--tool-offset", offset)
-    if offset is not None:
-        from kincal.cli.options import length_scale
-
-        unit = getattr(args, "length_unit", "m")
-        _need(max(map(abs, offset)) * length_scale(unit) <= 1e3,
-              f"--tool-offset {' '.join(f'{v:g}' for v in offset)} [{unit}] is over 1000 m from "
-              "the tip frame; check the unit (--length-unit)")
+    _cell_lengths("--tool-offset", getattr(args, "tool_offset", None), args,
+                  what="of the tip frame")
     c = args.command
     if hasattr(args, "backlash"):  # calibrate, analyze (evaluate reads backlash from FRAMES.json)
         # --model auto (the default) weighs backlash terms too: their directions need the order
@@ -212,9 +234,9 @@ def check_args(args) -> None:
               "needs --accuracy-map")
         from kincal.planning.accuracy_map import MAX_GRID  # the cube's own checks, named
 
-        _finite("--accuracy-map", args.accuracy_map)
-        _finite("--accuracy-map EDGE", None if args.accuracy_map is None else args.accuracy_map[3],
-                0, low_open=True)
+        cube = args.accuracy_map
+        _cell_lengths("--accuracy-map CX CY CZ", None if cube is None else cube[:3], args)
+        _cell_lengths("--accuracy-map EDGE", None if cube is None else cube[3], args, size=True)
         _count("--grid", args.grid, 1, MAX_GRID)
         args.grid = 5 if args.grid is None else args.grid
     _orientation_sigma(getattr(args, "orientation_sigma_deg", None))
@@ -229,13 +251,20 @@ def check_args(args) -> None:
         _need(args.tool_offset is None, "simulate does not use --tool-offset (a starting guess "
               "for calibration); the simulated tool point is --tool-m X Y Z [m]")
         _count("--poses", args.poses, 1, MAX_POSES)
+        from kincal.planning.volume_candidates import MAX_TILT_DEG
+
         # upper bounds far above any real robot: beyond them the simulated robot is noise
-        _finite("--size-mm", args.size_mm, 0, 10_000, low_open=True)
-        _finite("--tilt-deg", args.tilt_deg, 0, 180)
-        for option in ("center_m", "tool_m", "base_frame"):  # [m] and [deg]: a km is absurd
-            _finite("--" + option.replace("_", "-"), getattr(args, option), -1000, 1000)
+        _finite("--size-mm", args.size_mm, 0, 10_000, low_open=True, unit="mm")
+        _finite("--tilt-deg", args.tilt_deg, 0, MAX_TILT_DEG, unit="deg")
+        _cell_lengths("--center-m", args.center_m, args)
+        _cell_lengths("--tool-m", args.tool_m, args, what="of the tip frame")
+        frame = args.base_frame
+        _cell_lengths("--base-frame X Y Z", None if frame is None else frame[:3], args)
+        _finite("--base-frame RX RY RZ", None if frame is None else frame[3:], -360, 360,
+                unit="deg", why="one turn either way")
         for option, high in (("length_error_mm", 100), ("angle_error_deg", 10), ("noise_mm", 1000)):
-            _finite("--" + option.replace("_", "-"), getattr(args, option), 0, high)
+            _finite("--" + option.replace("_", "-"), getattr(args, option), 0, high,
+                    unit=option.rsplit("_", 1)[1])
         _count("--seed", args.seed, 0)
         _count("--truth-seed", args.truth_seed, 0)
         _check_simulate(args)
@@ -255,7 +284,12 @@ def check_args(args) -> None:
         args.seed = 0 if args.seed is None else args.seed
         _check_plan(args, volume)
     elif c == "compensate":
-        _finite("--tolerance-mm", args.tolerance_mm, 0, low_open=True)
+        from kincal.compensation.ik import POSITION_TOLERANCE_RANGE
+
+        _finite("--tolerance-mm", args.tolerance_mm, *POSITION_TOLERANCE_RANGE, unit="mm",
+                scale=1e-3, why="below, the inverse kinematics chase rounding; above, an "
+                "uncorrected seed would count as reached")
+        _count("--point", args.point, 1)
         _need(args.program is None or not (args.position_columns or args.orientation_format
                                            or args.orientation_columns),
               "--position-columns, --orientation-format and --orientation-columns describe "
@@ -270,7 +304,9 @@ def check_args(args) -> None:
     elif c == "fleet":
         lambda_value(args.lam)
         _count("--workers", args.workers, 1, MAX_WORKERS)  # each a process: 100,000 hung
-        _count("--hierarchical", args.hierarchical, 0)
+        from kincal.fleet.fleet import MAX_ROUNDS
+
+        _count("--hierarchical", args.hierarchical, 0, MAX_ROUNDS)
     elif c == "demo":
         out = Path(args.out).expanduser()
         if out.exists() or out.is_symlink():

@@ -1,19 +1,19 @@
 """``kincal fleet``: calibrate every unit of a fleet of one robot model on a distributed
 engine (Dask), write each unit's outputs under DIR/<unit>/, the fleet summary and the fleet
-prior DIR/FLEET.json (:mod:`kincal.fleet`)."""
+prior DIR/FLEET.json (:mod:`kincal.fleet`): all of them once the fleet has succeeded (two
+units calibrated, a prior learnt), none if it fails or is interrupted."""
 
 from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from kincal.cli.options import (Chain, Inputs, add_common, add_gate_overrides, add_model,
                                 add_overwrite, group, typed)
-from kincal.errors import OptionError
+from kincal.errors import DataError, OptionError
 
 SUMMARY_JSON, SUMMARY_HTML, PRIOR = "FLEET_SUMMARY.json", "fleet.html", "FLEET.json"
 
@@ -84,6 +84,7 @@ def unit_names(files) -> list[str]:
     count as one (a case-insensitive file system has one folder for both). Two units in one
     folder would replace each other's files, and the summary would count one twice. A name
     the fleet's own files or staging folders take is refused."""
+    from kincal.fleet.folders import OLD
     from kincal.fleet.unit import STAGING
 
     stems = [Path(f).stem for f in files]
@@ -102,9 +103,11 @@ def unit_names(files) -> list[str]:
         names.append(name)
     reserved = {n.casefold() for n in (PRIOR, SUMMARY_JSON, SUMMARY_HTML)}
     for f, name in zip(files, names):
-        if name.casefold() in reserved or name.startswith(STAGING) or name in ("", ".", ".."):
+        if name.casefold() in reserved or name.startswith((STAGING, OLD)) \
+                or name in ("", ".", ".."):
             raise OptionError(f"{f}: its unit would be DIR/{name}, a name the fleet's own files "
-                              f"or staging folders ({STAGING}*) take; rename the data file")
+                              f"or staging folders ({STAGING}*, {OLD}*) take; rename the data "
+                              "file")
     return names
 
 
@@ -143,7 +146,8 @@ def run(args) -> int:
     from kincal.export.outputs import File
     from kincal.cli.checks import check_outputs
     from kincal.fleet import UnitJob, calibrate_fleet
-    from kincal.fleet.unit import FRAMES, REPORT, STAGING, URDF
+    from kincal.fleet.folders import commit_units, discard_staged
+    from kincal.fleet.unit import FRAMES, REPORT, URDF
     unit_files = (URDF, FRAMES, REPORT)
     from kincal.identification.options import CalibrationOptions
 
@@ -173,8 +177,10 @@ def run(args) -> int:
                               "choose another --out-dir")
     repeated_units(inputs.files)
     # no folder made here: the one writer makes DIR with the first file written into it (a
-    # unit's, or the summary's), so a run that fails before leaves nothing behind; the
-    # units share it and never remove it, the command does if the run leaves it empty
+    # unit's staging folder, or the summary's), so a run that fails before leaves nothing
+    # behind; the units share it and never remove it, the command does if the run leaves it
+    # empty. The units' files wait in their staging folders for the fleet's outcome
+    # (kincal.fleet.folders): a fleet that fails writes nothing and replaces nothing.
     made = not out.exists()
     # absolute paths: a worker of a running scheduler (--scheduler) has a cwd of its own
     from kincal.descriptions import portable
@@ -185,53 +191,70 @@ def run(args) -> int:
                     os.path.abspath(out), c.accept_implausible, c.accept_unconverged,
                     c.overwrite, c.command_line or None, xacro_args(chain.xacro_arg))
             for n, f in zip(names, inputs.files)]
+    finished: list[str] = []
 
     def progress(done, total, outcome):
+        finished.append(outcome.name)
         if not c.quiet:
             print(f"  unit {done}/{total}: {outcome.name} {outcome.status}", file=sys.stderr,
                   flush=True)
+
+    def discard():
+        discard_staged(out)  # no unit's files are left behind, staged or half written
+        _remove_if_empty(out, made)  # made by a unit's staging
 
     try:
         summary = calibrate_fleet(robot, jobs, c.workers, c.scheduler, c.hierarchical,
                                   progress)
     except BaseException as exc:  # Ctrl-C, SIGTERM: the workers are stopped by now
-        for stage in out.glob(f"{STAGING}*"):  # no half-written unit is left behind
-            shutil.rmtree(stage, ignore_errors=True)
-        _remove_if_empty(out, made)  # made by a unit stopped midway
+        discard()
         from kincal.cli.console import Terminated
 
         if not isinstance(exc, (KeyboardInterrupt, Terminated)):
             raise
         signal, code = ("SIGINT", 130) if isinstance(exc, KeyboardInterrupt) else ("SIGTERM", 143)
-        finished = [n for n in names if (out / n / URDF).is_file()]
-        print(f"kincal: error: interrupted ({signal}): {len(finished)} of the {len(jobs)} units "
-              f"are complete under {out}{'/' if finished else ''}"
-              f"{'' if not finished else ' (' + _shown(finished) + ')'}, the others left "
-              f"nothing; no fleet prior or summary was written", file=sys.stderr)
+        print(f"kincal: error: interrupted ({signal}) after {len(finished)} of the "
+              f"{len(jobs) * (c.hierarchical + 1)} unit calibrations: nothing was written (no "
+              "unit's files, no fleet prior or summary)", file=sys.stderr)
         return code
-    files = [File(out / SUMMARY_JSON, "json", summary.as_dict()),
-             File(out / SUMMARY_HTML, "html", summary.html())]
-    if summary.prior is not None:
-        files.append(File(out / PRIOR, "json", summary.prior.as_dict()))
+    if summary.prior is None:  # the fleet failed: its units' files are no result of it
+        discard()
+        raise DataError(_failed(summary.units, out))
     status = [u.status for u in summary.units]
     gate = (f"each unit's own gate: {status.count('calibrated')} calibrated, "
             f"{status.count('refused')} refused, {status.count('failed')} failed of "
             f"{len(status)} units (the prior is learnt from the calibrated ones)")
-    try:
+    units = None
+    try:  # the units put in place, then the fleet's files; any failure: none of them
+        files = [File(out / SUMMARY_JSON, "json", summary.as_dict()),
+                 File(out / SUMMARY_HTML, "html", summary.html()),
+                 File(out / PRIOR, "json", summary.prior.as_dict())]
+        units = commit_units(out, [u.name for u in summary.units if u.status == "calibrated"],
+                             c.overwrite)
         say_and_write(files, lambda written: summary_lines(
             c.json, [summary.table()], {"command": "fleet", **summary.as_dict()}, written),
             provenance=c.chain.provenance(robot, inputs.files, c.command_line,
                                           verdict="per unit", gate=gate),
             overwrite=c.overwrite, protect=protect, dirs=[out])
+        units.done()  # the earlier unit folders replaced go
     except BaseException:
-        _remove_if_empty(out, made)  # the units' shared folder, if no unit's files are in it
+        if units is not None:
+            units.undo()  # the summary could not be written: no unit's files either
+        discard()
         raise
-    if summary.prior is None:
-        stale = (f"; {out / PRIOR} is an earlier run's, not this one's (left as it was)"
-                 if (out / PRIOR).exists() else "")
-        raise OptionError(f"fewer than 2 of the {len(jobs)} units were calibrated: no fleet "
-                          f"prior written (see {out / SUMMARY_JSON}){stale}")
     return 0
+
+
+def _failed(units, out: Path) -> str:
+    """The error of a fleet with fewer than two units calibrated: each unit's outcome."""
+    calibrated = sum(u.status == "calibrated" for u in units)
+    stale = (f"; {out / PRIOR} is an earlier run's, left as it was"
+             if (out / PRIOR).exists() else "")
+    each = "; ".join(f"{u.name}: {u.status}" + (f" ({u.message})" if u.message else "")
+                     for u in units)
+    return (f"fewer than 2 of the {len(units)} units were calibrated ({calibrated}): a fleet "
+            f"prior needs 2, and nothing was written (no unit's files, no summary){stale}. "
+            f"Units: {each}")
 
 
 def _remove_if_empty(out: Path, made: bool) -> None:
@@ -242,6 +265,3 @@ def _remove_if_empty(out: Path, made: bool) -> None:
         with contextlib.suppress(OSError):
             out.rmdir()
 
-
-def _shown(names, at_most: int = 5) -> str:
-    return ", ".join(names[:at_most]) + (f", ... ({len(names)})" if len(names) > at_most else "")

@@ -148,12 +148,15 @@ def add_kinds(p, several: bool = True):
 
 
 def add_model(p, allow_all: bool = False, default: str | None = None, help: str | None = None,
-              allow_auto: bool = False):
+              allow_auto: bool = False, auto: str | None = None):
+    """--model NAME: the one definition of its choices (kincal.models) and default; with
+    allow_auto "auto" (the default), ``auto`` what it means there (calibrate's: CV)."""
     from kincal.models import DEFAULT, MODELS, SUITS
 
     choices = (("auto",) if allow_auto else ()) + MODELS + (("all",) if allow_all else ())
-    auto = ("auto (default): the error models and, with approach directions, backlash terms "
-            "compared by K-fold CV and the best used, the table shown; " if allow_auto else "")
+    auto = "" if not allow_auto else "auto (default): " + (auto or (
+        "the error models and, with approach directions, backlash terms compared by K-fold "
+        "CV and the best used, the table shown")) + "; "
     group(p, "model and penalty").add_argument(
         "--model", choices=choices, default="auto" if allow_auto else default, metavar="NAME",
         help=help or (auto + (f"error model (default: {DEFAULT}; " if not allow_auto else "(")
@@ -360,8 +363,8 @@ class Inputs:
         if self.flush and not self.on_plane:
             raise OptionError("--flush describes plane contacts: give it with --on-plane")
         if self.set_sigma_mm:
-            if len(self.set_sigma_mm) != len(self.files) or min(self.set_sigma_mm) <= 0:
-                raise OptionError(f"--set-sigma-mm takes one positive value per data file: "
+            if len(self.set_sigma_mm) != len(self.files):
+                raise OptionError(f"--set-sigma-mm takes one value per data file: "
                                   f"{len(self.files)} files, got {list(self.set_sigma_mm)}")
             lo, hi = SIGMA_RANGE_M
             for s in self.set_sigma_mm:

@@ -7,8 +7,8 @@ from dataclasses import dataclass, replace
 
 from kincal.cli.checks import check_outputs
 from kincal.cli.console import say_and_write, summary_lines
-from kincal.cli.options import (Chain, add_common, add_joint_columns, add_overwrite, add_units,
-                                group, joint_map, length_scale, tool_guess, typed)
+from kincal.cli.options import (Chain, add_common, add_joint_columns, add_model, add_overwrite,
+                                add_units, group, joint_map, length_scale, tool_guess, typed)
 from kincal.cli.volume_options import VolumeRequest, add_volume_options, volume_spec
 from kincal.errors import OptionError
 
@@ -46,6 +46,9 @@ def register(subparsers) -> None:
              "numbers there (candidate_line)")
     add_units(p, length="prismatic joints in CANDIDATES and of --tool-offset",
               angle="revolute joints in CANDIDATES")
+    add_model(p, allow_auto=True, auto="poses for the model calibrate's auto starts from and "
+              "keeps unless the data tell otherwise, the chain's default (complete; placement "
+              "on a tree path)")
     c.add_argument("--fix", nargs="+", default=[], metavar="NAME",
                    help="parameters held nominal (left out of the criterion)")
     c.add_argument("--noise-mm", type=float, default=0.05,
@@ -91,6 +94,7 @@ class Plan:
     out: str
     length_unit: str
     angle_unit: str
+    model: str  # an error model, or "auto": the chain's default (kincal.models.default_for)
     fix: tuple[str, ...]
     noise_mm: float
     joint_columns: tuple[tuple[str, str], ...]
@@ -206,6 +210,7 @@ def _plan(p: Plan, robot, protect: list) -> int:
     with limited(1):  # small batched matrices: BLAS threads would only wait for each other
         selection = select_poses(robot, np.vstack([measured, q]), k + p.poses, tool=tool,
                                  fix=p.fix, keep=tuple(range(k)), method=p.criterion.upper(),
+                                 model=None if p.model == "auto" else p.model,
                                  targets=targets, kind=p.kind,
                                  pivot=None if p.pivot is None else np.array(p.pivot) * unit,
                                  planes=planes)
@@ -219,6 +224,7 @@ def _plan(p: Plan, robot, protect: list) -> int:
 
     summary = {"command": "plan", "robot": str(robot.source), "candidates": int(len(q)),
                "measured": int(k), "criterion": p.criterion, "kind": p.kind,
+               "model": selection.model,
                "chosen": int(len(new)),
                "candidate_lines": None if lines is None else [int(v) for v in lines[new]],
                "joint_names": list(selection.joint_names),

@@ -35,11 +35,18 @@ STALL_GAIN = 0.9  # an error counts as progress below this fraction of the best 
 STALL_NET = 0.1  # net move over the window / path length below which the joints wander
 
 
+# [m] accepted position tolerances: below 1 nm the iterations (stopped at a thousandth of
+# it) would chase rounding; above 10 mm a target counts as reached where a calibration's
+# corrections (millimetres) are not yet applied: the uncorrected seed would pass
+POSITION_TOLERANCE_RANGE = (1e-9, 1e-2)
+
+
 @dataclass(frozen=True)
 class IkOptions:
     """Settings of the batched inverse kinematics.
 
-    position_tolerance: [m] a target is reached when its tool point is this close.
+    position_tolerance: [m] a target is reached when its tool point is this close (within
+        :data:`POSITION_TOLERANCE_RANGE`; the iterations stop at a thousandth of it).
     orientation_tolerance: [rad] the same for a required orientation.
     max_iterations: iterations per target (Newton converges in a few near the seed).
     stall_window: a target whose error (position and orientation, each over its
@@ -65,6 +72,10 @@ class IkOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise OptionError(f"IkOptions.{name} must be a positive number, got {v!r}")
+        lo, hi = POSITION_TOLERANCE_RANGE
+        if not lo <= self.position_tolerance <= hi:
+            raise OptionError(f"IkOptions.position_tolerance must be between {lo:g} and {hi:g} "
+                              f"m, got {self.position_tolerance!r}")
         for name in ("max_iterations", "stall_window"):
             if int(getattr(self, name)) < 1:
                 raise OptionError(f"IkOptions.{name} must be >= 1, got {getattr(self, name)}")

@@ -31,10 +31,16 @@ from typing import Callable
 
 import numpy as np
 
+from kincal.errors import OptionError
 from kincal.fleet import engine
 from kincal.fleet.summary import FleetSummary
 from kincal.fleet.unit import UnitJob, UnitOutcome, calibrate_unit
 from kincal.identification.prior import FleetPrior
+
+
+# rounds of the hierarchical fit at most: each is a pass over every unit, and the EM's gains
+# fall below 1 % a round after a few (docs/fleet.md: 8 rounds measured); more is a typo
+MAX_ROUNDS = 100
 
 
 def learn_prior(robot, outcomes, method: str = "per-unit", with_covariances: bool = False
@@ -66,11 +72,16 @@ def calibrate_fleet(robot, jobs: list[UnitJob], workers: int = 1, scheduler: str
                     rounds: int = 0, progress: Callable | None = None,
                     batch: int | None = None, on_round: Callable | None = None
                     ) -> FleetSummary:
-    """Every job on the engine; the summary with the prior. The outputs are written by the
-    last round only (its jobs' out_dir); earlier rounds of the hierarchical fit write
-    nothing. progress(done, total, outcome) after each unit (total counts every round).
+    """Every job on the engine; the summary with the prior. The outputs are staged by the
+    last round only (its jobs' out_dir), for the caller to put in place or discard
+    (:mod:`kincal.fleet.folders`); earlier rounds of the hierarchical fit write nothing. progress(done, total, outcome) after each unit (total counts every round).
     batch: units per task (None: engine.batch_size). on_round(r, prior): the prior learned
-    after round r (0: each unit alone), e.g. to compare the rounds."""
+    after round r (0: each unit alone), e.g. to compare the rounds. rounds: 0 to
+    :data:`MAX_ROUNDS`."""
+    if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) \
+            or not 0 <= rounds <= MAX_ROUNDS:
+        raise OptionError(f"rounds (--hierarchical) must be an integer from 0 to {MAX_ROUNDS}, "
+                          f"got {rounds!r}")
     total, done = len(jobs) * (rounds + 1), [0]
     prior, outcomes = None, []
     with engine.Engine(workers, scheduler) as eng:  # started once for every round

@@ -1,5 +1,5 @@
 """One unit of a fleet: calibrate one data file through the one calibration path and write
-its outputs through the one writer, all or none, under DIR/<unit>/.
+its outputs through the one writer, all or none, staged for DIR/<unit>/.
 
 :func:`calibrate_unit` runs on a worker of the distributed engine (:mod:`kincal.fleet.engine`):
 a :class:`UnitJob` and a :class:`UnitOutcome` are plain picklable values. A unit whose file is
@@ -7,13 +7,14 @@ bad, whose calibration fails or whose result the gate refuses comes back as an o
 that status and its one-line reason; it never raises (the fleet goes on).
 
 All or none per unit: the writer writes into a hidden staging folder ``DIR/.partial-<unit>``,
-which then takes the unit's name in one rename; an interrupted run leaves no ``DIR/<unit>``
-half written (the staging folders of an interrupted run are removed by the command).
+and there it stays: the fleet's outcome decides. The command puts every staged unit in place
+together once the fleet has succeeded, or discards them all (:mod:`kincal.fleet.folders`),
+so a fleet that fails (fewer than two units calibrated, an interrupt) leaves no unit's files
+a pipeline could take for its result, and replaces no earlier ones.
 """
 
 from __future__ import annotations
 
-import os
 import shutil
 import warnings
 from dataclasses import dataclass, replace
@@ -38,7 +39,9 @@ class UnitJob:
     file. load: () -> Robot (the chain; cached per worker). read: (Robot) -> [measurement
     set] (the command's own reader, so a unit reads its file as ``kincal calibrate`` does).
     options: the CalibrationOptions (no callbacks: they do not travel to workers).
-    out_dir: the fleet's folder, or None to write nothing (a round of the hierarchical fit).
+    out_dir: the fleet's folder (the unit's files are staged in it, put in place by
+    :func:`kincal.fleet.folders.commit_units`), or None to write nothing (a round of the
+    hierarchical fit).
     accept_implausible / accept_unconverged: the gate's overrides. overwrite: replace an
     existing DIR/<unit>. command / xacro_args: the command line and the xacro arguments,
     for the provenance of the unit's files."""
@@ -67,7 +70,8 @@ class UnitOutcome:
     [SI] of the kinematic parameters: with a fleet prior under evidence the posterior
     covariance, else the result's sandwich covariance (None if not estimated); identified:
     (k,) which the unit's fit moved. before_mm / after_mm: mean error before and after [mm].
-    written: the unit's files. warnings: its warnings, one line each.
+    written: the unit's files, as they are named once the fleet puts them in place (staged
+    until then). warnings: its warnings, one line each.
     """
 
     name: str
@@ -153,7 +157,8 @@ def _line(e: BaseException) -> str:
 
 
 def _write(job: UnitJob, result) -> tuple[str, ...]:
-    """The unit's files through the one writer into the staging folder, then one rename.
+    """The unit's files through the one writer into its staging folder, where they wait for
+    the fleet's outcome (:mod:`kincal.fleet.folders`); returns the names they will take.
     The writer makes the staging folder (removed again if the writing fails), and the
     fleet's folder if no unit made it yet, as a shared folder: never removed by a unit's
     failure, since other units may be about to write into it (the command removes it if
@@ -175,25 +180,7 @@ def _write(job: UnitJob, result) -> tuple[str, ...]:
                               data_source=job.source, command=job.command,
                               xacro_args=job.xacro_args, dirs=(stage,),
                               shared_dirs=(job.out_dir,))
-        old = None
-        try:
-            if final.exists():
-                if not job.overwrite:
-                    raise KincalError(f"{final} exists; give --overwrite to replace it")
-                old = final.with_name(f"{STAGING}old-{job.name}")
-                if old.exists():  # left by a run that was killed here
-                    shutil.rmtree(old)
-                os.replace(final, old)
-            os.replace(stage, final)
-        except OSError as e:  # the earlier files back under their name, never left hidden
-            if old is not None and old.exists() and not final.exists():
-                os.replace(old, final)
-            kept = "the earlier ones are kept" if old is not None else "nothing written"
-            raise KincalError(f"{final}: could not put the unit's files in place "
-                              f"({e.strerror or e}); {kept}") from None
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    finally:
-        if stage.exists():
-            shutil.rmtree(stage, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
     return tuple(str(final / n) for n in (URDF, FRAMES, REPORT))

@@ -9,9 +9,10 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from kincal.errors import OptionError
+from kincal.frames_file import MAX_LENGTH
 from kincal.identification.cross_validation import check_grid
 from kincal.measurements.point_space import DEG, MM
-from kincal.identification.robust import LOSSES
+from kincal.identification.robust import LOSSES, SCALE_RANGE_M
 from kincal.identification.selection import RANK_TOL
 from kincal.identification.solver import SolverOptions
 
@@ -23,6 +24,12 @@ METHODS = ("l2", "ls", "frames")
 # 1 / value^2 under- or overflows; the estimator's own scales stay within a decade inside
 EVIDENCE_RANGE = (1e-6, 1e4)
 DEFAULT_FOLDS = 5  # k of the k-fold cross-validation when none is given
+# the largest penalty weight given as a number: the penalty's rows carry sqrt(lambda) per
+# parameter [per mm or deg], a pose's data rows about 30 (a 2 m arm, mm per deg), so
+# J^T J reaches ~1e10 at the ~3 million poses a 256 MB data file can hold; beyond 1e12 the
+# penalty outweighs any data set a hundredfold and the result is the nominal kinematics
+# (what method "frames" fits), and 1e308 overflows the cost
+MAX_LAMBDA = 1e12
 
 
 @dataclass(frozen=True)
@@ -41,9 +48,9 @@ class CalibrationOptions:
         interpolation), else "cv"; "evidence" for Gaussian priors toward nominal per
         parameter class (lengths, twists, joint offsets, backlash) whose scales and the
         noise maximise the marginal likelihood (kincal.identification.evidence); "cv" to
-        choose one lambda by cross-validation (the paper's Algorithm 1); or a number >= 0
-        (method "l2"). The rule was chosen from scripts/estimators.py (README, "Choosing
-        the penalty"). Given prior_mm / prior_deg / noise_mm make "auto" use evidence.
+        choose one lambda by cross-validation (the paper's Algorithm 1); or a number from 0
+        to MAX_LAMBDA (method "l2"). The rule was chosen from scripts/estimators.py
+        (README, "Choosing the penalty"). Given prior_mm / prior_deg / noise_mm make "auto" use evidence.
     prior_mm, prior_deg: with lam "evidence", the prior standard deviation [mm] of the
         length class and [deg] of the twist and joint-offset classes (tolerances), kept
         instead of estimated; None: estimated. noise_mm: likewise the measurement noise,
@@ -152,9 +159,9 @@ class CalibrationOptions:
             if o.lam not in ("auto", "cv", "evidence"):
                 raise OptionError(f"lambda must be 'auto', 'cv', 'evidence' or a number >= 0, got "
                                   f"{o.lam!r}")
-        elif not (math.isfinite(float(o.lam)) and float(o.lam) >= 0):
-            raise OptionError(f"lambda must be 'auto', 'cv', 'evidence' or a finite number >= 0, got "
-                              f"{o.lam!r}")
+        elif not (math.isfinite(float(o.lam)) and 0 <= float(o.lam) <= MAX_LAMBDA):
+            raise OptionError(f"lambda must be 'auto', 'cv', 'evidence' or a number from 0 to "
+                              f"{MAX_LAMBDA:g}, got {o.lam!r}")
         for key in ("prior_mm", "prior_deg", "noise_mm"):
             value = getattr(o, key)
             if value is None:
@@ -186,14 +193,23 @@ class CalibrationOptions:
         check_grid(o.lambda_min, o.lambda_max, o.n_lambdas)
         if o.cv_max_poses is not None and not (
                 isinstance(o.cv_max_poses, (int, np.integer)) and not isinstance(
-                    o.cv_max_poses, bool) and o.cv_max_poses >= max(2, o.fold_count)):
-            raise OptionError(f"cv_max_poses must be an integer >= the number of folds "
-                              f"({o.fold_count}) or None, got {o.cv_max_poses!r}")
+                    o.cv_max_poses, bool) and o.cv_max_poses >= 2):
+            raise OptionError(f"cv_max_poses (--cv-max-poses) must be an integer >= 2 or None "
+                              f"(0 on the command line: every pose), got {o.cv_max_poses!r}")
+        if o.cv_max_poses is not None and o.cv_max_poses < o.fold_count:
+            raise OptionError(f"folds (--folds) {o.fold_count} is more than the "
+                              f"{o.cv_max_poses} poses the cross-validation runs on "
+                              f"(cv_max_poses, --cv-max-poses): each fold needs a pose; ask "
+                              f"for at most {o.cv_max_poses} folds, or a larger --cv-max-poses "
+                              f"(0: every pose)")
         if o.robust is not None and o.robust not in LOSSES:
             raise OptionError(f"unknown robust loss {o.robust!r}; expected one of "
                               f"{', '.join(LOSSES)} (or none)")
-        if o.robust_scale_mm is not None and not o.robust_scale_mm > 0:
-            raise OptionError(f"robust_scale_mm must be > 0, got {o.robust_scale_mm}")
+        lo, hi = SCALE_RANGE_M
+        if o.robust_scale_mm is not None and not lo <= o.robust_scale_mm * 1e-3 <= hi:
+            raise OptionError(f"robust_scale_mm (--robust-scale-mm) must be between "
+                              f"{lo * 1e3:g} and {hi * 1e3:g} mm (a pose error's scale), got "
+                              f"{o.robust_scale_mm:g}")
         if o.blas_threads is not None and not (isinstance(o.blas_threads, int)
                                                and o.blas_threads >= 1):
             raise OptionError(f"blas_threads must be an integer >= 1 or None, got "
@@ -237,9 +253,9 @@ class CalibrationOptions:
                 v = np.zeros(0)
             if v.shape != (n,) or not np.all(np.isfinite(v)):
                 raise OptionError(f"{name} needs {n} finite numbers, got {value!r}")
-            if np.abs(v[:3]).max() > 1e3:  # a kilometre: a unit slip, and sums would overflow
-                raise OptionError(f"{name}: {value!r} is over 1000 m from its frame; positions "
-                                  "are in metres")
+            if np.abs(v[:3]).max() > MAX_LENGTH:  # a unit slip; sums would overflow
+                raise OptionError(f"{name}: {value!r} is over {MAX_LENGTH:g} m from its frame; "
+                                  "positions are in metres")
             changes[name] = tuple(float(x) for x in v)
         for name, low in (("folds", 2), ("seed", 0), ("n_lambdas", 2)):
             value = getattr(self, name)

@@ -13,8 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kincal.measurements.checks import SIGMA_RANGE_M
+
 LOSSES = ("huber", "cauchy")
 ROBUST_SCALE = 2.5  # c = 2.5 x median pose error when no scale is given
+# [m] a given scale c: a pose error's size, in the range of a stated measurement noise;
+# beyond it no pose is down-weighted (the loss is plain squares), below it every pose is
+SCALE_RANGE_M = SIGMA_RANGE_M
 
 
 def weights(errors_mm: np.ndarray, loss: str, scale_mm: float) -> np.ndarray:

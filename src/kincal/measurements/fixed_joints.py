@@ -34,9 +34,11 @@ from kincal.errors import DataError
 def held_values(items, robots, length_unit: str = "m", angle_unit: str = "rad") -> dict:
     """{joint: value [rad or m]} of ``--joint-value NAME=VALUE`` items (values in the
     file's units), each a joint of the chain of one of ``robots`` and within its URDF
-    limits (it held there while the robot was measured); OptionError otherwise."""
+    limits (it held there while the robot was measured; a joint without limits within the
+    magnitudes of a data file's values, :data:`~kincal.measurements.data.MAX_ABS_VALUE`);
+    OptionError otherwise."""
     from kincal.errors import OptionError, listing, suggest
-    from kincal.measurements.data import unit_factors
+    from kincal.measurements.data import MAX_ABS_VALUE, unit_factors
 
     L, A = unit_factors(length_unit, angle_unit, OptionError)
     joints = {j: (g.kinds[k], g.lower[k], g.upper[k]) for r in robots
@@ -61,8 +63,12 @@ def held_values(items, robots, length_unit: str = "m", angle_unit: str = "rad") 
         kind, lo, hi = joints[name]
         scale, unit = (L, length_unit) if kind == "prismatic" else (A, angle_unit)
         out[name] = value * scale
+        # a joint without limits (continuous): the magnitudes a data file's column may hold
+        limits = "URDF limits" if math.isfinite(lo) and math.isfinite(hi) else \
+            "accepted range (the URDF gives no limits: a data file's magnitudes)"
+        lo, hi = max(lo, -MAX_ABS_VALUE), min(hi, MAX_ABS_VALUE)
         if not lo - 1e-6 <= out[name] <= hi + 1e-6:  # the slack of the data's limit check
-            raise OptionError(f"--joint-value {item}: outside {name}'s URDF limits "
+            raise OptionError(f"--joint-value {item}: outside {name}'s {limits} "
                               f"[{lo / scale:.4g}, {hi / scale:.4g}] {unit} (values in the "
                               "files' units, --angle-unit and --length-unit)")
     return out
@@ -194,7 +200,8 @@ class HeldJoints:
 
     values: ((joint, value [rad or m]), ...), chain order; a joint counts when every set of
     the chain records it held at one value (a set that moved it, or two held values: the
-    calibration is not bound to one). source: the FRAMES.json, for messages.
+    calibration is not bound to one; two held values are warned about, :meth:`of`).
+    source: the FRAMES.json, for messages.
     """
 
     values: tuple[tuple[str, float], ...] = ()
@@ -211,7 +218,28 @@ class HeldJoints:
         values = tuple((j, float(held[0][j])) for j in joints
                        if held and all(j in h and abs(h[j] - held[0][j]) <= HELD_TOLERANCE
                                        for h in held))
-        return cls(values, str(frames.source))
+        out = cls(values, str(frames.source))
+        kinds = dict(zip(joints, robot.geometry.kinds))
+        for j in joints:  # held by every set, but not at one value: not held, and why
+            if held and j not in dict(values) and all(j in h for h in held):
+                out._warn_two_values(j, kinds[j], [(k, s.source, h[j]) for k, (s, h)
+                                                   in enumerate(zip(sets, held))])
+        return out
+
+    def _warn_two_values(self, joint: str, kind: str, sets) -> None:
+        """Warn that ``joint`` was held at different values in the calibration's sets
+        ``sets`` ((index, source, value [rad or m]), ...): it is not taken as held."""
+        import warnings
+
+        from kincal.errors import KincalWarning
+
+        where = ", ".join(f"{held_text(joint, v, kind)} in set {k + 1}"
+                          + (f" ({source})" if source else "") for k, source, v in sets)
+        warnings.warn(f"{joint} was held still at different values in the calibration's sets "
+                      f"({where}, as {self.source} records): the calibration holds at neither "
+                      f"alone, so {joint} is not taken as held at a recorded value; give its "
+                      f"value explicitly (its column in the file, or --joint-value "
+                      f"{joint}=VALUE where the command takes it)", KincalWarning)
 
     def as_dict(self) -> dict[str, float]:
         return dict(self.values)

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kincal.errors import OptionError
+from kincal.frames_file import MAX_LENGTH
 from kincal.measurements.point_space import BASE, MM, ParameterSpace
 from kincal.measurements.point import MeasurementModel
 from kincal.measurements.pose import FRAMES as POSE_FRAMES
@@ -183,10 +184,12 @@ MAX_GRID = 25  # grid points per edge of an accuracy cube: 25^3 inverse kinemati
 def cube_grid(center, edge: float, n: int = 5) -> np.ndarray:
     """(n^3, 3) points of an n x n x n grid filling a cube [m] (n = 1: the centre)."""
     c = np.asarray(center, float)
-    if c.shape != (3,) or not np.all(np.isfinite(c)):
-        raise OptionError(f"the cube centre must be 3 finite numbers, got {center!r}")
-    if not (np.isfinite(edge) and edge > 0):
-        raise OptionError(f"the cube edge must be a positive length, got {edge!r}")
+    if c.shape != (3,) or not np.all(np.isfinite(c)) or np.abs(c).max() > MAX_LENGTH:
+        raise OptionError(f"the cube centre must be 3 finite numbers within {MAX_LENGTH:g} m "
+                          f"of the base frame, got {center!r}")
+    if not (np.isfinite(edge) and 0 < edge <= MAX_LENGTH):
+        raise OptionError(f"the cube edge must be a positive length up to {MAX_LENGTH:g} m, "
+                          f"got {edge!r}")
     if isinstance(n, bool) or int(n) != n or not 1 <= n <= MAX_GRID:
         raise OptionError(f"the grid must have 1 to {MAX_GRID} points per edge, got {n!r}")
     t = np.linspace(-edge / 2, edge / 2, int(n)) if n > 1 else np.zeros(1)

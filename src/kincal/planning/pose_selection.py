@@ -104,6 +104,7 @@ class PoseSelection:
     random_log_det, random_condition, random_variances: the same figures for random
         subsets of the same size (median over ``random_subsets`` seeded draws; ``keep``
         is in every draw).
+    model: the error model whose parameters the poses determine (kincal.models).
     criterion: "D" or "I" (:mod:`kincal.planning.i_optimal`). With target poses
         (n_targets of them): mean_variance, the mean predicted variance of the measured
         point over the targets per axis [mm^2 per mm^2 of noise], after the measurement
@@ -137,6 +138,7 @@ class PoseSelection:
     random_mean_variance: float = math.nan
     n_targets: int = 0
     kind: str = "point"
+    model: str = ""
 
     def noise_text(self, sigma_mm: float) -> str:
         """The noise the predicted errors are for, per equation of the kind: a distance or a
@@ -170,7 +172,7 @@ class PoseSelection:
         :func:`kincal.planning.volume_candidates.volume_candidates`)."""
         n, p = len(self.indices), len(self.parameters)
         lines = [f"{self.criterion}-optimal selection of {n} of {self.n_candidates} candidate poses, "
-                 f"{self.chain}",
+                 f"{self.chain}" + (f", error model {self.model}" if self.model else ""),
                  f"  optimised over the {p} parameters the candidates identify"]
         if self.not_identifiable:
             lines.append(f"  not identifiable from the candidates: {', '.join(self.not_identifiable)}")
@@ -329,7 +331,8 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                               f"[m] (--pivot), got {pivot!r}" if pv.shape != (3,) else
                               "the pivot needs 3 finite numbers (x, y, z in the base frame) "
                               f"[m] (--pivot), got {' '.join(f'{v:g}' for v in pv)}")
-    em = error_models.build(model or error_models.default_for(g), g)
+    model = model or error_models.default_for(g)
+    em = error_models.build(model, g)
     _warn_tool_on_axis(em, t)
     if kind == "point":
         space = ParameterSpace.of_model(em)
@@ -421,4 +424,5 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
                          _readonly(np.median(r_var, axis=0)), int(random_subsets),
                          criterion=method, mean_variance=mean_var,
                          random_mean_variance=r_mean_var,
-                         n_targets=0 if targets is None else len(targets), kind=kind)
+                         n_targets=0 if targets is None else len(targets), kind=kind,
+                         model=model)

@@ -48,6 +48,7 @@ import numpy as np
 
 from kincal.collision import CollisionChecker
 from kincal.errors import OptionError
+from kincal.frames_file import MAX_LENGTH
 from kincal.identification import blas_threads
 from kincal.measurements.fixed_joints import refuse_coupled
 from kincal.planning.batch_ik import BatchKinematics
@@ -64,6 +65,7 @@ MAX_ATTEMPTS = 20  # draws per candidate asked for, at most, before giving up
 # --max-tilt); docs/results.md ("The default beyond its twin") measures other choices
 WORKING_EDGE = 0.4
 WORKING_TILT = math.radians(30.0)
+MAX_TILT_DEG = 180.0  # [deg] a tilt is an angle between two directions: 0 to 180
 
 
 # ------------------------------------------------------------------ values
@@ -83,13 +85,13 @@ class Volume:
         if self.shape not in ("cube", "sphere"):
             raise OptionError(f"unknown volume shape {self.shape!r}; expected cube or sphere")
         c = np.asarray(self.center, float)
-        if c.shape != (3,) or not np.all(np.isfinite(c)):
-            raise OptionError(f"the {self.shape} centre needs 3 finite numbers [m], "
-                              f"got {self.center!r}")
-        if not (math.isfinite(self.size) and self.size > 0):
+        if c.shape != (3,) or not np.all(np.isfinite(c)) or np.abs(c).max() > MAX_LENGTH:
+            raise OptionError(f"the {self.shape} centre needs 3 finite numbers [m] within "
+                              f"{MAX_LENGTH:g} m of the base frame, got {self.center!r}")
+        if not (math.isfinite(self.size) and 0 < self.size <= MAX_LENGTH):
             what = "edge" if self.shape == "cube" else "radius"
-            raise OptionError(f"the {self.shape} {what} must be a positive number [m], "
-                              f"got {self.size!r}")
+            raise OptionError(f"the {self.shape} {what} must be a positive number up to "
+                              f"{MAX_LENGTH:g} [m], got {self.size!r}")
         object.__setattr__(self, "center", tuple(float(v) for v in c))
 
     @classmethod
@@ -144,14 +146,15 @@ class VolumeSpec:
         t = np.asarray(self.tool, float)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise OptionError(f"tool needs 3 finite numbers (tip frame) [m], got {self.tool!r}")
-        if not (math.isfinite(self.max_tilt) and 0 <= self.max_tilt <= math.pi):
-            raise OptionError(f"the largest tilt must be between 0 and 180 deg, got "
+        if not (math.isfinite(self.max_tilt) and 0 <= self.max_tilt <= math.radians(MAX_TILT_DEG)):
+            raise OptionError(f"the largest tilt must be between 0 and {MAX_TILT_DEG:g} deg, got "
                               f"{math.degrees(self.max_tilt):g} deg")
         u = np.asarray(self.tilt_direction, float)
         if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) < 1e-9:
             raise OptionError(f"the tilt direction needs 3 finite numbers, not all zero, got "
                               f"{self.tilt_direction!r}")
         object.__setattr__(self, "tool", tuple(float(v) for v in t))
+        u = u / np.abs(u).max()  # a direction: its length does not count (1e308 would overflow)
         object.__setattr__(self, "tilt_direction", tuple(float(v) for v in u / np.linalg.norm(u)))
         if self.home is not None:
             try:
