@@ -83,7 +83,7 @@ from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes,
                                                 unit_causes, weak_cause)
 from kincal.identification.statistics import angle_label
 from kincal.measurements.checks import (DEGREES_AS_RADIANS, TOOL_RATIO, UNIT_RATIO,
-                                        duplicate_samples, spread)
+                                        duplicate_samples, millimetres_read_as_metres, spread)
 from kincal.identification.tool_motion import change, farthest_tool, n_chains
 from kincal.models.workspace import CHANGE, tool_points
 
@@ -155,6 +155,8 @@ class Evidence:
     length_source: str = ""  # the file of length_ratio when several sets measure positions
     angle_max: float = 0.0
     angle_outside: bool = False
+    prismatic_mm: str = ""  # a prismatic value in metres far beyond its limits (checks.
+    #                         millimetres_read_as_metres): lengths in mm, the file's positions too
     angle_unit: str = "rad"
     off_chain_columns: tuple[str, ...] = ()
     other_branch_columns: tuple[str, ...] = ()
@@ -435,6 +437,9 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             v = dt.joint_values[i, c]
             angle_max = top
             outside = bool(v < gi.lower[c] - 1e-6 or v > gi.upper[c] + 1e-6)
+    prismatic_mm = next((f"{getattr(dt, 'source', '')}: {clue}" for dt, robot in zip(
+        datas, problem.robots) if getattr(dt, "length_unit", "m") == "m" and (
+            clue := millimetres_read_as_metres(*_limits(robot), dt.joint_values, dt.rows))), "")
     off_chain, elsewhere, at_base = problem.chains.off_chain_columns(datas)
     # the worst set's orientation errors after calibration (poses; flush: the tilts)
     turned = [(a.median, a.rms, angle_label(s.kind)) for s in result.sets
@@ -449,6 +454,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
         length_source=str(getattr(unit_set, "source", "")) if len(clues) > 1 else "",
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
+        prismatic_mm=prismatic_mm,
         off_chain_columns=off_chain, other_branch_columns=elsewhere, at_base=at_base,
         bases=tuple(dict.fromkeys(r.base for r in problem.robots)),
         converged=bool(result.converged),
@@ -463,6 +469,12 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         duplicates=tuple(duplicate_samples(datas)), orientation_median_deg=o_median,
         orientation_rms_deg=o_rms, orientation_what=o_what,
         tool_far=farthest_tool(problem, result) or ())
+
+
+def _limits(robot):
+    """(joint names, kinds, lower, upper) of ``robot``'s chain."""
+    g = robot.geometry
+    return g.joint_names, g.kinds, g.lower, g.upper
 
 
 def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str, ...], str]:
