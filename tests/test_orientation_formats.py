@@ -268,6 +268,17 @@ def test_a_calibration_of_a_convention_in_doubt_is_refused_by_the_gate(tmp_path,
     assert code == 1 and len(errors) == 1, err
     assert "implausible" in errors[0] and "is the file's convention quat-wxyz?" in errors[0]
     assert not out.exists()
+    # the diagnosis: the convention's finding has no one number (it showed value 0,
+    # threshold 0); its two readings' errors are in its message
+    code, _, err = run(capsys, "calibrate", "ec66", data, "--orientation-format", "quat-xyzw",
+                       *cols, "--out", out, "--model", "mdh", "--report", tmp_path / "r.json",
+                       "--html", tmp_path / "r.html")
+    finding = [f for f in json.loads((tmp_path / "r.json").read_text())["plausibility"]
+               ["findings"] if f["kind"] == "orientation_convention"][0]
+    assert finding["value"] is None and finding["threshold"] is None
+    html = (tmp_path / "r.html").read_text()
+    row = html[html.index("is the file&#x27;s convention quat-wxyz?"):]
+    assert row.split("</tr>")[0].count("<td>0</td>") == 0
     code, _, err = run(capsys, "calibrate", "ec66", data, "--orientation-format", "quat-xyzw",
                        *cols, "--out", out, "--model", "mdh", "--accept-implausible")
     assert code == 0 and out.exists() and "convention" in err

@@ -192,7 +192,8 @@ class Finding:
     kind: "residual", "orientation", "unexplained", "corrections", "length_correction",
     "length_unit", "angle_unit", "not_converged" or "orientation_convention" (a pose file's
     convention in doubt). value
-    and threshold share ``unit``. parameters: those the finding is about (largest first).
+    and threshold share ``unit`` (NaN where no one number is judged: a convention in doubt,
+    whose two readings' errors its message gives). parameters: those the finding is about (largest first).
     causes: likely causes, most likely first."""
 
     kind: str
@@ -345,9 +346,9 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             "length_correction", f"{n} is corrected by {v:+.4g} mm, more than "
             f"{th.length_correction:.0%} of the reach ({L_mm:.0f} mm)", abs(v),
             th.length_correction * L_mm, "mm", (n,), causes=tuple(fit_causes(ev, th))))
-    for doubt in ev.convention_doubts:  # orientations in another convention: a wrong fit
-        out.append(Finding("orientation_convention", doubt, 0.0, 0.0, "", causes=(
-            "orientations read in another convention than the file's",)))
+    for doubt in ev.convention_doubts:  # another convention: two readings' errors, said in
+        out.append(Finding("orientation_convention", doubt, math.nan, math.nan, "", causes=(
+            "orientations read in another convention than the file's",)))  # the message
     if not ev.converged:
         out.append(Finding(
             "not_converged", f"the solver did not converge in {ev.iterations} iterations",
