@@ -146,9 +146,9 @@ def main(argv=None) -> int:
         try:
             from kincal.cli.checks import check_args
 
-            check_args(args)
-            if args.verbose:
+            if args.verbose:  # first, also before an option's refusal
                 print(f"kincal {__version__}: {' '.join(args.command_line)}", file=sys.stderr)
+            check_args(args)
             with quiet_stdout(args.quiet):
                 code = args.run(args)
             say([])  # flush: a full disk behind stdout fails here (one line), not at exit
