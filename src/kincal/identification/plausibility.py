@@ -438,9 +438,10 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             v = dt.joint_values[i, c]
             angle_max = top
             outside = bool(v < gi.lower[c] - 1e-6 or v > gi.upper[c] + 1e-6)
-    prismatic_mm = next((f"{getattr(dt, 'source', '')}: {clue}" for dt, robot in zip(
-        datas, problem.robots) if getattr(dt, "length_unit", "m") == "m" and (
-            clue := millimetres_read_as_metres(*_limits(robot), dt.joint_values, dt.rows))), "")
+    prismatic_mm = next((f"{getattr(dt, 'source', '')}: {clue}" for dt, g in zip(
+        datas, (r.geometry for r in problem.robots)) if getattr(dt, "length_unit", "m") == "m"
+        and (clue := millimetres_read_as_metres(g.joint_names, g.kinds, g.lower, g.upper,
+                                                dt.joint_values, dt.rows))), "")
     off_chain, elsewhere, at_base = problem.chains.off_chain_columns(datas)
     # the worst set's orientation errors after calibration (poses; flush: the tilts)
     turned = [(a.median, a.rms, angle_label(s.kind)) for s in result.sets
@@ -470,12 +471,6 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         duplicates=tuple(duplicate_samples(datas)), orientation_median_deg=o_median,
         orientation_rms_deg=o_rms, orientation_what=o_what,
         tool_far=farthest_tool(problem, result) or ())
-
-
-def _limits(robot):
-    """(joint names, kinds, lower, upper) of ``robot``'s chain."""
-    g = robot.geometry
-    return g.joint_names, g.kinds, g.lower, g.upper
 
 
 def _weak_corrections(result: CalibrationResult, corrections) -> tuple[tuple[str, ...], str]:
