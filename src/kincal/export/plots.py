@@ -173,7 +173,7 @@ def angle_axis_label(kind: str) -> str:
     """The axis label of a set's per-sample orientation errors [deg] (poses, flush)."""
     from kincal.identification.statistics import angle_label
 
-    return f"{angle_label(kind)} error (deg)"
+    return angle_label(kind) + (" (deg)" if kind == "flush" else " error (deg)")
 
 
 def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
@@ -347,8 +347,10 @@ def calibration_figures(result, source: PngText = "kincal") -> list[tuple[str, b
                  f"{s.before.mean:.3f}, max {s.before.max:.3f} mm")
         angles = None
         if s.angles_after is not None and s.angles_before is not None:
-            title += (f"; {angle_axis_label(s.kind).split(' error')[0]} mean "
-                      f"{np.degrees(s.angles_before).mean():.4g} deg")
+            from kincal.identification.statistics import angle_label
+
+            title += (f"; {angle_label(s.kind)} mean {np.degrees(s.angles_before).mean():.4g} "
+                      "deg")
             angles = [(series[0][0], np.degrees(s.angles_before)),
                       (series[1][0], np.degrees(s.angles_after))]
         out.append((_residuals_png(i), png_bytes(plot_error_distributions(
