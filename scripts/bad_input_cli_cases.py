@@ -425,6 +425,15 @@ def unit_and_kind_cases():
 
     def on(x, argv):
         return [a.replace("{x}", x) for a in argv]
+
+    def renamed(d):  # a pose file whose quaternion a logger named otherwise
+        _simulated(d, "bad.csv", "--kind", "pose")
+        text = (d / "bad.csv").read_text()
+        (d / "bad.csv").write_text(text.replace("qx,qy,qz,qw", "quat_x,quat_y,quat_z,quat_w", 1))
+    for what, argv in (("calibrate", cal), ("evaluate", ["evaluate", "ec66", "{d}/bad.csv",
+                                                         "--fit-frames"]),
+                       ("compensate", on("{d}/bad.csv", targets))):
+        yield f"{what}: orientation columns under a logger's names", argv, renamed
     for flag in ([], ["--flag-unreachable"]):
         yield (f"compensate --program in degrees {' '.join(flag)}",
                comp + ["--program", "{d}/bad.csv", "--nominal", "ec66", *flag],

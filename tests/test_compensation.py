@@ -459,7 +459,7 @@ def test_cli_targets_take_the_orientation_formats_of_pose_files(cli_cell, capsys
             str(out), "--angle-unit", "deg"]
     assert main(base) == 1
     err = capsys.readouterr().err
-    assert "orientation columns roll, pitch, yaw would not be read" in err and not out.exists()
+    assert "orientation columns roll, pitch, yaw beside the position columns x y z would not be read" in err and not out.exists()
     assert main(base + ["--orientation-format", "rpy-zyx"]) == 0
     table = np.genfromtxt(_uncommented(out), delimiter=",", names=True)
     np.testing.assert_allclose(np.radians(np.column_stack([table[j] for j in names])), q,

@@ -39,6 +39,12 @@ def test_verbose_names_the_command_and_the_error_kind(cal, capsys):
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("kincal ") and "evaluate" in err[0]
     assert [line for line in err if line.startswith("kincal: error:")][0].endswith("[FrameError]")
+    # an option refused before the work: the version and command line first too (it was
+    # said after the options' checks, so not at all then)
+    assert main(["demo", "--out", str(cal), "-v"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("kincal ") and "demo" in err[0], err
+    assert err[1].startswith("kincal: error:") and err[1].endswith("[OptionError]"), err
 
 
 def test_json_is_the_only_thing_on_stdout(cal, tmp_path, capsys):

@@ -465,6 +465,34 @@ def test_compensate_holds_the_joints_the_calibration_held(tmp_path, capsys):
     np.testing.assert_array_equal(np.array(summary["joint_values_si"])[:, 5], np.radians(30.0))
 
 
+def test_pose_targets_with_a_held_joint_say_why_they_fail(tmp_path, capsys):
+    """Pose targets on a chain whose wrist the calibration held: five free joints cannot
+    meet a full pose, and the refusal said the targets missed "within 0.001 mm" while the
+    tool point was 1e-12 mm off. It names the orientation tolerance and the held joint."""
+    from scipy.spatial.transform import Rotation
+
+    from kincal import Robot
+
+    without, with_column, header, rows, urdf, frames = _held_calibration(tmp_path, capsys)
+    robot = Robot.load(urdf, tip="flange")
+    q = rows[:5, [header.index(j) for j in robot.joint_names]].copy()
+    f = json.loads(frames.read_text())["sets"][0]["frames"]
+    R_base = Rotation.from_euler("XYZ", [f[f"base.r{a}"] for a in "xyz"]).as_matrix()
+    wanted = R_base @ robot.tip_poses(q)[:, :3, :3] @ Rotation.from_rotvec(
+        [0.0, 0.01, 0.0]).as_matrix()  # the measured tip, turned 0.57 deg about its y axis
+    cols = [j for j in robot.joint_names if j != "joint_6"] + ["x", "y", "z", "qx", "qy",
+                                                                "qz", "qw"]
+    targets = write(tmp_path / "poses.csv", cols, np.hstack(
+        [q[:, :5], rows[:5, [header.index(c) for c in "xyz"]],
+         Rotation.from_matrix(wanted).as_quat()]))
+    code, out, err = run(capsys, "compensate", urdf, targets, "--frames", frames, "--out",
+                         tmp_path / "j.csv")
+    assert code == 1 and err.count("\n") == 1, err
+    assert "within 0.001 mm and 5.73e-05 deg; a full pose needs six free joints, this chain " \
+           "has 5 (1 held where the calibration held them" in err, err
+    assert not (tmp_path / "j.csv").exists()
+
+
 def test_compensation_api_holds_the_joints_the_frames_record_held(tmp_path, capsys):
     """compensate() and filter_program() with the CellFrames of a calibration that held
     joint_6: the solution keeps it at its held value (seeds elsewhere warned about); before,

@@ -268,6 +268,17 @@ def test_a_calibration_of_a_convention_in_doubt_is_refused_by_the_gate(tmp_path,
     assert code == 1 and len(errors) == 1, err
     assert "implausible" in errors[0] and "is the file's convention quat-wxyz?" in errors[0]
     assert not out.exists()
+    # the diagnosis: the convention's finding has no one number (it showed value 0,
+    # threshold 0); its two readings' errors are in its message
+    code, _, err = run(capsys, "calibrate", "ec66", data, "--orientation-format", "quat-xyzw",
+                       *cols, "--out", out, "--model", "mdh", "--report", tmp_path / "r.json",
+                       "--html", tmp_path / "r.html")
+    finding = [f for f in json.loads((tmp_path / "r.json").read_text())["plausibility"]
+               ["findings"] if f["kind"] == "orientation_convention"][0]
+    assert finding["value"] is None and finding["threshold"] is None
+    html = (tmp_path / "r.html").read_text()
+    row = html[html.index("is the file&#x27;s convention quat-wxyz?"):]
+    assert row.split("</tr>")[0].count("<td>0</td>") == 0
     code, _, err = run(capsys, "calibrate", "ec66", data, "--orientation-format", "quat-xyzw",
                        *cols, "--out", out, "--model", "mdh", "--accept-implausible")
     assert code == 0 and out.exists() and "convention" in err
@@ -354,3 +365,45 @@ def test_the_gate_names_orientation_angles_in_degrees_as_the_cause(tmp_path, cap
     assert main([*argv[:2], str(src), *argv[2:]]) == 0  # the same file in radians: plausible
     assert PoseData.from_csv(src, Robot.load("ec66").joint_names,
                              orientation_format="rpy-zyx").angles_read_max < np.pi + 1e-9
+
+
+@pytest.mark.parametrize("names", [("Roll", "Pitch", "Yaw"), ("quat_x", "quat_y", "quat_z", "quat_w"),
+                                   ("pose.orientation.x", "pose.orientation.y",
+                                    "pose.orientation.z", "pose.orientation.w"),
+                                   ("qx", "qy", "qz"), ("Rotation X", "Rotation Y", "Rotation Z"),
+                                   ("yaw_deg", "pitch_deg", "roll_deg")])
+def test_orientation_columns_under_other_names_are_never_dropped(tmp_path, capsys, names):
+    """A logger's names for orientation components (not the usual qx .. qw, roll pitch yaw,
+    phix ..): read as positions they were dropped without a word and the file calibrated as
+    points. Refused as the usual names are, naming the columns; read with
+    --orientation-columns, or as positions with --positions-only; compensate alike."""
+    robot = Robot.load("ec66")
+    q = np.random.default_rng(3).uniform(-1, 1, (12, 6))
+    T = robot.tip_poses(q)
+    R = Rotation.from_matrix(T[:, :3, :3])
+    values = (R.as_quat() if len(names) == 4 else R.as_quat()[:, :3] if names[0] == "qx"
+              else R.as_euler("xyz"))
+    cols = list(robot.joint_names) + ["x", "y", "z", *names]
+    rows = np.hstack([q, T[:, :3, 3], values])
+    path = tmp_path / "log.csv"
+    path.write_text(",".join(f'"{c}"' if " " in c else c for c in cols) + "\n"
+                    + "".join(",".join(map(repr, r.tolist())) + "\n" for r in rows))
+    args = ("calibrate", "ec66", path, "--model", "offsets", "--method", "ls")
+    code, out, err = run(capsys, *args, "--out", tmp_path / "a.urdf")
+    assert code == 1 and err.count("\n") == 1 and err.startswith("kincal: error:"), err
+    assert ", ".join(names) in err and "--orientation-columns" in err and "--positions-only" in err
+    assert not (tmp_path / "a.urdf").exists()
+    code, out, err = run(capsys, *args, "--positions-only", "--out", tmp_path / "b.urdf")
+    assert code == 0, err
+    if len(names) == 4:  # a quaternion, scalar last, under its own names: read as poses
+        code, out, err = run(capsys, *args, "--orientation-columns", *names,
+                             "--out", tmp_path / "c.urdf")
+        assert code == 0 and "orientation after:" in out, err
+    frames = tmp_path / "frames.json"
+    assert main(["calibrate", "ec66", str(path), "--positions-only", "--model", "offsets",
+                 "--method", "ls", "--out", str(tmp_path / "d.urdf"), "--frames-out",
+                 str(frames), "-q"]) == 0
+    capsys.readouterr()
+    code, out, err = run(capsys, "compensate", tmp_path / "d.urdf", path, "--tip", "flange",
+                         "--frames", frames, "--out", tmp_path / "j.csv")
+    assert code == 1 and err.count("\n") == 1 and ", ".join(names) in err, err

@@ -736,3 +736,36 @@ def test_a_second_file_in_millimetres_is_the_unit_clue(tmp_path, capsys):
     assert not out.exists()
     assert main(["calibrate", "ec66", str(tmp_path / "s1.csv"), str(tmp_path / "s7.csv"),
                  "--out", str(out), "--quiet"]) == 0  # both in metres: plausible
+
+
+def test_a_pose_file_logged_in_millimetres_and_degrees_names_the_length_unit(tmp_path, capsys):
+    """TIAGo poses logged in mm and deg (its torso a prismatic joint, in mm too), read with
+    --angle-unit deg alone: the positions' spread grows with the torso's, so their ratio gave
+    no clue and the gate named noise, a tip or another URDF. The torso far beyond its limits
+    is the clue now: warned, and the refusal's likely cause; --length-unit mm calibrates."""
+    assert main(["simulate", "tiago", "--tip", "arm_tool_link", "--center-m", "0.6", "0", "0.8",
+                 "--size-mm", "300", "--tilt-deg", "180", "--kind", "pose", "--poses", "40",
+                 "--orientation-format", "rpy-zyx", "--out", str(tmp_path / "si.csv"),
+                 "--quiet"]) == 0
+
+    def to_mm_deg(header, values):
+        values[:, [header.index(c) for c in ("torso_lift_joint", "x", "y", "z")]] *= 1e3
+        angles = [c for c in header if c.startswith("arm_") or c in ("roll", "pitch", "yaw")]
+        values[:, [header.index(c) for c in angles]] = np.degrees(
+            values[:, [header.index(c) for c in angles]])
+
+    _rewrite(tmp_path / "si.csv", tmp_path / "mm.csv", to_mm_deg)
+    out = tmp_path / "o.urdf"
+    args = ["calibrate", "tiago", str(tmp_path / "mm.csv"), "--tip", "arm_tool_link",
+            "--orientation-format", "rpy-zyx", "--angle-unit", "deg", "--model", "complete",
+            "--out", str(out)]
+    capsys.readouterr()
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    line = [t for t in err.splitlines() if t.startswith("kincal: error:")][0]
+    assert "Likely cause: lengths in millimetres read as metres (" in line, line
+    assert "torso_lift_joint is" in line and "--length-unit mm" in line
+    assert "were the lengths millimetres? Read them with --length-unit mm" in err
+    assert not out.exists()
+    assert main(args + ["--length-unit", "mm", "--quiet"]) == 0
+    assert "were the lengths millimetres" not in capsys.readouterr().err

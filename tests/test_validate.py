@@ -43,11 +43,13 @@ def test_held_out_errors_match_evaluate_and_residuals_csv(data, tmp_path, capsys
     assert 'id="validation"' in html and "x (rms)" in html
     rows = [r for r in csv.reader(line for line in (tmp_path / "res.csv").open()
                                   if not line.startswith("#"))]
-    assert rows[0][:6] == ["split", "set", "source", "kind", "row", "error_m"]
+    assert rows[0][:7] == ["split", "set", "source", "kind", "row", "error_m",
+                           "orientation_error_rad"]
     splits = [r[0] for r in rows[1:]]
     assert splits.count("training") == 40 and splits.count("held-out") == 25
-    for r in rows[1:]:  # each error is its residual vector's norm
-        assert float(r[5]) == pytest.approx(np.linalg.norm([float(x) for x in r[6:9]]), rel=1e-12)
+    for r in rows[1:]:  # each error is its residual vector's norm; points have no angle
+        assert float(r[5]) == pytest.approx(np.linalg.norm([float(x) for x in r[7:10]]), rel=1e-12)
+        assert r[6] == ""
     prov = json.loads((tmp_path / "r.json").read_text())["provenance"]
     assert [d["path"] for d in prov["data"]] == [str(data / "cal.csv"), str(data / "held.csv")]
 
@@ -125,3 +127,65 @@ def test_held_out_points_on_a_pose_calibration_match_evaluate(tmp_path, capsys):
                  "--report", str(tmp_path / "e.json")]) == 0
     ev = json.loads((tmp_path / "e.json").read_text())["errors"]
     assert ev["mean_mm"] == pytest.approx(v["errors"]["after"]["mean_mm"], rel=1e-9)
+
+
+def test_held_out_poses_orientation_in_every_output(tmp_path, capsys):
+    """A pose calibration's orientation errors wherever its position errors are: the
+    held-out line and the HTML table give the max too; the residual CSV each sample's
+    rotation vector in radians (not through the sigma ratio) and its angle, equal to a
+    computation from the written URDF and FRAMES.json with scipy; REPORT.json each
+    sample's angle; the residual figure a panel of them (it was labelled "position and
+    orientation error (mm)" over the positions alone)."""
+    from PIL import Image
+    from scipy.spatial.transform import Rotation
+
+    from kincal import Robot
+
+    for name, seed, n in (("cal", 3, 40), ("held", 4, 25)):
+        assert main(["simulate", "ec66", "--kind", "pose", "--out", str(tmp_path / f"{name}.csv"),
+                     "--poses", str(n), "--seed", str(seed), "--orientation-format", "rpy-zyx",
+                     "--orientation-noise-deg", "0.02", "-q"]) == 0
+    out = tmp_path / "c.urdf"
+    capsys.readouterr()
+    assert main(["calibrate", "ec66", str(tmp_path / "cal.csv"), "--orientation-format",
+                 "rpy-zyx", "--model", "complete", "--out", str(out), "--frames-out",
+                 str(tmp_path / "f.json"), "--validate", str(tmp_path / "held.csv"),
+                 "--report", str(tmp_path / "r.json"), "--html", str(tmp_path / "r.html"),
+                 "--residuals-out", str(tmp_path / "res.csv"), "--plots",
+                 str(tmp_path / "plots")]) == 0
+    text = capsys.readouterr().out
+    report = json.loads((tmp_path / "r.json").read_text())
+    o = report["validation"]["orientation_errors"]
+    line = [t for t in text.splitlines() if "orientation [deg]: mean" in t][0]
+    assert (f"max {o['before']['max_deg']:.4f} -> {o['after']['max_deg']:.4f}") in line
+    assert "orientation: max [deg]" in (tmp_path / "r.html").read_text()
+    rows = [r for r in csv.reader(line for line in (tmp_path / "res.csv").open()
+                                  if not line.startswith("#"))]
+    head, rows = rows[0], rows[1:]
+    held = [r for r in rows if r[0] == "held-out"]
+    assert len(held) == 25 and head[6] == "orientation_error_rad" and head[7:] == [
+        f"r{k}" for k in range(1, 7)]
+    # independently: the written robot and frames, scipy's rotations
+    frames = json.loads((tmp_path / "f.json").read_text())["sets"][0]["frames"]
+    robot = Robot.load(out, tip="flange")
+    data = [r for r in csv.DictReader(line for line in (tmp_path / "held.csv").open()
+                                      if not line.startswith("#"))]
+    q = np.array([[float(r[j]) for j in robot.joint_names] for r in data])
+    R_meas = Rotation.from_euler("xyz", [[float(r[k]) for k in ("roll", "pitch", "yaw")]
+                                         for r in data]).as_matrix()
+    T = robot.tip_poses(q)
+    R_base = Rotation.from_euler("XYZ", [frames[f"base.r{a}"] for a in "xyz"]).as_matrix()
+    R_tool = Rotation.from_euler("XYZ", [frames[f"tool.r{a}"] for a in "xyz"]).as_matrix()
+    R_pred = R_base @ T[:, :3, :3] @ R_tool
+    rotvec = Rotation.from_matrix(R_meas @ np.transpose(R_pred, (0, 2, 1))).as_rotvec()
+    written = np.array([[float(v) for v in r[10:13]] for r in held])
+    np.testing.assert_allclose(written, rotvec, atol=1e-12)
+    np.testing.assert_allclose([float(r[6]) for r in held], np.linalg.norm(rotvec, axis=1),
+                               atol=1e-12)
+    training = [float(r[6]) for r in rows if r[0] == "training"]
+    np.testing.assert_allclose(np.radians(report["sets"][0]["residuals"]["orientation_error_deg"]),
+                               training, rtol=1e-12)
+    np.testing.assert_allclose(np.radians(report["residuals"]["orientation_error_deg"]),
+                               training, rtol=1e-12)
+    # the residual figure: positions and, beside them, orientations (two panels)
+    assert Image.open(tmp_path / "plots" / "residuals.png").size[0] > 1000

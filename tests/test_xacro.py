@@ -162,6 +162,18 @@ def test_calibrate_a_xacro_file_through_the_cli(workspace, tmp_path, capsys):
     assert main(["analyze", str(arm).replace("arm.urdf", "nothere.urdf"), str(data)]) == 1
 
 
+def test_a_refused_run_on_a_xacro_robot_is_its_one_error_line(workspace, tmp_path, capsys):
+    """The note that a xacro file was expanded (how an input was read) came after the
+    error line of a refused run: an error is one line, with the warnings that may explain
+    it; the note is said when the run goes on."""
+    arm, _ = workspace
+    capsys.readouterr()
+    assert main(["simulate", str(arm), "--tip", "flange", "--out", str(tmp_path / "s.csv")]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("kincal: error: no default cube centre"), err
+    assert not (tmp_path / "s.csv").exists()
+
+
 def test_xacro_arguments_on_ur_description(tmp_path, capsys):
     """--xacro-arg NAME:=VALUE on every command that reads a robot: ur_description's
     ur.urdf.xacro (shared test data, BSD-3) needs ur_type and name; without them one line

@@ -135,8 +135,18 @@ def _compensate(c: Compensate) -> int:
         inputs = [c.targets]
     failures = result.failures()
     if failures and not c.flag_unreachable:
+        import numpy as np
+
+        posed = bool(np.any(result.orientation_required & ~result.reached))
+        free = len(robot.joint_names) - len(held.as_dict())
+        few = (f"; a full pose needs six free joints, this chain has {free} "
+               f"({len(robot.joint_names) - free} held where the calibration held them; "
+               "leave the orientation columns out to reach the positions alone)"
+               if posed and free < 6 else "")
         raise DataError(f"{len(failures)} of {len(result)} targets cannot be reached by the "
-                        f"calibrated model within {c.tolerance_mm:g} mm: "
+                        f"calibrated model within {c.tolerance_mm:g} mm"
+                        + (f" and {np.degrees(options.orientation_tolerance):.3g} deg"
+                           if posed else "") + f"{few}: "
                         + "; ".join(failures[:10]) + (" ..." if len(failures) > 10 else "")
                         + "; nothing written; pass --flag-unreachable to write them marked "
                           "reached=0")

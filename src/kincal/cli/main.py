@@ -140,14 +140,15 @@ def main(argv=None) -> int:
     if threading.current_thread() is threading.main_thread():
         sigterm = signal.signal(signal.SIGTERM, _on_sigterm)
     scratch = _matplotlib_home()
+    failed = False  # a refused run: its one error line, and warnings that may explain it
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", KincalWarning)
         try:
             from kincal.cli.checks import check_args
 
-            check_args(args)
-            if args.verbose:
+            if args.verbose:  # first, also before an option's refusal
                 print(f"kincal {__version__}: {' '.join(args.command_line)}", file=sys.stderr)
+            check_args(args)
             with quiet_stdout(args.quiet):
                 code = args.run(args)
             say([])  # flush: a full disk behind stdout fails here (one line), not at exit
@@ -166,13 +167,14 @@ def main(argv=None) -> int:
             if args.verbose:
                 message += f" [{type(exc).__name__}]"
             print(f"kincal: error: {message}", file=sys.stderr)
-            code = 1
+            code, failed = 1, True
             _drain_stdout()
         finally:
             said = set()  # a warning raised again (a second fit of the same data) says nothing new
             for w in caught:
-                if issubclass(w.category, KincalWarning):
-                    kind = "note" if issubclass(w.category, KincalNote) else "warning"
+                if issubclass(w.category, KincalWarning) and not (
+                        failed and issubclass(w.category, KincalNote)):  # how an input was
+                    kind = "note" if issubclass(w.category, KincalNote) else "warning"  # read
                     line = f"kincal: {kind}: {w.message}"
                     if line not in said:
                         said.add(line)

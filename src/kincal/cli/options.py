@@ -393,8 +393,8 @@ class Inputs:
             fj.check_absent(path, header, fixed, self.joint_map())
             fixed.update({j: v for j, v in held.values if j in r.joint_names
                           and j not in fixed and columns.get(j, j) not in header})
-            angled.append(all(c in header for c in pos or "xyz")
-                          and bool(found_columns(header, pos)))
+            angled.append(all(c in header for c in pos or "xyz") and bool(found_columns(
+                header, pos, [columns.get(j, j) for j in r.joint_names])))
             follow = fj.mimicked(path, header, r, fixed, self.joint_map())
             d = read_set_file(path, [j for j in r.joint_names if j not in {*fixed, *follow}],
                               _prismatic(r), self.length_unit, self.angle_unit, pos,

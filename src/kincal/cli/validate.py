@@ -75,4 +75,5 @@ def held_out(result, inputs, path: str, k: int | None = None):
     angles = None if before is None or after is None else (before, after)
     return Validation(str(path), km.kind, np.asarray(km.data.rows), out[0][0], out[1][0],
                       out[0][1], out[1][1], per_axis, angles,
-                      f"{nominal.base} -> {nominal.tip}" if several else "")
+                      f"{nominal.base} -> {nominal.tip}" if several else "",
+                      km.angle_rows(out[0][0]), km.angle_rows(out[1][0]))

@@ -25,7 +25,8 @@ from kincal.measurements.csv_table import read_columns
 from kincal.measurements.data import unit_factors
 from kincal.measurements.fixed_joints import HeldJoints
 from kincal.measurements.orientation_columns import (DEFAULT_FORMAT, OrientationFormat,
-                                                     found_columns, rotations)
+                                                     found_columns, rotations,
+                                                     unread_message)
 from kincal.measurements.pose import QUATERNION_COLUMNS as QUATERNION
 
 
@@ -95,12 +96,11 @@ def read_targets(path, robot, length_unit: str = "m", angle_unit: str = "rad",
                             "quaternion, scalar last) or none, or name the format "
                             "(--orientation-format)")
     else:
-        unused = found_columns(header, position_columns)
+        unused = found_columns(header, position_columns, robot.joint_names)
         if unused:
-            raise DataError(f"{path}: orientation columns {', '.join(unused[0])} would not be "
-                            "read: give their format (--orientation-format quat-xyzw, "
-                            "quat-wxyz, rpy-zyx, rpy-xyz, rotvec or matrix) to reach the "
-                            "orientations too, or remove them to reach the positions alone")
+            raise DataError(unread_message(path, unused[0], position_columns,
+                                           "to reach the orientations too",
+                                           "remove them to reach the positions alone"))
     expected = (f"the chain joints (seeds) and {', '.join(position_columns)}"
                 + (f" and {', '.join(columns)} ({fmt.name})" if columns else ""))
     held = held or HeldJoints()

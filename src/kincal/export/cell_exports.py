@@ -204,7 +204,9 @@ def ur_kinematics_yaml(nominal, corrected, ur_hash: str) -> str:
     old, new = nominal.urdf_origins(), corrected.urdf_origins()
     near = _written_rpy(nominal, {name: new[name] for name in joints})
     lines = [f"# kincal: corrected kinematics of {corrected.name} ({corrected.base} -> "
-             f"{corrected.tip}), ur_description's layout; the hash is the factory file's",
+             f"{corrected.tip}), ur_description's layout; hash: the robot's calibration id, "
+             "which ur_robot_driver compares with the controller's (the kinematics_params "
+             "file's, or --ur-hash)",
              "kinematics:"]
     for (segment, _), name in zip(UR_SEGMENTS, joints):
         T = new[name]

@@ -16,30 +16,37 @@ import math
 import numpy as np
 
 # the figure and save helpers are shared with the other plots on purpose: one look
-from kincal.export.plots import _COLORS, PngText, _figure, _save, equal_axes_mm, error_label
+from kincal.export.plots import (_COLORS, PngText, _figure, _save, angle_axis_label,
+                                 equal_axes_mm, error_label)
 
 
 def plot_residuals_per_pose(result, path=None, *, overwrite: bool = False,
                             source: PngText = "kincal", set_index: int = 0):
     """Error [mm] of every sample of set ``set_index`` before (frames fitted) and after
-    calibration, in file order, x = the sample's line in the data file."""
+    calibration, in file order, x = the sample's line in the data file; below it, a pose
+    or flush set's orientation error [deg] alike."""
     s = result.sets[set_index]
-    before = s.errors_before * 1e3
-    after = s.errors_after * 1e3
-    k = np.arange(len(after))
-    fig = _figure(8.4, 3.6)
-    ax = fig.add_subplot()
-    ax.vlines(k, after, before, color="0.8", lw=0.8)
-    ax.plot(k, before, "o", ms=3.5, color=_COLORS[0], label=f"before (mean {before.mean():.3f} mm)")
-    ax.plot(k, after, "o", ms=3.5, color=_COLORS[2], label=f"after (mean {after.mean():.3f} mm)")
+    panels = [(s.errors_before * 1e3, s.errors_after * 1e3, error_label(s.kind), "mm", ".3f")]
+    if s.angles_before is not None and s.angles_after is not None:
+        panels.append((np.degrees(s.angles_before), np.degrees(s.angles_after),
+                       angle_axis_label(s.kind), "deg", ".4g"))
+    k = np.arange(len(s.errors_after))
+    fig = _figure(8.4, 3.6 if len(panels) == 1 else 6.0)
+    axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
     step = max(1, len(k) // 20)
-    ax.set_xticks(k[::step], [str(int(r)) for r in np.asarray(s.rows)[::step]], fontsize=7)
-    ax.set_xlabel("sample (line in the data file)")
-    ax.set_ylabel(error_label(s.kind))
+    for ax, (before, after, label, unit, fmt) in zip(axes, panels):
+        ax.vlines(k, after, before, color="0.8", lw=0.8)
+        ax.plot(k, before, "o", ms=3.5, color=_COLORS[0],
+                label=f"before (mean {before.mean():{fmt}} {unit})")
+        ax.plot(k, after, "o", ms=3.5, color=_COLORS[2],
+                label=f"after (mean {after.mean():{fmt}} {unit})")
+        ax.set_xticks(k[::step], [str(int(r)) for r in np.asarray(s.rows)[::step]], fontsize=7)
+        ax.set_ylabel(label)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.legend(fontsize=8)
+    axes[-1].set_xlabel("sample (line in the data file)")
     what = "" if len(result.sets) == 1 else f" of set {set_index + 1} ({s.kind}, {s.source})"
-    ax.set_title(f"Residuals per sample{what}, before and after calibration", fontsize=10)
-    ax.grid(True, axis="y", alpha=0.3)
-    ax.legend(fontsize=8)
+    axes[0].set_title(f"Residuals per sample{what}, before and after calibration", fontsize=10)
     return _save(fig, path, overwrite, source, _made_from(result))
 
 

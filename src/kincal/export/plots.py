@@ -163,25 +163,49 @@ def plot_point_sets(calibration_mm, validation_mm, path, *, highlight_index=None
 
 
 def error_label(kind: str) -> str:
-    """The axis label of a set's per-sample errors [mm], by its measurement kind."""
-    return {"point": "position", "pose": "position and orientation", "distance": "distance",
+    """The axis label of a set's per-sample errors [mm], by its measurement kind (a pose's
+    is its position's: its orientation is drawn apart, :func:`angle_axis_label`)."""
+    return {"point": "position", "pose": "position", "distance": "distance",
             "plane": "distance to the plane", "flush": "height"}.get(kind, "sample") + " error (mm)"
+
+
+def angle_axis_label(kind: str) -> str:
+    """The axis label of a set's per-sample orientation errors [deg] (poses, flush)."""
+    from kincal.identification.statistics import angle_label
+
+    return angle_label(kind) + (" (deg)" if kind == "flush" else " error (deg)")
 
 
 def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
                              title: str = "Position error distribution",
                              overwrite: bool = False, source: PngText = "kincal",
-                             ylabel: str = "position error (mm)") -> Path | bytes:
+                             ylabel: str = "position error (mm)",
+                             angles: Sequence[tuple[str, np.ndarray]] | None = None,
+                             angle_ylabel: str = "orientation error (deg)") -> Path | bytes:
     """Box plots (with the points) of per-pose errors [mm], one per method.
 
     series: (label, (N,) errors [mm]) pairs, drawn left to right. A log axis is used
     when the largest median is over 20 times the smallest, so all boxes stay readable.
-    ylabel: what the errors are (:func:`error_label` of a set's kind).
+    ylabel: what the errors are (:func:`error_label` of a set's kind). angles: the same
+    for each sample's orientation error [deg] (pose and flush sets), drawn beside them
+    under ``angle_ylabel``.
     """
+    fig = _figure(6.4 if angles is None else 9.6, 4.2)
+    axes = [fig.add_subplot()] if angles is None else list(fig.subplots(1, 2))
+    _boxes(axes[0], series, ylabel, ".3f")
+    if angles is None:
+        axes[0].set_title(title, fontsize=10)
+    else:
+        _boxes(axes[1], angles, angle_ylabel, ".4g")
+        fig.suptitle(title, fontsize=10)
+    return _save(fig, path, overwrite, source)
+
+
+def _boxes(ax, series, ylabel: str, fmt: str) -> None:
+    """One box (and its points, its mean written above in ``fmt``) per (label, values) of
+    ``series``."""
     labels = [s[0] for s in series]
     data = [np.asarray(s[1], float) for s in series]
-    fig = _figure(6.4, 4.2)
-    ax = fig.add_subplot()
     pos = np.arange(1, len(data) + 1)
     ax.boxplot(data, positions=pos, widths=0.55, showfliers=False, medianprops={"color": "k"})
     ax.set_xticks(pos, labels)  # not boxplot(tick_labels=): that needs matplotlib 3.9
@@ -189,16 +213,14 @@ def plot_error_distributions(series: Sequence[tuple[str, np.ndarray]], path, *,
     for i, d in enumerate(data):
         ax.scatter(pos[i] + rng.uniform(-0.18, 0.18, d.size), d, s=6, alpha=0.45,
                    color=_COLORS[i % len(_COLORS)])
-        ax.annotate(f"mean {d.mean():.3f}", (pos[i], d.max()), textcoords="offset points",
+        ax.annotate(f"mean {d.mean():{fmt}}", (pos[i], d.max()), textcoords="offset points",
                     xytext=(0, 4), ha="center", fontsize=8)
     meds = [np.median(d) for d in data if d.size]
     if meds and min(meds) > 0 and max(meds) / min(meds) > 20:
         ax.set_yscale("log")
     ax.set_ylabel(ylabel)
-    ax.set_title(title, fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)
     ax.tick_params(axis="x", labelsize=8)
-    return _save(fig, path, overwrite, source)
 
 
 def plot_parameter_deviations(names: Sequence[str], is_length, columns, path, *,
@@ -323,8 +345,17 @@ def calibration_figures(result, source: PngText = "kincal") -> list[tuple[str, b
         what = "" if len(result.sets) == 1 else f" of set {i + 1} ({s.kind}, {s.source})"
         title = (f"Calibration residuals{what}, {len(after)} samples; before: mean "
                  f"{s.before.mean:.3f}, max {s.before.max:.3f} mm")
+        angles = None
+        if s.angles_after is not None and s.angles_before is not None:
+            from kincal.identification.statistics import angle_label
+
+            title += (f"; {angle_label(s.kind)} mean {np.degrees(s.angles_before).mean():.4g} "
+                      "deg")
+            angles = [(series[0][0], np.degrees(s.angles_before)),
+                      (series[1][0], np.degrees(s.angles_after))]
         out.append((_residuals_png(i), png_bytes(plot_error_distributions(
-            series, None, title=title, source=source, ylabel=error_label(s.kind)))))
+            series, None, title=title, source=source, ylabel=error_label(s.kind),
+            angles=angles, angle_ylabel=angle_axis_label(s.kind)))))
     kin = list(result.parameters[:result.layout.n_kinematic])
     if any(p.status == "identified" for p in kin):
         how = result.options.method + (f", lambda = {result.lam:.3g}" if result.lam else "")

@@ -77,7 +77,17 @@ def set_dict(s) -> dict:
                 "before": angle_dict(s.orientation_before),
                 "after": angle_dict(s.orientation_after)},
             "residuals": {"row": s.rows, "error_mm": s.errors_after * 1e3,
-                          "residual_rows_m": s.residuals}}
+                          **_angles(s), "residual_rows_m": s.residuals}}
+
+
+def _angles(s) -> dict:
+    """A pose or flush set's per-sample orientation error after calibration [deg] and its
+    angles [rad] (the rotation vector; the roll and pitch against the plane), for the
+    residuals of REPORT.json; nothing for other kinds."""
+    if s.angle_rows_after is None:
+        return {}
+    return {"orientation_error_deg": np.degrees(s.angles_after),
+            "orientation_rows_rad": s.angle_rows_after}
 
 
 def residuals_dict(result: CalibrationResult) -> dict:
@@ -88,7 +98,8 @@ def residuals_dict(result: CalibrationResult) -> dict:
     first = result.sets[0]
     if len(result.sets) == 1:
         return {"row": first.rows, "point": result.points, "error_mm": first.errors_after * 1e3,
-                **({"dx_dy_dz_mm": first.residuals * 1e3} if first.kind == "point" else {})}
+                **({"dx_dy_dz_mm": first.residuals * 1e3} if first.kind == "point" else {}),
+                **{k: v for k, v in _angles(first).items() if k == "orientation_error_deg"}}
     points = [getattr(s.data, "points", None) for s in result.sets]
     return {"set": np.concatenate([np.full(len(s.errors_after), i + 1)
                                    for i, s in enumerate(result.sets)]),

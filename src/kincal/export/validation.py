@@ -28,7 +28,9 @@ class Validation:
     x, y, z of the position in the measurement frame. angles: (before, after) statistics
     of the orientation errors [deg] (poses: the rotation angle; flush touches: the tilt
     against the plane, with its roll and pitch), None for kinds without one. chain: the
-    chain it was judged on ("base -> tip") in a calibration of several, else ""."""
+    chain it was judged on ("base -> tip") in a calibration of several, else "".
+    angle_rows_before / angle_rows_after: (N, k) each sample's orientation error as angles
+    [rad] (:meth:`kincal.measurements.kind.KindModel.angle_rows`), None without one."""
 
     source: str
     kind: str
@@ -40,6 +42,8 @@ class Validation:
     per_axis: bool
     angles: tuple[AngleStats, AngleStats] | None = None
     chain: str = ""  # "base -> tip" when the calibration has several chains
+    angle_rows_before: np.ndarray | None = None
+    angle_rows_after: np.ndarray | None = None
 
     @property
     def before(self) -> ErrorStats:
@@ -66,7 +70,8 @@ class Validation:
             b0, a0 = self.angles
             label = angle_label(self.kind, short=True)
             out += [(f"{label}: mean [deg]", b0.mean, a0.mean),
-                    (f"{label}: rms [deg]", b0.rms, a0.rms)]
+                    (f"{label}: rms [deg]", b0.rms, a0.rms),
+                    (f"{label}: max [deg]", b0.max, a0.max)]
             out += [(f"{k}: rms [deg]", vb, va) for (k, vb), (_, va) in zip(b0.axes, a0.axes)]
         return out
 
@@ -91,7 +96,8 @@ class Validation:
             parts = "".join(f", {k} {vb:.4f} -> {va:.4f}"
                             for (k, vb), (_, va) in zip(b0.axes, a0.axes))
             out.append(f"  {angle_label(self.kind)} [deg]: mean {b0.mean:.4f} -> "
-                       f"{a0.mean:.4f}, RMS {b0.rms:.4f} -> {a0.rms:.4f}"
+                       f"{a0.mean:.4f}, RMS {b0.rms:.4f} -> {a0.rms:.4f}, max {b0.max:.4f} -> "
+                       f"{a0.max:.4f}"
                        + (f" ({parts[2:]})" if parts else ""))
         return out
 
@@ -127,25 +133,34 @@ def validation_dict(validations) -> dict | list | None:
 
 def residuals_csv(result, validations=(), header: str = "") -> str:
     """Every sample's residual vector after calibration (training sets, then the held-out
-    sets) as CSV: split, set, source, kind, row, error_m, r1..rD [m] (D the widest set's
-    residual size; point sets: dx dy dz per measured point; poses: position, then the
-    orientation rows in metres through their sigma ratio). ``header``: ``#`` lines put
-    first."""
-    parts = [("training", k + 1, s.source, s.kind, s.rows, s.residuals, s.errors_after)
-             for k, s in enumerate(result.sets)]
+    sets) as CSV: split, set, source, kind, row, error_m, orientation_error_rad, r1..rD (D
+    the widest set's residual size), measured minus predicted: points dx dy dz [m] per
+    measured point; distances, contacts [m]; poses dx dy dz [m] then the rotation vector
+    [rad]; flush touches the height [m] then the roll and pitch against the plane [rad].
+    orientation_error_rad: the norm of those angles (poses, flush), else empty. ``header``:
+    ``#`` lines put first."""
+    parts = [("training", k + 1, s.source, s.kind, s.rows, s.residuals, s.errors_after,
+              s.angle_rows_after) for k, s in enumerate(result.sets)]
     for validation in validations:
         parts.append(("held-out", len(parts) + 1, validation.source, validation.kind,
-                      validation.rows, validation.residuals_after, validation.errors_after))
+                      validation.rows, validation.residuals_after, validation.errors_after,
+                      validation.angle_rows_after))
     width = max(np.asarray(p[5]).reshape(len(p[4]), -1).shape[1] for p in parts)
-    lines = [f"# residual vectors per sample after calibration, measured minus predicted [m]"]
+    lines = ["# residual vectors per sample after calibration, measured minus predicted: "
+             "lengths [m], a pose's rotation vector and a flush touch's tilts [rad]"]
     lines += [line for line in header.splitlines() if line]
-    lines.append(csv_line(["split", "set", "source", "kind", "row", "error_m"]
-                          + [f"r{k + 1}" for k in range(width)]))
-    for split, k, source, kind, rows, res, err in parts:
+    lines.append(csv_line(["split", "set", "source", "kind", "row", "error_m",
+                           "orientation_error_rad"] + [f"r{k + 1}" for k in range(width)]))
+    for split, k, source, kind, rows, res, err, angles in parts:
         res = np.asarray(res).reshape(len(rows), -1)
-        for row, r, e in zip(rows, res, err):
-            cells = [split, str(k), str(source), kind, str(int(row)), repr(float(e))]
+        if angles is not None:  # the angle rows in radians, not through their sigma ratio
+            a = np.asarray(angles).reshape(len(rows), -1)
+            res = np.hstack([res[:, :res.shape[1] - a.shape[1]], a])
+        norms = [""] * len(rows) if angles is None else [
+            repr(float(v)) for v in np.linalg.norm(np.asarray(angles).reshape(len(rows), -1),
+                                                   axis=1)]
+        for row, r, e, o in zip(rows, res, err, norms):
+            cells = [split, str(k), str(source), kind, str(int(row)), repr(float(e)), o]
             cells += [repr(float(v)) for v in r] + [""] * (width - len(r))
             lines.append(csv_line(cells))
     return "\n".join(lines) + "\n"
-

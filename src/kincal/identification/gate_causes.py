@@ -34,6 +34,9 @@ def names_text(names, shown: int = 6) -> str:
 
 def unit_causes(ev: Evidence) -> list[str]:
     out = []
+    if ev.prismatic_mm:  # the positions' spread grows with such joints: no ratio shows it
+        out.append(f"lengths in millimetres read as metres ({ev.prismatic_mm}; --length-unit "
+                   "mm reads the positions and the prismatic joints in millimetres)")
     r = ev.length_ratio
     if math.isfinite(r) and r > UNIT_RATIO:
         out.append(f"positions in millimetres read as metres (they spread {r:.0f}x more than "

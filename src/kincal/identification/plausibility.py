@@ -83,7 +83,7 @@ from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes,
                                                 unit_causes, weak_cause)
 from kincal.identification.statistics import angle_label
 from kincal.measurements.checks import (DEGREES_AS_RADIANS, TOOL_RATIO, UNIT_RATIO,
-                                        duplicate_samples, spread)
+                                        duplicate_samples, millimetres_read_as_metres, spread)
 from kincal.identification.tool_motion import change, farthest_tool, n_chains
 from kincal.models.workspace import CHANGE, tool_points
 
@@ -155,6 +155,8 @@ class Evidence:
     length_source: str = ""  # the file of length_ratio when several sets measure positions
     angle_max: float = 0.0
     angle_outside: bool = False
+    prismatic_mm: str = ""  # a prismatic value in metres far beyond its limits (checks.
+    #                         millimetres_read_as_metres): lengths in mm, the file's positions too
     angle_unit: str = "rad"
     off_chain_columns: tuple[str, ...] = ()
     other_branch_columns: tuple[str, ...] = ()
@@ -190,7 +192,8 @@ class Finding:
     kind: "residual", "orientation", "unexplained", "corrections", "length_correction",
     "length_unit", "angle_unit", "not_converged" or "orientation_convention" (a pose file's
     convention in doubt). value
-    and threshold share ``unit``. parameters: those the finding is about (largest first).
+    and threshold share ``unit`` (NaN where no one number is judged: a convention in doubt,
+    whose two readings' errors its message gives). parameters: those the finding is about (largest first).
     causes: likely causes, most likely first."""
 
     kind: str
@@ -343,9 +346,9 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
             "length_correction", f"{n} is corrected by {v:+.4g} mm, more than "
             f"{th.length_correction:.0%} of the reach ({L_mm:.0f} mm)", abs(v),
             th.length_correction * L_mm, "mm", (n,), causes=tuple(fit_causes(ev, th))))
-    for doubt in ev.convention_doubts:  # orientations in another convention: a wrong fit
-        out.append(Finding("orientation_convention", doubt, 0.0, 0.0, "", causes=(
-            "orientations read in another convention than the file's",)))
+    for doubt in ev.convention_doubts:  # another convention: two readings' errors, said in
+        out.append(Finding("orientation_convention", doubt, math.nan, math.nan, "", causes=(
+            "orientations read in another convention than the file's",)))  # the message
     if not ev.converged:
         out.append(Finding(
             "not_converged", f"the solver did not converge in {ev.iterations} iterations",
@@ -435,6 +438,10 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
             v = dt.joint_values[i, c]
             angle_max = top
             outside = bool(v < gi.lower[c] - 1e-6 or v > gi.upper[c] + 1e-6)
+    prismatic_mm = next((f"{getattr(dt, 'source', '')}: {clue}" for dt, g in zip(
+        datas, (r.geometry for r in problem.robots)) if getattr(dt, "length_unit", "m") == "m"
+        and (clue := millimetres_read_as_metres(g.joint_names, g.kinds, g.lower, g.upper,
+                                                dt.joint_values, dt.rows))), "")
     off_chain, elsewhere, at_base = problem.chains.off_chain_columns(datas)
     # the worst set's orientation errors after calibration (poses; flush: the tilts)
     turned = [(a.median, a.rms, angle_label(s.kind)) for s in result.sets
@@ -449,6 +456,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
         length_source=str(getattr(unit_set, "source", "")) if len(clues) > 1 else "",
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
+        prismatic_mm=prismatic_mm,
         off_chain_columns=off_chain, other_branch_columns=elsewhere, at_base=at_base,
         bases=tuple(dict.fromkeys(r.base for r in problem.robots)),
         converged=bool(result.converged),

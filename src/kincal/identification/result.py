@@ -67,11 +67,14 @@ class SetResult:
     residuals / residuals_before: (N, dim) measured minus predicted [m] after calibration and
     at the start (orientation rows of poses in metres through their sigma ratio).
     errors_before / errors_after: (N,) each sample's error [m] (position, distance, distance
-    to the plane; poses: position and orientation together); before / after: their
+    to the plane; poses: the position's, their orientation is apart); before / after: their
     statistics [mm]. orientation_before / orientation_after: statistics [deg] of each
     sample's orientation error (poses: the angle of the rotation between measured and
     predicted; flush contacts: the tilt against the plane), None for other kinds;
-    orientation_after_deg: the mean of orientation_after [deg].
+    orientation_after_deg: the mean of orientation_after [deg]. angle_rows_before /
+    angle_rows_after: (N, k) each sample's orientation error as angles [rad] (poses: the
+    rotation vector; flush: roll and pitch; :meth:`KindModel.angle_rows`), None for other
+    kinds; :attr:`angles_before` / :attr:`angles_after` their norms.
     base_frame / tip_frame: the chain the set was measured on.
     """
 
@@ -91,6 +94,20 @@ class SetResult:
     tip_frame: str = ""
     orientation_before: AngleStats | None = None
     orientation_after: AngleStats | None = None
+    angle_rows_before: np.ndarray | None = None
+    angle_rows_after: np.ndarray | None = None
+
+    @property
+    def angles_before(self) -> np.ndarray | None:
+        """(N,) each sample's orientation error at the start [rad], None without one."""
+        return None if self.angle_rows_before is None else np.linalg.norm(
+            self.angle_rows_before, axis=1)
+
+    @property
+    def angles_after(self) -> np.ndarray | None:
+        """(N,) each sample's orientation error after calibration [rad], None without one."""
+        return None if self.angle_rows_after is None else np.linalg.norm(
+            self.angle_rows_after, axis=1)
 
     @property
     def rows(self) -> np.ndarray:
@@ -207,7 +224,8 @@ class CalibrationResult:
             sets.append(SetResult(km.kind, km.data.source, km.data, tuple(km.frame_names),
                                   np.array(lay.frames(x, i)), r, r0, e0, e,  # as from_errors'
                                   ErrorStats.from_errors(e0), ErrorStats.from_errors(e), ori,
-                                  problem.robots[i].base, problem.robots[i].tip, o0, o))
+                                  problem.robots[i].base, problem.robots[i].tip, o0, o,
+                                  km.angle_rows(r0), km.angle_rows(r)))
         return cls(problem.robot, corrected, problem.options, lay, rows, x_nom, x_start, x,
                    float(lam) if evidence is None else math.nan, cv, tuple(sets), sol, ident,
                    problem.error_model, tuple(downweighted), covariance, evidence,

@@ -115,8 +115,5 @@ def angle_errors(kind_model, residuals: np.ndarray) -> np.ndarray | None:
     """(N,) orientation error of each sample [rad] from a set's residual rows: poses, the
     angle of the rotation between measured and predicted; flush contacts, the tilt against
     the plane (roll and pitch together); None for kinds without an orientation."""
-    if kind_model.kind == "pose":
-        return kind_model.orientation_errors(residuals)
-    if kind_model.kind == "flush":
-        return np.linalg.norm(kind_model.tilt_errors(residuals), axis=1)
-    return None
+    rows = kind_model.angle_rows(residuals)
+    return None if rows is None else np.linalg.norm(rows, axis=1)

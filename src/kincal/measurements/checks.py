@@ -31,6 +31,26 @@ def degrees_read_as_radians(joint_names, kinds, lower, upper, q, rows) -> str:
             "joint values degrees? Read them with --angle-unit deg (Python: angle_unit='deg')")
 
 
+def millimetres_read_as_metres(joint_names, kinds, lower, upper, q, rows) -> str:
+    """"" or what shows that prismatic values read in metres were millimetres: a prismatic
+    joint with limits, a value beyond them and more than UNIT_RATIO times its farthest limit
+    from zero (or its travel, if larger), the farthest such value named with its line. (A
+    pose file logged in mm and degrees with a prismatic joint, as the TIAGo's torso: its
+    lengths grow with the positions, so the positions' spread gives no clue.)"""
+    q = np.asarray(q, dtype=float)
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    with np.errstate(invalid="ignore"):
+        scale = np.maximum(np.maximum(np.abs(lo), np.abs(hi)), hi - lo)
+    scale = np.where(np.isfinite(scale) & (scale > 0), scale, np.inf)
+    prismatic = np.array([k == "prismatic" for k in kinds], dtype=bool)
+    sign = prismatic & (np.abs(q) > UNIT_RATIO * scale) & ((q < lo - 1e-6) | (q > hi + 1e-6))
+    if not sign.any():
+        return ""
+    i, j = np.unravel_index(np.argmax(np.where(sign, np.abs(q), -1.0)), q.shape)
+    return (f"{joint_names[j]} is {q[i, j]:.4g} m at line {rows[i]}, {abs(q[i, j]) / scale[j]:.0f} "
+            f"times the farthest of its URDF limits [{lo[j]:.4g}, {hi[j]:.4g}] m")
+
+
 LIMIT_JOINTS_LISTED = 3  # joints outside their limits named one warning each; beyond, one
 
 
@@ -176,8 +196,13 @@ def set_warnings(data, geometry, backlash=()) -> list[str]:
     pose = np.unique(data.poses, return_index=True)[1]
     q = data.joint_values[pose]
     g = geometry
-    out = (angle_unit_warnings(g.joint_names, g.kinds, q, getattr(data, "angle_unit", "rad"),
-                               g.lower, g.upper)  # first: the cause the limits then show
+    mm = ("" if getattr(data, "length_unit", "m") != "m" else  # first: the causes the
+          millimetres_read_as_metres(g.joint_names, g.kinds, g.lower, g.upper, q,  # limits
+                                     data.rows[pose]))                              # show
+    out = ([f"{mm}: were the lengths millimetres? Read them with --length-unit mm (Python: "
+            "length_unit='mm')"] if mm else [])
+    out += (angle_unit_warnings(g.joint_names, g.kinds, q, getattr(data, "angle_unit", "rad"),
+                                g.lower, g.upper)
            + limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, data.rows[pose]))
     order = getattr(data, "order_source", "the order of the rows")
     timelike = [c for c in data.ignored_columns

@@ -320,6 +320,11 @@ class FlushKind(KindModel):
         predicted minus flush) from the residual rows."""
         return -r[:, 1:] / self.data.ratio()[:, None]
 
+    def angle_rows(self, r) -> np.ndarray:
+        """(N, 2) a touch's orientation error, its tilt (:meth:`tilt_errors`), signed as the
+        residual rows are (flush minus predicted) [rad]."""
+        return -self.tilt_errors(r)
+
     def noise_rows(self):
         """(height [mm], tilt [deg], tilt [deg]): a touch's residual rows (module notes)."""
         tilt = self.data.ratio() * (math.pi / 180.0)

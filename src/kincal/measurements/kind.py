@@ -188,6 +188,12 @@ class KindModel:
         """(N,) size of each sample's error [m] from its residual rows (for statistics)."""
         return np.linalg.norm(r, axis=1)
 
+    def angle_rows(self, r: np.ndarray) -> np.ndarray | None:
+        """(N, k) each sample's orientation error as angles [rad] from its residual rows
+        (poses: the rotation vector between measured and predicted; flush touches: the
+        roll and pitch against the plane), None for kinds without an orientation."""
+        return None
+
     def notes(self) -> tuple[str, ...]:
         """What this kind cannot see, for the identifiability report."""
         return ()

@@ -23,6 +23,7 @@ file); beyond it the row is refused with its line.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,15 +64,59 @@ def candidate_columns(fmt: str, position_columns=None) -> list[tuple[str, ...]]:
     return out + list(CANDIDATES[fmt])
 
 
-def found_columns(header, position_columns=None) -> list[tuple[str, ...]]:
-    """Every complete group of orientation columns in ``header`` (any format), for the
-    refusal of a pose file read as positions."""
+def found_columns(header, position_columns=None, exclude=()) -> list[tuple[str, ...]]:
+    """Every group of orientation columns in ``header``, for the refusal of a pose file
+    read as positions: each complete group of the usual names (any format), then the
+    columns named as loggers name orientation components otherwise (:func:`looks_like`:
+    ``Roll``, ``quat_x``, ``pose.orientation.w``, three of a quaternion's four), as one
+    group in the header's order. exclude: columns read as something else (joints)."""
     seen: list[tuple[str, ...]] = []
     for fmt in FORMATS:
         for g in candidate_columns(fmt, position_columns):
             if all(c in header for c in g) and set(g) not in [set(x) for x in seen]:
                 seen.append(g)
-    return seen
+    known = {c for g in seen for c in g} | set(exclude) | set(position_columns or "xyz")
+    suffix = suffix_of(position_columns)
+    other = tuple(c for c in header if c not in known and looks_like(c, suffix))
+    return seen + ([other] if other else [])
+
+
+# the names of orientation components loggers write beyond the usual ones (CANDIDATES),
+# matched without case, after a unit and the position columns' suffix are taken off: a
+# quaternion's or rotation's x y z w ("quat_x", "pose.orientation.w", "Rotation X", "qw"),
+# Euler angles ("Roll", "yaw"), rotation vectors and matrices ("Rx", "R11")
+_COMPONENT = re.compile(r"^(?:.*[._\s-])?(?:q|quat|quaternion|orient|orientation|rot|rotation)"
+                        r"[._\s-]?[xyzw]$|^(?:roll|pitch|yaw|phi[xyz]|r[xyz]|r[1-3][1-3])$")
+_UNIT_TAIL = re.compile(r"[\s._-]*[\[(]?(?:deg|degrees|rad|radians)[\])]?$")
+
+
+def looks_like(name: str, suffix: str = "") -> bool:
+    """Whether a column ``name`` looks like an orientation component (see _COMPONENT);
+    suffix: that of the position columns (x1 y1 z1: "1"), taken off first."""
+    n = _UNIT_TAIL.sub("", str(name).strip().lower())
+    if suffix and n.endswith(suffix.lower()) and len(n) > len(suffix):
+        n = n[: len(n) - len(suffix)]
+    return bool(_COMPONENT.match(n))
+
+
+def is_usual(columns, position_columns=None) -> bool:
+    """Whether ``columns`` are a complete group of the usual names of some format (which
+    ``--orientation-format`` alone reads), not look-alikes needing --orientation-columns."""
+    return any(set(columns) == set(g) for fmt in FORMATS
+               for g in candidate_columns(fmt, position_columns))
+
+
+def unread_message(path, columns, position_columns, purpose: str = "to calibrate poses",
+                   alone: str = "--positions-only to use the positions alone") -> str:
+    """The refusal of orientation columns that a reading as positions would drop; purpose:
+    what reading them gives, alone: how to read the positions without them."""
+    pos = " ".join(position_columns or ("x", "y", "z"))
+    formats = "--orientation-format quat-xyzw, quat-wxyz, rpy-zyx, rpy-xyz, rotvec or matrix"
+    how = (f"give their format ({formats}) {purpose}" if is_usual(columns, position_columns)
+           else f"name them in their format's order ({formats}, with --orientation-columns) "
+           f"{purpose}")
+    return (f"{path}: orientation columns {', '.join(columns)} beside the position columns "
+            f"{pos} would not be read: {how}, or {alone}")
 
 
 @dataclass(frozen=True)

@@ -265,6 +265,10 @@ class PointKind:
     def sample_errors(self, r):
         return np.linalg.norm(r, axis=1)
 
+    def angle_rows(self, r) -> None:
+        """Points have no orientation (:meth:`KindModel.angle_rows`)."""
+        return None
+
     def noise_rows(self) -> tuple[tuple[str, str, np.ndarray], ...]:
         """x, y, z: one kind of row, in mm (:meth:`KindModel.noise_rows`)."""
         return tuple(("", "mm", np.full(self.N, 1e-3)) for _ in range(self.dim))

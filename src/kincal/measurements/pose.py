@@ -252,9 +252,14 @@ class PoseKind(KindModel):
     def sample_errors(self, r):
         return np.linalg.norm(r[:, :3], axis=1)
 
+    def angle_rows(self, r) -> np.ndarray:
+        """(N, 3) the rotation vector log(R_measured R^T) [rad], in the measurement frame,
+        from the residual rows (their orientation rows over the sigma ratio)."""
+        return r[:, 3:] / self.data.ratio()[:, None]
+
     def orientation_errors(self, r) -> np.ndarray:
         """(N,) orientation error angles [rad] from the residual rows."""
-        return np.linalg.norm(r[:, 3:], axis=1) / self.data.ratio()
+        return np.linalg.norm(self.angle_rows(r), axis=1)
 
     def notes(self):
         return (f"{self.data.source}: poses see the tool frame's orientation too; what a "

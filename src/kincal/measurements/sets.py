@@ -79,7 +79,8 @@ def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="
     file has them). A file with orientation columns beside its positions is read as poses;
     read as positions only when ``positions_only`` says so, else refused (angles never
     ignored silently)."""
-    from kincal.measurements.orientation_columns import DEFAULT_FORMAT, found_columns
+    from kincal.measurements.orientation_columns import (DEFAULT_FORMAT, found_columns,
+                                                         unread_message)
 
     header = header_of(path, joint_column_names(joint_names, joint_columns).values())
     pos = tuple(position_columns) if position_columns else ("x", "y", "z")
@@ -111,13 +112,11 @@ def read_set_file(path, joint_names, prismatic=(), length_unit="m", angle_unit="
                                  orientation_columns,
                                  orientation_sigma_deg or DEFAULT_ORIENTATION_SIGMA_DEG,
                                  joint_columns, orientation_format or DEFAULT_FORMAT)
-    unused = found_columns(header, pos) if has_pos and not positions_only else []
+    read_as = joint_column_names(joint_names, joint_columns).values()
+    unused = (found_columns(header, pos, (*read_as, order_column or ""))
+              if has_pos and not positions_only else [])
     if unused:
-        raise DataError(f"{path}: orientation columns {', '.join(unused[0])} beside the position "
-                        f"columns {' '.join(pos)} would not be read: give their format "
-                        "(--orientation-format quat-xyzw, quat-wxyz, rpy-zyx, rpy-xyz, rotvec "
-                        "or matrix) to calibrate poses, or --positions-only to use the "
-                        "positions alone")
+        raise DataError(unread_message(path, unused[0], pos))
     return Measurements.from_csv(path, joint_names, prismatic, length_unit, angle_unit,
                                  position_columns or ("x", "y", "z"),
                                  order_column=order_column, joint_columns=joint_columns)
