@@ -47,6 +47,8 @@ def ignored_option_cases():
         for base, name in ((plan, "plan"), (sim, "simulate")):
             yield f"{name} --floor {v} without a volume", base + ["--floor", v]
             yield f"{name} --floor {v} with --no-floor", base + cube + ["--floor", v, "--no-floor"]
+    for base, name in ((plan, "plan"), (sim, "simulate")):
+        yield f"{name} --no-collision without a volume", base + ["--no-collision"]
     for v in ("nan", "inf"):
         for base, name in ((plan, "plan"), (sim, "simulate")):
             yield f"{name} --floor {v}", base + cube + ["--floor", v]

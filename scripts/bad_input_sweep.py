@@ -448,6 +448,14 @@ def cases(inputs_dir: Path, inputs: dict):
         yield label, with_file("robot.urdf", text, lambda p: [
             "calibrate", "{d}/robot.urdf", "{csv}", "--tip", "flange", "--method", "ls",
             "--out", "{d}/o.urdf"])(None)
+    mesh = ('<link name="link_1"><collision><geometry><mesh filename="package://no_such_pkg/'
+            'link_1.stl"/></geometry></collision>')  # a description without its meshes
+    meshless = inputs["urdf"].replace('<link name="link_1">', mesh, 1)
+    for cmd in ("plan", "simulate"):  # refused naming where it looked and --no-collision
+        yield f"{cmd} in a volume, collision mesh missing", with_file(
+            "robot.urdf", meshless, lambda p, c=cmd: [
+                c, "{d}/robot.urdf", "--tip", "flange", "--in-cube", "0.4", "0", "0.25", "0.02",
+                "--poses", "12", "--out", "{d}/o.csv"])(None)
     frames_bad = {"frames garbage": "not json", "frames nan": inputs["frames"].replace(
         '"x": ', '"x": NaN, "xx": ', 1), "frames empty object": "{}",
                   "frames no tool": '{"base": {"x": 0, "y": 0, "z": 0, "rx": 0, "ry": 0, "rz": 0}}'}

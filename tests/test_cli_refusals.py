@@ -134,6 +134,11 @@ IGNORED = [
     # audit of issue 12: --no-floor and --design were taken and did nothing
     (SIM + ["--no-floor"], "--no-floor is checked for poses drawn in a volume"),
     (PLAN + ["--no-floor"], "--no-floor is checked for poses drawn in a volume"),
+    # --no-collision drops a check that only poses drawn in a volume have
+    (SIM + ["--no-collision"], "--no-collision drops the self-collision check of poses drawn "
+     "in a volume: it needs --in-cube or --in-sphere"),
+    (PLAN + ["--no-collision"], "--no-collision drops the self-collision check of poses drawn "
+     "in a volume: it needs --in-cube or --in-sphere (or --target-cube)"),
     (["simulate", "ec66", "--out", "s.csv", "--poses-file", "points.csv", "--design", "rtest"],
      "--design is not used with --poses-file"),
     (SIM + ["--in-cube", "0.4", "0", "0.3", "0.02", "--max-tilt", "40", "--design", "rtest"],

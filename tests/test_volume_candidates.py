@@ -206,6 +206,64 @@ def test_collision_checker_and_floor(tmp_path):
     assert not checker.colliding(c.joint_values).any()
 
 
+MISSING_MESH = "package://kincal_no_such_pkg/meshes/link_1.stl"
+
+
+@pytest.fixture
+def meshless(tmp_path):
+    """The EC66 with a collision mesh whose file is nowhere (a description package checked
+    out without its meshes), alone in a folder."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "urdf" / "ec66.urdf").read_text()
+    text = text.replace('<link name="link_1">', '<link name="link_1">\n    <collision><geometry>'
+                        f'<mesh filename="{MISSING_MESH}"/></geometry></collision>', 1)
+    assert MISSING_MESH in text
+    (tmp_path / "ec66_meshes.urdf").write_text(text)
+    return tmp_path / "ec66_meshes.urdf"
+
+
+VOLUME_RUNS = [["plan", "--in-cube", "0.4", "0", "0.25", "0.02", "--random", "100", "--poses",
+                "12", "--criterion", "d"],
+               ["simulate", "--in-cube", "0.4", "0", "0.25", "0.02", "--poses", "5"]]
+
+
+@pytest.mark.parametrize("run", VOLUME_RUNS, ids=["plan", "simulate"])
+def test_missing_collision_mesh_refused_with_the_ways_forward(meshless, capsys, run):
+    """It said only that the mesh could not be found: not where it was looked for, nor that
+    the poses can be drawn without the check."""
+    folder = meshless.parent
+    code = main([run[0], str(meshless), *run[1:], "--tip", "flange", "--out",
+                 str(folder / "out.csv")])
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("kincal: error:")]
+    assert code == 1 and len(lines) == 1 and "Traceback" not in err
+    assert f"the collision geometry could not be loaded (Mesh {MISSING_MESH} could not be " \
+           "found)" in lines[0]
+    assert f"under the folders above the URDF ({folder} up to /)" in lines[0]
+    assert "ROS_PACKAGE_PATH" in lines[0] and "give --no-collision" in lines[0]
+    assert sorted(p.name for p in folder.iterdir()) == ["ec66_meshes.urdf"]  # nothing written
+
+
+@pytest.mark.parametrize("run", VOLUME_RUNS, ids=["plan", "simulate"])
+def test_no_collision_draws_without_the_check_and_says_so(meshless, capsys, run):
+    import json
+
+    out = meshless.parent / "out.csv"
+    base = [run[0], str(meshless), *run[1:], "--tip", "flange", "--out", str(out)]
+    assert main(base + ["--no-collision"]) == 0
+    said = capsys.readouterr().out
+    note = ("self-collision NOT checked (--no-collision); only the tool point and tip kept "
+            "above the floor at z = 0 m")
+    assert note in said and out.exists()
+    assert main(base + ["--no-collision", "--json", "--overwrite"]) == 0
+    assert json.loads(capsys.readouterr().out)["collision"] == note
+    # the spec carries it: the geometry is not even loaded
+    spec = VolumeSpec(Volume.cube(*CUBE), TOOL, self_collision=False)
+    c = volume_candidates(Robot.load(str(meshless), tip="flange"), spec, 20, seed=0)
+    assert c.collision_note == note and c.spec.self_collision is False
+
+
 # ------------------------------------------------------------------ I-optimality
 def test_i_optimal_gain_formula_and_selection(ec66, cands):
     rng = np.random.default_rng(0)

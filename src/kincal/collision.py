@@ -12,6 +12,19 @@ import pinocchio as pin
 from kincal.errors import UrdfError
 
 
+def _unloadable(source, dirs, exc) -> str:
+    """The one-line refusal of collision geometry Pinocchio could not load (a mesh file
+    missing, as in a description package checked out or exported without its meshes):
+    what was expected, where package:// paths were looked for (``dirs``, then the
+    variables Pinocchio reads itself), and the way to plan without the check."""
+    why = " ".join(str(exc).split()).rstrip(".")
+    above = f"the folders above the URDF ({dirs[0]} up to {dirs[-1]}), " if dirs else ""
+    return (f"{source}: the collision geometry could not be loaded ({why}); expected each "
+            f"mesh file where the URDF names it, package://PKG/FILE as PKG/FILE under "
+            f"{above}ROS_PACKAGE_PATH or AMENT_PREFIX_PATH/share: put the meshes there, or "
+            "give --no-collision to draw poses without the self-collision check")
+
+
 class CollisionChecker:
     """Self-collision (and floor) checks of a robot's chain configurations.
 
@@ -40,8 +53,7 @@ class CollisionChecker:
             geom = pin.buildGeomFromUrdfString(m, robot.urdf_text, pin.COLLISION,
                                                package_dirs=dirs)
         except (ValueError, RuntimeError) as exc:
-            raise UrdfError(f"{robot.source}: the collision geometry could not be loaded: {exc}"
-                            ) from None
+            raise UrdfError(_unloadable(robot.source, dirs, exc)) from None
         self.has_geometry = geom.ngeoms > 0
         for obj in geom.geometryObjects:
             # meshes become their convex hulls: ~100x faster, and conservative (a pose the

@@ -143,11 +143,16 @@ def _check_calibrate(args) -> None:
         args.cv_max_poses = CalibrationOptions().cv_max_poses
 
 
-def _check_floor(args, volume: bool) -> None:
+def _check_floor(args, volume: bool, target_cube: bool = False) -> None:
+    """--floor, --no-floor, --no-collision: checks of poses drawn in a volume (plan's
+    --target-cube draws its target poses with the collision check too)."""
     _need(args.floor is None or not args.no_floor, "give --floor Z or --no-floor, not both")
     for option, given in (("--floor", args.floor is not None), ("--no-floor", args.no_floor)):
         _need(not given or volume, f"{option} is checked for poses drawn in a volume: it "
               "needs --in-cube or --in-sphere")
+    _need(not args.no_collision or volume or target_cube, "--no-collision drops the "
+          "self-collision check of poses drawn in a volume: it needs --in-cube or --in-sphere"
+          + (" (or --target-cube)" if args.command == "plan" else ""))
     _cell_lengths("--floor", args.floor, args)
     args.floor = 0.0 if args.floor is None else args.floor
 
@@ -184,7 +189,7 @@ def _check_simulate(args) -> None:
 
 def _check_plan(args, volume: bool) -> None:
     """Options that this plan would silently ignore."""
-    _check_floor(args, volume)
+    _check_floor(args, volume, target_cube=args.target_cube is not None)
     _need(args.pivot is None or args.kind == "distance",
           "--pivot is the guess of the pivot of --kind distance")
     _cell_lengths("--pivot", args.pivot, args)

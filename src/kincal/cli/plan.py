@@ -136,7 +136,7 @@ def _plan(p: Plan, robot, protect: list) -> int:
     tool = (0.0, 0.0, 0.0) if tool is None else tool
     columns = joint_map(p.joint_columns)
     spec = volume_spec(p.volume, robot, unit, tool)
-    targets = None
+    targets, collision = None, None  # collision: what the check of drawn poses covered
     if spec is not None:
         from kincal.planning.volume_candidates import volume_candidates
 
@@ -146,7 +146,7 @@ def _plan(p: Plan, robot, protect: list) -> int:
                               "choose: ask for more candidates or fewer poses")
         vc = volume_candidates(robot, spec, m, seed=p.seed)
         q, lines = np.array(vc.joint_values), None
-        source = vc.summary()
+        source, collision = vc.summary(), vc.collision_note
     planes = None
     if p.kind in ("plane", "flush") and p.candidates is not None:  # contacts: a plane column
         from kincal.measurements.plane import PlaneData
@@ -183,12 +183,13 @@ def _plan(p: Plan, robot, protect: list) -> int:
         tspec = replace(base_spec, volume=Volume.cube([v * unit for v in c[:3]], c[3] * unit),
                         home=None if spec is None else tuple(vc.home))
         try:
-            targets = np.array(volume_candidates(robot, tspec, p.target_poses, seed=p.seed + 1,
-                                                 what=_TARGETS).joint_values)
+            tv = volume_candidates(robot, tspec, p.target_poses, seed=p.seed + 1, what=_TARGETS)
         except OptionError as e:  # the volume named is the target cube, not --in-cube
             raise OptionError(f"--target-cube: {e}") from None
+        targets = np.array(tv.joint_values)
         source += (f"\n  {len(targets)} target poses in the {tspec.volume.describe()} (same tilt "
-                   "range and branch)")
+                   "range and branch" + (f"; {tv.collision_note})" if spec is None else ")"))
+        collision = tv.collision_note
     elif p.criterion == "i" and spec is not None:  # the default working volume
         from kincal.planning.volume_candidates import volume_candidates, working_volume
 
@@ -224,7 +225,7 @@ def _plan(p: Plan, robot, protect: list) -> int:
 
     summary = {"command": "plan", "robot": str(robot.source), "candidates": int(len(q)),
                "measured": int(k), "criterion": p.criterion, "kind": p.kind,
-               "model": selection.model,
+               "model": selection.model, "collision": collision,
                "chosen": int(len(new)),
                "candidate_lines": None if lines is None else [int(v) for v in lines[new]],
                "joint_names": list(selection.joint_names),

@@ -130,6 +130,7 @@ def run(args) -> int:
     if s.tilt_deg is not None and s.volume.max_tilt is not None:
         raise OptionError("give --max-tilt or --tilt-deg, not both (the same limit)")
     spec = volume_spec(s.volume, robot, 1.0, tool, default_tilt=tilt)
+    collision = None  # what the check of poses drawn in a volume covered
     if s.poses_file is not None:
         from kincal.planning.candidates import read_candidates
 
@@ -140,7 +141,8 @@ def run(args) -> int:
     elif spec is not None:
         from kincal.planning.volume_candidates import volume_candidates
 
-        q = np.array(volume_candidates(robot, spec, s.poses, seed=s.seed).joint_values)
+        vc = volume_candidates(robot, spec, s.poses, seed=s.seed)
+        q, collision = np.array(vc.joint_values), vc.collision_note
         where = (f"{s.design}: {spec.volume.describe()}, tilt <= "
                  f"{math.degrees(spec.max_tilt):g} deg, random poses on one branch")
     else:  # the default cube: its centre and size are needed only here
@@ -164,8 +166,9 @@ def run(args) -> int:
 
     prov = s.chain.provenance(robot, (s.poses_file,), s.command_line)
     summary = {"command": "simulate", "robot": str(robot.source), "kind": s.kind,
-               "poses": len(q), "design": s.design, "where": where,
+               "poses": len(q), "design": s.design, "where": where, "collision": collision,
                "noise_m": s.noise_mm * 1e-3, "seed": s.seed, "truth_seed": s.truth_seed}
+    noted = [] if collision is None else [f"  {collision}"]  # said under the line
     if s.kind != "point":
         csv, n = _other_kind_csv(s, robot, model, q, table, tool, base, rng)
         # plane contacts come as a whole number per plane (at least 3): say what was written
@@ -175,7 +178,8 @@ def run(args) -> int:
                       lambda written: summary_lines(s.json, [
                           f"simulated {s.kind} measurements of {robot.name} at {n} poses "
                           f"({s.design} design{asked}), noise {s.noise_mm} mm: "
-                          + ", ".join(map(str, written))], summary, written, wrote=None),
+                          + ", ".join(map(str, written)), *noted], summary, written,
+                          wrote=None),
                       provenance=prov, overwrite=s.overwrite, protect=protect)
         return 0
     truth = simulation.Truth(table, base, tool)
@@ -185,7 +189,7 @@ def run(args) -> int:
         files.append(File(s.truth_out, "json", _truth_json(s, robot, model, truth)))
     say_and_write(files, lambda written: summary_lines(s.json, [
         f"simulated {len(q)} poses of {robot.name} ({where}, noise {s.noise_mm} mm): "
-        + ", ".join(map(str, written))], summary, written, wrote=None),
+        + ", ".join(map(str, written)), *noted], summary, written, wrote=None),
         provenance=prov, overwrite=s.overwrite, protect=protect)
     return 0
 

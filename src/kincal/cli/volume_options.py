@@ -1,7 +1,8 @@
 """The command-line options of a measurement volume (``kincal plan`` and ``kincal simulate``).
 
-``--in-cube``/``--in-sphere``, ``--max-tilt``, ``--tilt-direction``, ``--floor``/``--no-floor``
-and (plan) ``--home`` become a :class:`kincal.planning.volume_candidates.VolumeSpec`.
+``--in-cube``/``--in-sphere``, ``--max-tilt``, ``--tilt-direction``,
+``--floor``/``--no-floor``, ``--no-collision`` and (plan) ``--home`` become a
+:class:`kincal.planning.volume_candidates.VolumeSpec`.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ class VolumeRequest:
     tilt_direction: tuple[float, float, float] | None = None
     floor: float = 0.0  # height of the floor in the base frame
     no_floor: bool = False
+    no_collision: bool = False  # no self-collision check (meshes not loaded)
     home: tuple[float, ...] | None = None  # plan only: joint values in the plan's units
     angle_unit: str = "rad"  # of --home
 
@@ -36,8 +38,8 @@ class VolumeRequest:
 
 
 def volume_spec(request: VolumeRequest, robot, unit: float, tool, default_tilt: float = 30.0):
-    """A VolumeSpec from --in-cube/--in-sphere, --max-tilt, --tilt-direction, --home, --floor
-    (lengths in ``unit`` [m per unit], --home in the plan's joint units), or None.
+    """A VolumeSpec from --in-cube/--in-sphere, --max-tilt, --tilt-direction, --home, --floor,
+    --no-collision (lengths in ``unit`` [m per unit], --home in the plan's joint units), or None.
     default_tilt: [deg] when --max-tilt is not given."""
     from kincal.planning.volume_candidates import Volume, VolumeSpec
 
@@ -65,7 +67,8 @@ def volume_spec(request: VolumeRequest, robot, unit: float, tool, default_tilt: 
     return VolumeSpec(volume, (x, y, z), math.radians(default_tilt if request.max_tilt is None
                                                         else request.max_tilt),
                       request.tilt_direction or (0.0, 0.0, -1.0),
-                      None if home is None else tuple(home), floor)
+                      None if home is None else tuple(home), floor,
+                      self_collision=not request.no_collision)
 
 
 def add_volume_options(p, unit_help):
@@ -84,3 +87,7 @@ def add_volume_options(p, unit_help):
                    help=f"height of the floor in the base frame ({unit_help}; default 0): no "
                         "link may go below it")
     p.add_argument("--no-floor", action="store_true", help="no floor check")
+    p.add_argument("--no-collision", action="store_true",
+                   help="no self-collision check: the URDF's collision meshes are not loaded "
+                        "(for a URDF whose meshes cannot be found); the tool point and tip "
+                        "are still kept above the floor, and the output says so")

@@ -13,7 +13,10 @@ The instrument fixes where the measured point may be and how the tool may be til
 - is free of self-collision and of the floor (z = ``floor_z`` of the base frame) where
   the URDF has collision geometry (:class:`kincal.collision.CollisionChecker`). Without
   collision geometry only the tool point and the tip frame origin are kept above the
-  floor, and :attr:`VolumeCandidates.collision_note` says so.
+  floor, and :attr:`VolumeCandidates.collision_note` says so. With
+  ``self_collision=False`` (``--no-collision``: a URDF whose meshes cannot be found) the
+  geometry is not loaded and the same holds: only the tool point and tip are kept above
+  the floor, and the note says that self-collision was NOT checked.
 
 Generation. Targets are drawn at random: a point uniform in the volume, a z direction
 uniform on the spherical cap of half-angle ``max_tilt``, and a start that is ``home``
@@ -133,6 +136,9 @@ class VolumeSpec:
     max_tilt: largest angle [rad] between the tip z axis and ``tilt_direction`` (3,).
     home: (n,) joint values [rad or m] giving the arm branch, or None to find one.
     floor_z: height of the floor [m] in the base frame, or None for no floor.
+    self_collision: check the URDF's collision geometry (self-collision, links against the
+        floor; True, the default); False (``--no-collision``) does not load it, and only
+        the tool point and tip are kept above the floor.
     """
 
     volume: Volume
@@ -141,8 +147,12 @@ class VolumeSpec:
     tilt_direction: tuple[float, float, float] = (0.0, 0.0, -1.0)
     home: tuple[float, ...] | None = None
     floor_z: float | None = 0.0
+    self_collision: bool = True
 
     def __post_init__(self):
+        if not isinstance(self.self_collision, (bool, np.bool_)):
+            raise OptionError(f"self_collision is True or False, got {self.self_collision!r}")
+        object.__setattr__(self, "self_collision", bool(self.self_collision))
         t = np.asarray(self.tool, float)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise OptionError(f"tool needs 3 finite numbers (tip frame) [m], got {self.tool!r}")
@@ -264,13 +274,16 @@ def _on_branch(kin: BatchKinematics, home, sigma_home: float, Q) -> np.ndarray:
 
 
 class _Collisions:
-    """Collision geometry when the URDF has it; tool point and tip above the floor always."""
+    """Collision geometry when the URDF has it and the spec asks for it; tool point and tip
+    above the floor always."""
 
-    def __init__(self, robot, floor_z, tool):
-        self.checker = CollisionChecker(robot, floor_z)
+    def __init__(self, robot, spec: VolumeSpec):
+        floor_z = spec.floor_z
+        # not loaded at all without the check: its meshes may be missing (--no-collision)
+        self.checker = CollisionChecker(robot, floor_z) if spec.self_collision else None
         self.floor_z = floor_z
-        self.tool = np.asarray(tool, float)
-        if self.checker.has_geometry:
+        self.tool = np.asarray(spec.tool, float)
+        if self.checker is not None and self.checker.has_geometry:
             what = f"{len(self.checker.pairs)} collision pairs checked (self"
             what += f" and a floor at z = {floor_z:g} m)" if floor_z is not None else ")"
             if self.checker.excluded:
@@ -278,16 +291,17 @@ class _Collisions:
                          "left out")
             self.note = what
         else:
-            self.note = ("the URDF has no collision geometry: self-collision NOT checked"
-                         + (f"; only the tool point and tip kept above the floor at z = "
-                            f"{floor_z:g} m" if floor_z is not None else ""))
+            self.note = ("self-collision NOT checked (--no-collision)" if self.checker is None
+                         else "the URDF has no collision geometry: self-collision NOT checked")
+            self.note += (f"; only the tool point and tip kept above the floor at z = "
+                          f"{floor_z:g} m" if floor_z is not None else "")
 
     def free(self, Q, R, P) -> np.ndarray:
         ok = np.ones(len(Q), dtype=bool)
         if self.floor_z is not None:
             tip = P - R @ self.tool
             ok &= (P[:, 2] > self.floor_z) & (tip[:, 2] > self.floor_z)
-        if self.checker.has_geometry and ok.any():
+        if self.checker is not None and self.checker.has_geometry and ok.any():
             ok[ok] = ~self.checker.colliding(Q[ok])
         return ok
 
@@ -297,7 +311,7 @@ def find_home(robot: "Robot", spec: VolumeSpec, kin: BatchKinematics | None = No
               collisions: _Collisions | None = None) -> np.ndarray:
     """(n,) a home configuration for ``spec`` (see the module notes); raises OptionError."""
     kin = kin or BatchKinematics(robot, spec.tool)
-    collisions = collisions or _Collisions(robot, spec.floor_z, spec.tool)
+    collisions = collisions or _Collisions(robot, spec)
     rng = np.random.default_rng(0)
     c = np.asarray(spec.volume.center)[None]
     u = np.asarray(spec.tilt_direction)[None]
@@ -359,7 +373,7 @@ def volume_candidates(robot: "Robot", spec: VolumeSpec, m: int, seed: int = 0,
 
 def _generate(robot, spec, m, seed, batch, what) -> VolumeCandidates:
     kin = BatchKinematics(robot, spec.tool)
-    collisions = _Collisions(robot, spec.floor_z, spec.tool)
+    collisions = _Collisions(robot, spec)
     if spec.home is None:
         home, found = find_home(robot, spec, kin, collisions), True
     else:
