@@ -503,6 +503,8 @@ def main(argv=None) -> int:
             problem = runner(folder)
             if problem:
                 failed.append((label, problem))
+        if snapshot(inputs_dir) != inputs_before:  # before the signal cases' own input
+            failed.append(("inputs", "an input file changed"))
         if not args.no_signals:
             with contextlib.redirect_stdout(io.StringIO()):
                 from kincal.cli.main import main as kincal
@@ -517,8 +519,8 @@ def main(argv=None) -> int:
                 problem = run_signal_case(sig, code, inputs_dir / "p200.csv", folder)
                 if problem:
                     failed.append((f"signal {sig.name} during cross-validation", problem))
-        if snapshot(inputs_dir) != inputs_before:
-            failed.append(("inputs", "an input file changed"))
+            if snapshot(inputs_dir) != inputs_before:
+                failed.append(("inputs", "an input file changed in a signal case"))
     print(f"bad-input sweep: {n - len(failed)} of {n} cases held the promise (one line, "
           f"right exit code, nothing written) in {time.perf_counter() - t0:.0f} s")
     for label, problem in failed:
