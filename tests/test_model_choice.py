@@ -1,6 +1,7 @@
 """model "auto": candidate structures compared by CV on the penalty's folds, the best used."""
 
 import json
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -176,7 +177,10 @@ def test_cli_analyze_prints_the_table_and_writes_nothing(tmp_path, capsys):
     assert main(["analyze", "ur10", str(csv), "--tip", "tool0"]) == 0
     out = capsys.readouterr().out
     assert "model: complete + backlash elbow_joint, chosen by 5-fold CV" in out
-    assert "<- chosen" in out
+    # the chosen term's row says why, as the JSON does (it said "<- chosen" alone)
+    (row,) = [r for r in out.splitlines() if "<- chosen" in r]
+    assert "complete + backlash elbow_joint" in row and re.search(
+        r"<- chosen \([0-9.e+-]+ mm better, p = [0-9.e+-]+\)$", row), row
     assert sorted(tmp_path.iterdir()) == before
     # --json: the same comparison, not only the chosen model's name (it was left out)
     for command in (["analyze"], ["calibrate", "--out", str(tmp_path / "c.urdf")]):
