@@ -74,7 +74,16 @@ def read_json(path, kind: str, what: str, error=InputFileError, expected: str = 
     except RecursionError:
         raise error(f"{p}: not {what} (JSON nested too deeply)") from None
     except ValueError as exc:
-        raise error(f"{p}: not {what} (invalid JSON: {exc})") from None
+        first = next((ln.strip() for ln in text.splitlines()
+                      if ln.strip() and not ln.lstrip().startswith("#")), "")
+        if first.startswith("<"):  # as a CSV reader names a URDF given in a data file's place
+            other = "XML (a URDF or xacro file?)"
+        elif not first.startswith(("{", "[")) and any(c in first for c in ",;\t"):
+            other = "a CSV file (a data file?)"
+        else:
+            raise error(f"{p}: not {what} (invalid JSON: {exc})") from None
+        raise error(f"{p}: is {other}, not {what} (is a file given in another's place?)") \
+            from None
 
 
 def non_finite_path(value, where: str = "") -> str:

@@ -142,7 +142,11 @@ def diagnose(result) -> Finding | None:
                     math.degrees(float(np.hypot(*coef))) if cause == "periodic"
                     else math.degrees(coef[0] * torque_rms(fs[0])) if cause == "compliance"
                     else math.degrees(coef[0]))
-            after = r - (C @ coef) / w  # the residual rows with the term
+            # the residual rows with the term and every fitted parameter refitted (the
+            # linearised refit: the part the fit absorbs, projected off, less the term's);
+            # r - C coef / w kept what a penalised fit had left of its own directions, and
+            # said 0.73 mm where modelling the term gave 0.075 (a TIAGo Pro torso's scale)
+            after = (resid - C @ coef) / w
             mm, deg = _rms(blocks, r, after)
             given = {"backlash": have, "compliance": stiff}.get(cause, [])
             best = (F, Finding(name, cause, float(size), mm, p,

@@ -253,8 +253,8 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
             rows = ((reader.line_num, row) for row in reader if any(c.strip() for c in row))
             first = next(rows, None)
             if first is None:
-                raise DataError(f"{path}: the file is empty; expected a header with "
-                                f"{', '.join(required)}")
+                raise DataError(f"{path}: the file is empty; expected a header naming "
+                                f"{', '.join(required) or 'the columns'}, then rows of numbers")
             header = [h.strip() for h in first[1]]
             if all(_is_number(h) for h in header):  # numpy.savetxt writes "# a,b,c"
                 raise DataError(f"{path}: line {first[0]} holds numbers, not column names: the "
