@@ -4,6 +4,7 @@ foreign stderr lines (9). Every refusal is one ``kincal: error:`` line, exit cod
 traceback, no stderr line that is not kincal's, and the folder unchanged (names, bytes,
 modification times)."""
 
+import json
 import os
 import shutil
 import stat
@@ -257,6 +258,24 @@ def test_stdout_on_a_full_disk_writes_nothing_and_says_one_line(work):
         assert run.returncode == 1, run.stderr
         assert "standard output" in check_stderr(run.stderr)[0]
         assert snapshot(work) == before
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
+def test_json_on_a_full_disk_says_no_file_was_written(work):
+    """--json says the files written on stderr: it said "kincal: wrote c.urdf" and "wrote
+    r.json" before stdout took the JSON, then "no output was written or changed" when it
+    could not (and none was): three lines, two of them false. Now the one error line; the
+    wrote lines come once stdout took the JSON."""
+    argv = CAL + ["--report", "r.json", "--json"]
+    before = snapshot(work)
+    with open("/dev/full", "w") as full:
+        run = _kincal(argv, work, stdout=full)
+    assert run.returncode == 1 and snapshot(work) == before
+    assert [line for line in run.stderr.splitlines() if line.strip()] == check_stderr(
+        run.stderr), run.stderr  # the error line alone
+    run = _kincal(argv, work)
+    assert run.returncode == 0 and json.loads(run.stdout)["written"]
+    assert "kincal: wrote" in run.stderr and "c.urdf" in run.stderr
 
 
 def test_an_ascii_console_prints_a_non_ascii_path_escaped(work):
