@@ -205,7 +205,7 @@ def test_noise_mm_takes_one_range_in_calibrate_analyze_and_plan(cell, tmp_path, 
 
 
 @pytest.mark.parametrize("name, extra", [
-    ("residuals_set2.png", ["points.csv"]),  # a second data file: its residual figure
+    ("residuals_set2.png", ["poses.csv"]),  # a second data file: its residual figure
     ("accuracy_map.png", ["--accuracy-map", "0.4", "0", "0.3", "0.2", "--grid", "2"])])
 def test_every_plot_calibrate_may_write_is_checked_before_the_work(cell, tmp_path, monkeypatch,
                                                                   capsys, name, extra):
