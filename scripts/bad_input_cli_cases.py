@@ -124,12 +124,16 @@ def _read_only(folder: Path) -> None:
 
 
 def undo_read_only(folder: Path) -> None:
+    """Undo _read_only, and a file system mounted on the folder itself (a full disk)."""
     ro = folder / "ro"
     if ro in _MOUNTS:
         subprocess.run(["umount", str(ro)], check=True)
         _MOUNTS.remove(ro)
     elif ro.exists():
         ro.chmod(0o755)
+    if folder in _MOUNTS:
+        subprocess.run(["umount", str(folder)], check=True)
+        _MOUNTS.remove(folder)
 
 
 class CaseSkipped(Exception):
@@ -187,21 +191,26 @@ def output_first_cases():
 
 
 def message_cases():
-    """(label, argv, setup) of inputs whose one line used to name another problem (class 8)."""
+    """(label, argv, setup, expect) of inputs whose one line used to name another problem
+    (class 8); expect: what the line must say."""
     def write(name, text):
         return lambda d: (d / name).write_text(text)
 
-    for text, what in (("", "empty"), ("  \n\n", "blank"), ("[1, 2]", "a list"),
-                       ("[" * 10_000, "10,000 deep")):
+    for text, what, expect in (("", "empty", "the frames file is empty"),
+                               ("  \n\n", "blank", "the frames file is empty"),
+                               ("[1, 2]", "a list", "a JSON object was expected"),
+                               ("[" * 10_000, "10,000 deep", "JSON nested too deeply")):
         for argv in (["evaluate", "ec66", "{csv}", "--frames", "{d}/f.json"],
                      ["compensate", "{urdf}", "{csv}", "--frames", "{d}/f.json", "--out",
                       "{d}/j.csv"]):
-            yield f"{argv[0]} frames {what}", argv, write("f.json", text)
-    for header in ("joint_1,,,x", ",,", "joint_1,joint_2,,y,,z"):
+            yield f"{argv[0]} frames {what}", argv, write("f.json", text), expect
+    for header, expect in (("joint_1,,,x", "columns 2-3 hold numbers but have no name"),
+                           (",,", "line 2 holds numbers, not column names"),
+                           ("joint_1,joint_2,,y,,z", "columns 3, 5 hold numbers but have no")):
         yield (f"csv unnamed columns {header!r}",
                ["calibrate", "ec66", "{d}/u.csv", "--out", "{d}/o.urdf"],
                write("u.csv", header + "\n" + ",".join("1" * max(1, header.count(",") + 1))
-                     + "\n"))
+                     + "\n"), expect)
 
 
 CONSOLE_CHILD = [sys.executable, "-m", "kincal"]
@@ -342,11 +351,12 @@ def chain_cases():
                                                  "btip", "atip"] + out
     yield "chains: complete on two chains", two + ["--base", "atip", "base_link", "--tip",
                                                    "btip", "--model", "complete"] + out
+    # held-out files that are not data files (a data file as --validate is refused first)
     yield "chains: --validate with two chains", two + ["--base", "atip", "base_link", "--tip",
-                                                       "btip", "--validate", "{down}"] + out
+                                                       "btip", "--validate", "{nofinger}"] + out
     yield "chains: 3 --validate files for 2 data files", two + [
-        "--base", "atip", "base_link", "--tip", "btip", "--validate", "{up}", "{down}",
-        "{down}"] + out
+        "--base", "atip", "base_link", "--tip", "btip", "--validate", "{nofinger}",
+        "{touch_up}", "{touch_down}"] + out
     yield "tree: --mdh-out on a tree path", cal + ["{up}", "--base", "atip", "--tip", "btip",
                                                    "--mdh-out", "{d}/m.csv"] + out
     yield "contacts: --accuracy-map on flush touches", cal + [

@@ -29,6 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bad_input_audit_cases import audit_cases
 from bad_input_bound_cases import bound_cases
 from bad_input_cli_cases import (CaseSkipped, chain_cases, console_cases,
                                   ignored_option_cases, message_cases, output_first_cases,
@@ -324,8 +325,9 @@ def _on_alarm(signum, frame):
     raise CaseTimeout(f"still running after {CASE_TIMEOUT_S} s")
 
 
-def run_case(argv, folder: Path, codes=(1, 2)) -> str | None:
-    """Run main(argv) in-process, fd 2 captured; None if the promise held, else why not."""
+def run_case(argv, folder: Path, codes=(1, 2), expect: str | None = None) -> str | None:
+    """Run main(argv) in-process, fd 2 captured; None if the promise held, else why not.
+    expect: a piece of the error line (the case is refused for the reason it names)."""
     from kincal.cli.main import main
 
     before = snapshot(folder)
@@ -365,6 +367,8 @@ def run_case(argv, folder: Path, codes=(1, 2)) -> str | None:
         problems.append("other output on stderr")
     if code == 2 and not (err and "error:" in err[-1]):
         problems.append("usage error without a message")
+    if expect is not None and not any(expect in e for e in err if "error:" in e):
+        problems.append(f"the error line does not say {expect!r}")
     if snapshot(folder) != before:
         problems.append("the folder changed")
     if problems:
@@ -409,13 +413,13 @@ def cases(inputs_dir: Path, inputs: dict):
     fill = {"csv": str(inputs_dir / "good.csv"), "frames": str(inputs_dir / "frames.json"),
             "poses": str(inputs_dir / "poses.csv"), "urdf": str(inputs_dir / "good.urdf")}
 
-    def cli(argv, setup=None, codes=(1, 2)):
+    def cli(argv, setup=None, codes=(1, 2), expect=None):
         def runner(folder):
             try:
                 if setup is not None:
                     setup(folder)
                 args = [a.format(d=folder, **fill) if "{" in a else a for a in argv]
-                return run_case(args, folder, codes)
+                return run_case(args, folder, codes, expect)
             except CaseSkipped:
                 return None
             finally:
@@ -477,12 +481,15 @@ def cases(inputs_dir: Path, inputs: dict):
         yield label, cli(argv, codes=(1,))
     for label, argv, setup in output_first_cases():
         yield label, cli(argv, setup, codes=(1,))
-    for label, argv, setup in message_cases():
-        yield label, cli(argv, setup, codes=(1,))
+    for label, argv, setup, expect in message_cases():  # the line must name the cause
+        yield label, cli(argv, setup, codes=(1,), expect=expect)
     for label, argv, setup in unit_and_kind_cases():  # newer paths' units, files' kinds
         yield label, cli(argv, setup, codes=(1,))
     for label, argv, how, code in console_cases():
         yield label, console(argv, how, code)
+    for label, argv, setup, expect in audit_cases():  # the audit of issues 22 and 24
+        yield label, cli(argv, setup and (lambda folder, s=setup: s(folder, fill)),
+                         codes=(1,), expect=expect)
 
 
 def main(argv=None) -> int:
@@ -511,6 +518,8 @@ def main(argv=None) -> int:
             problem = runner(folder)
             if problem:
                 failed.append((label, problem))
+        if snapshot(inputs_dir) != inputs_before:  # before the signal cases' own input
+            failed.append(("inputs", "an input file changed"))
         if not args.no_signals:
             with contextlib.redirect_stdout(io.StringIO()):
                 from kincal.cli.main import main as kincal
@@ -525,8 +534,8 @@ def main(argv=None) -> int:
                 problem = run_signal_case(sig, code, inputs_dir / "p200.csv", folder)
                 if problem:
                     failed.append((f"signal {sig.name} during cross-validation", problem))
-        if snapshot(inputs_dir) != inputs_before:
-            failed.append(("inputs", "an input file changed"))
+            if snapshot(inputs_dir) != inputs_before:
+                failed.append(("inputs", "an input file changed in a signal case"))
     print(f"bad-input sweep: {n - len(failed)} of {n} cases held the promise (one line, "
           f"right exit code, nothing written) in {time.perf_counter() - t0:.0f} s")
     for label, problem in failed:

@@ -10,6 +10,8 @@ the tool point by the corrections, both as % of the reach; the findings; the con
 
 Usage: python scripts/plausibility_cases.py [--quick] [--convergence]   (quick: seed 0 only)
 
+Exit code 1 if a good run is refused or a broken one is not (the table's promise).
+
 --convergence: instead, the simulated ls runs' convergence alone: how many of them stop at the
 iteration limit, with the error models complete (the API's default) and mdh, each under the
 relative stopping rule (the default) and the paper's absolute one (SolverOptions(rule="paper")),
@@ -22,6 +24,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import sys
 import tempfile
 import time
 import warnings
@@ -115,11 +118,11 @@ def main(argv=None):
     seeds = (0,) if args.quick else (0, 1, 2)
     if args.convergence:
         convergence(seeds)
-        return
+        return 0
     print("| run | median error after [mm] (% of reach) | tool moved by corrections, RMS [mm] "
           "| findings | gate |")
     print("|---|---|---|---|---|")
-    good = bad = 0
+    good = bad = n_bad = 0
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for X in ("ec66", "ur10", "panda", "ur3"):
@@ -145,16 +148,20 @@ def main(argv=None):
                 data = Measurements.from_csv(_variant(src, tmp / "bad.csv", robot.joint_names,
                                                       how, rng), robot.joint_names)
                 bad += not _row(f"{X} {how} (l2)", calibrate(robot, data))
+                n_bad += 1
         for tip in ("wrist_1_link", "forearm_link"):
             robot = Robot.load("ur10", tip=tip)
             data = Measurements.from_csv(tmp / "ur10_tracker_0.csv", robot.joint_names)
             bad += not _row(f"ur10 data, --tip {tip} (l2)", calibrate(robot, data))
+            n_bad += 1
         robot = Robot.load("ur5")
         data = Measurements.from_csv(tmp / "ur10_tracker_0.csv", robot.joint_names)
         bad += not _row("ur10 data, ur5 URDF (l2)", calibrate(robot, data))
-    print(f"\ngood runs plausible: {good} of {n_good}; broken runs refused: {bad} of 11; "
+        n_bad += 1
+    print(f"\ngood runs plausible: {good} of {n_good}; broken runs refused: {bad} of {n_bad}; "
           f"{time.perf_counter() - t0:.0f} s")
+    return 0 if (good, bad) == (n_good, n_bad) else 1
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -4,6 +4,7 @@ foreign stderr lines (9). Every refusal is one ``kincal: error:`` line, exit cod
 traceback, no stderr line that is not kincal's, and the folder unchanged (names, bytes,
 modification times)."""
 
+import json
 import os
 import shutil
 import stat
@@ -264,6 +265,24 @@ def test_stdout_on_a_full_disk_writes_nothing_and_says_one_line(work):
         assert snapshot(work) == before
 
 
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
+def test_json_on_a_full_disk_says_no_file_was_written(work):
+    """--json says the files written on stderr: it said "kincal: wrote c.urdf" and "wrote
+    r.json" before stdout took the JSON, then "no output was written or changed" when it
+    could not (and none was): three lines, two of them false. Now the one error line; the
+    wrote lines come once stdout took the JSON."""
+    argv = CAL + ["--report", "r.json", "--json"]
+    before = snapshot(work)
+    with open("/dev/full", "w") as full:
+        run = _kincal(argv, work, stdout=full)
+    assert run.returncode == 1 and snapshot(work) == before
+    assert [line for line in run.stderr.splitlines() if line.strip()] == check_stderr(
+        run.stderr), run.stderr  # the error line alone
+    run = _kincal(argv, work)
+    assert run.returncode == 0 and json.loads(run.stdout)["written"]
+    assert "kincal: wrote" in run.stderr and "c.urdf" in run.stderr
+
+
 def test_an_ascii_console_prints_a_non_ascii_path_escaped(work):
     (work / "é").mkdir()
     env = {**os.environ, "PYTHONIOENCODING": "ascii"}
@@ -384,6 +403,59 @@ def test_compensate_refuses_joint_values_in_degrees_read_as_radians(work, capsys
         assert "deg.csv: joint_" in line and "outside its URDF limits" in line, line
         assert "were the joint values degrees? Read them with --angle-unit deg" in line, line
     assert main(argv + ["--angle-unit", "deg"]) == 0  # read as what they are: compensated
+
+
+@pytest.mark.parametrize("argv", [
+    ["plan", "ec66", "deg.csv", "--poses", "12", "--out", "p.csv"],
+    ["plan", "ec66", "--random", "50", "--measured", "deg.csv", "--poses", "5", "--out", "p.csv"],
+    ["simulate", "ec66", "--poses-file", "deg.csv", "--out", "s.csv"],
+    ["analyze", "ec66", "points.csv", "--accuracy-poses", "deg.csv"],
+])
+def test_poses_in_degrees_read_as_radians_are_refused_where_they_are_read(work, capsys, argv):
+    """Candidates, measured poses, poses to simulate at and map poses in degrees read as
+    radians (358 rad, outside every limit): plan and simulate wrote poses of 358 rad behind a
+    warning (the calibrate gate and compensate refuse the same clue). Now the one reader of
+    pose files (read_candidates) refuses them, nothing written."""
+    _in_degrees(work / "points.csv", work / "deg.csv")
+    line = refused(capsys, argv, work)
+    assert "deg.csv: joint_" in line and "outside its URDF limits" in line, line
+    assert "were the joint values degrees? Read them with --angle-unit deg" in line, line
+
+
+def test_candidates_that_identify_no_joint_parameter_are_refused(work, capsys):
+    """Twenty copies of one pose as candidates identify the measurement frame's position
+    alone: plan wrote five of them as a plan "optimised over 3 parameters", exit 0."""
+    rows = _rows(work / "points.csv")
+    (work / "same.csv").write_text("\n".join([rows[0]] + [rows[1]] * 20) + "\n")
+    line = refused(capsys, ["plan", "ec66", "same.csv", "--poses", "5", "--out", "p.csv"], work)
+    assert "the 20 candidates identify no parameter of the chain's joints, only base.x, " \
+           "base.y, base.z" in line, line
+    # planning for the frames alone, the joints fixed, stays possible
+    assert main(["plan", "ec66", "points.csv", "--poses", "5", "--fix", "joint_*", "--out",
+                 "p.csv"]) == 0
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["calibrate", "ec66", "points.csv", "points.csv", "--out", "o.urdf"],
+     "points.csv is given twice: a data file given twice counts each sample twice"),
+    (["calibrate", "ec66", "points.csv", "copy.csv", "--out", "o.urdf"],
+     "copy.csv has the same bytes as points.csv: a data file given twice"),
+    (["analyze", "ec66", "points.csv", "points.csv"], "points.csv is given twice"),
+    (["calibrate", "ec66", "points.csv", "--validate", "points.csv", "--out", "o.urdf"],
+     "--validate points.csv is a data file: held-out errors judge a calibration on samples "
+     "it did not see"),
+    (["calibrate", "ec66", "points.csv", "--validate", "other.csv", "--out", "o.urdf"],
+     "--validate other.csv: 30 of its 30 samples repeat samples of points.csv exactly"),
+])
+def test_data_given_twice_or_held_out_from_the_training_is_refused(work, capsys, argv, says):
+    """A data file given twice (or a copy of its bytes) weighs every sample twice and puts a
+    CV fold's validation samples in its training: a warning only, written (the fleet refuses
+    one unit given twice). A --validate file that is a training file, or holds its samples,
+    reported "held-out" errors of the training data without a word."""
+    shutil.copy2(work / "points.csv", work / "copy.csv")
+    (work / "other.csv").write_text("\n".join(_rows(work / "points.csv")) + "\n")
+    line = refused(capsys, argv, work)
+    assert says in line, line
 
 
 @pytest.mark.parametrize("argv, says", [

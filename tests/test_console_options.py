@@ -48,9 +48,12 @@ def test_verbose_names_the_command_and_the_error_kind(cal, capsys):
 
 
 def test_json_is_the_only_thing_on_stdout(cal, tmp_path, capsys):
+    held = tmp_path / "held.csv"  # other poses of the same robot (a training file is refused)
+    assert main(["simulate", "ec66", "--out", str(held), "--poses", "30", "--seed", "3",
+                 "--tool-m", "0.03", "0.02", "0.12", "-q"]) == 0
     capsys.readouterr()
     assert main(["calibrate", "ec66", str(cal), "--lambda", "0.01", "--out",
-                 str(tmp_path / "c.urdf"), "--validate", str(cal), "--json"]) == 0
+                 str(tmp_path / "c.urdf"), "--validate", str(held), "--json"]) == 0
     cap = capsys.readouterr()
     summary = json.loads(cap.out)  # the whole of stdout is one JSON object
     assert summary["format"] == "kincal-summary-1" and summary["verdict"] == "written"

@@ -86,8 +86,14 @@ def test_a_fleet_prior_is_read_as_a_frames_file_is(cell, tmp_path, capsys):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("content, said", [("", "is empty"), ("{", "invalid JSON"),
-                                           (b"\xff\xfe{}", "not a kincal fleet prior")])
+@pytest.mark.parametrize("content, said", [
+    ("", "is empty"), ("{", "invalid JSON"), (b"\xff\xfe{}", "not a kincal fleet prior"),
+    # a file given in another's place is named as what it is, as a CSV reader names a JSON
+    # or URDF file (it said "invalid JSON: Expecting value: line 1 column 1 (char 0)")
+    ('<?xml version="1.0"?>\n<robot name="r"/>\n', "is XML (a URDF or xacro file?), not a "
+                                                  "kincal fleet prior"),
+    ("# made by kincal\njoint_1,x,y,z\n0,1,2,3\n", "is a CSV file (a data file?), not a "
+                                                  "kincal fleet prior")])
 def test_a_broken_fleet_prior_is_one_line(cell, tmp_path, capsys, content, said):
     prior = tmp_path / "FLEET.json"
     (prior.write_bytes if isinstance(content, bytes) else prior.write_text)(content)
@@ -199,7 +205,7 @@ def test_noise_mm_takes_one_range_in_calibrate_analyze_and_plan(cell, tmp_path, 
 
 
 @pytest.mark.parametrize("name, extra", [
-    ("residuals_set2.png", ["points.csv"]),  # a second data file: its residual figure
+    ("residuals_set2.png", ["poses.csv"]),  # a second data file: its residual figure
     ("accuracy_map.png", ["--accuracy-map", "0.4", "0", "0.3", "0.2", "--grid", "2"])])
 def test_every_plot_calibrate_may_write_is_checked_before_the_work(cell, tmp_path, monkeypatch,
                                                                   capsys, name, extra):

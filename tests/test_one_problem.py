@@ -48,8 +48,11 @@ def test_the_summary_has_one_shape_for_one_set_or_several(rtest, tmp_path, capsy
     (the several-set path printed every dropped parameter and the weak list twice)."""
     _, _, folder = rtest
     data = str(folder / "rt.csv")
+    copy = tmp_path / "copy.csv"  # the samples again (one file given twice is refused)
+    copy.write_text("# a copy\n" + (folder / "rt.csv").read_text())
     shapes = []
-    for files, verbose in (([data], []), ([data, data], []), ([data, data], ["-v"])):
+    for files, verbose in (([data], []), ([data, str(copy)], []),
+                           ([data, str(copy)], ["-v"])):
         out = tmp_path / f"c{len(shapes)}.urdf"
         _quiet(main, ["calibrate", "ec66", *files, "--out", str(out), "--lambda", "evidence",
                       "--accept-implausible", *verbose])

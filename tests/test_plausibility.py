@@ -8,6 +8,7 @@ import csv
 import json
 import math
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -692,24 +693,28 @@ def test_a_weak_parameter_under_one_lambda_names_that_lambda():
 
 def test_talos_three_copies_of_a_day_name_the_penalty(tmp_path, capsys):
     """The real TALOS touches read three times (three files of one day, each with its own
-    table plane): the evidence's offset scale runs away and a wrist turn trades against
-    the contact face's tilt; refused in one line, nothing written, the copies named as the
-    first likely cause, then the weak penalty with the scale the evidence estimated (not
-    only a wrong URDF or tip)."""
+    table plane; copies with a comment line of their own, since one file given twice is
+    refused before the work): the evidence's offset scale runs away and a wrist turn trades
+    against the contact face's tilt; refused in one line, nothing written, the copies named
+    as the first likely cause, then the weak penalty with the scale the evidence estimated
+    (not only a wrong URDF or tip)."""
     from test_tree_paths import _talos_study
 
     study = _talos_study()
     train = str(study.DATA / "left_train.csv")
+    copies = [tmp_path / f"copy{k}.csv" for k in (1, 2)]
+    for k, copy in enumerate(copies):
+        copy.write_text(f"# copy {k + 1}\n" + Path(train).read_text())
     out = tmp_path / "cal.urdf"
-    code = main(["calibrate", str(study.talos_urdf()), train, train, train, "--base",
+    code = main(["calibrate", str(study.talos_urdf()), train, *map(str, copies), "--base",
                  "left_sole_link", "--tip", "gripper_left_base_link", "--on-plane", "--flush",
                  "--tool-offset", "0", "0", "-0.12", "--out", str(out)])
     err = capsys.readouterr().err
     assert code != 0 and not out.exists() and err.count("\n") == 1  # one line, no warning
     line = err.strip()
     assert line.startswith("kincal: error: implausible calibration")
-    assert ("Likely cause: the same samples given more than once (" + train + ": 21 of its 21 "
-            "samples repeat samples of " + train + " exactly (line ") in line
+    assert ("Likely cause: the same samples given more than once (" + str(copies[0]) + ": 21 "
+            "of its 21 samples repeat samples of " + train + " exactly (line ") in line
     assert "or a penalty too weak for what the data barely tell apart" in line
     assert "whose scale the evidence estimated at" in line and "--prior-deg" in line
 

@@ -94,6 +94,30 @@ def test_decimal_comma_is_refused_with_a_reason(plain, tmp_path):
         Measurements.from_csv(bad, JOINTS)
 
 
+def test_a_header_of_separators_alone_is_named_missing(tmp_path):
+    """A first line of separators alone (",,") is blank to the reader, so the first row of
+    numbers was taken for the header: "duplicated column(s) 1 in the header" (or "a header
+    but no samples"). Now: that line holds numbers, the header is missing."""
+    bad = tmp_path / "unnamed.csv"
+    bad.write_text(",,\n1,1,1\n")
+    with pytest.raises(DataError, match="line 2 holds numbers, not column names: the header "
+                                        "is missing"):
+        Measurements.from_csv(bad, JOINTS)
+
+
+def test_an_empty_data_file_says_what_it_should_hold(tmp_path, capsys):
+    """The command line reads a file's header before its kind is known: an empty file said
+    "the file is empty; expected a header with" and stopped there."""
+    from kincal.cli.main import main
+
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    assert main(["calibrate", "ec66", str(empty), "--out", str(tmp_path / "c.urdf")]) == 1
+    line = capsys.readouterr().err.strip()
+    assert line.endswith("the file is empty; expected a header naming the columns, then rows "
+                         "of numbers"), line
+
+
 def test_commented_out_header_is_named(plain, tmp_path):
     _, text = plain
     bad = tmp_path / "savetxt.csv"

@@ -6,6 +6,7 @@ per set, the command line and its refusals."""
 
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -311,12 +312,15 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
         assert len(err) == 1 and "describe one chain; this calibration has several" in err[0]
     # --validate: one held-out file per data file with several chains, refused before any
     # fit otherwise
-    for held, said in (([files[1]], "give one held-out file per data file (here 2)"),
-                       ([files[1]] * 3, "2 data file(s), 3 --validate files")):
+    other = tmp_path / "held.csv"  # not a data file (a data file as --validate is refused)
+    other.write_text("# held out\n" + Path(files[1]).read_text())
+    for held, said in (([str(other)], "give one held-out file per data file (here 2)"),
+                       ([str(other)] * 3, "2 data file(s), 3 --validate files")):
         assert main(["calibrate", urdf, *files, "--base", "base_link", "ctip", "--tip", "atip",
                      "btip", "--validate", *held, "--out", str(out)]) == 1
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0], err
+    other.unlink()
     assert {p: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -74,7 +74,16 @@ def read_json(path, kind: str, what: str, error=InputFileError, expected: str = 
     except RecursionError:
         raise error(f"{p}: not {what} (JSON nested too deeply)") from None
     except ValueError as exc:
-        raise error(f"{p}: not {what} (invalid JSON: {exc})") from None
+        first = next((ln.strip() for ln in text.splitlines()
+                      if ln.strip() and not ln.lstrip().startswith("#")), "")
+        if first.startswith("<"):  # as a CSV reader names a URDF given in a data file's place
+            other = "XML (a URDF or xacro file?)"
+        elif not first.startswith(("{", "[")) and any(c in first for c in ",;\t"):
+            other = "a CSV file (a data file?)"
+        else:
+            raise error(f"{p}: not {what} (invalid JSON: {exc})") from None
+        raise error(f"{p}: is {other}, not {what} (is a file given in another's place?)") \
+            from None
 
 
 def non_finite_path(value, where: str = "") -> str:
@@ -102,3 +111,32 @@ def json_depth(value, limit: int) -> int:
             depth += 1
         level = nxt
     return depth
+
+
+def same_files(files) -> tuple[str, str, str] | None:
+    """(first, second, how) for the first two of ``files`` that are one file (a path given
+    twice, a link to it: one inode) or hold the same bytes, else None; how: "is given
+    twice", "is FIRST" or "has the same bytes as FIRST". Files that cannot be read are left
+    to their reader."""
+    import contextlib
+    import hashlib
+
+    stats = []
+    for f in files:
+        with contextlib.suppress(OSError):
+            if os.path.isfile(f):
+                stats.append((str(f), os.stat(f)))
+    keys: dict = {}
+    for f, st in stats:  # the same file: one inode
+        keys.setdefault((st.st_dev, st.st_ino), []).append(f)
+    sizes = [st.st_size for _, st in stats]
+    for f, st in stats:  # the same bytes: hashed only where two files share a size
+        if sizes.count(st.st_size) > 1 and len(keys[(st.st_dev, st.st_ino)]) == 1:
+            with open(f, "rb") as fh:
+                keys.setdefault(hashlib.file_digest(fh, "sha256").hexdigest(), []).append(f)
+    for key, same in keys.items():
+        if len(same) > 1:
+            how = ("is given twice" if same[0] == same[1] else f"is {same[0]}"
+                   if isinstance(key, tuple) else f"has the same bytes as {same[0]}")
+            return same[0], same[1], how
+    return None

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kincal.cli.checks import check_outputs
+from kincal.cli.checks import check_outputs, distinct_inputs
 from kincal.cli.options import (AccuracyRequest, Chain, Inputs, add_accuracy_options,
                                 add_common, add_kinds, add_model, add_overwrite, group, typed)
 from kincal.errors import OptionError
@@ -92,6 +92,7 @@ def _analyze(a: Analyze):
     if several and a.accuracy.asked:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "analysis has several (one --base/--tip per file)")
+    distinct_inputs(a.inputs.files)
     protect = check_outputs(robot, [a.report, a.accuracy_plot], overwrite=a.overwrite,
                             inputs=(*a.inputs.files, a.accuracy.accuracy_poses))
     sets = a.inputs.read_sets(robots)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 
-from kincal.cli.checks import check_outputs, plot_paths
+from kincal.cli.checks import check_outputs, distinct_inputs, plot_paths
 from kincal.cli.options import (AccuracyRequest, Chain, Inputs, add_accuracy_options,
                                 add_common, add_gate_overrides, add_kinds, add_model,
                                 add_overwrite, group, typed)
@@ -260,6 +260,7 @@ def run(args) -> int:
     if c.accuracy.asked and several:
         raise OptionError("--accuracy-map and --accuracy-poses describe one chain; this "
                           "calibration has several (one --base/--tip per file)")
+    distinct_inputs(c.inputs.files, c.validate)
     inputs = c.inputs.files + c.validate + tuple(
         p for p in (c.prior, c.accuracy.accuracy_poses) if p)
     check_outputs(robot, c.outputs(), overwrite=c.overwrite, inputs=inputs, dirs=[c.plots],

@@ -345,6 +345,26 @@ def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=(), urdf_out
     return protect
 
 
+def distinct_inputs(files, held_out=()) -> None:
+    """Refuse a data file given twice (the same file, or one of the same bytes: each sample
+    would count twice, the noise look smaller, and a fold's validation samples sit in its
+    training), and a held-out file (--validate) that is a data file, before any work."""
+    from kincal.input_files import same_files
+
+    same = same_files(files)
+    if same is not None:
+        raise OptionError(f"{same[1]} {same[2]}: a data file given twice counts each sample "
+                          "twice (the noise looks smaller than it is, and cross-validation "
+                          "sees its validation samples in training); give each file once")
+    for held in held_out:
+        same = same_files([*files, held])
+        if same is not None:
+            how = "is a data file" if same[2] == "is given twice" else same[2]
+            raise OptionError(f"--validate {same[1]} {how}: held-out errors judge a "
+                              "calibration on samples it did not see; give measurements kept "
+                              "out of the training files")
+
+
 def plot_paths(folder, n_sets: int = 1, accuracy: bool = False) -> list:
     """The files ``kincal calibrate --plots FOLDER`` may write, for the check before the
     work: a residual figure per data file, the accuracy map's with ``accuracy``

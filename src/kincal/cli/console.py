@@ -13,9 +13,16 @@ import sys
 from kincal.errors import ExportError
 
 
+class AfterStdout(str):
+    """A line for stderr that :func:`say` writes once stdout has taken its lines (a --json
+    run's "kincal: wrote PATH"): said before, it claimed files that a stdout on a full disk
+    then kept from being written."""
+
+
 def say(lines) -> None:
-    """Write ``lines`` to stdout and flush; ExportError if stdout cannot take them."""
-    text = "".join(f"{line}\n" for line in lines)
+    """Write ``lines`` to stdout and flush, then the :class:`AfterStdout` among them to
+    stderr; ExportError if stdout cannot take them."""
+    text = "".join(f"{line}\n" for line in lines if not isinstance(line, AfterStdout))
     try:
         sys.stdout.write(text)
         sys.stdout.flush()
@@ -25,6 +32,9 @@ def say(lines) -> None:
         reason = getattr(exc, "strerror", None) or exc.__class__.__name__
         raise ExportError(f"cannot write to the standard output ({reason}); no output was "
                           "written or changed") from None
+    for line in lines:
+        if isinstance(line, AfterStdout):
+            print(line, file=sys.stderr)
 
 
 def stdout_to_null() -> None:
@@ -60,16 +70,16 @@ def summary_lines(json_out: bool, human, summary: dict, written=(),
     """What a command says at its end: its ``human`` lines and one ``wrote`` line per
     written file (wrote None: none, the human lines name them); with ``--json`` (json_out) the ``summary`` alone, as one JSON object
     (SI units; the paths written under "written"), the written files said on stderr
-    instead, so that stdout holds nothing but the JSON."""
+    instead (once stdout took the JSON: :func:`say`), so that stdout holds nothing but the
+    JSON."""
     if not json_out:
         return list(human) + ([] if wrote is None else [wrote(path) for path in written])
     from kincal import __version__
     from kincal.export.report import dumps
 
-    for path in written:
-        print(f"kincal: wrote {path}", file=sys.stderr)
     return [dumps({"format": "kincal-summary-1", "kincal_version": __version__, **summary,
-                   "written": [str(p) for p in written]}).rstrip("\n")]
+                   "written": [str(p) for p in written]}).rstrip("\n")] + [
+        AfterStdout(f"kincal: wrote {path}") for path in written]
 
 
 class _NullOut:

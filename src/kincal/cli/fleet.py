@@ -115,28 +115,12 @@ def repeated_units(files) -> None:
     """Refuse one unit's data given twice (the same file, or two files of the same bytes):
     the fleet would count it as two units, and its prior's scatter would shrink toward that
     unit's deviations. Files that cannot be read are left to the unit (FAILED, reported)."""
-    import hashlib
+    from kincal.input_files import same_files
 
-    stats = []
-    for f in files:
-        with contextlib.suppress(OSError):
-            if os.path.isfile(f):
-                stats.append((f, os.stat(f)))
-    keys: dict = {}
-    for f, st in stats:  # the same file: one inode
-        keys.setdefault((st.st_dev, st.st_ino), []).append(f)
-    sizes = [st.st_size for _, st in stats]
-    for f, st in stats:  # the same bytes: hashed only where two files share a size
-        if sizes.count(st.st_size) > 1 and len(keys[(st.st_dev, st.st_ino)]) == 1:
-            with open(f, "rb") as fh:
-                keys.setdefault(hashlib.file_digest(fh, "sha256").hexdigest(), []).append(f)
-    for key, same in keys.items():
-        if len(same) > 1:
-            how = ("is given twice" if same[0] == same[1] else f"is {same[0]}"
-                   if isinstance(key, tuple) else f"has the same bytes as {same[0]}")
-            raise OptionError(f"{same[1]} {how}: one unit's data given twice would "
-                              "count as two units and shrink the fleet's scatter; give each "
-                              "unit's file once")
+    same = same_files(files)
+    if same is not None:
+        raise OptionError(f"{same[1]} {same[2]}: one unit's data given twice would count as "
+                          "two units and shrink the fleet's scatter; give each unit's file once")
 
 
 def run(args) -> int:

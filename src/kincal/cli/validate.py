@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from kincal.errors import OptionError
+from kincal.errors import DataError, OptionError
 
 
 def check_count(n_held: int, n_files: int, several: bool) -> None:
@@ -37,6 +37,7 @@ def held_out(result, inputs, path: str, k: int | None = None):
     from kincal.cli.evaluate import with_frames
     from kincal.export.validation import Validation
     from kincal.identification.statistics import angle_stats
+    from kincal.measurements.checks import repeated_samples
     from kincal.measurements.fixed_joints import HeldJoints
 
     several = result.chains is not None and result.chains.several
@@ -52,6 +53,13 @@ def held_out(result, inputs, path: str, k: int | None = None):
     reading = dataclasses.replace(inputs, files=(path,), set_sigma_mm=None, joint_value=())
     held = dataclasses.replace(HeldJoints.of(after_frames, nominal), source="the calibration")
     sets = reading.read_sets(nominal, held)
+    for data in sets:  # another file holding training samples: not held out either
+        for trained in result.sets:
+            found = repeated_samples(data, trained.data)
+            if found is not None:
+                raise DataError(f"--validate {found}: held-out errors judge a calibration on "
+                                "samples it did not see; give measurements kept out of the "
+                                "training files")
     lay = result.layout
     start = [tuple(float(v) for v in result.x_start[lay.frame_slices[i]])
              for i in range(len(result.sets))]

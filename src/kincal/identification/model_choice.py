@@ -154,7 +154,8 @@ class ModelChoice:
                 err = f"{c.cv_error_mm:13.4f} {se:7.4f}"
             else:
                 err = f"{'-':>13} {'':7}"
-            mark = "  <- chosen" if c.chosen else (f"  {c.note}" if c.note else "")
+            mark = ("  <- chosen" + (f" ({c.note})" if c.note else "")) if c.chosen else (
+                f"  {c.note}" if c.note else "")
             out.append(f"    {c.label:<{w}}  {c.free:>4}  {err}{mark}".rstrip())
         return out + [f"  {n}" for n in self.notes]
 

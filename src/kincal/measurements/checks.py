@@ -272,6 +272,35 @@ DUPLICATE_WHY = ("a copy counts as a second measurement, weighs twice and makes 
                  "in the last digits of its readings)")
 
 
+def _sample_keys(data) -> np.ndarray:
+    """(N,) each sample of a set as one hashable key of all its numbers (exact copies alike)."""
+    rows = _sample_rows(data)
+    return np.ascontiguousarray(rows).view(np.dtype((np.void, rows.dtype.itemsize
+                                                     * rows.shape[1])))[:, 0]
+
+
+def _lines(data, n: int) -> np.ndarray:
+    return data.rows if data.rows is not None else np.arange(n) + 2
+
+
+def repeated_samples(data, other, keys=None, other_keys=None) -> str | None:
+    """The finding when samples of ``data`` repeat samples of ``other`` exactly (a set of
+    the same kind and joints; every joint value and reading to the last digit), else None."""
+    keys = _sample_keys(data) if keys is None else keys
+    other_keys = _sample_keys(other) if other_keys is None else other_keys
+    if type(other) is not type(data) or other.joint_names != data.joint_names \
+            or other_keys.dtype != keys.dtype:
+        return None
+    both = np.flatnonzero(np.isin(keys, other_keys))
+    if not both.size:
+        return None
+    k = int(both[0])
+    j = int(np.flatnonzero(other_keys == keys[k])[0])
+    return (f"{data.source}: {both.size} of its {len(keys)} samples repeat samples of "
+            f"{other.source} exactly (line {_lines(data, len(keys))[k]} = line "
+            f"{_lines(other, len(other_keys))[j]} there: the same data given twice?)")
+
+
 def duplicate_samples(sets) -> list[str]:
     """Samples that repeat another exactly (every joint value and every reading to the last
     digit), in one set or across sets of one kind, one finding per set that has them
@@ -279,10 +308,8 @@ def duplicate_samples(sets) -> list[str]:
     out: list[str] = []
     seen: list[tuple] = []  # (set, its rows as void keys)
     for data in sets:
-        rows = _sample_rows(data)
-        keys = np.ascontiguousarray(rows).view(np.dtype((np.void, rows.dtype.itemsize
-                                                         * rows.shape[1])))[:, 0]
-        lines = data.rows if data.rows is not None else np.arange(len(rows)) + 2
+        keys = _sample_keys(data)
+        lines = _lines(data, len(keys))
         _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
         earliest = first[inverse.ravel()]  # each sample's first occurrence
         copies = np.flatnonzero(earliest != np.arange(len(keys)))
@@ -291,18 +318,9 @@ def duplicate_samples(sets) -> list[str]:
             out.append(f"{data.source}: {copies.size} sample(s) repeat earlier ones exactly "
                        f"(line {lines[k]} repeats line {lines[earliest[k]]})")
         for other, other_keys in seen:
-            if type(other) is not type(data) or other.joint_names != data.joint_names \
-                    or other_keys.dtype != keys.dtype:
-                continue
-            both = np.flatnonzero(np.isin(keys, other_keys))
-            if both.size:
-                k = int(both[0])
-                j = int(np.flatnonzero(other_keys == keys[k])[0])
-                other_lines = (other.rows if other.rows is not None
-                               else np.arange(len(other_keys)) + 2)
-                out.append(f"{data.source}: {both.size} of its {len(keys)} samples repeat "
-                           f"samples of {other.source} exactly (line {lines[k]} = line "
-                           f"{other_lines[j]} there: the same data given twice?)")
+            found = repeated_samples(data, other, keys, other_keys)
+            if found:
+                out.append(found)
                 break
         seen.append((data, keys))
     return out

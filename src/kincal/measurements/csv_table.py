@@ -253,9 +253,13 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
             rows = ((reader.line_num, row) for row in reader if any(c.strip() for c in row))
             first = next(rows, None)
             if first is None:
-                raise DataError(f"{path}: the file is empty; expected a header with "
-                                f"{', '.join(required)}")
+                raise DataError(f"{path}: the file is empty; expected a header naming "
+                                f"{', '.join(required) or 'the columns'}, then rows of numbers")
             header = [h.strip() for h in first[1]]
+            if all(_is_number(h) for h in header):  # numpy.savetxt writes "# a,b,c"
+                raise DataError(f"{path}: line {first[0]} holds numbers, not column names: the "
+                                "header is missing (or commented out with '#'); expected a "
+                                f"header naming {', '.join(required) or 'the columns'}")
             dupes = sorted({h for h in header if h and header.count(h) > 1})
             if dupes:
                 raise DataError(f"{path}: duplicated column(s) {', '.join(dupes)} in the header")
@@ -269,9 +273,6 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                     hints += (f" A chain joint held still during the measurements needs no "
                               f"column: give its value (--joint-value {held[0]}=VALUE).")
                 named = [f"{m} (for {aliases[m]})" if m in aliases else m for m in missing]
-                if all(_is_number(h) for h in header):  # e.g. numpy.savetxt writes "# a,b,c"
-                    hints += (f" Line {first[0]} holds numbers, not column names: the header "
-                              "is missing (or commented out with '#').")
                 raise DataError(f"{path}: missing column(s) {', '.join(named)}.{hints} Expected "
                                 f"{expected + ': ' if expected else ''}{', '.join(required)}; "
                                 f"the header has {listing(header)}")

@@ -13,8 +13,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from kincal.errors import KincalWarning, OptionError
-from kincal.measurements.checks import angle_unit_warnings, limit_warnings
+from kincal.errors import DataError, KincalWarning, OptionError
+from kincal.measurements.checks import (angle_unit_warnings, degrees_read_as_radians,
+                                       limit_warnings)
 from kincal.measurements.csv_table import csv_line, read_columns
 from kincal.measurements.data import joint_column_names, unit_factors
 from kincal.measurements.fixed_joints import HeldJoints, refuse_coupled
@@ -51,7 +52,10 @@ def read_candidates(path, robot: "Robot", length_unit: str = "m", angle_unit: st
 
     The header names the chain joints as in the URDF (other columns are ignored).
     Revolute joints are read in ``angle_unit``, prismatic ones in ``length_unit``. Values
-    outside the URDF limits are warned about, not dropped. kind: what the file is, for
+    outside the URDF limits are warned about, not dropped; values that show degrees read as
+    radians (:func:`~kincal.measurements.checks.degrees_read_as_radians`: beyond a turn and
+    a half and outside the limits) are refused: poses to command, or to simulate, plan and
+    map at, so read are nonsense. kind: what the file is, for
     messages. joint_columns: {URDF joint: CSV column} for columns named otherwise (see
     :meth:`kincal.measurements.data.Measurements.from_csv`). held: the joints a calibration
     held (:class:`~kincal.measurements.fixed_joints.HeldJoints`), whose columns the file may
@@ -68,6 +72,9 @@ def read_candidates(path, robot: "Robot", length_unit: str = "m", angle_unit: st
                          aliases={c: j for j, c in columns.items() if c != j})
     unit = [L if k == "prismatic" else A for k in g.kinds]
     q = held.joint_values(table, robot.joint_names, unit, columns)
+    degrees = degrees_read_as_radians(g.joint_names, g.kinds, g.lower, g.upper, q, table.lines)
+    if degrees:
+        raise DataError(f"{table.path}: {degrees}")
     for message in (limit_warnings(g.joint_names, g.kinds, g.lower, g.upper, q, table.lines)
                     + angle_unit_warnings(g.joint_names, g.kinds, q, angle_unit, g.lower,
                                           g.upper)):

@@ -366,6 +366,10 @@ def select_poses(robot: "Robot", candidates, n: int, tool=(0.0, 0.0, 0.0), fix=(
     if p == 0:
         raise DataError(f"the {M} candidates identify no parameter at all ({len(ident.free)} "
                         "free): give candidates that move every joint")
+    if not np.any(cols < space.n_kinematic) and free[:space.n_kinematic].any():  # joints free
+        raise DataError(f"the {M} candidates identify no parameter of the chain's joints, only "
+                        f"{', '.join(ident.kept)} (poses that hardly differ?): a plan of them "
+                        "calibrates nothing; give candidates that move every joint")
     need = math.ceil(p / rows_per)
     if n < need:
         raise OptionError(f"{n} poses give {rows_per * n} equations, but the candidates identify "
