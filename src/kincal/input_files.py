@@ -113,13 +113,24 @@ def json_depth(value, limit: int) -> int:
     return depth
 
 
+def file_sha256(path) -> str:
+    """SHA-256 of a file's bytes (hex), read in pieces: a large data file is never held
+    whole (``hashlib.file_digest`` is Python 3.11's; kincal runs on 3.10)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for piece in iter(lambda: fh.read(1 << 20), b""):
+            h.update(piece)
+    return h.hexdigest()
+
+
 def same_files(files) -> tuple[str, str, str] | None:
     """(first, second, how) for the first two of ``files`` that are one file (a path given
     twice, a link to it: one inode) or hold the same bytes, else None; how: "is given
     twice", "is FIRST" or "has the same bytes as FIRST". Files that cannot be read are left
     to their reader."""
     import contextlib
-    import hashlib
 
     stats = []
     for f in files:
@@ -132,8 +143,7 @@ def same_files(files) -> tuple[str, str, str] | None:
     sizes = [st.st_size for _, st in stats]
     for f, st in stats:  # the same bytes: hashed only where two files share a size
         if sizes.count(st.st_size) > 1 and len(keys[(st.st_dev, st.st_ino)]) == 1:
-            with open(f, "rb") as fh:
-                keys.setdefault(hashlib.file_digest(fh, "sha256").hexdigest(), []).append(f)
+            keys.setdefault(file_sha256(f), []).append(f)
     for key, same in keys.items():
         if len(same) > 1:
             how = ("is given twice" if same[0] == same[1] else f"is {same[0]}"

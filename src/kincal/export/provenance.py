@@ -37,11 +37,9 @@ class FileHash:
         p = str(path)
         if p.startswith("<") or not Path(p).is_file():
             return cls(p, None)
-        h = hashlib.sha256()  # in pieces: a large data file is never held whole
-        with open(p, "rb") as fh:
-            for piece in iter(lambda: fh.read(1 << 20), b""):
-                h.update(piece)
-        return cls(p, h.hexdigest())
+        from kincal.input_files import file_sha256
+
+        return cls(p, file_sha256(p))
 
 
 @dataclass(frozen=True)
