@@ -774,3 +774,31 @@ def test_a_pose_file_logged_in_millimetres_and_degrees_names_the_length_unit(tmp
     assert not out.exists()
     assert main(args + ["--length-unit", "mm", "--quiet"]) == 0
     assert "were the lengths millimetres" not in capsys.readouterr().err
+
+
+def test_validate_contacts_repeating_some_training_touches_is_warned(tmp_path, capsys):
+    """A contact sample is its joint values alone: a touch program run again with commanded
+    joints repeats some exactly, and its touches are measured anew. --validate with one
+    training touch among the other day's 9 is judged, with a warning naming the repeat; a
+    file of training touches alone is still refused (nothing written)."""
+    from test_tree_paths import _talos_study
+
+    study = _talos_study()
+    names, train = study.joint_rows(study.DATA / "left_train.csv")
+    _, valid = study.joint_rows(study.DATA / "left_validation.csv")
+    t, mixed, same = (tmp_path / n for n in ("t.csv", "mixed.csv", "same.csv"))
+    study.write_joint_csv(t, names, train)
+    study.write_joint_csv(mixed, names, np.vstack([valid, train[2:3]]))
+    study.write_joint_csv(same, names, train[:5])
+    args = ["calibrate", str(study.talos_urdf()), str(t), "--base", "left_sole_link", "--tip",
+            "gripper_left_base_link", "--on-plane", "--flush", "--tool-offset", "0", "0",
+            "-0.12", "--quiet"]
+    out = tmp_path / "cal.urdf"
+    assert main([*args, "--out", str(out), "--validate", str(mixed)]) == 0 and out.exists()
+    err = capsys.readouterr().err
+    assert "1 of its 10 samples repeat samples of" in err and "judged as held out" in err
+    out2 = tmp_path / "cal2.urdf"
+    assert main([*args, "--out", str(out2), "--validate", str(same)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert not out2.exists() and err.startswith("kincal: error: --validate")
+    assert "5 of its 5 samples repeat samples of" in err

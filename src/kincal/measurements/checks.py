@@ -301,6 +301,12 @@ def repeated_samples(data, other, keys=None, other_keys=None) -> str | None:
             f"{_lines(other, len(other_keys))[j]} there: the same data given twice?)")
 
 
+def repeats_all(data, other) -> bool:
+    """Whether every sample of ``data`` repeats a sample of ``other`` exactly."""
+    keys, other_keys = _sample_keys(data), _sample_keys(other)
+    return keys.dtype == other_keys.dtype and bool(np.all(np.isin(keys, other_keys)))
+
+
 def duplicate_samples(sets) -> list[str]:
     """Samples that repeat another exactly (every joint value and every reading to the last
     digit), in one set or across sets of one kind, one finding per set that has them
