@@ -14,6 +14,17 @@ UNIT_RATIO = 30.0  # measured spread this many times the robot's: probably mm re
 DEGREES_AS_RADIANS = 2 * np.pi + 0.5  # [rad] a revolute value beyond: probably degrees
 
 
+def _farthest_beyond(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, mask: np.ndarray):
+    """(row, joint, signs) of the farthest value from zero among those of ``mask`` outside
+    their limits [lo, hi] (the data's limit slack, 1e-6), with every such value's sign
+    (N, n); None when there is none: the evidence a unit clue names."""
+    sign = mask & ((q < lo - 1e-6) | (q > hi + 1e-6))
+    if not sign.any():
+        return None
+    i, j = np.unravel_index(np.argmax(np.where(sign, np.abs(q), -1.0)), q.shape)
+    return int(i), int(j), sign
+
+
 def degrees_read_as_radians(joint_names, kinds, lower, upper, q, rows) -> str:
     """"" or what shows that revolute values in radians were degrees: a joint with limits
     beyond them and beyond a turn and a half (DEGREES_AS_RADIANS), the farthest such value
@@ -21,10 +32,10 @@ def degrees_read_as_radians(joint_names, kinds, lower, upper, q, rows) -> str:
     q = np.asarray(q, dtype=float)
     lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
     bounded = np.array([k == "revolute" for k in kinds]) & (np.isfinite(lo) | np.isfinite(hi))
-    sign = (np.abs(q) > DEGREES_AS_RADIANS) & ((q < lo - 1e-6) | (q > hi + 1e-6)) & bounded
-    if not sign.any():
+    found = _farthest_beyond(q, lo, hi, (np.abs(q) > DEGREES_AS_RADIANS) & bounded)
+    if found is None:
         return ""
-    i, j = np.unravel_index(np.argmax(np.where(sign, np.abs(q), -1.0)), q.shape)
+    i, j, sign = found
     return (f"{joint_names[j]} is {q[i, j]:.4g} rad ({q[i, j] / np.pi:.1f} pi) at line "
             f"{rows[i]}, outside its URDF limits [{lo[j]:.4g}, {hi[j]:.4g}] rad "
             f"({int(sign.any(axis=1).sum())} of {len(q)} rows have such values): were the "
@@ -43,10 +54,10 @@ def millimetres_read_as_metres(joint_names, kinds, lower, upper, q, rows) -> str
         scale = np.maximum(np.maximum(np.abs(lo), np.abs(hi)), hi - lo)
     scale = np.where(np.isfinite(scale) & (scale > 0), scale, np.inf)
     prismatic = np.array([k == "prismatic" for k in kinds], dtype=bool)
-    sign = prismatic & (np.abs(q) > UNIT_RATIO * scale) & ((q < lo - 1e-6) | (q > hi + 1e-6))
-    if not sign.any():
+    found = _farthest_beyond(q, lo, hi, prismatic & (np.abs(q) > UNIT_RATIO * scale))
+    if found is None:
         return ""
-    i, j = np.unravel_index(np.argmax(np.where(sign, np.abs(q), -1.0)), q.shape)
+    i, j, _ = found
     return (f"{joint_names[j]} is {q[i, j]:.4g} m at line {rows[i]}, {abs(q[i, j]) / scale[j]:.0f} "
             f"times the farthest of its URDF limits [{lo[j]:.4g}, {hi[j]:.4g}] m")
 
