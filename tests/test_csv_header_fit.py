@@ -105,3 +105,16 @@ def test_the_command_lines_reading_says_the_shift_too(tmp_path, capsys):
                  "--out", str(tmp_path / "cal.urdf")]) == 1
     assert "4 columns to their right" in capsys.readouterr().err
     assert not (tmp_path / "cal.urdf").exists()
+
+
+def test_one_unnamed_column_is_named_in_the_singular(tmp_path):
+    """One empty name over numbers (a robot log's header with a name lost) and one cell
+    more than names: the lines say "column 3 holds ... has", not "column 3 hold ... have"."""
+    path = tmp_path / "log.csv"
+    rows = ["0.1,0.2,0.3,0.4", "0.5,0.6,0.7,0.8"]
+    path.write_text("\n".join(["j1,j2,,j4"] + rows) + "\n")
+    with pytest.raises(DataError, match=r"column 3 holds numbers but has no name in the header"):
+        read_columns(path, ["j1", "j2"])
+    path.write_text("\n".join(["j1,j2,j3"] + rows) + "\n")
+    with pytest.raises(DataError, match=r"4 cells, 3 names \(column 4 has no name\)"):
+        read_columns(path, ["j1", "j2"])

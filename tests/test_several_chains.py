@@ -245,8 +245,20 @@ def test_bad_input_refused(tmp_path):
         CalibrationProblem([robots[0]] * 3, sets)
     # a chain ending on its way up cannot carry the origin another chain corrects
     climbing = Robot.load(robots[0].source, base="atip", tip="base_link")
-    with pytest.raises(ChainError, match="ends climbing"):
+    with pytest.raises(ChainError, match="ends climbing through tj1, whose origin .in "
+                                         "base_link.*a movable joint down from base_link"):
         Chains([robots[0], climbing], 2)
+
+
+def test_climbing_refusal_advice_is_followable(tmp_path):
+    """The refusal of a chain that ends climbing names a way out that works: a tip reached
+    through a movable joint down from the lost origin's link (there base_link, the root:
+    "a tip below its parent link" said before would name every link, the refused one too)."""
+    robots, _ = _tree(tmp_path)
+    with pytest.raises(ChainError, match="down from base_link"):
+        Chains([robots[0], Robot.load(robots[0].source, base="atip", tip="base_link")], 2)
+    down = Robot.load(robots[0].source, base="atip", tip="ctip")  # base_link down branch c
+    assert Chains([robots[0], down], 2).several
 
 
 def test_frames_file_records_each_sets_chain(tmp_path):

@@ -160,12 +160,15 @@ class Chains:
         for r, m in zip(self.chain_robots, self.models):
             mine = {n.rsplit(".", 1)[0] for n in m.names}
             lost = [j for j in m.joint_names if j not in mine and j in owned]
-            if lost:
+            if lost:  # any tip still reached by climbing through it keeps the origin lost
+                link = r.parent_link(lost[0])
                 raise ChainError(
                     f"the chain {r.base} -> {r.tip} ends climbing through {lost[0]}, whose "
-                    "origin lies between its last motion and its tip: it cannot carry that "
-                    "origin's errors, which another chain corrects; choose a tip below "
-                    f"{lost[0]}'s parent link for it")
+                    f"origin (in {link}) lies between its last motion and its tip: it cannot "
+                    "carry that origin's errors, which another chain corrects; give it a tip "
+                    f"its path reaches through a movable joint down from {link} or a link "
+                    "above it (the path then corrects that origin as the others do), or "
+                    "calibrate that chain on its own (its tool frame then holds those errors)")
 
     @property
     def several(self) -> bool:

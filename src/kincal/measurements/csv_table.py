@@ -133,6 +133,11 @@ def _positions(index) -> str:
     return ("column " if len(index) == 1 else "columns ") + ", ".join(out)
 
 
+def _verb(count: int, one: str, several: str) -> str:
+    """The verb agreeing with :func:`_positions`' "column 4" or "columns 4-5"."""
+    return one if count == 1 else several
+
+
 def _shift_hint(header, row, cols) -> str:
     """' the named columns fit the cells k columns to their right ...' for the smallest
     shift k that puts every wanted column on a number and every number (after a leading
@@ -159,13 +164,15 @@ def _check_fit(path, line: int, header, row, cols, separator: str) -> None:
     if len(row) > len(header):
         commas = f" (or decimal commas? {_DECIMAL_COMMA_HINT})" if separator == "," else ""
         raise DataError(f"{path}, line {line}: the header does not fit its rows: {len(row)} cells, "
-                        f"{len(header)} names ({_positions(range(len(header), len(row)))} have "
-                        f"no name){_shift_hint(header, row, cols)}{commas}")
+                        f"{len(header)} names ({_positions(range(len(header), len(row)))} "
+                        f"{_verb(len(row) - len(header), 'has', 'have')} no name)"
+                        f"{_shift_hint(header, row, cols)}{commas}")
     unnamed = [i for i, h in enumerate(header) if not h and i < len(row) and row[i].strip()
                and _is_number(row[i]) and i > 0]
     if unnamed:
         raise DataError(f"{path}, line {line}: the header does not fit its rows: "
-                        f"{_positions(unnamed)} hold numbers but have no name in the header"
+                        f"{_positions(unnamed)} {_verb(len(unnamed), 'holds', 'hold')} numbers "
+                        f"but {_verb(len(unnamed), 'has', 'have')} no name in the header"
                         f"{_shift_hint(header, row, cols)}; name every data column")
 
 
