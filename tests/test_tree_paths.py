@@ -282,6 +282,11 @@ def test_bad_base_and_tip_in_one_line(tmp_path):
         Robot.load(path, base="atip", tip="btipp")
     with pytest.raises(FrameError, match="same frame 'atip'"):
         Robot.load(path, base="atip", tip="atip")
+    # Pinocchio's frame 0 is no URDF frame: not offered, not taken (a FRAMES.json naming it
+    # would name a base no other URDF reader finds)
+    with pytest.raises(FrameError, match="unknown base frame 'universe'") as exc:
+        Robot.load(path, base="universe", tip="btip")
+    assert "universe" not in exc.value.valid and "base_link" in exc.value.valid
     text = path.read_text()
     for kind in ("floating", "planar"):
         bad = tmp_path / f"{kind}.urdf"

@@ -160,12 +160,14 @@ class Robot:
                 if f.type == pin.FrameType.BODY and i not in parents]
 
     def frame_names(self) -> list[str]:
-        """Names usable as base or tip: links and joints of the URDF."""
-        return [f.name for f in self.model.frames
+        """Names usable as base or tip: links and joints of the URDF (not frame 0, Pinocchio's
+        "universe", which no URDF names: a FRAMES.json recording it would name no frame
+        another URDF reader finds)."""
+        return [f.name for f in list(self.model.frames)[1:]
                 if f.type in (pin.FrameType.BODY, pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)]
 
     def _frame_id(self, name: str, role: str) -> int:
-        if not isinstance(name, str) or not self.model.existFrame(name):
+        if not isinstance(name, str) or name not in self.frame_names():
             valid = self.frame_names()
             raise FrameError(f"unknown {role} frame {name!r} in robot {self.name!r}."
                              + suggest(str(name), valid) + f" Valid frames: {listing(valid)}",
