@@ -160,9 +160,7 @@ class Robot:
                 if f.type == pin.FrameType.BODY and i not in parents]
 
     def frame_names(self) -> list[str]:
-        """Names usable as base or tip: links and joints of the URDF (not frame 0, Pinocchio's
-        "universe", which no URDF names: a FRAMES.json recording it would name no frame
-        another URDF reader finds)."""
+        """Base or tip names: the URDF's links and joints (not Pinocchio's frame 0, universe)."""
         return [f.name for f in list(self.model.frames)[1:]
                 if f.type in (pin.FrameType.BODY, pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)]
 
