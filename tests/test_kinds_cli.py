@@ -210,3 +210,26 @@ def test_distances_in_a_small_volume_start_from_the_pivot_and_tool_they_fix(tmp_
     (f,) = pivot_and_tool(p, R, d)
     assert np.allclose(f, np.r_[c, t], atol=1e-9)
     assert pivot_and_tool(p[:15], R[:15], d[:15]) == []
+
+
+@pytest.mark.parametrize("kind,flush", [("pose", True), ("point", False), ("distance", False)])
+def test_on_plane_with_no_contact_file_is_refused(tmp_path, capsys, kind, flush):
+    """--on-plane (--flush) reads files of joint columns alone as contacts; a file with
+    measurement columns (a robot log carrying its floating base's x y z qx qy qz qw) is
+    read as its kind. With no contact file at all the option was used nowhere and the file
+    calibrated as what it is without a word: refused, naming each file's kind."""
+    data = tmp_path / f"{kind}.csv"
+    assert run(capsys, "simulate", "ec66", "--kind", kind, "--poses", 24, "--out", data)[0] == 0
+    out_urdf = tmp_path / "cal.urdf"
+    code, out, err = run(capsys, "calibrate", "ec66", data, "--on-plane",
+                         *(["--flush"] if flush else []), "--out", out_urdf)
+    lines = [line for line in err.splitlines() if line.startswith("kincal: error:")]
+    assert code != 0 and len(lines) == 1, err
+    assert "--on-plane" in lines[0] and f"{kind}.csv: {kind}" in lines[0]
+    assert not out_urdf.exists()
+    # with one contact file beside it, the option is used: accepted
+    plane = tmp_path / "plane.csv"
+    assert run(capsys, "simulate", "ec66", "--kind", "plane", "--poses", 24, "--out", plane)[0] == 0
+    code, out, err = run(capsys, "calibrate", "ec66", data, plane, "--on-plane", "--lambda", 0.1,
+                         "--out", out_urdf)
+    assert code == 0, err

@@ -358,7 +358,7 @@ class Inputs:
         from kincal.measurements.sets import read_set_file
 
         from kincal.measurements.kind import SIGMA_RANGE_M
-        from kincal.measurements.sets import kind_of
+        from kincal.measurements.sets import check_contacts_read, kind_of
 
         if self.flush and not self.on_plane:
             raise OptionError("--flush describes plane contacts: give it with --on-plane")
@@ -415,6 +415,7 @@ class Inputs:
         sets = [checked(CalibrationProblem, r, read(path, r, self.orientation_format))
                 for path, r in zip(self.files, robots)]
         self._kind_options_used(any(kind_of(d) in ("pose", "flush") for d in sets), any(angled))
+        check_contacts_read(sets, self.files, self.on_plane, self.flush)
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))
                     for d, s in zip(sets, self.set_sigma_mm)]

@@ -35,6 +35,21 @@ def kind_of(data) -> str:
                     f"PlaneData, got {type(data).__name__}")
 
 
+def check_contacts_read(sets, files, on_plane: bool, flush: bool) -> None:
+    """With --on-plane: refuse data files of which none was read as contacts (every one had
+    measurement columns and was read as its kind: the option would be used nowhere)."""
+    if not on_plane or any(kind_of(d) in ("plane", "flush") for d in sets):
+        return
+    what = "; ".join(f"{f}: {kind_of(d)}" for f, d in zip(files, sets))
+    from kincal.errors import OptionError
+
+    raise OptionError(
+        f"--on-plane{' --flush' if flush else ''} reads files of joint columns alone as "
+        f"contacts, but every data file has measurement columns and is read as its kind "
+        f"({what}); if those columns are not measurements (a logged floating base's x y z "
+        "qx qy qz qw, say), rename or remove them")
+
+
 def as_sets(data) -> list:
     """A list of measurement sets from one set or a sequence of them (DataError if empty)."""
     sets = list(data) if isinstance(data, (list, tuple)) else [data]
