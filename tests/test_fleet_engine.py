@@ -147,6 +147,39 @@ def test_no_scheduler_at_the_address_is_one_line(units, tmp_path, capsys, existi
         assert not out.exists()
 
 
+@pytest.mark.parametrize("what", ["silent", "malformed", "http"])
+def test_an_address_that_is_no_scheduler_is_one_line_in_bounded_time(units, tmp_path, capsys,
+                                                                       monkeypatch, what):
+    """A server that accepts and never answers (a web server's port, the dashboard's)
+    made Dask's Client wait forever (its timeout bounds only the TCP connection, not the
+    handshake); a malformed address (no port, another scheme) raised a traceback from deep
+    in Dask. Each is one line naming the address, within the connect timeout, nothing
+    written."""
+    import socket
+    import threading
+
+    from kincal.fleet import engine
+
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 1.0, raising=False)
+    with socket.socket() as server:  # listens (the kernel accepts), never answers
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        address = {"silent": f"tcp://127.0.0.1:{port}", "malformed": "127.0.0.1",
+                   "http": f"http://127.0.0.1:{port}"}[what]
+        out, got = tmp_path / "D", []
+        t = threading.Thread(target=lambda: got.append(main(_fleet_argv(
+            units[:2], out, "--scheduler", address))), daemon=True)
+        t.start()
+        t.join(30)
+        assert not t.is_alive(), "kincal fleet --scheduler still waits after 30 s"
+    assert got == [1]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"kincal: error: --scheduler {address}: no Dask "
+                                               "scheduler answers there"), err
+    assert not out.exists()
+
+
 def _half(x):
     if x == 3:
         raise ValueError("three")
