@@ -98,6 +98,47 @@ def test_a_prior_of_another_chain_or_model_is_refused(fleet_files, fleet_dir, ca
     assert not (fleet_files / "x.urdf").exists()
 
 
+@pytest.mark.parametrize("robot", ["longer", "corrected"])
+def test_a_prior_of_a_robot_of_another_design_is_refused(fleet_files, fleet_dir, capsys, robot):
+    """The chain hash leaves the link lengths out (FRAMES.json must fit a corrected URDF),
+    so a prior learned on one design was taken by another with the same joints and axes
+    (a UR5e's by a UR10e, 0.5 mm on one link here) and by a unit's corrected URDF, whose
+    nominal already holds that unit's deviation: the fleet mean was added on top. The
+    prior records its nominal values and is refused with another's, naming the largest."""
+    if robot == "longer":
+        path = fleet_files / "ec66-longer.urdf"
+        text = _ec66_text()
+        assert text.count('xyz="0.398 0 0.098"') == 1
+        path.write_text(text.replace('xyz="0.398 0 0.098"', 'xyz="0.398 0 0.0985"'))
+    else:
+        path = fleet_dir / "u01" / "corrected.urdf"
+    out = fleet_files / f"y-{robot}.urdf"
+    argv = ["calibrate", str(path), str(fleet_files / "new.csv"), "--tip", "flange",
+            "--tool-offset", "0", "0", "0.11", "--prior", str(fleet_dir / "FLEET.json"),
+            "--out", str(out)]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("kincal: error: the fleet prior was learned on a robot of "
+                              "another design"), err
+    if robot == "longer":
+        assert "joint_4.d: 98.0000 mm there, 98.5000 mm here" in err[-1]
+    assert not out.exists()
+    # the design the fleet was learned on is taken, as written by kincal fleet
+    d = json.loads((fleet_dir / "FLEET.json").read_text())
+    assert all("nominal" in q for q in d["parameters"]) and d["version"] == 2
+
+
+def test_a_prior_of_version_1_is_refused(tmp_path, fleet_dir):
+    """Version 1 recorded no nominal values: it cannot be checked against the design."""
+    d = json.loads((fleet_dir / "FLEET.json").read_text())
+    d["version"] = 1
+    for q in d["parameters"]:
+        del q["nominal"]
+    (tmp_path / "F.json").write_text(json.dumps(d))
+    with pytest.raises(PriorError, match="version 1, which does not record the nominal"):
+        FleetPrior.read(tmp_path / "F.json")
+
+
 def test_a_malformed_prior_is_refused(tmp_path, fleet_dir):
     d = json.loads((fleet_dir / "FLEET.json").read_text())
     d["covariance"] = d["covariance"][:-1]
@@ -173,10 +214,10 @@ def test_prior_pulls_toward_the_fleet_mean_where_data_are_blind():
         moved = np.array([p.layout.kinematic_names[i].endswith(".a") for i in range(k)])
         mean[moved] = 2e-4  # 0.2 mm on every a
         prior = FleetPrior.estimate(robot, p.model_name, p.layout.kinematic_names,
-                                    p.layout.is_length[:k], units, ["a", "b"])
+                                    p.layout.is_length[:k], p.x_nominal[:k], units, ["a", "b"])
         prior = FleetPrior(prior.robot, prior.robot_hash, prior.model, prior.names,
-                           prior.is_length, mean, np.diag(np.where(moved, 1e-10, 0.0)),
-                           prior.units, 1.0)
+                           prior.is_length, prior.nominal, mean,
+                           np.diag(np.where(moved, 1e-10, 0.0)), prior.units, 1.0)
         fitted = CalibrationProblem(robot, data, CalibrationOptions(
             tool_guess=(0, 0, 0.11), prior=prior, lam=1.0)).solve()
     dev = fitted.x[:k] - fitted.x_nominal[:k]
