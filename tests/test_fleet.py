@@ -13,6 +13,7 @@ import scipy.linalg
 from kincal.cli import main
 from kincal.errors import KincalWarning, OptionError, PriorError
 from kincal.fleet.simulated import FleetModel
+from kincal.frames_file import chain_hash
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.prior import FleetPrior, shrink_to_diagonal
 from kincal.identification.problem import CalibrationProblem
@@ -223,6 +224,36 @@ def test_prior_pulls_toward_the_fleet_mean_where_data_are_blind():
     dev = fitted.x[:k] - fitted.x_nominal[:k]
     assert np.allclose(dev[moved], 2e-4, atol=5e-5)
     assert np.max(np.abs((plain.x[:k] - plain.x_nominal[:k])[moved] - 2e-4)) > 5e-5
+
+
+def test_a_parameter_that_never_moved_in_the_fleet_is_held_at_the_fleet_mean():
+    """A kinematic parameter with no fleet variance (it never moved in any unit: redundant
+    in the error model, or fixed there) is held at the fleet mean, as docs/fleet.md says.
+    It was fitted instead whenever the new unit's data identified it (at the fleet mean
+    the parallel axes of joints 2-4 are no longer exactly parallel, so joint_2.d and
+    joint_3.d were "identified" by an R-test), with a pull toward nominal of its own."""
+    robot = Robot.load("ec66", tip="flange")
+    fm = FleetModel.of(robot, 0)
+    rng = np.random.default_rng(3)
+    data = fm.tracker(fm.unit(rng), rng, n=40)  # wide: joint_4.a is well identified
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        p = CalibrationProblem(robot, data, CalibrationOptions(tool_guess=(0, 0, 0.045)))
+        k = p.layout.n_kinematic
+        names = p.layout.kinematic_names
+        i = names.index("joint_4.a")
+        assert "joint_4.a" in p.analyze().kept
+        sd = np.where(np.asarray(p.layout.is_length[:k]), 1e-4, 1e-4 * np.pi / 180)
+        sd[i] = 0.0  # never moved in the fleet
+        mean = np.zeros(k)
+        mean[i] = 3e-4
+        prior = FleetPrior(robot.model_name, chain_hash(robot), p.model_name, tuple(names),
+                           tuple(bool(v) for v in p.layout.is_length[:k]), p.x_nominal[:k],
+                           mean, np.diag(sd ** 2), ("a", "b"), 1.0)
+        for lam in ("evidence", 0.0025):
+            fitted = CalibrationProblem(robot, data, CalibrationOptions(
+                tool_guess=(0, 0, 0.045), prior=prior, lam=lam)).solve()
+            assert fitted.x[i] - fitted.x_nominal[i] == pytest.approx(3e-4, abs=1e-12)
 
 
 def test_hierarchical_rounds_write_once_and_learn_a_hierarchical_prior(fleet_files, capsys):
