@@ -83,6 +83,7 @@ def test_calibrate_with_prior_and_another_tool(fleet_files, fleet_dir, capsys):
     (["--model", "mdh"], "error model complete"),
     (["--tip", "link_6"], "another robot or chain"),
     (["--method", "ls"], "method l2"),
+    (["--lambda", "0"], "lambda 0 (--lambda 0) switches off"),  # was taken, the prior ignored
 ])
 def test_a_prior_of_another_chain_or_model_is_refused(fleet_files, fleet_dir, capsys, extra,
                                                       words):
