@@ -148,6 +148,9 @@ class Engine:
                 _quiet_engine_logs()
                 self.client.cancel(futures)
             raise
+        finally:  # released here, where a Ctrl-C raises: left to Future.__del__ at the return,
+            for f in futures:  # the release met a Ctrl-C there and Python dropped it
+                f.release()  # ("Exception ignored in ... __del__"): the run went on, exit 0
 
 
 def _quiet_engine_logs() -> None:
