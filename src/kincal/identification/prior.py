@@ -206,13 +206,14 @@ class FleetPrior:
         if off.size:
             i = int(off[np.argmax(differ[off])])
             k, unit = (1e3, "mm") if self.is_length[i] else (180.0 / math.pi, "deg")
+            there, here = (f"{round(v * k, 4) + 0.0:.4f} {unit}"  # no "-0.0000"
+                           for v in (self.nominal[i], nominal[i]))
             raise PriorError(
                 f"{source} was learned on a robot of another design: {off.size} of its "
-                f"{len(self.names)} nominal values differ from this robot's, most "
-                f"{self.names[i]}: {self.nominal[i] * k:.4f} {unit} there, "
-                f"{nominal[i] * k:.4f} {unit} here; its mean is a deviation from its own "
-                "nominal: calibrate with the robot description the fleet was learned on (the "
-                "design's URDF, not a unit's corrected one)")
+                f"{len(self.names)} nominal values differ from this robot's (the most "
+                f"{self.names[i]}: {there} there, {here} here); its mean is a deviation "
+                "from its own nominal: calibrate with the robot description the fleet was "
+                "learned on (the design's URDF, not a unit's corrected one)")
 
 
 @dataclass(frozen=True)
