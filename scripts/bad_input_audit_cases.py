@@ -309,6 +309,11 @@ def audit_cases():
             "simulate", "ec66", "--poses", "5", "--out", "{d}/s.csv", "--truth-out",
             "{d}/s.csv"], None, "two outputs name the same file"),
         # fleet and simulate misuse
+        ("fleet: --out-dir empty (the current folder)", fleet + ["--out-dir", ""], None,
+         "an output folder must be a non-empty str or Path, got ''"),
+        ("calibrate: --plots empty", ["calibrate", "ec66", "{csv}", "--out", "{d}/o.urdf",
+                                      "--plots", ""], None,
+         "an output folder must be a non-empty str or Path, got ''"),
         ("fleet: --scheduler without a port", fleet + ["--out-dir", "{d}/D", "--scheduler",
                                                        "localhost"], None,
          "no Dask scheduler answers there (missing port number"),

@@ -351,6 +351,18 @@ def test_a_fleet_that_fails_writes_nothing_and_replaces_nothing(fleet_files, tmp
     assert not fresh.exists()
 
 
+def test_an_empty_out_dir_is_refused_not_the_current_folder(fleet_files, tmp_path, capsys,
+                                                             monkeypatch):
+    """--out-dir "" (a script's unset variable) wrote every unit, the summary and the prior
+    into the current folder (Path("") is "."), where calibrate --out "" is refused."""
+    monkeypatch.chdir(tmp_path)
+    files = [str(fleet_files / f"u0{u}.csv") for u in (1, 2)]
+    assert main(["fleet", "ec66", *files, "--tip", "flange", "--out-dir", ""]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["kincal: error: an output folder must be a non-empty str or Path, got ''"]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_unit_names_are_unique_folders():
     """x/a.csv, y/a.csv and a-2.csv made the units a-1, a-2, a-2: the second a-2 found the
     first one's folder (failed, or with --overwrite replaced it), and the summary listed
