@@ -95,6 +95,24 @@ def _ro(d, fill):
     _read_only(d)
 
 
+def _prior_file(d, fill) -> None:
+    """d/p.json: a fleet prior of the EC66 design (tip flange, model complete), two units of
+    0.1 mm and 0.01 deg scatter about nominal, written as kincal fleet writes it."""
+    import numpy as np
+
+    from kincal.export.report import dumps
+    from kincal.identification.prior import FleetPrior
+    from kincal.models import build
+    from kincal.robot import Robot
+
+    robot = Robot.load("ec66", tip="flange")
+    m = build("complete", robot.geometry)
+    sd = np.where(np.asarray(m.is_length, bool), 1e-4, 1.7e-4)
+    prior = FleetPrior.estimate(robot, "complete", m.names, m.is_length, m.nominal,
+                                np.array([sd, -sd]), ["u1", "u2"])
+    (d / "p.json").write_text(dumps(prior.as_dict()))
+
+
 def audit_cases():
     """(label, argv, setup(folder, fill) or None, expect) of the audit's faults: each
     refused with one line holding ``expect``, exit code 1, nothing written."""
@@ -171,6 +189,14 @@ def audit_cases():
         ("json: --prior truncated", cal + ["--prior", "{d}/p.json", "--out", "{d}/o.urdf"],
          _write("p.json", lambda f: '{"format": "kincal-fleet-prior", "version": 1, "units": ['),
          "not a kincal fleet prior (invalid JSON"),
+        ("json: --prior of the design on a corrected URDF", [
+            "calibrate", "{urdf}", "{csv}", "--tip", "flange", "--model", "complete", "--prior",
+            "{d}/p.json", "--out", "{d}/o.urdf"], _prior_file,
+         "learned on a robot of another design"),
+        ("json: --prior with --lambda 0", ["calibrate", "ec66", "{csv}", "--model", "complete",
+                                           "--prior", "{d}/p.json", "--lambda", "0", "--out",
+                                           "{d}/o.urdf"], _prior_file,
+         "lambda 0 (--lambda 0) switches off"),
         ("json: FRAMES.json truncated", ev, _write("f.json", lambda f: Path(
             f["frames"]).read_text()[:200]), "not a kincal frames file (invalid JSON"),
         ("json: a backlash of 1e300", ev, _write("f.json", lambda f: _frames_with(
@@ -283,6 +309,17 @@ def audit_cases():
             "simulate", "ec66", "--poses", "5", "--out", "{d}/s.csv", "--truth-out",
             "{d}/s.csv"], None, "two outputs name the same file"),
         # fleet and simulate misuse
+        ("fleet: --out-dir empty (the current folder)", fleet + ["--out-dir", ""], None,
+         "an output folder must be a non-empty str or Path, got ''"),
+        ("calibrate: --plots empty", ["calibrate", "ec66", "{csv}", "--out", "{d}/o.urdf",
+                                      "--plots", ""], None,
+         "an output folder must be a non-empty str or Path, got ''"),
+        ("fleet: --scheduler without a port", fleet + ["--out-dir", "{d}/D", "--scheduler",
+                                                       "localhost"], None,
+         "no Dask scheduler answers there (missing port number"),
+        ("fleet: --scheduler the dashboard's http://", fleet + [
+            "--out-dir", "{d}/D", "--scheduler", "http://127.0.0.1:8787"], None,
+         "no Dask scheduler answers there (unknown address scheme 'http'"),
         ("fleet: --out-dir is a file", fleet + ["--out-dir", "{d}/D"],
          _write("D", lambda f: "keep"), "exists and is not a directory"),
         ("fleet: a unit that would be DIR/..", ["fleet", "ec66", "{csv}", "{d}/...csv",

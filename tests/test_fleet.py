@@ -13,6 +13,7 @@ import scipy.linalg
 from kincal.cli import main
 from kincal.errors import KincalWarning, OptionError, PriorError
 from kincal.fleet.simulated import FleetModel
+from kincal.frames_file import chain_hash
 from kincal.identification.options import CalibrationOptions
 from kincal.identification.prior import FleetPrior, shrink_to_diagonal
 from kincal.identification.problem import CalibrationProblem
@@ -82,6 +83,7 @@ def test_calibrate_with_prior_and_another_tool(fleet_files, fleet_dir, capsys):
     (["--model", "mdh"], "error model complete"),
     (["--tip", "link_6"], "another robot or chain"),
     (["--method", "ls"], "method l2"),
+    (["--lambda", "0"], "lambda 0 (--lambda 0) switches off"),  # was taken, the prior ignored
 ])
 def test_a_prior_of_another_chain_or_model_is_refused(fleet_files, fleet_dir, capsys, extra,
                                                       words):
@@ -96,6 +98,47 @@ def test_a_prior_of_another_chain_or_model_is_refused(fleet_files, fleet_dir, ca
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("kincal: error:") and words in err[-1]
     assert not (fleet_files / "x.urdf").exists()
+
+
+@pytest.mark.parametrize("robot", ["longer", "corrected"])
+def test_a_prior_of_a_robot_of_another_design_is_refused(fleet_files, fleet_dir, capsys, robot):
+    """The chain hash leaves the link lengths out (FRAMES.json must fit a corrected URDF),
+    so a prior learned on one design was taken by another with the same joints and axes
+    (a UR5e's by a UR10e, 0.5 mm on one link here) and by a unit's corrected URDF, whose
+    nominal already holds that unit's deviation: the fleet mean was added on top. The
+    prior records its nominal values and is refused with another's, naming the largest."""
+    if robot == "longer":
+        path = fleet_files / "ec66-longer.urdf"
+        text = _ec66_text()
+        assert text.count('xyz="0.398 0 0.098"') == 1
+        path.write_text(text.replace('xyz="0.398 0 0.098"', 'xyz="0.398 0 0.0985"'))
+    else:
+        path = fleet_dir / "u01" / "corrected.urdf"
+    out = fleet_files / f"y-{robot}.urdf"
+    argv = ["calibrate", str(path), str(fleet_files / "new.csv"), "--tip", "flange",
+            "--tool-offset", "0", "0", "0.11", "--prior", str(fleet_dir / "FLEET.json"),
+            "--out", str(out)]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("kincal: error: the fleet prior was learned on a robot of "
+                              "another design"), err
+    if robot == "longer":
+        assert "(the most joint_4.d: 98.0000 mm there, 98.5000 mm here)" in err[-1]
+    assert not out.exists()
+    # the design the fleet was learned on is taken, as written by kincal fleet
+    d = json.loads((fleet_dir / "FLEET.json").read_text())
+    assert all("nominal" in q for q in d["parameters"]) and d["version"] == 2
+
+
+def test_a_prior_of_version_1_is_refused(tmp_path, fleet_dir):
+    """Version 1 recorded no nominal values: it cannot be checked against the design."""
+    d = json.loads((fleet_dir / "FLEET.json").read_text())
+    d["version"] = 1
+    for q in d["parameters"]:
+        del q["nominal"]
+    (tmp_path / "F.json").write_text(json.dumps(d))
+    with pytest.raises(PriorError, match="version 1, which does not record the nominal"):
+        FleetPrior.read(tmp_path / "F.json")
 
 
 def test_a_malformed_prior_is_refused(tmp_path, fleet_dir):
@@ -173,15 +216,45 @@ def test_prior_pulls_toward_the_fleet_mean_where_data_are_blind():
         moved = np.array([p.layout.kinematic_names[i].endswith(".a") for i in range(k)])
         mean[moved] = 2e-4  # 0.2 mm on every a
         prior = FleetPrior.estimate(robot, p.model_name, p.layout.kinematic_names,
-                                    p.layout.is_length[:k], units, ["a", "b"])
+                                    p.layout.is_length[:k], p.x_nominal[:k], units, ["a", "b"])
         prior = FleetPrior(prior.robot, prior.robot_hash, prior.model, prior.names,
-                           prior.is_length, mean, np.diag(np.where(moved, 1e-10, 0.0)),
-                           prior.units, 1.0)
+                           prior.is_length, prior.nominal, mean,
+                           np.diag(np.where(moved, 1e-10, 0.0)), prior.units, 1.0)
         fitted = CalibrationProblem(robot, data, CalibrationOptions(
             tool_guess=(0, 0, 0.11), prior=prior, lam=1.0)).solve()
     dev = fitted.x[:k] - fitted.x_nominal[:k]
     assert np.allclose(dev[moved], 2e-4, atol=5e-5)
     assert np.max(np.abs((plain.x[:k] - plain.x_nominal[:k])[moved] - 2e-4)) > 5e-5
+
+
+def test_a_parameter_that_never_moved_in_the_fleet_is_held_at_the_fleet_mean():
+    """A kinematic parameter with no fleet variance (it never moved in any unit: redundant
+    in the error model, or fixed there) is held at the fleet mean, as docs/fleet.md says.
+    It was fitted instead whenever the new unit's data identified it (at the fleet mean
+    the parallel axes of joints 2-4 are no longer exactly parallel, so joint_2.d and
+    joint_3.d were "identified" by an R-test), with a pull toward nominal of its own."""
+    robot = Robot.load("ec66", tip="flange")
+    fm = FleetModel.of(robot, 0)
+    rng = np.random.default_rng(3)
+    data = fm.tracker(fm.unit(rng), rng, n=40)  # wide: joint_4.a is well identified
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        p = CalibrationProblem(robot, data, CalibrationOptions(tool_guess=(0, 0, 0.045)))
+        k = p.layout.n_kinematic
+        names = p.layout.kinematic_names
+        i = names.index("joint_4.a")
+        assert "joint_4.a" in p.analyze().kept
+        sd = np.where(np.asarray(p.layout.is_length[:k]), 1e-4, 1e-4 * np.pi / 180)
+        sd[i] = 0.0  # never moved in the fleet
+        mean = np.zeros(k)
+        mean[i] = 3e-4
+        prior = FleetPrior(robot.model_name, chain_hash(robot), p.model_name, tuple(names),
+                           tuple(bool(v) for v in p.layout.is_length[:k]), p.x_nominal[:k],
+                           mean, np.diag(sd ** 2), ("a", "b"), 1.0)
+        for lam in ("evidence", 0.0025):
+            fitted = CalibrationProblem(robot, data, CalibrationOptions(
+                tool_guess=(0, 0, 0.045), prior=prior, lam=lam)).solve()
+            assert fitted.x[i] - fitted.x_nominal[i] == pytest.approx(3e-4, abs=1e-12)
 
 
 def test_hierarchical_rounds_write_once_and_learn_a_hierarchical_prior(fleet_files, capsys):
@@ -276,6 +349,18 @@ def test_a_fleet_that_fails_writes_nothing_and_replaces_nothing(fleet_files, tmp
         capsys.readouterr()
         assert main([*argv[:-1], str(fresh), good[0], str(fleet_files / "bad.csv")]) == 1
     assert not fresh.exists()
+
+
+def test_an_empty_out_dir_is_refused_not_the_current_folder(fleet_files, tmp_path, capsys,
+                                                             monkeypatch):
+    """--out-dir "" (a script's unset variable) wrote every unit, the summary and the prior
+    into the current folder (Path("") is "."), where calibrate --out "" is refused."""
+    monkeypatch.chdir(tmp_path)
+    files = [str(fleet_files / f"u0{u}.csv") for u in (1, 2)]
+    assert main(["fleet", "ec66", *files, "--tip", "flange", "--out-dir", ""]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["kincal: error: an output folder must be a non-empty str or Path, got ''"]
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_unit_names_are_unique_folders():

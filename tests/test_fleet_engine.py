@@ -147,6 +147,39 @@ def test_no_scheduler_at_the_address_is_one_line(units, tmp_path, capsys, existi
         assert not out.exists()
 
 
+@pytest.mark.parametrize("what", ["silent", "malformed", "http"])
+def test_an_address_that_is_no_scheduler_is_one_line_in_bounded_time(units, tmp_path, capsys,
+                                                                       monkeypatch, what):
+    """A server that accepts and never answers (a web server's port, the dashboard's)
+    made Dask's Client wait forever (its timeout bounds only the TCP connection, not the
+    handshake); a malformed address (no port, another scheme) raised a traceback from deep
+    in Dask. Each is one line naming the address, within the connect timeout, nothing
+    written."""
+    import socket
+    import threading
+
+    from kincal.fleet import engine
+
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 1.0, raising=False)
+    with socket.socket() as server:  # listens (the kernel accepts), never answers
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        address = {"silent": f"tcp://127.0.0.1:{port}", "malformed": "127.0.0.1",
+                   "http": f"http://127.0.0.1:{port}"}[what]
+        out, got = tmp_path / "D", []
+        t = threading.Thread(target=lambda: got.append(main(_fleet_argv(
+            units[:2], out, "--scheduler", address))), daemon=True)
+        t.start()
+        t.join(30)
+        assert not t.is_alive(), "kincal fleet --scheduler still waits after 30 s"
+    assert got == [1]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"kincal: error: --scheduler {address}: no Dask "
+                                               "scheduler answers there"), err
+    assert not out.exists()
+
+
 def _half(x):
     if x == 3:
         raise ValueError("three")
@@ -199,6 +232,35 @@ def test_an_interrupted_engine_leaves_its_loggers_quiet():
     finally:
         for n, level in before.items():
             logging.getLogger(n).setLevel(level)
+
+
+def test_a_ctrl_c_as_the_tasks_are_released_stops_the_run(monkeypatch):
+    """Ctrl-C just after the last unit came back met Dask's Future.__del__ (a future's
+    release, as run returned): Python prints an exception raised in __del__ as "Exception
+    ignored" and drops it, so the command printed a KeyboardInterrupt traceback, went on and
+    exited 0 with every file written. The engine releases its futures itself, where the
+    interrupt propagates: here a release that meets one (as the signal would) stops the run."""
+    import distributed
+
+    from kincal.fleet.engine import Engine
+
+    release, hit = distributed.Future.release, []
+
+    def interrupted(self):
+        if not hit:
+            hit.append(self.key)
+            raise KeyboardInterrupt
+        return release(self)
+
+    got = []
+    with Engine(1) as engine:
+        monkeypatch.setattr(distributed.Future, "release", interrupted)
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                engine.run(_half, [0, 1, 2, 4], got.append, batch=1)
+        finally:
+            monkeypatch.setattr(distributed.Future, "release", release)
+    assert hit and sorted(got) == [0, 0.5, 1, 2]
 
 
 def _worker_error():

@@ -340,7 +340,7 @@ def check_outputs(robot, files, *, overwrite: bool, inputs=(), dirs=(), urdf_out
 
     protect = [robot.source] + [p for p in inputs if p]
     check_targets([f for f in files if f], overwrite=overwrite, protect=protect,
-                  dirs=[d for d in dirs if d],
+                  dirs=[d for d in dirs if d is not None],  # "" refused, not skipped
                   in_place=[(urdf_out, robot.source)] if urdf_out else [])
     return protect
 

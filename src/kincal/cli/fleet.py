@@ -143,7 +143,8 @@ def run(args) -> int:
     out = Path(c.out_dir)
     names = unit_names(inputs.files)
     fixed = [out / n for n in (PRIOR, SUMMARY_JSON, SUMMARY_HTML)]
-    protect = check_outputs(robot, fixed, overwrite=c.overwrite, inputs=inputs.files, dirs=[out])
+    protect = check_outputs(robot, fixed, overwrite=c.overwrite, inputs=inputs.files,
+                            dirs=[c.out_dir])  # as given: Path("") is the current folder
     taken = [n for n in names if (out / n).exists()]
     if taken and not c.overwrite:
         raise OptionError(f"{out}: unit folders exist ({', '.join(taken[:5])}); give "

@@ -83,7 +83,11 @@ def _writable(folder: Path, path) -> None:
 
 
 def _check_dir(path, new_dirs: set) -> Path:
-    """The resolved folder ``path``; it must be a folder or creatable in one (one level)."""
+    """The resolved folder ``path``; it must be a folder or creatable in one (one level).
+    An empty path is refused: ``Path("")`` is the current folder, where a folder option
+    left empty (``--out-dir "$UNSET"``) would have put its files."""
+    if not isinstance(path, (str, os.PathLike)) or str(path) == "":
+        raise ExportError(f"an output folder must be a non-empty str or Path, got {path!r}")
     try:
         return _check_dir_os(path, new_dirs)
     except (OSError, RuntimeError) as exc:

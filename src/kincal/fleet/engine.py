@@ -12,6 +12,7 @@ It is an optional dependency (``pip install "kincal[fleet]"``): only ``kincal fl
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import functools
 import logging
@@ -25,6 +26,19 @@ WORKER_MEMORY = "2GiB"  # a local worker's memory limit (Dask pauses, then resta
 INSTALL = 'pip install "kincal[fleet]"'
 MAX_BATCH = 8  # units per task at most
 TASKS_PER_WORKER = 4  # tasks per worker at least, when there are units enough
+CONNECT_TIMEOUT = 10.0  # [s] for a --scheduler to answer Dask's handshake
+
+
+async def _handshake(address: str) -> None:
+    """Connect to ``address`` and exchange Dask's handshake, within CONNECT_TIMEOUT in all.
+    Dask's own connect bounds only the TCP connection, not the handshake after it: a
+    server that accepts and never answers (a web server, the dashboard's port) made the
+    Client wait forever, and one that answers other bytes failed deep in Dask (a
+    malformed address too) with a traceback."""
+    from distributed.comm import connect
+
+    comm = await asyncio.wait_for(connect(address, timeout=CONNECT_TIMEOUT), CONNECT_TIMEOUT)
+    await comm.close()
 
 
 def available() -> bool:
@@ -43,10 +57,17 @@ def _client(workers: int, scheduler: str | None):
                           f"is not installed: {INSTALL}") from None
     if scheduler is not None:
         try:
-            return Client(scheduler, timeout="10s"), None
-        except OSError as e:
+            asyncio.run(_handshake(scheduler))
+            return Client(scheduler, timeout=f"{CONNECT_TIMEOUT}s"), None
+        except Exception as e:  # noqa: BLE001 - whatever the address gave, one line naming it
+            reason = (f"no answer to Dask's handshake within {CONNECT_TIMEOUT:g} s"
+                      if isinstance(e, asyncio.TimeoutError) else str(e)
+                      if isinstance(e, (OSError, ValueError))  # refused, malformed address
+                      else f"what answered is not a Dask scheduler: {type(e).__name__}: {e}")
             raise OptionError(f"--scheduler {scheduler}: no Dask scheduler answers there "
-                              f"({e}); start one (dask scheduler) or use --workers N") from None
+                              f"({reason}); expected the address of a running scheduler "
+                              "(tcp://HOST:8786, as dask scheduler prints it), or use "
+                              "--workers N") from None
     # the workers print nothing of the engine's own: a failure reaches the command through
     # the tasks' results, which it reports itself, and after Ctrl-C a busy worker's heartbeat
     # logged the closed scheduler with a traceback below the command's one line
@@ -127,6 +148,9 @@ class Engine:
                 _quiet_engine_logs()
                 self.client.cancel(futures)
             raise
+        finally:  # released here, where a Ctrl-C raises: left to Future.__del__ at the return,
+            for f in futures:  # the release met a Ctrl-C there and Python dropped it
+                f.release()  # ("Exception ignored in ... __del__"): the run went on, exit 0
 
 
 def _quiet_engine_logs() -> None:

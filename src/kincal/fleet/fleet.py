@@ -55,7 +55,7 @@ def learn_prior(robot, outcomes, method: str = "per-unit", with_covariances: boo
         covs = [u.covariance for u in ok if u.covariance is not None]
         extra = np.mean(covs, axis=0) if covs else None
     return FleetPrior.estimate(robot, ok[0].model, ok[0].names, ok[0].is_length,
-                               np.array([u.deviation for u in ok]), [u.name for u in ok],
+                               ok[0].nominal, np.array([u.deviation for u in ok]), [u.name for u in ok],
                                method, extra)
 
 

@@ -66,7 +66,8 @@ class UnitOutcome:
     status: "calibrated", "refused" (the gate refused the result: nothing written) or
     "failed" (a bad file or option, or a calibration that could not be made). message: the
     reason, one line ("" when calibrated). model / names / is_length: the error model and
-    its kinematic parameters; deviation: (k,) estimate - nominal [SI]; covariance: (k, k)
+    its kinematic parameters; nominal: (k,) their nominal values [SI]; deviation: (k,)
+    estimate - nominal [SI]; covariance: (k, k)
     [SI] of the kinematic parameters: with a fleet prior under evidence the posterior
     covariance, else the result's sandwich covariance (None if not estimated); identified:
     (k,) which the unit's fit moved. before_mm / after_mm: mean error before and after [mm].
@@ -81,6 +82,7 @@ class UnitOutcome:
     model: str = ""
     names: tuple[str, ...] = ()
     is_length: tuple[bool, ...] = ()
+    nominal: np.ndarray | None = None
     deviation: np.ndarray | None = None
     covariance: np.ndarray | None = None
     identified: np.ndarray | None = None
@@ -115,6 +117,7 @@ def calibrate_unit(job: UnitJob) -> UnitOutcome:
             cov = np.array(result.covariance[:k, :k])
         out = UnitOutcome(job.name, job.source, "calibrated", "", result.chains.model_name, tuple(result.layout.kinematic_names),
                           tuple(bool(v) for v in result.layout.is_length[:k]),
+                          np.array(result.x_nominal[:k]),
                           np.array(result.x[:k] - result.x_nominal[:k]), cov,
                           np.array([p.status == "identified" for p in result.parameters[:k]]),
                           float(result.before.mean), float(result.after.mean), (), tuple(seen))

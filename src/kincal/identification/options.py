@@ -223,6 +223,11 @@ class CalibrationOptions:
             if o.method != "l2":
                 raise OptionError(f"a fleet prior (--prior) shapes the penalty of method l2; "
                                   f"got method {o.method}")
+            if not isinstance(o.lam, str) and float(o.lam) == 0:  # the least-squares fit
+                raise OptionError("a fleet prior (--prior) weighs through the penalty, which "
+                                  "lambda 0 (--lambda 0) switches off: the prior would be "
+                                  "ignored; give --lambda evidence (the default with a small "
+                                  "volume), cv or a value > 0")
         for term in ("backlash", "compliance"):
             if getattr(o, term) and o.method == "frames":
                 raise OptionError(f"{term} terms need method l2 or ls; method frames fits only "

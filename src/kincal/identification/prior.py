@@ -11,8 +11,11 @@ lambda). Only kinematic parameters are covered: the measurement frame and tool p
 from cell to cell and keep their flat prior, and backlash keeps its pull toward zero.
 
 The prior is bound to the chain it was learned on (a hash of the robot description and
-chain, :func:`kincal.frames_file.chain_hash`), to the error model and to its parameter
-names: another robot, model or parameter set is refused (:class:`PriorError`).
+chain, :func:`kincal.frames_file.chain_hash`), to the error model, to its parameter names
+and to their nominal values: another robot, model or parameter set is refused
+(:class:`PriorError`), and so is a robot of another design with the same joints (a UR5e's
+prior on a UR10e, a unit's corrected URDF): the mean is a deviation from the nominal it was
+learned on, and the chain hash leaves the link lengths out (a calibration changes them).
 
 Plain numpy: no pinocchio, no file writing (the fleet's writer writes ``dumps()``).
 """
@@ -29,10 +32,14 @@ from kincal.errors import PriorError
 from kincal.frames_file import chain_hash
 
 FORMAT = "kincal-fleet-prior"
-VERSION = 1
+VERSION = 2  # 2: each parameter's nominal value (version 1 had none: not checkable)
 # [mm or deg]^2: a parameter whose fleet variance is below this never moved in any unit
 # (redundant in the error model, or fixed): it is held at the fleet mean, not penalised
 COVERED_VARIANCE = 1e-18
+# [m or rad]: a nominal value further than this from the prior's is another design (the
+# same description gives the same values to rounding; a corrected URDF or another model's
+# differs by micrometres and more)
+NOMINAL_TOLERANCE = 1e-9
 
 
 def shrink_to_diagonal(X: np.ndarray) -> tuple[np.ndarray, float]:
@@ -64,6 +71,7 @@ class FleetPrior:
     robot: the robot description's name; robot_hash: chain_hash of the chain (robot, base,
     tip, joints, axes). model: the error model. names: the kinematic parameter names, in the
     model's order; is_length: (k,) True for lengths [m], False for angles [rad].
+    nominal: (k,) the nominal values the deviations are from [m or rad] (the robot's design).
     mean: (k,) mean deviation from nominal [m or rad]. covariance: (k, k) [SI], correlations
     shrunk toward diagonal by ``shrinkage`` (0: the sample covariance, 1: its diagonal).
     units: the units it was learned from (their names); n_units: how many.
@@ -76,6 +84,7 @@ class FleetPrior:
     model: str
     names: tuple[str, ...]
     is_length: tuple[bool, ...]
+    nominal: np.ndarray
     mean: np.ndarray
     covariance: np.ndarray
     units: tuple[str, ...]
@@ -92,18 +101,19 @@ class FleetPrior:
         return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
 
     @classmethod
-    def estimate(cls, robot, model: str, names, is_length, deviations: np.ndarray, units,
-                 method: str = "per-unit", extra_covariance: np.ndarray | None = None
-                 ) -> "FleetPrior":
-        """From (n, k) deviations of n units [SI]; extra_covariance: (k, k) added to the
-        shrunk scatter (the hierarchical fit's mean posterior covariance)."""
+    def estimate(cls, robot, model: str, names, is_length, nominal, deviations: np.ndarray,
+                 units, method: str = "per-unit",
+                 extra_covariance: np.ndarray | None = None) -> "FleetPrior":
+        """From (n, k) deviations of n units [SI] from ``nominal`` (k,) [SI];
+        extra_covariance: (k, k) added to the shrunk scatter (the hierarchical fit's mean
+        posterior covariance)."""
         X = np.asarray(deviations, float)
         cov, lam = shrink_to_diagonal(X)
         if extra_covariance is not None:
             cov = cov + extra_covariance
         return cls(robot.model_name, chain_hash(robot), model, tuple(names),
-                   tuple(bool(v) for v in is_length), X.mean(axis=0), cov, tuple(units),
-                   float(lam), method)
+                   tuple(bool(v) for v in is_length), np.array(nominal, float),
+                   X.mean(axis=0), cov, tuple(units), float(lam), method)
 
     # ---------------------------------------------------------------- the file
     def as_dict(self) -> dict:
@@ -112,8 +122,9 @@ class FleetPrior:
                 "robot_hash": self.robot_hash, "model": self.model, "method": self.method,
                 "n_units": self.n_units, "units": list(self.units),
                 "shrinkage": self.shrinkage,
-                "parameters": [{"name": n, "unit": u, "mean": float(m), "std": float(s)}
-                               for n, u, m, s in zip(self.names, unit, self.mean, self.std)],
+                "parameters": [{"name": n, "unit": u, "nominal": float(v), "mean": float(m),
+                                "std": float(s)} for n, u, v, m, s in
+                               zip(self.names, unit, self.nominal, self.mean, self.std)],
                 "covariance": self.covariance.tolist()}
 
     @classmethod
@@ -127,6 +138,11 @@ class FleetPrior:
         if not isinstance(d, dict) or d.get("format") != FORMAT:
             raise PriorError(f"{path}: not a fleet prior (expected \"format\": \"{FORMAT}\", "
                              "as kincal fleet writes in DIR/FLEET.json)")
+        if d.get("version") == 1:
+            raise PriorError(f"{path}: fleet prior version 1, which does not record the "
+                             "nominal values its deviations are from, so it cannot be checked "
+                             f"against this robot's design; this kincal reads version {VERSION}"
+                             ": learn the prior again (kincal fleet)")
         if d.get("version") != VERSION:
             raise PriorError(f"{path}: fleet prior version {d.get('version')!r}; this kincal "
                              f"reads version {VERSION}")
@@ -134,24 +150,28 @@ class FleetPrior:
             params = d["parameters"]
             names = tuple(str(p["name"]) for p in params)
             is_length = tuple({"m": True, "rad": False}[p["unit"]] for p in params)
+            nominal = np.array([float(p["nominal"]) for p in params])
             mean = np.array([float(p["mean"]) for p in params])
             cov = np.array(d["covariance"], dtype=float)
             units = tuple(str(u) for u in d["units"])
             out = cls(str(d["robot"]), str(d["robot_hash"]), str(d["model"]), names, is_length,
-                      mean, cov, units, float(d["shrinkage"]), str(d.get("method", "per-unit")))
+                      nominal, mean, cov, units, float(d["shrinkage"]),
+                      str(d.get("method", "per-unit")))
         except (KeyError, TypeError, ValueError) as e:
             raise PriorError(f"{path}: malformed fleet prior ({type(e).__name__}: {e}); "
                              "expected robot, robot_hash, model, units, shrinkage, parameters "
-                             "(name, unit m or rad, mean) and a k x k covariance") from None
+                             "(name, unit m or rad, nominal, mean) and a k x k covariance"
+                             ) from None
         k = len(names)
         if cov.shape != (k, k) or not np.all(np.isfinite(cov)):
             raise PriorError(f"{path}: the covariance must be a finite {k} x {k} matrix (one "
                              f"row per parameter), got " + (f"shape {cov.shape}" if cov.shape
                                                             != (k, k) else "a NaN or infinity"))
-        if not np.all(np.isfinite(mean)):
-            raise PriorError(f"{path}: the mean deviation of "
-                             f"{names[int(np.flatnonzero(~np.isfinite(mean))[0])]} is not a "
-                             "finite number")
+        for what, v in (("mean deviation", mean), ("nominal value", nominal)):
+            if not np.all(np.isfinite(v)):
+                raise PriorError(f"{path}: the {what} of "
+                                 f"{names[int(np.flatnonzero(~np.isfinite(v))[0])]} is not a "
+                                 "finite number")
         if not np.allclose(cov, cov.T, rtol=1e-9, atol=0) or np.linalg.eigvalsh(
                 cov).min() < -1e-9 * max(float(np.abs(cov).max()), 1e-300):
             raise PriorError(f"{path}: the covariance is not symmetric positive semidefinite")
@@ -160,8 +180,10 @@ class FleetPrior:
         return out
 
     # ----------------------------------------------------------- binding
-    def check(self, robot, model: str, names, source: str = "the fleet prior") -> None:
-        """Refuse a prior of another robot or chain, error model or parameter set."""
+    def check(self, robot, model: str, names, nominal, source: str = "the fleet prior"
+              ) -> None:
+        """Refuse a prior of another robot or chain, error model or parameter set, or of a
+        robot of another design (``nominal``: (k,) this calibration's nominal values [SI])."""
         h = chain_hash(robot)
         if h != self.robot_hash:
             raise PriorError(
@@ -178,6 +200,20 @@ class FleetPrior:
                              f"{len(names)} kinematic parameters (differing: "
                              f"{', '.join(extra[:6]) or 'the order'}); learn the prior with "
                              "the same model and options")
+        nominal = np.asarray(nominal, float)
+        differ = np.abs(nominal - self.nominal)
+        off = np.flatnonzero(differ > NOMINAL_TOLERANCE)
+        if off.size:
+            i = int(off[np.argmax(differ[off])])
+            k, unit = (1e3, "mm") if self.is_length[i] else (180.0 / math.pi, "deg")
+            there, here = (f"{round(v * k, 4) + 0.0:.4f} {unit}"  # no "-0.0000"
+                           for v in (self.nominal[i], nominal[i]))
+            raise PriorError(
+                f"{source} was learned on a robot of another design: {off.size} of its "
+                f"{len(self.names)} nominal values differ from this robot's (the most "
+                f"{self.names[i]}: {there} there, {here} here); its mean is a deviation "
+                "from its own nominal: calibrate with the robot description the fleet was "
+                "learned on (the design's URDF, not a unit's corrected one)")
 
 
 @dataclass(frozen=True)
@@ -216,8 +252,8 @@ def bind(prior: FleetPrior, problem) -> BoundPrior:
     """The prior on ``problem`` (a CalibrationProblem), checked against its chain, model and
     kinematic parameters (PriorError)."""
     lay = problem.layout
-    prior.check(problem.robot, problem.model_name, lay.kinematic_names)
     p, k = lay.size, lay.n_kinematic
+    prior.check(problem.robot, problem.model_name, lay.kinematic_names, problem.x_nominal[:k])
     centre = problem.x_nominal.copy()
     centre[lay.is_frame] = 0.0
     centre[:k] += prior.mean

@@ -369,7 +369,9 @@ class CalibrationProblem:
         return ""
 
     def free_mask(self) -> np.ndarray:
-        """(p,) the parameters the fit moves: identifiable ones, and ``free`` names."""
+        """(p,) the parameters the fit moves: identifiable ones, and ``free`` names; with a
+        fleet prior, of the kinematic ones exactly those it covers (the prior bounds what
+        the data cannot see, and holds at its mean what never moved in the fleet)."""
         lay = self.layout
         mask = np.zeros(lay.size, dtype=bool)
         kept = self.analyze().kept  # names of this layout: no patterns to expand
@@ -377,7 +379,7 @@ class CalibrationProblem:
             mask[[lay.index(n) for n in kept]] = True
         if self.options.free:
             mask[lay.indices(self.options.free)] = True
-        return mask if self.prior is None else mask | self.prior.covered
+        return mask if self.prior is None else (mask & ~self.prior.held) | self.prior.covered
 
     # ------------------------------------------------------------------- fits
     def fit(self, lam, rows=None, start: np.ndarray | None = None,
