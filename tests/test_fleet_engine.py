@@ -1,6 +1,7 @@
-"""kincal fleet's engine: a run interrupted by Ctrl-C writes nothing (its finished units
-staged, discarded with the rest: an interrupted fleet is a failed one) and leaves no process; the same fleet through a running Dask scheduler (--scheduler) gives
-the local cluster's results; units are batched into tasks without losing any."""
+"""kincal fleet's engine: a run interrupted by Ctrl-C keeps the units finished by then, each
+complete, and no partial one, writes no fleet prior or summary, and leaves no process; the
+same fleet through a running Dask scheduler (--scheduler) gives the local cluster's
+results; units are batched into tasks without losing any."""
 
 from __future__ import annotations
 
@@ -59,13 +60,14 @@ def _default_sigint():
 
 
 @pytest.mark.parametrize("sig,code", [("SIGINT", 130), ("SIGTERM", 143)])
-def test_ctrl_c_writes_nothing_and_leaves_no_partial_unit(units, tmp_path, sig, code):
+def test_ctrl_c_keeps_the_finished_units_and_no_partial_one(units, tmp_path, sig, code):
     """Ctrl-C as a terminal sends it: SIGINT to the whole process group (the command and its
     local workers) once the first unit is reported finished; ``kill`` sends SIGTERM to the
-    command alone. Either way nothing is left: the finished units' files waited for the
-    fleet's outcome (kincal.fleet.folders), and the folder the run made goes too; the one
-    line says how far it got. (The finished units stayed, put in place: the files of a
-    failed run that a pipeline could take for its results.)"""
+    command alone. Either way (issue 21: "interrupting leaves finished units intact and no
+    partial ones") the units reported finished are in place, each with its three files, no
+    other unit folder and no staging folder is left, no fleet prior or summary is written,
+    and the one line says how far it got and what is kept. (Earlier, every finished unit
+    was discarded with the rest: hours of a large fleet lost to one Ctrl-C.)"""
     out = tmp_path / "D"
     proc = subprocess.Popen([sys.executable, "-m", "kincal", *_fleet_argv(
         units, out, "--workers", "2")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -91,11 +93,19 @@ def test_ctrl_c_writes_nothing_and_leaves_no_partial_unit(units, tmp_path, sig, 
     assert "Traceback" not in err and "KeyboardInterrupt" not in err  # workers too are quiet
     last = err.strip().splitlines()[-1]
     assert last.startswith(f"kincal: error: interrupted ({sig}) after ") and \
-        "nothing was written" in last, last
+        "finished are in place" in last and "fleet prior and summary were not" in last, last
     assert [s for s in err.splitlines() if s.startswith("kincal:")] == [last]  # one line
     finished = int(re.search(r"after (\d+) of the", last).group(1))
     assert 1 <= finished < N_UNITS, last  # the run was stopped midway, after a unit
-    assert not out.exists(), sorted(p.name for p in out.iterdir())  # made by the run: gone
+    reported = re.findall(r"unit \d+/\d+: (\S+) calibrated", err)
+    assert len(reported) >= 1 and len(reported) == finished, err  # every unit calibrates
+    kept = sorted(p.name for p in out.iterdir())
+    assert kept == sorted(reported), (kept, reported)  # no staging folder, no fleet file
+    for name in kept:  # each complete: the three files, the URDF a whole document
+        assert sorted(p.name for p in (out / name).iterdir()) == \
+            ["FRAMES.json", "REPORT.json", "corrected.urdf"]
+        assert (out / name / "corrected.urdf").read_text().rstrip().endswith("</robot>")
+    assert f"the {finished} unit(s) finished" in last
     assert _gone(proc.pid, 30), "worker processes outlived the interrupted command"
 
 

@@ -1,7 +1,8 @@
 """``kincal fleet``: calibrate every unit of a fleet of one robot model on a distributed
 engine (Dask), write each unit's outputs under DIR/<unit>/, the fleet summary and the fleet
 prior DIR/FLEET.json (:mod:`kincal.fleet`): all of them once the fleet has succeeded (two
-units calibrated, a prior learnt), none if it fails or is interrupted."""
+units calibrated, a prior learnt), none if it fails; interrupted, the units finished by then
+(each complete) and nothing else."""
 
 from __future__ import annotations
 
@@ -177,9 +178,12 @@ def run(args) -> int:
                     c.overwrite, c.command_line or None, xacro_args(chain.xacro_arg))
             for n, f in zip(names, inputs.files)]
     finished: list[str] = []
+    kept: list[str] = []  # the last round's calibrated units: their files staged, complete
 
     def progress(done, total, outcome):
         finished.append(outcome.name)
+        if done > len(jobs) * c.hierarchical and outcome.status == "calibrated":
+            kept.append(outcome.name)
         if not c.quiet:
             print(f"  unit {done}/{total}: {outcome.name} {outcome.status}", file=sys.stderr,
                   flush=True)
@@ -192,15 +196,15 @@ def run(args) -> int:
         summary = calibrate_fleet(robot, jobs, c.workers, c.scheduler, c.hierarchical,
                                   progress)
     except BaseException as exc:  # Ctrl-C, SIGTERM: the workers are stopped by now
-        discard()
         from kincal.cli.console import Terminated
 
         if not isinstance(exc, (KeyboardInterrupt, Terminated)):
+            discard()
             raise
         signal, code = ("SIGINT", 130) if isinstance(exc, KeyboardInterrupt) else ("SIGTERM", 143)
         print(f"kincal: error: interrupted ({signal}) after {len(finished)} of the "
-              f"{len(jobs) * (c.hierarchical + 1)} unit calibrations: nothing was written (no "
-              "unit's files, no fleet prior or summary)", file=sys.stderr)
+              f"{len(jobs) * (c.hierarchical + 1)} unit calibrations: "
+              f"{_keep_finished(out, kept, c.overwrite, discard)}", file=sys.stderr)
         return code
     if summary.prior is None:  # the fleet failed: its units' files are no result of it
         discard()
@@ -228,6 +232,29 @@ def run(args) -> int:
         discard()
         raise
     return 0
+
+
+def _keep_finished(out: Path, names: list[str], overwrite: bool, discard) -> str:
+    """An interrupted fleet: the units finished (their staged files complete) put in place,
+    every other staged or half-written unit discarded; what was kept, as a clause. The
+    fleet's own files (summary, prior) need every unit: none is written."""
+    from kincal.errors import ExportError
+    from kincal.fleet.folders import commit_units
+
+    stale = (f"; {out / PRIOR} is an earlier run's, left as it was"
+             if (out / PRIOR).exists() else "")
+    try:
+        commit_units(out, names, overwrite).done()
+    except ExportError as e:
+        names = []
+        stale = f" ({e}){stale}"
+    finally:
+        discard()
+    if not names:
+        return f"nothing was written (no unit's files, no fleet prior or summary){stale}"
+    listed = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+    return (f"the {len(names)} unit(s) finished are in place in {out} ({listed}), each "
+            f"complete; the others and the fleet prior and summary were not written{stale}")
 
 
 def _failed(units, out: Path) -> str:

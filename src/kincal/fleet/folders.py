@@ -3,12 +3,14 @@ has succeeded, or discarded.
 
 Each unit writes its files into ``DIR/.partial-<unit>`` (:mod:`kincal.fleet.unit`) while the
 fleet runs. Whether they become results is the fleet's outcome, known only at its end: a
-fleet that fails (fewer than two units calibrated, no prior; an interrupt) must leave no
-unit's files that a pipeline could take for its result, and must not have replaced the
-earlier run's. So the command either commits every staged unit (:func:`commit_units`: each
-staging folder takes its unit's name, an earlier ``DIR/<unit>`` moved aside first; all or
-none) and then writes the summary and the prior, undoing the commit if that fails; or
-discards them (:func:`discard_staged`).
+fleet that fails (fewer than two units calibrated, no prior) must leave no unit's files
+that a pipeline could take for its result, and must not have replaced the earlier run's.
+So the command either commits every staged unit (:func:`commit_units`: each staging folder
+takes its unit's name, an earlier ``DIR/<unit>`` moved aside first; all or none) and then
+writes the summary and the prior, undoing the commit if that fails; or discards them
+(:func:`discard_staged`). An interrupted fleet (Ctrl-C, SIGTERM) commits the units finished
+by then, each complete, writes no summary or prior, and discards every other staging
+folder (a unit stopped while writing leaves none).
 """
 
 from __future__ import annotations

@@ -9,8 +9,9 @@ that status and its one-line reason; it never raises (the fleet goes on).
 All or none per unit: the writer writes into a hidden staging folder ``DIR/.partial-<unit>``,
 and there it stays: the fleet's outcome decides. The command puts every staged unit in place
 together once the fleet has succeeded, or discards them all (:mod:`kincal.fleet.folders`),
-so a fleet that fails (fewer than two units calibrated, an interrupt) leaves no unit's files
-a pipeline could take for its result, and replaces no earlier ones.
+so a fleet that fails (fewer than two units calibrated) leaves no unit's files a pipeline
+could take for its result, and replaces no earlier ones; an interrupted fleet keeps the
+units finished by then, each complete, and no partial one.
 """
 
 from __future__ import annotations
