@@ -4,6 +4,7 @@ on a local Dask cluster (units all-or-none, a bad unit reported, the prior writt
 from __future__ import annotations
 
 import json
+import re
 import warnings
 
 import numpy as np
@@ -471,3 +472,21 @@ def test_a_fleet_whose_summary_cannot_be_written_takes_its_units_out_again(
         assert main([*argv[:-1], str(fresh)]) == 1
     assert not fresh.exists()
     assert "No space left" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("edit,words", [
+    (lambda d: d.update(units="".join(d["units"])), "units must be a list"),
+    (lambda d: d["parameters"][0].update(mean=True), "True is not a number"),
+    (lambda d: d["parameters"][0].update(mean="0.001"), "'0.001' is not a number"),
+    (lambda d: d["parameters"][0].update(nominal=None), "None is not a number"),
+    (lambda d: d.update(n_units=d["n_units"] + 1), "n_units"),
+])
+def test_a_hand_edited_prior_is_read_as_written_or_refused(tmp_path, fleet_dir, edit, words):
+    """A FLEET.json edited by hand: the units' names as one string were read as one unit per
+    character, a boolean or a quoted number as a mean, a unit count that disagrees with the
+    units named went unseen. Each is refused naming it."""
+    d = json.loads((fleet_dir / "FLEET.json").read_text())
+    edit(d)
+    (tmp_path / "F.json").write_text(json.dumps(d))
+    with pytest.raises(PriorError, match=re.escape(words)):
+        FleetPrior.read(tmp_path / "F.json")

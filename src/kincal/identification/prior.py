@@ -42,6 +42,13 @@ COVERED_VARIANCE = 1e-18
 NOMINAL_TOLERANCE = 1e-9
 
 
+def _number(v) -> float:
+    """A JSON number as a float (TypeError for a string, a boolean, null: not read as one)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise TypeError(f"{v!r} is not a number")
+    return float(v)
+
+
 def shrink_to_diagonal(X: np.ndarray) -> tuple[np.ndarray, float]:
     """(Sigma (k, k), intensity in [0, 1]): the sample covariance of the rows of X (n, k),
     its correlations shrunk toward zero by the Schaefer-Strimmer intensity (the variance of
@@ -150,10 +157,15 @@ class FleetPrior:
             params = d["parameters"]
             names = tuple(str(p["name"]) for p in params)
             is_length = tuple({"m": True, "rad": False}[p["unit"]] for p in params)
-            nominal = np.array([float(p["nominal"]) for p in params])
-            mean = np.array([float(p["mean"]) for p in params])
+            nominal = np.array([_number(p["nominal"]) for p in params])
+            mean = np.array([_number(p["mean"]) for p in params])
             cov = np.array(d["covariance"], dtype=float)
-            units = tuple(str(u) for u in d["units"])
+            units = d["units"]
+            if not isinstance(units, list) or not all(isinstance(u, str) for u in units):
+                raise TypeError(f"units must be a list of the units' names, got {units!r:.60}")
+            units = tuple(units)
+            if d.get("n_units", len(units)) != len(units):
+                raise ValueError(f"n_units {d['n_units']!r} but {len(units)} units named")
             out = cls(str(d["robot"]), str(d["robot_hash"]), str(d["model"]), names, is_length,
                       nominal, mean, cov, units, float(d["shrinkage"]),
                       str(d.get("method", "per-unit")))
