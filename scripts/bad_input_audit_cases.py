@@ -350,4 +350,11 @@ def audit_cases():
         ("nan: fleet --tool-offset", ["fleet", "ec66", "{csv}", "{poses}", "--tool-offset", "0",
                                       "nan", "0", "--out-dir", "{d}/D"], None,
          "--tool-offset must be a finite number"),
+        # --on-plane used nowhere: a log with position or pose columns is read as its kind
+        ("calibrate: --on-plane --flush, a pose file", [
+            "calibrate", "ec66", "{poses}", "--on-plane", "--flush", "--out", "{d}/o.urdf"],
+         None, "reads files of joint columns alone as contacts, but every data file"),
+        ("evaluate: --on-plane, a point file", [
+            "evaluate", "{urdf}", "{csv}", "--frames", "{frames}", "--tip", "flange",
+            "--on-plane"], None, "reads files of joint columns alone as contacts"),
     ]
