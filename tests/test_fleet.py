@@ -490,3 +490,28 @@ def test_a_hand_edited_prior_is_read_as_written_or_refused(tmp_path, fleet_dir, 
     (tmp_path / "F.json").write_text(json.dumps(d))
     with pytest.raises(PriorError, match=re.escape(words)):
         FleetPrior.read(tmp_path / "F.json")
+
+
+def test_model_auto_takes_the_prior_s_model(fleet_files, tmp_path, capsys):
+    """A fleet learned with --model mdh: calibrate --prior with the default --model auto
+    was refused ("give --model mdh"), the choice built on the chain's default (complete),
+    which the prior does not cover. Auto now takes the prior's model and says why; an
+    explicit other model is still refused (above)."""
+    out = tmp_path / "D"
+    files = [str(fleet_files / f"u{u:02d}.csv") for u in range(1, 4)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KincalWarning)
+        assert main(["fleet", "ec66", *files, "--tip", "flange", "--tool-offset", "0", "0",
+                     "0.045", "--model", "mdh", "--out-dir", str(out), "--workers", "1",
+                     "--quiet"]) == 0
+        assert FleetPrior.read(out / "FLEET.json").model == "mdh"
+        capsys.readouterr()
+        code = main(["calibrate", "ec66", str(fleet_files / "new.csv"), "--tip", "flange",
+                     "--tool-offset", "0", "0", "0.11", "--prior", str(out / "FLEET.json"),
+                     "--out", str(tmp_path / "new.urdf"), "--json"])
+    got = capsys.readouterr()
+    assert code == 0, got.err
+    result = json.loads(got.out)
+    text = json.dumps(result)
+    assert "the fleet prior's model" in text and '"mdh"' in text
+    assert (tmp_path / "new.urdf").exists()

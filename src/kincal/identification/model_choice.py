@@ -249,6 +249,9 @@ def choose(CalibrationProblem, robots, sets, options: CalibrationOptions
         return (ModelChoice((c,), default, tuple(o.backlash), "none", reason, k,
                             tuple(o.compliance)), replace(o, model=default))
 
+    if o.prior is not None:  # a fleet prior covers its own model's parameters, no other's
+        return keep(o.prior.model, f"the fleet prior's model (--prior): its {len(o.prior.names)} "
+                    "parameters are those the prior covers")
     if o.method != "l2":  # the chain's default model: no problem needs building to know it
         from kincal.identification.chains import Chains
 
