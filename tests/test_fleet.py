@@ -515,3 +515,19 @@ def test_model_auto_takes_the_prior_s_model(fleet_files, tmp_path, capsys):
     text = json.dumps(result)
     assert "the fleet prior's model" in text and '"mdh"' in text
     assert (tmp_path / "new.urdf").exists()
+
+
+def test_the_summary_file_gives_si_beside_mm_and_deg(fleet_dir):
+    """FLEET_SUMMARY.json gave each parameter's mean and scatter in mm or deg only (files are
+    SI, as REPORT.json does beside its human units): now mean_m / scatter_m (lengths) or
+    mean_rad / scatter_rad (angles) too, equal to FLEET.json's."""
+    summary = json.loads((fleet_dir / "FLEET_SUMMARY.json").read_text())
+    prior = FleetPrior.read(fleet_dir / "FLEET.json")
+    rows = summary["parameters"]
+    assert [r["name"] for r in rows] == list(prior.names)
+    for r, is_len, m, s in zip(rows, prior.is_length, prior.mean, prior.std):
+        si, k = ("m", 1e3) if is_len else ("rad", 180.0 / np.pi)
+        assert r["unit"] == ("mm" if is_len else "deg")
+        assert r[f"mean_{si}"] == pytest.approx(m, rel=1e-12, abs=1e-300)
+        assert r[f"scatter_{si}"] == pytest.approx(s, rel=1e-12, abs=1e-300)
+        assert r["mean"] == pytest.approx(m * k, rel=1e-12, abs=1e-300)

@@ -71,6 +71,14 @@ class FleetSummary:
             out.append((n, unit, p.mean[i] * k, p.std[i] * k, flagged))
         return out
 
+    def _si(self) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """Per parameter of :meth:`rows`: its SI unit (m or rad), mean and scatter in it (as
+        REPORT.json gives both: the human unit beside the file's SI)."""
+        if self.prior is None:
+            return [], np.zeros(0), np.zeros(0)
+        p = self.prior
+        return ["m" if v else "rad" for v in p.is_length], p.mean, p.std
+
     def table(self) -> str:
         ok = self.calibrated
         lines = [f"fleet: {len(self.units)} units, {len(ok)} calibrated, "
@@ -100,7 +108,10 @@ class FleetSummary:
                            "after_mm": _num(u.after_mm), "written": list(u.written),
                            "warnings": list(u.warnings)} for u in self.units],
                 "parameters": [{"name": n, "unit": unit, "mean": m, "scatter": s,
-                                "outliers": flagged} for n, unit, m, s, flagged in self.rows()],
+                                f"mean_{si}": float(p_mean), f"scatter_{si}": float(p_std),
+                                "outliers": flagged}
+                               for (n, unit, m, s, flagged), si, p_mean, p_std in zip(
+                                   self.rows(), *self._si())],
                 "outliers": {u: list(n) for u, n in self.outliers},
                 "hierarchical_rounds": self.rounds}
 
