@@ -117,7 +117,12 @@ def test_repr_of_random_doubles_reads_back_bit_for_bit(tmp_path):
     ("1,2\n3,x\n", "line 3, column 'b': 'x'; expected a finite number"),
     ("1,2\n3\n", "line 3: 1 cells, the header has 2"),
     ("1,2\n3,4,5\n", "line 3: 3 cells, the header has 2"),
-    ("1,2\n3,1_0\n", None),                         # float() reads it, numpy does not
+    # float() reads these (as 10, 1.0 and 2.0), numpy and other CSV readers do not: refused
+    ("1,2\n3,1_0\n", r"line 3, column 'b': '1_0'; expected a finite number written with the "
+                     r"digits 0-9 \(no '_' digit separators"),
+    ("1,2\n\uff11,4\n", "line 3, column 'a': '\uff11'; expected a finite number written with"),
+    ("1,2\n3,\u0662\n", "line 3, column 'b': '\u0662'; expected a finite number written with"),
+    ("1,2\n3,joint_states\n", "line 3, column 'b': 'joint_states'; expected a finite number$"),
     ("1,2\r3,4\r", None),                           # old Mac line ends
 ])
 def test_files_the_fast_path_declines_read_or_fail_as_before(body, message, tmp_path,

@@ -444,3 +444,28 @@ def test_offsets_at_zero_are_the_origins(tmp_path):
         assert np.array_equal(fast, slow)
         fast[...] = 0.0  # a copy: the shared model is untouched
         assert np.array_equal(model.placements(zero), slow)
+
+
+def test_tied_duplicates_read_the_same_streamed_and_dense(tmp_path, monkeypatch):
+    """A dropped parameter reproduced by several others with equal coefficients (the base's
+    tilt by the three planes' tilts, each -1): the report lists them in one order whether
+    the analysis reads the whole J or its triangle streamed in blocks, the kept columns'
+    order (it followed the solve's rounding: plane3, plane1, plane2 on one path, another
+    order on the other)."""
+    from kincal.cli import main
+    from kincal.identification import problem as problem_module
+    from kincal.identification.problem import CalibrationOptions, CalibrationProblem
+    from kincal.measurements.sets import read_set_file
+
+    path = tmp_path / "planes.csv"
+    assert main(["simulate", "ec66", "--kind", "plane", "--poses", "300", "--seed", "1",
+                 "--out", str(path), "-q"]) == 0
+    robot = Robot.load("ec66")
+    data = read_set_file(path, robot.joint_names, on_plane=True)
+    why = {}
+    for size in (10 ** 9, 64):
+        monkeypatch.setattr(problem_module, "BLOCK_SAMPLES", size)
+        ident = CalibrationProblem(robot, data, CalibrationOptions(method="ls")).analyze()
+        why[size] = [d.describe() for d in ident.duplicates]
+    assert "joint_1.alpha ~ -1 plane1.rx -1 plane2.rx -1 plane3.rx" in why[64]
+    assert why[64] == why[10 ** 9]

@@ -163,3 +163,95 @@ def test_simulate_reports_progress_to_the_last_pose():
                    np.random.default_rng(0), progress=lambda done, total: seen.append(done))
     assert len(q) == 250 and seen[0] == 0 and seen[-1] == 250
     assert seen == sorted(seen) and len(seen) > 100
+
+
+def _plain_duplicates(sets):
+    """The findings of checks.duplicate_samples as its first version made them: every
+    sample's numbers as one void key, np.unique and np.isin over all of them."""
+    def keys(d):
+        n = len(d.joint_values)
+        rows = np.ascontiguousarray(np.hstack([
+            np.asarray(v, dtype=float).reshape(n, -1) for name in d.per_sample_fields()
+            if name not in ("rows", "poses", "approach")
+            for v in [getattr(d, name)] if v is not None]))
+        return rows.view(np.dtype((np.void, 8 * rows.shape[1])))[:, 0]
+
+    out, seen = [], []
+    for d in sets:
+        k, lines = keys(d), d.rows
+        _, first, inverse = np.unique(k, return_index=True, return_inverse=True)
+        earliest = first[inverse.ravel()]
+        copies = np.flatnonzero(earliest != np.arange(len(k)))
+        if copies.size:
+            out.append(f"{d.source}: {copies.size} sample(s) repeat earlier ones exactly "
+                       f"(line {lines[copies[0]]} repeats line {lines[earliest[copies[0]]]})")
+        for o, ok in seen:
+            if ok.dtype != k.dtype:
+                continue
+            both = np.flatnonzero(np.isin(k, ok))
+            if both.size:
+                j = int(np.flatnonzero(ok == k[both[0]])[0])
+                out.append(f"{d.source}: {both.size} of its {len(k)} samples repeat samples of "
+                           f"{o.source} exactly (line {lines[both[0]]} = line {o.rows[j]} "
+                           "there: the same data given twice?)")
+                break
+        seen.append((d, k))
+    return out
+
+
+@pytest.mark.parametrize("collide", [False, True])
+def test_duplicate_samples_are_the_exact_copies(monkeypatch, collide):
+    """The gate's search for samples given twice (checks.duplicate_samples, repeated_samples,
+    repeats_all) finds exactly the copies the plain search over every sample's numbers
+    finds, with the same lines, -0.0 apart from 0.0; also when every hash collides (the
+    multiplier 0 hashes every sample to 0): matching hashes are only candidates."""
+    from dataclasses import replace
+
+    from kincal.measurements import checks
+
+    if collide:
+        monkeypatch.setattr(checks, "_MIX", np.uint64(0), raising=False)
+    rng = np.random.default_rng(5)
+    base = _data(40)
+    for trial in range(40):
+        sets = []
+        for s in range(int(rng.integers(1, 4))):
+            n = int(rng.integers(2, 30))
+            q = rng.integers(0, 3, (n, 6)) * 0.5  # few distinct values: many copies
+            q[rng.random(n) < 0.3, 0] = -0.0
+            q[rng.random(n) < 0.3, 0] = 0.0
+            d = base.subset(np.arange(n))
+            sets.append(replace(d, joint_values=q, positions=np.c_[rng.integers(0, 2, (n, 2)),
+                                                                    np.arange(n) % 2 * 0.1],
+                                sigma=None if rng.random() < 0.5 else np.full(n, 1e-4),
+                                rows=np.arange(n) + 2 + 100 * s, source=f"set{s}"))
+        assert checks.duplicate_samples(sets) == _plain_duplicates(sets)
+        for a in sets:
+            for b in sets:
+                plain = _plain_duplicates([b, a])[-1:]
+                found = checks.repeated_samples(a, b)
+                assert [found] == plain if found else not [p for p in plain if "of its" in p]
+                assert checks.repeats_all(a, b) == bool(found and found.split(": ")[1]
+                                                       .startswith(f"{len(a.rows)} of its"))
+
+
+def test_duplicate_samples_keep_the_memory_bounded():
+    """The gate looks for copies among all samples after the fit (issue 20: memory linear
+    with the fit's slope): 8-byte hashes and their sort, not every sample's numbers as keys
+    sorted and copied (about 350 bytes per sample traced, which took the 300,000-pose
+    command past its 1.0 KiB per pose)."""
+    import tracemalloc
+
+    from kincal.measurements import checks
+
+    data = _data(100_000, tools=TOOLS[:1])
+    data = data.subset(np.r_[np.arange(100_000), [7, 9]])  # two samples given twice
+    tracemalloc.start()
+    try:
+        assert checks.duplicate_samples([data]) == [
+            f"{data.source}: 2 sample(s) repeat earlier ones exactly (line {data.rows[7]} "
+            f"repeats line {data.rows[7]})"]
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 100 * len(data.rows)  # bytes

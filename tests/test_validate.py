@@ -189,3 +189,27 @@ def test_held_out_poses_orientation_in_every_output(tmp_path, capsys):
                                training, rtol=1e-12)
     # the residual figure: positions and, beside them, orientations (two panels)
     assert Image.open(tmp_path / "plots" / "residuals.png").size[0] > 1000
+
+
+def test_residuals_csv_is_made_in_pieces_as_written(data):
+    """--residuals-out's text comes to the writer a block of rows at a time (as compensate's
+    CSV does), never as one string with a Python string per row of the whole file (at
+    300,000 poses that was 128 MB over the command's peak): the pieces hold at most
+    ``rows_per_piece`` rows each, after one piece of header lines, and join to the same
+    text whatever their size."""
+    import math
+
+    from kincal.export.validation import residuals_csv
+    from kincal.identification.problem import calibrate
+    from kincal.measurements.sets import read_set_file
+    from kincal.robot import Robot
+
+    robot = Robot.load("ec66")
+    result = calibrate(robot, read_set_file(data / "cal.csv", robot.joint_names),
+                       method="ls")
+    pieces = list(residuals_csv(result, (), "# a header line", rows_per_piece=7))
+    assert all(isinstance(p, str) for p in pieces)
+    assert len(pieces) == 1 + math.ceil(40 / 7)
+    assert pieces[0].startswith("# residual vectors") and "# a header line\nsplit," in pieces[0]
+    assert [p.count("\n") for p in pieces[1:]] == [7] * 5 + [5]
+    assert "".join(pieces) == "".join(residuals_csv(result, (), "# a header line"))

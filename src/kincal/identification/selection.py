@@ -352,11 +352,15 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     norm_of = norms.tolist()
     seen = [c for c in dropped if norm_of[c] > rank_tol * scale]
     # every dropped column against the kept ones in one solve (one SVD of Jk), the four
-    # largest of each row in one argsort (row by row: the order each row's own gives)
+    # largest of each row in one argsort (row by row: the order each row's own gives);
+    # coefficients equal to 9 decimals are tied and keep the kept columns' order, so the
+    # rounding of the solve (the whole J, or the triangle of J streamed in blocks) does
+    # not reorder a parameter's equals (joint_1.alpha ~ -1 plane1.rx -1 plane2.rx ...)
     coefs: dict = {}
     if seen:
         C = np.linalg.lstsq(Jk, J[:, seen], rcond=None)[0].T
-        coefs = dict(zip(seen, zip(C.tolist(), np.argsort(-np.abs(C), axis=1)[:, :4].tolist())))
+        big4 = np.argsort(-np.round(np.abs(C), 9), axis=1, kind="stable")[:, :4]
+        coefs = dict(zip(seen, zip(C.tolist(), big4.tolist())))
     for c in dropped:  # Python numbers read once (the same values: float of each element)
         if c not in coefs:
             duplicates.append(Duplicate(names[c], ()))

@@ -266,15 +266,21 @@ def check_sigmas(values, n: int, source: str, what: str = "sigma", unit: str = "
     return s
 
 
-def _sample_rows(data) -> np.ndarray:
-    """(N, k) every per-sample number of a set (its ``per_sample_fields``): joint values,
-    what was measured, its sigmas, its point or plane index; not the line numbers, poses or
-    approach directions, which differ between copies."""
+def _sample_parts(data) -> list[np.ndarray]:
+    """Every per-sample number of a set (its ``per_sample_fields``), as (N, k_i) float
+    arrays: joint values, what was measured, its sigmas, its point or plane index; not the
+    line numbers, poses or approach directions, which differ between copies."""
     n = len(data.joint_values)
-    parts = [np.asarray(v, dtype=float).reshape(n, -1) for name in data.per_sample_fields()
-             if name not in ("rows", "poses", "approach")
-             for v in [getattr(data, name)] if v is not None]
-    return np.hstack(parts)
+    return [np.asarray(v, dtype=float).reshape(n, -1) for name in data.per_sample_fields()
+            if name not in ("rows", "poses", "approach")
+            for v in [getattr(data, name)] if v is not None]
+
+
+def _sample_rows(data, index: np.ndarray) -> np.ndarray:
+    """(len(index), k) the samples ``index`` of a set, every number of each
+    (:func:`_sample_parts`) as one void key (exact copies alike, -0.0 apart from 0.0)."""
+    rows = np.ascontiguousarray(np.hstack([part[index] for part in _sample_parts(data)]))
+    return rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1])))[:, 0]
 
 
 # what a sample repeated exactly does to a calibration (the note kincal adds to the finding)
@@ -282,16 +288,41 @@ DUPLICATE_WHY = ("a copy counts as a second measurement, weighs twice and makes 
                  "look smaller than it is; remove the copies (a true repeat differs at least "
                  "in the last digits of its readings)")
 
+_MIX = np.uint64(0x9E3779B97F4A7C15)  # odd multiplier of the hash (Fibonacci hashing)
 
-def _sample_keys(data) -> np.ndarray:
-    """(N,) each sample of a set as one hashable key of all its numbers (exact copies alike)."""
-    rows = _sample_rows(data)
-    return np.ascontiguousarray(rows).view(np.dtype((np.void, rows.dtype.itemsize
-                                                     * rows.shape[1])))[:, 0]
+
+def _sample_keys(data) -> tuple[np.ndarray, int]:
+    """((N,) uint64 hash of each sample's numbers bit for bit, the count of numbers per
+    sample). Made a column at a time: 8 bytes per sample, where the samples' rows as keys
+    (and the sorts of them) took about 350 traced, on top of the fit's peak
+    (the gate runs this). Equal samples have equal hashes; samples whose hashes match are
+    compared exactly (:func:`_sample_rows`), so a collision never makes a finding."""
+    parts = _sample_parts(data)
+    h = np.zeros(len(data.joint_values), dtype=np.uint64)
+    for part in parts:
+        for c in range(part.shape[1]):
+            h ^= np.ascontiguousarray(part[:, c]).view(np.uint64)
+            h *= _MIX
+            h ^= h >> np.uint64(29)
+    return h, sum(part.shape[1] for part in parts)
 
 
 def _lines(data, n: int) -> np.ndarray:
     return data.rows if data.rows is not None else np.arange(n) + 2
+
+
+def _matches(data, other, keys, other_keys) -> tuple[np.ndarray, np.ndarray]:
+    """(indices of the samples of ``data`` that repeat one of ``other`` exactly, the index
+    in ``other`` of the first sample each repeats)."""
+    (h, width), (oh, other_width) = keys, other_keys
+    if width != other_width:
+        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+    mine = np.flatnonzero(np.isin(h, oh))  # hashes shared: candidates, compared exactly
+    theirs = np.flatnonzero(np.isin(oh, h[mine]))
+    a, b = _sample_rows(data, mine), _sample_rows(other, theirs)
+    distinct, first = np.unique(b, return_index=True)  # the first sample of each value
+    found = np.isin(a, distinct)
+    return mine[found], theirs[first[np.searchsorted(distinct, a[found])]]
 
 
 def repeated_samples(data, other, keys=None, other_keys=None) -> str | None:
@@ -299,23 +330,22 @@ def repeated_samples(data, other, keys=None, other_keys=None) -> str | None:
     the same kind and joints; every joint value and reading to the last digit), else None."""
     keys = _sample_keys(data) if keys is None else keys
     other_keys = _sample_keys(other) if other_keys is None else other_keys
-    if type(other) is not type(data) or other.joint_names != data.joint_names \
-            or other_keys.dtype != keys.dtype:
+    if type(other) is not type(data) or other.joint_names != data.joint_names:
         return None
-    both = np.flatnonzero(np.isin(keys, other_keys))
+    both, first = _matches(data, other, keys, other_keys)
     if not both.size:
         return None
-    k = int(both[0])
-    j = int(np.flatnonzero(other_keys == keys[k])[0])
-    return (f"{data.source}: {both.size} of its {len(keys)} samples repeat samples of "
-            f"{other.source} exactly (line {_lines(data, len(keys))[k]} = line "
-            f"{_lines(other, len(other_keys))[j]} there: the same data given twice?)")
+    n, n_other = len(keys[0]), len(other_keys[0])
+    return (f"{data.source}: {both.size} of its {n} samples repeat samples of "
+            f"{other.source} exactly (line {_lines(data, n)[both[0]]} = line "
+            f"{_lines(other, n_other)[first[0]]} there: the same data given twice?)")
 
 
 def repeats_all(data, other) -> bool:
     """Whether every sample of ``data`` repeats a sample of ``other`` exactly."""
-    keys, other_keys = _sample_keys(data), _sample_keys(other)
-    return keys.dtype == other_keys.dtype and bool(np.all(np.isin(keys, other_keys)))
+    keys = _sample_keys(data)
+    both, _ = _matches(data, other, keys, _sample_keys(other))
+    return both.size == len(keys[0])
 
 
 def duplicate_samples(sets) -> list[str]:
@@ -323,17 +353,28 @@ def duplicate_samples(sets) -> list[str]:
     digit), in one set or across sets of one kind, one finding per set that has them
     (:data:`DUPLICATE_WHY` says what they do)."""
     out: list[str] = []
-    seen: list[tuple] = []  # (set, its rows as void keys)
+    seen: list[tuple] = []  # (set, its sample keys)
     for data in sets:
         keys = _sample_keys(data)
-        lines = _lines(data, len(keys))
-        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-        earliest = first[inverse.ravel()]  # each sample's first occurrence
-        copies = np.flatnonzero(earliest != np.arange(len(keys)))
-        if copies.size:
-            k = int(copies[0])
-            out.append(f"{data.source}: {copies.size} sample(s) repeat earlier ones exactly "
-                       f"(line {lines[k]} repeats line {lines[earliest[k]]})")
+        h = keys[0]
+        lines = _lines(data, len(h))
+        order = np.argsort(h, kind="stable")  # samples whose hash another shares: compared
+        same = h[order[1:]] == h[order[:-1]]
+        shared = np.zeros(len(h), dtype=bool)
+        shared[1:] |= same
+        shared[:-1] |= same
+        candidates = np.sort(order[shared])
+        del order, same, shared
+        if candidates.size:
+            rows = _sample_rows(data, candidates)
+            _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+            earliest = first[inverse.ravel()]  # each candidate's first occurrence
+            copies = np.flatnonzero(earliest != np.arange(len(candidates)))
+            if copies.size:
+                k = int(copies[0])
+                out.append(f"{data.source}: {copies.size} sample(s) repeat earlier ones "
+                           f"exactly (line {lines[candidates[k]]} repeats line "
+                           f"{lines[candidates[earliest[k]]]})")
         for other, other_keys in seen:
             found = repeated_samples(data, other, keys, other_keys)
             if found:

@@ -9,7 +9,9 @@ separator is a comma, or a semicolon or a tab when the header has one of those a
 comma outside its double-quoted names (sniffed from the header, and said in a
 :class:`KincalNote`), or the one a first line ``sep=;`` names (as Excel writes it).
 Every cell of a wanted column must be a finite number with a decimal point: a decimal
-comma ("0,5") is refused with a message saying so, never read as two cells or as 5. The
+comma ("0,5") is refused with a message saying so, never read as two cells or as 5; so
+are digit separators and digits other than 0-9 ("1_000", "１"), which Python's ``float()``
+reads and other CSV readers (numpy's, the fast path's) do not. The
 columns of stated standard deviations (``sigma``, ``sigma_deg``) must lie in
 :data:`COLUMN_RANGES`; a value outside is refused with its line. A column asked for twice
 (a joint mapped onto a position column) is refused.
@@ -111,12 +113,34 @@ def _column_hint(name: str, columns) -> str:
     return (" Did you mean " + " or ".join(repr(c) for c in starts[:3]) + "?") if starts else ""
 
 
-def _is_number(cell: str) -> bool:
+def _number(cell: str) -> float:
+    """The number a cell holds, as ``float()`` reads it but for what no other CSV reader
+    takes as a number (numpy's, the fast path's, refuses them): digit separators ("1_000",
+    "1_5", which ``float()`` reads as 1000 and 15) and digits other than 0-9 (fullwidth,
+    Arabic-Indic: ``float("１")`` is 1.0); nan when it holds none."""
+    cell = cell.strip()
+    if "_" in cell or not cell.isascii():
+        return math.nan
+    try:
+        return float(cell)
+    except ValueError:
+        return math.nan
+
+
+def _python_reads(cell: str) -> bool:
+    """Whether ``float()`` reads the cell (the numbers :func:`_number` does not take)."""
     try:
         float(cell)
     except ValueError:
-        return bool(_DECIMAL_COMMA.match(cell.strip()))
+        return False
     return True
+
+
+def _is_number(cell: str) -> bool:
+    """A number, finite or not (:func:`_number`'s rule), or one with a decimal comma."""
+    cell = cell.strip()
+    return (cell.isascii() and "_" not in cell and _python_reads(cell)) \
+        or bool(_DECIMAL_COMMA.match(cell))
 
 
 def _positions(index) -> str:
@@ -144,7 +168,7 @@ def _shift_hint(header, row, cols) -> str:
     index) under a name, else ''."""
     def number(i):
         try:
-            return 0 <= i < len(row) and math.isfinite(float(row[i]))
+            return 0 <= i < len(row) and math.isfinite(_number(row[i]))
         except ValueError:
             return False
 
@@ -299,12 +323,14 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                                     f"{len(header)}{hint}")
                 for c in cols:
                     cell = row[c].strip()
-                    try:
-                        v = float(cell)
-                    except ValueError:
-                        v = math.nan
+                    v = _number(cell)
                     if not math.isfinite(v):
                         what = "an empty cell" if cell == "" else repr(cell)
+                        if ("_" in cell or not cell.isascii()) and _python_reads(cell):
+                            raise DataError(f"{path}, line {line}, column {header[c]!r}: {what}"
+                                            "; expected a finite number written with the "
+                                            "digits 0-9 (no '_' digit separators, no other "
+                                            "digits: what other CSV readers read)")
                         if _DECIMAL_COMMA.match(cell):
                             raise DataError(f"{path}, line {line}, column {header[c]!r}: {what} "
                                             f"has a decimal comma; {_DECIMAL_COMMA_HINT}")
