@@ -233,3 +233,22 @@ def test_on_plane_with_no_contact_file_is_refused(tmp_path, capsys, kind, flush)
     code, out, err = run(capsys, "calibrate", "ec66", data, plane, "--on-plane", "--lambda", 0.1,
                          "--out", out_urdf)
     assert code == 0, err
+
+
+def test_a_plane_named_by_a_word_is_refused_saying_planes_are_numbered(tmp_path, capsys):
+    """A contact file naming its planes by words ('wall') was refused as "expected a finite
+    number", right but not saying what the column holds: the line now says planes are
+    numbered."""
+    data = tmp_path / "plane.csv"
+    assert run(capsys, "simulate", "ec66", "--kind", "plane", "--poses", 24, "--out", data)[0] == 0
+    lines = data.read_text().splitlines()
+    body = [k for k, line in enumerate(lines) if not line.startswith("#")]
+    k = body[3]  # the third touch
+    lines[k] = lines[k].rsplit(",", 1)[0] + ",wall"
+    data.write_text("\n".join(lines) + "\n")
+    code, out, err = run(capsys, "calibrate", "ec66", data, "--on-plane", "--out",
+                         tmp_path / "c.urdf")
+    errors = [line for line in err.splitlines() if line.startswith("kincal: error:")]
+    assert code == 1 and len(errors) == 1, err
+    assert f"line {k + 1}, column 'plane': 'wall'; expected a finite number" in errors[0]
+    assert "the plane's number" in errors[0] and not (tmp_path / "c.urdf").exists()

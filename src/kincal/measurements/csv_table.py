@@ -53,6 +53,9 @@ _DECIMAL_COMMA_HINT = ("kincal reads numbers with a decimal point only; if the f
 # (low, high, unit for the message). ``sigma`` is in the file's length unit, m or mm, so
 # the range spans both (1 nm to 1 km in metres, 1 pm to 1 m in millimetres); the set's
 # own check (kincal.measurements.kind.check_sigmas) narrows it in SI.
+# what a column of numbers that is no joint or coordinate holds, said when a cell is not one
+COLUMN_MEANING = {"plane": " (the plane's number: touches with the same number lie on one "
+                           "plane; name planes 1, 2, 3, not by words)"}
 COLUMN_RANGES = {"sigma": (1e-9, 1e3, "in the file's length unit"),
                  "sigma_deg": (*SIGMA_RANGE_DEG, "deg")}  # a stated orientation sigma's range
 
@@ -335,6 +338,7 @@ def read_columns(path, required, optional=(), kind: str = "data", expected: str 
                             raise DataError(f"{path}, line {line}, column {header[c]!r}: {what} "
                                             f"has a decimal comma; {_DECIMAL_COMMA_HINT}")
                         hint = _shift_hint(header, row, cols) if not lines else ""
+                        hint += COLUMN_MEANING.get(header[c], "")
                         raise DataError(f"{path}, line {line}, column {header[c]!r}: "
                                         f"{what}; expected a finite number{hint}")
                     flat.append(v)
