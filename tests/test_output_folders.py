@@ -132,6 +132,47 @@ def test_fleet_interrupted_before_any_unit_leaves_no_folder_it_made(tmp_path, mo
         assert list(out.iterdir()) == []
 
 
+def test_an_interrupted_fleet_names_the_earlier_run_s_files_it_leaves(tmp_path, monkeypatch,
+                                                                   capsys):
+    """Ctrl-C after unit u1 finished, into a folder an earlier run filled (--overwrite): u1
+    is put in place, u2's half-written staging goes, and the line names what is the
+    earlier run's (its FLEET.json and u2's folder), which are left as they were."""
+    pytest.importorskip("distributed")
+    import kincal.fleet as fleet
+    from kincal.cli import main
+    from kincal.fleet.unit import STAGING, UnitOutcome
+
+    data, data2 = tmp_path / "u1.csv", tmp_path / "u2.csv"
+    for seed, path in (("1", data), ("2", data2)):
+        assert main(["simulate", "ec66", "--poses", "12", "--seed", seed, "--out", str(path)]) == 0
+    out = tmp_path / "D"
+    for unit in ("u1", "u2"):
+        (out / unit).mkdir(parents=True)
+        for name in ("corrected.urdf", "FRAMES.json", "REPORT.json"):
+            (out / unit / name).write_text("earlier")
+    (out / "FLEET.json").write_text("earlier")
+
+    def interrupted(robot, jobs, workers, scheduler, rounds, progress, *args, **kwargs):
+        for job, text in zip(jobs, ("new", "half")):
+            stage = Path(job.out_dir) / f"{STAGING}{job.name}"
+            stage.mkdir(parents=True)
+            (stage / "corrected.urdf").write_text(text)
+        progress(1, 2, UnitOutcome(jobs[0].name, jobs[0].source, "calibrated"))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fleet, "calibrate_fleet", interrupted)
+    capsys.readouterr()
+    assert main(["fleet", "ec66", str(data), str(data2), "--tip", "flange", "--out-dir",
+                 str(out), "--overwrite", "--quiet"]) == 130
+    err = capsys.readouterr().err
+    assert "the 1 unit(s) finished are in place" in err and "(u1)" in err, err
+    assert "an earlier run's FLEET.json, u2 in" in err, err
+    assert (out / "u1" / "corrected.urdf").read_text() == "new"
+    assert (out / "u2" / "corrected.urdf").read_text() == "earlier"
+    assert (out / "FLEET.json").read_text() == "earlier"
+    assert sorted(p.name for p in out.iterdir()) == ["FLEET.json", "u1", "u2"]
+
+
 def test_a_fleet_units_failure_leaves_the_shared_folder_to_the_unit_about_to_write(
         tmp_path, monkeypatch):
     """Two units of a fleet, the fleet's folder not there yet: unit A makes it with its

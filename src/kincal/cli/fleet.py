@@ -204,7 +204,7 @@ def run(args) -> int:
         signal, code = ("SIGINT", 130) if isinstance(exc, KeyboardInterrupt) else ("SIGTERM", 143)
         print(f"kincal: error: interrupted ({signal}) after {len(finished)} of the "
               f"{len(jobs) * (c.hierarchical + 1)} unit calibrations: "
-              f"{_keep_finished(out, kept, c.overwrite, discard)}", file=sys.stderr)
+              f"{_keep_finished(out, kept, names, c.overwrite, discard)}", file=sys.stderr)
         return code
     if summary.prior is None:  # the fleet failed: its units' files are no result of it
         discard()
@@ -234,15 +234,19 @@ def run(args) -> int:
     return 0
 
 
-def _keep_finished(out: Path, names: list[str], overwrite: bool, discard) -> str:
+def _keep_finished(out: Path, names: list[str], units: list[str], overwrite: bool,
+                   discard) -> str:
     """An interrupted fleet: the units finished (their staged files complete) put in place,
-    every other staged or half-written unit discarded; what was kept, as a clause. The
-    fleet's own files (summary, prior) need every unit: none is written."""
+    every other staged or half-written unit discarded; what was kept, as a clause (naming
+    an earlier run's files left beside them: its prior, the folders of this run's other
+    ``units``). The fleet's own files (summary, prior) need every unit: none is written."""
     from kincal.errors import ExportError
     from kincal.fleet.folders import commit_units
 
-    stale = (f"; {out / PRIOR} is an earlier run's, left as it was"
-             if (out / PRIOR).exists() else "")
+    older = [PRIOR] * (out / PRIOR).exists() + [u for u in units if u not in names
+                                                 and (out / u).exists()]
+    stale = (f"; an earlier run's {', '.join(older[:4])}{' ...' if len(older) > 4 else ''} "
+             f"in {out} left as they were" if older else "")
     try:
         commit_units(out, names, overwrite).done()
     except ExportError as e:
