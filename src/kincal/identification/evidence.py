@@ -73,7 +73,9 @@ class EvidenceFit:
     noise_mm); noise_groups: per group (rows, sigma, unit), in the rows' own units (mm of
     height, deg of tilt; :func:`kincal.identification.penalty_choice.fit_evidence`).
     gauged: whether the data's residual was exactly a direction of the parameters (see
-    :func:`exact_direction`), left to the prior.
+    :func:`exact_direction`), left to the prior. subsample: (poses, poses in the data) when
+    the hyperparameters were estimated on a seeded random subsample of the poses (the fit
+    itself on every one), else None.
     """
 
     classes: tuple[str, ...]
@@ -88,6 +90,7 @@ class EvidenceFit:
     row_noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     noise_groups: tuple[tuple[str, float, str], ...] = ()
     gauged: bool = False
+    subsample: tuple[int, int] | None = None
 
     def scale_of(self, cls: str) -> float:
         return float(self.scales[self.classes.index(cls)])
@@ -116,7 +119,9 @@ class EvidenceFit:
         gauge = ("; one direction fits any residual exactly (distances to planes, contact "
                  "heights: the robot shrunk toward its base), left to the prior"
                  if self.gauged else "")
-        return f"prior scales {', '.join(parts)}; {noise}{gauge}"
+        sub = (f"; estimated on a random {self.subsample[0]:,} of the {self.subsample[1]:,} "
+               "poses, the fit on all" if self.subsample else "")
+        return f"prior scales {', '.join(parts)}; {noise}{gauge}{sub}"
 
     def as_dict(self) -> dict:
         return {"prior_scales": {c: {"scale": float(s), "unit": "mm" if c == "length" else
@@ -129,7 +134,8 @@ class EvidenceFit:
                 "noise_groups": [{"rows": rows, "sigma": s, "unit": unit}
                                  for rows, s, unit in self.noise_groups],
                 "log_evidence": self.log_evidence.tolist(), "iterations": self.iterations,
-                "converged": self.converged, "exact_direction_to_prior": self.gauged}
+                "converged": self.converged, "exact_direction_to_prior": self.gauged,
+                "subsample_poses": None if self.subsample is None else list(self.subsample)}
 
 
 @dataclass(frozen=True)

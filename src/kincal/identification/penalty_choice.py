@@ -42,7 +42,7 @@ def prior_classes(problem: CalibrationProblem) -> tuple[str | None, ...]:
                                                  lay.is_length, fleet))
 
 
-def noise_groups(problem: CalibrationProblem, J: np.ndarray | None = None):
+def noise_groups(problem: CalibrationProblem, J: np.ndarray | None = None, counts=None):
     """The residual rows' noise groups for the evidence: (rows (m,) group of each row, per
     set (dim,) group of each of a sample's rows, [(label, unit)] per group).
 
@@ -58,19 +58,22 @@ def noise_groups(problem: CalibrationProblem, J: np.ndarray | None = None):
     residual of its own and its noise is not identified (the evidence would drive it to
     0, fitting those rows exactly). Such a group joins its set's other rows (the set's
     rows as the kind weighs them, one noise), and a set whose rows all fit exactly joins
-    the one group of every such row."""
+    the one group of every such row. counts: samples of each set in J's rows (a
+    subsample's; default every sample); rows (m,) then follows them."""
     if J is not None and len(noise_groups(problem)[2]) == 1:
         J = None  # one group whatever the ranks (one set of one kind of row): none to check
     keys: list[tuple[str, str]] = []
     per_set = []
-    rows_of = np.repeat(np.arange(len(problem.kinds)), [km.N * km.dim for km in problem.kinds])
+    counts = [km.N for km in problem.kinds] if counts is None else list(counts)
+    rows_of = np.repeat(np.arange(len(problem.kinds)),
+                        [n * km.dim for n, km in zip(counts, problem.kinds)])
     for i, km in enumerate(problem.kinds):
         name = str(km.data.source).replace("\\", "/").rsplit("/", 1)[-1]
         own = [(f"{name} {kind}".strip(), unit) for kind, unit, _ in km.noise_rows()]
         if problem.options.noise_mm is not None or km.noise_stated():
             own = [("stated sigmas", "mm")] * km.dim
         elif J is not None:
-            mine = J[rows_of == i].reshape(km.N, km.dim, -1)
+            mine = J[rows_of == i].reshape(counts[i], km.dim, -1)
             if len(set(own)) > 1 and not all(_has_residual(mine[:, [k for k, o in enumerate(
                     own) if o == key]].reshape(-1, J.shape[1])) for key in set(own)):
                 own = [(name, "mm")] * km.dim
@@ -80,7 +83,7 @@ def noise_groups(problem: CalibrationProblem, J: np.ndarray | None = None):
             if key not in keys:
                 keys.append(key)
         per_set.append(np.array([keys.index(key) for key in own], dtype=np.intp))
-    rows = np.concatenate([np.tile(g, km.N) for g, km in zip(per_set, problem.kinds)])
+    rows = np.concatenate([np.tile(g, n) for g, n in zip(per_set, counts)])
     return rows, per_set, keys
 
 
@@ -118,8 +121,11 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
     problem.row_scale = None
     residual = problem.residual_function()
     u_prior = problem.start() / problem.scale
-    r0, J0 = residual(u_prior, True)
-    rows, per_set, keys = noise_groups(problem, J0[:, free])
+    samples, subsample = evidence_samples(problem)
+    linear = residual if samples is None else problem.residual_function(samples)
+    r0, J0 = linear(u_prior, True)  # the hyperparameters' rows: every sample, or a subsample
+    counts = None if samples is None else np.diff(np.searchsorted(samples, problem.offsets))
+    rows, per_set, keys = noise_groups(problem, J0[:, free], counts)
     classes = prior_classes(problem)
     given = {} if o.prior_mm is None else {"length": o.prior_mm}
     if o.prior_deg is not None:
@@ -135,9 +141,10 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
                            residual=residual if len(keys) == 1 else problem.residual_function())
 
     sol, ev = evidence.estimate(
-        fit, lambda u: residual(u, True), u_prior, u_prior, free, classes, given,
+        fit, lambda u: linear(u, True), u_prior, u_prior, free, classes, given,
         o.noise_mm, shape=None if problem.prior is None else problem.prior.precision,
         rows=rows)
+    del J0
     m, k = r0.size, int(free.sum())
     if o.noise_mm is None and m <= k and ev.noise_mm < INTERPOLATED * math.sqrt(np.mean(r0 ** 2)):
         raise IdentifiabilityError(
@@ -152,7 +159,29 @@ def fit_evidence(problem: CalibrationProblem) -> tuple[SolveSummary, evidence.Ev
             "(the fit is the last round's): the data barely tell how far to pull toward "
             "nominal; state the tolerances and noise (--prior-mm, --prior-deg, --noise-mm), "
             "or judge the result on held-out data (--validate)", KincalWarning)
-    return sol, replace(ev, noise_groups=_noise_in_units(problem, rows, keys, ev.row_noise))
+    if samples is not None:  # every row's group, for their units
+        rows = np.concatenate([np.tile(g, km.N) for g, km in zip(per_set, problem.kinds)])
+    return sol, replace(ev, noise_groups=_noise_in_units(problem, rows, keys, ev.row_noise),
+                        subsample=subsample)
+
+
+EVIDENCE_MAX_POSES = 20_000  # more: the hyperparameters from a seeded subsample of them
+
+
+def evidence_samples(problem: CalibrationProblem) -> tuple[np.ndarray | None,
+                                                           tuple[int, int] | None]:
+    """(sorted sample indices, (poses kept, poses)) of a seeded random subsample of
+    EVIDENCE_MAX_POSES poses (the samples of a pose together, as the CV's subsample) when
+    the data have more, else (None, None). The evidence's hyperparameters (a few prior
+    scales and noise levels, none growing with the data) are estimated on its rows, each
+    linearisation a dense Jacobian of them (at 300,000 poses the whole one took 1.5 GB);
+    the fit between the linearisations, and the final one, use every sample."""
+    if problem.n_poses <= EVIDENCE_MAX_POSES:
+        return None, None
+    groups = np.concatenate([km.data.poses + 10 ** 9 * i for i, km in enumerate(problem.kinds)])
+    keep = np.random.default_rng(problem.options.seed).choice(
+        np.unique(groups), EVIDENCE_MAX_POSES, replace=False)
+    return np.flatnonzero(np.isin(groups, keep)), (EVIDENCE_MAX_POSES, problem.n_poses)
 
 
 def _refuse_unused_tolerances(problem: CalibrationProblem, present: set, has: set) -> None:
