@@ -279,7 +279,7 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
         if refused is not None:
             content["refused"] = {"verdict": "REFUSED", "message": refused}
         content["provenance"] = prov.as_dict()
-        files.append((o.report, report.dumps(content)))
+        files.append((o.report, report.dump_pieces(content)))
     if o.residuals is not None:
         from kincal.export.validation import residuals_csv
 

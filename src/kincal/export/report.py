@@ -187,3 +187,19 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
 
 def dumps(data: dict) -> str:
     return json.dumps(_clean(data), indent=2, allow_nan=False) + "\n"
+
+
+def dump_pieces(data: dict, size: int = 1 << 16):
+    """:func:`dumps`'s text, the same bytes, in pieces of about ``size`` characters for the
+    writer (REPORT.json): at many poses the text is never held whole, nor the encoder's
+    list of its millions of tokens (a 300,000-pose REPORT.json took 898 MB made at once)."""
+    buf: list[str] = []
+    n = 0
+    for token in json.JSONEncoder(indent=2, allow_nan=False).iterencode(_clean(data)):
+        buf.append(token)
+        n += len(token)
+        if n >= size:
+            yield "".join(buf)
+            buf, n = [], 0
+    buf.append("\n")
+    yield "".join(buf)
