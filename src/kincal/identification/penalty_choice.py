@@ -170,18 +170,26 @@ EVIDENCE_MAX_POSES = 20_000  # more: the hyperparameters from a seeded subsample
 
 def evidence_samples(problem: CalibrationProblem) -> tuple[np.ndarray | None,
                                                            tuple[int, int] | None]:
-    """(sorted sample indices, (poses kept, poses)) of a seeded random subsample of
-    EVIDENCE_MAX_POSES poses (the samples of a pose together, as the CV's subsample) when
-    the data have more, else (None, None). The evidence's hyperparameters (a few prior
-    scales and noise levels, none growing with the data) are estimated on its rows, each
-    linearisation a dense Jacobian of them (at 300,000 poses the whole one took 1.5 GB);
-    the fit between the linearisations, and the final one, use every sample."""
-    if problem.n_poses <= EVIDENCE_MAX_POSES:
+    """(sorted sample indices, (poses kept, poses)) of a seeded random subsample of the
+    poses when a set has more than EVIDENCE_MAX_POSES (that many of each such set, the
+    samples of a pose together, as the CV's subsample; every pose of a smaller set, so a
+    few contacts beside a million points keep their rows and their noise), else (None,
+    None). The evidence's hyperparameters (a few prior scales and noise levels, none
+    growing with the data) are estimated on its rows, each linearisation a dense Jacobian
+    of them (at 300,000 poses the whole one took 1.5 GB); the fit between the
+    linearisations, and the final one, use every sample."""
+    if all(len(np.unique(km.data.poses)) <= EVIDENCE_MAX_POSES for km in problem.kinds):
         return None, None
+    rng = np.random.default_rng(problem.options.seed)
+    keep = []
+    for i, km in enumerate(problem.kinds):
+        poses = np.unique(km.data.poses)
+        if poses.size > EVIDENCE_MAX_POSES:
+            poses = rng.choice(poses, EVIDENCE_MAX_POSES, replace=False)
+        keep.append(problem.offsets[i] + np.flatnonzero(np.isin(km.data.poses, poses)))
+    samples = np.concatenate(keep)
     groups = np.concatenate([km.data.poses + 10 ** 9 * i for i, km in enumerate(problem.kinds)])
-    keep = np.random.default_rng(problem.options.seed).choice(
-        np.unique(groups), EVIDENCE_MAX_POSES, replace=False)
-    return np.flatnonzero(np.isin(groups, keep)), (EVIDENCE_MAX_POSES, problem.n_poses)
+    return samples, (len(np.unique(groups[samples])), problem.n_poses)
 
 
 def _refuse_unused_tolerances(problem: CalibrationProblem, present: set, has: set) -> None:
