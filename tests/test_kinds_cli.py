@@ -252,3 +252,19 @@ def test_a_plane_named_by_a_word_is_refused_saying_planes_are_numbered(tmp_path,
     assert code == 1 and len(errors) == 1, err
     assert f"line {k + 1}, column 'plane': 'wall'; expected a finite number" in errors[0]
     assert "the plane's number" in errors[0] and not (tmp_path / "c.urdf").exists()
+
+
+def test_on_plane_training_with_a_held_out_point_file(tmp_path, capsys):
+    """--on-plane is the training's: a held-out file of points (--validate) beside points
+    and contacts in training is read as points, not refused as a run with no contact file
+    (the check of --on-plane judged the held-out file alone)."""
+    files = {}
+    for name, kind, seed in (("pt", "point", 2), ("pl", "plane", 1), ("held", "point", 3)):
+        files[name] = tmp_path / f"{name}.csv"
+        assert run(capsys, "simulate", "ec66", "--kind", kind, "--poses", 40, "--seed", seed,
+                   "--out", files[name])[0] == 0
+    code, out, err = run(capsys, "calibrate", "ec66", files["pt"], files["pl"], "--on-plane",
+                         "--lambda", 0.1, "--validate", files["held"], "--out",
+                         tmp_path / "c.urdf")
+    assert code == 0, err
+    assert f"held-out {files['held']}, 40 samples" in out, out

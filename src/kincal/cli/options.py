@@ -346,19 +346,18 @@ class Inputs:
 
         return held_values(self.joint_value, robots, self.length_unit, self.angle_unit)
 
-    def read_sets(self, robot, held=None) -> list:
+    def read_sets(self, robot, held=None, whole: bool = True) -> list:
         """Every data file, each read as its kind (on ``robot``'s chain, or with a list, on
         its own robot's), weighted by --set-sigma-mm if given. held: the joints a
         calibration held (:class:`~kincal.measurements.fixed_joints.HeldJoints`, from
         FRAMES.json): a file without a column for one gets its recorded value, unless
         --joint-value gives one (warned where it differs); a file with the column is read
-        as it is (warned where it strays from the held value)."""
+        as it is (warned where it strays from the held value). whole: the files are the
+        run's data (--on-plane must find a contact among them), not one held out."""
         import numpy as np
 
-        from kincal.measurements.sets import read_set_file
-
         from kincal.measurements.kind import SIGMA_RANGE_M
-        from kincal.measurements.sets import check_contacts_read, kind_of
+        from kincal.measurements.sets import check_contacts_read, kind_of, read_set_file
 
         if self.flush and not self.on_plane:
             raise OptionError("--flush describes plane contacts: give it with --on-plane")
@@ -415,7 +414,7 @@ class Inputs:
         sets = [checked(CalibrationProblem, r, read(path, r, self.orientation_format))
                 for path, r in zip(self.files, robots)]
         self._kind_options_used(any(kind_of(d) in ("pose", "flush") for d in sets), any(angled))
-        check_contacts_read(sets, self.files, self.on_plane, self.flush)
+        check_contacts_read(sets, self.files, self.on_plane and whole, self.flush)
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))
                     for d, s in zip(sets, self.set_sigma_mm)]

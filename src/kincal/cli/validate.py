@@ -57,7 +57,7 @@ def held_out(result, inputs, path: str, k: int | None = None):
     # held-out file with their columns is read as it is (warned where they stray)
     reading = dataclasses.replace(inputs, files=(path,), set_sigma_mm=None, joint_value=())
     held = dataclasses.replace(HeldJoints.of(after_frames, nominal), source="the calibration")
-    sets = reading.read_sets(nominal, held)
+    sets = reading.read_sets(nominal, held, whole=False)  # --on-plane: the training's
     for data in sets:  # another file holding training samples: not held out either
         for trained in result.sets:
             found = repeated_samples(data, trained.data)
