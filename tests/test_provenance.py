@@ -395,12 +395,13 @@ def test_simulated_fleet_files_carry_it_and_read_back(tmp_path, epoch):
 
 
 def test_report_pieces_are_the_report_text_byte_for_byte(tmp_path, capsys):
-    """REPORT.json is written in pieces (the encoder's tokens joined about 64 KB at a time:
-    a 300,000-pose report took 909 MB made at once, 438 MB so): the same bytes as the text
-    made whole, numpy numbers, NaN (null) and nested arrays included."""
+    """REPORT.json is written in pieces (the encoder's tokens joined about 64 KB at a time,
+    each array made Python numbers as it is reached: a 300,000-pose report took 909 MB made
+    at once): the same bytes as the text made whole, numpy numbers, NaN (null) and nested
+    arrays included."""
     import numpy as np
 
-    from kincal.export.report import dump_pieces, dumps, result_dict
+    from kincal.export.report import dump_pieces, dumps, result_dict, result_tree
     from kincal.identification.problem import CalibrationOptions, CalibrationProblem
     from kincal.measurements.sets import read_set_file
     from kincal.robot import Robot
@@ -419,3 +420,10 @@ def test_report_pieces_are_the_report_text_byte_for_byte(tmp_path, capsys):
     assert "".join(pieces) == whole
     assert json.loads(whole)["extra"] == {"nan": None, "inf": None,
                                           "array": [[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]], "int": 3}
+    # the tree with its numpy arrays kept (each made Python numbers as it is written): the
+    # same bytes again, NaN in an array included
+    tree = result_tree(result)
+    tree["extra"] = dict(content["extra"], array=np.array([[0.0, np.nan], [np.inf, 1.5]]))
+    content["extra"]["array"] = [[0.0, None], [None, 1.5]]
+    assert any(isinstance(v, np.ndarray) for v in tree["residuals"].values())
+    assert "".join(dump_pieces(tree, size=256)) == dumps(content)

@@ -269,7 +269,7 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
 
     files: list = []
     if o.report is not None:
-        content = report.result_dict(result, data_source)
+        content = report.result_tree(result, data_source)  # arrays made JSON as written
         if accuracy is not None:
             content["accuracy_map"] = accuracy.as_dict()
         if validations:

@@ -19,14 +19,15 @@ from kincal.identification.statistics import AngleStats, ErrorStats
 FORMAT = "kincal-report-1"
 
 
-def _clean(value):
-    """JSON-safe: numpy to Python, NaN and inf to None."""
+def _clean(value, keep_arrays: bool = False):
+    """JSON-safe: numpy to Python, NaN and inf to None; with ``keep_arrays`` the arrays
+    are left as they are (for :func:`dump_pieces`, which makes each when it is written)."""
     if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
+        return {k: _clean(v, keep_arrays) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
+        return [_clean(v, keep_arrays) for v in value]
     if isinstance(value, np.ndarray):
-        return _clean(value.tolist())
+        return value if keep_arrays else _clean(value.tolist())
     if isinstance(value, (np.floating, float)):
         v = float(value)
         return v if math.isfinite(v) else None
@@ -111,7 +112,14 @@ def residuals_dict(result: CalibrationResult) -> dict:
 
 
 def result_dict(result: CalibrationResult, data_source: str | None = None) -> dict:
-    """The whole result (REPORT.json)."""
+    """The whole result (REPORT.json), JSON-ready."""
+    return _clean(result_tree(result, data_source))
+
+
+def result_tree(result: CalibrationResult, data_source: str | None = None) -> dict:
+    """:func:`result_dict` before its numbers are made Python ones (numpy arrays kept: a
+    300,000-pose result's residuals as Python numbers took some 300 MB), for
+    :func:`dump_pieces`."""
     from kincal import __version__
     from kincal.identification.diagnosis import diagnose
 
@@ -182,7 +190,7 @@ def result_dict(result: CalibrationResult, data_source: str | None = None) -> di
         "residuals": residuals_dict(result),
         "plausibility": None if result.plausibility is None else result.plausibility.as_dict(),
     }
-    return _clean(out)
+    return out
 
 
 def dumps(data: dict) -> str:
@@ -192,10 +200,18 @@ def dumps(data: dict) -> str:
 def dump_pieces(data: dict, size: int = 1 << 16):
     """:func:`dumps`'s text, the same bytes, in pieces of about ``size`` characters for the
     writer (REPORT.json): at many poses the text is never held whole, nor the encoder's
-    list of its millions of tokens (a 300,000-pose REPORT.json took 898 MB made at once)."""
+    list of its millions of tokens, nor the arrays as Python numbers but one at a time
+    (a 300,000-pose REPORT.json took 909 MB made at once)."""
     buf: list[str] = []
     n = 0
-    for token in json.JSONEncoder(indent=2, allow_nan=False).iterencode(_clean(data)):
+
+    def array(value):  # each array made Python numbers as the encoder reaches it
+        if isinstance(value, np.ndarray):
+            return _clean(value.tolist())
+        raise TypeError(f"{type(value).__name__} is not JSON serializable")
+
+    encoder = json.JSONEncoder(indent=2, allow_nan=False, default=array)
+    for token in encoder.iterencode(_clean(data, keep_arrays=True)):
         buf.append(token)
         n += len(token)
         if n >= size:
