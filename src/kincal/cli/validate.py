@@ -14,9 +14,6 @@ import warnings
 
 from kincal.errors import DataError, KincalWarning, OptionError
 
-# kinds whose samples are joint values alone (the reading is the contact itself)
-CONTACT_KINDS = ("plane", "flush")
-
 
 def check_count(n_held: int, n_files: int, several: bool) -> None:
     """Refuse a count of --validate files that is neither one (one chain) nor one per data
@@ -42,7 +39,7 @@ def held_out(result, inputs, path: str, k: int | None = None):
     from kincal.export.validation import Validation
     from kincal.identification.statistics import angle_stats
     from kincal.measurements.checks import repeated_samples, repeats_all
-    from kincal.measurements.sets import kind_of
+    from kincal.measurements.sets import CONTACT_KINDS, kind_of
     from kincal.measurements.fixed_joints import HeldJoints
 
     several = result.chains is not None and result.chains.several

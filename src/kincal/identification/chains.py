@@ -27,7 +27,7 @@ import numpy as np
 
 from kincal import models as error_models
 from kincal.errors import ChainError, OptionError, ParameterError, listing, suggest
-from kincal.measurements.sets import kind_model
+from kincal.measurements.sets import CONTACT_KINDS, kind_model
 from kincal.models.base import ErrorModel
 from kincal.robot import Robot
 
@@ -272,7 +272,7 @@ class Chains:
         for i, km in enumerate(kinds):
             row = []
             for name in km.frame_names:
-                j = owner.setdefault(name, i) if (km.kind in ("plane", "flush")
+                j = owner.setdefault(name, i) if (km.kind in CONTACT_KINDS
                                                   and name.startswith("plane")) else i
                 if j != i and self.robots[j].base != self.robots[i].base:
                     raise OptionError(

@@ -35,10 +35,14 @@ def kind_of(data) -> str:
                     f"PlaneData, got {type(data).__name__}")
 
 
+# the kinds whose samples are joint values alone: the reading is the contact itself
+CONTACT_KINDS = ("plane", "flush")
+
+
 def check_contacts_read(sets, files, on_plane: bool, flush: bool) -> None:
     """With --on-plane: refuse data files of which none was read as contacts (every one had
     measurement columns and was read as its kind: the option would be used nowhere)."""
-    if not on_plane or any(kind_of(d) in ("plane", "flush") for d in sets):
+    if not on_plane or any(kind_of(d) in CONTACT_KINDS for d in sets):
         return
     what = "; ".join(f"{f}: {kind_of(d)}" for f, d in zip(files, sets))
     from kincal.errors import OptionError
