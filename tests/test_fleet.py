@@ -531,3 +531,19 @@ def test_the_summary_file_gives_si_beside_mm_and_deg(fleet_dir):
         assert r[f"mean_{si}"] == pytest.approx(m, rel=1e-12, abs=1e-300)
         assert r[f"scatter_{si}"] == pytest.approx(s, rel=1e-12, abs=1e-300)
         assert r["mean"] == pytest.approx(m * k, rel=1e-12, abs=1e-300)
+
+
+def test_units_failing_alike_are_named_in_one_clause(fleet_files, tmp_path, capsys):
+    """`--fix joint_9.a` (no such parameter) failed every unit with the same reason, and the
+    fleet's one error line repeated that reason, with its list of the valid names, once per
+    unit (200 units: 200 copies). Units with one outcome and reason are one clause."""
+    files = [str(fleet_files / f"u0{u}.csv") for u in (1, 2, 3)]
+    assert main(["fleet", "ec66", *files, "--tip", "flange", "--quiet", "--out-dir",
+                 str(tmp_path / "D"), "--fix", "joint_9.a"]) == 1
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "Units: u01, u02, u03: failed (unknown parameter 'joint_9.a'." in line, line
+    assert line.count("unknown parameter") == 1, line
+    assert not (tmp_path / "D").exists()
+    from kincal.cli.fleet import _some
+
+    assert _some([f"u{k}" for k in range(8)]) == "u0, u1, u2, u3, u4 and 3 more"

@@ -266,11 +266,20 @@ def _failed(units, out: Path) -> str:
     calibrated = sum(u.status == "calibrated" for u in units)
     stale = (f"; {out / PRIOR} is an earlier run's, left as it was"
              if (out / PRIOR).exists() else "")
-    each = "; ".join(f"{u.name}: {u.status}" + (f" ({u.message})" if u.message else "")
-                     for u in units)
+    groups: dict[tuple[str, str], list[str]] = {}  # one reason said once: 200 units failing
+    for u in units:  # alike (an unknown --fix name) make one clause, not 200 copies
+        groups.setdefault((u.status, u.message or ""), []).append(u.name)
+    each = "; ".join(f"{_some(names)}: {status}" + (f" ({message})" if message else "")
+                     for (status, message), names in groups.items())
     return (f"fewer than 2 of the {len(units)} units were calibrated ({calibrated}): a fleet "
             f"prior needs 2, and nothing was written (no unit's files, no summary){stale}. "
             f"Units: {each}")
+
+
+def _some(names: list[str], most: int = 5) -> str:
+    """Unit names as a list, the first ``most`` of a long one and how many more."""
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
 
 
 def _remove_if_empty(out: Path, made: bool) -> None:
