@@ -268,3 +268,24 @@ def test_on_plane_training_with_a_held_out_point_file(tmp_path, capsys):
                          tmp_path / "c.urdf")
     assert code == 0, err
     assert f"held-out {files['held']}, 40 samples" in out, out
+
+
+def test_a_wall_along_x_keeps_its_angles_and_frames_json_reads_back(tmp_path, capsys):
+    """A plane whose normal is along +-x (simulate's second wall) sits where Rx(rx) barely
+    turns its normal: the fit moved plane2.rx by whole turns (-101.09 rad on seed 5), and
+    `kincal evaluate` refused the FRAMES.json calibrate had just written ("beyond 100 rad
+    ... a corrupted or hand-edited file?"). Frame angles are now kept within half a turn
+    of their start, which is itself within a half turn of 0."""
+    data, urdf, frames = tmp_path / "c.csv", tmp_path / "c.urdf", tmp_path / "f.json"
+    assert run(capsys, "simulate", "ec66", "--kind", "plane", "--poses", 60, "--seed", 5,
+               "--out", data)[0] == 0
+    code, out, err = run(capsys, "calibrate", "ec66", data, "--on-plane", "--out", urdf,
+                         "--frames-out", frames)
+    assert code == 0, err
+    named = json.loads(frames.read_text())["sets"][0]["frames"]
+    angles = {k: v for k, v in named.items() if k.endswith((".rx", ".ry"))}
+    assert abs(angles["plane2.ry"]) == pytest.approx(np.pi / 2, abs=1e-3)  # the wall
+    assert max(map(abs, angles.values())) <= 2 * np.pi, angles
+    code, out, err = run(capsys, "evaluate", urdf, data, "--on-plane", "--frames", frames)
+    assert code == 0, err
+    assert float(out.split("mean ")[1].split()[0]) < 0.05  # [mm] as the calibration's after

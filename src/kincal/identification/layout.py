@@ -262,6 +262,18 @@ class ParameterLayout:
         vectors, one per sample)."""
         return self.kinematic(x), self.frames(x, i), self.backlash_values(x)
 
+    def wrap_frame_angles(self, x: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+        """A copy of x with each frame angle moved by whole turns to within half a turn of
+        its value in ``near`` (default 0): the same frames. Each frame angle is an angle of
+        a rotation or of a plane's normal, so a turn changes nothing the fit sees; a nearly
+        free one (a plane's rx at a normal near +-x, where Rx(rx) barely turns it) wanders
+        by whole turns in a fit (-101 rad, which FRAMES.json's reader refuses as corrupt)."""
+        angle = self.is_frame & ~self.is_length
+        out = np.array(x, dtype=float)
+        ref = 0.0 if near is None else np.asarray(near, dtype=float)[angle]
+        out[angle] -= 2 * np.pi * np.round((out[angle] - ref) / (2 * np.pi))
+        return out
+
     # ------------------------------------------- one set of points (the common case)
     @property
     def n_points(self) -> int:

@@ -267,7 +267,7 @@ class CalibrationProblem:
                                          lay.n_kinematic, free, o.rank_tol))
             free = free & np.array([n in kept for n in lay.names])  # (np.isin sorts strings)
             sol = solve(residual, x / self.scale, free, options=o.solver)
-            x = sol.u * self.scale
+            x = lay.wrap_frame_angles(sol.u * self.scale)
         self._x_start = x
         return x
 

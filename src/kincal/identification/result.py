@@ -198,12 +198,12 @@ class CalibrationResult:
               evidence: EvidenceFit | None = None, penalty_choice: str = "",
               downweighted=()) -> "CalibrationResult":
         lay = problem.layout
-        x = sol.u * problem.scale
+        x_start = problem.start()
+        x = lay.wrap_frame_angles(sol.u * problem.scale, near=x_start)  # turns: the same frames
         free = problem.free_mask()
         se, covariance = _std_errors(sol, free, lay.is_penalised, lam if problem.prior is None
                                      else problem.prior.penalty(lam), problem.scale)
         fixed = set(ident.fixed)
-        x_start = problem.start()
         x_nom = problem.x_nominal
         x_nom[lay.is_frame] = x_start[lay.is_frame]  # frames have no nominal: their start
         # Python numbers first (the same values as float() of each element): 45 rows of
