@@ -437,12 +437,14 @@ class CellFrames:
                                 f"term (chain joints of {robot.name}: "
                                 f"{', '.join(robot.joint_names)})")
 
-    def located(self) -> SetFrames:
+    def located(self, frame: bool = True) -> SetFrames:
         """The first set with a measurement frame and tool point (points, poses) on the
-        file's chain (a set of another chain has its tool point in another tip frame)."""
+        file's chain (a set of another chain has its tool point in another tip frame);
+        frame=False: else the first with a tool point (distances, contacts: a program
+        filter needs no measurement frame)."""
         chain = (self.base_frame, self.tip_frame)
-        for s in self._on(chain):
-            if s.as_points() is not None:
+        for s in sorted(self._on(chain), key=lambda s: s.as_points() is None):
+            if s.as_points() is not None or not frame and s.has("tool.x", "tool.y", "tool.z"):
                 return s
         elsewhere = dict.fromkeys(" -> ".join(self._chain_of(s)) for s in self.sets
                                   if s.as_points() is not None)
