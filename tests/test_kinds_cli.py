@@ -289,3 +289,24 @@ def test_a_wall_along_x_keeps_its_angles_and_frames_json_reads_back(tmp_path, ca
     code, out, err = run(capsys, "evaluate", urdf, data, "--on-plane", "--frames", frames)
     assert code == 0, err
     assert float(out.split("mean ")[1].split()[0]) < 0.05  # [mm] as the calibration's after
+
+
+def test_frames_of_another_robot_are_named_so_by_evaluate_and_compensate(tmp_path, capsys):
+    """UR10 frames (world -> tool0) given with EC66 data: the chain is taken from the frames
+    and the load failed first, as "unknown base frame 'world' in robot 'ec66'": a frame
+    the user never typed, and no word of the frames being another robot's."""
+    ur, urf = tmp_path / "ur.csv", tmp_path / "ur.json"
+    ec = tmp_path / "ec.csv"
+    assert run(capsys, "simulate", "ur10", "--poses", 20, "--out", ur)[0] == 0
+    assert run(capsys, "calibrate", "ur10", ur, "--lambda", 0.1, "--model", "complete",
+               "--out", tmp_path / "ur.urdf", "--frames-out", urf)[0] == 0
+    assert run(capsys, "simulate", "ec66", "--poses", 10, "--out", ec)[0] == 0
+    for argv in (("evaluate", "ec66", ec, "--frames", urf),
+                 ("compensate", "ec66", ec, "--frames", urf, "--out", tmp_path / "j.csv")):
+        code, out, err = run(capsys, *argv)
+        assert code == 1 and out == ""
+        (line,) = err.strip().splitlines()
+        assert line.startswith(f"kincal: error: {urf} holds frames of the robot 'ur10' "
+                               "identified on the chain world -> tool0, which ec66 does not "
+                               "have: frames of another robot or chain"), line
+    assert not (tmp_path / "j.csv").exists()

@@ -9,7 +9,8 @@ from pathlib import Path
 from kincal.cli.checks import check_outputs
 from kincal.cli.console import say_and_write, summary_lines
 from kincal.cli.options import (ORIENTATION_FORMATS, Chain, add_overwrite, add_units,
-                                add_xacro_args, chain_from_frames, group, typed, xacro_args)
+                                add_xacro_args, group, typed, xacro_args)
+from kincal.cli.recorded_chain import chain_from_frames, load_recorded
 from kincal.errors import DataError, OptionError
 
 
@@ -107,8 +108,8 @@ def _compensate(c: Compensate) -> int:
     if frames is not None:
         frames = frames.for_chain(c.chain.base, c.chain.tip)  # a chain of several
         c = replace(c, chain=chain_from_frames(c.chain, frames))
-    robot = c.chain.load()  # a chain with a mimic joint and its master: refused by
-    # compensate / filter_program (the API's path too)
+    robot = load_recorded(c.chain, frames)  # a chain with a mimic joint and its master:
+    # refused by compensate / filter_program (the API's path too)
     inputs: list[str | Path | None] = [c.targets, c.program, c.nominal, c.frames]
     protect = check_outputs(robot, [c.out], overwrite=c.overwrite, inputs=inputs)
     held = HeldJoints()  # the joints the calibration held: their columns may be left out

@@ -7,7 +7,8 @@ from dataclasses import dataclass, replace
 from kincal.cli.checks import check_outputs
 from kincal.cli.console import say, say_and_write, summary_lines
 from kincal.cli.options import (Chain, Inputs, add_common, add_kinds, add_overwrite,
-                                chain_from_frames, group, typed)
+                                group, typed)
+from kincal.cli.recorded_chain import chain_from_frames, load_recorded
 from kincal.errors import DataError, OptionError
 
 
@@ -66,7 +67,7 @@ def run(args) -> int:
                           + (f"{e.frames} has none" if frames is not None else
                              "--fit-frames fits none (the backlash values come from "
                              "--frames FRAMES.json)"))
-    robot = e.chain.load()
+    robot = load_recorded(e.chain, frames)
     protect = check_outputs(robot, [e.report], overwrite=e.overwrite,
                             inputs=(e.inputs.data, e.frames))
     held = None

@@ -421,29 +421,6 @@ class Inputs:
         return sets
 
 
-def chain_from_frames(chain: Chain, frames) -> Chain:
-    """The chain with base and tip from FRAMES.json where not given; refuse a mismatch.
-
-    Frames identified for one chain mean nothing for another: the tool point lives in
-    the recorded tip frame, the measurement frame is placed against the recorded base."""
-    for role in ("base", "tip"):
-        recorded, given = getattr(frames, f"{role}_frame"), getattr(chain, role)
-        if not recorded:
-            continue  # an older frames file without the chain: nothing to check
-        if given is None:
-            chain = dataclasses.replace(chain, **{role: recorded})
-        elif given != recorded:
-            from kincal.errors import FrameError
-
-            held = frames.chains() or ((frames.base_frame, frames.tip_frame),)
-            raise FrameError(f"--{role} {given!r} does not match the {role} frame {recorded!r} "
-                             f"recorded in {frames.source} (its frames were identified for "
-                             f"{', '.join(f'{b} -> {t}' for b, t in held)}); "
-                             + (f"use --{role} {recorded}" if len(held) == 1 else
-                                "give --base and --tip of one of them")
-                             + " or frames identified for this chain", valid=(recorded,))
-    return chain
-
 def _prismatic(robot) -> list[str]:
     return [n for n, k in zip(robot.joint_names, robot.geometry.kinds) if k == "prismatic"]
 
