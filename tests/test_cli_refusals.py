@@ -481,3 +481,24 @@ def test_a_file_of_another_kind_is_named_as_such(work, capsys, argv, says):
     line = refused(capsys, argv, work)
     assert says in line, line
     assert "decimal commas" not in line and "--joint-value" not in line
+
+
+def test_orientation_sigma_that_every_sigma_deg_column_overrides_is_refused(work, capsys):
+    """A pose file's sigma_deg column wins over --orientation-sigma-deg: with it in every
+    pose file the option was taken and weighed nothing (the same fit as without it)."""
+    lines = [line for line in (work / "poses.csv").read_text().splitlines()
+             if not line.startswith("#")]
+    (work / "stated.csv").write_text(lines[0] + ",sigma_deg\n"
+                                     + "".join(row + ",0.5\n" for row in lines[1:]))
+    stated = ["calibrate", "ec66", "stated.csv", "--lambda", "0.1", "--model", "complete",
+              "--out", "c.urdf"]
+    line = refused(capsys, stated + ["--orientation-sigma-deg", "0.02"], work)
+    assert line == ("kincal: error: --orientation-sigma-deg would weigh no row: every pose or "
+                    "flush file states its orientation noise in a sigma_deg column, which is "
+                    "used; leave out the option or the column")
+    line = refused(capsys, ["evaluate", "ec66", "stated.csv", "--fit-frames",
+                            "--orientation-sigma-deg", "0.02"], work)
+    assert "--orientation-sigma-deg would weigh no row" in line
+    # beside a pose file without the column, the option weighs that file's rows
+    assert main(stated[:3] + ["poses.csv"] + stated[3:]
+                + ["--orientation-sigma-deg", "0.02", "-q"]) == 0

@@ -328,17 +328,24 @@ class Inputs:
         """{URDF joint: CSV column} of --joint-columns, or None."""
         return joint_map(self.joint_columns)
 
-    def _kind_options_used(self, has_poses: bool, has_angles: bool) -> None:
-        """Refuse the options of pose files that no file would use."""
+    def _kind_options_used(self, stated: list[bool], has_angles: bool, whole: bool) -> None:
+        """Refuse the options of pose files that no file would use. stated: per pose or
+        flush file, whether a sigma_deg column states its orientation noise (the column wins
+        over --orientation-sigma-deg); whole: the files are the run's data (a held-out file
+        is judged with the noise of the training's)."""
         if self.positions_only and not has_angles:
             raise OptionError("--positions-only reads a pose file's positions alone; none of "
                               "the data files has orientation columns beside its positions")
-        if self.orientation_sigma_deg is not None and not has_poses:
+        if self.orientation_sigma_deg is not None and not stated:
             raise OptionError("--orientation-sigma-deg is the orientation noise of pose files "
                               "(or the tilt noise of flush contacts); none of the data files "
                               "is one (" + ("read with --positions-only" if self.positions_only
                                             else "no qx qy qz qw columns")
                               + ", no --on-plane --flush)")
+        if self.orientation_sigma_deg is not None and whole and all(stated):
+            raise OptionError("--orientation-sigma-deg would weigh no row: every pose or flush "
+                              "file states its orientation noise in a sigma_deg column, which "
+                              "is used; leave out the option or the column")
 
     def held_joints(self, robots) -> dict[str, float]:
         """{joint: value [SI]} of --joint-value NAME=VALUE (the file's units)."""
@@ -413,7 +420,8 @@ class Inputs:
         # the gate refuses a calibration of a reading in doubt)
         sets = [checked(CalibrationProblem, r, read(path, r, self.orientation_format))
                 for path, r in zip(self.files, robots)]
-        self._kind_options_used(any(kind_of(d) in ("pose", "flush") for d in sets), any(angled))
+        self._kind_options_used([d.sigma_deg is not None for d in sets
+                                 if kind_of(d) in ("pose", "flush")], any(angled), whole)
         check_contacts_read(sets, self.files, self.on_plane and whole, self.flush)
         if self.set_sigma_mm:
             sets = [dataclasses.replace(d, sigma=np.full(len(d), s * 1e-3))
