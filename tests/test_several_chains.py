@@ -779,3 +779,36 @@ def test_diagnosis_names_backlash_of_a_shared_joint_over_two_chains(tmp_path):
     assert (f.joint, f.cause) == ("tj1", "backlash") and f.rms_deg is None
     assert abs(f.size) == pytest.approx(0.1, rel=0.15) and f.rms_mm[1] < f.rms_mm[0]
     assert clean is None
+
+
+def test_a_shared_plane_that_shares_nothing_is_refused(tmp_path, capsys):
+    """--shared-plane with one contact file, or with files naming no plane alike (a
+    `plane` column's 1 beside a file without the column, `plane`), was taken and shared
+    nothing: the calibration was the one without it."""
+    contacts = tmp_path / "c.csv"
+    assert main(["simulate", "ec66", "--kind", "plane", "--poses", "30", "--out",
+                 str(contacts), "-q"]) == 0
+    rows = [line.split(",") for line in contacts.read_text().splitlines()
+            if not line.startswith("#")]
+    table = tmp_path / "t.csv"  # plane 1's rows without the plane column
+    table.write_text("".join(",".join(r[:-1]) + "\n" for r in rows
+                             if r is rows[0] or float(r[-1]) == 1))
+    capsys.readouterr()
+    for files, named in (([contacts], "(one contact file, set 1 (" + str(contacts)
+                          + "): plane1 plane2 plane3)"),
+                         ([contacts, table], "(set 1 (" + str(contacts) + "): plane1 plane2 "
+                          "plane3; set 2 (" + str(table) + "): plane)")):
+        assert main(["calibrate", "ec66", *map(str, files), "--on-plane", "--shared-plane",
+                     "--out", str(tmp_path / "c.urdf")]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == ["kincal: error: --shared-plane: no plane is named in two contact "
+                       "files, nothing to share " + named + "; a plane column's numbers "
+                       "name the same plane in every file, a file without one touches "
+                       "'plane'"]
+    assert not (tmp_path / "c.urdf").exists()
+    robot = Robot.load("ec66", tip="flange")  # the API's path: the same refusal
+    from kincal.measurements.sets import read_set_file
+
+    data = read_set_file(contacts, robot.joint_names, on_plane=True)
+    with pytest.raises(OptionError, match="^--shared-plane: no plane is named in two"):
+        CalibrationProblem(robot, [data], CalibrationOptions(shared_planes=True))

@@ -265,8 +265,9 @@ class Chains:
         """The layout's aliases (:class:`kincal.identification.layout.ParameterLayout`) when
         the files touch the same physical planes: every plane or flush set's plane
         parameters (``plane.*``, or ``plane<label>.*`` per label of a ``plane`` column) are
-        those of the first such set with that name; () when none is shared. A plane is
-        fitted in its chain's base frame: sets on chains with different bases are refused."""
+        those of the first such set with that name. A plane is fitted in its chain's base
+        frame: sets on chains with different bases are refused, and so is a request that
+        shares nothing (one contact file, or no plane name in two: it would be ignored)."""
         owner: dict[str, int] = {}
         out, shared = [], False
         for i, km in enumerate(kinds):
@@ -283,7 +284,17 @@ class Chains:
                 row.append(-1 if j == i else j)
                 shared |= j != i
             out.append(tuple(row))
-        return tuple(out) if shared else ()
+        if not shared:
+            named = [f"set {i + 1} ({km.data.source}): " + " ".join(
+                sorted({n.split(".")[0] for n in km.frame_names if n.startswith("plane")}))
+                for i, km in enumerate(kinds) if km.kind in CONTACT_KINDS]
+            raise OptionError("--shared-plane: no plane is named in two contact files, "
+                              "nothing to share (" + ("; ".join(named) if len(named) > 1 else
+                                                      f"one contact file, {named[0]}" if named
+                                                      else "no contact file")
+                              + "); a plane column's numbers name the same plane in every "
+                              "file, a file without one touches 'plane'")
+        return tuple(out)
 
     def chain_of(self, i: int):
         """(error model, (p_c,) its parameters' positions in the union) of set i's chain."""
