@@ -802,3 +802,33 @@ def test_validate_contacts_repeating_some_training_touches_is_warned(tmp_path, c
     err = capsys.readouterr().err.strip()
     assert not out2.exists() and err.startswith("kincal: error: --validate")
     assert "5 of its 5 samples repeat samples of" in err
+
+
+def test_the_residual_line_names_what_the_set_measures(tmp_path):
+    """Shuffled rows of a distance file: the gate's line said "the position error after
+    calibration" of data that hold no position (contacts: their distance to the plane)."""
+    from dataclasses import replace
+
+    from kincal.measurements.sets import read_set_file
+
+    kind, what = "distance", "distance"
+
+    path = tmp_path / "d.csv"
+    assert main(["simulate", "ec66", "--kind", kind, "--poses", "60", "--seed", "1",
+                 "--out", str(path), "-q"]) == 0
+    robot = Robot.load("ec66", tip="flange")
+    data = read_set_file(path, robot.joint_names, on_plane=kind == "plane")
+    q = data.joint_values[np.random.default_rng(0).permutation(len(data))]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = calibrate(robot, replace(data, joint_values=q), method="l2", lam=0.1,
+                           model="complete")
+    with pytest.raises(ImplausibleResultError) as exc:
+        write_calibration(result, Outputs(urdf=tmp_path / "c.urdf"))
+    assert f"the {what} error after calibration is " in str(exc.value)
+    assert "position error" not in str(exc.value)
+    assert not (tmp_path / "c.urdf").exists()
+    from kincal.identification.statistics import error_label
+
+    assert [error_label(k) for k in ("point", "pose", "distance", "plane", "flush")] == [
+        "position", "position", "distance", "distance to the plane", "height above the plane"]

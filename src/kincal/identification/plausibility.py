@@ -81,7 +81,7 @@ from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes,
                                                 moving_base_cause, names_text,
                                                 orientation_causes, overfit_cause, tool_causes,
                                                 unit_causes, weak_cause)
-from kincal.identification.statistics import angle_label
+from kincal.identification.statistics import angle_label, error_label
 from kincal.measurements.checks import (DEGREES_AS_RADIANS, TOOL_RATIO, UNIT_RATIO,
                                         duplicate_samples, millimetres_read_as_metres, spread)
 from kincal.identification.tool_motion import change, farthest_tool, n_chains
@@ -177,6 +177,7 @@ class Evidence:
     orientation_rms_deg: float | None = None  # calibration (poses; flush: the tilts) [deg]
     orientation_what: str = ""  # what they are ("tilt against the plane", "orientation")
     tool_far: tuple = ()  # (m, chain m, set, kind) of the tool point farthest from its tip
+    residual_what: str = "position"  # what the worst set's errors are ("distance", ...)
 
     @property
     def explained(self) -> float:
@@ -301,7 +302,8 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
                            causes=tuple(c for c in unit_causes(ev) if "orientation" in c)))
     if ev.residual_median_mm > th.residual * L_mm:
         out.append(Finding(
-            "residual", f"the position error after calibration is {ev.residual_median_mm:.4g} mm "
+            "residual", f"the {ev.residual_what} error after calibration is "
+            f"{ev.residual_median_mm:.4g} mm "
             f"(median; RMS {ev.residual_rms_mm:.4g} mm), above {th.residual:.0%} of the arm's "
             f"reach ({th.residual * L_mm:.3g} mm of {L_mm:.0f} mm): a geometric calibration "
             "leaves a fraction of a millimetre to a few", ev.residual_median_mm,
@@ -469,7 +471,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
                                             for dt, robot in zip(datas, problem.robots)) if d),
         orientation_angle_max=max(float(getattr(dt, "angles_read_max", 0.0)) for dt in datas),
         duplicates=tuple(duplicate_samples(datas)), orientation_median_deg=o_median,
-        orientation_rms_deg=o_rms, orientation_what=o_what,
+        orientation_rms_deg=o_rms, orientation_what=o_what, residual_what=error_label(worst.kind),
         tool_far=farthest_tool(problem, result) or ())
 
 

@@ -97,6 +97,13 @@ def angle_label(kind: str, short: bool = False) -> str:
     return "orientation"
 
 
+def error_label(kind: str) -> str:
+    """What a kind's sample error is called in the gate's lines: a position (points, poses),
+    a distance, a distance to the plane, a flush touch's height above it."""
+    return {"distance": "distance", "plane": "distance to the plane",
+            "flush": "height above the plane"}.get(kind, "position")
+
+
 def angle_stats(kind_model, residuals: np.ndarray) -> AngleStats | None:
     """The statistics of :func:`angle_errors` (flush touches: also the RMS of the roll and
     of the pitch, about the contact frame's x and y axes), None for kinds without an
