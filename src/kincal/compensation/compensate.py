@@ -26,7 +26,8 @@ program's value) elsewhere is warned about and the held value used; the summary 
 Compliance terms (FRAMES.json, :mod:`kincal.models.compliance`) are compensated: the joint
 values the solver finds are where the joints must *be*; the commanded values are those
 less the deflection the gravity torque causes there (q_cmd + c tau(q_cmd) = q, solved by
-a few fixed-point steps), and the summary says by how much the largest moved.
+a few fixed-point steps), and the summary says by how much the largest moved. A position
+target keeps the orientation the tool has where the seed's command puts it, deflected.
 """
 
 from __future__ import annotations
@@ -230,18 +231,36 @@ def _held(robot, frames: CellFrames | None, seeds, source: str, lines):
         "records): the calibration holds there only, the other joints reach the targets"]
 
 
-def _deflected(frames: CellFrames | None, robot, sol: IkSolution, lower, upper
-               ) -> tuple[IkSolution, list[str]]:
-    """(the solution with commanded joint values that the gravity torques deflect onto the
-    solver's, notes) for frames with compliance terms; (sol, []) without. A held joint
-    (lower = upper) is not commanded: it keeps its value."""
+def _compliances(frames: CellFrames | None, robot, lower, upper) -> np.ndarray | None:
+    """(n,) each chain joint's compliance [rad/(N m)] from ``frames`` (0 for a held joint,
+    lower = upper: it is not commanded, it keeps its value); None without compliance terms."""
     if frames is None or not frames.compliance:
-        return sol, []
+        return None
     names = list(robot.joint_names)
     c = np.zeros(len(names))
     for j, v in frames.compliance.items():
         c[names.index(j)] = v
     c[np.asarray(lower) >= np.asarray(upper)] = 0.0
+    return c
+
+
+def _where_it_is(frames: CellFrames | None, robot, commands, lower, upper) -> np.ndarray:
+    """(N, n) where the joints are when ``commands`` are commanded: deflected by the
+    gravity torques under compliance terms (``commands`` unchanged without)."""
+    c = _compliances(frames, robot, lower, upper)
+    commands = np.asarray(commands, float)
+    return commands if c is None else commands + c * robot.gravity_torques(commands)
+
+
+def _deflected(frames: CellFrames | None, robot, sol: IkSolution, lower, upper
+               ) -> tuple[IkSolution, list[str]]:
+    """(the solution with commanded joint values that the gravity torques deflect onto the
+    solver's, notes) for frames with compliance terms; (sol, []) without. A held joint
+    (lower = upper) is not commanded: it keeps its value."""
+    c = _compliances(frames, robot, lower, upper)
+    if c is None:
+        return sol, []
+    names = list(robot.joint_names)
     q = np.asarray(sol.q, float)
     cmd = q.copy()
     for _ in range(COMPLIANCE_STEPS):  # a contraction: |c dtau/dq| << 1
@@ -288,7 +307,10 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     R_tool = frames.tool_rotation if point == 0 else np.eye(3)
     t_MB = frames.base[:3]
     positions_B = (targets.positions - t_MB) @ R_MB  # R_MB^T (p - t) row-wise
-    R_seed, p_seed = chain.tool_poses(seeds, tool)
+    # the tool where the robot is when the seeds are commanded: deflected by the gravity
+    # torques under compliance terms (the orientation a position target keeps is the one the
+    # real robot has there, the solver's joints are where the joints must be)
+    R_seed, p_seed = chain.tool_poses(_where_it_is(frames, robot, seeds, lower, upper), tool)
     _check_units(chain, tool, lower, upper, positions_B, targets.positions,
                  p_seed @ R_MB.T + t_MB, targets.source, length_unit)
     if targets.rotations is None:
