@@ -114,10 +114,11 @@ class Compensation:
                                 if (~rev).any() else ""))
         gave = self.reached & ~self.orientation_required & (self.orientation_error > 1e-6)
         if gave.any():
-            lines.append(f"  {int(gave.sum())} position targets: the orientation gave way (up to "
+            lines.append(f"  {int(gave.sum())} targets: the orientation gave way (up to "
                          f"{np.degrees(self.orientation_error[gave].max()):.3g} deg from the "
-                         "seed's) to keep the joints within their limits or because the chain "
-                         "has fewer than six joints")
+                         "one kept: a position target's seed's, a program's nominal pose's) to "
+                         "keep the joints within their limits or because fewer than six "
+                         "joints are free (a shorter chain, joints held)")
         lines += [f"  {note}" for note in self.notes]
         return "\n".join(lines)
 
@@ -355,7 +356,8 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
     program: (N, n) joint values [rad or m]. The compensated values put the tool point
     (of ``frames``, or the tip origin without frames) where the nominal model puts it at
     the program's values, with the tip orientation the nominal model gives (required on
-    six or more joints, kept as closely as possible on fewer). Both robots must have the
+    six or more free joints, kept as closely as possible on fewer: the joints ``frames``
+    records as held stay at their values and do not count). Both robots must have the
     same chain joints, without a mimic joint and its master (refused, as by
     :func:`compensate`).
     """
@@ -379,7 +381,8 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
                                         lines)
     R_nom, p_nom = ChainKinematics.of(nominal.geometry).tool_poses(program, tool)
     g = calibrated.geometry
-    required = np.full(len(program), g.n >= 6)
+    # a full pose needs six joints the solver may move: a held one (lower = upper) is not
+    required = np.full(len(program), int(np.sum(lower < upper)) >= 6)
     sol = solve(ChainKinematics.of(g), tool, p_nom, R_nom, required, program, lower, upper,
                 options)
     notes = ["program filter: each pose of the nominal model at the program's joint values "
