@@ -373,6 +373,39 @@ def test_cli_program_filter(cli_cell, tmp_path):
                  "--out", str(tmp / "x.csv")]) == 1  # --program without --nominal
 
 
+@pytest.mark.parametrize("kind, options", [
+    ("distance", []), ("flush", ["--on-plane", "--flush", "--tool-offset", "0", "0", "0.12"])])
+def test_program_filter_takes_the_tool_point_of_a_calibration_without_points(
+        kind, options, tmp_path, capsys):
+    """The program filter needs the tool point of FRAMES.json alone (docs/cell.md): with the
+    frames of a distance or flush calibration it was refused, "no measurement set ... has a
+    measurement frame and tool point ...; targets in a measurement frame need a point or
+    pose calibration", a program having no targets in a measurement frame."""
+    data, urdf, fj, out = (tmp_path / f for f in ("d.csv", "c.urdf", "f.json", "j.csv"))
+    assert main(["simulate", "ec66", "--kind", kind, "--out", str(data), "--seed", "7",
+                 "-q"]) == 0
+    assert main(["calibrate", "ec66", str(data), *options, "--out", str(urdf),
+                 "--frames-out", str(fj), "-q"]) == 0
+    nominal, calibrated = Robot.load("ec66", tip="flange"), Robot.load(urdf, tip="flange")
+    q = simulation.cube_poses(nominal, 10, default_center("ec66"), 0.3, TOOL,
+                              np.random.default_rng(3))
+    prog = tmp_path / "program.csv"
+    prog.write_text(",".join(nominal.joint_names) + "\n"
+                    + "".join(",".join(map(repr, row.tolist())) + "\n" for row in q))
+    capsys.readouterr()
+    assert main(["compensate", str(urdf), "--program", str(prog), "--nominal", "ec66",
+                 "--frames", str(fj), "--out", str(out), "-q"]) == 0, capsys.readouterr().err
+    table = np.genfromtxt(_uncommented(out), delimiter=",", names=True)
+    q_out = np.column_stack([table[j] for j in nominal.joint_names])
+    assert np.abs(q_out - q).max() > 1e-4  # [rad] the calibration corrected them
+    frames = json.loads(fj.read_text())["sets"][0]["frames"]
+    tool = np.array([frames[f"tool.{c}"] for c in "xyz"])
+    want, got = nominal.tip_poses(q), calibrated.tip_poses(q_out)
+    assert np.abs(want[:, :3, :3] @ tool + want[:, :3, 3]
+                  - got[:, :3, :3] @ tool - got[:, :3, 3]).max() < 1e-12  # [m]
+    assert np.abs(want[:, :3, :3] - got[:, :3, :3]).max() < 1e-12
+
+
 def test_a_nominal_robot_of_another_model_is_refused(tmp_path, capsys):
     """--nominal of another model of the same chain (UR5 for a UR10: same joint names)
     was accepted, most targets "reached" with joint values for the wrong arm; now refused

@@ -437,12 +437,17 @@ class CellFrames:
                                 f"term (chain joints of {robot.name}: "
                                 f"{', '.join(robot.joint_names)})")
 
-    def located(self) -> SetFrames:
+    def located(self, frame: bool = True) -> SetFrames:
         """The first set with a measurement frame and tool point (points, poses) on the
-        file's chain (a set of another chain has its tool point in another tip frame)."""
+        file's chain (a set of another chain has its tool point in another tip frame); with
+        ``frame=False``, failing that, its first set with a tool point (a distance's, a
+        contact's: for a use without measurement frame, the program filter)."""
         chain = (self.base_frame, self.tip_frame)
         for s in self._on(chain):
             if s.as_points() is not None:
+                return s
+        for s in self._on(chain) if not frame else ():
+            if s.has("tool.x", "tool.y", "tool.z"):
                 return s
         elsewhere = dict.fromkeys(" -> ".join(self._chain_of(s)) for s in self.sets
                                   if s.as_points() is not None)

@@ -369,10 +369,12 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
     tilts: tuple[str, ...] = ()
     if frames is not None:
         frames.check_chain(calibrated)
-        if not 0 <= point < len(frames.tools):
+        tools = frames.located(frame=False).tools  # no measurement frame needed: a
+        # distance's or contact's tool point serves too
+        if not 0 <= point < len(tools):
             raise FrameError(f"measured point {point + 1} asked for, {frames.source} has "
-                             f"{len(frames.tools)} tool point(s)")
-        tool = frames.tools[point]
+                             f"{len(tools)} tool point(s)")
+        tool = tools[point]
         frames, tilts = on_urdf(frames, calibrated)  # a contact face's tilt it lacks
     _same_model(nominal, calibrated, tool)
     lines = np.arange(2, len(program) + 2) if lines is None else lines
