@@ -259,7 +259,7 @@ def _deflected(frames: CellFrames | None, robot, sol: IkSolution, lower, upper
     solver's, notes) for frames with compliance terms; (sol, []) without. A held joint
     (lower = upper) is not commanded: it keeps its value."""
     c = _compliances(frames, robot, lower, upper)
-    if c is None:
+    if frames is None or c is None:
         return sol, []
     names = list(robot.joint_names)
     q = np.asarray(sol.q, float)
