@@ -373,6 +373,40 @@ def test_cli_program_filter(cli_cell, tmp_path):
                  "--out", str(tmp / "x.csv")]) == 1  # --program without --nominal
 
 
+@pytest.mark.parametrize("kind, options", [
+    ("distance", []), ("plane", ["--on-plane"]),
+    ("flush", ["--on-plane", "--flush", "--tool-offset", "0", "0", "0.12"])])
+def test_program_filter_takes_the_tool_point_of_a_calibration_without_points(
+        kind, options, tmp_path, capsys):
+    """The program filter needs the tool point of FRAMES.json alone (docs/cell.md): with the
+    frames of a distance or flush calibration it was refused, "no measurement set ... has a
+    measurement frame and tool point ...; targets in a measurement frame need a point or
+    pose calibration", a program having no targets in a measurement frame."""
+    data, urdf, fj, out = (tmp_path / f for f in ("d.csv", "c.urdf", "f.json", "j.csv"))
+    assert main(["simulate", "ec66", "--kind", kind, "--out", str(data), "--seed", "7",
+                 "-q"]) == 0
+    assert main(["calibrate", "ec66", str(data), *options, "--out", str(urdf),
+                 "--frames-out", str(fj), "-q"]) == 0
+    nominal, calibrated = Robot.load("ec66", tip="flange"), Robot.load(urdf, tip="flange")
+    q = simulation.cube_poses(nominal, 10, default_center("ec66"), 0.3, TOOL,
+                              np.random.default_rng(3))
+    prog = tmp_path / "program.csv"
+    prog.write_text(",".join(nominal.joint_names) + "\n"
+                    + "".join(",".join(map(repr, row.tolist())) + "\n" for row in q))
+    capsys.readouterr()
+    assert main(["compensate", str(urdf), "--program", str(prog), "--nominal", "ec66",
+                 "--frames", str(fj), "--out", str(out), "-q"]) == 0, capsys.readouterr().err
+    table = np.genfromtxt(_uncommented(out), delimiter=",", names=True)
+    q_out = np.column_stack([table[j] for j in nominal.joint_names])
+    assert np.abs(q_out - q).max() > 1e-4  # [rad] the calibration corrected them
+    frames = json.loads(fj.read_text())["sets"][0]["frames"]
+    tool = np.array([frames[f"tool.{c}"] for c in "xyz"])
+    want, got = nominal.tip_poses(q), calibrated.tip_poses(q_out)
+    assert np.abs(want[:, :3, :3] @ tool + want[:, :3, 3]
+                  - got[:, :3, :3] @ tool - got[:, :3, 3]).max() < 1e-12  # [m]
+    assert np.abs(want[:, :3, :3] - got[:, :3, :3]).max() < 1e-12
+
+
 def test_a_nominal_robot_of_another_model_is_refused(tmp_path, capsys):
     """--nominal of another model of the same chain (UR5 for a UR10: same joint names)
     was accepted, most targets "reached" with joint values for the wrong arm; now refused
@@ -532,35 +566,3 @@ def _uncommented(path):
     """The lines of a CSV kincal wrote without its provenance (# lines): genfromtxt would
     take a first comment line for the header."""
     return [line for line in open(path) if not line.startswith("#")]
-
-
-@pytest.mark.parametrize("kind", ["distance", "plane"])
-def test_program_filter_takes_the_tool_point_of_distance_and_contact_frames(kind, tmp_path,
-                                                                            capsys):
-    """A program filter uses only FRAMES.json's tool point, which distance and contact
-    calibrations identify too; their frames were refused ("targets in a measurement frame
-    need a point or pose calibration", though a program has no targets)."""
-    data, urdf, fj = tmp_path / "d.csv", tmp_path / "c.urdf", tmp_path / "f.json"
-    assert main(["simulate", "ec66", "--kind", kind, "--poses", "30", "--seed", "3",
-                 "--out", str(data)]) == 0
-    assert main(["calibrate", "ec66", str(data), *(["--on-plane"] if kind == "plane" else []),
-                 "--lambda", "0.1", "--model", "complete", "--out", str(urdf),
-                 "--frames-out", str(fj)]) == 0
-    frames = CellFrames.read(fj)
-    tool = np.array([frames.sets[0].value("tool." + c) for c in "xyz"])
-    assert abs(tool[2] - 0.12) < 0.01  # simulate's tool point, 120 mm down the flange
-    robot, cal = Robot.load("ec66", tip="flange"), Robot.load(urdf, tip="flange")
-    q = np.genfromtxt(_uncommented(data), delimiter=",", names=True)
-    q = np.column_stack([q[j] for j in robot.joint_names])[:10]
-    prog, out = tmp_path / "program.csv", tmp_path / "joints.csv"
-    prog.write_text(",".join(robot.joint_names) + "\n"
-                    + "".join(",".join(map(repr, row)) + "\n" for row in q.tolist()))
-    capsys.readouterr()
-    assert main(["compensate", str(urdf), "--program", str(prog), "--nominal", "ec66",
-                 "--frames", str(fj), "--out", str(out)]) == 0, capsys.readouterr().err
-    table = np.genfromtxt(_uncommented(out), delimiter=",", names=True)
-    q_out = np.column_stack([table[j] for j in robot.joint_names])
-    T_nom, T_cal = robot.tip_poses(q), cal.tip_poses(q_out)
-    np.testing.assert_allclose(T_cal[:, :3, :3] @ tool + T_cal[:, :3, 3],
-                               T_nom[:, :3, :3] @ tool + T_nom[:, :3, 3], atol=1e-8)
-    assert np.abs(q_out - q).max() > 1e-6  # the calibration changed something

@@ -103,6 +103,25 @@ def test_unknown_tip_lists_valid_frames():
     assert "link_6" in exc.value.valid
 
 
+def test_a_link_named_as_a_joint_is_the_frame_meant(rng):
+    """example-robot-data's so100 has a link and a joint both named "gripper": --tip gripper
+    crashed in Pinocchio ("ValueError: Several frames match the filter"), a traceback in
+    every command. The link is the frame meant: its chain ends at wrist_roll, and its pose
+    is Pinocchio's of the link."""
+    import pinocchio as pin
+
+    robot = Robot.load("so100", tip="gripper")
+    assert robot.joint_names == ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex",
+                                 "wrist_roll")
+    q = random_joint_values(robot.geometry, rng, 3)
+    m, d = robot.model, robot.model.createData()
+    link = m.getFrameId("gripper", pin.FrameType.BODY)
+    for qk, T in zip(q, robot.tip_poses(q)):
+        pin.framesForwardKinematics(m, d, robot.configuration(qk))
+        assert np.abs(T - (d.oMf[robot.base_id].inverse() * d.oMf[link]).homogeneous).max() < 1e-12
+    assert Robot.load("so100", tip="jaw", base="gripper").joint_names == ("gripper",)
+
+
 def test_tip_above_base_climbs_the_chain():
     """A tip above the base is a tree path: the joints between them, reversed."""
     robot = Robot.load("ec66", base="link_3", tip="link_1")

@@ -91,8 +91,7 @@ class Robot:
         self.model, self.urdf_text, self.name, self.source = model, urdf_text, name, source
         self.xacro_args = tuple(sorted((str(k), str(v)) for k, v in dict(xacro_args).items()))
         self.base, self.tip = base, tip
-        self._base_id = self._frame_id(base, "base")
-        self._tip_id = self._frame_id(tip, "tip")
+        self._base_id, self._tip_id = self._frame_id(base, "base"), self._frame_id(tip, "tip")
         self._chain, self._reversed = self._find_chain()
         # (base joint frame in B, (n, 4, 4) parent links, tip frame): corrected copies share it
         self._links = (inverse(_mat(model.frames[self._base_id].placement)),
@@ -170,7 +169,9 @@ class Robot:
             raise FrameError(f"unknown {role} frame {name!r} in robot {self.name!r}."
                              + suggest(str(name), valid) + f" Valid frames: {listing(valid)}",
                              valid=tuple(valid))
-        return self.model.getFrameId(name)
+        # a link may share its name with a joint (so100's gripper): the link is meant
+        return min((i for i, f in enumerate(self.model.frames) if f.name == name),
+                   key=lambda i: self.model.frames[i].type != pin.FrameType.BODY)
 
     def _ancestors(self, joint: int) -> list[int]:
         """``joint``, its parent joint, ..., up to the universe (0) included."""
@@ -313,8 +314,7 @@ class Robot:
             raise DataError(f"joint values must be ({len(self._chain)},) for "
                             f"{', '.join(self.joint_names)}, got shape {values.shape}")
         ids = [self.model.getJointId(n) for n in self.off_chain]
-        for j, v in zip(self._chain + ids, list(values)
-                        + list(self.off_chain.values())):
+        for j, v in zip(self._chain + ids, list(values) + list(self.off_chain.values())):
             jm = self.model.joints[j]
             if jm.nq == 2:
                 q[jm.idx_q:jm.idx_q + 2] = (np.cos(v), np.sin(v))

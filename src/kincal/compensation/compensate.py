@@ -26,7 +26,8 @@ program's value) elsewhere is warned about and the held value used; the summary 
 Compliance terms (FRAMES.json, :mod:`kincal.models.compliance`) are compensated: the joint
 values the solver finds are where the joints must *be*; the commanded values are those
 less the deflection the gravity torque causes there (q_cmd + c tau(q_cmd) = q, solved by
-a few fixed-point steps), and the summary says by how much the largest moved.
+a few fixed-point steps), and the summary says by how much the largest moved. A position
+target keeps the orientation the tool has where the seed's command puts it, deflected.
 """
 
 from __future__ import annotations
@@ -113,10 +114,11 @@ class Compensation:
                                 if (~rev).any() else ""))
         gave = self.reached & ~self.orientation_required & (self.orientation_error > 1e-6)
         if gave.any():
-            lines.append(f"  {int(gave.sum())} position targets: the orientation gave way (up to "
+            lines.append(f"  {int(gave.sum())} targets: the orientation gave way (up to "
                          f"{np.degrees(self.orientation_error[gave].max()):.3g} deg from the "
-                         "seed's) to keep the joints within their limits or because the chain "
-                         "has fewer than six joints")
+                         "one kept: a position target's seed's, a program's nominal pose's) to "
+                         "keep the joints within their limits or because fewer than six "
+                         "joints are free (a shorter chain, joints held)")
         lines += [f"  {note}" for note in self.notes]
         return "\n".join(lines)
 
@@ -230,18 +232,36 @@ def _held(robot, frames: CellFrames | None, seeds, source: str, lines):
         "records): the calibration holds there only, the other joints reach the targets"]
 
 
-def _deflected(frames: CellFrames | None, robot, sol: IkSolution, lower, upper
-               ) -> tuple[IkSolution, list[str]]:
-    """(the solution with commanded joint values that the gravity torques deflect onto the
-    solver's, notes) for frames with compliance terms; (sol, []) without. A held joint
-    (lower = upper) is not commanded: it keeps its value."""
+def _compliances(frames: CellFrames | None, robot, lower, upper) -> np.ndarray | None:
+    """(n,) each chain joint's compliance [rad/(N m)] from ``frames`` (0 for a held joint,
+    lower = upper: it is not commanded, it keeps its value); None without compliance terms."""
     if frames is None or not frames.compliance:
-        return sol, []
+        return None
     names = list(robot.joint_names)
     c = np.zeros(len(names))
     for j, v in frames.compliance.items():
         c[names.index(j)] = v
     c[np.asarray(lower) >= np.asarray(upper)] = 0.0
+    return c
+
+
+def _where_it_is(frames: CellFrames | None, robot, commands, lower, upper) -> np.ndarray:
+    """(N, n) where the joints are when ``commands`` are commanded: deflected by the
+    gravity torques under compliance terms (``commands`` unchanged without)."""
+    c = _compliances(frames, robot, lower, upper)
+    commands = np.asarray(commands, float)
+    return commands if c is None else commands + c * robot.gravity_torques(commands)
+
+
+def _deflected(frames: CellFrames | None, robot, sol: IkSolution, lower, upper
+               ) -> tuple[IkSolution, list[str]]:
+    """(the solution with commanded joint values that the gravity torques deflect onto the
+    solver's, notes) for frames with compliance terms; (sol, []) without. A held joint
+    (lower = upper) is not commanded: it keeps its value."""
+    c = _compliances(frames, robot, lower, upper)
+    if frames is None or c is None:
+        return sol, []
+    names = list(robot.joint_names)
     q = np.asarray(sol.q, float)
     cmd = q.copy()
     for _ in range(COMPLIANCE_STEPS):  # a contraction: |c dtau/dq| << 1
@@ -288,7 +308,10 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     R_tool = frames.tool_rotation if point == 0 else np.eye(3)
     t_MB = frames.base[:3]
     positions_B = (targets.positions - t_MB) @ R_MB  # R_MB^T (p - t) row-wise
-    R_seed, p_seed = chain.tool_poses(seeds, tool)
+    # the tool where the robot is when the seeds are commanded: deflected by the gravity
+    # torques under compliance terms (the orientation a position target keeps is the one the
+    # real robot has there, the solver's joints are where the joints must be)
+    R_seed, p_seed = chain.tool_poses(_where_it_is(frames, robot, seeds, lower, upper), tool)
     _check_units(chain, tool, lower, upper, positions_B, targets.positions,
                  p_seed @ R_MB.T + t_MB, targets.source, length_unit)
     if targets.rotations is None:
@@ -333,7 +356,8 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
     program: (N, n) joint values [rad or m]. The compensated values put the tool point
     (of ``frames``, or the tip origin without frames) where the nominal model puts it at
     the program's values, with the tip orientation the nominal model gives (required on
-    six or more joints, kept as closely as possible on fewer). Both robots must have the
+    six or more free joints, kept as closely as possible on fewer: the joints ``frames``
+    records as held stay at their values and do not count). Both robots must have the
     same chain joints, without a mimic joint and its master (refused, as by
     :func:`compensate`).
     """
@@ -358,7 +382,8 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
                                         lines)
     R_nom, p_nom = ChainKinematics.of(nominal.geometry).tool_poses(program, tool)
     g = calibrated.geometry
-    required = np.full(len(program), g.n >= 6)
+    # a full pose needs six joints the solver may move: a held one (lower = upper) is not
+    required = np.full(len(program), int(np.sum(lower < upper)) >= 6)
     sol = solve(ChainKinematics.of(g), tool, p_nom, R_nom, required, program, lower, upper,
                 options)
     notes = ["program filter: each pose of the nominal model at the program's joint values "
