@@ -3,7 +3,7 @@ a floor above its own (the floor order below), no module over 500 lines, and eac
 sub-package's public face in ``__all__``.
 
 Floors, lowest first (a module imports its own floor or lower):
-errors, rotations and the input readers -> models, frames_file, tilts_in_urdf ->
+errors, rotations and the input readers -> models, frames_file, tilts_in_urdf, urdf_origins ->
 measurements, compensation -> robot -> identification -> planning, export -> experiments ->
 cli. Imports inside ``if TYPE_CHECKING:`` are for annotations only and do not count."""
 
@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1] / "src" / "kincal"
 FLOORS = [
     {"kincal", "errors", "lazy", "rotations", "input_files", "descriptions", "xacro_source",
      "urdf_source"},
-    {"models", "frames_file", "tilts_in_urdf"},
+    {"models", "frames_file", "tilts_in_urdf", "urdf_origins"},
     {"measurements", "compensation"},
     {"robot", "collision", "gravity"},
     {"identification"},

@@ -13,11 +13,10 @@ compensate`` and the API read. Version 2 (``"format": "kincal-frames", "version"
      "backlash": {"joint_6": ...}, "convention": "...", "backlash_convention": "..."}
 
 A set may also hold ``"fixed_joints": {"joint": value}`` (``--joint-value``: joints held
-during the measurements [rad or m]); optional and additive, so the version stays 2, as is
-``"tilts_in_urdf"``: the contact-face tilts the URDF written beside carries (the flush sets
-on that tip hold zero tilts), each ``{"tip_frame", "joint", "tool.rx", "tool.ry",
-"origin_written": {"xyz", "rpy"}, "origin_before": {"xyz", "rpy"}}``; a reader given another
-URDF puts them back where it lacks them (:mod:`kincal.tilts_in_urdf`).
+during the measurements [rad or m]); optional and additive, so the version stays 2, as are
+the records of the URDF written beside: ``"tilts_in_urdf"``, the contact-face tilts it
+carries (:mod:`kincal.tilts_in_urdf`), ``"urdf_origins"``, its calibrated joints' origins
+(:mod:`kincal.urdf_origins`), checked by the readers given a URDF.
 
 Frames are in metres and radians, named as the kinds name them (``base.*`` the pose of the
 robot's base frame B in the measurement frame M, ``R_base = rotx(rx) roty(ry) rotz(rz)``;
@@ -47,7 +46,8 @@ import numpy as np
 
 from kincal.errors import DataError, InputFileError, KincalWarning
 from kincal.input_files import json_depth, non_finite_path
-from kincal.rotations import base_rotation, inverse, matrix_to_quaternion, transform
+from kincal.rotations import base_rotation, matrix_to_quaternion, transform
+from kincal import urdf_origins
 from kincal.tilts_in_urdf import TiltInUrdf
 
 AXES6 = ("x", "y", "z", "rx", "ry", "rz")  # a frame's named values: translation, rotation
@@ -167,7 +167,8 @@ class CellFrames:
     backlash: {joint: half the play [rad or m]}; compliance: {joint: deflection per N m of
     gravity torque [rad/(N m)]} (:mod:`kincal.models.compliance`). source: for messages.
     tilts_in_urdf: contact-face tilts the URDF written beside carries
-    (:mod:`kincal.tilts_in_urdf`).
+    (:mod:`kincal.tilts_in_urdf`); urdf_origins: its calibrated joints' origins
+    ((joint, Origin), ...; :mod:`kincal.urdf_origins`).
     """
 
     robot: str
@@ -180,6 +181,7 @@ class CellFrames:
     source: str = "<frames>"
     compliance: dict = field(default_factory=dict)
     tilts_in_urdf: tuple[TiltInUrdf, ...] = ()
+    urdf_origins: tuple = ()
 
     @classmethod
     def of_points(cls, base, tools, *, robot: str = "", base_frame: str = "",
@@ -218,6 +220,8 @@ class CellFrames:
                         key + "_convention": convention}
         if self.tilts_in_urdf:
             out["tilts_in_urdf"] = [t.as_dict() for t in self.tilts_in_urdf]
+        if self.urdf_origins:
+            out["urdf_origins"] = urdf_origins.as_dict(self.urdf_origins)
         try:  # version 1's keys, of the first point or pose set, for readers of version 1
             s = self.located()
         except DataError:  # no measurement frame: the first set's tool point (contacts)
@@ -302,7 +306,8 @@ class CellFrames:
                    str(data.get("base_frame", "")), str(data.get("tip_frame", "")),
                    tuple(str(j) for j in data.get("joints", ())), tuple(sets),
                    _backlash(data), source, _backlash(data, "compliance"),
-                   tuple(map(TiltInUrdf.from_dict, data.get("tilts_in_urdf", []))))
+                   tuple(map(TiltInUrdf.from_dict, data.get("tilts_in_urdf", []))),
+                   urdf_origins.from_dict(data.get("urdf_origins", {})))
 
     @classmethod
     def _from_v1(cls, data: dict, source: str) -> "CellFrames":
@@ -404,7 +409,7 @@ class CellFrames:
         if top:  # its own sets only: another chain's frames would be read on this one
             return replace(self, sets=mine, backlash=backlash, compliance=compliance)
         return CellFrames(self.robot, "", base, tip, mine[0].joints, mine, backlash,
-                          self.source, compliance, self.tilts_in_urdf)
+                          self.source, compliance, self.tilts_in_urdf, self.urdf_origins)
 
     # ------------------------------------------------------------ checks
     def check_chain(self, robot) -> None:
@@ -476,10 +481,6 @@ class CellFrames:
         """(4, 4) pose of the base frame B in the measurement frame M [m]."""
         b = self.base
         return transform(base_rotation(*b[3:]), b[:3])
-
-    @property
-    def T_base_measurement(self) -> np.ndarray:
-        return inverse(self.T_measurement_base)
 
 
 def _fixed(value) -> tuple[tuple[str, float], ...]:

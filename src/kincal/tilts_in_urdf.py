@@ -64,10 +64,10 @@ class Origin:
         return cls(xyz, rpy)
 
     @classmethod
-    def from_dict(cls, value) -> "Origin":
+    def from_dict(cls, value, where: str = "tilts_in_urdf") -> "Origin":
         if not isinstance(value, dict) or not all(
                 isinstance(value.get(k), list) and len(value[k]) == 3 for k in ("xyz", "rpy")):
-            raise TypeError("tilts_in_urdf: an origin is {\"xyz\": [3 numbers], \"rpy\": "
+            raise TypeError(f"{where}: an origin is {{\"xyz\": [3 numbers], \"rpy\": "
                             "[3 numbers]}")
         return cls(*(tuple(float(v) for v in value[k]) for k in ("xyz", "rpy")))
 

@@ -101,6 +101,7 @@ def _compensate(c: Compensate) -> int:
     from kincal.compensation import (CellFrames, HeldJoints, IkOptions, compensate,
                                      filter_program, read_targets)
     from kincal.planning.candidates import read_candidates
+    from kincal.urdf_origins import check_calibrated
 
     options = IkOptions(position_tolerance=c.tolerance_mm * 1e-3)
     # the one FRAMES.json reader, before the robot loads (a broken file is the likelier error)
@@ -115,6 +116,7 @@ def _compensate(c: Compensate) -> int:
     held = HeldJoints()  # the joints the calibration held: their columns may be left out
     if frames is not None:
         frames.check_chain(robot)  # before reading targets: a wrong file is the likelier error
+        check_calibrated(frames, robot)  # and a nominal URDF with the calibrated frames
         held = HeldJoints.of(frames, robot)
     if c.program is not None:
         from kincal.robot import Robot

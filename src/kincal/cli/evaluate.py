@@ -74,10 +74,13 @@ def run(args) -> int:
     notes: tuple[str, ...] = ()
     if frames is not None:
         from kincal.measurements.fixed_joints import HeldJoints
+        from kincal import urdf_origins
         from kincal.tilts_in_urdf import on_urdf
 
         frames.check_chain(robot)
         frames, notes = on_urdf(frames, robot)  # a contact face's tilt this URDF lacks
+        other = urdf_origins.note(frames, robot)  # the nominal URDF with calibrated frames
+        notes += (other,) if other else ()
         held = HeldJoints.of(frames, robot)  # a file without their columns gets them
     sets = e.inputs.read_sets(robot, held)
     backlash = tuple(frames.backlash) if frames is not None else ()

@@ -49,6 +49,7 @@ from kincal.measurements.fixed_joints import HeldJoints, refuse_coupled
 from kincal.measurements.orientation_columns import reading_doubt
 from kincal.rotations import base_rotation
 from kincal.tilts_in_urdf import on_urdf
+from kincal.urdf_origins import check_calibrated
 
 COMPLIANCE_STEPS = 4  # fixed-point steps of the commanded joint values under compliance
 REACH_MARGIN = 1.05  # targets beyond this multiple of the chain's reach cannot be reached
@@ -293,6 +294,7 @@ def compensate(robot, frames: CellFrames, targets: Targets, point: int = 0,
     """
     refuse_coupled(robot, COUPLED)
     frames.check_chain(robot)
+    check_calibrated(frames, robot)  # not the nominal URDF with the calibrated frames
     if not 0 <= point < len(frames.tools):
         raise FrameError(f"measured point {point + 1} asked for, {frames.source} has "
                          f"{len(frames.tools)} tool point(s)")
@@ -369,6 +371,7 @@ def filter_program(nominal, calibrated, program: np.ndarray, frames: CellFrames 
     tilts: tuple[str, ...] = ()
     if frames is not None:
         frames.check_chain(calibrated)
+        check_calibrated(frames, calibrated)
         tools = frames.located(frame=False).tools  # distances and contacts have one too
         if not 0 <= point < len(tools):
             raise FrameError(f"measured point {point + 1} asked for, {frames.source} has "

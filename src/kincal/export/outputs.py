@@ -16,7 +16,7 @@ carries the run's provenance (:mod:`kincal.export.provenance`), the one way it g
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from kincal.errors import (ExportError, ImplausibleResultError, KincalWarning,
@@ -217,8 +217,13 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
     if o.frames is not None:  # made: a URDF text was written, whose folds are recorded
         from kincal.export.contact_fold import folded_frames
 
-        files.append((o.frames, folded_frames(result.frames(), made, text if made else "")
-                      .dumps(provenance=prov.as_dict())))
+        frames = folded_frames(result.frames(), made, text if made else "")
+        if o.urdf is not None:  # the origins written beside, for readers given a URDF
+            from kincal.urdf_origins import joint_origins
+
+            frames = replace(frames, urdf_origins=joint_origins(
+                text, result.error_model.joint_names))
+        files.append((o.frames, frames.dumps(provenance=prov.as_dict())))
     if o.yaml is not None or o.mdh is not None:
         from kincal.export.cell_exports import (kinematics_yaml, mdh_table_csv,
                                                 ur_kinematics_yaml)
