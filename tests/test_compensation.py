@@ -566,3 +566,38 @@ def _uncommented(path):
     """The lines of a CSV kincal wrote without its provenance (# lines): genfromtxt would
     take a first comment line for the header."""
     return [line for line in open(path) if not line.startswith("#")]
+
+
+def test_a_target_missed_near_a_singular_configuration_says_so():
+    """Targets missed near a singular configuration (seeds with the EC66's wrist axes
+    aligned, joint_5 = 0, and a turn the wrist then cannot make) gave only the miss
+    distance; their lines now say where the joints ended. A miss elsewhere (a target 5 mm
+    beyond the stretched arm's tool point, the solver stalling bent) does not say so."""
+    from kincal.rotations import rotx
+
+    robot = Robot.load("ec66", tip="flange")
+    tool = np.array([0.0, 0.0, 0.1])
+    frames = CellFrames.of_points(np.zeros(6), tool[None], base_frame=robot.base,
+                                  tip_frame=robot.tip)
+    chain = ChainKinematics.of(robot.geometry)
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-1.5, 1.5, (60, 6))
+    q[:, 4] = rng.uniform(-1e-3, 1e-3, 60)
+    R, p = chain.tool_poses(q, tool)
+    seeds = q.copy()
+    seeds[:, 4] = 0.0
+    c = compensate(robot, frames, Targets(seeds, p, R @ rotx(0.01), np.arange(2, 62)))
+    missed = ~c.reached
+    assert 5 <= missed.sum() < 40 and c.singular[missed].mean() > 0.9, (missed.sum(),
+                                                                       c.singular[missed])
+    assert not c.singular[c.reached].any()
+    lines = c.failures()
+    assert sum("the joints end near a singular configuration" in line for line in lines) \
+        == c.singular.sum()
+    q0 = np.array([[0.3, 0.0, 0.0, 0.0, 0.0, 0.0]])  # stretched: 5 mm further out
+    _, p0 = chain.tool_poses(q0, tool)
+    out = p0[0] * [1.0, 1.0, 0.0]
+    p0[0] += 0.005 * out / np.linalg.norm(out)
+    c = compensate(robot, frames, Targets(q0 + 0.01, p0, None, np.array([2])))
+    assert not c.reached[0] and c.position_error[0] > 1e-3 and not c.singular[0]
+    assert "singular" not in c.failures()[0]

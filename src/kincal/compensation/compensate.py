@@ -65,7 +65,7 @@ class Compensation:
     tool frame's orientation (its tip's turned by the tool's) from the wanted one;
     orientation_required: (N,) whether that orientation had to be met (a full pose) or was
     only kept where possible. reached: (N,) within the tolerances. at_limit: (N, n). notes:
-    what a user should know.
+    what a user should know. singular: (N,) not reached, near a singular configuration.
     """
 
     joint_names: tuple[str, ...]
@@ -80,6 +80,7 @@ class Compensation:
     at_limit: np.ndarray
     source: str = "<targets>"
     notes: tuple[str, ...] = ()
+    singular: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.joint_values)
@@ -94,6 +95,10 @@ class Compensation:
             limits = [self.joint_names[j] for j in np.flatnonzero(self.at_limit[k])]
             if limits:
                 why.append(f"{', '.join(limits)} at a joint limit")
+            if self.singular is not None and self.singular[k]:
+                why.append("the joints end near a singular configuration (the tool cannot "
+                           "move along some direction there: a stretched or folded arm, "
+                           "aligned wrist axes; another seed, on another branch, may reach it)")
             out.append(f"line {self.lines[k]}: " + ", ".join(why))
         return out
 
@@ -194,7 +199,7 @@ def _solution(chain_robot, sol: IkSolution, seeds, lines, required, source, note
     return Compensation(tuple(g.joint_names), tuple(g.kinds), np.array(seeds, float), sol.q,
                         np.asarray(lines), sol.position_error, sol.orientation_error,
                         np.asarray(required, bool), sol.reached, sol.at_limit, source,
-                        tuple(notes))
+                        tuple(notes), sol.singular)
 
 
 def _backlash_notes(frames: CellFrames | None, robot) -> list[str]:

@@ -33,6 +33,7 @@ from kincal.rotations import rotation_log
 
 STALL_GAIN = 0.9  # an error counts as progress below this fraction of the best so far
 STALL_NET = 0.1  # net move over the window / path length below which the joints wander
+SINGULAR = 1e-3  # smallest / largest singular value of the task below which it is singular
 
 
 # [m] accepted position tolerances: below 1 nm the iterations (stopped at a thousandth of
@@ -89,6 +90,8 @@ class IkSolution:
     from its target [m]. orientation_error: (N,) angle between the tip orientation and
     its target [rad]. reached: (N,) position within tolerance, and the orientation too
     where it was required. at_limit: (N, n) joints sitting on a limit. iterations: (N,).
+    singular: (N,) a target not reached whose joints end near a singular configuration
+    (:func:`_singular`; False for the targets reached).
     """
 
     q: np.ndarray
@@ -97,6 +100,7 @@ class IkSolution:
     reached: np.ndarray
     at_limit: np.ndarray
     iterations: np.ndarray
+    singular: np.ndarray
 
 
 def _step(Jp, Jo, e_p, e_o, damping) -> np.ndarray:
@@ -197,4 +201,28 @@ def solve(chain: ChainKinematics, tool, positions: np.ndarray, rotations: np.nda
         ~np.asarray(required, bool) | (rot_err <= options.orientation_tolerance))
     span = np.maximum(np.where(np.isfinite(upper - lower), upper - lower, 1.0), 1e-12)
     at_limit = ((q - lower <= 1e-9 * span) | (upper - q <= 1e-9 * span)) & moving
-    return IkSolution(q, pos_err, rot_err, reached, at_limit, iterations)
+    return IkSolution(q, pos_err, rot_err, reached, at_limit, iterations,
+                      _singular(chain, tool, q, ~reached, np.asarray(required, bool), moving))
+
+
+def _singular(chain, tool, q, rows, required, moving) -> np.ndarray:
+    """(N,) whether each of ``rows`` ends where the task's Jacobian (the free joints'
+    columns: the tool point's rows, and the orientation's where required, scaled to the
+    position's) has a smallest singular value under :data:`SINGULAR` times its largest:
+    the tool cannot move along some direction there (a stretched or folded arm, aligned
+    wrist axes)."""
+    out = np.zeros(len(q), bool)
+    todo = np.flatnonzero(rows)
+    for s in range(0, len(todo), BLOCK):
+        k = todo[s:s + BLOCK]
+        _, _, Jp, Jo = chain.evaluate(q[k], tool)
+        Jp, Jo = Jp[:, :, moving], Jo[:, :, moving]
+        if Jp.shape[2] == 0:
+            continue
+        scale = np.linalg.norm(Jp, axis=(1, 2)) / np.maximum(
+            np.linalg.norm(Jo, axis=(1, 2)), 1e-300)
+        J = np.concatenate([Jp, Jo * (scale * required[k])[:, None, None]], axis=1)
+        sv = np.linalg.svd(J, compute_uv=False)  # (K, min(6, n)), largest first
+        task = np.minimum(np.where(required[k], 6, 3), Jp.shape[2])  # directions it needs
+        out[k] = sv[np.arange(len(k)), task - 1] < SINGULAR * sv[:, 0]
+    return out
