@@ -124,6 +124,22 @@ def read_urdf_text(path, xacro_args=None) -> str:
     return text
 
 
+def urdf_tree(text: str):
+    """The URDF ``text`` (checked) as an ElementTree element, its element names as urdfdom
+    reads them: a default namespace (``<robot xmlns="http://drake.mit.edu">``, which Drake's
+    URDFs declare and urdfdom ignores) is taken off, so that ``findall("joint")`` finds the
+    joints there too. Raises ``xml.etree.ElementTree.ParseError`` for text that is not XML."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(text.encode("utf-8"))
+    if root.tag.startswith("{"):  # "{uri}robot": the root is <robot>, so uri is the default
+        prefix = root.tag[:root.tag.index("}") + 1]
+        for e in root.iter():
+            if isinstance(e.tag, str) and e.tag.startswith(prefix):
+                e.tag = e.tag[len(prefix):]
+    return root
+
+
 def check_urdf_text(text: str, source: str = "<string>") -> None:
     """Raise :class:`UrdfError` unless ``text`` is plain, safe URDF XML.
 
