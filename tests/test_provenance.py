@@ -474,3 +474,29 @@ def test_calibrated_urdf_with_a_byte_order_mark_loads(tmp_path):
     assert data.startswith(b'\xef\xbb\xbf<?xml version="1.0" encoding="utf-8"?>\n<!-- made by')
     ET.fromstring(data)
     assert Robot.load(tmp_path / "c.urdf", tip="flange").joint_names[0] == "joint_1"
+
+
+def test_a_data_file_name_of_undecoded_bytes_and_control_characters(tmp_path):
+    """A data file named in Latin-1 on a UTF-8 system (its byte 0xe4 held by Python as a lone
+    surrogate) crashed every writer of its name (UnicodeEncodeError); a control character
+    in it went into the URDF's comment, which no XML parser then read."""
+    import os
+
+    from kincal.robot import Robot
+
+    data = tmp_path / os.fsdecode(b"m\xe4rz\x01.csv")
+    assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--seed", "5",
+                 "--quiet"]) == 0
+    out = {k: tmp_path / f"c.{k}" for k in ("urdf", "html", "csv")}
+    assert main(["calibrate", str(EC66), str(data), "--tip", "flange", "--lambda", "0.01",
+                 "--out", str(out["urdf"]), "--html", str(out["html"]),
+                 "--residuals-out", str(out["csv"]), "--quiet"]) == 0
+    shown = "m\\xe4rz\\x01.csv"
+    text = out["urdf"].read_text(encoding="utf-8")
+    assert f"data: {tmp_path}/{shown} sha256 {_sha(data)}" in text
+    ET.fromstring(text.encode("utf-8"))
+    assert Robot.load(out["urdf"], tip="flange").joint_names[-1] == "joint_6"
+    assert shown in out["html"].read_text(encoding="utf-8")
+    rows = [r for r in out["csv"].read_text(encoding="utf-8").splitlines()
+            if not r.startswith("#")]
+    assert rows[1].split(",")[2] == f"{tmp_path}/{shown}"

@@ -36,10 +36,31 @@ class FileHash:
     def of(cls, path) -> "FileHash":
         p = str(path)
         if p.startswith("<") or not Path(p).is_file():
-            return cls(p, None)
+            return cls(printable(p), None)
         from kincal.input_files import file_sha256
 
-        return cls(p, file_sha256(p))
+        return cls(printable(p), file_sha256(p))
+
+
+def printable(text: str) -> str:
+    """``text`` as every file kincal writes can hold it (UTF-8, XML 1.0): bytes of a file
+    name that did not decode (Python holds them as lone surrogates, U+DC80-U+DCFF) written
+    ``\\xNN``, other lone surrogates ``\\uNNNN``, control characters but tab and line ends
+    ``\\xNN`` (an XML comment cannot hold them; a UTF-8 file cannot hold a surrogate)."""
+    if text.isprintable():
+        return text
+    out = []
+    for c in text:
+        n = ord(c)
+        if 0xDC80 <= n <= 0xDCFF:
+            out.append(f"\\x{n - 0xDC00:02x}")
+        elif 0xD800 <= n <= 0xDFFF or n in (0xFFFE, 0xFFFF):
+            out.append(f"\\u{n:04x}")
+        elif n < 0x20 and c not in "\t\n\r" or n == 0x7F:
+            out.append(f"\\x{n:02x}")
+        else:
+            out.append(c)
+    return "".join(out)
 
 
 @dataclass(frozen=True)
@@ -102,6 +123,8 @@ class Provenance:
             import shlex
 
             command = shlex.join(str(a) for a in command)
+        if command is not None:
+            command = printable(command)
         files = tuple(FileHash.of(p) for p in data if p is not None)
         if robot is None:
             robot_file, text_sha = FileHash("(no robot)", None), "(no robot)"
@@ -111,8 +134,9 @@ class Provenance:
         if xacro_args is None:
             xacro_args = dict(getattr(robot, "xacro_args", ()))
         return cls(__version__, utc_now(), command, robot_file, text_sha,
-                   tuple(sorted((str(k), str(v)) for k, v in xacro_args.items())),
-                   files, verdict, gate)
+                   tuple(sorted((printable(str(k)), printable(str(v)))
+                                for k, v in xacro_args.items())),
+                   files, verdict, printable(gate))
 
     def _stamped_pieces(self, kind: str, pieces):
         """The pieces of a text file, its first stamped (it holds the title or header)."""
