@@ -40,7 +40,7 @@ nav a { margin-right: 1em; } .muted { color: #777; }
 
 
 def _e(text) -> str:
-    from kincal.export.provenance import printable  # a file name's undecoded bytes too
+    from kincal.export.writer import printable  # a file name's undecoded bytes too
 
     return html.escape(printable(str(text)), quote=True)
 

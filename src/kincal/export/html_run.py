@@ -8,7 +8,7 @@ import math
 
 
 def _e(text) -> str:
-    from kincal.export.provenance import printable  # a file name's undecoded bytes too
+    from kincal.export.writer import printable  # a file name's undecoded bytes too
 
     return html.escape(printable(str(text)), quote=True)
 

@@ -22,6 +22,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from kincal.errors import ExportError
+from kincal.export.writer import printable
 
 
 @dataclass(frozen=True)
@@ -40,27 +41,6 @@ class FileHash:
         from kincal.input_files import file_sha256
 
         return cls(printable(p), file_sha256(p))
-
-
-def printable(text: str) -> str:
-    """``text`` as every file kincal writes can hold it (UTF-8, XML 1.0): bytes of a file
-    name that did not decode (Python holds them as lone surrogates, U+DC80-U+DCFF) written
-    ``\\xNN``, other lone surrogates ``\\uNNNN``, control characters but tab and line ends
-    ``\\xNN`` (an XML comment cannot hold them; a UTF-8 file cannot hold a surrogate)."""
-    if text.isprintable():
-        return text
-    out = []
-    for c in text:
-        n = ord(c)
-        if 0xDC80 <= n <= 0xDCFF:
-            out.append(f"\\x{n - 0xDC00:02x}")
-        elif 0xD800 <= n <= 0xDFFF or n in (0xFFFE, 0xFFFF):
-            out.append(f"\\u{n:04x}")
-        elif n < 0x20 and c not in "\t\n\r" or n == 0x7F:
-            out.append(f"\\x{n:02x}")
-        else:
-            out.append(c)
-    return "".join(out)
 
 
 @dataclass(frozen=True)
