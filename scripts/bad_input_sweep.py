@@ -22,6 +22,7 @@ import argparse
 import contextlib
 import io
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -119,6 +120,11 @@ def urdf_cases(good: str):
             'lower="-', 'lower="9', 1)
         yield f"urdf limit not a number joint_{k + 1}", head + joint + tail.replace(
             'upper="', 'upper="x', 1)
+        # the audit a22's: numbers whose squares overflow (a traceback in the fit before)
+        yield f"urdf axis overflows joint_{k + 1}", head + joint + tail.replace(
+            '<axis xyz="0 0 1"/>', '<axis xyz="1e200 0 1e200"/>', 1)
+        yield f"urdf origin 1e160 m joint_{k + 1}", head + joint + re.sub(
+            r'<origin xyz="\S+', '<origin xyz="1e160', tail, count=1)
     yield "urdf missing parent link", good.replace('<parent link="base_link"/>',
                                                    '<parent link="nolink"/>', 1)
     yield "urdf duplicate link", good.replace("</robot>", '<link name="link_1"/></robot>')

@@ -180,3 +180,24 @@ def test_plan_pivot_not_finite_is_refused(tmp_path, capsys):
                      "--random", "200", "--kind", "distance", "--pivot", "0", "0", "nan"],
                     tmp_path, capsys)
     assert "--pivot must be a finite number" in line
+
+
+@pytest.mark.parametrize("where, value, said", [
+    ("axis", '<axis xyz="1e200 0 1e200"/>', "axis xyz='1e200 0 1e200' is too long to normalise"),
+    ("origin", '<origin xyz="1e160 0 0" rpy="0 0 0"/>',
+     "origin xyz='1e160 0 0' lies more than 1e+06 m from its parent link")])
+def test_urdf_numbers_whose_squares_overflow_are_refused(made, tmp_path, capsys, where, value,
+                                                         said):
+    """An axis or an origin beyond 1e154 made the kinematics overflow into NaN: a traceback
+    (numpy's LinAlgError 'SVD did not converge') instead of one line (the audit a22)."""
+    import re
+
+    from kincal.robot import Robot
+
+    text = Robot.load("ec66").urdf_text
+    head, tail = text.split('<joint name="joint_4"', 1)
+    tail = re.sub(rf"<{where} [^>]*/>", value, tail, count=1)
+    (tmp_path / "r.urdf").write_text(head + '<joint name="joint_4"' + tail)
+    line = _refused(["calibrate", str(tmp_path / "r.urdf"), str(made / "point.csv"), "--tip",
+                     "flange", "--out", str(tmp_path / "c.urdf")], tmp_path, capsys)
+    assert "r.urdf:" in line and "joint 'joint_4': " + said in line

@@ -244,3 +244,33 @@ def test_a_pose_file_on_a_point_calibration_is_refused_and_its_positions_evaluat
     got = json.loads(report.read_text())["errors"]
     assert got["mean_mm"] == pytest.approx(np.linalg.norm(p - exact, axis=1).mean() * 1e3,
                                            abs=1e-9)
+
+
+def test_added_tool_frame_of_a_pose_calibration_has_the_tool_orientation():
+    """--add-frames wrote a pose set's kincal_tool_point with the tip's axes: a tool frame
+    turned by TOOL's 0.2, -0.1, 0.4 rad (26 deg) in FRAMES.json's T_tip_tool came out of the
+    URDF 26 deg off the orientations measured, the positions right."""
+    from kincal.export.outputs import corrected_urdf
+
+    robot = Robot.load("ec66")
+    q, p, R, _ = planted(robot, n=30, seed=1)
+    R = predicted(robot, q, np.r_[BASE, TOOL])[1]  # orientations without planted errors
+    data = PoseData(joint_names=robot.joint_names, joint_values=q, positions=p, rotations=R,
+                    orientation_sigma_deg=1.0)
+    result = CalibrationProblem(robot, [data], CalibrationOptions(lam=0.1)).solve()
+    text = corrected_urdf(result, add_frames=True)[0]
+    import pinocchio as pin
+
+    model = pin.buildModelFromXML(text)
+    seen = Robot(model, text, "ec66", "kincal_measurement_frame", "kincal_tool_point")
+    T = seen.tip_poses(q)
+    fit_p, fit_R = predicted(result.corrected, q, result.sets[0].frames)  # the calibration's
+    assert angles_deg(R, T[:, :3, :3]).max() < 0.5  # the orientations measured [deg]
+    assert angles_deg(fit_R, T[:, :3, :3]).max() < 1e-9  # as the calibration predicts them
+    assert np.abs(T[:, :3, 3] - fit_p).max() < 1e-12  # and the positions [m]
+    frames = result.frames().sets[0].derived()["T_tip_tool"]
+    d = model.createData()
+    pin.framesForwardKinematics(model, d, pin.neutral(model))
+    at_tip = (d.oMf[model.getFrameId(result.robot.tip)].actInv(
+        d.oMf[model.getFrameId("kincal_tool_point")])).homogeneous
+    assert np.abs(at_tip - np.array(frames)).max() < 1e-12  # FRAMES.json's tool frame

@@ -427,3 +427,76 @@ def test_report_pieces_are_the_report_text_byte_for_byte(tmp_path, capsys):
     content["extra"]["array"] = [[0.0, None], [None, 1.5]]
     assert any(isinstance(v, np.ndarray) for v in tree["residuals"].values())
     assert "".join(dump_pieces(tree, size=256)) == dumps(content)
+
+
+PROLOGS = {  # how URDF files begin, each of them read by urdfdom and Python's XML parser
+    "byte-order mark": '\ufeff<?xml version="1.0" encoding="utf-8"?>\n<!-- mine -->\n',
+    "declaration over two lines": '<?xml version="1.0"\n      encoding="utf-8"?>\n',
+    "processing instruction": '<?xml version="1.0"?>\n<?xml-model href="urdf.xsd"?>\n',
+    "comment on the declaration's line": '<?xml version="1.0"?><!-- my\n robot -->\n',
+    "root on the declaration's line": '<?xml version="1.0"?><robot name="r"\n>'}
+
+
+@pytest.mark.parametrize("case", sorted(PROLOGS))
+def test_provenance_comment_leaves_the_urdf_readable(case):
+    """The comment went after the first line: inside a two-line declaration or a comment
+    begun there, before a processing instruction (urdfdom's TinyXML-2 refuses the file),
+    before a byte-order mark (which then stood in the middle of the file)."""
+    import pinocchio as pin
+
+    prov = Provenance(__version__, STAMP, "kincal calibrate a --out b", FileHash("r.urdf", "ab"),
+                      "cd", (), (FileHash("d.csv", "ef"),), "plausible", "no finding")
+    body = ('<link name="a"/><joint name="j" type="revolute"><parent link="a"/>'
+            '<child link="b"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" '
+            'velocity="1"/></joint><link name="b"/></robot>\n')
+    text = PROLOGS[case] + ("" if case.startswith("root") else '<robot name="r">') + body
+    pin.buildModelFromXML(text)  # the original is read
+    out = stamp_urdf(text, prov)
+    assert out.count("<!-- made by kincal") == 1
+    assert out.replace(prov.xml_comment() + "\n", "") == text  # nothing else changed
+    assert ET.fromstring(out.encode("utf-8")).get("name") == "r"
+    assert pin.buildModelFromXML(out).names[1] == "j"
+    assert out.startswith(PROLOGS[case].split("<!--")[0].split("<robot")[0].rstrip("\n"))
+
+
+def test_calibrated_urdf_with_a_byte_order_mark_loads(tmp_path):
+    """A URDF saved with a byte-order mark (Windows editors) was written with the comment
+    before the mark and the XML declaration: not XML, refused by every URDF reader."""
+    from kincal.robot import Robot
+
+    urdf = tmp_path / "bom.urdf"
+    urdf.write_text(EC66.read_text(encoding="utf-8"), encoding="utf-8-sig")
+    assert main(["simulate", "ec66", "--out", str(tmp_path / "d.csv"), "--poses", "30",
+                 "--seed", "5", "--quiet"]) == 0
+    assert main(["calibrate", str(urdf), str(tmp_path / "d.csv"), "--tip", "flange",
+                 "--lambda", "0.01", "--out", str(tmp_path / "c.urdf"), "--quiet"]) == 0
+    data = (tmp_path / "c.urdf").read_bytes()
+    assert data.startswith(b'\xef\xbb\xbf<?xml version="1.0" encoding="utf-8"?>\n<!-- made by')
+    ET.fromstring(data)
+    assert Robot.load(tmp_path / "c.urdf", tip="flange").joint_names[0] == "joint_1"
+
+
+def test_a_data_file_name_of_undecoded_bytes_and_control_characters(tmp_path):
+    """A data file named in Latin-1 on a UTF-8 system (its byte 0xe4 held by Python as a lone
+    surrogate) crashed every writer of its name (UnicodeEncodeError); a control character
+    in it went into the URDF's comment, which no XML parser then read."""
+    import os
+
+    from kincal.robot import Robot
+
+    data = tmp_path / os.fsdecode(b"m\xe4rz\x01.csv")
+    assert main(["simulate", "ec66", "--out", str(data), "--poses", "30", "--seed", "5",
+                 "--quiet"]) == 0
+    out = {k: tmp_path / f"c.{k}" for k in ("urdf", "html", "csv")}
+    assert main(["calibrate", str(EC66), str(data), "--tip", "flange", "--lambda", "0.01",
+                 "--out", str(out["urdf"]), "--html", str(out["html"]),
+                 "--residuals-out", str(out["csv"]), "--quiet"]) == 0
+    shown = "m\\xe4rz\\x01.csv"
+    text = out["urdf"].read_text(encoding="utf-8")
+    assert f"data: {tmp_path}/{shown} sha256 {_sha(data)}" in text
+    ET.fromstring(text.encode("utf-8"))
+    assert Robot.load(out["urdf"], tip="flange").joint_names[-1] == "joint_6"
+    assert shown in out["html"].read_text(encoding="utf-8")
+    rows = [r for r in out["csv"].read_text(encoding="utf-8").splitlines()
+            if not r.startswith("#")]
+    assert rows[1].split(",")[2] == f"{tmp_path}/{shown}"

@@ -158,3 +158,30 @@ def test_an_origin_added_to_a_joint_that_had_none_passes(tmp_path, rng):
     q = random_joint_values(robot.geometry, rng, 50)
     assert np.abs(Robot.load(out, tip="flange").tip_poses(q)
                   - result.corrected.tip_poses(q)).max() < 1e-12
+
+
+def test_a_urdf_with_a_default_namespace_is_calibrated_and_its_mimics_read(tmp_path):
+    """Drake's URDFs declare xmlns="http://drake.mit.edu" on <robot>, which urdfdom ignores:
+    the read-back check saw '{http://drake.mit.edu}joint', compared the chain's joints as
+    other elements and refused every calibration ("please report this"); the mimic tags of
+    such a file were not seen."""
+    text = Robot.load("ec66").urdf_text
+    ns = text.replace('<robot name="ec66"', '<robot name="ec66" xmlns="http://drake.mit.edu"')
+    assert ns != text
+    (tmp_path / "plain.urdf").write_text(text)
+    (tmp_path / "ns.urdf").write_text(ns)
+    assert main(["simulate", "ec66", "--poses", "30", "--out", str(tmp_path / "d.csv"),
+                 "--seed", "3", "--quiet"]) == 0
+    for name in ("plain", "ns"):
+        assert main(["calibrate", str(tmp_path / f"{name}.urdf"), str(tmp_path / "d.csv"),
+                     "--tip", "flange", "--lambda", "0.01", "--model", "complete",
+                     "--out", str(tmp_path / f"{name}_cal.urdf"), "--quiet"]) == 0
+    origins = [re.findall(r"<origin [^>]*>", (tmp_path / f"{name}_cal.urdf").read_text())
+               for name in ("plain", "ns")]
+    assert len(origins[0]) == 14 and origins[0] == origins[1]  # the same corrected origins
+    mimic = ns.replace('<joint name="joint_6" type="revolute">',
+                       '<joint name="joint_6" type="revolute"><mimic joint="joint_5" '
+                       'multiplier="2" offset="0.5"/>')
+    (tmp_path / "mimic.urdf").write_text(mimic)
+    assert Robot.load(tmp_path / "mimic.urdf", tip="flange").mimics == {
+        "joint_6": ("joint_5", 2.0, 0.5)}

@@ -110,10 +110,10 @@ class Robot:
         value is multiplier * master + offset. Pinocchio reads such a joint as an independent
         one; :mod:`kincal.measurements.fixed_joints` gives it its value when a file has no
         column for it, and warns when its column says otherwise."""
-        import xml.etree.ElementTree as ET
+        from kincal.urdf_source import urdf_tree
 
         out = {}
-        for joint in ET.fromstring(self.urdf_text.encode("utf-8")).findall("joint"):
+        for joint in urdf_tree(self.urdf_text).findall("joint"):
             m = joint.find("mimic")
             if m is not None and m.get("joint"):
                 try:

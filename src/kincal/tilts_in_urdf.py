@@ -90,7 +90,9 @@ class Origin:
 def joint_origin(urdf_text: str, joint: str) -> Origin | None:
     """The origin of the URDF joint ``joint`` as ``urdf_text`` writes it; None without such
     a joint or with an origin of other than 3 + 3 numbers."""
-    for e in ET.fromstring(urdf_text.encode("utf-8")).findall("joint"):
+    from kincal.urdf_source import urdf_tree
+
+    for e in urdf_tree(urdf_text).findall("joint"):
         if e.get("name") == joint:
             try:
                 return Origin.of(e)

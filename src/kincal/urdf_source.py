@@ -26,6 +26,10 @@ from kincal.input_files import check_regular_file
 MAX_URDF_BYTES = 20 * 1024 * 1024
 """Largest URDF accepted [bytes]; real robots are well under 1 MB."""
 
+MAX_ORIGIN_M = 1e6
+"""Farthest a joint origin may lie from its parent link [m]: a typo (1e300 for 1e-3) beyond
+it made the kinematics overflow into NaN and a traceback; a robot is far smaller."""
+
 MAX_URDF_LINKS = 2000
 """Most links accepted. Real robots have tens to a few hundred; Pinocchio's URDF parser
 recurses once per level of the tree and crashes the process (a segmentation fault, not
@@ -124,6 +128,22 @@ def read_urdf_text(path, xacro_args=None) -> str:
     return text
 
 
+def urdf_tree(text: str):
+    """The URDF ``text`` (checked) as an ElementTree element, its element names as urdfdom
+    reads them: a default namespace (``<robot xmlns="http://drake.mit.edu">``, which Drake's
+    URDFs declare and urdfdom ignores) is taken off, so that ``findall("joint")`` finds the
+    joints there too. Raises ``xml.etree.ElementTree.ParseError`` for text that is not XML."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(text.encode("utf-8"))
+    if root.tag.startswith("{"):  # "{uri}robot": the root is <robot>, so uri is the default
+        prefix = root.tag[:root.tag.index("}") + 1]
+        for e in root.iter():
+            if isinstance(e.tag, str) and e.tag.startswith(prefix):
+                e.tag = e.tag[len(prefix):]
+    return root
+
+
 def check_urdf_text(text: str, source: str = "<string>") -> None:
     """Raise :class:`UrdfError` unless ``text`` is plain, safe URDF XML.
 
@@ -197,6 +217,14 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
             if math.hypot(*values) < 1e-12:
                 fail(f"joint {joint[0]!r}: axis xyz={attrs.get('xyz')!r} has zero length; a joint "
                      "axis needs a direction")
+            if not math.isfinite(math.fsum(v * v for v in values)):  # Pinocchio normalises it
+                fail(f"joint {joint[0]!r}: axis xyz={attrs.get('xyz')!r} is too long to "
+                     "normalise; a joint axis is a direction, such as 0 0 1")
+        elif name == "origin" and joint is not None:
+            xyz = _floats(attrs.get("xyz", "0 0 0"))
+            if xyz is not None and any(abs(v) > MAX_ORIGIN_M for v in xyz):
+                fail(f"joint {joint[0]!r}: origin xyz={attrs.get('xyz')!r} lies more than "
+                     f"{MAX_ORIGIN_M:g} m from its parent link; expected metres")
         elif name == "limit" and joint is not None and joint[1] in ("revolute", "prismatic"):
             lo, hi = _floats(attrs.get("lower", "0")), _floats(attrs.get("upper", "0"))
             if lo is None or hi is None or len(lo) != 1 or len(hi) != 1:

@@ -74,7 +74,9 @@ class Fold:
 def _joints_by_child(robot) -> dict:
     """{child link: its URDF joint element}, read from the URDF text (the tree as written),
     not the model in memory."""
-    root = ET.fromstring(robot.urdf_text.encode("utf-8"))
+    from kincal.urdf_source import urdf_tree
+
+    root = urdf_tree(robot.urdf_text)
     return {child.get("link", ""): e for e in root.findall("joint")
             if (child := e.find("child")) is not None}
 

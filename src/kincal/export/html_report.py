@@ -40,7 +40,9 @@ nav a { margin-right: 1em; } .muted { color: #777; }
 
 
 def _e(text) -> str:
-    return html.escape(str(text), quote=True)
+    from kincal.export.writer import printable  # a file name's undecoded bytes too
+
+    return html.escape(printable(str(text)), quote=True)
 
 
 def _img(png: bytes, alt: str) -> str:

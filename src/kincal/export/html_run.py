@@ -8,7 +8,9 @@ import math
 
 
 def _e(text) -> str:
-    return html.escape(str(text), quote=True)
+    from kincal.export.writer import printable  # a file name's undecoded bytes too
+
+    return html.escape(printable(str(text)), quote=True)
 
 
 def _n(v, fmt: str = ".4g") -> str:

@@ -211,9 +211,10 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
             "ur_description's kinematics file (--yaml-format ur) has no place for it, and the "
             "URDF written beside describes the same robot" if o.yaml is not None
             and o.yaml_format == "ur" else None))
-        check_readback(result, text, o.add_frames, made)  # only the origins changed, and
+        stamped = stamp_urdf(text, prov)  # the text as written, provenance comment and all:
+        check_readback(result, stamped, o.add_frames, made)  # only the origins changed, and
         # to the calibrated model as a URDF reader reads them
-        files.append((o.urdf, stamp_urdf(text, prov)))
+        files.append((o.urdf, stamped))
     if o.frames is not None:  # made: a URDF text was written, whose folds are recorded
         from kincal.export.contact_fold import folded_frames
 

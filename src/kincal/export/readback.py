@@ -32,6 +32,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from kincal.errors import ExportError
+from kincal.urdf_source import urdf_tree
 
 TOLERANCE_M = 1e-9  # [m] largest position difference accepted (and 1e-9 in rotation)
 ORIGIN_TOLERANCE = 1e-12  # [m, 1] written origin against the corrected placement
@@ -107,7 +108,8 @@ def written_origins(original: str, text: str, movable, add_frames: bool
     ``add_frames``, fixed ``kincal_*`` frames added); ExportError naming the first other
     difference."""
     try:
-        old, new = ET.fromstring(original.encode("utf-8")), ET.fromstring(text.encode("utf-8"))
+        # element names as urdfdom reads them (a default namespace taken off)
+        old, new = urdf_tree(original), urdf_tree(text)
     except ET.ParseError as exc:
         raise _refuse(f"is not well-formed XML ({exc})") from None
     if old.tag != new.tag or old.attrib != new.attrib:

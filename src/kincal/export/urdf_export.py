@@ -353,8 +353,8 @@ def add_frames_of(result, text: str) -> str:
     """``text`` plus fixed frames for each measurement set of ``result`` that has them:
     ``kincal_measurement_frame`` (child of the set's base link, the pose of the measurement
     frame M in the base frame) and ``kincal_tool_point`` (child of the set's tip link, at the
-    tool point; ``kincal_tool_point_<k>`` for point k >= 2); sets k >= 2 add ``_set<k>`` to
-    the names."""
+    tool point, turned as the tool frame a pose set identified; ``kincal_tool_point_<k>`` for
+    point k >= 2); sets k >= 2 add ``_set<k>`` to the names."""
     from kincal.rotations import base_rotation, inverse, transform
 
     robot = result.robot
@@ -369,11 +369,16 @@ def add_frames_of(result, text: str) -> str:
             T_MB = transform(base_rotation(*b[3:]), b[:3])  # base frame expressed in M
             name = "kincal_measurement_frame" + suffix
             text = add_fixed_frame(text, base_link, name, name + "_joint", T_bl @ inverse(T_MB))
+        # a pose set measured the tool frame's orientation too: its frame is FRAMES.json's
+        # T_tip_tool, not the tip's axes at the tool point (a flush face's tilt is not, see
+        # kincal.export.contact_fold)
+        R_tool = (base_rotation(*(s.frame(f"tool.{c}") if f"tool.{c}" in names else 0.0
+                                  for c in ("rx", "ry", "rz"))) if s.kind == "pose" else None)
         k = 1
         while all(("tool." if k == 1 else f"tool{k}.") + c in names for c in "xyz"):
             t = [s.frame(("tool." if k == 1 else f"tool{k}.") + c) for c in "xyz"]
             name = "kincal_tool_point" + ("" if k == 1 else f"_{k}") + suffix
             text = add_fixed_frame(text, tip_link, name, name + "_joint",
-                                   T_tl @ transform(None, t))
+                                   T_tl @ transform(R_tool if k == 1 else None, t))
             k += 1
     return text

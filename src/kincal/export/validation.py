@@ -141,6 +141,8 @@ def residuals_csv(result, validations=(), header: str = "", rows_per_piece: int 
     ``#`` lines put first. Yields the text in pieces of ``rows_per_piece`` rows (the
     header lines first), made as the writer takes them: at many poses the file is never
     held whole, nor a Python string per row (0.4 KiB per pose at 300,000)."""
+    from kincal.export.writer import printable  # a file name's undecoded bytes too
+
     parts = [("training", k + 1, s.source, s.kind, s.rows, s.residuals, s.errors_after,
               s.angle_rows_after) for k, s in enumerate(result.sets)]
     for validation in validations:
@@ -166,7 +168,7 @@ def residuals_csv(result, validations=(), header: str = "", rows_per_piece: int 
                  [repr(float(v)) for v in norms[b]])
             lines = []
             for row, r, e, n in zip(rows[b], res[b], err[b], o):
-                cells = [split, str(k), str(source), kind, str(int(row)), repr(float(e)), n]
+                cells = [split, str(k), printable(str(source)), kind, str(int(row)), repr(float(e)), n]
                 cells += [repr(float(v)) for v in r] + [""] * (width - len(r))
                 lines.append(csv_line(cells))
             yield "\n".join(lines) + "\n"

@@ -8,7 +8,8 @@ its format (:meth:`kincal.export.provenance.Provenance.stamp`), then all are wri
 none (:func:`kincal.export.safe_write.write_all`). It sits under the figure modules so
 that :mod:`kincal.export.plots` writes through it without an import cycle
 (:mod:`kincal.export.outputs` draws the calibration's figures); outputs re-exports it and
-is its face.
+is its face. :func:`printable` is how a name (a path, the command line) is written into
+any of them.
 """
 
 from __future__ import annotations
@@ -39,3 +40,24 @@ def write_files(files, provenance, *, overwrite: bool, protect=(), dirs=(),
     staged = [(f.path, provenance.stamp(f.kind, f.content)) for f in files]
     return write_all(staged, overwrite=overwrite, protect=protect, dirs=dirs,
                      before_commit=before_commit)
+
+
+def printable(text: str) -> str:
+    """``text`` as every file kincal writes can hold it (UTF-8, XML 1.0): bytes of a file
+    name that did not decode (Python holds them as lone surrogates, U+DC80-U+DCFF) written
+    ``\\xNN``, other lone surrogates ``\\uNNNN``, control characters but tab and line ends
+    ``\\xNN`` (an XML comment cannot hold them; a UTF-8 file cannot hold a surrogate)."""
+    if text.isprintable():
+        return text
+    out = []
+    for c in text:
+        n = ord(c)
+        if 0xDC80 <= n <= 0xDCFF:
+            out.append(f"\\x{n - 0xDC00:02x}")
+        elif 0xD800 <= n <= 0xDFFF or n in (0xFFFE, 0xFFFF):
+            out.append(f"\\u{n:04x}")
+        elif n < 0x20 and c not in "\t\n\r" or n == 0x7F:
+            out.append(f"\\x{n:02x}")
+        else:
+            out.append(c)
+    return "".join(out)
