@@ -43,9 +43,9 @@ TOLERANCE = 1e-6  # [m or rotation entry] origins this close are the same
 def joint_origins(urdf_text: str, joints) -> tuple[tuple[str, Origin], ...]:
     """((joint, origin as ``urdf_text`` writes it), ...) for the URDF joints ``joints``
     that the text has, in the order of ``joints``."""
-    import xml.etree.ElementTree as ET
+    from kincal.urdf_source import urdf_tree  # the one reader of the element tree
 
-    found = {e.get("name"): e for e in ET.fromstring(urdf_text.encode("utf-8")).findall("joint")}
+    found = {e.get("name"): e for e in urdf_tree(urdf_text).findall("joint")}
     out = []
     for j in joints:
         if j in found:
