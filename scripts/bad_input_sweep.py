@@ -125,6 +125,11 @@ def urdf_cases(good: str):
             '<axis xyz="0 0 1"/>', '<axis xyz="1e200 0 1e200"/>', 1)
         yield f"urdf origin 1e160 m joint_{k + 1}", head + joint + re.sub(
             r'<origin xyz="\S+', '<origin xyz="1e160', tail, count=1)
+        yield f"urdf second origin joint_{k + 1}", head + joint + re.sub(
+            r'(<origin [^>]*/>)', r'\1<origin xyz="0 0 0"/>', tail, count=1)
+    yield "urdf link with two parent joints", re.sub(
+        r'(<joint name="joint_3".*?<child link=")[^"]*', r'\1link_2', good, count=1,
+        flags=re.S)
     yield "urdf missing parent link", good.replace('<parent link="base_link"/>',
                                                    '<parent link="nolink"/>', 1)
     yield "urdf duplicate link", good.replace("</robot>", '<link name="link_1"/></robot>')

@@ -2,9 +2,11 @@
 refused at the boundary with one ``kincal: error:`` line naming the accepted range, exit
 code 1, no traceback, no foreign stderr line, and the folder left as it was."""
 
+import re
 import shutil
 
 import numpy as np
+
 import pytest
 
 from kincal.cli.main import main
@@ -180,6 +182,28 @@ def test_plan_pivot_not_finite_is_refused(tmp_path, capsys):
                      "--random", "200", "--kind", "distance", "--pivot", "0", "0", "nan"],
                     tmp_path, capsys)
     assert "--pivot must be a finite number" in line
+
+
+@pytest.mark.parametrize("edit, said", [
+    (lambda t: re.sub(r'(<joint name="joint_3".*?<origin [^>]*/>)', r'\1<origin xyz="0 0 0"/>',
+                      t, count=1, flags=re.S),
+     ":56:47: joint 'joint_3' has a second <origin>: a URDF joint has at most one"),
+    (lambda t: re.sub(r'(<joint name="joint_3".*?<child link=")[^"]*', r'\1link_2', t, count=1,
+                      flags=re.S),
+     ":54:5: link 'link_2' is the child of two joints ('joint_2' and 'joint_3'): a URDF link "
+     "hangs from one joint (a tree)")])
+def test_a_joint_of_two_origins_or_a_link_of_two_parents_is_refused_at_reading(
+        made, tmp_path, capsys, edit, said):
+    """A joint with two <origin> elements was taken by urdfdom (the first) and refused only
+    when the corrected URDF was written, as "please report this" (the audit a22); a link
+    that is the child of two joints got urdfdom's "Model does not have any body named
+    link_2". Both are refused as the URDF is read, naming the line, joints and link."""
+    from kincal.robot import Robot
+
+    (tmp_path / "r.urdf").write_text(edit(Robot.load("ec66").urdf_text))
+    line = _refused(["calibrate", str(tmp_path / "r.urdf"), str(made / "point.csv"), "--tip",
+                     "flange", "--out", str(tmp_path / "c.urdf")], tmp_path, capsys)
+    assert line.startswith(f"kincal: error: {tmp_path / 'r.urdf'}{said}"), line
 
 
 @pytest.mark.parametrize("where, value, said", [

@@ -166,6 +166,8 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
     seen_root = False
     n_links = 0
     joint = None  # (name, type) of the <joint> being read
+    origins = 0  # the <origin> elements of that joint so far
+    parent_of: dict[str, str] = {}  # child link: the joint it hangs from
 
     def fail(problem: str, error=UrdfError):
         where = f"{source}:{parser.CurrentLineNumber}:{parser.CurrentColumnNumber + 1}"
@@ -202,14 +204,20 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
         _check_element(name, attrs)
 
     def _check_element(name, attrs):
-        nonlocal n_links, joint
+        nonlocal n_links, joint, origins
         if name == "link":
             n_links += 1
             if n_links > MAX_URDF_LINKS:
                 fail(f"more than {MAX_URDF_LINKS} links; kincal reads URDFs of at most "
                      f"{MAX_URDF_LINKS} links (Pinocchio's parser cannot take much deeper trees)")
         elif name == "joint" and "type" in attrs:  # <joint> inside <transmission> has no type
-            joint = (attrs.get("name", "?"), attrs["type"])
+            joint, origins = (attrs.get("name", "?"), attrs["type"]), 0
+        elif name == "child" and joint is not None:
+            link = attrs.get("link", "")
+            if link in parent_of:  # urdfdom's own words for it name no joint
+                fail(f"link {link!r} is the child of two joints ({parent_of[link]!r} and "
+                     f"{joint[0]!r}): a URDF link hangs from one joint (a tree)")
+            parent_of[link] = joint[0]
         elif name == "axis" and joint is not None and joint[1] in _MOVING:
             values = _floats(attrs.get("xyz", "1 0 0"))
             if values is None or len(values) != 3 or not all(map(math.isfinite, values)):
@@ -221,6 +229,10 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
                 fail(f"joint {joint[0]!r}: axis xyz={attrs.get('xyz')!r} is too long to "
                      "normalise; a joint axis is a direction, such as 0 0 1")
         elif name == "origin" and joint is not None:
+            origins += 1
+            if origins > 1:  # urdfdom reads the first: which would a correction edit?
+                fail(f"joint {joint[0]!r} has a second <origin>: a URDF joint has at most "
+                     "one (its placement in the parent link)")
             xyz = _floats(attrs.get("xyz", "0 0 0"))
             if xyz is not None and any(abs(v) > MAX_ORIGIN_M for v in xyz):
                 fail(f"joint {joint[0]!r}: origin xyz={attrs.get('xyz')!r} lies more than "
