@@ -832,3 +832,37 @@ def test_the_residual_line_names_what_the_set_measures(tmp_path):
 
     assert [error_label(k) for k in ("point", "pose", "distance", "plane", "flush")] == [
         "position", "position", "distance", "distance to the plane", "height above the plane"]
+
+
+def test_distances_in_millimetres_read_as_metres_are_named_as_the_cause(tmp_path):
+    """A distance file in mm read as m was refused with every cause but the unit (the unit
+    clue looked at positions only). Distances to a fixed pivot range no wider than the tool
+    point moves: 590x wider names the unit; the file in metres calibrates."""
+    from dataclasses import replace
+
+    from kincal.measurements.checks import distance_ratio
+    from kincal.measurements.sets import read_set_file
+
+    path = tmp_path / "d.csv"
+    assert main(["simulate", "ec66", "--kind", "distance", "--poses", "60", "--seed", "3",
+                 "--out", str(path), "-q"]) == 0
+    robot = Robot.load("ec66", tip="flange")
+    data = read_set_file(path, robot.joint_names)
+    mm = replace(data, distances=data.distances * 1e3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = calibrate(robot, mm, method="l2", lam=0.1, model="complete")
+        good = calibrate(robot, data, method="l2", lam=0.1, model="complete")
+    with pytest.raises(ImplausibleResultError) as exc:
+        write_calibration(result, Outputs(urdf=tmp_path / "c.urdf"))
+    text = str(exc.value)
+    assert "the measured distances spread " in text and "Likely cause: distances in " \
+        "millimetres read as metres (they spread " in text and "--length-unit mm" in text, text
+    assert good.plausibility.plausible and math.isnan(good.plausibility.evidence.length_ratio)
+    rng = np.random.default_rng(0)  # a point on a sphere about the pivot: one distance
+    u = rng.normal(size=(50, 3))
+    sphere = 0.3 * u / np.linalg.norm(u, axis=1)[:, None]
+    assert math.isnan(distance_ratio(np.full(50, 0.3), sphere))
+    line = rng.uniform(-0.2, 0.2, (50, 1)) * np.array([[1.0, 0.0, 0.0]])  # along a line
+    assert distance_ratio(1e3 * np.abs(line[:, 0] + 0.5), line) == pytest.approx(
+        1e3 * np.ptp(line[:, 0]) / (2 * np.abs(line[:, 0] - line[:, 0].mean()).max()))

@@ -39,8 +39,8 @@ def unit_causes(ev: Evidence) -> list[str]:
                    "mm reads the positions and the prismatic joints in millimetres)")
     r = ev.length_ratio
     if math.isfinite(r) and r > UNIT_RATIO:
-        out.append(f"positions in millimetres read as metres (they spread {r:.0f}x more than "
-                   "the robot's tip moves; --length-unit mm)")
+        out.append(f"{ev.length_what} in millimetres read as metres (they spread {r:.0f}x "
+                   "more than the robot's tip moves; --length-unit mm)")
     elif math.isfinite(r) and 0 < r < 1.0 / (10 * UNIT_RATIO):
         out.append(f"positions in metres read as millimetres (they spread {1 / r:.0f}x less "
                    "than the robot's tip moves)" if ev.length_unit == "mm" else

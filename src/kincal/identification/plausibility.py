@@ -82,7 +82,7 @@ from kincal.identification.gate_causes import (duplicate_cause, duplicate_notes,
                                                 orientation_causes, overfit_cause, tool_causes,
                                                 unit_causes, weak_cause)
 from kincal.identification.statistics import angle_label, error_label
-from kincal.measurements.checks import (DEGREES_AS_RADIANS, TOOL_RATIO, UNIT_RATIO,
+from kincal.measurements.checks import (DEGREES_AS_RADIANS, TOOL_RATIO, UNIT_RATIO, distance_ratio,
                                         duplicate_samples, millimetres_read_as_metres, spread)
 from kincal.identification.tool_motion import change, farthest_tool, n_chains
 from kincal.models.workspace import CHANGE, tool_points
@@ -153,6 +153,7 @@ class Evidence:
     length_ratio: float = float("nan")
     length_unit: str = "m"
     length_source: str = ""  # the file of length_ratio when several sets measure positions
+    length_what: str = "positions"  # what length_ratio measures: positions or distances
     angle_max: float = 0.0
     angle_outside: bool = False
     prismatic_mm: str = ""  # a prismatic value in metres far beyond its limits (checks.
@@ -286,8 +287,8 @@ def judge(ev: Evidence, th: Thresholds = Thresholds()) -> Plausibility:
     r = ev.length_ratio
     if math.isfinite(r) and (r > th.length_ratio or r < 1.0 / th.length_ratio):
         of = f" of {ev.length_source}" if ev.length_source else ""
-        out.append(Finding("length_unit", f"the measured positions{of} spread {r:.4g}x as much "
-                           "as the robot's tip moves", r, th.length_ratio, "ratio",
+        out.append(Finding("length_unit", f"the measured {ev.length_what}{of} spread {r:.4g}x "
+                           "as much as the robot's tip moves", r, th.length_ratio, "ratio",
                            causes=tuple(unit_causes(ev)[:1])))
     if ev.angle_unit == "rad" and (ev.angle_max > 4 * math.pi or (
             ev.angle_max > DEGREES_AS_RADIANS and ev.angle_outside)):
@@ -404,11 +405,16 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
     # most MAX_UNIT_POSES poses spread through the file (a reference forward kinematics),
     # of every set that measures positions, each on its own chain: the clue is the set
     # farthest off (a second file in mm beside one in m), the spread the worst set's
-    ratio, spread_mm, unit_set = float("nan"), float("nan"), datas[0]
+    ratio, spread_mm, unit_set, length_what = float("nan"), float("nan"), datas[0], "positions"
     guess = np.zeros(3) if problem.options.tool_guess is None else np.asarray(
         problem.options.tool_guess, float)
     clues = []
     for dt, robot in zip(datas, problem.robots):
+        if getattr(dt, "distances", None) is not None:  # no wider than the tool point moves
+            k = np.linspace(0, len(dt) - 1, min(len(dt), MAX_UNIT_POSES)).astype(int)
+            clues.append((distance_ratio(dt.distances[k], tool_points(
+                robot, dt.joint_values[k], guess)), float("nan"), dt, "distances"))
+            continue
         if getattr(dt, "positions", None) is None:
             continue
         points = getattr(dt, "points", None)
@@ -418,12 +424,13 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         s_pred = spread(tool_points(robot, dt.joint_values[first], guess))
         s_all = spread(dt.positions)  # = the subset's when that is every row (in order)
         s_meas = s_all if len(first) == len(dt) else spread(dt.positions[first])
-        clues.append((s_meas / s_pred if s_pred >= 1e-3 else float("nan"), s_all * 1e3, dt))
+        clues.append((s_meas / s_pred if s_pred >= 1e-3 else float("nan"), s_all * 1e3, dt,
+                      "positions"))
         if dt is worst.data:
             spread_mm = s_all * 1e3
     if clues:
-        ratio, _, unit_set = max(clues, key=lambda c: abs(math.log(c[0])) if math.isfinite(
-            c[0]) and c[0] > 0 else -1.0)
+        ratio, _, unit_set, length_what = max(clues, key=lambda c: abs(math.log(
+            c[0])) if math.isfinite(c[0]) and c[0] > 0 else -1.0)
     angle_max, outside = 0.0, False
     for dt, robot in zip(datas, problem.robots):  # each set against its own chain
         gi = robot.geometry  # continuous joints (no limits) may turn many times: no clue
@@ -457,6 +464,7 @@ def gather(problem: CalibrationProblem, result: CalibrationResult) -> Evidence:
         corrections=tuple(corrections), length_ratio=float(ratio),
         length_unit=getattr(unit_set, "length_unit", "m"), angle_max=angle_max,
         length_source=str(getattr(unit_set, "source", "")) if len(clues) > 1 else "",
+        length_what=length_what,
         angle_outside=outside, angle_unit=getattr(datas[0], "angle_unit", "rad"),
         prismatic_mm=prismatic_mm,
         off_chain_columns=off_chain, other_branch_columns=elsewhere, at_base=at_base,

@@ -123,6 +123,16 @@ def spread(points: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1))))
 
 
+def distance_ratio(distances: np.ndarray, points: np.ndarray) -> float:
+    """The range of measured distances (N,) [m] over the widest range the tool points (N, 3)
+    [m] allow them (twice their largest distance from their centroid: a distance to a fixed
+    pivot changes by no more than the point moves), when above 1 (NaN otherwise: a narrow
+    range is no clue, a point moving on a sphere about the pivot keeps one distance)."""
+    reach = 2.0 * float(np.sqrt(np.max(np.sum((points - points.mean(axis=0)) ** 2, axis=1))))
+    r = float(np.ptp(distances)) / reach if reach >= 1e-3 else float("nan")
+    return r if r > 1.0 else float("nan")
+
+
 def length_unit_warnings(measured: np.ndarray, predicted: np.ndarray, length_unit: str) -> list[str]:
     """Measured positions far larger or smaller than what the robot's motion can produce."""
     s_meas, s_pred = spread(measured), spread(predicted)
