@@ -37,6 +37,17 @@ def test_help_is_grouped():
         assert title in text
 
 
+def test_every_option_says_what_it_does():
+    # `kincal COMMAND --help` is the prompt's reference (docs/cli.md says it says the same):
+    # an option listed there without a word (as --method was, its `frames` choice
+    # documented nowhere) leaves the reader to guess
+    sub = cli_main.build_parser()._subparsers._group_actions[0].choices
+    silent = [f"kincal {name} {action.option_strings[-1]}" for name, parser in sub.items()
+              for action in parser._actions
+              if action.option_strings and action.help is None]
+    assert not silent, f"options without help: {silent}"
+
+
 def test_python_dash_m_kincal():
     out = subprocess.run([sys.executable, "-m", "kincal", "--version"], capture_output=True,
                          text=True, timeout=60)

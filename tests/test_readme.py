@@ -13,8 +13,8 @@ options added later are checked too. What is run, page by page:
   the same way and every other line it shows (but ``...``) must be printed by them.
 
 - every ```python block: the README's all in one namespace in their order, in a scratch
-  folder holding the ``poses.csv`` the examples read (a simulated EC66 with an
-  acquisition-time column ``t``); then each docs page's blocks, in their order, in a copy
+  folder holding the ``poses.csv`` the examples read, made as the README says
+  (``kincal simulate ec66 --out poses.csv``); then each docs page's blocks, in their order, in a copy
   of that namespace (the pages go on from the README's example: its ``robot``, ``data``
   and ``result``), in the same folder.
 
@@ -465,25 +465,18 @@ def test_block_parsing_rules():
     assert _steps("python", 1, ["$ kincal demo"]) == []
 
 
-def _poses_csv(path: Path) -> None:
-    """The poses.csv of the README's API examples: 25 random EC66 poses with planted
-    errors, an offset tool point, 0.02 mm noise, and an acquisition-time column t."""
-    import numpy as np
-    from conftest import random_joint_values
-
-    from kincal.models import mdh
-    from kincal.planning.simulation import Truth, measure, planted_table
-    from kincal.robot import Robot
-
-    rng = np.random.default_rng(7)
-    robot = Robot.load("ec66")
-    model = mdh.extract(robot.geometry)
-    truth = Truth(planted_table(model, rng), np.array([0.6, 0.2, -0.1, 0.01, -0.02, 0.5]),
-                  np.array([0.03, 0.02, 0.12]))
-    data = measure(model, truth, random_joint_values(robot.geometry, rng, 25), 2e-5, rng)
-    lines = data.to_csv_text().splitlines()
-    path.write_text("\n".join([lines[0] + ",t"] + [f"{row},{0.5 * k}" for k, row in
-                                                    enumerate(lines[1:])]) + "\n")
+def _poses_csv(folder: Path) -> None:
+    """The poses.csv of the README's API examples, made as the README tells a reader to
+    make one: ``kincal simulate ec66 --out poses.csv`` (joint columns and x,y,z, rows in
+    acquisition order, no time-stamp column), so the pages' examples run on the file a
+    reader has, not on one made for the test."""
+    here = Path.cwd()
+    os.chdir(folder)
+    try:
+        code, output = _run_kincal(["simulate", "ec66", "--out", "poses.csv", "--quiet"])
+    finally:
+        os.chdir(here)
+    assert code == 0, output
 
 
 def _python_blocks(page: Path) -> list[tuple[int, list[str]]]:
@@ -503,7 +496,7 @@ def _exec_blocks(page: Path, namespace: dict) -> None:
 def readme_namespace(tmp_path_factory):
     """(folder, namespace) after the README's Python examples ran in folder."""
     folder = tmp_path_factory.mktemp("examples")
-    _poses_csv(folder / "poses.csv")
+    _poses_csv(folder)
     namespace: dict = {}
     here = Path.cwd()
     os.chdir(folder)

@@ -16,7 +16,10 @@ def register(subparsers) -> None:
     add_kinds(p)
     add_model(p, allow_all=True, allow_auto=True)
     g = group(p, "model and penalty")
-    g.add_argument("--fix", nargs="+", default=[], metavar="NAME")
+    g.add_argument("--fix", nargs="+", default=[], metavar="NAME",
+                   help="parameters held nominal (left out of the analysis): names "
+                        "(joint_3.a, tool.z) or quoted shell patterns ('*.d', "
+                        "'joint_[456].*')")
     g.add_argument("--backlash", nargs="+", default=[], metavar="JOINT",
                    help="also analyse backlash terms of these joints (see calibrate)")
     g.add_argument("--compliance", nargs="+", default=[], metavar="JOINT",
@@ -29,7 +32,7 @@ def register(subparsers) -> None:
                    help="noise per axis [mm] for the predicted accuracy (least squares on "
                         "these poses; default 0.05)")
     a.add_argument("--accuracy-plot", metavar="MAP.png", help="plot of the accuracy map")
-    add_overwrite(p, help=None)
+    add_overwrite(p, help="replace existing output files (--report, --accuracy-plot)")
     p.set_defaults(run=run)
 
 

@@ -29,7 +29,11 @@ def register(subparsers) -> None:
              "planes are fitted in the base frame: the files' chains must have one --base")
     add_model(p, allow_auto=True)
     g = group(p, "model and penalty")
-    g.add_argument("--method", choices=("l2", "ls", "frames"), default="l2")
+    g.add_argument("--method", choices=("l2", "ls", "frames"), default="l2",
+                   help="l2 (default): least squares with a penalty toward nominal (its "
+                        "weight: --lambda); ls: plain least squares; frames: the "
+                        "measurement frame and tool point alone, the kinematics kept "
+                        "nominal (what the nominal model gives with fitted frames)")
     g.add_argument("--lambda", dest="lam",
                    help="'auto' (default: 'evidence' on data from a small measurement volume, "
                         "'cv' otherwise), 'evidence' (priors toward nominal per parameter "

@@ -25,7 +25,7 @@ def register(subparsers) -> None:
                         "measurement frame, the tool from --frames: the same tool on another "
                         "day)")
     group(p, "outputs").add_argument("--report", help="write the statistics as JSON")
-    add_overwrite(p, help=None)
+    add_overwrite(p, help="replace an existing --report file")
     p.set_defaults(run=run)
 
 

@@ -67,7 +67,7 @@ def register(subparsers) -> None:
     m.add_argument("--poses-file", metavar="CHOSEN.csv",
                    help="simulate at these poses (chain joint columns in rad and m, e.g. from "
                         "'kincal plan') instead of drawing them")
-    add_overwrite(p, help=None)
+    add_overwrite(p, help="replace existing output files (--out, --truth-out)")
     p.set_defaults(run=run)
 
 
