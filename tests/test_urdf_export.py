@@ -514,3 +514,17 @@ def test_interrupted_write_leaves_no_temporary_file(tmp_path, monkeypatch, step,
     assert files_in(tmp_path) == (set() if existing is None else {"out.urdf"})
     if existing is not None:
         assert (tmp_path / "out.urdf").read_text() == existing
+
+
+def test_an_existing_output_names_the_api_s_way_to_replace_it(tmp_path):
+    """An API user writing over a file was told "pass --overwrite", the command line's
+    option; the line now gives the API's keyword too."""
+    from kincal.export.safe_write import write_all
+
+    out = tmp_path / "x.json"
+    out.write_text("kept")
+    with pytest.raises(ExportError) as exc:
+        write_all([(out, "new")])
+    assert str(exc.value) == (f"{out}: already exists; choose another output path or pass "
+                              "--overwrite (Python: overwrite=True)")
+    assert out.read_text() == "kept"

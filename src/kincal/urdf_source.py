@@ -166,7 +166,8 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
     seen_root = False
     n_links = 0
     joint = None  # (name, type) of the <joint> being read
-    origins = 0  # the <origin> elements of that joint so far
+    origins = 0  # the <origin> elements of that joint so far (its own, not its children's)
+    depth, joint_depth = 0, -1  # of the element being read, and of that joint
     parent_of: dict[str, str] = {}  # child link: the joint it hangs from
 
     def fail(problem: str, error=UrdfError):
@@ -186,7 +187,8 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
         fail(f"entity declaration {name!r} is not accepted in a URDF")
 
     def on_start(name, attrs):
-        nonlocal seen_root
+        nonlocal seen_root, depth
+        depth += 1
         for key, value in attrs.items():
             if key.startswith("xmlns:") and any(uri in value for uri in _XACRO_URIS):
                 xacro_prefixes.add(key[len("xmlns:"):])
@@ -204,15 +206,16 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
         _check_element(name, attrs)
 
     def _check_element(name, attrs):
-        nonlocal n_links, joint, origins
+        nonlocal n_links, joint, origins, joint_depth
+        own = joint is not None and depth == joint_depth + 1  # an element of the joint's own
         if name == "link":
             n_links += 1
             if n_links > MAX_URDF_LINKS:
                 fail(f"more than {MAX_URDF_LINKS} links; kincal reads URDFs of at most "
                      f"{MAX_URDF_LINKS} links (Pinocchio's parser cannot take much deeper trees)")
         elif name == "joint" and "type" in attrs:  # <joint> inside <transmission> has no type
-            joint, origins = (attrs.get("name", "?"), attrs["type"]), 0
-        elif name == "child" and joint is not None:
+            joint, origins, joint_depth = (attrs.get("name", "?"), attrs["type"]), 0, depth
+        elif name == "child" and own:
             link = attrs.get("link", "")
             if link in parent_of:  # urdfdom's own words for it name no joint
                 fail(f"link {link!r} is the child of two joints ({parent_of[link]!r} and "
@@ -229,8 +232,8 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
                 fail(f"joint {joint[0]!r}: axis xyz={attrs.get('xyz')!r} is too long to "
                      "normalise; a joint axis is a direction, such as 0 0 1")
         elif name == "origin" and joint is not None:
-            origins += 1
-            if origins > 1:  # urdfdom reads the first: which would a correction edit?
+            origins += own
+            if own and origins > 1:  # urdfdom reads the first: which would a correction edit?
                 fail(f"joint {joint[0]!r} has a second <origin>: a URDF joint has at most "
                      "one (its placement in the parent link)")
             xyz = _floats(attrs.get("xyz", "0 0 0"))
@@ -246,9 +249,10 @@ def check_urdf_text(text: str, source: str = "<string>") -> None:
                 fail(f"joint {joint[0]!r}: limit lower={lo[0]:g} is above upper={hi[0]:g}")
 
     def on_end(name):
-        nonlocal joint
-        if name == "joint":
+        nonlocal joint, depth
+        if name == "joint" and depth == joint_depth:
             joint = None
+        depth -= 1
 
     parser.StartDoctypeDeclHandler = on_doctype
     parser.EntityDeclHandler = on_entity_decl

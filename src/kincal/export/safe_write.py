@@ -30,6 +30,7 @@ from pathlib import Path
 
 from kincal.errors import ExportError
 
+OVERWRITE = "pass --overwrite (Python: overwrite=True)"  # how a user replaces a file
 _NO_HARD_LINKS = (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK,
                   errno.ENOSYS)
 
@@ -145,7 +146,7 @@ def _check_target_os(path, overwrite: bool, protect, new_dirs, in_place=()) -> P
                               "description); choose another output path")
         if not overwrite:
             raise ExportError(f"{path}: refusing to overwrite the input file {protected}; "
-                              "choose another output path or pass --overwrite")
+                              "choose another output path or " + OVERWRITE)
     if target.exists():
         mode = target.stat().st_mode
         if stat.S_ISDIR(mode):
@@ -153,11 +154,11 @@ def _check_target_os(path, overwrite: bool, protect, new_dirs, in_place=()) -> P
         if not stat.S_ISREG(mode):
             raise ExportError(f"{path}: is {_kind(mode)}; kincal writes regular files only")
         if not overwrite:
-            raise ExportError(f"{path}: already exists; choose another output path or pass "
-                              "--overwrite")
+            raise ExportError(f"{path}: already exists; choose another output path or "
+                              + OVERWRITE)
     elif given.is_symlink() and not overwrite:
         raise ExportError(f"{path}: already exists (a dangling symlink); choose another output "
-                          "path or pass --overwrite")
+                          "path or " + OVERWRITE)
     if target.parent not in new_dirs and not target.parent.is_dir():
         p = target.parent
         while not p.exists() and p != p.parent:
@@ -246,7 +247,7 @@ def _place_new(tmp: str, target: Path, path) -> None:
         os.link(tmp, target)
     except FileExistsError:
         raise ExportError(f"{path}: already exists (created while kincal was running); "
-                          "choose another output path or pass --overwrite") from None
+                          "choose another output path or " + OVERWRITE) from None
     except OSError as exc:
         if exc.errno not in _NO_HARD_LINKS:
             raise
@@ -256,7 +257,7 @@ def _place_new(tmp: str, target: Path, path) -> None:
             os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
         except FileExistsError:
             raise ExportError(f"{path}: already exists (created while kincal was running); "
-                              "choose another output path or pass --overwrite") from None
+                              "choose another output path or " + OVERWRITE) from None
         try:
             os.replace(tmp, target)
         except BaseException:
