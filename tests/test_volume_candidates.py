@@ -1,6 +1,7 @@
 """Candidates inside a measurement volume, I-optimal selection, and plan -> simulate end to end."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
@@ -204,6 +205,28 @@ def test_collision_checker_and_floor(tmp_path):
     c = volume_candidates(robot, spec, 100, seed=1, batch=256)
     assert c.rejections.collision > 0 and "collision pairs checked" in c.collision_note
     assert not checker.colliding(c.joint_values).any()
+
+
+def test_a_floor_that_is_the_cause_is_named(ec66):
+    """A floor above the UR10's shoulder cuts its upper arm in every configuration, and a
+    floor above the cube leaves the tool point under it: no volume or tilt helps, so the
+    refusal says the floor (it said "move the volume or change --tilt-direction")."""
+    ur10_path()
+    robot = Robot.load("ur10")
+    spec = VolumeSpec(Volume.cube((0.6, 0.2, 0.4), 0.1), TOOL, math.radians(45), floor_z=0.1)
+    cut = (r"the floor at z = 0.1 m cuts upper_arm_link_0 in every one of the \d+ looked at "
+           r"\(it is above part of the arm\)\)?: lower --floor \(or --no-floor\)")
+    with pytest.raises(OptionError, match="collides .*" + cut):  # the home search
+        volume_candidates(robot, spec, 20, seed=0)
+    given = replace(spec, home=(0.0595, -1.667, 1.922, -1.826, -1.571, -1.72))  # floor 0's
+    with pytest.raises(OptionError, match=r"only 0 of the 20 candidates .*" + cut):
+        volume_candidates(robot, given, 20, seed=0, batch=256)
+    low = VolumeSpec(Volume.cube(*CUBE), TOOL, math.radians(60), floor_z=0.3,
+                     home=(-0.2928, -1.75, 1.871, -1.691, 1.571, 0.8006))
+    with pytest.raises(OptionError, match=r"tool point or the tip is below the floor at "
+                                          r"z = 0.3 m in every one\): move the volume above "
+                                          r"the floor or lower --floor"):
+        volume_candidates(ec66, low, 20, seed=0)
 
 
 MISSING_MESH = "package://kincal_no_such_pkg/meshes/link_1.stl"

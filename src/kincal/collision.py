@@ -104,6 +104,12 @@ class CollisionChecker:
                               self.robot.configuration(joint_values), False)
         return np.array([r.isCollision() for r in self._gdata.collisionResults], dtype=bool)
 
+    def pair_hits(self, joint_values) -> np.ndarray:
+        """(N, P) True where configuration k (N, n) [rad or m] has pair p of :attr:`pairs`
+        in contact: which pairs a refusal names."""
+        Q = np.atleast_2d(np.asarray(joint_values, dtype=float))
+        return np.array([self._pair_hits(q) for q in Q], dtype=bool).reshape(len(Q), -1)
+
     def colliding(self, joint_values) -> np.ndarray:
         """(N,) True where the configuration (N, n) [rad or m] has a checked pair in contact."""
         Q = np.atleast_2d(np.asarray(joint_values, dtype=float))

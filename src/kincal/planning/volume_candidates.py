@@ -63,6 +63,7 @@ BRANCH_MARGIN = 0.1  # smallest singular value on the path, relative to home's
 BRANCH_STEP = 0.05  # [rad or m] largest joint change between checks on the path
 HOME_STARTS = 64  # starts of the home search (fixed seed 0)
 MAX_ATTEMPTS = 20  # draws per candidate asked for, at most, before giving up
+BLAME_SAMPLE = 64  # colliding configurations looked at to name what they hit
 # the default working volume (working_volume): the 400 mm validation cube of the paper and
 # of kincal's studies, with the tool at most 30 deg from the tilt direction (the default
 # --max-tilt); docs/results.md ("The default beyond its twin") measures other choices
@@ -296,6 +297,31 @@ class _Collisions:
             self.note += (f"; only the tool point and tip kept above the floor at z = "
                           f"{floor_z:g} m" if floor_z is not None else "")
 
+    def blame(self, Q, R, P) -> tuple[str, str]:
+        """(what the colliding configurations Q (N, n) hit, what to relax: "" when no
+        advice of its own): the floor when every one of them meets it (the tool point or
+        tip below it, or a link the floor cuts in every one, as a floor above a UR10's
+        shoulder cuts its upper arm, where no volume or tilt helps), else the pair hit
+        most. R, P: their tip rotations and tool points (base frame)."""
+        Q, R, P = Q[:BLAME_SAMPLE], R[:BLAME_SAMPLE], P[:BLAME_SAMPLE]
+        floor = f"the floor at z = {self.floor_z:g} m" if self.floor_z is not None else ""
+        if floor and len(Q):
+            tip = P - R @ self.tool
+            if np.all((P[:, 2] <= self.floor_z) | (tip[:, 2] <= self.floor_z)):
+                return (f"the tool point or the tip is below {floor} in every one",
+                        "move the volume above the floor or lower --floor")
+        if self.checker is None or not self.checker.has_geometry or not len(Q):
+            return "", ""
+        hits = self.checker.pair_hits(Q)
+        always = [p for k, p in enumerate(self.checker.pairs) if hits[:, k].all()]
+        cut = [p.split(" / ")[0] for p in always if p.endswith(" / kincal_floor")]
+        if cut and floor:
+            return (f"{floor} cuts {', '.join(cut)} in every one of the {len(Q)} looked at "
+                    "(it is above part of the arm)", "lower --floor (or --no-floor)")
+        k = int(np.argmax(hits.sum(axis=0)))
+        return (f"most often {self.checker.pairs[k].replace('kincal_floor', 'the floor')} "
+                f"({int(hits[:, k].sum())} of {len(Q)} looked at)"), ""
+
     def free(self, Q, R, P) -> np.ndarray:
         ok = np.ones(len(Q), dtype=bool)
         if self.floor_z is not None:
@@ -321,13 +347,15 @@ def find_home(robot: "Robot", spec: VolumeSpec, kin: BatchKinematics | None = No
         _explain_unreachable(kin, spec, starts)
     Q = Q[ok]
     R, P = kin.poses(Q)
-    Q = Q[collisions.free(Q, R, P)]
-    if len(Q) == 0:
+    free = collisions.free(Q, R, P)
+    if not free.any():
+        why, advice = collisions.blame(Q, R, P)
         raise OptionError(f"every configuration that reaches the centre of the "
                           f"{spec.volume.describe()} pointing along "
                           f"{np.round(spec.tilt_direction, 3).tolist()} collides "
-                          f"({collisions.note}): "
-                          "move the volume or change --tilt-direction")
+                          f"({collisions.note}){': ' + why if why else ''}: "
+                          + (advice or "move the volume or change --tilt-direction"))
+    Q = Q[free]
     home = Q[int(np.argmax(kin.sigma_min(Q)))].copy()
     # a revolute joint turned by a full turn gives the same pose: take the turn nearest zero
     for i, kind in enumerate(robot.geometry.kinds):
@@ -394,6 +422,7 @@ def _generate(robot, spec, m, seed, batch, what) -> VolumeCandidates:
     found_q, found_p, found_t = [], [], []
     counts = dict(not_reached=0, branch=0, collision=0)
     attempts, have = 0, 0
+    hit = [np.empty((0, kin.n)), np.empty((0, 3, 3)), np.empty((0, 3))]  # colliding Q, R, P
     while have < m and attempts < MAX_ATTEMPTS * m:
         k = min(batch, MAX_ATTEMPTS * m - attempts)
         attempts += k
@@ -410,6 +439,8 @@ def _generate(robot, spec, m, seed, batch, what) -> VolumeCandidates:
         R, P = kin.poses(Q)
         free = collisions.free(Q, R, P)
         counts["collision"] += int((~free).sum())
+        if len(hit[0]) < BLAME_SAMPLE:  # kept to name what they hit, if too few are free
+            hit = [np.concatenate([h, x[~free]]) for h, x in zip(hit, (Q, R, P))]
         Q, R, P = Q[free], R[free], P[free]
         found_q.append(Q)
         found_p.append(P)
@@ -417,22 +448,24 @@ def _generate(robot, spec, m, seed, batch, what) -> VolumeCandidates:
         have += len(Q)
     rej = Rejections(**counts)
     if have < m:
-        _too_few(spec, m, have, attempts, rej, collisions.note, what)
+        _too_few(spec, m, have, attempts, rej, collisions.note, what, collisions.blame(*hit))
     Qa = np.concatenate(found_q)[:m]
     return VolumeCandidates(spec, _readonly(Qa), _readonly(np.concatenate(found_p)[:m]),
                             _readonly(np.concatenate(found_t)[:m]), _readonly(home), found,
                             attempts, rej, collisions.note, tuple(robot.joint_names))
 
 
-def _too_few(spec, m, have, attempts, rej, note, what):
+def _too_few(spec, m, have, attempts, rej, note, what, blame=("", "")):
     worst = max(("not_reached", rej.not_reached), ("branch", rej.branch),
                 ("collision", rej.collision), key=lambda kv: kv[1])[0]
     advice = {"not_reached": "most targets are out of reach: shrink the volume or move it "
                              "nearer the arm, or lower --max-tilt",
               "branch": "most solutions lie on another arm branch: lower --max-tilt, shrink the "
                         "volume, or give a --home farther from singular configurations",
-              "collision": f"most solutions collide ({note}): move the volume away from the "
-                           "floor and the robot, or lower --max-tilt"}[worst]
+              "collision": f"most solutions collide ({note}"
+                           + (f"; {blame[0]}" if blame[0] else "") + "): "
+                           + (blame[1] or "move the volume away from the floor and the "
+                                           "robot, or lower --max-tilt")}[worst]
     raise OptionError(f"only {have} of the {m} {what} asked for satisfy the constraints "
                       f"after {attempts} targets drawn in the {spec.volume.describe()} with tilt "
                       f"<= {math.degrees(spec.max_tilt):g} deg ({rej.not_reached} not reached, "
