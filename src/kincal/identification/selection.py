@@ -393,18 +393,21 @@ def _identifiable_of(J, names, n_kinematic, rank_tol, m, scale, free=None) -> tu
 
 def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float = RANK_TOL,
             weak_independence: float = WEAK_INDEPENDENCE,
-            weak_sensitivity: float = WEAK_SENSITIVITY, m: int | None = None
-            ) -> Identifiability:
+            weak_sensitivity: float = WEAK_SENSITIVITY, m: int | None = None,
+            samples: int | None = None) -> Identifiability:
     """Identifiability of the parameters from a Jacobian in reporting units.
 
     J: (m, p) rows = residual components [mm], columns = parameters [mm or deg]; or the
     triangle R (p, p) of its QR factorisation, with its number of rows ``m`` given.
     free: (p,) bool, the parameters the user did not fix (default: all).
+    samples: the samples the rows belong to, over which a weak parameter's sensitivity is
+    an RMS (a pose's 6 rows, a distance's 1); None: m / 3 where m is a multiple of 3
+    (measured points), else m.
     """
     J, names, free, m, norms, kept, dropped, sv, rank = _select(J, names, n_kinematic, free,
                                                                 rank_tol, m)
     p = len(names)
-    rows = m // 3 if m % 3 == 0 else m  # poses, for RMS figures
+    rows = samples if samples else m // 3 if m % 3 == 0 else m  # samples, for RMS figures
     scale = float(norms.max()) if norms.size else 1.0
     free_idx = np.flatnonzero(free)
     Jk = J[:, kept]
