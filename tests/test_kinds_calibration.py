@@ -164,3 +164,28 @@ def test_measurement_kinds_script_runs_reduced():
     for name in ("pose", "distance", "plane", "rtest+tracker"):
         mean, ratio, result = script.scenario(name, robot, em, 0, options)
         assert result.converged and 0.9 < ratio < 3.0, (name, mean, ratio)
+
+
+@pytest.mark.parametrize("n", [60, 61])
+def test_weak_sensitivity_is_an_rms_over_the_samples(n):
+    """A weak parameter's sensitivity [mm per mm or deg] is its own part's RMS over the
+    samples: the column's norm times its independence over sqrt(samples). Before, the rows
+    were taken as samples of three (points) when their number was a multiple of 3: 60
+    distances (1 row each) counted as 20 samples, sqrt(3) too high, 61 as 61 (poses, 6 rows
+    each, as twice their number). A tool point 0.5 mm off the last axis makes joint_6 weak."""
+    robot = Robot.load("ec66", tip="flange")
+    rng = np.random.default_rng(3)
+    em = models.build("complete", robot.geometry)
+    q = random_joint_values(robot.geometry, rng, n)
+    tool = np.array([0.0005, 0.0, 0.12])
+    data = ks.simulate_distances(em, em.nominal, PIVOT, tool, q, 0.0, rng)
+    problem = CalibrationProblem(robot, data, CalibrationOptions(method="ls",
+                                                                 tool_guess=tuple(tool)))
+    ident = problem.analyze()
+    lay = problem.layout
+    _, J = problem.residual_function()(problem.start() / problem.scale, True)
+    norms = np.linalg.norm(J * lay.reporting_scale() / problem.scale, axis=0)  # [mm per unit]
+    assert ident.weak
+    for w in ident.weak:
+        expected = w.independence * norms[lay.index(w.name)] / np.sqrt(n)
+        assert w.sensitivity == pytest.approx(expected, rel=1e-6), w.name

@@ -289,7 +289,7 @@ class CalibrationProblem:
             lay, u = self.layout, self.start() / self.scale  # J in mm per mm or per deg
             ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
                                  lay.names, lay.n_kinematic, self._unfixed(),
-                                 self.options.rank_tol)
+                                 self.options.rank_tol, self.n_samples)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):

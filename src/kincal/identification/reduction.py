@@ -220,11 +220,12 @@ def one_pass(whole: Callable, frames_only: Callable, u: np.ndarray, is_frame: np
 
 
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
-                 n_kinematic: int, free: np.ndarray, rank_tol: float) -> Identifiability:
+                 n_kinematic: int, free: np.ndarray, rank_tol: float,
+                 samples: int | None = None) -> Identifiability:
     """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
-    scaled by ``column_scale`` (:func:`_analysed_matrix`)."""
+    scaled by ``column_scale`` (:func:`_analysed_matrix`); samples: the samples of its rows."""
     A, m = _analysed_matrix(residual, u)
-    return analyze(A * column_scale, names, n_kinematic, free, rank_tol, m=m)
+    return analyze(A * column_scale, names, n_kinematic, free, rank_tol, m=m, samples=samples)
 
 
 def identifiable_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,

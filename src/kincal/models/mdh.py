@@ -21,7 +21,9 @@ x_i along that normal. Degenerate cases, each a deliberate choice:
   common plane; the measurement model still reproduces the URDF exactly (see C below),
   and Hayati's beta (below, the ``complete`` model) adds the missing direction.
 - coincident axes: no normal at all; x_i is the URDF joint x axis projected onto the
-  plane normal to z_i, frame i at the URDF joint origin.
+  plane normal to z_i, frame i at the URDF joint origin. Exact, but not complete: a shift
+  of axis i+1 along y_i has no parameter (theta_i and d_i move along the common line), in
+  MD-H and with Hayati's beta alike; the ``placement`` model has it (docs/method.md).
 - prismatic joints: the axis has a direction only; its line is taken through the URDF
   joint origin. The joint value adds to d_i.
 - the first axis in general position: frame 0 is a fixed frame of the base with z_0 on
