@@ -158,7 +158,9 @@ def test_a_frames_file_with_a_byte_order_mark_is_read_as_a_csv_file_is(cell, tmp
     with_bom = capsys.readouterr().out
     assert main(["evaluate", "ec66", str(cell / "points.csv"), "--frames",
                  str(cell / "frames.json")]) == 0
-    assert capsys.readouterr().out.split(":", 1)[1] == with_bom.split(":", 1)[1]
+    # the same output but for the file's name (a note names the FRAMES.json it read)
+    same = with_bom.replace(str(bom), str(cell / "frames.json"))
+    assert capsys.readouterr().out.split(":", 1)[1] == same.split(":", 1)[1]
 
 
 def test_fleet_workers_load_the_robot_the_command_loaded(cell, tmp_path, monkeypatch, capsys):
