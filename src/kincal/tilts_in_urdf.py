@@ -90,15 +90,26 @@ class Origin:
 def joint_origin(urdf_text: str, joint: str) -> Origin | None:
     """The origin of the URDF joint ``joint`` as ``urdf_text`` writes it; None without such
     a joint or with an origin of other than 3 + 3 numbers."""
-    from kincal.urdf_source import urdf_tree
+    return dict(joint_origins(urdf_text, (joint,))).get(joint)
 
+
+def joint_origins(urdf_text: str, joints) -> tuple[tuple[str, Origin], ...]:
+    """((joint, origin as ``urdf_text`` writes it), ...) for the URDF joints ``joints``
+    that the text has with an origin of 3 + 3 numbers, in the order of ``joints`` (the one
+    reader of written origins: this module's record and :mod:`kincal.urdf_origins`')."""
+    from kincal.urdf_source import urdf_tree  # the one reader of the element tree
+
+    found: dict = {}
     for e in urdf_tree(urdf_text).findall("joint"):
-        if e.get("name") == joint:
+        found.setdefault(e.get("name"), e)  # the first of a name, as urdfdom would refuse
+    out = []
+    for j in joints:
+        if j in found:
             try:
-                return Origin.of(e)
+                out.append((str(j), Origin.of(found[j])))
             except ValueError:
-                return None
-    return None
+                pass  # an origin of other than 3 + 3 numbers: nothing to record or compare
+    return tuple(out)
 
 
 @dataclass(frozen=True)

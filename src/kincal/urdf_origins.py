@@ -32,28 +32,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kincal.errors import DataError
-from kincal.tilts_in_urdf import Origin
+from kincal.tilts_in_urdf import Origin, joint_origins
 
 if TYPE_CHECKING:
     from kincal.frames_file import CellFrames
 
 TOLERANCE = 1e-6  # [m or rotation entry] origins this close are the same
-
-
-def joint_origins(urdf_text: str, joints) -> tuple[tuple[str, Origin], ...]:
-    """((joint, origin as ``urdf_text`` writes it), ...) for the URDF joints ``joints``
-    that the text has, in the order of ``joints``."""
-    from kincal.urdf_source import urdf_tree  # the one reader of the element tree
-
-    found = {e.get("name"): e for e in urdf_tree(urdf_text).findall("joint")}
-    out = []
-    for j in joints:
-        if j in found:
-            try:
-                out.append((str(j), Origin.of(found[j])))
-            except ValueError:
-                pass  # an origin of other than 3 + 3 numbers: nothing to record or compare
-    return tuple(out)
 
 
 def as_dict(record) -> dict:

@@ -220,7 +220,7 @@ def write_calibration(result, outputs: Outputs, *, accept_implausible: bool = Fa
 
         frames = folded_frames(result.frames(), made, text if made else "")
         if o.urdf is not None:  # the origins written beside, for readers given a URDF
-            from kincal.urdf_origins import joint_origins
+            from kincal.tilts_in_urdf import joint_origins
 
             frames = replace(frames, urdf_origins=joint_origins(
                 text, result.error_model.joint_names))
