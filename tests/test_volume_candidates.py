@@ -501,3 +501,24 @@ def test_a_target_cube_that_fails_is_named_not_the_measurement_volume(tmp_path, 
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and not out.exists()
     assert says in err and "--in-cube" not in err and "candidates" not in err, err
+
+
+def test_a_given_home_in_collision_is_warned_about(ec66):
+    """A --home in collision (here its tool point 0.14 m below the floor) was taken without
+    a word: it only marks the branch and every planned pose is checked, but the robot cannot
+    start there. A home clear of collisions gives no warning."""
+    import warnings
+
+    from kincal.errors import KincalWarning
+
+    low = np.array([-0.29, -0.75, 1.87, -1.69, 1.57, 0.8])
+    spec = VolumeSpec(Volume.sphere((0.4, 0.0, 0.25), 0.05), TOOL, math.radians(20),
+                      (0.0, 0.0, -1.0), tuple(low))
+    with pytest.warns(KincalWarning, match=r"the home given \(--home\) collides \(the tool "
+                      r"point or tip below the floor at z = 0 m\): it only marks the arm branch"):
+        c = volume_candidates(ec66, spec, 20, seed=0)
+    assert c.points[:, 2].min() > 0.0  # the planned poses are above the floor
+    clear = replace(spec, home=(-0.29, -1.75, 1.87, -1.69, 1.57, 0.8))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", KincalWarning)
+        volume_candidates(ec66, clear, 20, seed=0)

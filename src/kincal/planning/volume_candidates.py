@@ -44,13 +44,14 @@ deterministically: the solution at the volume's centre, pointing along
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kincal.collision import CollisionChecker
-from kincal.errors import OptionError
+from kincal.errors import KincalWarning, OptionError
 from kincal.frames_file import MAX_LENGTH
 from kincal.identification import blas_threads
 from kincal.measurements.fixed_joints import refuse_coupled
@@ -322,6 +323,18 @@ class _Collisions:
         return (f"most often {self.checker.pairs[k].replace('kincal_floor', 'the floor')} "
                 f"({int(hits[:, k].sum())} of {len(Q)} looked at)"), ""
 
+    def hits_of(self, q, R, P) -> list[str]:
+        """What one configuration q (n,) hits (R, P: its tip rotation (3, 3) and tool point
+        (3,), base frame): the floor under its tool point or tip, the pairs in contact."""
+        out = []
+        if self.floor_z is not None and min(P[2], (P - R @ self.tool)[2]) <= self.floor_z:
+            out.append(f"the tool point or tip below the floor at z = {self.floor_z:g} m")
+        if self.checker is not None and self.checker.has_geometry:
+            hits = self.checker.pair_hits(np.asarray(q, float)[None])[0]
+            out += [p.replace("kincal_floor", "the floor")
+                    for k, p in enumerate(self.checker.pairs) if hits[k]]
+        return out
+
     def free(self, Q, R, P) -> np.ndarray:
         ok = np.ones(len(Q), dtype=bool)
         if self.floor_z is not None:
@@ -413,6 +426,14 @@ def _generate(robot, spec, m, seed, batch, what) -> VolumeCandidates:
             raise OptionError("home is outside the joint limits: give values within "
                               + ", ".join(f"{n} [{a:.4g}, {b:.4g}]" for n, a, b in
                                           zip(robot.joint_names, kin.lo, kin.hi)))
+        R_h, P_h = kin.poses(home[None])
+        touched = collisions.hits_of(home, R_h[0], P_h[0])
+        if touched:  # a planned pose never: they are all checked; but no start for the robot
+            more = f"; and {len(touched) - 3} more" if len(touched) > 3 else ""
+            warnings.warn(f"the home given (--home) collides ({'; '.join(touched[:3])}{more}): "
+                          "it only marks the arm branch, every planned pose is checked, but "
+                          "the robot cannot start there; give a home clear of collisions",
+                          KincalWarning)
     sigma_home = float(kin.sigma_min(home[None])[0])
     if sigma_home < 1e-6:
         raise OptionError("home is a singular configuration: its branch is undefined; give "
