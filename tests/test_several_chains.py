@@ -361,17 +361,23 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
             P = (T[:, :3, 3] + T[:, :3, :3] @ s.tools[0]) @ base_rotation(*s.base[3:]).T
             errors.append(np.abs(P + s.base[:3] - truth).max())
         assert errors[1] < 0.1e-3 and errors[1] < 0.1 * errors[0], errors
-    # kincal evaluate on one chain: the first by default, with a warning naming the chains
-    # (the other chain's data were judged on the first chain without a word), the second by
-    # its base and tip
+    # kincal evaluate on one chain: without --base/--tip refused, naming the chains (the
+    # first chain's frames judged the other chain's data with a warning only, then without a
+    # word); each chain by its base and tip
     capsys.readouterr()
-    assert main(["evaluate", str(out), files[0], "--frames", str(frames)]) == 0
-    first = capsys.readouterr()
-    assert ("kincal: warning: " + str(frames) + " holds the frames of 2 chains (base_link -> "
-            "atip, ctip -> btip); the first, base_link -> atip, is used: give --tip") in first.err
+    for data in files:
+        assert main(["evaluate", str(out), data, "--frames", str(frames)]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == ["kincal: error: " + str(frames) + " holds the frames of 2 chains "
+                       "(base_link -> atip, ctip -> btip): give --base and --tip of the chain "
+                       "the data were measured on (another chain's frames would judge them "
+                       "metres off)"], err
+    assert main(["evaluate", str(out), files[0], "--base", "base_link", "--tip", "atip",
+                 "--frames", str(frames)]) == 0
+    said = capsys.readouterr().out
     assert main(["evaluate", str(out), files[1], "--base", "ctip", "--tip", "btip",
                  "--frames", str(frames)]) == 0
-    said = first.out + capsys.readouterr().out
+    said += capsys.readouterr().out
     assert "(base_link -> atip)" in said and "(ctip -> btip)" in said
     rms = [float(line.split("RMS")[1].split()[0]) for line in said.splitlines() if "RMS" in line]
     assert len(rms) == 2 and max(rms) < 0.05, said  # [mm]: noise 0.01 mm per axis
@@ -669,13 +675,23 @@ def test_the_frames_of_a_chain_are_its_own_sets_only():
     with pytest.raises(DataError, match=r"no measurement set on the chain lb -> lt .*kinds "
                                         r"flush.*its point or pose sets are on rb -> rt"):
         f.located()
-    for base, tip in (("lb", "lt"), (None, "lt"), (None, None)):
+    with pytest.raises(DataError, match=r"<frames> holds the frames of 2 chains \(lb -> lt, "
+                                        r"rb -> rt\): give --base and --tip"):
+        f.for_chain(None, None)  # which chain the data are on: not for the first to say
+    for base, tip in (("lb", "lt"), (None, "lt")):
         mine = f.for_chain(base, tip)
         assert [s.source for s in mine.sets] == ["a.csv"]
         with pytest.raises(DataError, match="no measurement set on the chain lb -> lt"):
             mine.located()
     assert f.for_chain("rb", "rt").located() is point
     assert f.for_chain(None, "rt").tools.tolist() == [[0.05, 0.02, 0.08]]
+    # two chains from one base: --base alone names both (it took the first chain's frames)
+    arms = CellFrames("robot", "", "lb", "lt", left, (FlushSetFrames("a.csv", "lb", "lt", left),
+                                                      FlushSetFrames("c.csv", "lb", "rt", right)))
+    with pytest.raises(DataError, match=r"2 chains \(lb -> lt, lb -> rt\), 2 of them with "
+                                        r"--base lb: give --base and --tip"):
+        arms.for_chain("lb", None)
+    assert [s.source for s in arms.for_chain(None, "rt").sets] == ["c.csv"]
 
 
 def FlushSetFrames(source, base, tip, joints):

@@ -38,13 +38,12 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from kincal.errors import DataError, InputFileError, KincalWarning
+from kincal.errors import DataError, InputFileError
 from kincal.input_files import json_depth, non_finite_path
 from kincal.rotations import base_rotation, matrix_to_quaternion, transform
 from kincal import urdf_origins
@@ -384,17 +383,24 @@ class CellFrames:
         return tuple(s for s in self.sets if self._chain_of(s) == chain)
 
     def for_chain(self, base: str | None, tip: str | None) -> "CellFrames":
-        """The frames of the sets measured on the chain ``base`` -> ``tip`` (None: as
-        recorded; one of the two given: the one recorded chain with that frame), checked by
-        its base, tip and joints (the chain hash is the top-level chain's)."""
-        if (base is None) != (tip is None):
-            fit = [c for c in self.chains() if base in (None, c[0]) and tip in (None, c[1])]
-            base, tip = fit[0] if len(fit) == 1 else (base, tip)
-        elif base is None and len(self.chains()) > 1:  # data of another chain: metres off
-            warnings.warn(f"{self.source} holds the frames of {len(self.chains())} chains "
-                          f"({', '.join(map(' -> '.join, self.chains()))}); the first, "
-                          f"{self.base_frame} -> {self.tip_frame}, is used: give --tip (and "
-                          "--base) of the chain the data were measured on", KincalWarning)
+        """The frames of the sets measured on the chain ``base`` -> ``tip`` (both None: the
+        recorded chain; one of the two given: the recorded chain with that frame), checked by
+        its base, tip and joints (the chain hash is the top-level chain's). A file of several
+        chains that the given frames do not narrow to one is refused: nothing in a data file
+        says which chain it was measured on (a robot log holds every joint), and the first
+        chain's frames on another chain's data gave that chain's figures, metres off, with a
+        warning only."""
+        chains = self.chains()
+        fit = [c for c in chains if base in (None, c[0]) and tip in (None, c[1])]
+        if (base is None or tip is None) and len(fit) > 1:
+            given = " ".join(f"--{r} {v}" for r, v in (("base", base), ("tip", tip)) if v)
+            raise DataError(f"{self.source} holds the frames of {len(chains)} chains "
+                            f"({', '.join(map(' -> '.join, chains))})"
+                            + (f", {len(fit)} of them with {given}" if given else "")
+                            + ": give --base and --tip of the chain the data were measured "
+                            "on (another chain's frames would judge them metres off)")
+        if (base is None) != (tip is None) and len(fit) == 1:
+            base, tip = fit[0]
         base, tip = base or self.base_frame, tip or self.tip_frame
         top = (base, tip) == (self.base_frame, self.tip_frame)
         mine = self._on((base, tip))
