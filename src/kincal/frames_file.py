@@ -383,13 +383,10 @@ class CellFrames:
         return tuple(s for s in self.sets if self._chain_of(s) == chain)
 
     def for_chain(self, base: str | None, tip: str | None) -> "CellFrames":
-        """The frames of the sets measured on the chain ``base`` -> ``tip`` (both None: the
-        recorded chain; one of the two given: the recorded chain with that frame), checked by
-        its base, tip and joints (the chain hash is the top-level chain's). A file of several
-        chains that the given frames do not narrow to one is refused: nothing in a data file
-        says which chain it was measured on (a robot log holds every joint), and the first
-        chain's frames on another chain's data gave that chain's figures, metres off, with a
-        warning only."""
+        """The frames of the sets measured on the chain ``base`` -> ``tip`` (None: the one
+        recorded chain with the other frame), checked by its base, tip and joints (the chain
+        hash is the top-level chain's); refused unless they name one chain: a data file does
+        not say which it was measured on, and another chain's frames judge it metres off."""
         chains = self.chains()
         fit = [c for c in chains if base in (None, c[0]) and tip in (None, c[1])]
         if (base is None or tip is None) and len(fit) > 1:
@@ -399,8 +396,7 @@ class CellFrames:
                             + (f", {len(fit)} of them with {given}" if given else "")
                             + ": give --base and --tip of the chain the data were measured "
                             "on (another chain's frames would judge them metres off)")
-        if (base is None) != (tip is None) and len(fit) == 1:
-            base, tip = fit[0]
+        base, tip = fit[0] if (base is None) != (tip is None) and len(fit) == 1 else (base, tip)
         base, tip = base or self.base_frame, tip or self.tip_frame
         top = (base, tip) == (self.base_frame, self.tip_frame)
         mine = self._on((base, tip))
