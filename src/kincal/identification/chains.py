@@ -175,6 +175,17 @@ class Chains:
         return len(self.models) > 1
 
     @property
+    def shared_joints(self) -> tuple[str, ...]:
+        """The joints on more than one chain (a humanoid's torso under both arms), in the
+        union's order: the identifiability analysis takes them last
+        (:func:`kincal.identification.selection.preference_order`); () for one chain."""
+        counts: dict[str, int] = {}
+        for m in self.models:
+            for j in dict.fromkeys(n.rsplit(".", 1)[0] for n in m.names):
+                counts[j] = counts.get(j, 0) + 1
+        return tuple(j for j, k in counts.items() if k > 1)
+
+    @property
     def robot(self) -> Robot:
         """The first set's robot (what one-chain readers of a result look at)."""
         return self.robots[0]

@@ -264,7 +264,8 @@ class CalibrationProblem:
             # only what the data can fix moves (an unseen flush contact point stays put)
             kept = set(identifiable_rows(residual, x / self.scale,
                                          lay.reporting_scale() / self.scale, lay.names,
-                                         lay.n_kinematic, free, o.rank_tol))
+                                         lay.n_kinematic, free, o.rank_tol,
+                                         self.chains.shared_joints))
             free = free & np.array([n in kept for n in lay.names])  # (np.isin sorts strings)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = lay.wrap_frame_angles(sol.u * self.scale)
@@ -289,7 +290,8 @@ class CalibrationProblem:
             lay, u = self.layout, self.start() / self.scale  # J in mm per mm or per deg
             ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
                                  lay.names, lay.n_kinematic, self._unfixed(),
-                                 self.options.rank_tol, self.n_samples)
+                                 self.options.rank_tol, self.n_samples,
+                                 self.chains.shared_joints)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):

@@ -221,19 +221,22 @@ def one_pass(whole: Callable, frames_only: Callable, u: np.ndarray, is_frame: np
 
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
                  n_kinematic: int, free: np.ndarray, rank_tol: float,
-                 samples: int | None = None) -> Identifiability:
+                 samples: int | None = None, last=()) -> Identifiability:
     """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
-    scaled by ``column_scale`` (:func:`_analysed_matrix`); samples: the samples of its rows."""
+    scaled by ``column_scale`` (:func:`_analysed_matrix`); samples: the samples of its rows;
+    last: the joints taken last in the order of preference (on several chains)."""
     A, m = _analysed_matrix(residual, u)
-    return analyze(A * column_scale, names, n_kinematic, free, rank_tol, m=m, samples=samples)
+    return analyze(A * column_scale, names, n_kinematic, free, rank_tol, m=m, samples=samples,
+                   last=last)
 
 
 def identifiable_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
-                      n_kinematic: int, free: np.ndarray, rank_tol: float) -> tuple[str, ...]:
+                      n_kinematic: int, free: np.ndarray, rank_tol: float, last=()
+                      ) -> tuple[str, ...]:
     """The names :func:`analyze_rows` keeps, without its report
     (:func:`kincal.identification.selection.identifiable`)."""
     A, m = _analysed_matrix(residual, u)
-    return identifiable(A * column_scale, names, n_kinematic, free, rank_tol, m=m)
+    return identifiable(A * column_scale, names, n_kinematic, free, rank_tol, m=m, last=last)
 
 
 def _analysed_matrix(residual: Callable, u: np.ndarray) -> tuple[np.ndarray, int | None]:
