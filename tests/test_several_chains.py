@@ -311,6 +311,12 @@ def test_frames_file_records_each_sets_chain(tmp_path):
     back = CellFrames.from_dict(json.loads(text))
     assert [(s.base_frame, s.tip_frame) for s in back.sets] == [("base_link", "atip"),
                                                                 ("ctip", "btip")]
+    # the file says it holds two chains (its top-level chain keys, version 1's tool and
+    # frames among them, are the first's: a reader of those alone read the second chain's
+    # data with the first's frames); one chain's file has no such list
+    assert json.loads(text)["chains"] == [{"base_frame": "base_link", "tip_frame": "atip"},
+                                          {"base_frame": "ctip", "tip_frame": "btip"}]
+    assert "chains" not in json.loads(back.for_chain("ctip", "btip").dumps())
     # an older file without them: the sets are on the top-level chain
     data = json.loads(text)
     for s in data["sets"]:

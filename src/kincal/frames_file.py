@@ -23,14 +23,15 @@ robot's base frame B in the measurement frame M, ``R_base = rotx(rx) roty(ry) ro
 ``tool.*`` the tool point (or frame) in the tip frame; ``pivot.*``, ``plane.*``, ...). The
 4x4 matrices are derived, for cells that take those; on reading they must agree with the
 named values. Each set records the chain it was measured on (``base_frame``,
-``tip_frame``; an older file's sets are on its top-level chain). ``chain_hash`` identifies
-the robot model and chain (robot name, base, tip, joint names, kinds and axes; not the
-joint origins, which a calibration changes), so frames never go to another robot or chain.
+``tip_frame``; an older file's sets are on its top-level chain); with several chains,
+``"chains"`` lists them and the top-level chain keys are the first's. ``chain_hash``
+identifies the robot model and chain (robot name, base, tip, joint names, kinds and axes;
+not the joint origins, which a calibration changes): frames never go to another robot.
 
 Version 1's top-level keys (``base``, ``tool``, ``tool_points``, ``T_measurement_base``,
-``T_tip_tool``) are written for the first point or pose set, for version 1 readers;
-version 1 and the several-set ``kincal-frames-sets-1`` are still read. Values are
-checked: finite, translations within 1 km, angles within 100 rad, nesting at most 32 deep.
+``T_tip_tool``) are of the first point or pose set (else of the first set with a tool
+point), for version 1 readers; version 1 and ``kincal-frames-sets-1`` are still read.
+Values are checked: finite, within 1 km and 100 rad, nesting at most 32 deep.
 """
 
 from __future__ import annotations
@@ -56,9 +57,8 @@ FORMAT = "kincal-frames"
 VERSION = 2
 CONVENTION = ("P_measured = R_base (p_tip + R_tip t_tool) + t_base, R_base = rotx(rx) "
               "roty(ry) rotz(rz); metres and radians")
-# [m] the largest length kincal accepts in a robot cell: a frame's translation (a frames
-# file, a tool point or measurement frame guess), a point or the size of a volume the
-# commands are given (a cube, a sphere, a floor, a pivot); a kilometre is a unit slip
+# [m] the largest length kincal accepts in a robot cell (a frame's translation, a tool point
+# or frame guess, a point, a volume's size: a cube, sphere, floor, pivot): 1 km is a slip
 MAX_LENGTH = 1e3
 MAX_ANGLE = 100.0  # [rad]
 MAX_COMPLIANCE = 1.0  # [rad/(N m)] largest compliance accepted (1 rad at 1 N m)
@@ -103,11 +103,9 @@ class SetFrames:
     @property
     def tools(self) -> np.ndarray:
         """(K, 3) the tool points in the tip frame: tool.*, then tool2.*, ..."""
-        out = [[self.value("tool." + c) for c in "xyz"]]
-        k = 2
+        out, k = [[self.value("tool." + c) for c in "xyz"]], 2
         while self.has(f"tool{k}.x", f"tool{k}.y", f"tool{k}.z"):
-            out.append([self.value(f"tool{k}.{c}") for c in "xyz"])
-            k += 1
+            out, k = out + [[self.value(f"tool{k}.{c}") for c in "xyz"]], k + 1
         return np.array(out)
 
     def as_points(self) -> "SetFrames | None":
@@ -221,6 +219,8 @@ class CellFrames:
             out["tilts_in_urdf"] = [t.as_dict() for t in self.tilts_in_urdf]
         if self.urdf_origins:
             out["urdf_origins"] = urdf_origins.as_dict(self.urdf_origins)
+        if len(self.chains()) > 1:  # the top-level chain keys are the first's; say which
+            out["chains"] = [{"base_frame": b, "tip_frame": t} for b, t in self.chains()]
         try:  # version 1's keys, of the first point or pose set, for readers of version 1
             s = self.located()
         except DataError:  # no measurement frame: the first set's tool point (contacts)
