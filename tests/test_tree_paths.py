@@ -605,3 +605,84 @@ def test_talos_summary_and_report_say_which_kept_parameters_stand_in_amplified(t
     assert gains["leg_left_5_joint.tx"] == pytest.approx(28, abs=0.5)
     assert ident["stand_in_note"] == note
     assert "amplified up to 28x" in html.read_text()
+    # the stance leg read as a 7 deg turn of its hip: the export says how far that moves the
+    # sole against the pelvis, which the touches do not see (it said nothing)
+    (moved,) = [line for line in lines if line.startswith("  export: the corrections move")]
+    assert ("base left_sole_link 7.14 deg and 87.9 mm against the URDF's root base_link (RMS "
+            "at the 21 samples' joint values, through 6 joint(s) leg_left_1_joint ... "
+            "leg_left_6_joint)") in moved, moved
+    assert "export: the corrections move the chain&#x27;s base left_sole_link 7.14 deg" in \
+        html.read_text()
+
+
+def _root_pose(robot, model, frame, q):
+    """(N, 4, 4) the frame's pose in the URDF's root link, from Pinocchio's own frames of
+    ``model`` at the chain joint values q of ``robot`` (independent of kincal's chain code)."""
+    d = model.createData()
+    root = model.frames[1].name  # the root link's body frame follows "universe"
+    r, f = model.getFrameId(root), model.getFrameId(frame)
+    out = np.empty((len(q), 4, 4))
+    for k, qk in enumerate(q):
+        pin.framesForwardKinematics(model, d, robot.configuration(qk))
+        out[k] = (d.oMf[r].inverse() * d.oMf[f]).homogeneous
+    return out
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_a_base_moved_against_the_root_is_said(tmp_path, seed):
+    """A chain from a leaf off the root (ctip, up branch c, down the trunk to atip) whose
+    climb carries turns of degrees: the export says how far the corrections move the base
+    against the URDF's root, by the figures Pinocchio's own frames of the corrected model
+    give; the same errors below a root base (base_link -> atip) move nothing of the kind,
+    and small ones stay below the note's thresholds. (TALOS's flush touches from the left
+    sole moved the sole 7.1 deg and 88 mm against the pelvis without a word.)"""
+    from kincal import calibrate
+    from kincal.export import base_motion
+    from kincal.measurements.data import Measurements
+
+    path, joints = _tree(tmp_path, seed)
+    rng = np.random.default_rng(seed)
+    said = {}
+    for base, scale in (("ctip", 4.0), ("base_link", 4.0), ("ctip", 0.05)):
+        robot = Robot.load(path, base=base, tip="atip")
+        g = robot.geometry
+        q = random_joint_values(g, rng, 120) * 0.7
+        model = placement.build(g)
+        # a turn of `scale` deg about a random axis of every origin, a few mm along one
+        x_true = np.where(model.is_length, rng.normal(size=model.size) * scale * 1e-3,
+                          np.radians(scale) * rng.normal(size=model.size) / np.sqrt(3))
+        st = Chain(model, q).state(x_true, keep=False)
+        positions = st.p_tip + st.R_tip @ TOOL
+        with _quiet():
+            result = calibrate(robot, Measurements(g.joint_names, q, positions),
+                               model="placement", method="ls")
+        notes = base_motion.notes(result)
+        said[(base, scale)] = notes
+        if (base, scale) != ("ctip", 4.0):
+            continue
+        T0 = _root_pose(robot, robot.model, base, q)
+        T1 = _root_pose(robot, result.corrected.model, base, q)
+        D = np.linalg.solve(T0, T1)
+        turn = np.degrees(np.arccos(np.clip((np.trace(D[:, :3, :3], axis1=1, axis2=2) - 1) / 2,
+                                            -1, 1)))
+        move = np.linalg.norm(D[:, :3, 3], axis=1) * 1e3
+        rms = float(np.sqrt(np.mean(turn ** 2))), float(np.sqrt(np.mean(move ** 2)))
+        assert rms[0] > base_motion.TURN_DEG, rms  # the case is one for the note
+        assert len(notes) == 1 and (f"base ctip {rms[0]:.3g} deg and {rms[1]:.3g} mm against "
+                                    "the URDF's root base_link") in notes[0], (notes, rms)
+        assert f"through {len(joints['c'])} joint(s)" in notes[0]
+    assert said[("base_link", 4.0)] == () and said[("ctip", 0.05)] == (), said
+
+
+class _quiet:
+    """Warnings of the fit (weak parameters of a random tree) kept out of the test's output."""
+
+    def __enter__(self):
+        import warnings
+
+        self._w = warnings.catch_warnings()
+        self._w.__enter__()
+        warnings.simplefilter("ignore")
+
+    def __exit__(self, *exc):
+        return self._w.__exit__(*exc)

@@ -117,7 +117,10 @@ def _corrected(result, readable: bool = True, add_frames: bool = False,
         if made:
             text = edit_joint_origins(text, {f.joint: f.origin for f in made},
                                       source=str(result.robot.source)).text
-    return text, tuple(m.describe() for m in moved) + tuple(f.describe() for f in made) + said, made
+    from kincal.export import base_motion
+
+    return (text, tuple(m.describe() for m in moved) + tuple(f.describe() for f in made) + said
+            + base_motion.notes(result), made)
 
 
 def corrected_urdf_text(result, readable: bool = True) -> str:
