@@ -19,6 +19,7 @@ import numpy as np
 
 TURN_DEG = 2.0  # [deg] RMS turn of the base against the root above which a note is made
 MOVE_MM = 20.0  # [mm] RMS move, likewise
+MAX_SAMPLES = 2000  # an RMS over at most this many samples, evenly spaced (a million poses)
 
 
 def root_link(text: str) -> str:
@@ -71,6 +72,8 @@ def notes(result) -> tuple[str, ...]:
         nominal = next((r for r in (result.chains.robots if result.chains else [result.robot])
                         if (r.base, r.tip) == (cor.base, cor.tip)), result.robot)
         q = np.vstack([s.data.joint_values for s in sets])
+        n = len(q)
+        q = q[np.unique(np.linspace(0, n - 1, min(n, MAX_SAMPLES)).astype(int))]
         turn, move, between = motion(nominal, cor, cor.base, q, nominal.joint_names)
         if turn <= TURN_DEG and move <= MOVE_MM:
             continue
@@ -78,7 +81,7 @@ def notes(result) -> tuple[str, ...]:
         through = between[0] if len(between) == 1 else f"{between[0]} ... {between[-1]}"
         out.append(
             f"the corrections move the chain's base {cor.base} {turn:.3g} deg and {move:.3g} mm "
-            f"against the URDF's root {root} (RMS at the {len(q)} samples' joint values, "
+            f"against the URDF's root {root} (RMS at the {n} samples' joint values, "
             f"through {len(between)} joint(s) {through}), which the data do not see: the "
             f"other branches hang from {root}, so standing on {cor.base} the URDF puts them "
             f"that far off (a second foot on the floor), and read from {root} it puts "
