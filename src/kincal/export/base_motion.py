@@ -81,7 +81,9 @@ def notes(result) -> tuple[str, ...]:
         through = between[0] if len(between) == 1 else f"{between[0]} ... {between[-1]}"
         out.append(
             f"the corrections move the chain's base {cor.base} {turn:.3g} deg and {move:.3g} mm "
-            f"against the URDF's root {root} (RMS at the {n} samples' joint values, "
+            f"against the URDF's root {root} (RMS at the "
+            + (f"{n} samples'" if len(q) == n else f"{len(q):,} of the {n:,} samples'")
+            + " joint values, "
             f"through {len(between)} joint(s) {through}), which the data do not see: the "
             f"other branches hang from {root}, so standing on {cor.base} the URDF puts them "
             f"that far off (a second foot on the floor), and read from {root} it puts "
