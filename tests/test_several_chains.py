@@ -228,34 +228,88 @@ def test_two_chains_together_at_least_as_good_as_each_alone(tmp_path):
     assert together[0] < 0.95 * alone[0] and together[1] <= 1.01 * alone[1], (together, alone)
 
 
-@pytest.mark.parametrize("method", ["l2", "ls"])
-def test_two_chains_calibrate_alike_in_either_order(tmp_path, method):
-    """The data files of two chains given in one order and in the other: the same parameters
-    kept and the same corrected URDF origins. A joint on both chains (the trunk) is taken
-    after every joint of one chain only in the identifiability analysis; taken before
-    (joints in union order), it carried the first-listed chain's share of what it has in
-    common with each chain's own origins, the second chain's own origins carried theirs,
-    and the penalty toward nominal weighed the two representations differently."""
-    robots, joints = _tree(tmp_path)
+@pytest.mark.parametrize("method, chains", [
+    ("l2", (("base_link", "atip"), ("ctip", "btip"))),
+    ("ls", (("base_link", "atip"), ("ctip", "btip"))),
+    # the second chain climbs the first's joints: the union lists them in its order
+    ("ls", (("base_link", "atip"), ("atip", "ctip"))),
+    ("l2", (("atip", "btip"), ("btip", "atip"))),
+    ("l2", (("base_link", "atip"), ("ctip", "btip"), ("atip", "ctip")))])
+def test_several_chains_calibrate_alike_in_any_order(tmp_path, method, chains):
+    """The data files of several chains given in every order: the same parameters kept and
+    the same corrected URDF origins. The identifiability analysis takes each chain's own
+    joints (the chains by their names) and then the joints on several chains, deepest first
+    (Chains.preference). In the union's order (file order) a shared joint carried the
+    first-listed chain's share of what it has in common with each chain's own origins, the
+    second chain's own origins carried theirs, and the penalty toward nominal weighed the
+    two representations differently; with a chain climbing the other's joints, the shared
+    joints' own order followed the files too."""
+    import itertools
+
+    robots, _ = _tree(tmp_path)
+    path = robots[0].source
+    robots = [Robot.load(path, base=b, tip=t) for b, t in chains]
     rng = np.random.default_rng(11)
-    qs = [_q(robots[k], n, rng) for k, n in ((0, 30), (1, 40))]
-    _, _, true = _truth(robots, 1e-3, rng)
-    sets = [_points(robots[k], true[k], qs[k], k, 20e-6, rng) for k in range(2)]
-    on_joints = set(sum(joints.values(), []))
+    qs = [_q(r, n, rng) for r, n in zip(robots, (30, 40, 35))]
+    ch = Chains(robots, len(robots), "placement")
+    origins = ch.origins(rng.normal(0, 1e-3, ch.model.size))
+    true = [r.with_origins(origins) for r in robots]
+    sets = [_points(robots[k], true[k], qs[k], k % 2, 20e-6, rng) for k in range(len(robots))]
     fits = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for order in ((0, 1), (1, 0)):
+        for order in itertools.permutations(range(len(robots))):
             options = {"lam": "evidence"} if method == "l2" else {}
             res = calibrate([robots[k] for k in order], [sets[k] for k in order],
                             method=method, **options)
-            kept = {n for n in res.identifiability.kept if n.split(".")[0] in on_joints}
+            kept = {n for n in res.identifiability.kept
+                    if n.split(".")[0] in res.chains.model.joint_names}
             fits.append((kept, res.chains.origins(res.kinematic)))
-    (kept0, o0), (kept1, o1) = fits
-    assert kept0 and kept0 == kept1, sorted(kept0 ^ kept1)
-    assert set(o0) == set(o1)
-    worst = max(float(np.abs(o0[j] - o1[j]).max()) for j in o0)
-    assert worst < 1e-9, worst
+    (kept0, o0), rest = fits[0], fits[1:]
+    assert kept0
+    for kept, o in rest:
+        assert kept == kept0, sorted(kept ^ kept0)
+        assert set(o) == set(o0)
+        worst = max(float(np.abs(o0[j] - o[j]).max()) for j in o0)
+        assert worst < 1e-9, worst
+
+
+def test_a_shared_plane_keeps_the_same_parameters_in_either_order(tmp_path):
+    """Two arms from one base touching one plane (--shared-plane): the shared plane links
+    the two chains' own joints, and which of them the analysis kept followed the order of
+    the files (aj1.ty in one, bj1.ty in the other, on seeds 3 and 5 of the random tree)."""
+    from scipy.optimize import least_squares
+
+    from kincal.measurements.plane import PlaneData
+
+    tool = np.array([0.02, -0.01, 0.05])
+    for seed in (3, 5):
+        robots, _ = _tree(tmp_path, seed)
+        path = robots[0].source
+        robots = [Robot.load(path, base="base_link", tip=t) for t in ("atip", "btip")]
+        rng = np.random.default_rng(seed)
+        n = np.array([0.0, 0.3, 1.0]) / np.linalg.norm([0.0, 0.3, 1.0])
+
+        def height(r, q):
+            T = r.tip_poses(np.atleast_2d(q))
+            return (T[:, :3, 3] + T[:, :3, :3] @ tool) @ n
+
+        c = np.median(np.concatenate([height(r, _q(r, 50, rng)) for r in robots]))
+        sets = []
+        for k, r in enumerate(robots):  # touches of the plane height = c, near random poses
+            qs = [least_squares(lambda q: np.r_[height(r, q) - c, 1e-4 * (q - q0)], q0).x
+                  for q0 in _q(r, 60, rng)]
+            qs = [q for q in qs if abs(height(r, q)[0] - c) < 1e-6][:40]
+            sets.append(PlaneData(joint_names=r.joint_names, joint_values=np.array(qs),
+                                  source=f"p{k}"))
+        kept = []
+        for order in ((0, 1), (1, 0)):
+            p = CalibrationProblem([robots[k] for k in order], [sets[k] for k in order],
+                                   CalibrationOptions(method="ls", shared_planes=True,
+                                                      tool_guess=tuple(tool)))
+            kept.append({m for m in p.analyze().kept
+                         if m.split(".")[0] in p.chains.model.joint_names})
+        assert kept[0] and kept[0] == kept[1], (seed, sorted(kept[0] ^ kept[1]))
 
 
 def test_bad_input_refused(tmp_path):
@@ -406,8 +460,8 @@ def test_command_line_two_chains_and_count_refusals(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert err == ["kincal: error: " + str(frames) + " holds the frames of 2 chains "
                        "(base_link -> atip, ctip -> btip): give --base and --tip of the chain "
-                       "the data were measured on (another chain's frames would judge them "
-                       "metres off)"], err
+                       "meant (the data or targets of another chain are metres off with these "
+                       "frames)"], err
     assert main(["evaluate", str(out), files[0], "--base", "base_link", "--tip", "atip",
                  "--frames", str(frames)]) == 0
     said = capsys.readouterr().out

@@ -608,11 +608,12 @@ def test_talos_summary_and_report_say_which_kept_parameters_stand_in_amplified(t
     # the stance leg read as a 7 deg turn of its hip: the export says how far that moves the
     # sole against the pelvis, which the touches do not see (it said nothing)
     (moved,) = [line for line in lines if line.startswith("  export: the corrections move")]
-    assert ("base left_sole_link 7.14 deg and 87.9 mm against the URDF's root base_link (RMS "
-            "at the 21 samples' joint values, through 6 joint(s) leg_left_1_joint ... "
-            "leg_left_6_joint)") in moved, moved
+    assert ("base left_sole_link 7.14 deg and 87.9 mm against base_link (the URDF's root), "
+            "where it turns toward its tip (RMS at the 21 samples' joint values, through the 6 "
+            "joint(s) it climbs, leg_left_6_joint ... leg_left_1_joint)") in moved, moved
     assert "export: the corrections move the chain&#x27;s base left_sole_link 7.14 deg" in \
         html.read_text()
+    assert json.loads(report.read_text())["export_notes"][-1] == moved[len("  export: "):]
 
 
 def _root_pose(robot, model, frame, q):
@@ -669,9 +670,46 @@ def test_a_base_moved_against_the_root_is_said(tmp_path, seed):
         rms = float(np.sqrt(np.mean(turn ** 2))), float(np.sqrt(np.mean(move ** 2)))
         assert rms[0] > base_motion.TURN_DEG, rms  # the case is one for the note
         assert len(notes) == 1 and (f"base ctip {rms[0]:.3g} deg and {rms[1]:.3g} mm against "
-                                    "the URDF's root base_link") in notes[0], (notes, rms)
-        assert f"through {len(joints['c'])} joint(s)" in notes[0]
+                                    "base_link (the URDF's root)") in notes[0], (notes, rms)
+        assert f"through the {len(joints['c'])} joint(s) it climbs" in notes[0]
     assert said[("base_link", 4.0)] == () and said[("ctip", 0.05)] == (), said
+
+
+def test_no_base_move_said_where_the_chain_does_not_climb(tmp_path):
+    """Chains that do not climb say nothing, at no cost, and do not fail: a base below the
+    URDF's root through fixed joints only (example-robot-data's UR10: root 'world', base
+    base_link; the export failed with 'no movable joint between base world and tip
+    base_link'), and with several chains one whose base is an ancestor of its tip while
+    another chain corrects the joints above that base (the note measured those at zero
+    joint values and blamed the chain's load)."""
+    from kincal import calibrate
+    from kincal.export import base_motion
+    from kincal.measurements.data import Measurements
+
+    robot = Robot.load("ur10", base="base_link", tip="tool0")
+    g = robot.geometry
+    rng = np.random.default_rng(0)
+    q = random_joint_values(g, rng, 40)
+    model = placement.build(g)
+    x_true = np.where(model.is_length, 5e-3, np.radians(3.0)) * rng.normal(size=model.size)
+    st = Chain(model, q).state(x_true, keep=False)
+    with _quiet():
+        result = calibrate(robot, Measurements(g.joint_names, q, st.p_tip), method="ls",
+                           model="placement")
+    assert base_motion.notes(result) == ()
+    path, _ = _tree(tmp_path, 3)
+    robots = [Robot.load(path, base=b, tip=t) for b, t in (("base_link", "atip"),
+                                                           ("tl2", "btip"))]
+    sets = []
+    for r in robots:
+        qr = random_joint_values(r.geometry, rng, 40) * 0.7
+        m = placement.build(r.geometry)
+        s_ = Chain(m, qr).state(np.where(m.is_length, 5e-3, np.radians(3.0))
+                                * rng.normal(size=m.size), keep=False)
+        sets.append(Measurements(r.joint_names, qr, s_.p_tip + s_.R_tip @ TOOL))
+    with _quiet():
+        result = calibrate(robots, sets, method="ls")
+    assert base_motion.notes(result) == ()
 
 
 class _quiet:

@@ -394,8 +394,8 @@ class CellFrames:
             raise DataError(f"{self.source} holds the frames of {len(chains)} chains "
                             f"({', '.join(map(' -> '.join, chains))})"
                             + (f", {len(fit)} of them with {given}" if given else "")
-                            + ": give --base and --tip of the chain the data were measured "
-                            "on (another chain's frames would judge them metres off)")
+                            + ": give --base and --tip of the chain meant (the data or "
+                            "targets of another chain are metres off with these frames)")
         base, tip = fit[0] if (base is None) != (tip is None) and len(fit) == 1 else (base, tip)
         base, tip = base or self.base_frame, tip or self.tip_frame
         top = (base, tip) == (self.base_frame, self.tip_frame)

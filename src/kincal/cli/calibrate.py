@@ -209,9 +209,10 @@ def _ur_hash(c: Calibrate, robot) -> str:
     return found
 
 
-def json_summary(result, validations, refused: bool) -> dict:
+def json_summary(result, validations, refused: bool, notes=()) -> dict:
     """The summary of ``--json``: the run's figures (REPORT.json's keys, without the
-    per-sample residuals), given out by :func:`kincal.cli.console.summary_lines`."""
+    per-sample residuals), given out by :func:`kincal.cli.console.summary_lines`; notes:
+    the export's (``export_notes``, as in REPORT.json)."""
     from kincal.export import report
     from kincal.export.validation import validation_dict
 
@@ -224,7 +225,7 @@ def json_summary(result, validations, refused: bool) -> dict:
             "sets": [{k: v for k, v in s.items() if k != "residuals"} for s in full["sets"]],
             "identifiability": {k: full["identifiability"][k] for k in
                                 ("rank", "condition_number", "kept", "fixed")},
-            "validation": validation_dict(validations)}
+            "validation": validation_dict(validations), "export_notes": list(notes)}
 
 
 def run(args) -> int:
@@ -321,7 +322,7 @@ def run(args) -> int:
         if c.quiet:
             return []
         if c.json:  # stdout holds the JSON alone; what was written goes to stderr
-            return summary_lines(True, (), json_summary(result, validations, refused),
+            return summary_lines(True, (), json_summary(result, validations, refused, notes),
                                  written)
         out = [result.summary()]
         said = set(out[0].splitlines())  # -v: the notes under its identifiable line once

@@ -287,6 +287,7 @@ def _diagnosis(result, o: Outputs, prov, accuracy, warnings_seen, data_source, n
             content["validation"] = validation_dict(validations)
         if refused is not None:
             content["refused"] = {"verdict": "REFUSED", "message": refused}
+        content["export_notes"] = list(notes)  # what the summary says under "export:"
         content["provenance"] = prov.as_dict()
         files.append((o.report, report.dump_pieces(content)))
     if o.residuals is not None:

@@ -176,14 +176,31 @@ class Chains:
 
     @property
     def shared_joints(self) -> tuple[str, ...]:
-        """The joints on more than one chain (a humanoid's torso under both arms), in the
-        union's order: the identifiability analysis takes them last
-        (:func:`kincal.identification.selection.preference_order`); () for one chain."""
+        """The joints whose origins more than one chain corrects (a humanoid's torso under
+        both arms), in the union's order; () for one chain."""
         counts: dict[str, int] = {}
         for m in self.models:
             for j in dict.fromkeys(n.rsplit(".", 1)[0] for n in m.names):
                 counts[j] = counts.get(j, 0) + 1
         return tuple(j for j, k in counts.items() if k > 1)
+
+    @property
+    def preference(self) -> tuple[str, ...]:
+        """The joints in the identifiability analysis's order of preference, the same
+        whatever the order of the chains (data files): each chain's own joints from its tip
+        back, the chains by their (base, tip) names, then the shared joints, deepest in the
+        URDF tree first (:func:`kincal.identification.selection.preference_order`); () for
+        one chain (its default order, the same)."""
+        if not self.several:
+            return ()
+        shared = set(self.shared_joints)
+        chains = sorted(zip(self.chain_robots, self.models), key=lambda rm: (rm[0].base,
+                                                                             rm[0].tip))
+        own = [j for _, m in chains
+               for j in reversed(dict.fromkeys(n.rsplit(".", 1)[0] for n in m.names))
+               if j not in shared]
+        tree = list(self.robot.model.names)  # the URDF tree's joints, parents first
+        return tuple(own) + tuple(sorted(shared, key=tree.index, reverse=True))
 
     @property
     def robot(self) -> Robot:

@@ -265,7 +265,7 @@ class CalibrationProblem:
             kept = set(identifiable_rows(residual, x / self.scale,
                                          lay.reporting_scale() / self.scale, lay.names,
                                          lay.n_kinematic, free, o.rank_tol,
-                                         self.chains.shared_joints))
+                                         self.chains.preference))
             free = free & np.array([n in kept for n in lay.names])  # (np.isin sorts strings)
             sol = solve(residual, x / self.scale, free, options=o.solver)
             x = lay.wrap_frame_angles(sol.u * self.scale)
@@ -291,7 +291,7 @@ class CalibrationProblem:
             ident = analyze_rows(self.residual_function(), u, lay.reporting_scale() / self.scale,
                                  lay.names, lay.n_kinematic, self._unfixed(),
                                  self.options.rank_tol, self.n_samples,
-                                 self.chains.shared_joints)
+                                 self.chains.preference)
         notes = [n for km in self.kinds for n in km.notes()]
         lost = [n for n in ident.dropped if lay.is_frame[lay.index(n)]]
         for i, km in enumerate(self.kinds):

@@ -221,22 +221,23 @@ def one_pass(whole: Callable, frames_only: Callable, u: np.ndarray, is_frame: np
 
 def analyze_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
                  n_kinematic: int, free: np.ndarray, rank_tol: float,
-                 samples: int | None = None, last=()) -> Identifiability:
+                 samples: int | None = None, joints=()) -> Identifiability:
     """:func:`kincal.identification.selection.analyze` of the Jacobian at u with its columns
     scaled by ``column_scale`` (:func:`_analysed_matrix`); samples: the samples of its rows;
-    last: the joints taken last in the order of preference (on several chains)."""
+    joints: the joints' order of preference (several chains)."""
     A, m = _analysed_matrix(residual, u)
     return analyze(A * column_scale, names, n_kinematic, free, rank_tol, m=m, samples=samples,
-                   last=last)
+                   joints=joints)
 
 
 def identifiable_rows(residual: Callable, u: np.ndarray, column_scale: np.ndarray, names,
-                      n_kinematic: int, free: np.ndarray, rank_tol: float, last=()
+                      n_kinematic: int, free: np.ndarray, rank_tol: float, joints=()
                       ) -> tuple[str, ...]:
     """The names :func:`analyze_rows` keeps, without its report
     (:func:`kincal.identification.selection.identifiable`)."""
     A, m = _analysed_matrix(residual, u)
-    return identifiable(A * column_scale, names, n_kinematic, free, rank_tol, m=m, last=last)
+    return identifiable(A * column_scale, names, n_kinematic, free, rank_tol, m=m,
+                        joints=joints)
 
 
 def _analysed_matrix(residual: Callable, u: np.ndarray) -> tuple[np.ndarray, int | None]:

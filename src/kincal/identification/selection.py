@@ -9,13 +9,15 @@ preference and a column is kept when the part of it that the kept columns cannot
 reproduce is larger than ``rank_tol`` of its own norm. The order is: measurement frame,
 then tool point, then the kinematic parameters from the last joint back to the first
 (within a joint in the error model's order: a, alpha, beta, d, theta for MD-H), then any other columns after those (backlash terms).
-With several chains, a joint on more than one of them (a humanoid's torso under both arms)
-comes after every joint of one chain only: what such a joint's origin shares with each
-chain's own origins (the torso's turn against each hip's) is carried by each chain's own,
-and the shared joint keeps what only the chains together see. The kept set then does not
-depend on the order the chains (data files) are given in; joints first (the old rule) gave
-the first-listed chain's share to the shared joint and the second chain's to both, and a
-mirror-image pair of files calibrated differently in one order and the other.
+With several chains the joints come in an order that does not depend on the order the
+chains (data files) are given in (:meth:`kincal.identification.chains.Chains.preference`):
+each chain's own joints, from its tip back, the chains taken by their (base, tip) names;
+then the joints on more than one chain (a humanoid's torso under both arms), deepest in the
+URDF tree first. What a shared joint's origin has in common with each chain's own (the
+torso's turn against each hip's) is carried by each chain's own, and the shared joint keeps
+what only the chains together see. In the union's order (file order, before 2026-12-01)
+the first-listed chain's share went to the shared joint and the second chain's to both,
+and a mirror-image pair of files calibrated differently in one order and the other.
 So a kinematic parameter that duplicates the frame or tool is dropped (not the frame),
 of a set of parallel-axis offsets the one nearest the tool is kept, and a backlash term
 the data cannot tell from its joint's offset (samples approached from one side) is
@@ -208,19 +210,19 @@ def no_spare_note(equations: int, identifiable: int) -> str | None:
             "poses")
 
 
-def preference_order(names, n_kinematic: int, last=()) -> list[int]:
+def preference_order(names, n_kinematic: int, joints=()) -> list[int]:
     """Column indices in the order of preference described in the module notes.
 
     The first n_kinematic names are ``<joint>.<field>``, grouped by joint in chain order;
     whatever the error model's fields, joints are taken from the last back to the first,
-    each joint's fields in the model's order; the joints named in ``last`` (on several
-    chains) after all others, in that order among themselves. Made once per layout (three
-    analyses a fit ask for it)."""
-    return list(_preference_order(tuple(names), int(n_kinematic), frozenset(last)))
+    each joint's fields in the model's order; ``joints`` (several chains): the joints in
+    their order of preference instead, any joint it leaves out after them in the default
+    order. Made once per layout (three analyses a fit ask for it)."""
+    return list(_preference_order(tuple(names), int(n_kinematic), tuple(joints)))
 
 
 @functools.lru_cache(maxsize=64)
-def _preference_order(names: tuple, n_kinematic: int, last: frozenset = frozenset()
+def _preference_order(names: tuple, n_kinematic: int, joints: tuple = ()
                       ) -> tuple[int, ...]:
     frames_end = n_kinematic
     while frames_end < len(names) and _FRAME.match(names[frames_end]):
@@ -229,13 +231,13 @@ def _preference_order(names: tuple, n_kinematic: int, last: frozenset = frozense
     groups: dict[str, list[int]] = {}
     for c in range(n_kinematic):
         groups.setdefault(names[c].rsplit(".", 1)[0], []).append(c)
-    joints = list(reversed(groups))
-    for joint in [j for j in joints if j not in last] + [j for j in joints if j in last]:
+    given = [j for j in joints if j in groups]
+    for joint in given + [j for j in reversed(groups) if j not in given]:
         order += groups[joint]
     return tuple(order + list(range(frames_end, len(names))))
 
 
-def _within_rank(J, norms, names, n_kinematic, free, floor, last=()) -> tuple[list, list]:
+def _within_rank(J, norms, names, n_kinematic, free, floor, joints=()) -> tuple[list, list]:
     """(kept, dropped) by the same order of preference, a column kept only while the
     smallest singular value of the kept unit-norm columns stays above ``floor`` (the rank's
     own threshold): never more kept than the rank (by interlacing). The plain ordered
@@ -244,7 +246,7 @@ def _within_rank(J, norms, names, n_kinematic, free, floor, last=()) -> tuple[li
     although together they span fewer directions: kept > rank, condition number ~1e15."""
     kept: list[int] = []
     dropped: list[int] = []
-    for c in preference_order(names, n_kinematic, last):
+    for c in preference_order(names, n_kinematic, joints):
         if not free[c]:
             continue
         if norms[c] > 0:
@@ -302,11 +304,11 @@ def _ordered(J: np.ndarray, order, free_of, norm_of, rank_tol: float, scale: flo
 
 
 def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: int | None,
-            scale: float | None = None, last=()):
+            scale: float | None = None, joints=()):
     """The partition of :func:`analyze`: (J or its triangle, names, free, m, column norms,
     kept, dropped, singular values of the free unit columns, rank). scale: the largest
-    column norm (default: of these columns); last: the joints taken last (on several
-    chains, :func:`preference_order`)."""
+    column norm (default: of these columns); joints: the joints' order of preference
+    (several chains, :func:`preference_order`)."""
     names = tuple(names)
     p = len(names)
     free = np.ones(p, dtype=bool) if free is None else np.asarray(free, dtype=bool)
@@ -318,7 +320,7 @@ def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: in
     norms = np.linalg.norm(J, axis=0)
     if scale is None:
         scale = float(norms.max()) if norms.size else 1.0
-    order = preference_order(names, n_kinematic, last)
+    order = preference_order(names, n_kinematic, joints)
     kept, dropped = _ordered(J, order, free.tolist(), norms.tolist(), rank_tol, scale)
     free_idx = np.flatnonzero(free)
     Jn = J[:, free_idx] / np.where(norms[free_idx] > 0, norms[free_idx], 1.0)
@@ -329,7 +331,7 @@ def _select(J: np.ndarray, names, n_kinematic: int, free, rank_tol: float, m: in
                                                    scale, sv, rank, kept, dropped)
     if len(kept) > rank:  # many nearly parallel columns: each new part passes, the set not
         kept, dropped = _within_rank(J, norms, names, n_kinematic, free, rank_tol * sv[0],
-                                     last)
+                                     joints)
     return J, names, free, m, norms, kept, dropped, sv, rank
 
 
@@ -382,7 +384,8 @@ def _deferring_near_duplicates(J, norms, order, free_of, rank_tol, scale, sv, ra
 
 
 def identifiable(J: np.ndarray, names, n_kinematic: int, free=None,
-                 rank_tol: float = RANK_TOL, m: int | None = None, last=()) -> tuple[str, ...]:
+                 rank_tol: float = RANK_TOL, m: int | None = None, joints=()
+                 ) -> tuple[str, ...]:
     """The names :func:`analyze` keeps, without its report (why each dropped one was
     dropped, weak ones, condition number): for a caller that needs only the partition (the
     frame start's, three analyses per fit). Of the free columns alone when some are not
@@ -393,22 +396,22 @@ def identifiable(J: np.ndarray, names, n_kinematic: int, free=None,
         norms = np.linalg.norm(J, axis=0)
         return _identifiable_of(J[:, idx], tuple(names[i] for i in idx),
                                int(np.sum(idx < n_kinematic)), rank_tol, m,
-                               float(norms.max()) if norms.size else 1.0, last=last)
-    return _identifiable_of(J, names, n_kinematic, rank_tol, m, None, free, last)
+                               float(norms.max()) if norms.size else 1.0, joints=joints)
+    return _identifiable_of(J, names, n_kinematic, rank_tol, m, None, free, joints)
 
 
-def _identifiable_of(J, names, n_kinematic, rank_tol, m, scale, free=None, last=()
+def _identifiable_of(J, names, n_kinematic, rank_tol, m, scale, free=None, joints=()
                      ) -> tuple[str, ...]:
     """:func:`identifiable` of these columns, the largest column norm ``scale`` (None: theirs)."""
     _, names, _, _, _, kept, _, _, _ = _select(J, names, n_kinematic, free, rank_tol, m, scale,
-                                               last)
+                                               joints)
     return tuple(names[i] for i in kept)
 
 
 def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float = RANK_TOL,
             weak_independence: float = WEAK_INDEPENDENCE,
             weak_sensitivity: float = WEAK_SENSITIVITY, m: int | None = None,
-            samples: int | None = None, last=()) -> Identifiability:
+            samples: int | None = None, joints=()) -> Identifiability:
     """Identifiability of the parameters from a Jacobian in reporting units.
 
     J: (m, p) rows = residual components [mm], columns = parameters [mm or deg]; or the
@@ -416,11 +419,11 @@ def analyze(J: np.ndarray, names, n_kinematic: int, free=None, rank_tol: float =
     free: (p,) bool, the parameters the user did not fix (default: all).
     samples: the samples the rows belong to, over which a weak parameter's sensitivity is
     an RMS (a pose's 6 rows, a distance's 1); None: m / 3 where m is a multiple of 3
-    (measured points), else m. last: joints taken after all others in the order of
-    preference (those on several chains; module notes).
+    (measured points), else m. joints: the joints' order of preference (several chains;
+    module notes), () for the default.
     """
     J, names, free, m, norms, kept, dropped, sv, rank = _select(J, names, n_kinematic, free,
-                                                                rank_tol, m, last=last)
+                                                                rank_tol, m, joints=joints)
     p = len(names)
     rows = samples if samples else m // 3 if m % 3 == 0 else m  # samples, for RMS figures
     scale = float(norms.max()) if norms.size else 1.0
