@@ -61,8 +61,11 @@ def notes(result) -> tuple[str, ...]:
         sets = [s for s in result.sets if (getattr(s, "base_frame", "") or cor.base,
                                            getattr(s, "tip_frame", "") or cor.tip)
                 == (cor.base, cor.tip)]
-        nominal = next((r for r in (result.chains.robots if result.chains else [result.robot])
-                        if (r.base, r.tip) == (cor.base, cor.tip)), result.robot)
+        nominal = next((r for r in (result.chains.chain_robots if result.chains else
+                                    [result.robot]) if (r.base, r.tip) == (cor.base, cor.tip)),
+                       result.robot)
+        if not nominal.geometry.is_reversed.any():  # no climb: nothing to stack (a hot path)
+            continue
         q = np.vstack([s.data.joint_values for s in sets])
         n = len(q)
         q = q[np.unique(np.linspace(0, n - 1, min(n, MAX_SAMPLES)).astype(int))]

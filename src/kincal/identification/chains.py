@@ -62,6 +62,11 @@ class UnionModel:
                 f"on {self.n} joints")
 
 
+def _corrected_joints(model) -> tuple[str, ...]:
+    """The joints whose origins an error model's parameters correct, in its chain order."""
+    return tuple(dict.fromkeys(n.rsplit(".", 1)[0] for n in model.names))
+
+
 class MappedKind:
     """A kind model of one chain seen through the union: it takes and gives the union's
     kinematic vector and backlash values (``idx``: the chain's parameters in the union;
@@ -156,9 +161,9 @@ class Chains:
     def _check_origins(self) -> None:
         """A chain that ends climbing (its tip above its base, on the base's way up) cannot
         correct the origin of its last joint: refused when another chain corrects it."""
-        owned = {n.rsplit(".", 1)[0] for m in self.models for n in m.names}
+        owned = {j for m in self.models for j in _corrected_joints(m)}
         for r, m in zip(self.chain_robots, self.models):
-            mine = {n.rsplit(".", 1)[0] for n in m.names}
+            mine = set(_corrected_joints(m))
             lost = [j for j in m.joint_names if j not in mine and j in owned]
             if lost:  # any tip still reached by climbing through it keeps the origin lost
                 link = r.parent_link(lost[0])
@@ -180,7 +185,7 @@ class Chains:
         both arms), in the union's order; () for one chain."""
         counts: dict[str, int] = {}
         for m in self.models:
-            for j in dict.fromkeys(n.rsplit(".", 1)[0] for n in m.names):
+            for j in _corrected_joints(m):
                 counts[j] = counts.get(j, 0) + 1
         return tuple(j for j, k in counts.items() if k > 1)
 
@@ -196,9 +201,7 @@ class Chains:
         shared = set(self.shared_joints)
         chains = sorted(zip(self.chain_robots, self.models), key=lambda rm: (rm[0].base,
                                                                              rm[0].tip))
-        own = [j for _, m in chains
-               for j in reversed(dict.fromkeys(n.rsplit(".", 1)[0] for n in m.names))
-               if j not in shared]
+        own = [j for _, m in chains for j in reversed(_corrected_joints(m)) if j not in shared]
         tree = list(self.robot.model.names)  # the URDF tree's joints, parents first
         return tuple(own) + tuple(sorted(shared, key=tree.index, reverse=True))
 
